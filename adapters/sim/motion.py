@@ -1,0 +1,62 @@
+"""Simulated joints: each moves toward its target no faster than its speed limit.
+
+This is how ALMotion's ``setAngles(names, angles, fractionMaxSpeed)`` behaves
+as seen from the sensors: a move of 1 rad at speed 0.5 on a joint whose
+maximum velocity is 4 rad/s takes 0.5 s.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Mapping
+
+from sonibus.bus.robot import RobotModel
+
+STIFF = 0.1  # below this stiffness a joint's motor is off: it holds no target
+
+
+class Body:
+    """Positions, targets, per-joint speed limits and stiffness of one robot."""
+
+    def __init__(self, model: RobotModel, pose: Mapping[str, float] | None = None) -> None:
+        self.model = model
+        self.names = model.joint_names
+        self._index = {n: i for i, n in enumerate(self.names)}
+        self._specs = model.joints
+        pose = pose or {}
+        self.positions = [s.clamp(pose.get(s.name, min(max(0.0, s.min), s.max))) for s in self._specs]
+        self.targets = list(self.positions)
+        self.velocity = [0.0] * len(self.names)
+        self.stiffness = [1.0] * len(self.names)
+
+    def set_targets(self, targets: Mapping[str, float], fraction: float) -> None:
+        """Move ``targets`` (name → position) at ``fraction`` of each joint's max velocity."""
+        for name, value in targets.items():
+            i = self._index[name]
+            spec = self._specs[i]
+            self.targets[i] = spec.clamp(value)
+            self.velocity[i] = spec.max_velocity * min(1.0, max(0.0, fraction))
+
+    def set_stiffness(self, names: Iterable[str], value: float) -> None:
+        for name in names:
+            self.stiffness[self._index[name]] = value
+
+    def halt(self) -> None:
+        """Every joint holds where it is now."""
+        self.targets = list(self.positions)
+
+    def moving(self, names: Iterable[str] | None = None) -> bool:
+        indexes = range(len(self.names)) if names is None else (self._index[n] for n in names)
+        return any(self.positions[i] != self.targets[i] and self.stiffness[i] >= STIFF for i in indexes)
+
+    def step(self, dt: float) -> None:
+        """Advance ``dt`` seconds."""
+        for i, target in enumerate(self.targets):
+            if self.stiffness[i] < STIFF:
+                self.targets[i] = self.positions[i]
+                continue
+            error = target - self.positions[i]
+            reach = self.velocity[i] * dt
+            self.positions[i] = target if abs(error) <= reach else self.positions[i] + (reach if error > 0 else -reach)
+
+    def pose(self) -> dict[str, float]:
+        return dict(zip(self.names, self.positions, strict=True))

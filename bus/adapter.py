@@ -1,0 +1,134 @@
+"""The adapter contract: a typed config, ``start(bus)``, ``stop()``.
+
+A subclass sets ``Config`` (a dataclass) and overrides the ``_start`` and
+``_stop`` hooks; the base class owns the invariants: state checks, the node's
+liveliness token, worker threads joined and Zenoh entities undeclared on stop.
+
+>>> from dataclasses import dataclass
+>>> class Hello(Adapter):
+...     @dataclass(frozen=True)
+...     class Config:
+...         greeting: str = "hello"
+...     def _start(self) -> None:
+...         self.bus.put("hello/events/greeting", {"t": 0.0, "kind": self.config.greeting})
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any, ClassVar
+
+from . import keys
+from .node import Bus
+
+log = logging.getLogger(__name__)
+
+JOIN_TIMEOUT_S = 2.0
+
+
+@dataclass(frozen=True)
+class NoOptions:
+    """Config of an adapter that takes no options."""
+
+
+class Adapter:
+    """Base class of every adapter (robot owners, sinks, processors)."""
+
+    Config: ClassVar[type] = NoOptions
+
+    def __init__(self, config: Any = None, *, name: str = "") -> None:
+        self.config = config if config is not None else self.Config()
+        if not isinstance(self.config, self.Config):
+            raise TypeError(f"{type(self).__name__} takes a {self.Config.__name__}, "
+                            f"got {type(self.config).__name__}")
+        self.name = name or type(self).__name__.lower()
+        self.state = "new"
+        self.stopping = threading.Event()
+        self._bus: Bus | None = None
+        self._threads: list[threading.Thread] = []
+        self._entities: list[Any] = []
+
+    @property
+    def bus(self) -> Bus:
+        if self._bus is None:
+            raise RuntimeError(f"{self!r} is not started")
+        return self._bus
+
+    def start(self, bus: Bus) -> None:
+        """Join the bus and begin work; on failure everything taken is given back."""
+        if self.state != "new":
+            raise RuntimeError(f"{self!r} cannot start: it is {self.state}")
+        self._bus = bus.for_node(self.name)
+        self.state = "starting"
+        try:
+            self.own(self._bus.token(keys.node_token(self._bus.host, self.name)))
+            self._start()
+        except BaseException:
+            self.stop()
+            raise
+        self.state = "running"
+
+    def stop(self) -> None:
+        """Stop work and leave the bus; safe to call twice."""
+        if self.state in ("new", "stopped"):
+            self.state = "stopped"
+            return
+        self.stopping.set()
+        try:
+            self._stop()
+        finally:
+            for thread in self._threads:
+                thread.join(JOIN_TIMEOUT_S)
+                if thread.is_alive():
+                    log.warning("%s: thread %s did not stop within %.0f s", self.name, thread.name, JOIN_TIMEOUT_S)
+            for entity in reversed(self._entities):
+                _undeclare(entity)
+            self._entities.clear()
+            self.state = "stopped"
+
+    def spawn(self, target: Callable[[], None], name: str) -> threading.Thread:
+        """Run ``target`` on a thread joined by ``stop()``; it must return once ``stopping`` is set."""
+        thread = threading.Thread(target=self._guard(target), name=f"{self.name}:{name}", daemon=True)
+        self._threads.append(thread)
+        thread.start()
+        return thread
+
+    def own(self, entity: Any) -> Any:
+        """Undeclare/close ``entity`` (publisher, subscriber, token, queue...) on stop."""
+        self._entities.append(entity)
+        return entity
+
+    def _guard(self, target: Callable[[], None]) -> Callable[[], None]:
+        def run() -> None:
+            try:
+                target()
+            except Exception:
+                log.exception("%s: worker %s failed", self.name, target.__name__)
+        return run
+
+    def _start(self) -> None:
+        """Hook: declare what the adapter needs on ``self.bus``, spawn workers."""
+
+    def _stop(self) -> None:
+        """Hook: release what ``own`` and ``spawn`` do not cover."""
+
+    def __enter__(self) -> Adapter:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.stop()
+
+    def __repr__(self) -> str:
+        return f"<{type(self).__name__} {self.name!r} {self.state}>"
+
+
+def _undeclare(entity: Any) -> None:
+    closer = getattr(entity, "undeclare", None) or getattr(entity, "close", None)
+    try:
+        if closer is not None:
+            closer()
+    except Exception as exc:  # a session closed underneath is not worth a traceback here
+        log.debug("undeclare %r: %s", entity, exc)

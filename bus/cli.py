@@ -1,0 +1,306 @@
+"""The ``sonibus`` command line. Parsing is separate from running, so the CLI
+can be tested in-process: ``main(["send", "pepper", "stop"], env)``."""
+
+from __future__ import annotations
+
+import argparse
+import enum
+import json
+import logging
+import signal
+import sys
+import threading
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field, replace
+from importlib import resources
+from typing import Any, TextIO
+
+from .. import schemas
+from . import codec, config, keys, registry, runner
+from .client import robot_info, send_command
+from .errors import CommandError, ConfigError, RobotNotFound, SonibusError
+from .node import Bus
+from .session import MODES, BusConfig, open_session
+
+
+class Exit(enum.IntEnum):
+    OK = 0
+    ERROR = 1
+    USAGE = 2
+    NOT_FOUND = 3
+    REFUSED = 4
+    TIMEOUT = 5
+    INTERRUPTED = 130
+
+
+@dataclass
+class Environment:
+    """Where the CLI reads and writes; tests pass their own."""
+
+    stdout: TextIO = field(default_factory=lambda: sys.stdout)
+    stderr: TextIO = field(default_factory=lambda: sys.stderr)
+    stop: threading.Event = field(default_factory=threading.Event)
+
+    def say(self, text: str) -> None:
+        print(text, file=self.stdout, flush=True)
+
+
+# -- parsing -------------------------------------------------------------------------
+
+
+def parser() -> argparse.ArgumentParser:
+    top = argparse.ArgumentParser(prog="sonibus", description="Robots on a Zenoh bus, for sound tools.")
+    top.add_argument("--traceback", action="store_true", help="show the full traceback of an error")
+    top.add_argument("-v", "--verbose", action="count", default=0, help="log more (-vv: debug)")
+    sub = top.add_subparsers(dest="command", required=True, metavar="COMMAND")
+
+    bus_options = argparse.ArgumentParser(add_help=False)
+    group = bus_options.add_argument_group("bus")
+    group.add_argument("--mode", choices=MODES, help="Zenoh mode (default: peer)")
+    group.add_argument("--connect", action="append", metavar="ENDPOINT", help="e.g. tcp/192.168.1.10:7447")
+    group.add_argument("--listen", action="append", metavar="ENDPOINT", help="e.g. tcp/0.0.0.0:7447")
+    group.add_argument("--no-multicast", action="store_true", help="do not discover peers by multicast")
+    group.add_argument("--namespace", help="prefix that keeps this installation apart from others")
+    group.add_argument("--zenoh", action="append", metavar="KEY=JSON", default=[],
+                       help="raw Zenoh option, e.g. transport/link/tx/lease=2000")
+
+    demo = sub.add_parser("demo", parents=[bus_options], help="simulated robot → OSC, with a live view")
+    demo.add_argument("--robot", default="pepper", help="robot name: pepper, nao, pepper2... (default: pepper)")
+    demo.add_argument("--port", type=int, default=9000, help="UDP port of the OSC receiver (default: 9000)")
+    demo.add_argument("--host", default="127.0.0.1", help="host of the OSC receiver (default: 127.0.0.1)")
+    demo.add_argument("--rate", type=float, default=100.0, help="frames per second (default: 100)")
+    demo.add_argument("--quiet", action="store_true", help="no live view")
+
+    run = sub.add_parser("run", parents=[bus_options], help="run the nodes of an installation file")
+    run.add_argument("config", metavar="CONFIG.toml")
+    run.add_argument("--only", nargs="+", metavar="NODE", help="run only these nodes")
+
+    sub.add_parser("adapters", help="list installed adapters")
+
+    nodes = sub.add_parser("nodes", parents=[bus_options], help="list live nodes and robots")
+    nodes.add_argument("--timeout", type=float, default=1.0, help="seconds to wait for answers")
+
+    echo = sub.add_parser("echo", parents=[bus_options], help="print samples as they arrive")
+    echo.add_argument("keyexpr", metavar="KEYEXPR", help="e.g. 'pepper/joints/*' or '*/events/**'")
+    echo.add_argument("--count", type=int, help="exit after this many samples")
+    echo.add_argument("--duration", type=float, help="exit after this many seconds")
+
+    send = sub.add_parser("send", parents=[bus_options], help="send a command to a robot, print the reply")
+    send.add_argument("robot", metavar="ROBOT")
+    send.add_argument("verb", metavar="VERB", help=", ".join(schemas.command_verbs()))
+    send.add_argument("args", nargs="*", metavar="ARG", help="NAME=VALUE, or the verb's main value")
+    send.add_argument("--timeout", type=float, default=5.0, help="seconds to wait for the reply")
+    return top
+
+
+def bus_config(args: argparse.Namespace, base: BusConfig | None = None) -> BusConfig:
+    """``base`` (or defaults) with the command-line bus options applied."""
+    cfg = base or BusConfig()
+    changes: dict[str, Any] = {}
+    if args.mode:
+        changes["mode"] = args.mode
+    if args.connect:
+        changes["connect"] = tuple(args.connect)
+    if args.listen:
+        changes["listen"] = tuple(args.listen)
+    if args.no_multicast:
+        changes["multicast"] = False
+    if args.namespace is not None:
+        changes["namespace"] = args.namespace
+    if args.zenoh:
+        options = dict(cfg.options)
+        for item in args.zenoh:
+            key, sep, value = item.partition("=")
+            if not sep:
+                raise ConfigError(f"--zenoh '{item}' is not KEY=VALUE")
+            try:
+                options[key] = json.loads(value)
+            except json.JSONDecodeError:
+                options[key] = value
+        changes["options"] = options
+    return replace(cfg, **changes) if changes else cfg
+
+
+def command_args(verb: str, words: Sequence[str]) -> dict[str, Any]:
+    """``NAME=VALUE`` words (and the verb's positional value) as typed arguments."""
+    if verb not in schemas.command_verbs():
+        return {}  # the robot answers with the list of verbs
+    schema = schemas.command_schema(verb)
+    props = schema.get("properties", {})
+    named = [w for w in words if "=" in w.split(" ", 1)[0]]
+    loose = [w for w in words if w not in named]
+    args: dict[str, Any] = {}
+    if loose:
+        positional = schema.get("x-positional")
+        if positional is None:
+            raise ConfigError(f"{verb} takes only NAME=VALUE arguments: {', '.join(props) or 'none'}")
+        words_for = " ".join(loose) if props[positional].get("type") == "string" else loose[0]
+        args[positional] = _typed(verb, positional, props[positional], words_for)
+    for word in named:
+        name, _, value = word.partition("=")
+        if name not in props:
+            raise ConfigError(f"{verb} has no argument '{name}' — arguments: {', '.join(props) or 'none'}")
+        args[name] = _typed(verb, name, props[name], value)
+    return args
+
+
+def _typed(verb: str, name: str, prop: dict[str, Any], text: str) -> Any:
+    kind = prop.get("type")
+    try:
+        if kind == "array":
+            items = [t for t in text.split(",") if t != ""]
+            item_kind = prop.get("items", {}).get("type")
+            return [float(t) if item_kind == "number" else t for t in items]
+        if kind == "number":
+            return float(text)
+        if kind == "integer":
+            return int(text)
+        if kind == "boolean":
+            lowered = text.lower()
+            if lowered not in ("true", "false", "1", "0", "on", "off", "yes", "no"):
+                raise ValueError(text)
+            return lowered in ("true", "1", "on", "yes")
+    except ValueError:
+        raise ConfigError(f"{verb}: {name}={text!r} is not a {kind}") from None
+    return text
+
+
+# -- running -------------------------------------------------------------------------
+
+
+def cmd_demo(args: argparse.Namespace, env: Environment) -> Exit:
+    text = resources.files("sonibus.adapters").joinpath("demo.toml").read_text(encoding="utf-8")
+    installation = config.parse(text, "demo.toml")
+    specs = installation.nodes
+    robot = specs["robot"]
+    robot.options.update(robot=args.robot, rate_hz=args.rate)
+    specs["sound"].options.update(targets=[f"{args.host}:{args.port}"])
+    only = ["robot", "sound"] if args.quiet else None
+    adapters = runner.build(installation, only)
+    env.say(f"sonibus demo: simulated {args.robot} at {args.rate:g} frames/s → OSC to {args.host}:{args.port}, "
+            f"one float per message at /{args.robot}/joints/<Joint>")
+    env.say(f"  listen with: oscdump {args.port}     Ctrl-C to stop")
+    runner.run(adapters, bus_config(args, installation.bus), env.stop)
+    return Exit.OK
+
+
+def cmd_run(args: argparse.Namespace, env: Environment) -> Exit:
+    installation = config.load(args.config)
+    adapters = runner.build(installation, args.only)
+    names = ", ".join(f"{a.name} ({type(a).__name__})" for a in adapters)
+    runner.run(adapters, bus_config(args, installation.bus), env.stop,
+               on_started=lambda bus: env.say(f"sonibus: running {names} on {bus.host}"))
+    return Exit.OK
+
+
+def cmd_adapters(args: argparse.Namespace, env: Environment) -> Exit:
+    for name, cls in registry.load_all().items():
+        env.say(f"{name:<10} {registry.summary(cls)}")
+    return Exit.OK
+
+
+def cmd_nodes(args: argparse.Namespace, env: Environment) -> Exit:
+    with open_session(bus_config(args)) as session:
+        bus = Bus(session)
+        nodes = bus.alive(f"{keys.NODES}/**", timeout=args.timeout)
+        robots = bus.alive(f"{keys.ROBOTS}/*", timeout=args.timeout)
+        env.say(f"{len(nodes)} node(s)")
+        for key in nodes:
+            host, _, node = key[len(keys.NODES) + 1:].partition("/")
+            env.say(f"  node  {node:<16} on {host}")
+        env.say(f"{len(robots)} robot(s)")
+        for key in robots:
+            name = key[len(keys.ROBOTS) + 1:]
+            info = robot_info(bus, name, timeout=args.timeout) or {}
+            owner = info.get("owner", {})
+            env.say(f"  robot {name:<16} {info.get('model', '?'):<8} {info.get('rate_hz', 0):g} frames/s  "
+                    f"owned by {owner.get('node', '?')} on {owner.get('host', '?')}")
+    return Exit.OK
+
+
+def cmd_echo(args: argparse.Namespace, env: Environment) -> Exit:
+    deadline = time.monotonic() + args.duration if args.duration else None
+    seen = 0
+    with open_session(bus_config(args)) as session:
+        subscriber, queue = Bus(session).subscribe(args.keyexpr, 65536)
+        try:
+            while not env.stop.is_set() and (args.count is None or seen < args.count):
+                if deadline is not None and time.monotonic() >= deadline:
+                    break
+                item = queue.get(timeout=0.2)
+                if item is None:
+                    continue
+                key, payload = item
+                try:
+                    shown = json.dumps(codec.decode(payload), separators=(", ", ": "))
+                except codec.DecodeError:
+                    shown = repr(payload)
+                env.say(f"{key} {shown}")
+                seen += 1
+        finally:
+            subscriber.undeclare()
+    return Exit.OK
+
+
+def cmd_send(args: argparse.Namespace, env: Environment) -> Exit:
+    request = command_args(args.verb, args.args)
+    with open_session(bus_config(args)) as session:
+        result = send_command(Bus(session), args.robot, args.verb, request, timeout=args.timeout)
+    env.say(json.dumps(result))
+    return Exit.OK
+
+
+COMMANDS: dict[str, Callable[[argparse.Namespace, Environment], Exit]] = {
+    "demo": cmd_demo, "run": cmd_run, "adapters": cmd_adapters, "nodes": cmd_nodes,
+    "echo": cmd_echo, "send": cmd_send,
+}
+
+
+def main(argv: Sequence[str] | None = None, env: Environment | None = None) -> int:
+    env = env or Environment()
+    try:
+        args = parser().parse_args(argv)
+    except SystemExit as exc:  # argparse has printed its message
+        return int(exc.code or 0)
+    logging.basicConfig(level=(logging.WARNING, logging.INFO, logging.DEBUG)[min(args.verbose, 2)],
+                        format="sonibus: %(levelname)s: %(message)s", stream=env.stderr)
+    try:
+        return int(COMMANDS[args.command](args, env))
+    except KeyboardInterrupt:
+        return int(Exit.INTERRUPTED)
+    except Exception as exc:
+        if args.traceback:
+            raise
+        print(f"sonibus: error: {_one_line(exc)}", file=env.stderr, flush=True)
+        return int(_status(exc))
+
+
+def _status(exc: Exception) -> Exit:
+    if isinstance(exc, RobotNotFound):
+        return Exit.NOT_FOUND
+    if isinstance(exc, CommandError):
+        return Exit.TIMEOUT if exc.code == "timeout" else Exit.REFUSED
+    if isinstance(exc, ConfigError):
+        return Exit.USAGE
+    return Exit.ERROR
+
+
+def _one_line(exc: Exception) -> str:
+    text = str(exc).strip() or type(exc).__name__
+    if not isinstance(exc, SonibusError):
+        text = f"{type(exc).__name__}: {text}"
+    return " ".join(text.split())
+
+
+def console_main() -> None:
+    """Entry point of the ``sonibus`` script: Ctrl-C and SIGTERM end it cleanly."""
+    env = Environment()
+
+    def terminate(signum: int, frame: object) -> None:
+        if not env.stop.is_set():  # the first signal unwinds; later ones must not cut the clean-up short
+            env.stop.set()
+            raise KeyboardInterrupt
+
+    signal.signal(signal.SIGTERM, terminate)
+    sys.exit(main(sys.argv[1:], env))

@@ -1,0 +1,33 @@
+"""Payload codec: msgpack maps, Zenoh encoding ``application/msgpack``."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import msgpack
+import zenoh
+
+ENCODING = zenoh.Encoding("application/msgpack")
+
+
+class DecodeError(ValueError):
+    """A payload is not a msgpack map."""
+
+
+def encode(message: dict[str, Any]) -> bytes:
+    return msgpack.packb(message, use_bin_type=True)
+
+
+def decode(payload: bytes | zenoh.ZBytes | None) -> dict[str, Any]:
+    if payload is None:
+        return {}
+    data = payload.to_bytes() if isinstance(payload, zenoh.ZBytes) else payload
+    if not data:
+        return {}
+    try:
+        message = msgpack.unpackb(data, raw=False, strict_map_key=False)
+    except Exception as exc:  # msgpack raises several unrelated types
+        raise DecodeError(f"payload is not msgpack: {exc}") from exc
+    if not isinstance(message, dict):
+        raise DecodeError(f"payload is a msgpack {type(message).__name__}, expected a map")
+    return message

@@ -1,0 +1,118 @@
+"""Command requests: the verb table and validation against a robot's model.
+
+Structure (types, required fields, ranges that do not depend on the robot) comes
+from the request schemas in ``schemas/v1/cmd/``; this module adds what the
+schemas cannot say: finite numbers, known joints and their limits, known
+behaviors and postures.
+
+>>> from sonibus.bus.robot import load_model
+>>> validate("joints/set", {"names": ["HeadYaw"], "angles": [0.3]}, load_model("pepper")).args
+{'names': ['HeadYaw'], 'angles': [0.3], 'speed': 0.3}
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Collection
+from dataclasses import dataclass
+from typing import Any
+
+import jsonschema
+
+from .. import schemas
+from .errors import CommandError
+from .robot import RobotModel
+
+_RANGE_CHECKS = {"minimum", "maximum", "exclusiveMinimum", "exclusiveMaximum"}
+
+
+@dataclass(frozen=True)
+class Command:
+    """A validated request: ``verb`` and its arguments with defaults filled in."""
+
+    verb: str
+    args: dict[str, Any]
+
+
+def verbs() -> tuple[str, ...]:
+    return schemas.command_verbs()
+
+
+def validate(verb: str, args: Any, model: RobotModel,
+             behaviors: Collection[str] = ()) -> Command:
+    """Check a request completely, or raise ``CommandError`` saying what is wrong."""
+    if verb not in verbs():
+        raise CommandError("unknown_verb", f"unknown command '{verb}' — known commands: {', '.join(verbs())}")
+    if not isinstance(args, dict):
+        raise CommandError("bad_request", f"{verb}: arguments must be a map, got {type(args).__name__}")
+    _check_finite(verb, args)
+    schema = schemas.command_schema(verb)
+    error = jsonschema.exceptions.best_match(schemas.validator("cmd/" + verb).iter_errors(args))
+    if error is not None:
+        where = ".".join(str(p) for p in error.absolute_path) or "arguments"
+        code = "out_of_range" if error.validator in _RANGE_CHECKS else "bad_request"
+        raise CommandError(code, f"{verb}: {where}: {error.message}")
+    filled = {k: p["default"] for k, p in schema["properties"].items() if "default" in p}
+    filled.update(args)
+    _check_against_model(verb, filled, model, behaviors)
+    return Command(verb, filled)
+
+
+def _check_finite(verb: str, value: Any, where: str = "arguments") -> None:
+    if isinstance(value, float) and not math.isfinite(value):
+        raise CommandError("bad_request", f"{verb}: {where}: {value} is not a finite number")
+    if isinstance(value, dict):
+        for key, item in value.items():
+            _check_finite(verb, item, str(key))
+    elif isinstance(value, list | tuple):
+        for index, item in enumerate(value):
+            _check_finite(verb, item, f"{where}.{index}")
+
+
+def _known(kind: str, name: str, known: Collection[str], code: str) -> None:
+    if name not in known:
+        shown = ", ".join(sorted(known)[:12]) + (", ..." if len(known) > 12 else "")
+        raise CommandError(code, f"unknown {kind} '{name}' — known: {shown or 'none'}")
+
+
+def _check_against_model(verb: str, args: dict[str, Any], model: RobotModel,
+                         behaviors: Collection[str]) -> None:
+    if verb == "joints/set":
+        names, angles = args["names"], args["angles"]
+        if len(names) != len(angles):
+            raise CommandError("bad_request", f"joints/set: {len(names)} names but {len(angles)} angles")
+        if len(set(names)) != len(names):
+            raise CommandError("bad_request", "joints/set: a joint is named twice")
+        for name, angle in zip(names, angles, strict=True):
+            _known("joint", name, model.joint_names, "unknown_joint")
+            spec = model.joint(name)
+            if not spec.min <= angle <= spec.max:
+                raise CommandError("out_of_range", f"joints/set: {name} = {angle} is outside its limits "
+                                   f"[{spec.min}, {spec.max}] {spec.unit}")
+    elif verb == "stiffness":
+        groups = {"Body", *(j.chain for j in model.joints), *model.joint_names}
+        for name in args["names"]:
+            _known("joint or chain", name, groups, "unknown_joint")
+    elif verb == "posture":
+        _known("posture", args["name"], model.postures, "unknown_posture")
+    elif verb in ("behavior/run", "behavior/stop") and "name" in args:
+        _known("behavior", args["name"], behaviors, "unknown_behavior")
+    elif verb == "say" and not args["text"].strip():
+        raise CommandError("bad_request", "say: text is blank")
+
+
+def ok_reply(verb: str, result: dict[str, Any] | None = None) -> dict[str, Any]:
+    return {"ok": True, "verb": verb, "result": result or {}}
+
+
+def error_reply(verb: str, error: CommandError) -> dict[str, Any]:
+    return {"ok": False, "verb": verb, "error": error.to_payload()}
+
+
+def expand_stiffness_names(names: Collection[str], model: RobotModel) -> list[str]:
+    """Joint names for a list of joints, chains and ``Body``."""
+    out: list[str] = []
+    for name in names:
+        group = model.joint_names if name == "Body" else (model.chain(name) or (name,))
+        out.extend(j for j in group if j not in out)
+    return out

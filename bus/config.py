@@ -1,0 +1,119 @@
+"""Installation files (TOML): the bus settings and the nodes, in one file.
+
+>>> installation = load("examples/demo.toml")   # doctest: +SKIP
+>>> list(installation.nodes)                    # doctest: +SKIP
+['pepper', 'sound', 'console']
+"""
+
+from __future__ import annotations
+
+import re
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from .adapter import Adapter
+from .errors import ConfigError
+from .keys import check_name
+from .options import from_mapping
+from .session import BusConfig
+
+TOP_LEVEL = ("bus", "nodes")
+
+
+@dataclass(frozen=True)
+class NodeSpec:
+    """One ``[nodes.NAME]`` table: the adapter's name and its raw options."""
+
+    name: str
+    adapter: str
+    options: dict[str, Any] = field(default_factory=dict)
+    where: str = ""
+    lines: dict[str, int] = field(default_factory=dict)
+
+    def build(self, cls: type[Adapter]) -> Adapter:
+        """The adapter, with its options checked against ``cls.Config``."""
+        return cls(from_mapping(cls.Config, self.options, self.where, self.lines), name=self.name)
+
+
+@dataclass(frozen=True)
+class Installation:
+    """A whole installation: how to join the bus, and every node by name."""
+
+    bus: BusConfig
+    nodes: dict[str, NodeSpec]
+    path: str = ""
+
+    def select(self, only: list[str] | None) -> list[NodeSpec]:
+        if not only:
+            return list(self.nodes.values())
+        for name in only:
+            if name not in self.nodes:
+                raise ConfigError(f"{self.path}: no node '{name}' — nodes: {', '.join(self.nodes)}")
+        return [self.nodes[n] for n in only]
+
+
+def load(path: str | Path) -> Installation:
+    """Read and check an installation file; ``ConfigError`` names file, node and key."""
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise ConfigError(f"{path}: no such file") from None
+    except OSError as exc:
+        raise ConfigError(f"{path}: cannot read: {exc.strerror}") from None
+    return parse(text, str(path))
+
+
+def parse(text: str, path: str = "<string>") -> Installation:
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError(f"{path}: not valid TOML: {exc}") from None
+    for key in data:
+        if key not in TOP_LEVEL:
+            line = _line(text, None, key)
+            raise ConfigError(f"{path}{f' line {line}' if line else ''}: unknown table '{key}' — "
+                              f"known: {', '.join(TOP_LEVEL)}")
+    bus_table = data.get("bus", {})
+    if not isinstance(bus_table, dict):
+        raise ConfigError(f"{path}: 'bus' must be a table")
+    bus = from_mapping(BusConfig, bus_table, f"{path} [bus]", _lines(text, "bus", bus_table))
+    nodes_table = data.get("nodes", {})
+    if not isinstance(nodes_table, dict) or not nodes_table:
+        raise ConfigError(f"{path}: no [nodes.NAME] table — an installation needs at least one node")
+    nodes = {}
+    for name, table in nodes_table.items():
+        where = f"{path} [nodes.{name}]"
+        try:
+            check_name("node", name)
+        except ValueError as exc:
+            raise ConfigError(f"{where}: {exc}") from None
+        if not isinstance(table, dict):
+            raise ConfigError(f"{where}: must be a table")
+        options = dict(table)
+        adapter = options.pop("adapter", None)
+        if not isinstance(adapter, str):
+            raise ConfigError(f"{where}: missing key 'adapter' (a string: see `sonibus adapters`)")
+        nodes[name] = NodeSpec(name, adapter, options, where, _lines(text, f"nodes.{name}", options))
+    return Installation(bus, nodes, path)
+
+
+def _lines(text: str, table: str, keys: Any) -> dict[str, int]:
+    found = {key: _line(text, table, key) for key in keys}
+    return {key: line for key, line in found.items() if line}
+
+
+def _line(text: str, table: str | None, key: str) -> int:
+    """The line where ``key`` is set in ``[table]``, 0 if not found (for messages)."""
+    in_table = table is None
+    for number, line in enumerate(text.splitlines(), 1):
+        stripped = line.strip()
+        if stripped.startswith("["):
+            if table is None and re.match(rf"\[\[?{re.escape(key)}[.\]]", stripped):
+                return number
+            in_table = stripped.strip("[]").strip() == table
+        elif in_table and re.match(rf"{re.escape(key)}\s*=", stripped):
+            return number
+    return 0

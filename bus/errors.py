@@ -1,0 +1,39 @@
+"""Exceptions of sonibus. Every one carries a message fit for one line."""
+
+from __future__ import annotations
+
+
+class SonibusError(Exception):
+    """Base of every error sonibus raises on purpose."""
+
+
+class ConfigError(SonibusError):
+    """A configuration file or option is wrong; the message names where."""
+
+
+class AdapterError(SonibusError):
+    """An adapter cannot be found, loaded or started."""
+
+
+class OwnershipError(SonibusError):
+    """A robot already has an owner on the bus."""
+
+
+class CommandError(SonibusError):
+    """A command was refused or failed; ``code`` is machine-readable."""
+
+    def __init__(self, code: str, message: str) -> None:
+        super().__init__(message)
+        self.code = code
+        self.message = message
+
+    def to_payload(self) -> dict:
+        return {"code": self.code, "message": self.message}
+
+
+class RobotNotFound(CommandError):
+    """No node on the bus owns the robot a command was sent to."""
+
+    def __init__(self, robot: str) -> None:
+        super().__init__("robot_not_found", f"robot '{robot}' not found: no node on the bus owns it")
+        self.robot = robot

@@ -1,0 +1,60 @@
+"""The key space (see docs/design.md, "Key space")."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+NODES = "sonibus/nodes"
+ROBOTS = "sonibus/robots"
+
+
+def joint(robot: str, name: str) -> str:
+    return f"{robot}/joints/{name}"
+
+
+def joints(robot: str = "*") -> str:
+    return f"{robot}/joints/*"
+
+
+def event(robot: str, kind: str) -> str:
+    return f"{robot}/events/{kind}"
+
+
+def command(robot: str, verb: str = "**") -> str:
+    return f"{robot}/cmd/{verb}"
+
+
+def info(robot: str) -> str:
+    return f"{robot}/info"
+
+
+def node_token(host: str, node: str) -> str:
+    return f"{NODES}/{host}/{node}"
+
+
+def robot_token(robot: str) -> str:
+    return f"{ROBOTS}/{robot}"
+
+
+@dataclass(frozen=True)
+class Key:
+    """A parsed data key: ``pepper/joints/HeadYaw`` → robot, section, name."""
+
+    robot: str
+    section: str
+    name: str
+
+    @classmethod
+    def parse(cls, key: str) -> Key:
+        robot, _, rest = str(key).partition("/")
+        section, _, name = rest.partition("/")
+        if not robot or not section:
+            raise ValueError(f"not a sonibus data key: '{key}'")
+        return cls(robot, section, name)
+
+
+def check_name(kind: str, name: str) -> str:
+    """A robot or node name must be one plain key chunk."""
+    if not name or any(c in name for c in "/*$?#@ ") :
+        raise ValueError(f"{kind} name '{name}' must be non-empty without '/', '*', '$', '?', '#', '@' or spaces")
+    return name

@@ -1,0 +1,101 @@
+"""Typed options: build a config dataclass from a plain mapping (TOML, CLI).
+
+Unknown keys and wrong types raise ``ConfigError`` naming where and the key.
+
+>>> from dataclasses import dataclass
+>>> @dataclass(frozen=True)
+... class Opts:
+...     rate_hz: float = 100.0
+>>> from_mapping(Opts, {"rate_hz": 50}, "show.toml [nodes.pepper]")
+Opts(rate_hz=50.0)
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import types
+import typing
+from collections.abc import Mapping
+from typing import Any, TypeVar
+
+from .errors import ConfigError
+
+T = TypeVar("T")
+
+
+def from_mapping(cls: type[T], data: Mapping[str, Any], where: str,
+                 lines: Mapping[str, int] | None = None) -> T:
+    """An instance of dataclass ``cls`` from ``data``, checked key by key.
+
+    ``lines`` maps keys to their line in the source file, for the messages."""
+    lines = lines or {}
+
+    def at(key: str) -> str:
+        return f"{where} line {lines[key]}" if key in lines else where
+
+    fields = {f.name: f for f in dataclasses.fields(cls) if f.init}  # type: ignore[arg-type]
+    hints = typing.get_type_hints(cls)
+    for key in data:
+        if key not in fields:
+            raise ConfigError(f"{at(key)}: unknown key '{key}' — known keys: {', '.join(fields) or 'none'}")
+    missing = [n for n, f in fields.items() if n not in data and f.default is dataclasses.MISSING
+               and f.default_factory is dataclasses.MISSING]
+    if missing:
+        raise ConfigError(f"{where}: missing key '{missing[0]}'")
+    values = {key: coerce(value, hints[key], f"{at(key)}: key '{key}'") for key, value in data.items()}
+    try:
+        return cls(**values)
+    except (ValueError, TypeError) as exc:
+        raise ConfigError(f"{where}: {exc}") from exc
+
+
+def coerce(value: Any, tp: Any, where: str) -> Any:
+    """``value`` as type ``tp`` (int→float, list→tuple allowed), else ``ConfigError``."""
+    origin = typing.get_origin(tp)
+    if origin in (typing.Union, types.UnionType):
+        for option in typing.get_args(tp):
+            if option is type(None) and value is None:
+                return None
+            try:
+                return coerce(value, option, where)
+            except ConfigError:
+                continue
+        raise ConfigError(f"{where}: {value!r} is not {describe(tp)}")
+    if origin in (tuple, list):
+        args = typing.get_args(tp)
+        if not isinstance(value, list | tuple):
+            raise ConfigError(f"{where}: {value!r} is not {describe(tp)}")
+        item_type = args[0] if args else Any
+        items = [coerce(v, item_type, f"{where}[{i}]") for i, v in enumerate(value)]
+        return tuple(items) if origin is tuple else items
+    if origin is dict or tp is dict:
+        if not isinstance(value, dict):
+            raise ConfigError(f"{where}: {value!r} is not a table")
+        return dict(value)
+    if origin is typing.Literal:
+        if value not in typing.get_args(tp):
+            raise ConfigError(f"{where}: {value!r} is not one of {', '.join(map(repr, typing.get_args(tp)))}")
+        return value
+    if tp is Any:
+        return value
+    if tp is float and isinstance(value, int) and not isinstance(value, bool):
+        return float(value)
+    if tp in (int, float) and isinstance(value, bool):
+        raise ConfigError(f"{where}: {value!r} is not {describe(tp)}")
+    if isinstance(tp, type) and isinstance(value, tp):
+        return value
+    raise ConfigError(f"{where}: {value!r} is not {describe(tp)}")
+
+
+def describe(tp: Any) -> str:
+    """A type as a reader of a configuration file would say it."""
+    names = {str: "a string", int: "an integer", float: "a number", bool: "true or false", dict: "a table"}
+    if tp in names:
+        return names[tp]
+    origin = typing.get_origin(tp)
+    if origin in (tuple, list):
+        args = [a for a in typing.get_args(tp) if a is not Ellipsis]
+        return f"a list of {describe(args[0]).split(' ', 1)[1]}s" if args else "a list"
+    if origin in (typing.Union, types.UnionType):
+        return " or ".join(describe(a) for a in typing.get_args(tp) if a is not type(None))
+    return getattr(tp, "__name__", str(tp))

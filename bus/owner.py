@@ -1,0 +1,135 @@
+"""``RobotAdapter``: the base of every adapter that owns a robot on the bus.
+
+It owns the invariants every robot shares, whatever drives it (simulator,
+NAOqi): one owner per robot, the robot's liveliness token, ``<robot>/info``,
+the joint streams and events, and the command path — every request validated
+against the robot's model before a subclass's ``_cmd_<verb>`` hook sees it,
+one reply each, and a ``command`` event for each executed command.
+
+A subclass connects and sets ``self.model`` in ``_open()``, runs its frame loop
+in ``_acquire()`` (calling ``publish_frame`` per frame until ``self.stopping``
+is set) and implements one ``_cmd_*`` hook per verb
+(``_cmd_joints_set(names, angles, speed)``, ``_cmd_say(text, ...)``, ...).
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from collections.abc import Sequence
+from typing import Any
+
+import zenoh
+
+from .. import schemas
+from . import codec, commands, keys
+from .adapter import Adapter
+from .errors import CommandError, OwnershipError
+from .robot import RobotModel
+
+log = logging.getLogger(__name__)
+
+
+class RobotAdapter(Adapter):
+    """Owns one robot: streams its joints and events, serves its commands."""
+
+    model: RobotModel
+    rate_hz: float = 100.0
+
+    @property
+    def robot(self) -> str:
+        return self.config.robot
+
+    # -- lifecycle -------------------------------------------------------------
+
+    def _start(self) -> None:
+        self._claim()
+        self._open()
+        self._publishers = [self.own(self.bus.stream_publisher(keys.joint(self.robot, j)))
+                            for j in self.model.joint_names]
+        self.own(self.bus.serve(keys.info(self.robot), self._serve_info))
+        self.own(self.bus.serve(keys.command(self.robot), self._serve_command))
+        self.spawn(self._acquire, "acquire")
+
+    def _claim(self) -> None:
+        if self.bus.alive(keys.robot_token(self.robot)):
+            replies = self.bus.query(keys.info(self.robot), timeout=1.0)
+            owner = replies[0].get("owner", {}) if replies else {}
+            who = (f"node '{owner.get('node')}' on host '{owner.get('host')}'" if owner
+                   else "another node")
+            raise OwnershipError(f"robot '{self.robot}' is already owned by {who}; "
+                                 f"stop that node or give this robot another name")
+        self.own(self.bus.token(keys.robot_token(self.robot)))
+
+    def _open(self) -> None:
+        """Hook: connect to the robot and set ``self.model`` (and ``self.rate_hz``)."""
+        raise NotImplementedError
+
+    def _acquire(self) -> None:
+        """Hook: the frame loop; returns soon after ``self.stopping`` is set."""
+        raise NotImplementedError
+
+    # -- what a subclass calls --------------------------------------------------
+
+    def publish_frame(self, t: float, seq: int, positions: Sequence[float]) -> None:
+        """One frame: ``positions`` in the order of ``self.model.joint_names``."""
+        for publisher, value in zip(self._publishers, positions, strict=True):
+            publisher.put(codec.encode({"t": t, "seq": seq, "v": value}))
+
+    def publish_event(self, kind: str, **fields: Any) -> None:
+        self.bus.put(keys.event(self.robot, kind), {"t": time.time(), "kind": kind, **fields})
+
+    def behaviors(self) -> Sequence[str]:
+        """Names of the behaviors the robot can run (hook)."""
+        return ()
+
+    def robot_info(self) -> dict[str, Any]:
+        return {
+            "robot": self.robot, "model": self.model.name,
+            "joints": [j.to_info() for j in self.model.joints],
+            "rate_hz": self.rate_hz, "behaviors": list(self.behaviors()),
+            "postures": sorted(self.model.postures), "adapter": type(self).__name__,
+            "schema_version": schemas.VERSION,
+            "owner": {"host": self.bus.host, "node": self.name},
+        }
+
+    # -- serving ----------------------------------------------------------------
+
+    def _serve_info(self, query: zenoh.Query) -> None:
+        query.reply(query.key_expr, codec.encode(self.robot_info()), encoding=codec.ENCODING)
+
+    def _serve_command(self, query: zenoh.Query) -> None:
+        verb = str(query.key_expr)[len(keys.command(self.robot, "")):]
+        args: Any = {}
+        try:
+            args = codec.decode(query.payload)
+            reply = commands.ok_reply(verb, self.execute(verb, args))
+        except CommandError as exc:
+            reply = commands.error_reply(verb, exc)
+        except codec.DecodeError as exc:
+            reply = commands.error_reply(verb, CommandError("bad_request", f"{verb}: {exc}"))
+        except Exception as exc:
+            log.exception("%s: command %s failed", self.name, verb)
+            reply = commands.error_reply(verb, CommandError("failed", f"{verb} failed: {exc}"))
+        query.reply(query.key_expr, codec.encode(reply), encoding=codec.ENCODING)
+        if verb in commands.verbs():
+            event = {"verb": verb, "args": args if isinstance(args, dict) else {}, "ok": reply["ok"]}
+            if not reply["ok"]:
+                event["error"] = reply["error"]["message"]
+            self.publish_event("command", **event)
+
+    def execute(self, verb: str, args: Any) -> dict[str, Any]:
+        """Validate and run one command; ``stop`` runs whatever its arguments."""
+        if verb == "stop":
+            return self._cmd_stop() or {}
+        command = commands.validate(verb, args, self.model, self.behaviors())
+        hook = getattr(self, "_cmd_" + verb.replace("/", "_"))
+        return hook(**command.args) or {}
+
+    # -- command hooks (subclasses implement every verb) ------------------------
+
+    def _cmd_stop(self) -> dict[str, Any] | None:
+        raise NotImplementedError
+
+    def _cmd_behavior_list(self) -> dict[str, Any]:
+        return {"behaviors": list(self.behaviors())}

@@ -1,0 +1,49 @@
+"""A bounded sample queue fed by a Zenoh callback: newest kept, oldest dropped.
+
+Zenoh runs every callback of a session on shared threads, so a callback must
+only enqueue; the consumer works on its own thread and can be woken to stop.
+"""
+
+from __future__ import annotations
+
+import threading
+from collections import deque
+from typing import Any
+
+
+class SampleQueue:
+    """``put`` never blocks: when full, the oldest item is dropped and counted."""
+
+    def __init__(self, maxlen: int = 1024) -> None:
+        if maxlen < 1:
+            raise ValueError(f"queue length must be at least 1, got {maxlen}")
+        self._items: deque[Any] = deque(maxlen=maxlen)
+        self._ready = threading.Condition()
+        self._closed = False
+        self.dropped = 0
+
+    def put(self, item: Any) -> None:
+        with self._ready:
+            if len(self._items) == self._items.maxlen:
+                self.dropped += 1
+            self._items.append(item)
+            self._ready.notify()
+
+    def get(self, timeout: float | None = None) -> Any | None:
+        """The oldest item, or None when closed or after ``timeout`` seconds."""
+        with self._ready:
+            if not self._items and not self._closed:
+                self._ready.wait(timeout)
+            return self._items.popleft() if self._items else None
+
+    def close(self) -> None:
+        with self._ready:
+            self._closed = True
+            self._ready.notify_all()
+
+    @property
+    def closed(self) -> bool:
+        return self._closed
+
+    def __len__(self) -> int:
+        return len(self._items)

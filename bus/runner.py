@@ -1,0 +1,41 @@
+"""Running nodes: build adapters from an installation, start them, stop them all."""
+
+from __future__ import annotations
+
+import logging
+import threading
+from collections.abc import Callable
+
+from . import registry
+from .adapter import Adapter
+from .config import Installation
+from .node import Bus
+from .session import BusConfig, open_session
+
+log = logging.getLogger(__name__)
+
+
+def build(installation: Installation, only: list[str] | None = None) -> list[Adapter]:
+    """Every selected node's adapter, configured; all errors before anything starts."""
+    return [spec.build(registry.load(spec.adapter)) for spec in installation.select(only)]
+
+
+def run(adapters: list[Adapter], bus_config: BusConfig, stop: threading.Event,
+        on_started: Callable[[Bus], None] | None = None) -> None:
+    """Open one session, start ``adapters`` in order, wait for ``stop``, stop them in
+    reverse order and close the session — also on Ctrl-C or an error."""
+    with open_session(bus_config) as session:
+        bus = Bus(session)
+        started: list[Adapter] = []
+        try:
+            for adapter in adapters:
+                adapter.start(bus)
+                started.append(adapter)
+                log.info("started %r", adapter)
+            if on_started is not None:
+                on_started(bus)
+            while not stop.wait(0.25):
+                pass
+        finally:
+            for adapter in reversed(started):
+                adapter.stop()
