@@ -1,0 +1,144 @@
+"""Shared fixtures: real Zenoh sessions on loopback standing for machines, a
+simulated robot, external tools that must exist, and waiting on conditions."""
+
+from __future__ import annotations
+
+import os
+import shutil
+import signal
+import socket
+import subprocess
+import sys
+import time
+from collections.abc import Callable, Iterator
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from sonibus.adapters.sim import SimConfig, SimRobot
+from sonibus.bus import Bus, BusConfig, open_session
+
+SONIBUS = str(Path(sys.executable).with_name("sonibus"))
+
+
+def free_port(kind: int = socket.SOCK_STREAM) -> int:
+    with socket.socket(socket.AF_INET, kind) as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def wait_for(predicate: Callable[[], Any], timeout: float = 5.0, what: str = "condition") -> Any:
+    """Poll ``predicate`` until it returns something truthy; fail after ``timeout``."""
+    deadline = time.monotonic() + timeout
+    while True:
+        value = predicate()
+        if value:
+            return value
+        if time.monotonic() > deadline:
+            pytest.fail(f"timed out after {timeout} s waiting for {what}")
+        time.sleep(0.01)
+
+
+def require_tool(name: str, package: str) -> str:
+    """The path of an external tool; a missing tool fails the test (never skips)."""
+    path = shutil.which(name)
+    if path is None:
+        pytest.fail(f"'{name}' is not installed: apt-get install {package} (.ci/run does)")
+    return path
+
+
+class Network:
+    """Sessions on one loopback 'network': the first listens, the others connect.
+    Each session stands for a machine. Multicast is off, so tests do not mix."""
+
+    def __init__(self) -> None:
+        self.endpoint = f"tcp/127.0.0.1:{free_port()}"
+        self._sessions: list[Any] = []
+        self._adapters: list[Any] = []
+
+    def config(self, **changes: Any) -> BusConfig:
+        role = {"connect": (self.endpoint,)} if self._sessions else {"listen": (self.endpoint,)}
+        return BusConfig(multicast=False, **{**role, **changes})
+
+    def bus(self, node: str = "test") -> Bus:
+        session = open_session(self.config())
+        self._sessions.append(session)
+        bus = Bus(session, node=node)
+        if len(self._sessions) > 1:
+            wait_for(lambda: session.info.peers_zid() or session.info.routers_zid(), what="peer connection")
+        return bus
+
+    def cli_args(self) -> list[str]:
+        """Bus options that join a CLI process to this network."""
+        if not self._sessions:
+            self.bus("anchor")
+        return ["--no-multicast", "--connect", self.endpoint]
+
+    def start(self, adapter: Any, bus: Bus | None = None) -> Any:
+        adapter.start(bus or self.bus(adapter.name))
+        self._adapters.append(adapter)
+        return adapter
+
+    def sim(self, robot: str = "pepper", bus: Bus | None = None, **options: Any) -> SimRobot:
+        return self.start(SimRobot(SimConfig(robot=robot, **options), name=f"sim-{robot}"), bus)
+
+    def close(self) -> None:
+        for adapter in reversed(self._adapters):
+            adapter.stop()
+        for session in reversed(self._sessions):
+            session.close()
+
+
+@pytest.fixture
+def net() -> Iterator[Network]:
+    network = Network()
+    try:
+        yield network
+    finally:
+        network.close()
+
+
+class Process:
+    """A child process that is always ended, also when the test fails."""
+
+    def __init__(self, args: list[str], **kwargs: Any) -> None:
+        self.popen = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                                      start_new_session=True, **kwargs)
+
+    def stop(self, sig: int = signal.SIGINT, timeout: float = 5.0) -> tuple[int, str, str]:
+        if self.popen.poll() is None:
+            self.popen.send_signal(sig)
+        try:
+            out, err = self.popen.communicate(timeout=timeout)
+        except subprocess.TimeoutExpired:
+            os.killpg(self.popen.pid, signal.SIGKILL)
+            out, err = self.popen.communicate()
+            pytest.fail(f"{self.popen.args} did not end within {timeout} s of signal {sig}")
+        return self.popen.returncode, out, err
+
+    def kill(self) -> None:
+        if self.popen.poll() is None:
+            os.killpg(self.popen.pid, signal.SIGKILL)
+            self.popen.communicate()
+
+
+@pytest.fixture
+def spawn() -> Iterator[Callable[..., Process]]:
+    started: list[Process] = []
+
+    def start(*args: str, **kwargs: Any) -> Process:
+        process = Process(list(args), **kwargs)
+        started.append(process)
+        return process
+
+    try:
+        yield start
+    finally:
+        for process in started:
+            process.kill()
+
+
+def run_cli(*args: str, timeout: float = 20.0) -> subprocess.CompletedProcess[str]:
+    """Run ``sonibus ARGS`` to completion."""
+    return subprocess.run([SONIBUS, *args], capture_output=True, text=True, timeout=timeout)
