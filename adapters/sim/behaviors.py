@@ -8,6 +8,7 @@ on top, so no keyframe can move a joint faster than the real robot could.
 
 from __future__ import annotations
 
+import itertools
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass
@@ -65,7 +66,7 @@ class Playback:
         frames = self._frames
         if elapsed >= frames[-1][0]:
             return dict(frames[-1][1]), True
-        for (t0, a), (t1, b) in zip(frames, frames[1:], strict=False):
+        for (t0, a), (t1, b) in itertools.pairwise(frames):
             if elapsed < t1:
                 x = (elapsed - t0) / (t1 - t0)
                 ease = 0.5 - 0.5 * math.cos(math.pi * x)
