@@ -4,6 +4,10 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import zenoh
+
+from .errors import ConfigError
+
 NODES = "sonibus/nodes"
 ROBOTS = "sonibus/robots"
 
@@ -58,3 +62,19 @@ def check_name(kind: str, name: str) -> str:
     if not name or any(c in name for c in "/*$?#@ ") :
         raise ValueError(f"{kind} name '{name}' must be non-empty without '/', '*', '$', '?', '#', '@' or spaces")
     return name
+
+
+def expr(pattern: str) -> str:
+    """A Zenoh key expression from a user's pattern: ``pepper/joints/R*`` becomes
+    ``pepper/joints/R$*`` (Zenoh only allows a bare ``*`` as a whole chunk)."""
+    chunks = []
+    for chunk in pattern.strip().split("/"):
+        if "*" in chunk and chunk not in ("*", "**") and "$*" not in chunk:
+            chunk = chunk.replace("*", "$*")
+        chunks.append(chunk)
+    text = "/".join(chunks)
+    try:
+        return str(zenoh.KeyExpr.autocanonize(text))
+    except Exception as exc:  # zenoh's message carries a Rust source path: keep only its first sentence
+        reason = str(exc).split(" at /")[0]
+        raise ConfigError(f"'{pattern}' is not a valid key expression: {reason}") from None

@@ -13,7 +13,7 @@ from typing import Any
 
 import zenoh
 
-from . import codec
+from . import codec, keys
 from .queue import SampleQueue
 
 
@@ -40,7 +40,11 @@ class Bus:
                          congestion_control=zenoh.CongestionControl.BLOCK)
 
     def subscribe(self, keyexpr: str, maxlen: int = 1024) -> tuple[zenoh.Subscriber, SampleQueue]:
-        """Samples of ``keyexpr`` as ``(key, payload bytes)`` in a bounded queue."""
+        """Samples of ``keyexpr`` as ``(key, payload bytes)`` in a bounded queue.
+
+        ``keyexpr`` may use globs inside a chunk (``pepper/joints/R*``); a bad one
+        raises ``ConfigError``."""
+        keyexpr = keys.expr(keyexpr)
         queue = SampleQueue(maxlen)
 
         def enqueue(sample: zenoh.Sample) -> None:

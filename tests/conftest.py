@@ -9,6 +9,7 @@ import signal
 import socket
 import subprocess
 import sys
+import threading
 import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
@@ -100,11 +101,20 @@ def net() -> Iterator[Network]:
 
 
 class Process:
-    """A child process that is always ended, also when the test fails."""
+    """A child process that is always ended, also when the test fails.
 
-    def __init__(self, args: list[str], **kwargs: Any) -> None:
+    With ``collect=True`` its stdout lines are gathered in ``lines`` as they come."""
+
+    def __init__(self, args: list[str], collect: bool = False, **kwargs: Any) -> None:
         self.popen = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                                       start_new_session=True, **kwargs)
+        self.lines: list[str] = []
+        if collect:
+            threading.Thread(target=self._collect, daemon=True).start()
+
+    def _collect(self) -> None:
+        for line in self.popen.stdout:
+            self.lines.append(line.rstrip("\n"))
 
     def stop(self, sig: int = signal.SIGINT, timeout: float = 5.0) -> tuple[int, str, str]:
         if self.popen.poll() is None:

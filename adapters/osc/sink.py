@@ -10,7 +10,7 @@ from dataclasses import dataclass
 
 from pythonosc.osc_message_builder import OscMessageBuilder
 
-from sonibus.bus import codec
+from sonibus.bus import codec, keys
 from sonibus.bus.adapter import Adapter
 from sonibus.bus.errors import ConfigError
 from sonibus.bus.keys import Key
@@ -31,6 +31,7 @@ class OscSinkConfig:
     queue: int = 4096                            # samples buffered before the oldest are dropped
 
     def __post_init__(self) -> None:
+        keys.expr(self.subscribe)
         if not self.targets:
             raise ConfigError("targets is empty — give at least one host:port")
         for target in self.targets:
