@@ -18,6 +18,7 @@ demo: $(STAMP)
 	$(BIN)/sonibus demo
 
 test: $(STAMP)
+	bash scripts/test-tools.sh
 	$(BIN)/ruff check .
 	$(BIN)/python -m pytest
 
