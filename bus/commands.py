@@ -7,7 +7,7 @@ behaviors and postures.
 
 >>> from sonibus.bus.robot import load_model
 >>> validate("joints/set", {"names": ["HeadYaw"], "angles": [0.3]}, load_model("pepper")).args
-{'names': ['HeadYaw'], 'angles': [0.3], 'speed': 0.3}
+{'speed': 0.3, 'names': ['HeadYaw'], 'angles': [0.3]}
 """
 
 from __future__ import annotations

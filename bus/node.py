@@ -1,5 +1,6 @@
 """``Bus``: one node's handle on a Zenoh session, the only way adapters talk.
 
+>>> from sonibus.bus import BusConfig, open_session
 >>> with open_session(BusConfig(multicast=False)) as session:
 ...     bus = Bus(session, node="demo")
 ...     bus.put("pepper/events/hello", {"t": 0.0, "kind": "hello"})

@@ -1,8 +1,9 @@
 """Zenoh sessions from a typed config: the one place that builds ``zenoh.Config``.
 
->>> cfg = BusConfig(listen=("tcp/127.0.0.1:7447",), multicast=False)
+>>> cfg = BusConfig(mode="peer", multicast=False)
 >>> with open_session(cfg) as session:
-...     pass
+...     len(str(session.zid())) > 0
+True
 """
 
 from __future__ import annotations
