@@ -4,6 +4,7 @@ can be tested in-process: ``main(["send", "pepper", "stop"], env)``."""
 from __future__ import annotations
 
 import argparse
+import contextlib
 import enum
 import json
 import logging
@@ -135,8 +136,9 @@ def command_args(verb: str, words: Sequence[str]) -> dict[str, Any]:
         positional = schema.get("x-positional")
         if positional is None:
             raise ConfigError(f"{verb} takes only NAME=VALUE arguments: {', '.join(props) or 'none'}")
-        words_for = " ".join(loose) if props[positional].get("type") == "string" else loose[0]
-        args[positional] = _typed(verb, positional, props[positional], words_for)
+        if props[positional].get("type") != "string" and len(loose) > 1:
+            raise ConfigError(f"{verb} takes one {positional}, got {' '.join(loose)!r}")
+        args[positional] = _typed(verb, positional, props[positional], " ".join(loose))
     for word in named:
         name, _, value = word.partition("=")
         if name not in props:
@@ -162,7 +164,9 @@ def _typed(verb: str, name: str, prop: dict[str, Any], text: str) -> Any:
                 raise ValueError(text)
             return lowered in ("true", "1", "on", "yes")
     except ValueError:
-        raise ConfigError(f"{verb}: {name}={text!r} is not a {kind}") from None
+        what = {"array": "a list of numbers", "number": "a number", "integer": "an integer",
+                "boolean": "true or false"}.get(kind, kind)
+        raise ConfigError(f"{verb}: {name}={text!r} is not {what}") from None
     return text
 
 
@@ -260,11 +264,15 @@ COMMANDS: dict[str, Callable[[argparse.Namespace, Environment], Exit]] = {
 def main(argv: Sequence[str] | None = None, env: Environment | None = None) -> int:
     env = env or Environment()
     try:
-        args = parser().parse_args(argv)
+        with contextlib.redirect_stdout(env.stdout), contextlib.redirect_stderr(env.stderr):
+            args = parser().parse_args(argv)
     except SystemExit as exc:  # argparse has printed its message
         return int(exc.code or 0)
-    logging.basicConfig(level=(logging.WARNING, logging.INFO, logging.DEBUG)[min(args.verbose, 2)],
-                        format="sonibus: %(levelname)s: %(message)s", stream=env.stderr)
+    handler = logging.StreamHandler(env.stderr)
+    handler.setFormatter(logging.Formatter("sonibus: %(levelname)s: %(message)s"))
+    logger = logging.getLogger("sonibus")
+    logger.addHandler(handler)
+    logger.setLevel((logging.WARNING, logging.INFO, logging.DEBUG)[min(args.verbose, 2)])
     try:
         return int(COMMANDS[args.command](args, env))
     except KeyboardInterrupt:
@@ -274,6 +282,8 @@ def main(argv: Sequence[str] | None = None, env: Environment | None = None) -> i
             raise
         print(f"sonibus: error: {_one_line(exc)}", file=env.stderr, flush=True)
         return int(_status(exc))
+    finally:
+        logger.removeHandler(handler)
 
 
 def _status(exc: Exception) -> Exit:

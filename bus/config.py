@@ -16,7 +16,7 @@ from typing import Any
 from .adapter import Adapter
 from .errors import ConfigError
 from .keys import check_name
-from .options import from_mapping
+from .options import from_mapping, located
 from .session import BusConfig
 
 TOP_LEVEL = ("bus", "nodes")
@@ -35,6 +35,10 @@ class NodeSpec:
     def build(self, cls: type[Adapter]) -> Adapter:
         """The adapter, with its options checked against ``cls.Config``."""
         return cls(from_mapping(cls.Config, self.options, self.where, self.lines), name=self.name)
+
+    def at(self, key: str) -> str:
+        """Where ``key`` of this node is set, for messages."""
+        return located(self.where, self.lines, key)
 
 
 @dataclass(frozen=True)
@@ -96,7 +100,7 @@ def parse(text: str, path: str = "<string>") -> Installation:
         adapter = options.pop("adapter", None)
         if not isinstance(adapter, str):
             raise ConfigError(f"{where}: missing key 'adapter' (a string: see `sonibus adapters`)")
-        nodes[name] = NodeSpec(name, adapter, options, where, _lines(text, f"nodes.{name}", options))
+        nodes[name] = NodeSpec(name, adapter, options, where, _lines(text, f"nodes.{name}", table))
     return Installation(bus, nodes, path)
 
 
@@ -113,7 +117,7 @@ def _line(text: str, table: str | None, key: str) -> int:
         if stripped.startswith("["):
             if table is None and re.match(rf"\[\[?{re.escape(key)}[.\]]", stripped):
                 return number
-            in_table = stripped.strip("[]").strip() == table
+            in_table = stripped.split("#", 1)[0].strip().strip("[]").strip() == table
         elif in_table and re.match(rf"{re.escape(key)}\s*=", stripped):
             return number
     return 0

@@ -13,6 +13,7 @@ Opts(rate_hz=50.0)
 from __future__ import annotations
 
 import dataclasses
+import re
 import types
 import typing
 from collections.abc import Mapping
@@ -28,10 +29,8 @@ def from_mapping(cls: type[T], data: Mapping[str, Any], where: str,
     """An instance of dataclass ``cls`` from ``data``, checked key by key.
 
     ``lines`` maps keys to their line in the source file, for the messages."""
-    lines = lines or {}
-
     def at(key: str) -> str:
-        return f"{where} line {lines[key]}" if key in lines else where
+        return located(where, lines, key)
 
     fields = {f.name: f for f in dataclasses.fields(cls) if f.init}  # type: ignore[arg-type]
     hints = typing.get_type_hints(cls)
@@ -45,8 +44,22 @@ def from_mapping(cls: type[T], data: Mapping[str, Any], where: str,
     values = {key: coerce(value, hints[key], f"{at(key)}: key '{key}'") for key, value in data.items()}
     try:
         return cls(**values)
+    except ConfigError as exc:  # from the dataclass's own checks: "key 'rate_hz': ..."
+        named = re.match(r"key '([^']+)'", str(exc))
+        raise ConfigError(f"{at(named[1]) if named else where}: {exc}") from None
     except (ValueError, TypeError) as exc:
         raise ConfigError(f"{where}: {exc}") from exc
+
+
+def bad(key: str, problem: str) -> ConfigError:
+    """The error a config dataclass raises for one of its keys (``from_mapping``
+    adds the file, table and line)."""
+    return ConfigError(f"key '{key}': {problem}")
+
+
+def located(where: str, lines: Mapping[str, int] | None, key: str) -> str:
+    """``where`` plus the line that sets ``key``, when known."""
+    return f"{where} line {lines[key]}" if lines and key in lines else where
 
 
 def coerce(value: Any, tp: Any, where: str) -> Any:

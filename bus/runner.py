@@ -9,6 +9,7 @@ from collections.abc import Callable
 from . import registry
 from .adapter import Adapter
 from .config import Installation
+from .errors import AdapterError, ConfigError
 from .node import Bus
 from .session import BusConfig, open_session
 
@@ -17,7 +18,14 @@ log = logging.getLogger(__name__)
 
 def build(installation: Installation, only: list[str] | None = None) -> list[Adapter]:
     """Every selected node's adapter, configured; all errors before anything starts."""
-    return [spec.build(registry.load(spec.adapter)) for spec in installation.select(only)]
+    adapters = []
+    for spec in installation.select(only):
+        try:
+            cls = registry.load(spec.adapter)
+        except AdapterError as exc:
+            raise ConfigError(f"{spec.at('adapter')}: key 'adapter': {exc}") from None
+        adapters.append(spec.build(cls))
+    return adapters
 
 
 def run(adapters: list[Adapter], bus_config: BusConfig, stop: threading.Event,

@@ -15,6 +15,7 @@ from typing import Any
 import zenoh
 
 from .errors import ConfigError
+from .options import bad
 
 MODES = ("peer", "client", "router")
 
@@ -36,7 +37,7 @@ class BusConfig:
 
     def __post_init__(self) -> None:
         if self.mode not in MODES:
-            raise ConfigError(f"bus mode '{self.mode}' is not one of {', '.join(MODES)}")
+            raise bad("mode", f"'{self.mode}' is not one of {', '.join(MODES)}")
 
     def to_zenoh(self) -> zenoh.Config:
         config = zenoh.Config()

@@ -14,6 +14,7 @@ from sonibus.bus import codec, keys
 from sonibus.bus.adapter import Adapter
 from sonibus.bus.errors import ConfigError
 from sonibus.bus.keys import Key
+from sonibus.bus.options import bad
 
 log = logging.getLogger(__name__)
 
@@ -31,18 +32,24 @@ class OscSinkConfig:
     queue: int = 4096                            # samples buffered before the oldest are dropped
 
     def __post_init__(self) -> None:
-        keys.expr(self.subscribe)
+        try:
+            keys.expr(self.subscribe)
+        except ConfigError as exc:
+            raise bad("subscribe", str(exc)) from None
         if not self.targets:
-            raise ConfigError("targets is empty — give at least one host:port")
+            raise bad("targets", "targets is empty — give at least one host:port")
         for target in self.targets:
-            parse_target(target)
+            try:
+                parse_target(target)
+            except ConfigError as exc:
+                raise bad("targets", str(exc)) from None
         used = {f for _, f, _, _ in string.Formatter().parse(self.address) if f is not None}
         unknown = used - set(FIELDS)
         if unknown:
-            raise ConfigError(f"address '{self.address}' uses unknown field '{{{sorted(unknown)[0]}}}' — "
-                              f"fields: {', '.join('{' + f + '}' for f in FIELDS)}")
+            raise bad("address", f"'{self.address}' uses unknown field '{{{sorted(unknown)[0]}}}' — "
+                      f"fields: {', '.join('{' + f + '}' for f in FIELDS)}")
         if not self.address.startswith("/"):
-            raise ConfigError(f"address '{self.address}' must start with '/'")
+            raise bad("address", f"'{self.address}' must start with '/'")
 
 
 def parse_target(target: str) -> tuple[str, int]:

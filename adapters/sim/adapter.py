@@ -12,7 +12,8 @@ from dataclasses import dataclass
 from typing import Any
 
 from sonibus.bus.commands import expand_stiffness_names
-from sonibus.bus.errors import CommandError, ConfigError
+from sonibus.bus.errors import CommandError
+from sonibus.bus.options import bad
 from sonibus.bus.owner import RobotAdapter
 from sonibus.bus.robot import load_model, models
 
@@ -37,10 +38,17 @@ class SimConfig:
 
     def __post_init__(self) -> None:
         if not 0 < self.rate_hz <= 1000:
-            raise ConfigError(f"rate_hz = {self.rate_hz} must be in (0, 1000]")
-        model = self.model or self.robot.rstrip("0123456789")
-        if model not in models():
-            raise ConfigError(f"model '{model}' unknown — known models: {', '.join(models())}")
+            raise bad("rate_hz", f"{self.rate_hz:g} must be in (0, 1000]")
+        if self.model_name not in models():
+            raise bad("model", f"'{self.model_name}' is unknown — known models: {', '.join(models())}")
+        postures = load_model(self.model_name).postures
+        if self.posture not in postures:
+            raise bad("posture", f"'{self.posture}' is unknown for {self.model_name} — "
+                      f"known postures: {', '.join(postures)}")
+
+    @property
+    def model_name(self) -> str:
+        return self.model or self.robot.rstrip("0123456789")
 
 
 class SimRobot(RobotAdapter):
@@ -50,10 +58,9 @@ class SimRobot(RobotAdapter):
 
     def _open(self) -> None:
         cfg: SimConfig = self.config
-        self.model = load_model(cfg.model or cfg.robot.rstrip("0123456789"))
+        self.model = load_model(cfg.model_name)
         self.rate_hz = cfg.rate_hz
-        start = self.model.posture(cfg.posture) if cfg.posture in self.model.postures else {}
-        self.body = Body(self.model, start)
+        self.body = Body(self.model, self.model.posture(cfg.posture))
         self._lock = threading.Lock()
         self._playback: Playback | None = None
         self._playback_started = 0.0

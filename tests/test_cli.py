@@ -1,0 +1,351 @@
+"""The ``sonibus`` command: real subprocesses on the test network, and ``main`` in-process."""
+
+from __future__ import annotations
+
+import io
+import json
+import signal
+import socket
+import subprocess
+import time
+from pathlib import Path
+
+import pytest
+
+from sonibus.bus import ConfigError, keys
+from sonibus.bus.cli import Environment, command_args, main
+
+from .conftest import SONIBUS, free_port, run_cli, wait_for
+
+CASES = Path(__file__).parent / "cases" / "config"
+STOP_WITHIN_S = 3.0
+
+
+def one_error_line(err: str) -> str:
+    """The single ``sonibus: error: ...`` line of a failed command."""
+    assert "Traceback" not in err, err
+    lines = err.strip().splitlines()
+    assert len(lines) == 1, f"expected one line on stderr, got: {err!r}"
+    assert lines[0].startswith("sonibus: error: "), lines[0]
+    return lines[0]
+
+
+def cli_in(cwd: Path, *args: str) -> subprocess.CompletedProcess[str]:
+    return subprocess.run([SONIBUS, *args], capture_output=True, text=True, timeout=20, cwd=cwd)
+
+
+# -- adapters ---------------------------------------------------------------------------
+
+
+def test_adapters_lists_installed_and_warns_about_broken_plugin():
+    result = run_cli("adapters")
+    assert result.returncode == 0, result.stderr
+    listed = {line.split()[0] for line in result.stdout.splitlines() if line.strip()}
+    assert {"sim", "osc", "console", "jsonl"} <= listed
+    assert "broken" not in listed
+    warnings = result.stderr.strip().splitlines()
+    assert len(warnings) == 1, result.stderr
+    assert "'broken'" in warnings[0] and "skipped" in warnings[0]
+    assert "Traceback" not in result.stderr
+
+
+# -- send -------------------------------------------------------------------------------
+
+
+def test_send_say_prints_the_json_result(net):
+    net.sim("pepper")
+    result = run_cli("send", "pepper", "say", "hello", "world", *net.cli_args())
+    assert result.returncode == 0, result.stderr
+    reply = json.loads(result.stdout)
+    assert reply["duration"] > 0
+    assert reply["queued"] == 0
+    assert result.stderr == ""
+
+
+def test_send_joints_set_moves_the_robot(net):
+    sim = net.sim("pepper")
+    assert abs(sim.body.pose()["HeadYaw"] - 0.3) > 0.1
+    result = run_cli("send", "pepper", "joints/set", "names=HeadYaw", "angles=0.3", "speed=0.5", *net.cli_args())
+    assert result.returncode == 0, result.stderr
+    assert json.loads(result.stdout) == {}
+    wait_for(lambda: abs(sim.body.pose()["HeadYaw"] - 0.3) < 0.01, what="HeadYaw to reach 0.3")
+
+
+def test_send_invalid_request_is_one_error_line(net):
+    sim = net.sim("pepper")
+    before = sim.body.pose()
+    result = run_cli("send", "pepper", "joints/set", "names=HedYaw", "angles=0.3", *net.cli_args())
+    assert result.returncode not in (0, 2), result.returncode
+    assert "HedYaw" in one_error_line(result.stderr)
+    assert result.stdout == ""
+    assert sim.body.pose() == before
+
+
+def test_send_to_unknown_robot_exits_3_promptly(net):
+    net.sim("pepper")
+    args = net.cli_args()
+    started = time.monotonic()
+    result = run_cli("send", "nobody", "stop", *args)
+    elapsed = time.monotonic() - started
+    assert result.returncode == 3, result.stderr
+    assert "'nobody'" in one_error_line(result.stderr)
+    assert elapsed < 3.0, f"took {elapsed:.1f} s"
+
+
+def test_send_unknown_argument_is_a_usage_error(net):
+    net.sim("pepper")
+    result = run_cli("send", "pepper", "joints/set", "bogus=1", *net.cli_args())
+    assert result.returncode == 2
+    line = one_error_line(result.stderr)
+    assert "'bogus'" in line and "names" in line
+
+
+# -- echo, nodes ------------------------------------------------------------------------
+
+
+def test_echo_prints_count_samples(net):
+    net.sim("pepper", rate_hz=50)
+    result = run_cli("echo", "pepper/joints/HeadYaw", "--count", "5", *net.cli_args())
+    assert result.returncode == 0, result.stderr
+    lines = result.stdout.splitlines()
+    assert len(lines) == 5, result.stdout
+    seqs = []
+    for line in lines:
+        key, _, payload = line.partition(" ")
+        assert key == "pepper/joints/HeadYaw"
+        sample = json.loads(payload)
+        assert set(sample) == {"t", "seq", "v"}
+        assert abs(sample["t"] - time.time()) < 30
+        assert isinstance(sample["v"], float)
+        seqs.append(sample["seq"])
+    assert seqs == sorted(seqs) and len(set(seqs)) == 5
+
+
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
+def test_echo_without_count_ends_on_signal(net, spawn, sig):
+    net.sim("pepper", rate_hz=50)
+    process = spawn(SONIBUS, "echo", "pepper/joints/HeadYaw", *net.cli_args(), collect=True)
+    wait_for(lambda: process.lines, what="echo to print a sample")
+    assert process.lines[0].startswith("pepper/joints/HeadYaw {")
+    started = time.monotonic()
+    rc, _, err = process.stop(sig, timeout=STOP_WITHIN_S)
+    assert time.monotonic() - started < STOP_WITHIN_S
+    assert rc in (130, 128 + sig, -sig), (rc, err)
+    assert "Traceback" not in err, err
+
+
+def test_echo_bad_key_expression_is_a_usage_error(net):
+    result = run_cli("echo", "pepper//joints", "--count", "1", *net.cli_args())
+    assert result.returncode == 2
+    assert "pepper//joints" in one_error_line(result.stderr)
+
+
+def test_nodes_lists_the_robot_and_its_node(net):
+    net.sim("pepper")
+    result = run_cli("nodes", *net.cli_args())
+    assert result.returncode == 0, result.stderr
+    out = result.stdout
+    assert "1 robot(s)" in out
+    node_lines = [line.split() for line in out.splitlines() if line.strip().startswith("node ")]
+    assert ["node", "sim-pepper"] in [words[:2] for words in node_lines]
+    robot_line = next(line for line in out.splitlines() if line.strip().startswith("robot "))
+    assert robot_line.split()[1:3] == ["pepper", "pepper"]
+    assert "owned by sim-pepper" in robot_line
+
+
+# -- run: configuration errors ----------------------------------------------------------
+
+
+def test_run_missing_file(tmp_path):
+    result = cli_in(tmp_path, "run", "missing.toml")
+    assert result.returncode == 2
+    assert one_error_line(result.stderr) == "sonibus: error: missing.toml: no such file"
+
+
+@pytest.mark.parametrize("case", ["invalid-unknown-key", "invalid-syntax", "invalid-unknown-adapter"])
+def test_run_invalid_file_is_one_error_line(case):
+    path = CASES / f"{case}.toml"
+    result = run_cli("run", str(path))
+    assert path.name in one_error_line(result.stderr)
+    assert result.returncode == 2, f"a bad installation file is a usage error: {result.stderr}"
+
+
+def test_run_only_unknown_node(tmp_path):
+    (tmp_path / "show.toml").write_text('[nodes.view]\nadapter = "console"\n')
+    result = cli_in(tmp_path, "run", "show.toml", "--only", "lights")
+    assert result.returncode == 2
+    assert "'lights'" in one_error_line(result.stderr)
+
+
+# -- run: a real installation, ended by signals ------------------------------------------
+
+
+def write_show(tmp_path: Path, bus_table: str) -> tuple[Path, Path]:
+    samples = tmp_path / "samples.jsonl"
+    config = tmp_path / "show.toml"
+    config.write_text(f"""\
+{bus_table}
+[nodes.pepper]
+adapter = "sim"
+rate_hz = 50
+
+[nodes.recorder]
+adapter = "jsonl"
+path = "{samples}"
+subscribe = "pepper/joints/*"
+""")
+    return config, samples
+
+
+def joint_samples(path: Path) -> list[dict]:
+    if not path.exists():
+        return []
+    lines = path.read_text().splitlines()
+    return [json.loads(line) for line in lines[:-1]]  # the last line may be half written
+
+
+def check_samples(samples: Path) -> None:
+    found = wait_for(lambda: len(joint_samples(samples)) >= 100 and joint_samples(samples),
+                     timeout=10, what="joint samples in the JSON-lines file")
+    assert {s["key"] for s in found} >= {"pepper/joints/HeadYaw", "pepper/joints/LHand"}
+    assert all(s["key"].startswith("pepper/joints/") and {"t", "seq", "v"} <= set(s) for s in found)
+
+
+def test_run_plugin_and_sim_then_sigint(net, spawn, tmp_path):
+    net.cli_args()  # the network's listening session
+    config, samples = write_show(tmp_path, f'[bus]\nmode = "peer"\nmulticast = false\nconnect = ["{net.endpoint}"]\n')
+    process = spawn(SONIBUS, "run", str(config))
+    check_samples(samples)
+    watcher = net.bus("watcher")
+    wait_for(lambda: watcher.alive(keys.robot_token("pepper")), what="the run's robot on the test network")
+    started = time.monotonic()
+    rc, out, err = process.stop(signal.SIGINT, timeout=STOP_WITHIN_S)
+    assert rc == 130, (rc, err)
+    assert time.monotonic() - started < STOP_WITHIN_S
+    assert "Traceback" not in err, err
+    assert "running pepper (SimRobot), recorder (JsonLinesSink)" in out
+    wait_for(lambda: not watcher.alive(keys.robot_token("pepper")), what="the robot to leave the bus")
+
+
+def test_run_with_cli_bus_options_then_sigterm(net, spawn, tmp_path):
+    config, samples = write_show(tmp_path, "")
+    process = spawn(SONIBUS, "run", str(config), *net.cli_args())
+    check_samples(samples)
+    started = time.monotonic()
+    rc, _, err = process.stop(signal.SIGTERM, timeout=STOP_WITHIN_S)
+    assert time.monotonic() - started < STOP_WITHIN_S
+    assert rc in (130, 143, -signal.SIGTERM), (rc, err)
+    assert "Traceback" not in err, err
+
+
+def test_run_only_one_node(net, spawn, tmp_path):
+    config, samples = write_show(tmp_path, "")
+    process = spawn(SONIBUS, "run", str(config), "--only", "pepper", *net.cli_args())
+    watcher = net.bus("watcher")
+    wait_for(lambda: watcher.alive(keys.robot_token("pepper")), what="the robot on the bus")
+    assert not watcher.alive(f"{keys.NODES}/*/recorder")
+    assert not samples.exists()
+    rc, _, err = process.stop(signal.SIGINT, timeout=STOP_WITHIN_S)
+    assert rc == 130, err
+
+
+def test_demo_sends_osc_and_ends_on_sigint(spawn):
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as receiver:
+        receiver.bind(("127.0.0.1", 0))
+        receiver.settimeout(10)
+        udp_port = receiver.getsockname()[1]
+        process = spawn(SONIBUS, "demo", "--no-multicast", "--listen", f"tcp/127.0.0.1:{free_port()}",
+                        "--port", str(udp_port), "--quiet")
+        datagram = receiver.recv(4096)  # waits for the first OSC message, at most 10 s
+    assert datagram.startswith(b"/pepper/joints/")
+    started = time.monotonic()
+    rc, out, err = process.stop(signal.SIGINT, timeout=STOP_WITHIN_S)
+    assert time.monotonic() - started < STOP_WITHIN_S
+    assert rc == 130, (rc, err)
+    assert "Traceback" not in err, err
+    assert f"127.0.0.1:{udp_port}" in out
+
+
+# -- main() in-process -------------------------------------------------------------------
+
+
+def environment() -> Environment:
+    return Environment(stdout=io.StringIO(), stderr=io.StringIO())
+
+
+def test_main_adapters_in_process():
+    env = environment()
+    assert main(["adapters"], env) == 0
+    listed = {line.split()[0] for line in env.stdout.getvalue().splitlines()}
+    assert {"sim", "osc", "console", "jsonl"} <= listed
+    assert "broken" not in listed
+    assert "'broken'" in env.stderr.getvalue(), "the skipped plug-in's warning must go to env.stderr"
+
+
+def test_main_send_usage_error_in_process():
+    env = environment()
+    assert main(["send", "pepper", "joints/set", "bogus=1"], env) == 2
+    assert env.stdout.getvalue() == ""
+    assert one_error_line(env.stderr.getvalue()).startswith("sonibus: error: joints/set has no argument 'bogus'")
+
+
+def test_main_argparse_usage_error_in_process(capsys):
+    env = environment()
+    assert main(["frobnicate"], env) == 2
+    assert "invalid choice: 'frobnicate'" in env.stderr.getvalue(), "argparse's message must go to env.stderr"
+    assert capsys.readouterr().err == "", "nothing may leak to the real stderr"
+
+
+# -- command_args -----------------------------------------------------------------------
+
+
+def test_command_args_positional_text_joins_words():
+    assert command_args("say", ["hello", "world"]) == {"text": "hello world"}
+    assert command_args("posture", ["StandInit", "speed=0.5"]) == {"name": "StandInit", "speed": 0.5}
+
+
+def test_command_args_comma_lists():
+    args = command_args("joints/set", ["names=HeadYaw,HeadPitch", "angles=0.3,-0.1", "speed=1"])
+    assert args == {"names": ["HeadYaw", "HeadPitch"], "angles": [0.3, -0.1], "speed": 1.0}
+    assert all(isinstance(a, float) for a in args["angles"])
+    assert command_args("stiffness", ["names=Body", "value=0"]) == {"names": ["Body"], "value": 0.0}
+
+
+@pytest.mark.parametrize(("word", "value"), [("on", True), ("off", False), ("true", True), ("No", False),
+                                             ("enabled=1", True), ("enabled=false", False)])
+def test_command_args_booleans(word, value):
+    assert command_args("awareness", [word]) == {"enabled": value}
+
+
+def test_command_args_bad_boolean():
+    with pytest.raises(ConfigError, match="maybe"):
+        command_args("awareness", ["enabled=maybe"])
+
+
+def test_command_args_unknown_argument():
+    with pytest.raises(ConfigError) as caught:
+        command_args("say", ["text=hi", "loudness=3"])
+    assert "'loudness'" in str(caught.value)
+    assert "volume" in str(caught.value)  # the arguments there are
+
+
+def test_command_args_positional_where_none_is_taken():
+    with pytest.raises(ConfigError, match="NAME=VALUE"):
+        command_args("joints/set", ["HeadYaw"])
+
+
+@pytest.mark.parametrize(("verb", "words", "name"), [
+    ("say", ["hi", "speed=fast"], "speed"),
+    ("joints/set", ["names=HeadYaw", "angles=zero"], "angles"),
+    ("stiffness", ["names=Body", "value=high"], "value"),
+])
+def test_command_args_bad_number(verb, words, name):
+    with pytest.raises(ConfigError) as caught:
+        command_args(verb, words)
+    message = str(caught.value)
+    assert f"{name}=" in message and verb in message
+    assert "number" in message
+
+
+def test_command_args_unknown_verb_is_left_to_the_robot():
+    assert command_args("dance", ["wildly"]) == {}
