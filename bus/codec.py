@@ -27,7 +27,7 @@ def decode(payload: bytes | zenoh.ZBytes | None) -> dict[str, Any]:
     try:
         message = msgpack.unpackb(data, raw=False, strict_map_key=False)
     except Exception as exc:  # msgpack raises several unrelated types
-        raise DecodeError(f"payload is not msgpack: {exc}") from exc
+        raise DecodeError(f"payload is not msgpack ({type(exc).__name__}: {exc})") from exc
     if not isinstance(message, dict):
         raise DecodeError(f"payload is a msgpack {type(message).__name__}, expected a map")
     return message

@@ -51,7 +51,11 @@ def validate(verb: str, args: Any, model: RobotModel,
     if error is not None:
         where = ".".join(str(p) for p in error.absolute_path) or "arguments"
         code = "out_of_range" if error.validator in _RANGE_CHECKS else "bad_request"
-        raise CommandError(code, f"{verb}: {where}: {error.message}")
+        message = error.message
+        if error.validator in ("maxLength", "minLength"):
+            message = f"is {len(error.instance)} characters long, must be {error.validator_value} " \
+                      f"at {'most' if error.validator == 'maxLength' else 'least'}"
+        raise CommandError(code, f"{verb}: {where}: {message}")
     filled = {k: p["default"] for k, p in schema["properties"].items() if "default" in p}
     filled.update(args)
     _check_against_model(verb, filled, model, behaviors)

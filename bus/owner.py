@@ -102,12 +102,14 @@ class RobotAdapter(Adapter):
         verb = str(query.key_expr)[len(keys.command(self.robot, "")):]
         args: Any = {}
         try:
-            args = codec.decode(query.payload)
+            try:
+                args = codec.decode(query.payload)
+            except codec.DecodeError as exc:
+                if verb != "stop":  # stop must always work
+                    raise CommandError("bad_request", f"{verb}: {exc}") from None
             reply = commands.ok_reply(verb, self.execute(verb, args))
         except CommandError as exc:
             reply = commands.error_reply(verb, exc)
-        except codec.DecodeError as exc:
-            reply = commands.error_reply(verb, CommandError("bad_request", f"{verb}: {exc}"))
         except Exception as exc:
             log.exception("%s: command %s failed", self.name, verb)
             reply = commands.error_reply(verb, CommandError("failed", f"{verb} failed: {exc}"))

@@ -81,14 +81,12 @@ class SimRobot(RobotAdapter):
         period = 1.0 / self.rate_hz
         start = time.monotonic()
         frame = 0
-        last = time.time()
+        last = time.monotonic()
         while not self.stopping.is_set():
-            now = time.time()
-            events = self._advance(now, now - last)
-            last = now
-            self.publish_frame(now, frame, list(self.body.positions))
-            for kind, fields in events:
-                self.publish_event(kind, **fields)
+            now, tick = time.time(), time.monotonic()  # wall clock for `t`, monotonic for motion
+            positions = self._advance(now, tick - last)
+            last = tick
+            self.publish_frame(now, frame, positions)
             frame += 1
             deadline = start + frame * period
             late = time.monotonic() - deadline
@@ -99,7 +97,8 @@ class SimRobot(RobotAdapter):
                 deadline = start + frame * period
             self.stopping.wait(max(0.0, deadline - time.monotonic()))
 
-    def _advance(self, now: float, dt: float) -> list[tuple[str, dict[str, Any]]]:
+    def _advance(self, now: float, dt: float) -> list[float]:
+        """Move the robot on by ``dt`` seconds; publish what happened; the new positions."""
         events: list[tuple[str, dict[str, Any]]] = []
         with self._lock:
             if self._playback is not None:
@@ -116,7 +115,7 @@ class SimRobot(RobotAdapter):
             if self.config.autoplay_s and self._playback is None and time.monotonic() >= self._next_autoplay:
                 self._next_autoplay = time.monotonic() + self.config.autoplay_s
                 events.extend(self._start_behavior(random.choice(list(LIBRARY)), now))
-            self.body.step(min(dt, 0.1))
+            self.body.step(max(0.0, min(dt, 0.1)))
             if self._speaking_until and now >= self._speaking_until:
                 events.append(("speech", {"text": self._speech.popleft()[0], "state": "done"}))
                 self._speaking_until = 0.0
@@ -124,7 +123,8 @@ class SimRobot(RobotAdapter):
                 text, duration = self._speech[0]
                 self._speaking_until = now + duration
                 events.append(("speech", {"text": text, "state": "started"}))
-        return events
+            self._emit(events)
+            return list(self.body.positions)
 
     def _idle(self, now: float) -> None:
         targets = {}
@@ -134,10 +134,9 @@ class SimRobot(RobotAdapter):
         self.body.set_targets(targets, 0.2)
 
     def _start_behavior(self, name: str, now: float) -> list[tuple[str, dict[str, Any]]]:
-        events = self._end_behavior()
+        events = self._interrupt()
         self._playback = Playback(LIBRARY[name], self.body.pose())
         self._playback_started = now
-        self._posture = None
         events.append(("behavior", {"name": name, "state": "started"}))
         return events
 
@@ -157,6 +156,7 @@ class SimRobot(RobotAdapter):
         return events
 
     def _emit(self, events: list[tuple[str, dict[str, Any]]]) -> None:
+        """Publish events; callers hold the lock, so events keep the order of what happened."""
         for kind, fields in events:
             self.publish_event(kind, **fields)
 
@@ -166,39 +166,35 @@ class SimRobot(RobotAdapter):
         with self._lock:
             if self._playback is not None and self._playback.behavior.name == name:
                 raise CommandError("failed", f"behavior '{name}' is already running")
-            events = self._start_behavior(name, time.time())
-        self._emit(events)
+            self._emit(self._start_behavior(name, time.time()))
         return {"name": name, "duration": LIBRARY[name].duration}
 
     def _cmd_behavior_stop(self, name: str | None = None) -> dict[str, Any]:
         with self._lock:
             running = self._playback is not None and name in (None, self._playback.behavior.name)
-            events = self._end_behavior() if running else []
             if running:
+                self._emit(self._end_behavior())
                 self.body.halt()
-        self._emit(events)
         return {"was_running": running}
 
     def _cmd_joints_set(self, names: list[str], angles: list[float], speed: float) -> dict[str, Any]:
         with self._lock:
-            events = self._interrupt()
+            self._emit(self._interrupt())
             self.body.set_targets(dict(zip(names, map(float, angles), strict=True)), speed)
             self._idle_home.update(zip(names, map(float, angles), strict=True))
-        self._emit(events)
         return {}
 
     def _cmd_posture(self, name: str, speed: float) -> dict[str, Any]:
         with self._lock:
-            events = self._interrupt()
+            self._emit([*self._interrupt(), ("posture", {"name": name, "state": "started"})])
             pose = self.model.posture(name)
             self.body.set_targets(pose, speed)
             self._idle_home.update(pose)
             self._posture = name
-        self._emit([*events, ("posture", {"name": name, "state": "started"})])
         return {"name": name}
 
     def _cmd_say(self, text: str, volume: float | None = None, speed: float | None = None) -> dict[str, Any]:
-        words = max(1, len(text.split()))
+        words = max(len(text.split()), len(text) / 6.0)  # long unbroken text still takes time
         duration = 0.2 + words * 60.0 / (self.config.words_per_minute * (speed or 100.0) / 100.0)
         with self._lock:
             self._speech.append((text, duration))
@@ -224,5 +220,5 @@ class SimRobot(RobotAdapter):
                 events.append(("speech", {"text": self._speech[0][0], "state": "done"}))
             self._speech.clear()
             self._speaking_until = 0.0
-        self._emit(events)
+            self._emit(events)
         return {}

@@ -49,7 +49,9 @@ class Body:
         return any(self.positions[i] != self.targets[i] and self.stiffness[i] >= STIFF for i in indexes)
 
     def step(self, dt: float) -> None:
-        """Advance ``dt`` seconds."""
+        """Advance ``dt`` seconds (nothing moves for ``dt <= 0``)."""
+        if dt <= 0:
+            return
         for i, target in enumerate(self.targets):
             if self.stiffness[i] < STIFF:
                 self.targets[i] = self.positions[i]
