@@ -40,13 +40,14 @@ class Bus:
         self.session.put(key, codec.encode(message), encoding=codec.ENCODING,
                          congestion_control=zenoh.CongestionControl.BLOCK)
 
-    def subscribe(self, keyexpr: str, maxlen: int = 1024) -> tuple[zenoh.Subscriber, SampleQueue]:
+    def subscribe(self, keyexpr: str, maxlen: int = 1024,
+                  queue: SampleQueue | None = None) -> tuple[zenoh.Subscriber, SampleQueue]:
         """Samples of ``keyexpr`` as ``(key, payload bytes)`` in a bounded queue.
 
         ``keyexpr`` may use globs inside a chunk (``pepper/joints/R*``); a bad one
-        raises ``ConfigError``."""
+        raises ``ConfigError``. Pass ``queue`` to feed several subscriptions into one."""
         keyexpr = keys.expr(keyexpr)
-        queue = SampleQueue(maxlen)
+        queue = queue if queue is not None else SampleQueue(maxlen)
 
         def enqueue(sample: zenoh.Sample) -> None:
             queue.put((str(sample.key_expr), sample.payload.to_bytes()))

@@ -103,12 +103,19 @@ def coerce(value: Any, tp: Any, where: str) -> Any:
 def describe(tp: Any) -> str:
     """A type as a reader of a configuration file would say it."""
     names = {str: "a string", int: "an integer", float: "a number", bool: "true or false", dict: "a table"}
-    if tp in names:
-        return names[tp]
     origin = typing.get_origin(tp)
+    if tp in names or origin is dict:
+        return names[dict if origin is dict else tp]
     if origin in (tuple, list):
         args = [a for a in typing.get_args(tp) if a is not Ellipsis]
-        return f"a list of {describe(args[0]).split(' ', 1)[1]}s" if args else "a list"
+        return f"a list of {_plural(args[0])}" if args else "a list"
     if origin in (typing.Union, types.UnionType):
         return " or ".join(describe(a) for a in typing.get_args(tp) if a is not type(None))
     return getattr(tp, "__name__", str(tp))
+
+
+def _plural(tp: Any) -> str:
+    if typing.get_origin(tp) in (typing.Union, types.UnionType):
+        return " or ".join(_plural(a) for a in typing.get_args(tp) if a is not type(None))
+    plurals = {str: "strings", int: "integers", float: "numbers", bool: "booleans", dict: "tables"}
+    return plurals.get(dict if typing.get_origin(tp) is dict else tp, describe(tp))

@@ -8,6 +8,7 @@ set -euo pipefail
 tools=(
   "oscdump liblo-tools"
   "oscsend liblo-tools"
+  "pd puredata-core"
 )
 
 missing=()

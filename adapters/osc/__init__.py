@@ -1,5 +1,11 @@
-"""OSC sink (adapter ``osc``): ``OscSink`` with ``OscSinkConfig``."""
+"""OSC for sound tools: the sink ``osc`` (bus → OSC) and the gateway
+``osc-gateway`` (OSC → robot commands).
 
-from .sink import OscSink, OscSinkConfig, parse_target
+    from sonibus.adapters.osc import OscSink, OscSinkConfig
+    sink = OscSink(OscSinkConfig(targets=("127.0.0.1:3005",), profile="pepperosc"), name="sound")
+"""
 
-__all__ = ["OscSink", "OscSinkConfig", "parse_target"]
+from .config import OscSinkConfig, Target, TargetSettings, parse_target
+from .sink import OscSink
+
+__all__ = ["OscSink", "OscSinkConfig", "Target", "TargetSettings", "parse_target"]

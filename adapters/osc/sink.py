@@ -1,122 +1,244 @@
-"""OSC sink: every sample of a key expression as one OSC message over UDP."""
+"""OSC sink: bus samples and events → OSC over UDP, per target as configured."""
 
 from __future__ import annotations
 
 import logging
+import math
 import socket
-import string
 import time
-from dataclasses import dataclass
-
-from pythonosc.osc_message_builder import OscMessageBuilder
+from collections.abc import Sequence
+from typing import Any
 
 from sonibus.bus import codec, keys
 from sonibus.bus.adapter import Adapter
 from sonibus.bus.errors import ConfigError
-from sonibus.bus.keys import Key
-from sonibus.bus.options import bad
+from sonibus.bus.queue import SampleQueue
+
+from .config import OscSinkConfig, Target, parse_target
+from .frames import Frame, FrameAssembler
+from .profiles import PROFILES, Source
 
 log = logging.getLogger(__name__)
 
-FIELDS = ("robot", "section", "joint", "name", "key")
 WARN_EVERY_S = 10.0
+INFO_RETRY_S = 2.0
 
 
-@dataclass(frozen=True)
-class OscSinkConfig:
-    """Options of the ``osc`` adapter."""
+class _Link:
+    """One target: where it is, its profile, and what it was last sent."""
 
-    subscribe: str = "*/joints/*"                # key expression to forward
-    targets: tuple[str, ...] = ("127.0.0.1:9000",)  # host:port of each receiver
-    address: str = "/{robot}/joints/{joint}"     # OSC address template: {robot} {joint} {section} {name} {key}
-    queue: int = 4096                            # samples buffered before the oldest are dropped
+    def __init__(self, target: Target, destination: tuple[str, int]) -> None:
+        self.target = target
+        self.destination = destination
+        self.profile = PROFILES[target.profile](target)
+        self.min_interval = 1.0 / target.max_rate_hz if target.max_rate_hz else 0.0
+        self.filtering = target.on_change or target.deadband > 0
+        self.last_values: dict[str, Sequence[float]] = {}
+        self.last_sent: dict[str, float] = {}     # slot (key, or robot for frames) → monotonic time
+        self.held: dict[str, Any] = {}            # slot → the newest thing waiting for its turn
+        self.last_frame_t: dict[str, float] = {}  # robot → t of the last frame sent
 
-    def __post_init__(self) -> None:
-        try:
-            keys.expr(self.subscribe)
-        except ConfigError as exc:
-            raise bad("subscribe", str(exc)) from None
-        if not self.targets:
-            raise bad("targets", "targets is empty — give at least one host:port")
-        for target in self.targets:
-            try:
-                parse_target(target)
-            except ConfigError as exc:
-                raise bad("targets", str(exc)) from None
-        used = {f for _, f, _, _ in string.Formatter().parse(self.address) if f is not None}
-        unknown = used - set(FIELDS)
-        if unknown:
-            raise bad("address", f"'{self.address}' uses unknown field '{{{sorted(unknown)[0]}}}' — "
-                      f"fields: {', '.join('{' + f + '}' for f in FIELDS)}")
-        if not self.address.startswith("/"):
-            raise bad("address", f"'{self.address}' must start with '/'")
+    def changed(self, key: str, values: Sequence[float]) -> bool:
+        """Whether ``values`` pass the on-change/deadband filter (and remember them if so)."""
+        if self.filtering:
+            last = self.last_values.get(key)
+            if last is not None and len(last) == len(values) and all(
+                    abs(a - b) <= self.target.deadband for a, b in zip(values, last, strict=True)):
+                return False
+        self.last_values[key] = values
+        return True
 
-
-def parse_target(target: str) -> tuple[str, int]:
-    """``"host:port"`` → ``(host, port)``, or ``ConfigError``."""
-    host, sep, port = target.rpartition(":")
-    if not sep or not host or not port.isdigit() or not 0 < int(port) < 65536:
-        raise ConfigError(f"target '{target}' is not host:port with a port in 1..65535")
-    return host, int(port)
+    def turn(self, slot: str, now: float) -> bool:
+        """Whether ``slot`` may send now under the rate cap."""
+        return now - self.last_sent.get(slot, -math.inf) >= self.min_interval
 
 
 class OscSink(Adapter):
-    """Forwards bus samples to OSC receivers (Pure Data, Max, SuperCollider) over UDP."""
+    """Forwards joints, derived values and events to OSC receivers (Pd, Max, SuperCollider) over UDP."""
 
     Config = OscSinkConfig
 
     def _start(self) -> None:
         cfg: OscSinkConfig = self.config
-        self.sent = self.skipped = 0
-        self._last_warning = 0.0
-        self._addresses: dict[str, str] = {}
-        self._targets = [_resolve(*parse_target(t)) for t in cfg.targets]
+        self.stats = dict.fromkeys(("received", "sent", "stale", "bad", "late", "waiting_info", "send_errors"), 0)
+        self._last_warning: dict[str, float] = {}
+        self._sources: dict[str, Source] = {}
+        self._ranges: dict[str, dict[str, tuple[float, float]]] = {}
+        self._info_asked: dict[str, float] = {}
+        self._links = [_Link(t, _resolve(t.to)) for t in cfg.resolved_targets()]
+        self._sample_links = [link for link in self._links if not link.target.framed]
+        self._frame_links = [link for link in self._links if link.target.framed]
+        self._frames = FrameAssembler()
         self._socket = self.own(socket.socket(socket.AF_INET, socket.SOCK_DGRAM))
-        subscriber, self._queue = self.bus.subscribe(cfg.subscribe, cfg.queue)
-        self.own(subscriber)
-        self.own(self._queue)
+        self._queue = self.own(SampleQueue(cfg.queue))
+        for pattern in cfg.subscribe:
+            self.own(self.bus.subscribe(pattern, queue=self._queue)[0])
         self.spawn(self._forward, "forward")
 
     @property
     def dropped(self) -> int:
+        """Samples dropped because the queue was full."""
         return self._queue.dropped
+
+    # -- the loop ---------------------------------------------------------------------
 
     def _forward(self) -> None:
         while not self.stopping.is_set():
-            item = self._queue.get(timeout=0.2)
+            item = self._queue.get(timeout=self._wait())
+            now = time.monotonic()
             if item is not None:
-                self._send(*item)
+                self._take(*item, now)
+            self._tick(now)
 
-    def _send(self, key: str, payload: bytes) -> None:
+    def _wait(self) -> float:
+        soonest = [0.2]
+        expiry = self._frames.next_expiry()
+        if expiry is not None:
+            soonest.append(expiry - time.monotonic())
+        for link in self._links:
+            if link.held:
+                soonest.append(min(link.last_sent.get(s, 0.0) for s in link.held) + link.min_interval
+                               - time.monotonic())
+        return max(0.0, min(soonest))
+
+    def _tick(self, now: float) -> None:
+        for frame in self._frames.expire(now):
+            self._send_frame(frame, now)
+        for link in self._links:
+            for slot in [s for s in link.held if link.turn(s, now)]:
+                held = link.held.pop(slot)
+                if isinstance(held, Frame):
+                    self._frame_to(link, held, now)
+                else:
+                    self._sample_to(link, *held, now)
+
+    def _take(self, key: str, payload: bytes, now: float) -> None:
+        self.stats["received"] += 1
+        source = self._sources.get(key)
+        if source is None:
+            source = self._sources[key] = Source.parse(key)
         try:
-            address = self._addresses.get(key) or self._address(key)
-            value = codec.decode(payload)["v"]
-            builder = OscMessageBuilder(address)
-            builder.add_arg(float(value), OscMessageBuilder.ARG_TYPE_FLOAT)
-            datagram = builder.build().dgram
-            for target in self._targets:
-                self._socket.sendto(datagram, target)
-            self.sent += 1
-        except (ValueError, KeyError, TypeError, OSError) as exc:
-            self.skipped += 1
-            self._warn(f"sample on '{key}' not sent: {type(exc).__name__}: {exc}")
+            message = codec.decode(payload)
+            if source.section == "events":
+                self._event(source, message)
+                return
+            t, seq, value = float(message["t"]), int(message["seq"]), message["v"]
+            values = (float(value),) if isinstance(value, int | float) else tuple(float(v) for v in value)
+        except (codec.DecodeError, KeyError, TypeError, ValueError) as exc:
+            self.stats["bad"] += 1
+            self._warn("bad", f"sample on '{key}' not sent: {type(exc).__name__}: {exc}")
+            return
+        max_age = self.config.max_age_ms / 1000.0
+        if max_age and time.time() - t > max_age:
+            self.stats["stale"] += 1
+            self._warn("stale", f"samples older than {self.config.max_age_ms:g} ms dropped (clocks in step?)")
+            return
+        for link in self._sample_links:
+            self._sample_to(link, source, values, t, seq, now)
+        if self._frame_links:
+            frames = self._frames.add(source.robot, key, seq, t, (source, values))
+            self.stats["late"] = self._frames.late
+            for frame in frames:
+                self._send_frame(frame, now)
 
-    def _address(self, key: str) -> str:
-        parsed = Key.parse(key)
-        address = self.config.address.format(robot=parsed.robot, section=parsed.section, joint=parsed.name,
-                                             name=parsed.name, key=key)
-        self._addresses[key] = address
-        return address
+    # -- per target ------------------------------------------------------------------
 
-    def _warn(self, message: str) -> None:
+    def _sample_to(self, link: _Link, source: Source, values: Sequence[float], t: float, seq: int,
+                   now: float) -> None:
+        scaled = self._scaled(link, source, values)
+        if scaled is None or not link.changed(source.key, scaled):
+            return
+        if not link.turn(source.key, now):
+            link.held[source.key] = (source, values, t, seq)
+            return
+        link.last_sent[source.key] = now
+        self._send(link, link.profile.sample(source, scaled, t, seq))
+
+    def _send_frame(self, frame: Frame, now: float) -> None:
+        for link in self._frame_links:
+            if link.turn(frame.robot, now):
+                self._frame_to(link, frame, now)
+            else:
+                link.held[frame.robot] = frame
+
+    def _frame_to(self, link: _Link, frame: Frame, now: float) -> None:
+        samples = []
+        for source, values in frame.values.values():
+            scaled = self._scaled(link, source, values)
+            if scaled is not None and link.changed(source.key, scaled):
+                samples.append((source, scaled))
+        if not samples:
+            return
+        link.last_sent[frame.robot] = now
+        previous = link.last_frame_t.get(frame.robot)
+        link.last_frame_t[frame.robot] = frame.t
+        interval = frame.t - previous if previous is not None and frame.t > previous else 0.0
+        for datagram in link.profile.frame(frame.robot, frame.t, frame.seq, samples, interval):
+            self._send(link, datagram)
+
+    def _event(self, source: Source, message: dict[str, Any]) -> None:
+        kind = str(message.get("kind") or source.name)
+        for link in self._links:
+            if link.target.events:
+                self._send(link, link.profile.event(source.robot, kind, message))
+
+    def _send(self, link: _Link, datagram: bytes | None) -> None:
+        if datagram is None:
+            return
+        try:
+            self._socket.sendto(datagram, link.destination)
+            self.stats["sent"] += 1
+        except OSError as exc:
+            self.stats["send_errors"] += 1
+            self._warn("send", f"cannot send to {link.target.to}: {exc.strerror or exc}")
+
+    # -- normalization ----------------------------------------------------------------
+
+    def _scaled(self, link: _Link, source: Source, values: Sequence[float]) -> Sequence[float] | None:
+        if link.target.values == "raw":
+            return values
+        ranges = self._ranges.get(source.robot)
+        if ranges is None:
+            self.stats["waiting_info"] += 1
+            self._ask_info(source.robot)
+            return None
+        span = ranges.get(source.name if source.section == "joints" else f"{source.feature}/{source.name}")
+        if span is None:
+            return values
+        low, high = span
+        return tuple(min(1.0, max(0.0, (v - low) / (high - low))) if high > low else 0.0 for v in values)
+
+    def _ask_info(self, robot: str) -> None:
         now = time.monotonic()
-        if now - self._last_warning >= WARN_EVERY_S:
-            self._last_warning = now
-            log.warning("%s: %s (%d skipped so far)", self.name, message, self.skipped)
+        if now - self._info_asked.get(robot, -math.inf) < INFO_RETRY_S:
+            return
+        self._info_asked[robot] = now
+
+        def take(reply: Any) -> None:
+            if reply.ok is None:
+                return
+            try:
+                info = codec.decode(reply.ok.payload)
+                ranges = {j["name"]: (float(j["min"]), float(j["max"])) for j in info.get("joints", [])}
+                ranges.update({d["name"]: (float(d["min"]), float(d["max"])) for d in info.get("derived", [])
+                               if "min" in d and "max" in d})
+            except (codec.DecodeError, KeyError, TypeError, ValueError) as exc:
+                self._warn("info", f"{robot}/info unusable: {exc}")
+                return
+            self._ranges[robot] = ranges
+
+        self.bus.session.get(keys.info(robot), handler=take, timeout=INFO_RETRY_S)
+
+    def _warn(self, kind: str, message: str) -> None:
+        now = time.monotonic()
+        if now - self._last_warning.get(kind, -math.inf) >= WARN_EVERY_S:
+            self._last_warning[kind] = now
+            log.warning("%s: %s (%s)", self.name, message, ", ".join(f"{k} {v}" for k, v in self.stats.items() if v))
 
 
-def _resolve(host: str, port: int) -> tuple[str, int]:
+def _resolve(target: str) -> tuple[str, int]:
+    host, port = parse_target(target)
     try:
         return socket.getaddrinfo(host, port, socket.AF_INET, socket.SOCK_DGRAM)[0][4][:2]
     except socket.gaierror as exc:
-        raise ConfigError(f"target '{host}:{port}': cannot resolve '{host}': {exc.strerror}") from None
+        raise ConfigError(f"target '{target}': cannot resolve '{host}': {exc.strerror}") from None

@@ -24,7 +24,7 @@ def test_sink_serves_every_target_with_its_template(net, spawn):
     for receiver in receivers:
         addresses = {line.split()[1] for line in receiver.lines}
         assert addresses == {"/bot/nao/HeadYaw/pos", "/bot/nao/HeadPitch/pos"}
-    assert sink.skipped == 0
+    assert sink.stats["bad"] == 0
 
 
 def test_a_bad_sample_is_skipped_and_the_stream_goes_on(net, spawn):
@@ -35,7 +35,7 @@ def test_a_bad_sample_is_skipped_and_the_stream_goes_on(net, spawn):
     other = net.bus("stranger")
     for payload in (b"\xc1not msgpack", b"\x93\x01\x02\x03", b"\x81\xa1v\xa3str"):
         other.session.put("pepper/joints/HeadYaw", payload)
-    wait_for(lambda: sink.skipped == 3, what="three bad samples counted")
+    wait_for(lambda: sink.stats["bad"] == 3, what="three bad samples counted")
     net.sim("pepper", rate_hz=50)
     wait_for(lambda: len(receiver.lines) >= 17, what="good samples after bad ones")
     assert sink.state == "running"

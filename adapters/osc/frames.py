@@ -1,0 +1,72 @@
+"""Reassembling frames: the joint samples one robot took at one instant share
+``t`` and ``seq``; a frame is complete when every key seen in the previous
+frame has arrived, when a newer frame starts, or after ``max_wait_s``.
+
+>>> frames = FrameAssembler()
+>>> frames.add("pepper", "pepper/joints/HeadYaw", 7, 1.0, 0.1)    # keys of a frame: not known yet
+[]
+>>> [f.seq for f in frames.add("pepper", "pepper/joints/HeadYaw", 8, 1.01, 0.2)]
+[7, 8]
+
+Frame 8 closed 7 and, now that a frame is known to hold just HeadYaw, itself.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from typing import Any
+
+
+@dataclass
+class Frame:
+    """One robot's samples of one instant: key → item (whatever the caller stores)."""
+
+    robot: str
+    seq: int
+    t: float
+    values: dict[str, Any] = field(default_factory=dict)
+    opened: float = field(default_factory=time.monotonic)
+
+
+class FrameAssembler:
+    """Groups samples into frames per robot; counts samples that come too late."""
+
+    def __init__(self, max_wait_s: float = 0.05) -> None:
+        self.max_wait_s = max_wait_s
+        self.late = 0
+        self._open: dict[str, Frame] = {}
+        self._expected: dict[str, frozenset[str]] = {}
+
+    def add(self, robot: str, key: str, seq: int, t: float, item: Any) -> list[Frame]:
+        """Add a sample; returns the frames it completed (zero, one or two)."""
+        done: list[Frame] = []
+        frame = self._open.get(robot)
+        if frame is not None and seq != frame.seq:
+            if seq < frame.seq and t < frame.t:  # a straggler from an earlier frame
+                self.late += 1
+                return done
+            done.append(self._close(robot, learn=True))  # a newer frame (or a restarted stream)
+            frame = None
+        if frame is None:
+            frame = self._open[robot] = Frame(robot, seq, t)
+        frame.values[key] = item
+        expected = self._expected.get(robot)
+        if expected and expected <= frame.values.keys():
+            done.append(self._close(robot, learn=False))
+        return done
+
+    def expire(self, now: float | None = None) -> list[Frame]:
+        """Frames open for longer than ``max_wait_s`` (their stream paused or lost keys)."""
+        now = time.monotonic() if now is None else now
+        stale = [r for r, f in self._open.items() if now - f.opened >= self.max_wait_s]
+        return [self._close(r, learn=True) for r in stale]
+
+    def next_expiry(self) -> float | None:
+        return min((f.opened + self.max_wait_s for f in self._open.values()), default=None)
+
+    def _close(self, robot: str, learn: bool) -> Frame:
+        frame = self._open.pop(robot)
+        if learn:
+            self._expected[robot] = frozenset(frame.values)
+        return frame
