@@ -1,0 +1,162 @@
+"""End-to-end OSC latency and loss: robot adapter acquisition → datagram at a
+separate receiver process, beside the same OSC sent straight (no bus).
+
+sonibus path: process 1 runs the simulated robots (`sonibus run --only`),
+process 2 the OSC sink (extra args t and seq), process 3 receives. Baseline:
+one process sends the same messages (same rate, same t/seq args) straight to
+the receiver. Latency = arrival time − t (one host, one clock).
+
+    .venv/bin/python bench/osc_latency.py [--robots 2] [--rate 100] [--seconds 10]
+
+Writes bench/results/osc_latency.json and prints a table.
+"""
+
+from __future__ import annotations
+
+import argparse
+import gc
+import json
+import multiprocessing
+import os
+import signal
+import socket
+import struct
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parent
+SONIBUS = str(Path(sys.executable).with_name("sonibus"))
+JOINTS = 17
+
+
+def free_port(kind: int) -> int:
+    with socket.socket(socket.AF_INET, kind) as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def receive(port: int, seconds: float, ready: multiprocessing.Event, out: multiprocessing.Queue) -> None:
+    """Record (address, seq, latency) of every message ending in args ,fdi (v, t, seq)."""
+    gc.disable()
+    sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 8 << 20)
+    sock.bind(("127.0.0.1", port))
+    sock.settimeout(0.5)
+    ready.set()
+    records = []
+    end = time.monotonic() + seconds
+    while time.monotonic() < end:
+        try:
+            data = sock.recv(2048)
+        except TimeoutError:
+            continue
+        now = time.time()
+        address = data[:data.index(b"\0")]
+        t, seq = struct.unpack(">di", data[-12:])
+        records.append((address, seq, now - t))
+    out.put(records)
+
+
+def summarize(records: list[tuple[bytes, int, float]], robots: int) -> dict[str, float]:
+    latency = np.array([r[2] for r in records]) * 1e6
+    frames: dict[tuple[bytes, int], int] = {}
+    for address, seq, _ in records:
+        robot = address.split(b"/")[1]
+        frames[(robot, seq)] = frames.get((robot, seq), 0) + 1
+    partial_missing = sum(JOINTS - n for n in frames.values() if n < JOINTS)
+    received = len(records)
+    return {
+        "messages": received, "frames": len(frames),
+        "p50_us": float(np.percentile(latency, 50)), "p99_us": float(np.percentile(latency, 99)),
+        "p999_us": float(np.percentile(latency, 99.9)), "max_us": float(latency.max()),
+        "lost_messages": partial_missing, "loss": partial_missing / max(1, received + partial_missing),
+    }
+
+
+def baseline(port: int, robots: int, rate: float, seconds: float) -> None:
+    """The same OSC (v, t, seq per joint) sent straight, paced like the simulator."""
+    from sonibus.adapters.osc.encode import Double, message
+    names = [f"J{j}" for j in range(JOINTS)]
+    sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    period = 1.0 / rate
+    start = time.monotonic()
+    frame = 0
+    while time.monotonic() - start < seconds:
+        for r in range(robots):
+            t = time.time()
+            for name in names:
+                sock.sendto(message(f"/robot{r}/joints/{name}", 0.1, Double(t), frame), ("127.0.0.1", port))
+        frame += 1
+        time.sleep(max(0.0, start + frame * period - time.monotonic()))
+
+
+def measure(path: str, robots: int, rate: float, seconds: float) -> dict[str, float]:
+    port = free_port(socket.SOCK_DGRAM)
+    ready, out = multiprocessing.Event(), multiprocessing.Queue()
+    receiver = multiprocessing.Process(target=receive, args=(port, seconds + 2.0, ready, out))
+    receiver.start()
+    ready.wait(5)
+    children = []
+    try:
+        if path == "baseline":
+            baseline(port, robots, rate, seconds)
+        else:
+            zport = free_port(socket.SOCK_STREAM)
+            config = Path(tempfile.mkdtemp()) / "bench.toml"
+            nodes = "".join(f'[nodes.robot{r}]\nadapter = "sim"\nrobot = "robot{r}"\nmodel = "pepper"\n'
+                            f'rate_hz = {rate}\nidle = true\n\n' for r in range(robots))
+            config.write_text(
+                f'[bus]\nmulticast = false\n\n{nodes}'
+                f'[nodes.sound]\nadapter = "osc"\nsubscribe = "*/joints/*"\n'
+                f'targets = ["127.0.0.1:{port}"]\nextra = ["t", "seq"]\n')
+            robot_nodes = [f"robot{r}" for r in range(robots)]
+            children.append(subprocess.Popen([SONIBUS, "run", str(config), "--only", *robot_nodes,
+                                              "--listen", f"tcp/127.0.0.1:{zport}"], stdout=subprocess.DEVNULL))
+            children.append(subprocess.Popen([SONIBUS, "run", str(config), "--only", "sound",
+                                              "--connect", f"tcp/127.0.0.1:{zport}"], stdout=subprocess.DEVNULL))
+            time.sleep(seconds)
+    finally:
+        for child in children:
+            child.send_signal(signal.SIGINT)
+            child.wait(10)
+    records = out.get(timeout=seconds + 30)
+    receiver.join(10)
+    warmup = 1.0  # the first second: sessions connecting, caches filling
+    if path != "baseline" and records:
+        records = records[int(len(records) * warmup / seconds):]
+    return summarize(records, robots)
+
+
+def cpu_note() -> str:
+    return f"{os.cpu_count()} cores, load {os.getloadavg()[0]:.2f}"
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--robots", type=int, default=2)
+    parser.add_argument("--rate", type=float, default=100.0)
+    parser.add_argument("--seconds", type=float, default=10.0)
+    args = parser.parse_args()
+    before = cpu_note()
+    base = measure("baseline", args.robots, args.rate, args.seconds)
+    bus = measure("sonibus", args.robots, args.rate, args.seconds)
+    result = {"robots": args.robots, "joints": JOINTS, "rate_hz": args.rate, "seconds": args.seconds,
+              "machine": before, "baseline_no_bus": base, "sonibus": bus,
+              "ratio_p50": bus["p50_us"] / base["p50_us"], "ratio_p99": bus["p99_us"] / base["p99_us"]}
+    out = ROOT / "results" / "osc_latency.json"
+    out.parent.mkdir(exist_ok=True)
+    out.write_text(json.dumps(result, indent=2) + "\n")
+    print(f"{'path':<9} {'messages':>9} {'p50 µs':>8} {'p99 µs':>8} {'p99.9 µs':>9} {'lost':>6}")
+    for name, r in (("no bus", base), ("sonibus", bus)):
+        print(f"{name:<9} {r['messages']:>9} {r['p50_us']:>8.0f} {r['p99_us']:>8.0f} {r['p999_us']:>9.0f} "
+              f"{r['lost_messages']:>6}")
+    print(f"ratio p50 {result['ratio_p50']:.2f}, p99 {result['ratio_p99']:.2f} ({before})")
+
+
+if __name__ == "__main__":
+    main()
