@@ -200,7 +200,7 @@ def cmd_run(args: argparse.Namespace, env: Environment) -> Exit:
 
 def cmd_adapters(args: argparse.Namespace, env: Environment) -> Exit:
     for name, cls in registry.load_all().items():
-        env.say(f"{name:<10} {registry.summary(cls)}")
+        env.say(f"{name:<12} {registry.summary(cls)}")
     return Exit.OK
 
 

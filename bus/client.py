@@ -1,35 +1,102 @@
 """Asking a robot to do something: one query, one reply, a timeout.
 
+``ask`` sends at once and hands the outcome to a callback (the OSC gateway
+uses it so that a slow robot never stalls its receive loop; queries leave in
+the order they were asked); ``send_command`` waits for it.
+
 >>> send_command(bus, "pepper", "say", {"text": "hello"})   # doctest: +SKIP
-{'text': 'hello'}
+{'duration': 0.6, 'queued': 0}
 """
 
 from __future__ import annotations
 
+import threading
 import time
+from collections.abc import Callable
 from typing import Any
 
-from . import keys
+import zenoh
+
+from . import codec, keys
 from .errors import CommandError, RobotNotFound
 from .node import Bus
+
+Outcome = dict[str, Any] | CommandError
+
+
+def ask(bus: Bus, robot: str, verb: str, args: dict[str, Any], done: Callable[[Outcome], None],
+        timeout: float = 5.0) -> None:
+    """Send ``verb`` to ``robot``; ``done`` gets the result or a ``CommandError``
+    (``robot_not_found``, ``timeout``, or the robot's refusal), exactly once."""
+    pending = _Pending(robot, verb, done, timeout)
+    try:
+        bus.session.get(keys.command(robot, verb), zenoh.handlers.Callback(pending.on_reply, pending.on_end),
+                        payload=codec.encode(args), encoding=codec.ENCODING, timeout=timeout)
+    except Exception as exc:  # a closed session, a key Zenoh refuses
+        pending.finish(CommandError("internal", f"{verb}: the bus refused the query: {exc}"))
+
+
+class _Pending:
+    """The first answer wins; a query that ends unanswered is ``timeout`` when it
+    lasted about ``timeout`` (Zenoh then reports "Timeout" as an error reply), else
+    ``robot_not_found`` (nobody serves the key: it ends at once)."""
+
+    def __init__(self, robot: str, verb: str, done: Callable[[Outcome], None], timeout: float) -> None:
+        self.robot, self.verb, self.done, self.timeout = robot, verb, done, timeout
+        self.started = time.monotonic()
+        self.error = ""
+        self._finished = False
+        self._lock = threading.Lock()
+
+    def on_reply(self, reply: zenoh.Reply) -> None:
+        if reply.ok is None:
+            self.error = reply.err.payload.to_string()
+            return
+        try:
+            message = codec.decode(reply.ok.payload)
+        except codec.DecodeError as exc:
+            message = {"ok": False, "error": {"code": "internal", "message": f"{self.verb}: bad reply: {exc}"}}
+        if message.get("ok") is True:
+            self.finish(message.get("result") or {})
+            return
+        error = message.get("error") or {}
+        self.finish(CommandError(str(error.get("code", "internal")),
+                                 str(error.get("message", f"robot '{self.robot}' refused '{self.verb}'"))))
+
+    def on_end(self) -> None:
+        if time.monotonic() - self.started >= self.timeout * 0.9:
+            self.finish(CommandError("timeout", f"robot '{self.robot}' did not answer '{self.verb}' "
+                                                f"within {self.timeout:g} s"))
+        elif self.error:
+            self.finish(CommandError("internal", f"{self.verb}: {self.error}"))
+        else:
+            self.finish(RobotNotFound(self.robot))
+
+    def finish(self, outcome: Outcome) -> None:
+        with self._lock:
+            if self._finished:
+                return
+            self._finished = True
+        self.done(outcome)
 
 
 def send_command(bus: Bus, robot: str, verb: str, args: dict[str, Any] | None = None,
                  timeout: float = 5.0) -> dict[str, Any]:
     """The result of ``verb`` on ``robot``, or ``CommandError`` (``RobotNotFound``
-    when no node owns the robot)."""
-    started = time.monotonic()
-    replies = bus.query(keys.command(robot, verb), args or {}, timeout=timeout)
-    if not replies:
-        if time.monotonic() - started >= timeout * 0.9:
-            raise CommandError("timeout", f"robot '{robot}' did not answer '{verb}' within {timeout:g} s")
-        raise RobotNotFound(robot)
-    reply = replies[0]
-    if reply.get("ok") is True:
-        return reply.get("result") or {}
-    error = reply.get("error") or {}
-    raise CommandError(str(error.get("code", "internal")),
-                       str(error.get("message", f"robot '{robot}' refused '{verb}'")))
+    when no node owns the robot, code ``timeout`` when it did not answer)."""
+    answered = threading.Event()
+    outcomes: list[Outcome] = []
+
+    def done(outcome: Outcome) -> None:
+        outcomes.append(outcome)
+        answered.set()
+
+    ask(bus, robot, verb, args or {}, done, timeout)
+    if not answered.wait(timeout + 1.0):
+        raise CommandError("timeout", f"robot '{robot}' did not answer '{verb}' within {timeout:g} s")
+    if isinstance(outcomes[0], CommandError):
+        raise outcomes[0]
+    return outcomes[0]
 
 
 def robot_info(bus: Bus, robot: str, timeout: float = 2.0) -> dict[str, Any] | None:

@@ -1,0 +1,295 @@
+"""OSC command gateway (adapter ``osc-gateway``): ``/<robot>/cmd/<verb> args...`` over
+UDP (and TCP) becomes a command on the bus; the answer goes back to the sender as
+``/<robot>/reply/<verb> 1 "<result JSON>"`` or ``... 0 "<code>" "<message>"``.
+
+Queries are asynchronous (a Zenoh callback handler), so a slow or missing robot
+never stalls the receive loop, and commands reach a robot in the order they came.
+"""
+
+from __future__ import annotations
+
+import errno
+import ipaddress
+import json
+import logging
+import socket
+import threading
+import time
+from dataclasses import dataclass
+from typing import Any
+
+import zenoh
+
+from sonibus.bus import keys
+from sonibus.bus.adapter import Adapter
+from sonibus.bus.client import Outcome, ask
+from sonibus.bus.errors import CommandError, ConfigError
+from sonibus.bus.options import bad
+from sonibus.bus.queue import SampleQueue
+
+from . import shape, tcp, wire
+from .tcp import Peer
+
+log = logging.getLogger(__name__)
+
+COUNTERS = ("received", "commands", "replies_ok", "replies_error", "malformed", "unknown_address",
+            "refused_source", "bad_args", "busy", "replies_lost", "internal")
+POLL_S = 0.2          # socket timeouts: how soon stop() is noticed
+WARN_EVERY_S = 10.0   # at most one warning per kind in this time
+UDP_BUFFER = 1 << 20  # bytes of receive buffer asked for
+
+
+@dataclass(frozen=True)
+class OscGatewayConfig:
+    """Options of the ``osc-gateway`` adapter."""
+
+    listen: str = "127.0.0.1:9001"    # UDP host:port ("0.0.0.0:9001": every interface; port 0: any free port)
+    tcp: str = ""                     # also TCP host:port, SLIP or size-prefixed frames ("": no TCP)
+    allow: tuple[str, ...] = ("127.0.0.0/8", "::1/128")  # networks commands are taken from
+    reply: bool = True                # answer each command at /<robot>/reply/<verb>
+    timeout: float = 5.0              # seconds a robot has to answer
+    max_args: int = wire.MAX_ARGS     # more arguments in one message: bad_request
+    max_pending: int = 256            # commands awaiting an answer; more are refused as busy
+
+    def __post_init__(self) -> None:
+        parse_endpoint("listen", self.listen)
+        if self.tcp:
+            parse_endpoint("tcp", self.tcp)
+        self.networks()
+        if not self.timeout > 0:
+            raise bad("timeout", f"{self.timeout:g} s must be more than 0")
+        if not 0 < self.max_args <= 1024:
+            raise bad("max_args", f"{self.max_args} must be in 1..1024")
+        if self.max_pending < 1:
+            raise bad("max_pending", f"{self.max_pending} must be at least 1")
+
+    def networks(self) -> list[ipaddress.IPv4Network | ipaddress.IPv6Network]:
+        if not self.allow:
+            raise bad("allow", "allow is empty — give networks such as \"192.168.1.0/24\" (\"0.0.0.0/0\": anyone)")
+        try:
+            return [ipaddress.ip_network(n, strict=False) for n in self.allow]
+        except ValueError as exc:
+            raise bad("allow", f"{exc} — give networks such as \"10.0.0.0/8\" or \"::1/128\"") from None
+
+
+def parse_endpoint(key: str, value: str) -> tuple[str, int]:
+    """``"host:port"`` (``"[::1]:9001"`` for IPv6) → ``(host, port)``, or ``ConfigError`` naming ``key``."""
+    host, sep, port = value.rpartition(":")
+    if host.startswith("[") and host.endswith("]"):
+        host = host[1:-1]
+    if not sep or not host or not port.isdigit() or int(port) > 65535:
+        raise bad(key, f"'{value}' is not host:port with a port in 0..65535 (IPv6: \"[::1]:9001\")")
+    return host, int(port)
+
+
+class OscGateway(Adapter):
+    """Commands from OSC (TouchOSC, Pure Data, SuperCollider) to robots, answered by OSC."""
+
+    Config = OscGatewayConfig
+
+    def __init__(self, config: OscGatewayConfig | None = None, *, name: str = "") -> None:
+        super().__init__(config, name=name)
+        self.stats: dict[str, int] = dict.fromkeys(COUNTERS, 0)
+        self.udp_address: tuple[Any, ...] = ()
+        self.tcp_address: tuple[Any, ...] = ()
+        self._lock = threading.Lock()
+        self._warned: dict[str, float] = {}
+        self._pending = 0
+
+    def _start(self) -> None:
+        cfg: OscGatewayConfig = self.config
+        self._allow = cfg.networks()
+        self._replies = self.own(SampleQueue(4096))
+        self._udp = self.own(self._bind(socket.SOCK_DGRAM, "listen", cfg.listen))
+        self.udp_address = self._udp.getsockname()
+        if cfg.tcp:
+            self._tcp = self.own(self._bind(socket.SOCK_STREAM, "tcp", cfg.tcp))
+            self.tcp_address = self._tcp.getsockname()
+            self.spawn(self._serve_tcp, "tcp")
+        self.spawn(self._receive_udp, "udp")
+        self.spawn(self._send_replies, "reply")
+        log.info("%s: OSC commands on udp %s%s", self.name, cfg.listen, f" and tcp {cfg.tcp}" if cfg.tcp else "")
+
+    def _serve_tcp(self) -> None:
+        tcp.serve(self._tcp, self.stopping, self._allowed, self._guarded, self._problem, self._refused, POLL_S)
+
+    def _stop(self) -> None:
+        log.info("%s: stopping; %s", self.name, ", ".join(f"{k} {v}" for k, v in self.stats.items()))
+
+    def _bind(self, kind: socket.SocketKind, key: str, value: str) -> socket.socket:
+        host, port = parse_endpoint(key, value)
+        try:
+            family, _, _, _, address = socket.getaddrinfo(host, port, type=kind)[0]
+        except socket.gaierror as exc:
+            raise ConfigError(f"node '{self.name}': key '{key}': cannot resolve '{host}': {exc.strerror}") from None
+        sock = socket.socket(family, kind)
+        try:
+            if kind == socket.SOCK_STREAM:
+                sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)  # restart while old links linger
+            else:  # room for a burst (the kernel caps it at net.core.rmem_max)
+                sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, UDP_BUFFER)
+            sock.bind(address)
+            if kind == socket.SOCK_STREAM:
+                sock.listen(16)
+        except OSError as exc:
+            sock.close()
+            why = ("is already in use — stop the program that uses it or choose another port"
+                   if exc.errno == errno.EADDRINUSE else f"cannot be used: {exc.strerror}")
+            raise ConfigError(f"node '{self.name}': key '{key}': {value} {why}") from None
+        sock.settimeout(POLL_S)
+        return sock
+
+    # -- receiving ------------------------------------------------------------------
+
+    def _receive_udp(self) -> None:
+        while not self.stopping.is_set():
+            try:
+                data, source = self._udp.recvfrom(65535)
+            except TimeoutError:
+                continue
+            except OSError as exc:
+                self._warn("internal", f"UDP receive failed: {exc}")
+                continue
+            if self._allowed(source[0]):
+                self._guarded(data, Peer(source))
+            else:
+                self._count("received")
+
+    def _allowed(self, host: str) -> bool:
+        ip = ipaddress.ip_address(host.split("%")[0])
+        if isinstance(ip, ipaddress.IPv6Address) and ip.ipv4_mapped:
+            ip = ip.ipv4_mapped
+        if any(ip in network for network in self._allow):
+            return True
+        self._count("refused_source")
+        self._warn("refused_source", f"ignored OSC from {host}: not in allow = {list(self.config.allow)}")
+        return False
+
+    def _refused(self, message: str) -> None:
+        self._count("busy")
+        self._warn("busy", message)
+
+    # -- from packets to commands -----------------------------------------------------
+
+    def _guarded(self, packet: bytes, peer: Peer) -> None:
+        self._count("received")
+        try:
+            self._packet(packet, peer)
+        except Exception as exc:  # a bug must not end the receive loop
+            self._count("internal")
+            self._warn("internal", f"packet from {peer.address[0]} failed: {type(exc).__name__}: {exc}")
+            log.debug("%s: packet %r failed", self.name, packet[:64], exc_info=True)
+
+    def _packet(self, packet: bytes, peer: Peer) -> None:
+        for item in wire.elements(packet):
+            try:
+                if isinstance(item, wire.WireError):
+                    raise item
+                address, args = wire.parse(item, self.config.max_args)
+            except wire.WireError as exc:
+                self._problem(exc, peer)
+                continue
+            self._command(address, args, peer)
+
+    def _problem(self, error: wire.WireError, peer: Peer | None = None) -> None:
+        kind = error.kind
+        if kind == "bad_args":  # well formed but too long: answer it if it is a command
+            target = command_target(error.address)
+            if target and peer:
+                self._command_failed(*target, peer, CommandError("bad_request", f"{target[1]}: {error}"))
+                return
+            kind = "unknown_address"
+        self._count(kind)
+        self._warn(kind, f"ignored OSC {error.address or 'packet'}: {error}")
+
+    def _command(self, address: str, args: list[Any], peer: Peer) -> None:
+        target = command_target(address)
+        if target is None:
+            self._count("unknown_address")
+            self._warn("unknown_address", f"ignored OSC {address[:80]}: not /<robot>/cmd/<verb>")
+            return
+        robot, verb = target
+        try:
+            request = shape.request(verb, args)
+        except CommandError as exc:
+            self._command_failed(robot, verb, peer, exc)
+            return
+        with self._lock:
+            busy = self._pending >= self.config.max_pending
+            self._pending += not busy
+            self.stats["busy" if busy else "commands"] += 1
+        if busy:
+            self._answer(robot, verb, peer, CommandError(
+                "busy", f"{self._pending} commands are waiting for robots; try again when they are answered"))
+            return
+
+        def done(outcome: Outcome) -> None:
+            with self._lock:
+                self._pending -= 1
+            self._answer(robot, verb, peer, outcome)
+
+        ask(self.bus, robot, verb, request, done, self.config.timeout)
+
+    def _command_failed(self, robot: str, verb: str, peer: Peer, error: CommandError) -> None:
+        self._count("bad_args")
+        self._warn("bad_args", f"{robot} {verb} from {peer.address[0]}: {error}")
+        self._answer(robot, verb, peer, error)
+
+    # -- replies ---------------------------------------------------------------------------
+
+    def _answer(self, robot: str, verb: str, peer: Peer, outcome: Outcome) -> None:
+        """Count an outcome and queue its reply (called from Zenoh's threads too: only enqueues)."""
+        ok = not isinstance(outcome, CommandError)
+        self._count("replies_ok" if ok else "replies_error")
+        if not self.config.reply:
+            return
+        if isinstance(outcome, CommandError):
+            args: tuple[Any, ...] = (0, outcome.code, " ".join(outcome.message.split())[:1000])
+        else:
+            args = (1, json.dumps(outcome, separators=(",", ":"), ensure_ascii=False, default=str))
+        self._replies.put((peer, f"/{robot}/reply/{verb}", args))
+
+    def _send_replies(self) -> None:
+        while not self.stopping.is_set():
+            item = self._replies.get(timeout=POLL_S)
+            if item is None:
+                continue
+            peer, address, args = item
+            try:
+                packet = wire.message(address, *args)
+                if peer.connection is not None:
+                    peer.connection.send(packet)
+                else:
+                    self._udp.sendto(packet, peer.address)
+            except Exception as exc:  # OSError, or python-osc's BuildError
+                self._count("replies_lost")
+                self._warn("replies_lost", f"reply {address} to {peer.address[0]} not sent: {exc}")
+
+    # -- bookkeeping ------------------------------------------------------------------------
+
+    def _count(self, kind: str) -> None:
+        with self._lock:
+            self.stats[kind] += 1
+
+    def _warn(self, kind: str, message: str) -> None:
+        now = time.monotonic()
+        with self._lock:
+            if now - self._warned.get(kind, float("-inf")) < WARN_EVERY_S:
+                return
+            self._warned[kind] = now
+            count = self.stats.get(kind, 0)
+        log.warning("%s: %s (%s: %d so far)", self.name, message, kind, count)
+
+
+def command_target(address: str) -> tuple[str, str] | None:
+    """``/<robot>/cmd/<verb...>`` → ``(robot, verb)``; None for any other address."""
+    robot, sep, verb = address[1:].partition("/cmd/")
+    if not address.startswith("/") or not sep:
+        return None
+    try:
+        for chunk in (robot, *verb.split("/")):
+            keys.check_name("address chunk", chunk)
+        zenoh.KeyExpr(keys.command(robot, verb))
+    except Exception:  # ValueError, or zenoh's ZError
+        return None
+    return robot, verb
