@@ -106,6 +106,7 @@ class Adapter:
             try:
                 target()
             except Exception:
+                self.state = "failed"  # visible in repr and to whoever watches the node
                 log.exception("%s: worker %s failed", self.name, target.__name__)
         return run
 

@@ -30,6 +30,8 @@ Arg = float | int | str | bool
 def padded(text: str) -> bytes:
     """An OSC string: UTF-8, NUL-terminated, padded to a multiple of 4 bytes."""
     data = text.encode("utf-8")
+    if b"\0" in data:
+        raise ValueError(f"an OSC string cannot hold NUL: {text!r}")
     return data + b"\0" * (4 - len(data) % 4)
 
 

@@ -1,6 +1,6 @@
 """Reassembling frames: the joint samples one robot took at one instant share
-``t`` and ``seq``; a frame is complete when every key seen in the previous
-frame has arrived, when a newer frame starts, or after ``max_wait_s``.
+``t`` and ``seq``; a frame is complete when every key seen in earlier frames
+has arrived, when a newer frame starts, or after ``max_wait_s``.
 
 >>> frames = FrameAssembler()
 >>> frames.add("pepper", "pepper/joints/HeadYaw", 7, 1.0, 0.1)    # keys of a frame: not known yet
@@ -37,6 +37,7 @@ class FrameAssembler:
         self.late = 0
         self._open: dict[str, Frame] = {}
         self._expected: dict[str, frozenset[str]] = {}
+        self._closed: dict[str, tuple[int, float]] = {}  # robot → (seq, t) of the frame closed last
 
     def add(self, robot: str, key: str, seq: int, t: float, item: Any) -> list[Frame]:
         """Add a sample; returns the frames it completed (zero, one or two)."""
@@ -46,27 +47,32 @@ class FrameAssembler:
             if seq < frame.seq and t < frame.t:  # a straggler from an earlier frame
                 self.late += 1
                 return done
-            done.append(self._close(robot, learn=True))  # a newer frame (or a restarted stream)
+            done.append(self._close(robot))  # a newer frame (or a restarted stream)
             frame = None
+        if frame is None and self._closed.get(robot) == (seq, t):  # its frame closed without it
+            self.late += 1
+            return done
         if frame is None:
             frame = self._open[robot] = Frame(robot, seq, t)
         frame.values[key] = item
         expected = self._expected.get(robot)
         if expected and expected <= frame.values.keys():
-            done.append(self._close(robot, learn=False))
+            done.append(self._close(robot))
         return done
 
     def expire(self, now: float | None = None) -> list[Frame]:
         """Frames open for longer than ``max_wait_s`` (their stream paused or lost keys)."""
         now = time.monotonic() if now is None else now
         stale = [r for r, f in self._open.items() if now - f.opened >= self.max_wait_s]
-        return [self._close(r, learn=True) for r in stale]
+        return [self._close(r) for r in stale]
 
     def next_expiry(self) -> float | None:
         return min((f.opened + self.max_wait_s for f in self._open.values()), default=None)
 
-    def _close(self, robot: str, learn: bool) -> Frame:
+    def _close(self, robot: str) -> Frame:
+        """Close a frame; the keys a frame holds only grow, so one lost sample
+        does not make the next frame close early."""
         frame = self._open.pop(robot)
-        if learn:
-            self._expected[robot] = frozenset(frame.values)
+        self._expected[robot] = self._expected.get(robot, frozenset()) | frame.values.keys()
+        self._closed[robot] = (frame.seq, frame.t)
         return frame

@@ -5,8 +5,9 @@ from __future__ import annotations
 import logging
 import math
 import socket
+import struct
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import Any
 
 from sonibus.bus import codec, keys
@@ -122,8 +123,7 @@ class OscSink(Adapter):
             if source.section == "events":
                 self._event(source, message)
                 return
-            t, seq, value = float(message["t"]), int(message["seq"]), message["v"]
-            values = (float(value),) if isinstance(value, int | float) else tuple(float(v) for v in value)
+            t, seq, values = _sample(message)
         except (codec.DecodeError, KeyError, TypeError, ValueError) as exc:
             self.stats["bad"] += 1
             self._warn("bad", f"sample on '{key}' not sent: {type(exc).__name__}: {exc}")
@@ -145,14 +145,14 @@ class OscSink(Adapter):
 
     def _sample_to(self, link: _Link, source: Source, values: Sequence[float], t: float, seq: int,
                    now: float) -> None:
+        if not link.turn(source.key, now):
+            link.held[source.key] = (source, values, t, seq)  # filtered when its turn comes
+            return
         scaled = self._scaled(link, source, values)
         if scaled is None or not link.changed(source.key, scaled):
             return
-        if not link.turn(source.key, now):
-            link.held[source.key] = (source, values, t, seq)
-            return
         link.last_sent[source.key] = now
-        self._send(link, link.profile.sample(source, scaled, t, seq))
+        self._send(link, link.profile.sample, source, scaled, t, seq)
 
     def _send_frame(self, frame: Frame, now: float) -> None:
         for link in self._frame_links:
@@ -173,24 +173,29 @@ class OscSink(Adapter):
         previous = link.last_frame_t.get(frame.robot)
         link.last_frame_t[frame.robot] = frame.t
         interval = frame.t - previous if previous is not None and frame.t > previous else 0.0
-        for datagram in link.profile.frame(frame.robot, frame.t, frame.seq, samples, interval):
-            self._send(link, datagram)
+        self._send(link, link.profile.frame, frame.robot, frame.t, frame.seq, samples, interval)
 
     def _event(self, source: Source, message: dict[str, Any]) -> None:
         kind = str(message.get("kind") or source.name)
         for link in self._links:
             if link.target.events:
-                self._send(link, link.profile.event(source.robot, kind, message))
+                self._send(link, link.profile.event, source.robot, kind, message)
 
-    def _send(self, link: _Link, datagram: bytes | None) -> None:
-        if datagram is None:
-            return
+    def _send(self, link: _Link, render: Callable[..., bytes | list[bytes] | None], *args: Any) -> None:
+        """Encode with ``render(*args)`` and send; what OSC cannot carry is counted, not fatal."""
         try:
-            self._socket.sendto(datagram, link.destination)
-            self.stats["sent"] += 1
-        except OSError as exc:
-            self.stats["send_errors"] += 1
-            self._warn("send", f"cannot send to {link.target.to}: {exc.strerror or exc}")
+            rendered = render(*args)
+        except (struct.error, OverflowError, ValueError, TypeError) as exc:
+            self.stats["bad"] += 1
+            self._warn("encode", f"not sent to {link.target.to}, OSC cannot carry it: {exc}")
+            return
+        for datagram in [rendered] if isinstance(rendered, bytes) else rendered or ():
+            try:
+                self._socket.sendto(datagram, link.destination)
+                self.stats["sent"] += 1
+            except OSError as exc:
+                self.stats["send_errors"] += 1
+                self._warn("send", f"cannot send to {link.target.to}: {exc.strerror or exc}")
 
     # -- normalization ----------------------------------------------------------------
 
@@ -234,6 +239,23 @@ class OscSink(Adapter):
         if now - self._last_warning.get(kind, -math.inf) >= WARN_EVERY_S:
             self._last_warning[kind] = now
             log.warning("%s: %s (%s)", self.name, message, ", ".join(f"{k} {v}" for k, v in self.stats.items() if v))
+
+
+def _sample(message: dict[str, Any]) -> tuple[float, int, tuple[float, ...]]:
+    """``t``, ``seq`` and the values of a sample, or ``ValueError``/``TypeError``/``KeyError``."""
+    t, seq, value = message["t"], message["seq"], message["v"]
+    if not _number(t) or not math.isfinite(t):
+        raise ValueError(f"t = {t!r} is not a finite time")
+    if not isinstance(seq, int) or isinstance(seq, bool):
+        raise TypeError(f"seq = {seq!r} is not an integer")
+    values = (value,) if _number(value) else tuple(value) if isinstance(value, list | tuple) else ()
+    if not values or not all(_number(v) for v in values):
+        raise ValueError(f"v = {value!r} is not a number or a non-empty list of numbers")
+    return float(t), seq, tuple(float(v) for v in values)
+
+
+def _number(value: Any) -> bool:
+    return isinstance(value, int | float) and not isinstance(value, bool)
 
 
 def _resolve(target: str) -> tuple[str, int]:
