@@ -68,7 +68,11 @@ def summarize(records: list[tuple[bytes, int, float]], robots: int) -> dict[str,
     for address, seq, _ in records:
         robot = address.split(b"/")[1]
         frames[(robot, seq)] = frames.get((robot, seq), 0) + 1
-    partial_missing = sum(JOINTS - n for n in frames.values() if n < JOINTS)
+    edges = set()  # the first and last frame of each robot are cut by the measuring window
+    for robot in {r for r, _ in frames}:
+        seqs = [q for r, q in frames if r == robot]
+        edges |= {(robot, min(seqs)), (robot, max(seqs))}
+    partial_missing = sum(JOINTS - n for key, n in frames.items() if n < JOINTS and key not in edges)
     received = len(records)
     return {
         "messages": received, "frames": len(frames),
@@ -117,7 +121,7 @@ def measure(path: str, robots: int, rate: float, seconds: float) -> dict[str, fl
             robot_nodes = [f"robot{r}" for r in range(robots)]
             children.append(subprocess.Popen([SONIBUS, "run", str(config), "--only", *robot_nodes,
                                               "--listen", f"tcp/127.0.0.1:{zport}"], stdout=subprocess.DEVNULL))
-            children.append(subprocess.Popen([SONIBUS, "run", str(config), "--only", "sound",
+            children.append(subprocess.Popen([SONIBUS, "-v", "run", str(config), "--only", "sound",
                                               "--connect", f"tcp/127.0.0.1:{zport}"], stdout=subprocess.DEVNULL))
             time.sleep(seconds)
     finally:

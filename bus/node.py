@@ -30,10 +30,12 @@ class Bus:
         return Bus(self.session, node, self.host)
 
     def stream_publisher(self, key: str) -> zenoh.Publisher:
-        """A publisher for high-rate data: drops under congestion, never back-pressures."""
+        """A publisher for high-rate data: drops under congestion, never back-pressures.
+        Not ``express``: batching a frame's samples measured lossless where express lost
+        samples on a busy 2-core machine (docs/performance.md)."""
         return self.session.declare_publisher(
             key, encoding=codec.ENCODING, congestion_control=zenoh.CongestionControl.DROP,
-            priority=zenoh.Priority.DATA_HIGH, express=True)
+            priority=zenoh.Priority.DATA_HIGH, express=False)
 
     def put(self, key: str, message: dict[str, Any]) -> None:
         """Send one message reliably (events: low rate, must not be dropped)."""

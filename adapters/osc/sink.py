@@ -76,6 +76,10 @@ class OscSink(Adapter):
             self.own(self.bus.subscribe(pattern, queue=self._queue)[0])
         self.spawn(self._forward, "forward")
 
+    def _stop(self) -> None:
+        log.info("%s: stopping; %s, queue_dropped %d", self.name,
+                 ", ".join(f"{k} {v}" for k, v in self.stats.items()), self.dropped)
+
     @property
     def dropped(self) -> int:
         """Samples dropped because the queue was full."""
