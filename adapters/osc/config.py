@@ -24,11 +24,15 @@ EVENT_FIELDS = ("robot", "section", "kind", "name", "key")
 EXTRAS = ("t", "seq")
 
 
-def parse_target(target: str) -> tuple[str, int]:
-    """``"host:port"`` → ``(host, port)``, or ``ConfigError``."""
+def parse_target(target: str, lowest_port: int = 1) -> tuple[str, int]:
+    """``"host:port"`` (``"[::1]:9001"`` for IPv6) → ``(host, port)``, or ``ConfigError``.
+    ``lowest_port=0`` admits port 0 (any free port, for listening)."""
     host, sep, port = target.rpartition(":")
-    if not sep or not host or not port.isdigit() or not 0 < int(port) < 65536:
-        raise ConfigError(f"target '{target}' is not host:port with a port in 1..65535")
+    if host.startswith("[") and host.endswith("]"):
+        host = host[1:-1]
+    if not sep or not host or not port.isdigit() or not lowest_port <= int(port) <= 65535:
+        raise ConfigError(f"target '{target}' is not host:port with a port in {lowest_port}..65535 "
+                          f"(IPv6: \"[::1]:9001\")")
     return host, int(port)
 
 

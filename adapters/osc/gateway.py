@@ -28,6 +28,7 @@ from sonibus.bus.options import bad
 from sonibus.bus.queue import SampleQueue
 
 from . import shape, tcp, wire
+from .config import parse_target
 from .tcp import Peer
 
 log = logging.getLogger(__name__)
@@ -73,13 +74,12 @@ class OscGatewayConfig:
 
 
 def parse_endpoint(key: str, value: str) -> tuple[str, int]:
-    """``"host:port"`` (``"[::1]:9001"`` for IPv6) → ``(host, port)``, or ``ConfigError`` naming ``key``."""
-    host, sep, port = value.rpartition(":")
-    if host.startswith("[") and host.endswith("]"):
-        host = host[1:-1]
-    if not sep or not host or not port.isdigit() or int(port) > 65535:
-        raise bad(key, f"'{value}' is not host:port with a port in 0..65535 (IPv6: \"[::1]:9001\")")
-    return host, int(port)
+    """``"host:port"`` (``"[::1]:9001"`` for IPv6; port 0: any) → ``(host, port)``, or
+    ``ConfigError`` naming ``key``."""
+    try:
+        return parse_target(value, lowest_port=0)
+    except ConfigError as exc:
+        raise bad(key, str(exc)) from None
 
 
 class OscGateway(Adapter):
