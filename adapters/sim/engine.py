@@ -1,0 +1,193 @@
+"""The simulated robot itself, with no bus: motion, behaviors, postures and
+speech, advanced frame by frame. ``SimRobot`` puts it on the bus; the NAOqi
+face serves it as fake NAOqi services. Events go to ``emit(kind, fields)``,
+called under the engine's lock so they keep the order of what happened."""
+
+from __future__ import annotations
+
+import math
+import random
+import threading
+import time
+from collections import deque
+from collections.abc import Callable, Sequence
+from typing import Any
+
+from sonibus.bus.commands import expand_stiffness_names
+from sonibus.bus.errors import CommandError
+from sonibus.bus.robot import RobotModel
+
+from .behaviors import LIBRARY, Playback
+from .motion import Body
+
+IDLE_JOINTS = {"HeadYaw": (0.25, 9.0), "HeadPitch": (0.06, 6.0),
+               "LShoulderPitch": (0.05, 4.5), "RShoulderPitch": (0.05, 4.7)}  # amplitude, period s
+
+Emit = Callable[[str, dict[str, Any]], None]
+
+
+class SimEngine:
+    """One simulated robot's state; every method is thread-safe."""
+
+    def __init__(self, model: RobotModel, emit: Emit, *, posture: str = "StandInit", idle: bool = False,
+                 autoplay_s: float = 0.0, words_per_minute: float = 150.0) -> None:
+        self.model = model
+        self.body = Body(model, model.posture(posture) if posture in model.postures else {})
+        self.lock = threading.RLock()
+        self._emit_one = emit
+        self.idle, self.autoplay_s, self.words_per_minute = idle, autoplay_s, words_per_minute
+        self._playback: Playback | None = None
+        self._playback_started = 0.0
+        self._posture: str | None = None
+        self._speech: deque[tuple[str, float]] = deque()
+        self._speaking_until = 0.0
+        self.awareness = idle
+        self._idle_home = self.body.pose()
+        self._next_autoplay = time.monotonic() + autoplay_s
+
+    @staticmethod
+    def behaviors() -> list[str]:
+        return sorted(LIBRARY)
+
+    @property
+    def running_behavior(self) -> str | None:
+        playback = self._playback
+        return playback.behavior.name if playback is not None else None
+
+    @property
+    def speaking(self) -> bool:
+        return bool(self._speaking_until or self._speech)
+
+    # -- time ---------------------------------------------------------------------
+
+    def advance(self, now: float, dt: float) -> list[float]:
+        """Move on by ``dt`` seconds (wall time ``now``); the new positions."""
+        events: list[tuple[str, dict[str, Any]]] = []
+        with self.lock:
+            if self._playback is not None:
+                targets, done = self._playback.targets(now - self._playback_started)
+                self.body.set_targets(targets, 1.0)
+                if done:
+                    events.append(("behavior", {"name": self._playback.behavior.name, "state": "stopped"}))
+                    self._playback = None
+            elif self._posture is not None and not self.body.moving():
+                events.append(("posture", {"name": self._posture, "state": "reached"}))
+                self._posture = None
+            elif self.idle:
+                self._idle(now)
+            if self.autoplay_s and self._playback is None and time.monotonic() >= self._next_autoplay:
+                self._next_autoplay = time.monotonic() + self.autoplay_s
+                events.extend(self._start_behavior(random.choice(list(LIBRARY)), now))
+            self.body.step(max(0.0, min(dt, 0.1)))
+            if self._speaking_until and now >= self._speaking_until:
+                events.append(("speech", {"text": self._speech.popleft()[0], "state": "done"}))
+                self._speaking_until = 0.0
+            if not self._speaking_until and self._speech:
+                text, duration = self._speech[0]
+                self._speaking_until = now + duration
+                events.append(("speech", {"text": text, "state": "started"}))
+            self._emit(events)
+            return list(self.body.positions)
+
+    def _idle(self, now: float) -> None:
+        targets = {}
+        for joint, (amplitude, period) in IDLE_JOINTS.items():
+            if self.model.has_joint(joint) and (joint != "HeadYaw" or self.awareness):
+                targets[joint] = self._idle_home[joint] + amplitude * math.sin(2 * math.pi * now / period)
+        self.body.set_targets(targets, 0.2)
+
+    def _start_behavior(self, name: str, now: float) -> list[tuple[str, dict[str, Any]]]:
+        events = self._interrupt()
+        self._playback = Playback(LIBRARY[name], self.body.pose())
+        self._playback_started = now
+        events.append(("behavior", {"name": name, "state": "started"}))
+        return events
+
+    def _end_behavior(self) -> list[tuple[str, dict[str, Any]]]:
+        if self._playback is None:
+            return []
+        name = self._playback.behavior.name
+        self._playback = None
+        return [("behavior", {"name": name, "state": "stopped"})]
+
+    def _interrupt(self) -> list[tuple[str, dict[str, Any]]]:
+        events = self._end_behavior()
+        if self._posture is not None:
+            events.append(("posture", {"name": self._posture, "state": "interrupted"}))
+            self._posture = None
+        self._idle_home = self.body.pose()
+        return events
+
+    def _emit(self, events: list[tuple[str, dict[str, Any]]]) -> None:
+        for kind, fields in events:
+            self._emit_one(kind, fields)
+
+    # -- commands (validated before they get here) ------------------------------------
+
+    def behavior_run(self, name: str) -> dict[str, Any]:
+        with self.lock:
+            if self.running_behavior == name:
+                raise CommandError("failed", f"behavior '{name}' is already running")
+            self._emit(self._start_behavior(name, time.time()))
+        return {"name": name, "duration": LIBRARY[name].duration}
+
+    def behavior_stop(self, name: str | None = None) -> dict[str, Any]:
+        with self.lock:
+            running = self._playback is not None and name in (None, self._playback.behavior.name)
+            if running:
+                self._emit(self._end_behavior())
+                self.body.halt()
+        return {"was_running": running}
+
+    def joints_set(self, names: Sequence[str], angles: Sequence[float], speed: float) -> dict[str, Any]:
+        targets = dict(zip(names, map(float, angles), strict=True))
+        with self.lock:
+            self._emit(self._interrupt())
+            self.body.set_targets(targets, speed)
+            self._idle_home.update(targets)
+        return {}
+
+    def posture(self, name: str, speed: float) -> dict[str, Any]:
+        with self.lock:
+            self._emit([*self._interrupt(), ("posture", {"name": name, "state": "started"})])
+            pose = self.model.posture(name)
+            self.body.set_targets(pose, speed)
+            self._idle_home.update(pose)
+            self._posture = name
+        return {"name": name}
+
+    def posture_reached(self) -> bool:
+        with self.lock:
+            return self._posture is None
+
+    def say(self, text: str, volume: float | None = None, speed: float | None = None) -> dict[str, Any]:
+        words = max(len(text.split()), len(text) / 6.0)  # long unbroken text still takes time
+        duration = 0.2 + words * 60.0 / (self.words_per_minute * (speed or 100.0) / 100.0)
+        with self.lock:
+            self._speech.append((text, duration))
+            queued = len(self._speech) - 1
+        return {"duration": round(duration, 3), "queued": queued}
+
+    def stiffness(self, names: Sequence[str], value: float) -> dict[str, Any]:
+        joints = expand_stiffness_names(names, self.model)
+        with self.lock:
+            self.body.set_stiffness(joints, float(value))
+        return {"joints": joints}
+
+    def set_awareness(self, enabled: bool) -> dict[str, Any]:
+        with self.lock:
+            previous, self.awareness = self.awareness, enabled
+        return {"enabled": enabled, "previous": previous}
+
+    def stop(self, speech: bool = True, motion: bool = True) -> dict[str, Any]:
+        with self.lock:
+            events = self._interrupt() if motion else []
+            if motion:
+                self.body.halt()
+            if speech:
+                if self._speaking_until:
+                    events.append(("speech", {"text": self._speech[0][0], "state": "done"}))
+                self._speech.clear()
+                self._speaking_until = 0.0
+            self._emit(events)
+        return {}
