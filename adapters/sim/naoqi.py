@@ -1,0 +1,165 @@
+"""The simulator's NAOqi face: fake NAOqi services on a real libqi session,
+driven by the same simulated robot. Try a NAOqi configuration without a
+robot, and test the ``naoqi`` adapter against it.
+
+    [nodes.fake]
+    adapter = "naoqi-sim"
+    listen = "tcp://127.0.0.1:9559"
+
+    [nodes.pepper]
+    adapter = "naoqi"
+    url = "tcp://127.0.0.1:9559"
+"""
+
+from __future__ import annotations
+
+import logging
+import random
+import threading
+import time
+from dataclasses import dataclass
+from typing import Any, Literal
+
+from sonibus.bus.adapter import Adapter
+from sonibus.bus.options import bad
+from sonibus.bus.pacing import Pacer
+from sonibus.bus.robot import load_model, models
+
+from .engine import SimEngine
+from .naoqi_services import MEMORY, QUANTITIES, SERVICES, ALBehaviorManager, ALMemory, f32
+
+log = logging.getLogger(__name__)
+
+BODY_TYPES = {"pepper": "Pepper", "nao": "Nao"}
+
+
+@dataclass(frozen=True)
+class FakeNaoqiConfig:
+    """Options of the fake NAOqi endpoint (and of the ``naoqi-sim`` adapter)."""
+
+    listen: str = "tcp://127.0.0.1:9559"
+    model: str = "pepper"
+    rate_hz: float = 100.0                 # the simulated robot's motion cycle
+    posture: str = "StandInit"
+    idle: bool = False
+    float32: bool = True                   # ALMemory stores 4-byte floats
+    shuffle: bool = True                   # getBodyNames in an order that is not the joint table's
+    subscriber: Literal["ok", "invalid-signature"] = "ok"   # how ALMemory.subscriber behaves
+    delay_ms: float = 0.0                  # added to every call, like a network
+    almemory_period_ms: float = 0.0        # ALMemory refreshed this often (NAO V6: 500); 0: every cycle
+
+    def __post_init__(self) -> None:
+        if self.model not in models():
+            raise bad("model", f"'{self.model}' is unknown — known models: {', '.join(models())}")
+        if not self.listen.startswith(("tcp://", "tcps://")):
+            raise bad("listen", f"'{self.listen}' is not a URL like tcp://127.0.0.1:9559")
+        for key in ("delay_ms", "almemory_period_ms"):
+            if getattr(self, key) < 0:
+                raise bad(key, "must be 0 or more")
+
+
+class FakeNaoqi:
+    """A fake NAOqi robot: ``start()``, ``url``, ``engine`` (the simulated robot), ``stop()``."""
+
+    def __init__(self, config: FakeNaoqiConfig | None = None) -> None:
+        self.config = config or FakeNaoqiConfig()
+        self.delay_s = self.config.delay_ms / 1000.0
+        self.memory: dict[str, Any] = {}
+        self.engine = SimEngine(load_model(self.config.model), self._event, posture=self.config.posture,
+                                idle=self.config.idle)
+        names = list(self.engine.model.joint_names)
+        if self.config.shuffle:
+            random.Random(9559).shuffle(names)
+        self.body_names = tuple(names)
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+        self._session: Any = None
+        self.services: dict[str, Any] = {}
+
+    @property
+    def url(self) -> str:
+        return self.config.listen
+
+    def start(self) -> FakeNaoqi:
+        import qi
+        self._refresh()
+        self.memory.update({"RobotConfig/Body/Type": BODY_TYPES[self.config.model], "DCM/CycleTime": 10,
+                            "ALTextToSpeech/TextStarted": 0, "ALTextToSpeech/TextDone": 1})
+        self._session = qi.Session()
+        self._session.listenStandalone(self.config.listen)
+        for service in SERVICES:
+            self.services[service.__name__] = service(self)
+            self._session.registerService(service.__name__, self.services[service.__name__])
+        self._thread = threading.Thread(target=self._run, name="fake-naoqi", daemon=True)
+        self._thread.start()
+        return self
+
+    def stop(self) -> None:
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(2.0)
+        if self._session is not None:
+            self._session.close()
+            self._session = None
+
+    def memory_value(self, key: str) -> Any:
+        if key not in self.memory:
+            raise RuntimeError(f"ALMemory::getData: key not found: {key}")
+        return self.memory[key]
+
+    def expand(self, names: list[str]) -> list[str]:
+        if names in (["Body"], ["Joints"]):
+            return list(self.body_names)
+        out: list[str] = []
+        for name in names:
+            out.extend(self.engine.model.chain(name) or [name])
+        return out
+
+    def _run(self) -> None:
+        last = last_refresh = time.monotonic()
+        period = self.config.almemory_period_ms / 1000.0
+
+        def cycle(frame: int) -> None:
+            nonlocal last, last_refresh
+            tick = time.monotonic()
+            self.engine.advance(time.time(), tick - last)
+            last = tick
+            if tick - last_refresh >= period:
+                last_refresh = tick
+                self._refresh()
+
+        Pacer(self.config.rate_hz).run(cycle, self._stop)
+
+    def _refresh(self) -> None:
+        """Copy the robot's state into ALMemory (as the DCM does every cycle)."""
+        convert = f32 if self.config.float32 else float
+        body = self.engine.body
+        for i, name in enumerate(body.names):
+            values = {"pos": body.positions[i], "cmd": body.targets[i], "cur": 0.1 * body.stiffness[i],
+                      "temp": 35.0}
+            for suffix, quantity in QUANTITIES.items():
+                self.memory[MEMORY.format(name, suffix)] = convert(values[quantity])
+
+    def _event(self, kind: str, fields: dict[str, Any]) -> None:
+        memory: ALMemory | None = self.services.get("ALMemory")
+        behaviors: ALBehaviorManager | None = self.services.get("ALBehaviorManager")
+        if kind == "behavior" and behaviors is not None:
+            signal = behaviors.behaviorStarted if fields["state"] == "started" else behaviors.behaviorStopped
+            signal(fields["name"])
+        elif kind == "speech" and memory is not None:
+            started = fields["state"] == "started"
+            memory.raise_event("ALTextToSpeech/TextDone" if started else "ALTextToSpeech/TextStarted", 0)
+            memory.raise_event("ALTextToSpeech/TextStarted" if started else "ALTextToSpeech/TextDone", 1)
+
+
+class NaoqiSim(Adapter):
+    """A simulated Pepper or NAO served as fake NAOqi services (for the ``naoqi`` adapter)."""
+
+    Config = FakeNaoqiConfig
+
+    def _start(self) -> None:
+        self.fake = FakeNaoqi(self.config).start()
+        log.info("%s: fake NAOqi %s at %s", self.name, self.config.model, self.config.listen)
+
+    def _stop(self) -> None:
+        self.fake.stop()
