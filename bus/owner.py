@@ -45,8 +45,9 @@ class RobotAdapter(Adapter):
     def _start(self) -> None:
         self._claim()
         self._open()
-        self._publishers = [self.own(self.bus.stream_publisher(keys.joint(self.robot, j)))
-                            for j in self.model.joint_names]
+        self._streams: dict[str, zenoh.Publisher] = {}
+        for name in self.model.joint_names:
+            self._joint_publisher(name)
         self.own(self.bus.serve(keys.info(self.robot), self._serve_info))
         self.own(self.bus.serve(keys.command(self.robot), self._serve_command))
         self.spawn(self._acquire, "acquire")
@@ -71,10 +72,22 @@ class RobotAdapter(Adapter):
 
     # -- what a subclass calls --------------------------------------------------
 
-    def publish_frame(self, t: float, seq: int, positions: Sequence[float]) -> None:
-        """One frame: ``positions`` in the order of ``self.model.joint_names``."""
-        for publisher, value in zip(self._publishers, positions, strict=True):
-            publisher.put(codec.encode({"t": t, "seq": seq, "v": value}))
+    def publish_frame(self, t: float, seq: int, positions: Sequence[float], names: Sequence[str] | None = None,
+                      extra: dict[str, Sequence[float]] | None = None) -> None:
+        """One frame: ``positions`` in the order of ``names`` (default: the model's joints);
+        ``extra`` adds quantities (``cmd``, ``cur``, ``temp``) in the same order."""
+        for index, (name, value) in enumerate(zip(names or self.model.joint_names, positions, strict=True)):
+            sample = {"t": t, "seq": seq, "v": value}
+            if extra:
+                for quantity, values in extra.items():
+                    sample[quantity] = values[index]
+            self._joint_publisher(name).put(codec.encode(sample))
+
+    def _joint_publisher(self, joint: str) -> zenoh.Publisher:
+        publisher = self._streams.get(joint)
+        if publisher is None:  # also a joint the robot reports beyond its reference model
+            publisher = self._streams[joint] = self.own(self.bus.stream_publisher(keys.joint(self.robot, joint)))
+        return publisher
 
     def publish_event(self, kind: str, **fields: Any) -> None:
         self.bus.put(keys.event(self.robot, kind), {"t": time.time(), "kind": kind, **fields})

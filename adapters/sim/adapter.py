@@ -92,7 +92,8 @@ class SimRobot(RobotAdapter):
         return self.engine.posture(name, speed)
 
     def _cmd_say(self, text: str, volume: float | None = None, speed: float | None = None) -> dict[str, Any]:
-        return self.engine.say(text, volume, speed)
+        utterance = self.engine.say(text, volume, speed)
+        return {"duration": round(utterance.duration, 3), "queued": utterance.queued}
 
     def _cmd_stiffness(self, names: list[str], value: float) -> dict[str, Any]:
         return self.engine.stiffness(names, value)

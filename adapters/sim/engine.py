@@ -11,6 +11,7 @@ import threading
 import time
 from collections import deque
 from collections.abc import Callable, Sequence
+from dataclasses import dataclass
 from typing import Any
 
 from sonibus.bus.commands import expand_stiffness_names
@@ -26,6 +27,15 @@ IDLE_JOINTS = {"HeadYaw": (0.25, 9.0), "HeadPitch": (0.06, 6.0),
 Emit = Callable[[str, dict[str, Any]], None]
 
 
+@dataclass(eq=False)
+class Utterance:
+    """A text to speak, how long it takes, and how many texts were ahead of it."""
+
+    text: str
+    duration: float
+    queued: int = 0
+
+
 class SimEngine:
     """One simulated robot's state; every method is thread-safe."""
 
@@ -39,7 +49,8 @@ class SimEngine:
         self._playback: Playback | None = None
         self._playback_started = 0.0
         self._posture: str | None = None
-        self._speech: deque[tuple[str, float]] = deque()
+        self._last_posture: tuple[str, str] | None = None
+        self._speech: deque[Utterance] = deque()
         self._speaking_until = 0.0
         self.awareness = idle
         self._idle_home = self.body.pose()
@@ -58,6 +69,11 @@ class SimEngine:
     def speaking(self) -> bool:
         return bool(self._speaking_until or self._speech)
 
+    def still_to_say(self, utterance: Utterance) -> bool:
+        """Whether ``utterance`` is queued or being spoken."""
+        with self.lock:
+            return any(entry is utterance for entry in self._speech)
+
     # -- time ---------------------------------------------------------------------
 
     def advance(self, now: float, dt: float) -> list[float]:
@@ -72,6 +88,7 @@ class SimEngine:
                     self._playback = None
             elif self._posture is not None and not self.body.moving():
                 events.append(("posture", {"name": self._posture, "state": "reached"}))
+                self._last_posture = (self._posture, "reached")
                 self._posture = None
             elif self.idle:
                 self._idle(now)
@@ -80,12 +97,11 @@ class SimEngine:
                 events.extend(self._start_behavior(random.choice(list(LIBRARY)), now))
             self.body.step(max(0.0, min(dt, 0.1)))
             if self._speaking_until and now >= self._speaking_until:
-                events.append(("speech", {"text": self._speech.popleft()[0], "state": "done"}))
+                events.append(("speech", {"text": self._speech.popleft().text, "state": "done"}))
                 self._speaking_until = 0.0
             if not self._speaking_until and self._speech:
-                text, duration = self._speech[0]
-                self._speaking_until = now + duration
-                events.append(("speech", {"text": text, "state": "started"}))
+                self._speaking_until = now + self._speech[0].duration
+                events.append(("speech", {"text": self._speech[0].text, "state": "started"}))
             self._emit(events)
             return list(self.body.positions)
 
@@ -114,6 +130,7 @@ class SimEngine:
         events = self._end_behavior()
         if self._posture is not None:
             events.append(("posture", {"name": self._posture, "state": "interrupted"}))
+            self._last_posture = (self._posture, "interrupted")
             self._posture = None
         self._idle_home = self.body.pose()
         return events
@@ -156,17 +173,20 @@ class SimEngine:
             self._posture = name
         return {"name": name}
 
-    def posture_reached(self) -> bool:
+    def posture_done(self, name: str) -> bool | None:
+        """None while posture ``name`` is under way, then whether it was reached (not interrupted)."""
         with self.lock:
-            return self._posture is None
+            if self._posture == name:
+                return None
+            return self._last_posture == (name, "reached")
 
-    def say(self, text: str, volume: float | None = None, speed: float | None = None) -> dict[str, Any]:
+    def say(self, text: str, volume: float | None = None, speed: float | None = None) -> Utterance:
         words = max(len(text.split()), len(text) / 6.0)  # long unbroken text still takes time
         duration = 0.2 + words * 60.0 / (self.words_per_minute * (speed or 100.0) / 100.0)
         with self.lock:
-            self._speech.append((text, duration))
-            queued = len(self._speech) - 1
-        return {"duration": round(duration, 3), "queued": queued}
+            utterance = Utterance(text, duration, len(self._speech))
+            self._speech.append(utterance)
+        return utterance
 
     def stiffness(self, names: Sequence[str], value: float) -> dict[str, Any]:
         joints = expand_stiffness_names(names, self.model)
@@ -186,7 +206,7 @@ class SimEngine:
                 self.body.halt()
             if speech:
                 if self._speaking_until:
-                    events.append(("speech", {"text": self._speech[0][0], "state": "done"}))
+                    events.append(("speech", {"text": self._speech[0].text, "state": "done"}))
                 self._speech.clear()
                 self._speaking_until = 0.0
             self._emit(events)

@@ -47,6 +47,7 @@ class FakeNaoqiConfig:
     subscriber: Literal["ok", "invalid-signature"] = "ok"   # how ALMemory.subscriber behaves
     delay_ms: float = 0.0                  # added to every call, like a network
     almemory_period_ms: float = 0.0        # ALMemory refreshed this often (NAO V6: 500); 0: every cycle
+    naoqi_version: str = "2.5.10.7"        # what ALSystem.systemVersion() answers (NAO V6: 2.8.x)
 
     def __post_init__(self) -> None:
         if self.model not in models():
@@ -101,6 +102,7 @@ class FakeNaoqi:
         if self._session is not None:
             self._session.close()
             self._session = None
+        self.services.clear()  # services hold qi signals: alive at interpreter exit, libqi aborts
 
     def memory_value(self, key: str) -> Any:
         if key not in self.memory:

@@ -150,9 +150,9 @@ class ALRobotPosture(_Service):
         if name not in self.engine.model.postures:
             raise RuntimeError(f"ALRobotPosture::goToPosture: unknown posture {name}")
         self.engine.posture(name, speed)
-        while not self.engine.posture_reached():
+        while (reached := self.engine.posture_done(name)) is None:
             time.sleep(0.01)
-        return True
+        return reached  # False when interrupted, as NAOqi answers
 
     @delayed
     def stopMove(self) -> None:
@@ -213,9 +213,8 @@ class ALTextToSpeech(_Service):
 
     @delayed
     def say(self, text: str) -> None:
-        self.engine.say(text, self.volume, self.parameters["speed"])
-        time.sleep(0.02)
-        while self.engine.speaking:
+        utterance = self.engine.say(text, self.volume, self.parameters["speed"])
+        while self.engine.still_to_say(utterance):  # returns when this text is spoken, as NAOqi does
             time.sleep(0.01)
 
     @delayed
@@ -237,6 +236,13 @@ class ALTextToSpeech(_Service):
     @delayed
     def stopAll(self) -> None:
         self.engine.stop(motion=False)
+
+
+@qi.multiThreaded()
+class ALSystem(_Service):
+    @delayed
+    def systemVersion(self) -> str:
+        return self.fake.config.naoqi_version
 
 
 @qi.multiThreaded()
@@ -270,4 +276,4 @@ def _listed(value: Any) -> list[Any]:
     return list(value) if isinstance(value, list | tuple) else [value]
 
 
-SERVICES = (ALMemory, ALMotion, ALRobotPosture, ALBehaviorManager, ALTextToSpeech, ALBasicAwareness)
+SERVICES = (ALMemory, ALMotion, ALRobotPosture, ALBehaviorManager, ALTextToSpeech, ALBasicAwareness, ALSystem)

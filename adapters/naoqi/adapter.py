@@ -1,0 +1,241 @@
+"""The ``naoqi`` robot adapter: a real Pepper or NAO over libqi.
+
+``start()`` returns at once; the acquisition thread connects (retrying with
+backoff, one log line per outage), learns the robot (``discover``), then reads
+every joint once per frame until the link breaks or the node stops, and
+connects again. ``connection`` events say ``connected``/``lost``; a ``status``
+event every ``status_every_s`` gives the achieved rate and read latency."""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+import threading
+import time
+from collections.abc import Sequence
+from typing import Any
+
+from sonibus.bus.errors import CommandError
+from sonibus.bus.owner import RobotAdapter
+from sonibus.bus.pacing import Pacer
+from sonibus.bus.robot import load_model
+
+from .acquire import Reader, Stats
+from .commands import NaoqiCommands
+from .config import NaoqiConfig
+from .connection import Link, LinkDown, RemoteError
+from .discover import Robot, discover
+from .events import RobotEvents
+
+log = logging.getLogger(__name__)
+
+BACKOFF_START_S = 0.25
+CONNECT_ERRORS = (LinkDown, RemoteError, ValueError, TypeError)  # TypeError/ValueError: an odd answer
+
+
+class NaoqiRobot(RobotAdapter):
+    """A Pepper or NAO over NAOqi: joints, behaviors, speech, postures."""
+
+    Config = NaoqiConfig
+
+    def _open(self) -> None:
+        self.model = load_model(self.config.model_name)  # until the robot tells its own
+        self.rate_hz = self.config.rate_hz
+        self.stats = Stats()
+        self.events = RobotEvents(self.publish_event)
+        self.link = Link(self.config, self._lost)
+        self.commands = NaoqiCommands(self.link, self.events, lambda: self.model, self._down)
+        self.facts: Robot | None = None
+        self.frames_skipped = 0
+        self._behaviors: tuple[str, ...] = ()
+        self._halt = threading.Event()       # ends the current streaming run
+        self._error = "not connected yet"
+        self._announced = ""                 # connection state last published
+        self._seq, self._lost_at = -1, 0.0
+
+    def _stop(self) -> None:
+        if not hasattr(self, "link"):  # start failed before _open finished
+            return
+        self._halt.set()
+        try:
+            self.commands.restore_awareness()
+        except (LinkDown, RemoteError) as exc:
+            log.warning("%s: could not restore basic awareness: %s", self.name, exc)
+        self.link.close()
+
+    # -- connecting -------------------------------------------------------------------
+
+    def _acquire(self) -> None:
+        delay, failures = BACKOFF_START_S, 0
+        while not self.stopping.is_set():
+            try:
+                reader = self._connect()
+            except Exception as exc:  # whatever the robot answers, the node stays up and retries
+                if self.stopping.is_set():
+                    break
+                if not isinstance(exc, CONNECT_ERRORS):
+                    log.exception("%s: unexpected error while connecting to %s", self.name, self.link.url)
+                self._error = str(exc)
+                failures += 1
+                if failures == 1:  # one line per outage
+                    log.warning("%s: robot '%s' is unreachable at %s (%s); retrying, backoff up to %g s",
+                                self.name, self.robot, self.link.url, exc, self.config.retry_max_s)
+                    self._announce("lost")
+                log.debug("%s: connect to %s failed: %s", self.name, self.link.url, exc)
+                self.stopping.wait(delay)
+                delay = min(delay * 2, self.config.retry_max_s)
+                continue
+            delay, failures = BACKOFF_START_S, 0
+            self._stream(reader)
+            if not self.stopping.is_set():
+                failures = 1  # this line reports the outage
+                log.warning("%s: lost robot '%s' at %s (%s); reconnecting", self.name, self.robot,
+                            self.link.url, self._error)
+                self._lost_at = time.monotonic()
+                self._announce("lost")
+
+    def _connect(self) -> Reader:
+        self._halt.clear()
+        self.link.connect(self.stopping)
+        robot = discover(self.link, self.config)
+        polled = self.events.attach(self.link)
+        reader = self._reader(robot, polled)
+        robot = dataclasses.replace(robot, source=reader.source)
+        if polled and not reader.polled:
+            self.events.mode = "none"  # the speech keys could not be read either
+        self.commands.connected()
+        if self.config.pause_awareness:
+            try:
+                self.commands.pause_awareness()
+            except RemoteError as exc:
+                log.warning("%s: could not pause basic awareness: %s", self.name, exc)
+        self.model, self.facts, self._behaviors, self._error = robot.model, robot, robot.behaviors, ""
+        for difference in robot.differences:
+            log.info("%s: limits from the robot differ: %s", self.name, difference)
+        log.info("%s: connected to %s at %s (NAOqi %s): %d joints from %s, speech events by %s",
+                 self.name, robot.body_type or robot.model.name, self.link.url, robot.version or "version unknown",
+                 len(reader.names), reader.source, self.events.mode)
+        self._announce("connected")
+        return reader
+
+    def _reader(self, robot: Robot, polled: Sequence[str]) -> Reader:
+        """A reader that works here: without extras, then from ALMotion, if it must."""
+        names, extra = robot.model.joint_names, self.config.extra
+        tries = [(robot.source, extra, polled), (robot.source, (), polled), ("motion", (), polled),
+                 ("motion", (), ())]
+        error: Exception | None = None
+        for source, quantities, keys_ in dict.fromkeys(tries):
+            reader = Reader(self.link, names, source, quantities, keys_)
+            try:
+                reader.read()
+            except (RemoteError, ValueError, TypeError) as exc:
+                log.warning("%s: reading joints from %s with %s failed: %s", self.name, source,
+                            ", ".join([*quantities, *keys_]) or "positions only", exc)
+                error = exc
+                continue
+            return reader
+        raise RemoteError(f"no way to read the joints worked: {error}")
+
+    def _lost(self, reason: str) -> None:
+        self._error = reason
+        self._halt.set()
+
+    def _announce(self, state: str) -> None:
+        if state != self._announced:
+            self._announced = state
+            self.publish_event("connection", state=state, url=self.link.url,
+                               **({"error": self._error} if state == "lost" else {}))
+
+    def _down(self, what: str) -> CommandError:
+        return CommandError("failed", f"robot '{self.robot}' is not connected ({what}; last error: {self._error}); "
+                            f"retrying — check the robot is on and reachable at {self.link.url}")
+
+    # -- streaming --------------------------------------------------------------------
+
+    def _stream(self, reader: Reader) -> None:
+        gap = int((time.monotonic() - self._lost_at) * self.rate_hz) if self._lost_at else 0
+        base = self._seq + 1 + gap  # seq goes on across reconnects; the outage shows as a gap
+        pacer = Pacer(self.rate_hz)
+        self.stats.clear()
+        next_status = time.monotonic() + self.config.status_every_s
+
+        def tick(frame: int) -> None:
+            nonlocal next_status
+            try:
+                read = reader.read()
+            except Exception as exc:
+                if not isinstance(exc, CONNECT_ERRORS):
+                    log.exception("%s: unexpected error reading joints", self.name)
+                self.link.lost(f"reading joints: {exc}")
+                self._halt.set()
+                return
+            self._seq = base + frame
+            self.publish_frame(read.t, self._seq, read.positions, reader.names, read.extra)
+            if read.polled:
+                self.events.poll(read.polled)
+            self.stats.add(read.read_s)
+            if time.monotonic() >= next_status:
+                next_status += self.config.status_every_s
+                self.publish_event("status", **self.status(pacer.skipped))
+
+        pacer.run(tick, self._halt)
+        self.frames_skipped += pacer.skipped
+
+    def status(self, skipped: int = 0) -> dict[str, Any]:
+        """Achieved rate, read latency, frames skipped."""
+        return {**self.stats.summary(), "frames_skipped": self.frames_skipped + skipped,
+                "source": self.facts.source if self.facts else self.config.source}
+
+    # -- what the bus sees --------------------------------------------------------------
+
+    def behaviors(self) -> Sequence[str]:
+        return self._behaviors
+
+    def robot_info(self) -> dict[str, Any]:
+        info = super().robot_info()
+        info["naoqi"] = {"url": self.link.url, "connected": self.link.connected, "error": self._error,
+                         "speech_events": self.events.mode, **(self.facts.info() if self.facts else {}),
+                         **self.status()}
+        return info
+
+    def execute(self, verb: str, args: Any) -> dict[str, Any]:
+        try:
+            return super().execute(verb, args)
+        except CommandError as exc:
+            if exc.code == "unknown_behavior" and self.facts is None:  # no list yet to know it by
+                raise self._down(verb) from None
+            raise
+
+    # -- commands: validated by RobotAdapter, carried out by NaoqiCommands ----------------
+
+    def _cmd_behavior_list(self) -> dict[str, Any]:
+        if self.link.connected:
+            try:
+                self._behaviors = tuple(sorted(self.link.call("ALBehaviorManager", "getInstalledBehaviors")))
+            except (LinkDown, RemoteError) as exc:
+                log.debug("%s: behavior list: %s", self.name, exc)
+        return super()._cmd_behavior_list()
+
+    def _cmd_behavior_run(self, name: str) -> dict[str, Any]:
+        return self.commands.behavior_run(name)
+
+    def _cmd_behavior_stop(self, name: str | None = None) -> dict[str, Any]:
+        return self.commands.behavior_stop(name)
+
+    def _cmd_joints_set(self, names: list[str], angles: list[float], speed: float) -> dict[str, Any]:
+        return self.commands.joints_set(names, angles, speed)
+
+    def _cmd_posture(self, name: str, speed: float) -> dict[str, Any]:
+        return self.commands.posture(name, speed)
+
+    def _cmd_say(self, text: str, volume: float | None = None, speed: float | None = None) -> dict[str, Any]:
+        return self.commands.say(text, volume, speed)
+
+    def _cmd_stiffness(self, names: list[str], value: float) -> dict[str, Any]:
+        return self.commands.stiffness(names, value)
+
+    def _cmd_awareness(self, enabled: bool) -> dict[str, Any]:
+        return self.commands.awareness(enabled)
+
+    def _cmd_stop(self) -> dict[str, Any]:
+        return self.commands.stop()

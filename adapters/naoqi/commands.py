@@ -1,0 +1,198 @@
+"""The command verbs as NAOqi calls. Requests arrive validated (``RobotAdapter``);
+what can block on the robot (``say``, ``goToPosture``) is sent and not waited
+for, everything else is waited for at most the connect timeout.
+
+Errors: a robot that refuses → ``failed`` with its message on one line; no
+robot → ``failed`` saying so."""
+
+from __future__ import annotations
+
+import logging
+import threading
+from collections.abc import Callable
+from typing import Any
+
+from sonibus.bus.commands import expand_stiffness_names
+from sonibus.bus.errors import CommandError
+from sonibus.bus.robot import RobotModel
+
+from .connection import Link, LinkDown, RemoteError, one_line
+from .events import RobotEvents
+
+log = logging.getLogger(__name__)
+
+STOP_CALLS = (("ALBehaviorManager", "stopAllBehaviors"), ("ALMotion", "killAll"), ("ALMotion", "stopMove"),
+              ("ALTextToSpeech", "stopAll"))
+RESTORE_TIMEOUT_MS = 800  # on stop: the node must end within about a second
+
+
+class Postures:
+    """The posture in progress: ``started``, then ``reached`` or ``interrupted``."""
+
+    def __init__(self, publish: Callable[..., None]) -> None:
+        self.publish = publish
+        self._current: tuple[str, object] | None = None
+        self._lock = threading.Lock()
+
+    def begin(self, name: str) -> object:
+        token = object()
+        with self._lock:
+            self._end("interrupted")
+            self._current = (name, token)
+            self.publish("posture", name=name, state="started")
+        return token
+
+    def interrupt(self) -> None:
+        with self._lock:
+            self._end("interrupted")
+
+    def finished(self, token: object, reached: bool) -> None:
+        with self._lock:
+            if self._current is not None and self._current[1] is token:
+                self._end("reached" if reached else "interrupted")
+
+    def _end(self, state: str) -> None:
+        if self._current is not None:
+            self.publish("posture", name=self._current[0], state=state)
+            self._current = None
+
+
+class NaoqiCommands:
+    """Carries out validated commands on the robot behind ``link``."""
+
+    def __init__(self, link: Link, events: RobotEvents, model: Callable[[], RobotModel],
+                 down: Callable[[str], CommandError]) -> None:
+        self.link, self.events, self.model, self.down = link, events, model, down
+        self.postures = Postures(events.publish)
+        self.voice_defaults: dict[str, float] = {}
+        self._voice: dict[str, float] = {}
+        self._awareness_paused = False   # by this adapter, to be resumed on stop
+        self._paused_before: bool | None = None
+
+    def connected(self) -> None:
+        """A (new) connection: learn the voice settings it has now (the first ones are the defaults)."""
+        current = {"volume": self.link.try_call("ALTextToSpeech", "getVolume"),
+                   "speed": self.link.try_call("ALTextToSpeech", "getParameter", "speed")}
+        self._voice = {k: float(v) for k, v in current.items() if isinstance(v, int | float)}
+        for key, value in self._voice.items():
+            self.voice_defaults.setdefault(key, value)
+
+    def _call(self, verb: str, service: str, method: str, *args: Any) -> Any:
+        """Call and wait for the answer."""
+        return self._failed(verb, self.link.call, service, method, *args)
+
+    def _send(self, verb: str, service: str, method: str, *args: Any) -> Any:
+        """Send a call that may block on the robot; its future."""
+        return self._failed(verb, self.link.start, service, method, *args)
+
+    def _failed(self, verb: str, how: Callable[..., Any], *args: Any) -> Any:
+        try:
+            return how(*args)
+        except LinkDown as exc:
+            if not self.link.connected:
+                raise self.down(f"{verb}: {exc}") from None
+            raise CommandError("failed", f"{verb}: {exc}") from None  # e.g. a slow answer on a live link
+        except RemoteError as exc:
+            raise CommandError("failed", f"{verb}: {exc}") from None
+
+    # -- verbs ------------------------------------------------------------------------
+
+    def behavior_run(self, name: str) -> dict[str, Any]:
+        if self._call("behavior/run", "ALBehaviorManager", "isBehaviorRunning", name):
+            raise CommandError("failed", f"behavior '{name}' is already running")
+        self.postures.interrupt()
+        self._call("behavior/run", "ALBehaviorManager", "startBehavior", name)
+        return {"name": name}
+
+    def behavior_stop(self, name: str | None = None) -> dict[str, Any]:
+        if name is None:
+            running = bool(self._call("behavior/stop", "ALBehaviorManager", "getRunningBehaviors"))
+            self._call("behavior/stop", "ALBehaviorManager", "stopAllBehaviors")
+        else:
+            running = bool(self._call("behavior/stop", "ALBehaviorManager", "isBehaviorRunning", name))
+            if running:
+                self._call("behavior/stop", "ALBehaviorManager", "stopBehavior", name)
+        return {"was_running": running}
+
+    def joints_set(self, names: list[str], angles: list[float], speed: float) -> dict[str, Any]:
+        self._call("joints/set", "ALMotion", "setAngles", list(names), [float(a) for a in angles], float(speed))
+        self.postures.interrupt()
+        return {}
+
+    def posture(self, name: str, speed: float) -> dict[str, Any]:
+        future = self._send("posture", "ALRobotPosture", "goToPosture", name, float(speed))
+        token = self.postures.begin(name)
+        future.then(lambda done: self._posture_done(name, token, done))
+        return {"name": name}
+
+    def _posture_done(self, name: str, token: object, future: Any) -> None:
+        if future.hasError():
+            log.warning("posture %s: %s", name, one_line(future.error()))
+        self.postures.finished(token, not future.hasError() and bool(future.value()))
+
+    def say(self, text: str, volume: float | None = None, speed: float | None = None) -> dict[str, Any]:
+        for key, method, value in (("volume", "setVolume", volume), ("speed", "setParameter", speed)):
+            wanted = value if value is not None else self.voice_defaults.get(key)  # per text, like the sim
+            if wanted is not None and float(wanted) != self._voice.get(key):
+                self._call("say", "ALTextToSpeech", method, *(("speed",) if key == "speed" else ()), float(wanted))
+                self._voice[key] = float(wanted)
+        ahead = self.events.speech.queue(text)
+        try:
+            future = self._send("say", "ALTextToSpeech", "say", text)
+        except CommandError:
+            self.events.speech.forget(text)
+            raise
+        future.then(lambda done: self._said(text, done))
+        return {"queued": ahead}
+
+    def _said(self, text: str, future: Any) -> None:
+        self.events.speech.forget(text)  # spoken (its events came) or dropped (they never will)
+        if future.hasError():
+            log.warning("say %r: %s", text[:40], one_line(future.error()))
+
+    def stiffness(self, names: list[str], value: float) -> dict[str, Any]:
+        joints = expand_stiffness_names(names, self.model())
+        self._call("stiffness", "ALMotion", "setStiffnesses", joints, float(value))
+        return {"joints": joints}
+
+    def awareness(self, enabled: bool) -> dict[str, Any]:
+        previous = bool(self._call("awareness", "ALBasicAwareness", "isEnabled"))
+        self._call("awareness", "ALBasicAwareness", "setEnabled", bool(enabled))
+        if enabled and self._awareness_paused:  # turned on by hand: no longer held paused
+            self._call("awareness", "ALBasicAwareness", "resumeAwareness")
+            self._awareness_paused = False
+        return {"enabled": enabled, "previous": previous}
+
+    def stop(self) -> dict[str, Any]:
+        """Every part is sent at once and each is waited for, whatever the others do."""
+        self.events.speech.forget()
+        self.postures.interrupt()
+        sent, failures = [], []
+        for service, method in STOP_CALLS:
+            try:
+                sent.append((f"{service}.{method}", self.link.start(service, method)))
+            except (LinkDown, RemoteError) as exc:
+                failures.append(f"{service}.{method}: {exc}")
+        for what, future in sent:
+            try:
+                self.link.wait(future, what)
+            except (LinkDown, RemoteError) as exc:
+                failures.append(str(exc))
+        if not self.link.connected:
+            raise self.down("stop")
+        if failures:
+            raise CommandError("failed", f"stop: {'; '.join(failures)} (the other parts were done)")
+        return {}
+
+    # -- awareness held paused while the adapter runs ---------------------------------
+
+    def pause_awareness(self) -> None:
+        if self._paused_before is None:  # the state to restore is the one before the first pause
+            self._paused_before = bool(self.link.try_call("ALBasicAwareness", "isAwarenessPaused"))
+        self.link.call("ALBasicAwareness", "pauseAwareness")
+        self._awareness_paused = True
+
+    def restore_awareness(self) -> None:
+        if self._awareness_paused and not self._paused_before and self.link.connected:
+            self.link.call("ALBasicAwareness", "resumeAwareness", timeout_ms=RESTORE_TIMEOUT_MS)
+        self._awareness_paused = False

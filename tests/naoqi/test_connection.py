@@ -1,0 +1,88 @@
+"""A robot that is not there yet, goes away and comes back: the node stays up,
+says so on the bus, and streams again on its own."""
+
+from __future__ import annotations
+
+import socket
+import time
+
+import pytest
+
+from sonibus import schemas
+from sonibus.bus import CommandError, robot_info, send_command
+
+from ..conftest import free_port, wait_for
+from .conftest import attach
+
+NOD = "animations/Stand/Gestures/Yes_1"
+
+
+def refused(rig, verb, args):
+    with pytest.raises(CommandError) as caught:
+        send_command(rig.bus, rig.name, verb, args)
+    return caught.value
+
+
+def test_unreachable_at_start_then_the_robot_appears(net, fakes):
+    port = free_port()
+    started = time.monotonic()
+    r = attach(net, f"tcp://127.0.0.1:{port}", wait=False)
+    assert time.monotonic() - started < 1.0, "start() waited for the robot"
+    lost = r.events.wait("connection", state="lost")
+    assert str(port) in lost["url"] and lost["error"]
+    info = robot_info(r.bus, "pepper")
+    schemas.validate("robot_info", info)
+    assert info["naoqi"]["connected"] is False and info["model"] == "pepper"  # the reference model until then
+    for verb, args in (("say", {"text": "hello"}), ("behavior/run", {"name": NOD}), ("stop", {})):
+        error = refused(r, verb, args)
+        assert error.code == "failed", (verb, error)
+        assert "not connected" in error.message and str(port) in error.message and "\n" not in error.message
+    assert refused(r, "joints/set", {"names": ["HeadYaw"], "angles": [9.0]}).code == "out_of_range"
+    fakes(port)
+    r.events.wait("connection", timeout=5.0, state="connected")
+    wait_for(r.joints.complete, what="frames once the robot is there")
+    assert [e["state"] for e in r.events.find("connection")] == ["lost", "connected"]
+    assert send_command(r.bus, "pepper", "behavior/run", {"name": NOD}) == {"name": NOD}
+
+
+def test_robot_lost_mid_stream_and_back_on_the_same_port(net, fakes):
+    port = free_port()
+    fake = fakes(port)
+    r = attach(net, fake.url)
+    r.events.wait("connection", state="connected")
+    before = r.joints.last()[0]
+    fake.stop()
+    r.events.wait("connection", timeout=3.0, state="lost")
+    assert robot_info(r.bus, "pepper")["naoqi"]["connected"] is False
+    assert "not connected" in refused(r, "say", {"text": "anyone?"}).message
+    outage = r.joints.last()[0]
+    fake = fakes(port)  # a new robot process on the same address
+    wait_for(lambda: len(r.events.find("connection", state="connected")) == 2, timeout=5.0,
+             what="connected again")
+    after = r.joints.next(5)
+    assert after[0][0] > outage >= before  # seq goes on, with a gap for the outage
+    fake.engine.joints_set(["HeadYaw"], [0.4], 1.0)
+    r.joints.wait_pose({"HeadYaw": 0.4}, tol=1e-6)
+    send_command(r.bus, "pepper", "behavior/run", {"name": NOD})  # signals are connected again too
+    r.events.wait("behavior", name=NOD, state="started")
+    assert [e["state"] for e in r.events.find("connection")] == ["connected", "lost", "connected"]
+
+
+def test_stop_is_prompt_connected_retrying_and_mid_connect(net, fakes):
+    fake = fakes()
+    connected = attach(net, fake.url)
+    retrying = attach(net, f"tcp://127.0.0.1:{free_port()}", robot="pepper2", wait=False)
+    with socket.socket() as silent:  # accepts, never answers: the connect hangs until its timeout
+        silent.bind(("127.0.0.1", 0))
+        silent.listen()
+        hanging = attach(net, f"tcp://127.0.0.1:{silent.getsockname()[1]}", robot="pepper3", wait=False,
+                         connect_timeout_s=30.0)
+        retrying.events.wait("connection", state="lost")
+        silent.settimeout(5.0)
+        accepted, _ = silent.accept()  # the third adapter is in its connect, and stays there
+        with accepted:
+            for rig in (connected, retrying, hanging):
+                started = time.monotonic()
+                rig.adapter.stop()
+                assert time.monotonic() - started < 1.0, rig.name
+                assert rig.adapter.state == "stopped"
