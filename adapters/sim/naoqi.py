@@ -155,7 +155,7 @@ class FakeNaoqi:
 
 
 class NaoqiSim(Adapter):
-    """A simulated Pepper or NAO served as fake NAOqi services (for the ``naoqi`` adapter)."""
+    """A simulated Pepper or NAO served as fake NAOqi services, for the naoqi adapter."""
 
     Config = FakeNaoqiConfig
 
