@@ -67,6 +67,7 @@ class Link:
         self.url = config.endpoint
         self.timeout_ms = int(config.connect_timeout_s * 1000)
         self.on_lost = on_lost
+        qi.logging.setLevel(qi.logging.ERROR)  # libqi's chatter on stderr; our own log says what matters
         self.session = qi.Session()
         if config.password:
             self.session.setClientAuthenticatorFactory(AuthenticatorFactory(config.user, config.password))

@@ -86,6 +86,7 @@ class FakeNaoqi:
         self._refresh()
         self.memory.update({"RobotConfig/Body/Type": BODY_TYPES[self.config.model], "DCM/CycleTime": 10,
                             "ALTextToSpeech/TextStarted": 0, "ALTextToSpeech/TextDone": 1})
+        qi.logging.setLevel(qi.logging.ERROR)  # libqi's chatter on stderr; our own log says what matters
         self._session = qi.Session()
         self._session.listenStandalone(self.config.listen)
         for service in SERVICES:
