@@ -23,23 +23,19 @@ import argparse
 import json
 import multiprocessing
 import os
-import socket
 import sys
 import threading
 import time
 from pathlib import Path
 
 import numpy as np
+from common import free_port
 
 ROOT = Path(__file__).resolve().parent
 POSITION = "Device/SubDeviceList/{}/Position/Sensor/Value"
 FAST_HZ = 1000.0  # the adapter's highest rate: the pacer then never waits
 
 
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 def serve_fake(url: str, delay_ms: float, ready: multiprocessing.Event, stop: multiprocessing.Event) -> None:

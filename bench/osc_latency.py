@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import argparse
 import gc
-import json
 import multiprocessing
 import os
 import signal
@@ -27,17 +26,12 @@ import tempfile
 import time
 from pathlib import Path
 
-import numpy as np
+from common import compare, free_port, latency_stats, write
 
-ROOT = Path(__file__).resolve().parent
 SONIBUS = str(Path(sys.executable).with_name("sonibus"))
 JOINTS = 17
 
 
-def free_port(kind: int) -> int:
-    with socket.socket(socket.AF_INET, kind) as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 def receive(port: int, seconds: float, ready: multiprocessing.Event, out: multiprocessing.Queue) -> None:
@@ -63,7 +57,6 @@ def receive(port: int, seconds: float, ready: multiprocessing.Event, out: multip
 
 
 def summarize(records: list[tuple[bytes, int, float]], robots: int) -> dict[str, float]:
-    latency = np.array([r[2] for r in records]) * 1e6
     frames: dict[tuple[bytes, int], int] = {}
     for address, seq, _ in records:
         robot = address.split(b"/")[1]
@@ -74,12 +67,8 @@ def summarize(records: list[tuple[bytes, int, float]], robots: int) -> dict[str,
         edges |= {(robot, min(seqs)), (robot, max(seqs))}
     partial_missing = sum(JOINTS - n for key, n in frames.items() if n < JOINTS and key not in edges)
     received = len(records)
-    return {
-        "messages": received, "frames": len(frames),
-        "p50_us": float(np.percentile(latency, 50)), "p99_us": float(np.percentile(latency, 99)),
-        "p999_us": float(np.percentile(latency, 99.9)), "max_us": float(latency.max()),
-        "lost_messages": partial_missing, "loss": partial_missing / max(1, received + partial_missing),
-    }
+    return {"messages": received, "frames": len(frames), **latency_stats([r[2] for r in records]),
+            "lost_messages": partial_missing, "loss": partial_missing / max(1, received + partial_missing)}
 
 
 def baseline(port: int, robots: int, rate: float, seconds: float) -> None:
@@ -150,16 +139,10 @@ def main() -> None:
     base = measure("baseline", args.robots, args.rate, args.seconds)
     bus = measure("sonibus", args.robots, args.rate, args.seconds)
     result = {"robots": args.robots, "joints": JOINTS, "rate_hz": args.rate, "seconds": args.seconds,
-              "machine": before, "baseline_no_bus": base, "sonibus": bus,
-              "ratio_p50": bus["p50_us"] / base["p50_us"], "ratio_p99": bus["p99_us"] / base["p99_us"]}
-    out = ROOT / "results" / "osc_latency.json"
-    out.parent.mkdir(exist_ok=True)
-    out.write_text(json.dumps(result, indent=2) + "\n")
-    print(f"{'path':<9} {'messages':>9} {'p50 µs':>8} {'p99 µs':>8} {'p99.9 µs':>9} {'lost':>6}")
-    for name, r in (("no bus", base), ("sonibus", bus)):
-        print(f"{name:<9} {r['messages']:>9} {r['p50_us']:>8.0f} {r['p99_us']:>8.0f} {r['p999_us']:>9.0f} "
-              f"{r['lost_messages']:>6}")
-    print(f"ratio p50 {result['ratio_p50']:.2f}, p99 {result['ratio_p99']:.2f} ({before})")
+              "machine": before, "baseline_no_bus": base, "sonibus": bus}
+    compare(result, base, bus, ["messages", "p50_us", "p99_us", "p999_us", "lost_messages"])
+    write("osc_latency", result)
+    print(before)
 
 
 if __name__ == "__main__":

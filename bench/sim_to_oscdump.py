@@ -15,7 +15,6 @@ Writes bench/results/sim_to_oscdump.json and prints a table.
 from __future__ import annotations
 
 import argparse
-import json
 import re
 import socket
 import struct
@@ -25,20 +24,15 @@ import threading
 import time
 from pathlib import Path
 
-import numpy as np
+from common import compare, free_port, latency_stats, write
 from pythonosc.udp_client import SimpleUDPClient
 
 from sonibus.bus import Bus, BusConfig, decode, open_session
 
 NTP_EPOCH = 2208988800
 LINE = re.compile(r"^([0-9a-f]{8})\.([0-9a-f]{8}) (\S+) f (\S+)$")
-ROOT = Path(__file__).resolve().parent
 
 
-def free_port(kind: int) -> int:
-    with socket.socket(socket.AF_INET, kind) as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 def as_float32_text(value: float) -> str:
@@ -66,10 +60,6 @@ class OscDump:
         self.proc.wait(5)
 
 
-def stats(latencies_s: list[float]) -> dict[str, float]:
-    a = np.array(latencies_s) * 1e6
-    return {"n": len(a), "p50_us": float(np.percentile(a, 50)), "p99_us": float(np.percentile(a, 99)),
-            "p999_us": float(np.percentile(a, 99.9)), "max_us": float(a.max())}
 
 
 def sonibus_path(seconds: float, rate: float) -> dict[str, float]:
@@ -106,7 +96,7 @@ def sonibus_path(seconds: float, rate: float) -> dict[str, float]:
         if times and len(times) == 1:  # only values seen once: unambiguous
             latencies.append(t_recv - times[0])
     first, last = min(frames), max(frames)
-    result = stats(latencies)
+    result = latency_stats(latencies)
     result["rate_frames_per_s"] = (len(frames) - 1) / (frames[last] - frames[first])
     result["frames_missing_in_seq"] = last - first + 1 - len(frames)
     return result
@@ -131,7 +121,7 @@ def baseline(seconds: float, rate: float) -> dict[str, float]:
     time.sleep(0.3)
     dump.close()
     latencies = [t - sent[(a, v)] for t, a, v in dump.received if (a, v) in sent]
-    return stats(latencies)
+    return latency_stats(latencies)
 
 
 def main() -> None:
@@ -141,16 +131,10 @@ def main() -> None:
     args = parser.parse_args()
     base = baseline(args.seconds, args.rate)
     bus = sonibus_path(args.seconds, args.rate)
-    result = {"rate_hz": args.rate, "seconds": args.seconds, "baseline_no_bus": base, "sonibus": bus,
-              "ratio_p50": bus["p50_us"] / base["p50_us"], "ratio_p99": bus["p99_us"] / base["p99_us"]}
-    out = ROOT / "results" / "sim_to_oscdump.json"
-    out.parent.mkdir(exist_ok=True)
-    out.write_text(json.dumps(result, indent=2) + "\n")
-    print(f"{'path':<10} {'n':>7} {'p50 µs':>9} {'p99 µs':>9} {'p99.9 µs':>9}")
-    for name, r in (("no bus", base), ("sonibus", bus)):
-        print(f"{name:<10} {r['n']:>7} {r['p50_us']:>9.0f} {r['p99_us']:>9.0f} {r['p999_us']:>9.0f}")
-    print(f"ratio p50 {result['ratio_p50']:.2f}, p99 {result['ratio_p99']:.2f}; sonibus frame rate "
-          f"{bus['rate_frames_per_s']:.1f}/s, {bus['frames_missing_in_seq']} frames missing")
+    result = {"rate_hz": args.rate, "seconds": args.seconds, "baseline_no_bus": base, "sonibus": bus}
+    compare(result, base, bus, ["n", "p50_us", "p99_us", "p999_us"])
+    write("sim_to_oscdump", result)
+    print(f"sonibus frame rate {bus['rate_frames_per_s']:.1f}/s, {bus['frames_missing_in_seq']} frames missing")
 
 
 if __name__ == "__main__":

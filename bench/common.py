@@ -1,0 +1,43 @@
+"""What the benchmark scripts share: free ports, latency statistics, results."""
+
+from __future__ import annotations
+
+import json
+import socket
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+RESULTS = Path(__file__).resolve().parent / "results"
+
+
+def free_port(kind: int = socket.SOCK_STREAM) -> int:
+    with socket.socket(socket.AF_INET, kind) as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def latency_stats(seconds: list[float]) -> dict[str, float]:
+    """Median, p99, p99.9 and max of latencies given in seconds, in µs."""
+    a = np.array(seconds) * 1e6
+    return {"n": len(a), "p50_us": float(np.percentile(a, 50)), "p99_us": float(np.percentile(a, 99)),
+            "p999_us": float(np.percentile(a, 99.9)), "max_us": float(a.max())}
+
+
+def write(name: str, result: dict[str, Any]) -> Path:
+    """``bench/results/<name>.json``."""
+    RESULTS.mkdir(exist_ok=True)
+    path = RESULTS / f"{name}.json"
+    path.write_text(json.dumps(result, indent=2) + "\n")
+    return path
+
+
+def compare(result: dict[str, Any], base: dict[str, Any], bus: dict[str, Any], columns: list[str]) -> None:
+    """Add the p50/p99 ratios to ``result`` and print both rows and the ratios."""
+    result["ratio_p50"] = bus["p50_us"] / base["p50_us"]
+    result["ratio_p99"] = bus["p99_us"] / base["p99_us"]
+    print(f"{'path':<9} " + " ".join(f"{c:>9}" for c in columns))
+    for name, row in (("no bus", base), ("sonibus", bus)):
+        print(f"{name:<9} " + " ".join(f"{row[c]:>9.0f}" for c in columns))
+    print(f"ratio p50 {result['ratio_p50']:.2f}, p99 {result['ratio_p99']:.2f}")
