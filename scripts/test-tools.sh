@@ -9,6 +9,7 @@ tools=(
   "oscdump liblo-tools"
   "oscsend liblo-tools"
   "pd puredata-core"
+  "jackd jackd2"
 )
 
 missing=()

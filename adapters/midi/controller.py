@@ -1,0 +1,193 @@
+"""MIDI controller (adapter ``midi-in``): faders, keys and program changes from a
+MIDI input become robot commands, always through ``sonibus.bus.client.ask`` (so the
+robot validates them). Fader moves are coalesced to ``rate_hz`` per robot, sending
+the newest value of every fader moved since the last command."""
+
+from __future__ import annotations
+
+import logging
+import math
+import threading
+import time
+from typing import Any
+
+from sonibus.bus import codec, keys
+from sonibus.bus.adapter import Adapter
+from sonibus.bus.client import Outcome, ask
+from sonibus.bus.errors import CommandError
+from sonibus.bus.queue import SampleQueue
+
+from . import mapping, ports
+from .config import CcMapping, MidiControllerConfig
+
+log = logging.getLogger(__name__)
+
+INFO_RETRY_S = 2.0
+INFO = "\0info"
+
+
+class MidiController(Adapter):
+    """A MIDI controller or a DAW drives robots: CC → joints, notes → behaviors, programs → postures.
+
+    A panic note or CC sends stop."""
+
+    Config = MidiControllerConfig
+
+    def _start(self) -> None:
+        cfg: MidiControllerConfig = self.config
+        self.stats = dict.fromkeys(("received", "commands", "ok", "errors", "unmapped", "waiting_info"), 0)
+        self._lock = threading.Lock()          # stats and the error log are touched by reply callbacks
+        self._failed: set[str] = set()         # mappings whose error was logged once
+        self._limits: dict[str, dict[str, tuple[float, float]]] = {}
+        self._info_asked: dict[str, float] = {}
+        self._held: dict[tuple[str, str], tuple[int, CcMapping]] = {}   # (robot, joint) → newest value
+        self._last_sent: dict[str, float] = {}
+        self._interval = 1.0 / cfg.rate_hz
+        self._queue = self.own(SampleQueue(4096))
+        self._in = ports.open_input(cfg.api, cfg.port, cfg.connect, self._receive, client=self.name)
+        self.own(ports.Closer(self._in))
+        for robot in {m.robot for m in cfg.mappings("cc")}:
+            self._ask_info(robot)
+        self.spawn(self._work, "commands")
+        log.info("%s: MIDI in on %s", self.name, f"'{cfg.connect}'" if cfg.connect else f"virtual port '{cfg.port}'")
+
+    def _stop(self) -> None:
+        log.info("%s: stopping; %s", self.name, ", ".join(f"{k} {v}" for k, v in self.stats.items()))
+
+    def _receive(self, event: tuple[list[int], float], data: Any = None) -> None:
+        self._queue.put(("midi", event[0]))   # rtmidi's thread: only enqueue
+
+    # -- the loop ---------------------------------------------------------------------
+
+    def _work(self) -> None:
+        while not self.stopping.is_set():
+            item = self._queue.get(timeout=self._wait())
+            if item is not None:
+                kind, payload = item
+                if kind == INFO:
+                    self._learn(*payload)
+                else:
+                    self._midi(payload)
+            self._flush(time.monotonic())
+
+    def _wait(self) -> float:
+        if not self._held:
+            return 0.2
+        robots = {robot for robot, _ in self._held}
+        soonest = min(self._last_sent.get(r, -math.inf) for r in robots) + self._interval
+        return max(0.0, min(0.2, soonest - time.monotonic()))
+
+    def _midi(self, message: list[int]) -> None:
+        self.stats["received"] += 1
+        if len(message) < 2:
+            return
+        kind, channel = message[0] & 0xF0, (message[0] & 0x0F) + 1
+        data2 = message[2] if len(message) > 2 else 0
+        cfg: MidiControllerConfig = self.config
+        if kind == 0xB0:
+            handled = self._stop_robots(channel, cc=message[1])
+            for m in cfg.mappings("cc"):
+                if m.channel == channel and m.cc == message[1]:
+                    self._held[(m.robot, m.joint)] = (data2, m)
+                    handled = True
+        elif kind in (0x90, 0x80):
+            on = kind == 0x90 and data2 > 0
+            handled = on and self._stop_robots(channel, note=message[1])
+            for m in cfg.mappings("notes"):
+                if m.channel == channel and m.note == message[1]:
+                    if on:
+                        self._command(f"note {m.note}", m.robot, "behavior/run", {"name": m.behavior})
+                    elif m.stop_on_release:
+                        self._command(f"note {m.note}", m.robot, "behavior/stop", {"name": m.behavior})
+                    handled = True
+        elif kind == 0xC0:
+            handled = False
+            for m in cfg.mappings("program"):
+                if m.channel == channel and message[1] < len(m.postures):
+                    self._command(f"program {message[1]}", m.robot, "posture",
+                                  {"name": m.postures[message[1]], "speed": m.speed})
+                    handled = True
+        else:
+            handled = False
+        if not handled:
+            self.stats["unmapped"] += 1
+
+    def _stop_robots(self, channel: int, note: int = -1, cc: int = -1) -> bool:
+        hit = False
+        for m in self.config.mappings("stop"):
+            if m.channel == channel and ((note != -1 and m.note == note) or (cc != -1 and m.cc == cc)):
+                self._command("stop", m.robot, "stop", {})
+                hit = True
+        return hit
+
+    def _flush(self, now: float) -> None:
+        """One joints/set per robot and speed, with the newest value of each fader, at most ``rate_hz``."""
+        groups: dict[tuple[str, float], dict[str, float]] = {}
+        for (robot, joint), (value, m) in list(self._held.items()):
+            if now - self._last_sent.get(robot, -math.inf) < self._interval:
+                continue
+            limits = self._limits.get(robot)
+            if limits is None:
+                self.stats["waiting_info"] += 1
+                self._ask_info(robot)
+                continue
+            del self._held[(robot, joint)]
+            if joint not in limits:
+                self._fail(f"cc {m.cc}", f"key 'cc': {robot} has no joint '{joint}' — known joints: "
+                                         f"{', '.join(limits)}")
+                continue
+            groups.setdefault((robot, m.speed), {})[joint] = mapping.unscale(value, mapping.MAX7, *limits[joint])
+        for (robot, speed), angles in groups.items():
+            self._last_sent[robot] = now
+            self._command(f"cc {robot}", robot, "joints/set",
+                          {"names": list(angles), "angles": list(angles.values()), "speed": speed})
+
+    # -- commands and info ------------------------------------------------------------
+
+    def _command(self, what: str, robot: str, verb: str, args: dict[str, Any]) -> None:
+        self.stats["commands"] += 1
+
+        def done(outcome: Outcome) -> None:
+            if isinstance(outcome, CommandError):
+                self._fail(what, f"{robot} {verb}: {outcome}")
+            else:
+                with self._lock:
+                    self.stats["ok"] += 1
+
+        ask(self.bus, robot, verb, args, done, self.config.timeout)
+
+    def _fail(self, what: str, message: str) -> None:
+        with self._lock:
+            self.stats["errors"] += 1
+            first = what not in self._failed
+            self._failed.add(what)
+        if first:
+            log.error("%s: %s (%s; further errors of this mapping are counted, not logged)",
+                      self.name, message, what)
+
+    def _learn(self, robot: str, info: dict[str, Any]) -> None:
+        try:
+            self._limits[robot] = {j["name"]: (float(j["min"]), float(j["max"])) for j in info.get("joints", [])}
+        except (KeyError, TypeError, ValueError) as exc:
+            self._fail(f"info {robot}", f"{robot}/info unusable: {exc}")
+            return
+        for m in self.config.mappings("cc"):
+            if m.robot == robot and m.joint not in self._limits[robot]:
+                self._fail(f"cc {m.cc}", f"key 'cc': {robot} has no joint '{m.joint}' — known joints: "
+                                         f"{', '.join(self._limits[robot])}")
+
+    def _ask_info(self, robot: str) -> None:
+        now = time.monotonic()
+        if now - self._info_asked.get(robot, -math.inf) < INFO_RETRY_S:
+            return
+        self._info_asked[robot] = now
+
+        def take(reply: Any) -> None:
+            if reply.ok is not None:
+                try:
+                    self._queue.put((INFO, (robot, codec.decode(reply.ok.payload))))
+                except codec.DecodeError as exc:
+                    self._fail(f"info {robot}", f"{robot}/info unusable: {exc}")
+
+        self.bus.session.get(keys.info(robot), handler=take, timeout=INFO_RETRY_S)
+

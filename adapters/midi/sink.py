@@ -1,0 +1,326 @@
+"""MIDI sink (adapter ``midi``): joint samples → control changes or pitch bend,
+behavior and speech events → notes, on a virtual port or an existing one."""
+
+from __future__ import annotations
+
+import logging
+import math
+import time
+from dataclasses import dataclass, field
+from typing import Any
+
+from sonibus.adapters.osc.profiles import Source
+from sonibus.adapters.osc.sink import _sample
+from sonibus.bus import codec, keys
+from sonibus.bus.adapter import Adapter
+from sonibus.bus.queue import SampleQueue
+
+from . import mapping, ports
+from .config import MidiSinkConfig
+
+log = logging.getLogger(__name__)
+
+WARN_EVERY_S = 10.0
+INFO_RETRY_S = 2.0
+HARDWARE_MESSAGES_PER_S = 1000   # 31250 baud / 30 bits per 3-byte message ≈ 1041
+INFO = "\0info"                  # queue items carrying a robot's info, so only the worker touches state
+
+
+@dataclass
+class _Controller:
+    """One MIDI controller (a CC, a 14-bit CC pair, or a channel's pitch bend) fed by one joint."""
+
+    channel: int
+    cc: int                 # -1: pitch bend
+    resolution: int
+    low: float
+    high: float
+    last: int | None = None
+    last_sent: float = -math.inf
+    held: int | None = None
+
+    @property
+    def top(self) -> int:
+        return mapping.MAX7 if self.resolution == 7 else mapping.MAX14
+
+    def messages(self, number: int) -> list[list[int]]:
+        if self.cc == -1:
+            return mapping.pitch_bend(self.channel, number)
+        return mapping.cc_messages(self.channel, self.cc, number, self.resolution)
+
+
+@dataclass
+class _Robot:
+    channel: int
+    ranges: dict[str, tuple[float, float]] = field(default_factory=dict)
+    order: list[str] = field(default_factory=list)
+    behaviors: list[str] = field(default_factory=list)
+    rate_hz: float = 0.0
+    known: bool = False     # info arrived
+    waiting: list[tuple[Source, dict[str, Any]]] = field(default_factory=list)  # events before info
+
+
+class MidiSink(Adapter):
+    """Robots as MIDI: joints on controllers, behaviors and speech as notes (for a DAW or a synth)."""
+
+    Config = MidiSinkConfig
+
+    def _start(self) -> None:
+        cfg: MidiSinkConfig = self.config
+        self.stats = dict.fromkeys(("received", "sent", "notes", "held", "bad", "waiting_info", "unmapped",
+                                    "send_errors"), 0)
+        self.estimated_rate = 0.0   # 3-byte messages/s the mapping may produce at the robots' rates
+        self._last_warning: dict[str, float] = {}
+        self._sources: dict[str, Source] = {}
+        self._robots: dict[str, _Robot] = {}
+        self._controllers: dict[str, _Controller | None] = {}
+        self._held: set[str] = set()
+        self._sounding: set[tuple[int, int]] = set()
+        self._info_asked: dict[str, float] = {}
+        self._interval = 1.0 / cfg.max_rate_hz if cfg.max_rate_hz else 0.0
+        self._out = ports.open_output(cfg.api, cfg.port, cfg.connect, client=self.name)
+        self.own(ports.Closer(self._out))
+        self._queue = self.own(SampleQueue(cfg.queue))
+        for pattern in cfg.subscribe:
+            self.own(self.bus.subscribe(pattern, queue=self._queue)[0])
+        self.spawn(self._forward, "forward")
+        log.info("%s: MIDI out on %s", self.name, f"'{cfg.connect}'" if cfg.connect else f"virtual port '{cfg.port}'")
+
+    def _stop(self) -> None:
+        queue = getattr(self, "_queue", None)
+        log.info("%s: stopping; %s, queue_dropped %d", self.name,
+                 ", ".join(f"{k} {v}" for k, v in self.stats.items()), queue.dropped if queue else 0)
+
+    @property
+    def channels(self) -> dict[str, int]:
+        """Robot → the channel it plays on."""
+        return {robot: r.channel for robot, r in self._robots.items()}
+
+    # -- the loop ---------------------------------------------------------------------
+
+    def _forward(self) -> None:
+        try:
+            while not self.stopping.is_set():
+                item = self._queue.get(timeout=self._wait())
+                now = time.monotonic()
+                if item is not None:
+                    self._take(*item, now)
+                self._tick(now)
+        finally:
+            self._notes_off()
+
+    def _wait(self) -> float:
+        if not self._held:
+            return 0.2
+        soonest = min(self._controllers[k].last_sent for k in self._held) + self._interval  # type: ignore[union-attr]
+        return max(0.0, min(0.2, soonest - time.monotonic()))
+
+    def _tick(self, now: float) -> None:
+        for key in list(self._held):
+            controller = self._controllers[key]
+            assert controller is not None
+            if now - controller.last_sent >= self._interval:
+                self._held.discard(key)
+                number, controller.held = controller.held, None
+                if number is not None and number != controller.last:
+                    self._emit(controller, number, now)
+
+    def _take(self, key: str, payload: Any, now: float) -> None:
+        if key == INFO:
+            self._learn(*payload)
+            return
+        self.stats["received"] += 1
+        source = self._sources.get(key)
+        if source is None:
+            source = self._sources[key] = Source.parse(key)
+        try:
+            message = codec.decode(payload)
+            if source.section == "events":
+                self._event(source, message)
+                return
+            if source.section != "joints":
+                return
+            _, _, values = _sample(message)
+        except (codec.DecodeError, KeyError, TypeError, ValueError) as exc:
+            self.stats["bad"] += 1
+            self._warn("bad", f"sample on '{key}' not sent: {type(exc).__name__}: {exc}")
+            return
+        robot = self._robot(source.robot)
+        if not robot.known:
+            self.stats["waiting_info"] += 1
+            self._ask_info(source.robot)
+            return
+        controller = self._controller(source, robot)
+        if controller is None:
+            return
+        number = mapping.scale(values[0], controller.low, controller.high, controller.top)
+        if now - controller.last_sent < self._interval:
+            controller.held = number     # the newest waits for its turn
+            self._held.add(key)
+            self.stats["held"] += 1
+        elif number != controller.last:
+            self._emit(controller, number, now)
+
+    def _emit(self, controller: _Controller, number: int, now: float) -> None:
+        controller.last, controller.last_sent = number, now
+        for message in controller.messages(number):
+            self._send(message)
+
+    def _send(self, message: list[int]) -> None:
+        try:
+            self._out.send_message(message)
+            self.stats["sent"] += 1
+        except Exception as exc:  # rtmidi raises its own errors for a port gone away
+            self.stats["send_errors"] += 1
+            self._warn("send", f"cannot send MIDI: {exc}")
+
+    # -- mapping ----------------------------------------------------------------------
+
+    def _robot(self, name: str) -> _Robot:
+        robot = self._robots.get(name)
+        if robot is None:
+            robot = self._robots[name] = _Robot(self._channel_for(name))
+        return robot
+
+    def _channel_for(self, name: str) -> int:
+        fixed = self.config.channels or {}
+        if name in fixed:
+            return fixed[name]
+        taken = set(fixed.values()) | {r.channel for r in self._robots.values()}
+        free = [c for c in range(1, 17) if c not in taken]
+        if not free:
+            self._warn("channels", f"more than 16 robots: '{name}' shares channel 16 (set channels = {{...}})")
+            return 16
+        return free[0]
+
+    def _controller(self, source: Source, robot: _Robot) -> _Controller | None:
+        if source.key in self._controllers:
+            return self._controllers[source.key]
+        cfg: MidiSinkConfig = self.config
+        entry = cfg.entries.get(source.key)
+        controller = None
+        span = robot.ranges.get(source.name)
+        if span is None:
+            if entry is not None:
+                self._warn("unknown", f"map key '{source.key}': {source.robot} has no joint '{source.name}' "
+                                      f"— known joints: {', '.join(robot.order)}")
+        elif entry is not None:
+            controller = _Controller(entry.channel or robot.channel, -1 if entry.pitchbend else entry.cc,
+                                     14 if entry.pitchbend else entry.resolution, *span)
+        elif cfg.auto_map:
+            cc = mapping.FIRST_CC + robot.order.index(source.name)
+            if cc <= 119:
+                controller = _Controller(robot.channel, cc, 7, *span)
+        if controller is None:
+            self.stats["unmapped"] += 1
+        self._controllers[source.key] = controller
+        return controller
+
+    def _learn(self, name: str, info: dict[str, Any]) -> None:
+        robot = self._robot(name)
+        try:
+            robot.ranges = {j["name"]: (float(j["min"]), float(j["max"])) for j in info.get("joints", [])}
+            robot.order = [j["name"] for j in info.get("joints", [])]
+            robot.behaviors = [str(b) for b in info.get("behaviors", [])]
+            robot.rate_hz = float(info.get("rate_hz") or 0.0)
+        except (KeyError, TypeError, ValueError) as exc:
+            self._warn("info", f"{name}/info unusable: {exc}")
+            return
+        robot.known = True
+        self._estimate()
+        waiting, robot.waiting = robot.waiting, []
+        for source, message in waiting:
+            self._event(source, message)
+
+    def _estimate(self) -> None:
+        cfg: MidiSinkConfig = self.config
+        total = 0.0
+        for name, robot in self._robots.items():
+            if not robot.known:
+                continue
+            rate = min(robot.rate_hz, cfg.max_rate_hz) if cfg.max_rate_hz else robot.rate_hz
+            explicit = [e for e in cfg.entries.values() if e.key.split("/")[0] == name]
+            named = {e.key.split("/", 2)[2] for e in explicit}
+            auto = len([j for j in robot.order[:120 - mapping.FIRST_CC] if j not in named]) if cfg.auto_map else 0
+            messages = auto + sum(2 if e.resolution == 14 and not e.pitchbend else 1 for e in explicit)
+            total += messages * rate
+        self.estimated_rate = total
+        if cfg.connect and total > HARDWARE_MESSAGES_PER_S:
+            log.warning("%s: the mapping may send about %.0f MIDI messages/s to '%s', more than a hardware "
+                        "MIDI cable carries (~%d/s) — set max_rate_hz, map fewer joints (auto_map = false) "
+                        "or subscribe to fewer keys", self.name, total, cfg.connect, HARDWARE_MESSAGES_PER_S)
+
+    # -- events -----------------------------------------------------------------------
+
+    def _event(self, source: Source, message: dict[str, Any]) -> None:
+        cfg: MidiSinkConfig = self.config
+        kind, state = str(message.get("kind") or source.name), str(message.get("state", ""))
+        robot = self._robot(source.robot)
+        if kind == "connection" and state == "lost":
+            self._notes_off()
+            return
+        if not cfg.notes or kind not in ("behavior", "speech"):
+            return
+        if kind == "behavior" and cfg.behavior_note == -1 and not robot.known:
+            robot.waiting = [*robot.waiting[-63:], (source, message)]
+            self._ask_info(source.robot)
+            return
+        number = cfg.speech_note if kind == "speech" else self._behavior_note(robot, str(message.get("name", "")))
+        if number is None or state not in ("started", "stopped", "done"):
+            return
+        on = state == "started"
+        slot = (robot.channel, number)
+        if on:
+            self._sounding.add(slot)
+        elif slot in self._sounding:
+            self._sounding.discard(slot)
+        else:
+            return  # no note off without its note on
+        self.stats["notes"] += 1
+        self._send(mapping.note(robot.channel, number, on, cfg.velocity))
+
+    def _behavior_note(self, robot: _Robot, name: str) -> int | None:
+        if self.config.behavior_note != -1:
+            return int(self.config.behavior_note)
+        if name not in robot.behaviors:
+            robot.behaviors.append(name)  # started but not listed: the next free note
+        number = mapping.FIRST_BEHAVIOR_NOTE + robot.behaviors.index(name)
+        if number > 127:
+            self._warn("notes", f"behavior '{name}' has no note left (more than 68 behaviors); "
+                                f"set behavior_note for one fixed note")
+            return None
+        return number
+
+    def _notes_off(self) -> None:
+        """All notes off (CC 123) on every channel used."""
+        used = {r.channel for r in self._robots.values()} | {c.channel for c in self._controllers.values() if c}
+        for channel in sorted(used):
+            self._send(mapping.all_notes_off(channel))
+        self._sounding.clear()
+
+    # -- info and warnings ------------------------------------------------------------
+
+    def _ask_info(self, robot: str) -> None:
+        now = time.monotonic()
+        if now - self._info_asked.get(robot, -math.inf) < INFO_RETRY_S:
+            return
+        self._info_asked[robot] = now
+
+        def take(reply: Any) -> None:
+            if reply.ok is None:
+                return
+            try:
+                info = codec.decode(reply.ok.payload)
+            except codec.DecodeError as exc:
+                self._warn("info", f"{robot}/info unusable: {exc}")
+                return
+            self._queue.put((INFO, (robot, info)))
+
+        self.bus.session.get(keys.info(robot), handler=take, timeout=INFO_RETRY_S)
+
+    def _warn(self, kind: str, message: str) -> None:
+        now = time.monotonic()
+        if now - self._last_warning.get(kind, -math.inf) >= WARN_EVERY_S:
+            self._last_warning[kind] = now
+            log.warning("%s: %s (%s)", self.name, message, ", ".join(f"{k} {v}" for k, v in self.stats.items() if v))
+

@@ -1,0 +1,141 @@
+"""The sink through a real JACK MIDI port: scaling, 14-bit, pitch bend, dedupe,
+the rate cap, channels, and events as notes."""
+
+from __future__ import annotations
+
+import logging
+
+import pytest
+import rtmidi
+
+from sonibus.adapters.midi import MidiSink, MidiSinkConfig
+from sonibus.bus import ConfigError
+
+from ..conftest import wait_for
+
+
+def sink(net, **options):
+    return net.start(MidiSink(MidiSinkConfig(api="jack", **options), name="daw"))
+
+
+def until_sent(robot, joint, value, reader, expected, what):
+    """Put ``value`` until ``expected`` arrives (the first samples wait for ``<robot>/info``)."""
+    def arrived():
+        robot.joint(joint, value)
+        return expected(reader)
+    wait_for(arrived, what=what)
+
+
+def test_seven_bit_controllers_by_joint_order_at_limits_and_mid_range(net, fake, reader):
+    sink(net)
+    midi = reader("daw:sonibus")
+    bot = fake()
+    until_sent(bot, "A", -2.0, midi, lambda r: r.cc(1, 20) == [0], "A at its minimum on CC 20")
+    for value in (-2.0, -2.0, 2.0, 2.0, 0.0, 0.0, 3.5):    # beyond the limit: clamped
+        bot.joint("A", value)
+    bot.joint("B", 0.25)
+    wait_for(lambda: midi.cc(1, 21) == [32], what="B a quarter up on CC 21")
+    assert midi.cc(1, 20) == [0, 127, 64, 127]             # only changes are sent
+
+
+def test_fourteen_bit_and_pitch_bend(net, fake, reader):
+    sink(net, auto_map=False, map=({"key": "bot/joints/A", "cc": 1, "resolution": 14},
+                                   {"key": "bot/joints/B", "pitchbend": True, "channel": 3}))
+    midi = reader("daw:sonibus")
+    bot = fake()
+    until_sent(bot, "A", -2.0, midi, lambda r: r.cc(1, 33) == [0], "A at its minimum, LSB on CC 33")
+    bot.joint("A", 2.0)
+    bot.joint("A", 0.0)
+    bot.joint("A", 1.0)                                     # 12287.25 → 12287 = 95 * 128 + 127
+    bot.joint("B", 1.0)
+    bot.joint("B", 0.5)
+    bot.joint("B", 0.0)
+    wait_for(lambda: [0xE2, 0, 0] in midi.messages, what="pitch bend at its minimum")
+    assert list(zip(midi.cc(1, 1), midi.cc(1, 33), strict=True)) == [(0, 0), (127, 127), (64, 0), (95, 127)]
+    bends = [m for m in midi.messages if m[0] == 0xE2]
+    assert bends == [[0xE2, 127, 127], [0xE2, 0, 64], [0xE2, 0, 0]]  # LSB first, 8192 = centre
+    assert not any(m[0] & 0xF0 == 0xB0 and m[1] in (20, 21) for m in midi.messages)  # auto_map off
+
+
+def test_the_rate_cap_keeps_the_newest_value(net, fake, reader):
+    daw = sink(net, max_rate_hz=10)
+    midi = reader("daw:sonibus")
+    bot = fake()
+    until_sent(bot, "A", -2.0, midi, lambda r: r.cc(1, 20) == [0], "the first value")
+    first = len(midi.messages)
+    for step in range(1, 201):            # a fast sweep: 200 values as fast as they go
+        bot.joint("A", -2.0 + step * 0.02)
+    wait_for(lambda: midi.cc(1, 20)[-1:] == [127], what="the newest value after the sweep")
+    sent = len(midi.messages) - first
+    assert sent <= 10 + 2, f"{sent} messages for a sweep of ~{daw.stats['held']} held values"
+    assert daw.stats["held"] > 100
+
+
+def test_channels_in_the_order_robots_are_first_seen(net, fake, reader):
+    daw = sink(net, channels={"late": 9})
+    midi = reader("daw:sonibus")
+    one, two, late = fake("one"), fake("two"), fake("late")
+    until_sent(one, "A", 2.0, midi, lambda r: r.cc(1, 20) == [127], "robot one on channel 1")
+    until_sent(two, "A", 2.0, midi, lambda r: r.cc(2, 20) == [127], "robot two on channel 2")
+    until_sent(late, "B", 1.0, midi, lambda r: r.cc(9, 21) == [127], "the fixed channel")
+    assert daw.channels == {"one": 1, "two": 2, "late": 9}
+
+
+def test_events_as_notes_and_connection_lost_silences_every_channel(net, fake, reader):
+    sink(net)
+    midi = reader("daw:sonibus")
+    bot, other = fake("bot"), fake("other")
+    until_sent(other, "A", 0.0, midi, lambda r: r.cc(1, 20) == [64], "robot other on channel 1")
+    bot.event("behavior", name="wave", state="stopped")     # a note off without its note on: nothing
+    bot.event("behavior", name="nod", state="started")
+    wait_for(lambda: [0x91, 61, 100] in midi.messages, what="note on 61 (second behavior) on channel 2")
+    bot.event("behavior", name="nod", state="stopped")
+    bot.event("behavior", name="unlisted", state="started")
+    bot.event("speech", text="hello", state="started")
+    bot.event("speech", text="hello", state="done")
+    bot.event("connection", state="lost")
+    wait_for(lambda: [0xB1, 123, 0] in midi.messages, what="all notes off")
+    notes = [m for m in midi.messages if m[0] & 0xF0 in (0x80, 0x90) or m[1] == 123]
+    assert notes == [[0x91, 61, 100], [0x81, 61, 0], [0x91, 62, 100], [0x91, 48, 100], [0x81, 48, 0],
+                     [0xB0, 123, 0], [0xB1, 123, 0]]
+
+
+def test_a_fixed_behavior_note(net, fake, reader):
+    sink(net, behavior_note=36, speech_note=37)
+    midi = reader("daw:sonibus")
+    bot = fake()
+    bot.event("behavior", name="wave", state="started")
+    bot.event("speech", text="hi", state="started")
+    wait_for(lambda: [0x90, 37, 100] in midi.messages, what="the speech note")
+    assert midi.messages == [[0x90, 36, 100], [0x90, 37, 100]]
+
+
+def test_a_hardware_port_warns_of_too_many_messages(net, fake, jack, caplog):
+    synth = rtmidi.MidiIn(rtmidi.API_UNIX_JACK, "synth")
+    synth.open_virtual_port("din")
+    try:
+        caplog.set_level(logging.WARNING)
+        daw = sink(net, connect="synth:din")
+        bot = fake("bot", joints=tuple((f"J{i}", 0.0, 1.0) for i in range(17)), rate_hz=100)
+        wait_for(lambda: (bot.joint("J0", 0.5), daw.estimated_rate)[1], what="the estimate")
+        assert daw.estimated_rate == 1700
+        assert "about 1700 MIDI messages/s to 'synth:din'" in caplog.text
+    finally:
+        synth.close_port()
+        synth.delete()
+
+
+@pytest.mark.parametrize(("options", "message"), [
+    ({"map": ({"key": "pepper/joints/HeadYaw", "cc": 40, "resolution": 14},)},
+     r"key 'map'.*key 'cc': 40 must be in 0\.\.31"),
+    ({"map": ({"key": "pepper/joints/HeadYaw"},)}, r"key 'cc': -1 must be in 0\.\.119"),
+    ({"map": ({"key": "pepper/joints/*", "cc": 1},)}, r"key 'key': 'pepper/joints/\*' is not a joint key"),
+    ({"map": ({"key": "pepper/joints/HeadYaw", "cc": 1}, {"key": "pepper/joints/HeadPitch", "cc": 1})},
+     r"same key or controller"),
+    ({"channels": {"pepper": 17}}, r"key 'channels': pepper = 17 must be a channel in 1\.\.16"),
+    ({"port": ""}, r"key 'port': is empty"),
+    ({"max_rate_hz": -1.0}, r"key 'max_rate_hz'"),
+])
+def test_bad_options_name_the_key(options, message):
+    with pytest.raises(ConfigError, match=message):
+        MidiSinkConfig(**options)
