@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 import msgpack
@@ -31,3 +32,22 @@ def decode(payload: bytes | zenoh.ZBytes | None) -> dict[str, Any]:
     if not isinstance(message, dict):
         raise DecodeError(f"payload is a msgpack {type(message).__name__}, expected a map")
     return message
+
+
+def sample_values(message: dict[str, Any]) -> tuple[float, int, tuple[float, ...]]:
+    """``t``, ``seq`` and the values (one float or more) of a joint or derived sample;
+    ``KeyError``, ``TypeError`` or ``ValueError`` saying what is wrong."""
+    t, seq, value = message["t"], message["seq"], message["v"]
+    if not number(t) or not math.isfinite(t):
+        raise ValueError(f"t = {t!r} is not a finite time")
+    if not isinstance(seq, int) or isinstance(seq, bool):
+        raise TypeError(f"seq = {seq!r} is not an integer")
+    values = (value,) if number(value) else tuple(value) if isinstance(value, list | tuple) else ()
+    if not values or not all(number(v) for v in values):
+        raise ValueError(f"v = {value!r} is not a number or a non-empty list of numbers")
+    return float(t), seq, tuple(float(v) for v in values)
+
+
+def number(value: Any) -> bool:
+    """A real number (``bool`` is an ``int`` in Python, but not a number here)."""
+    return isinstance(value, int | float) and not isinstance(value, bool)

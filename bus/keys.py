@@ -42,11 +42,15 @@ def robot_token(robot: str) -> str:
 
 @dataclass(frozen=True)
 class Key:
-    """A parsed data key: ``pepper/joints/HeadYaw`` → robot, section, name."""
+    """A data key taken apart once: ``pepper/joints/HeadYaw`` → robot ``pepper``,
+    section ``joints``, name ``HeadYaw``; ``pepper/derived/hand/RHand`` also has
+    feature ``hand``."""
 
+    key: str
     robot: str
     section: str
     name: str
+    feature: str = ""
 
     @classmethod
     def parse(cls, key: str) -> Key:
@@ -54,7 +58,8 @@ class Key:
         section, _, name = rest.partition("/")
         if not robot or not section:
             raise ValueError(f"not a sonibus data key: '{key}'")
-        return cls(robot, section, name)
+        feature, _, name = name.rpartition("/") if section == "derived" else ("", "", name)
+        return cls(str(key), robot, section, name, feature)
 
 
 def check_name(kind: str, name: str) -> str:

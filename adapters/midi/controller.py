@@ -11,10 +11,10 @@ import threading
 import time
 from typing import Any
 
-from sonibus.bus import codec, keys
 from sonibus.bus.adapter import Adapter
 from sonibus.bus.client import Outcome, ask
 from sonibus.bus.errors import CommandError
+from sonibus.bus.info import InfoRequests
 from sonibus.bus.queue import SampleQueue
 
 from . import mapping, ports
@@ -39,15 +39,16 @@ class MidiController(Adapter):
         self._lock = threading.Lock()          # stats and the error log are touched by reply callbacks
         self._failed: set[str] = set()         # mappings whose error was logged once
         self._limits: dict[str, dict[str, tuple[float, float]]] = {}
-        self._info_asked: dict[str, float] = {}
         self._held: dict[tuple[str, str], tuple[int, CcMapping]] = {}   # (robot, joint) → newest value
         self._last_sent: dict[str, float] = {}
         self._interval = 1.0 / cfg.rate_hz
         self._queue = self.own(SampleQueue(4096))
+        self._info = InfoRequests(self.bus, lambda robot, info: self._queue.put((INFO, (robot, info))),
+                                  lambda robot, text: self._fail(f"info {robot}", text), INFO_RETRY_S)
         self._in = ports.open_input(cfg.api, cfg.port, cfg.connect, self._receive, client=self.name)
         self.own(ports.Closer(self._in))
         for robot in {m.robot for m in cfg.mappings("cc")}:
-            self._ask_info(robot)
+            self._info.ask(robot)
         self.spawn(self._work, "commands")
         log.info("%s: MIDI in on %s", self.name, f"'{cfg.connect}'" if cfg.connect else f"virtual port '{cfg.port}'")
 
@@ -129,7 +130,7 @@ class MidiController(Adapter):
             limits = self._limits.get(robot)
             if limits is None:
                 self.stats["waiting_info"] += 1
-                self._ask_info(robot)
+                self._info.ask(robot)
                 continue
             del self._held[(robot, joint)]
             if joint not in limits:
@@ -176,18 +177,4 @@ class MidiController(Adapter):
                 self._fail(f"cc {m.cc}", f"key 'cc': {robot} has no joint '{m.joint}' — known joints: "
                                          f"{', '.join(self._limits[robot])}")
 
-    def _ask_info(self, robot: str) -> None:
-        now = time.monotonic()
-        if now - self._info_asked.get(robot, -math.inf) < INFO_RETRY_S:
-            return
-        self._info_asked[robot] = now
-
-        def take(reply: Any) -> None:
-            if reply.ok is not None:
-                try:
-                    self._queue.put((INFO, (robot, codec.decode(reply.ok.payload))))
-                except codec.DecodeError as exc:
-                    self._fail(f"info {robot}", f"{robot}/info unusable: {exc}")
-
-        self.bus.session.get(keys.info(robot), handler=take, timeout=INFO_RETRY_S)
 

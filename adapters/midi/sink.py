@@ -9,10 +9,10 @@ import time
 from dataclasses import dataclass, field
 from typing import Any
 
-from sonibus.adapters.osc.profiles import Source
-from sonibus.adapters.osc.sink import _sample
-from sonibus.bus import codec, keys
+from sonibus.bus import codec
 from sonibus.bus.adapter import Adapter
+from sonibus.bus.info import InfoRequests
+from sonibus.bus.keys import Key
 from sonibus.bus.queue import SampleQueue
 
 from . import mapping, ports
@@ -57,7 +57,7 @@ class _Robot:
     behaviors: list[str] = field(default_factory=list)
     rate_hz: float = 0.0
     known: bool = False     # info arrived
-    waiting: list[tuple[Source, dict[str, Any]]] = field(default_factory=list)  # events before info
+    waiting: list[tuple[Key, dict[str, Any]]] = field(default_factory=list)  # events before info
 
 
 class MidiSink(Adapter):
@@ -71,16 +71,17 @@ class MidiSink(Adapter):
                                     "send_errors"), 0)
         self.estimated_rate = 0.0   # 3-byte messages/s the mapping may produce at the robots' rates
         self._last_warning: dict[str, float] = {}
-        self._sources: dict[str, Source] = {}
+        self._sources: dict[str, Key] = {}
         self._robots: dict[str, _Robot] = {}
         self._controllers: dict[str, _Controller | None] = {}
         self._held: set[str] = set()
         self._sounding: set[tuple[int, int]] = set()
-        self._info_asked: dict[str, float] = {}
         self._interval = 1.0 / cfg.max_rate_hz if cfg.max_rate_hz else 0.0
         self._out = ports.open_output(cfg.api, cfg.port, cfg.connect, client=self.name)
         self.own(ports.Closer(self._out))
         self._queue = self.own(SampleQueue(cfg.queue))
+        self._info = InfoRequests(self.bus, lambda robot, info: self._queue.put((INFO, (robot, info))),
+                                  lambda robot, text: self._warn("info", text), INFO_RETRY_S)
         for pattern in cfg.subscribe:
             self.own(self.bus.subscribe(pattern, queue=self._queue)[0])
         self.spawn(self._forward, "forward")
@@ -132,7 +133,7 @@ class MidiSink(Adapter):
         self.stats["received"] += 1
         source = self._sources.get(key)
         if source is None:
-            source = self._sources[key] = Source.parse(key)
+            source = self._sources[key] = Key.parse(key)
         try:
             message = codec.decode(payload)
             if source.section == "events":
@@ -140,7 +141,7 @@ class MidiSink(Adapter):
                 return
             if source.section != "joints":
                 return
-            _, _, values = _sample(message)
+            _, _, values = codec.sample_values(message)
         except (codec.DecodeError, KeyError, TypeError, ValueError) as exc:
             self.stats["bad"] += 1
             self._warn("bad", f"sample on '{key}' not sent: {type(exc).__name__}: {exc}")
@@ -148,7 +149,7 @@ class MidiSink(Adapter):
         robot = self._robot(source.robot)
         if not robot.known:
             self.stats["waiting_info"] += 1
-            self._ask_info(source.robot)
+            self._info.ask(source.robot)
             return
         controller = self._controller(source, robot)
         if controller is None:
@@ -193,7 +194,7 @@ class MidiSink(Adapter):
             return 16
         return free[0]
 
-    def _controller(self, source: Source, robot: _Robot) -> _Controller | None:
+    def _controller(self, source: Key, robot: _Robot) -> _Controller | None:
         if source.key in self._controllers:
             return self._controllers[source.key]
         cfg: MidiSinkConfig = self.config
@@ -252,7 +253,7 @@ class MidiSink(Adapter):
 
     # -- events -----------------------------------------------------------------------
 
-    def _event(self, source: Source, message: dict[str, Any]) -> None:
+    def _event(self, source: Key, message: dict[str, Any]) -> None:
         cfg: MidiSinkConfig = self.config
         kind, state = str(message.get("kind") or source.name), str(message.get("state", ""))
         robot = self._robot(source.robot)
@@ -263,7 +264,7 @@ class MidiSink(Adapter):
             return
         if kind == "behavior" and cfg.behavior_note == -1 and not robot.known:
             robot.waiting = [*robot.waiting[-63:], (source, message)]
-            self._ask_info(source.robot)
+            self._info.ask(source.robot)
             return
         number = cfg.speech_note if kind == "speech" else self._behavior_note(robot, str(message.get("name", "")))
         if number is None or state not in ("started", "stopped", "done"):
@@ -299,24 +300,6 @@ class MidiSink(Adapter):
         self._sounding.clear()
 
     # -- info and warnings ------------------------------------------------------------
-
-    def _ask_info(self, robot: str) -> None:
-        now = time.monotonic()
-        if now - self._info_asked.get(robot, -math.inf) < INFO_RETRY_S:
-            return
-        self._info_asked[robot] = now
-
-        def take(reply: Any) -> None:
-            if reply.ok is None:
-                return
-            try:
-                info = codec.decode(reply.ok.payload)
-            except codec.DecodeError as exc:
-                self._warn("info", f"{robot}/info unusable: {exc}")
-                return
-            self._queue.put((INFO, (robot, info)))
-
-        self.bus.session.get(keys.info(robot), handler=take, timeout=INFO_RETRY_S)
 
     def _warn(self, kind: str, message: str) -> None:
         now = time.monotonic()

@@ -7,8 +7,9 @@ target; it holds no sockets and no timing, so it is easy to test.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
 from typing import Any
+
+from sonibus.bus.keys import Key
 
 from . import encode
 from .config import Target
@@ -19,22 +20,6 @@ EVENT_ARGS: dict[str, tuple[str, ...]] = {
     "connection": ("state",), "command": ("verb", "ok"),
 }
 
-
-@dataclass(frozen=True)
-class Source:
-    """A data key taken apart once: ``pepper/derived/velocity/HeadYaw``."""
-
-    key: str
-    robot: str
-    section: str
-    name: str
-    feature: str = ""
-
-    @classmethod
-    def parse(cls, key: str) -> Source:
-        robot, section, rest = ([*key.split("/", 2), "", ""])[:3]
-        feature, _, name = rest.rpartition("/") if section == "derived" else ("", "", rest)
-        return cls(key, robot, section, name, feature)
 
 
 def event_args(kind: str, fields: dict[str, Any]) -> list[encode.Arg]:
@@ -56,7 +41,7 @@ class SonibusProfile:
         self.target = target
         self._addresses: dict[str, str] = {}
 
-    def address(self, source: Source) -> str:
+    def address(self, source: Key) -> str:
         found = self._addresses.get(source.key)
         if found is None:
             template = self.target.derived_address if source.section == "derived" else self.target.address
@@ -65,13 +50,13 @@ class SonibusProfile:
                 feature=source.feature, key=source.key)
         return found
 
-    def sample(self, source: Source, values: Sequence[float], t: float, seq: int) -> bytes:
+    def sample(self, source: Key, values: Sequence[float], t: float, seq: int) -> bytes:
         if not self.target.extra:
             return encode.floats(self.address(source), values)
         extra = [encode.Double(t) if e == "t" else seq & 0x7FFFFFFF for e in self.target.extra]
         return encode.message(self.address(source), *map(float, values), *extra)
 
-    def frame(self, robot: str, t: float, seq: int, samples: list[tuple[Source, Sequence[float]]],
+    def frame(self, robot: str, t: float, seq: int, samples: list[tuple[Key, Sequence[float]]],
               interval: float) -> list[bytes]:
         messages = [self.sample(source, values, t, seq) for source, values in samples]
         if not self.target.bundle:
@@ -94,10 +79,10 @@ class PepperOscProfile:
     def __init__(self, target: Target) -> None:
         self.target = target
 
-    def sample(self, source: Source, values: Sequence[float], t: float, seq: int) -> bytes | None:
+    def sample(self, source: Key, values: Sequence[float], t: float, seq: int) -> bytes | None:
         return None  # PepperOSC sent whole loops only
 
-    def frame(self, robot: str, t: float, seq: int, samples: list[tuple[Source, Sequence[float]]],
+    def frame(self, robot: str, t: float, seq: int, samples: list[tuple[Key, Sequence[float]]],
               interval: float) -> list[bytes]:
         out = [encode.message("/pepperdata", f"/{source.name}", "/PositionSensor", float(values[0]))
                for source, values in samples if source.section == "joints"]

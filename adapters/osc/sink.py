@@ -10,14 +10,16 @@ import time
 from collections.abc import Callable, Sequence
 from typing import Any
 
-from sonibus.bus import codec, keys
+from sonibus.bus import codec
 from sonibus.bus.adapter import Adapter
 from sonibus.bus.errors import ConfigError
+from sonibus.bus.info import InfoRequests
+from sonibus.bus.keys import Key
 from sonibus.bus.queue import SampleQueue
 
 from .config import OscSinkConfig, Target, parse_target
 from .frames import Frame, FrameAssembler
-from .profiles import PROFILES, Source
+from .profiles import PROFILES
 
 log = logging.getLogger(__name__)
 
@@ -63,9 +65,10 @@ class OscSink(Adapter):
         cfg: OscSinkConfig = self.config
         self.stats = dict.fromkeys(("received", "sent", "stale", "bad", "late", "waiting_info", "send_errors"), 0)
         self._last_warning: dict[str, float] = {}
-        self._sources: dict[str, Source] = {}
+        self._sources: dict[str, Key] = {}
         self._ranges: dict[str, dict[str, tuple[float, float]]] = {}
-        self._info_asked: dict[str, float] = {}
+        self._info = InfoRequests(self.bus, self._take_info, lambda robot, text: self._warn("info", text),
+                                  INFO_RETRY_S)
         self._links = [_Link(t, _resolve(t.to)) for t in cfg.resolved_targets()]
         self._sample_links = [link for link in self._links if not link.target.framed]
         self._frame_links = [link for link in self._links if link.target.framed]
@@ -121,13 +124,13 @@ class OscSink(Adapter):
         self.stats["received"] += 1
         source = self._sources.get(key)
         if source is None:
-            source = self._sources[key] = Source.parse(key)
+            source = self._sources[key] = Key.parse(key)
         try:
             message = codec.decode(payload)
             if source.section == "events":
                 self._event(source, message)
                 return
-            t, seq, values = _sample(message)
+            t, seq, values = codec.sample_values(message)
         except (codec.DecodeError, KeyError, TypeError, ValueError) as exc:
             self.stats["bad"] += 1
             self._warn("bad", f"sample on '{key}' not sent: {type(exc).__name__}: {exc}")
@@ -147,7 +150,7 @@ class OscSink(Adapter):
 
     # -- per target ------------------------------------------------------------------
 
-    def _sample_to(self, link: _Link, source: Source, values: Sequence[float], t: float, seq: int,
+    def _sample_to(self, link: _Link, source: Key, values: Sequence[float], t: float, seq: int,
                    now: float) -> None:
         if not link.turn(source.key, now):
             link.held[source.key] = (source, values, t, seq)  # filtered when its turn comes
@@ -179,7 +182,7 @@ class OscSink(Adapter):
         interval = frame.t - previous if previous is not None and frame.t > previous else 0.0
         self._send(link, link.profile.frame, frame.robot, frame.t, frame.seq, samples, interval)
 
-    def _event(self, source: Source, message: dict[str, Any]) -> None:
+    def _event(self, source: Key, message: dict[str, Any]) -> None:
         kind = str(message.get("kind") or source.name)
         for link in self._links:
             if link.target.events:
@@ -203,13 +206,13 @@ class OscSink(Adapter):
 
     # -- normalization ----------------------------------------------------------------
 
-    def _scaled(self, link: _Link, source: Source, values: Sequence[float]) -> Sequence[float] | None:
+    def _scaled(self, link: _Link, source: Key, values: Sequence[float]) -> Sequence[float] | None:
         if link.target.values == "raw":
             return values
         ranges = self._ranges.get(source.robot)
         if ranges is None:
             self.stats["waiting_info"] += 1
-            self._ask_info(source.robot)
+            self._info.ask(source.robot)
             return None
         span = ranges.get(source.name if source.section == "joints" else f"{source.feature}/{source.name}")
         if span is None:
@@ -217,26 +220,15 @@ class OscSink(Adapter):
         low, high = span
         return tuple(min(1.0, max(0.0, (v - low) / (high - low))) if high > low else 0.0 for v in values)
 
-    def _ask_info(self, robot: str) -> None:
-        now = time.monotonic()
-        if now - self._info_asked.get(robot, -math.inf) < INFO_RETRY_S:
+    def _take_info(self, robot: str, info: dict[str, Any]) -> None:
+        try:
+            ranges = {j["name"]: (float(j["min"]), float(j["max"])) for j in info.get("joints", [])}
+            ranges.update({d["name"]: (float(d["min"]), float(d["max"])) for d in info.get("derived", [])
+                           if "min" in d and "max" in d})
+        except (KeyError, TypeError, ValueError) as exc:
+            self._warn("info", f"{robot}/info unusable: {exc}")
             return
-        self._info_asked[robot] = now
-
-        def take(reply: Any) -> None:
-            if reply.ok is None:
-                return
-            try:
-                info = codec.decode(reply.ok.payload)
-                ranges = {j["name"]: (float(j["min"]), float(j["max"])) for j in info.get("joints", [])}
-                ranges.update({d["name"]: (float(d["min"]), float(d["max"])) for d in info.get("derived", [])
-                               if "min" in d and "max" in d})
-            except (codec.DecodeError, KeyError, TypeError, ValueError) as exc:
-                self._warn("info", f"{robot}/info unusable: {exc}")
-                return
-            self._ranges[robot] = ranges
-
-        self.bus.session.get(keys.info(robot), handler=take, timeout=INFO_RETRY_S)
+        self._ranges[robot] = ranges
 
     def _warn(self, kind: str, message: str) -> None:
         now = time.monotonic()
@@ -245,21 +237,6 @@ class OscSink(Adapter):
             log.warning("%s: %s (%s)", self.name, message, ", ".join(f"{k} {v}" for k, v in self.stats.items() if v))
 
 
-def _sample(message: dict[str, Any]) -> tuple[float, int, tuple[float, ...]]:
-    """``t``, ``seq`` and the values of a sample, or ``ValueError``/``TypeError``/``KeyError``."""
-    t, seq, value = message["t"], message["seq"], message["v"]
-    if not _number(t) or not math.isfinite(t):
-        raise ValueError(f"t = {t!r} is not a finite time")
-    if not isinstance(seq, int) or isinstance(seq, bool):
-        raise TypeError(f"seq = {seq!r} is not an integer")
-    values = (value,) if _number(value) else tuple(value) if isinstance(value, list | tuple) else ()
-    if not values or not all(_number(v) for v in values):
-        raise ValueError(f"v = {value!r} is not a number or a non-empty list of numbers")
-    return float(t), seq, tuple(float(v) for v in values)
-
-
-def _number(value: Any) -> bool:
-    return isinstance(value, int | float) and not isinstance(value, bool)
 
 
 def _resolve(target: str) -> tuple[str, int]:

@@ -3,6 +3,8 @@ keys run behaviors, program changes pick postures, a panic key stops."""
 
 from __future__ import annotations
 
+import time
+
 import pytest
 
 from sonibus.adapters.midi import MidiController, MidiControllerConfig
@@ -40,11 +42,13 @@ def test_a_fader_sweep_moves_the_joint_within_its_limits(net, writer):
             seen.append(sample["v"])
         return sample
 
-    for value in range(128):                        # a sweep up, as fast as the port takes it
+    for value in range(128):  # a sweep up at 500 messages/s, as a fast fader (JACK drops bigger bursts)
         writer.send_message([0xB1, 7, value])
+        time.sleep(0.002)
     wait_for(lambda: watched() and seen[-1] > limits.max - 0.01, timeout=10, what="HeadYaw at its maximum")
     for value in [*range(127, 0, -8), 0]:           # and back down
         writer.send_message([0xB1, 7, value])
+        time.sleep(0.002)
     wait_for(lambda: watched() and seen[-1] < limits.min + 0.01, timeout=10, what="HeadYaw at its minimum")
     assert all(limits.min - 1e-6 <= v <= limits.max + 1e-6 for v in seen)
     assert surface.stats["errors"] == 0
