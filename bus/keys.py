@@ -83,3 +83,17 @@ def expr(pattern: str) -> str:
     except Exception as exc:  # zenoh's message carries a Rust source path: keep only its first sentence
         reason = str(exc).split(" at /")[0]
         raise ConfigError(f"'{pattern}' is not a valid key expression: {reason}") from None
+
+
+def patterns(value: str | tuple[str, ...] | list[str], key: str = "subscribe") -> tuple[str, ...]:
+    """A config's ``subscribe`` value (one pattern or several) as checked key expressions;
+    ``ConfigError`` naming ``key`` otherwise."""
+    found = (value,) if isinstance(value, str) else tuple(value)
+    if not found:
+        raise ConfigError(f"key '{key}': is empty — give at least one key expression such as \"*/joints/*\"")
+    for pattern in found:
+        try:
+            expr(pattern)
+        except ConfigError as exc:
+            raise ConfigError(f"key '{key}': {exc}") from None
+    return found

@@ -37,17 +37,6 @@ def _tables(cls: type[T], key: str, entries: tuple[dict[str, Any], ...]) -> tupl
     return tuple(out)
 
 
-def _patterns(subscribe: str | tuple[str, ...]) -> tuple[str, ...]:
-    patterns = (subscribe,) if isinstance(subscribe, str) else tuple(subscribe)
-    if not patterns:
-        raise bad("subscribe", "is empty — give at least one key expression such as \"*/joints/*\"")
-    for pattern in patterns:
-        try:
-            keys.expr(pattern)
-        except ConfigError as exc:
-            raise bad("subscribe", str(exc)) from None
-    return patterns
-
 
 def _robot(robot: str) -> None:
     try:
@@ -106,7 +95,7 @@ class MidiSinkConfig:
 
     def __post_init__(self) -> None:
         _port(self.port, self.connect)
-        object.__setattr__(self, "subscribe", _patterns(self.subscribe))
+        object.__setattr__(self, "subscribe", keys.patterns(self.subscribe))
         for robot, channel in (self.channels or {}).items():
             if not isinstance(channel, int) or isinstance(channel, bool) or not 1 <= channel <= 16:
                 raise bad("channels", f"{robot} = {channel!r} must be a channel in 1..16")

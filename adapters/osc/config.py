@@ -114,15 +114,7 @@ class OscSinkConfig(TargetSettings):
 
     def __post_init__(self) -> None:
         super().__post_init__()
-        patterns = (self.subscribe,) if isinstance(self.subscribe, str) else tuple(self.subscribe)
-        if not patterns:
-            raise bad("subscribe", "is empty — give at least one key expression")
-        for pattern in patterns:
-            try:
-                keys.expr(pattern)
-            except ConfigError as exc:
-                raise bad("subscribe", str(exc)) from None
-        object.__setattr__(self, "subscribe", patterns)
+        object.__setattr__(self, "subscribe", keys.patterns(self.subscribe))
         if not self.targets:
             raise bad("targets", "targets is empty — give at least one host:port")
         if self.max_age_ms < 0 or self.queue < 1:
