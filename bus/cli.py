@@ -15,6 +15,7 @@ import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
 from importlib import resources
+from importlib.metadata import entry_points
 from typing import Any, TextIO
 
 from .. import schemas
@@ -23,6 +24,8 @@ from .client import robot_info, send_command
 from .errors import CommandError, ConfigError, RobotNotFound, SonibusError
 from .node import Bus
 from .session import MODES, BusConfig, open_session
+
+log = logging.getLogger(__name__)
 
 
 class Exit(enum.IntEnum):
@@ -47,10 +50,45 @@ class Environment:
         print(text, file=self.stdout, flush=True)
 
 
+@dataclass(frozen=True)
+class Command:
+    """A subcommand added by a package through the ``sonibus.commands`` entry-point
+    group (``record = "sonibus.adapters.recorder.cli:RECORD"``): the core knows none by name.
+
+    ``arguments`` adds its options to the subparser; ``run`` returns an exit status.
+    With ``bus=True`` it also takes the bus options (read them with ``bus_config(args)``)."""
+
+    name: str
+    help: str
+    arguments: Callable[[argparse.ArgumentParser], None]
+    run: Callable[[argparse.Namespace, Environment], int]
+    bus: bool = False
+
+
+COMMAND_GROUP = "sonibus.commands"
+
+
+def plugin_commands() -> dict[str, Command]:
+    """Installed subcommands by name; a broken one is logged and skipped."""
+    found = {}
+    for ep in entry_points(group=COMMAND_GROUP):
+        try:
+            command = ep.load()
+        except Exception as exc:
+            log.warning("command '%s' (%s) cannot be imported: %s: %s (skipped)", ep.name, ep.value,
+                        type(exc).__name__, exc)
+            continue
+        if isinstance(command, Command):
+            found[command.name] = command
+        else:
+            log.warning("command '%s' (%s) is not a sonibus.bus.cli.Command (skipped)", ep.name, ep.value)
+    return found
+
+
 # -- parsing -------------------------------------------------------------------------
 
 
-def parser() -> argparse.ArgumentParser:
+def parser(extra: dict[str, Command] | None = None) -> argparse.ArgumentParser:
     top = argparse.ArgumentParser(prog="sonibus", description="Robots on a Zenoh bus, for sound tools.")
     top.add_argument("--traceback", action="store_true", help="show the full traceback of an error")
     top.add_argument("-v", "--verbose", action="count", default=0, help="log more (-vv: debug)")
@@ -92,6 +130,12 @@ def parser() -> argparse.ArgumentParser:
     send.add_argument("verb", metavar="VERB", help=", ".join(schemas.command_verbs()))
     send.add_argument("args", nargs="*", metavar="ARG", help="NAME=VALUE, or the verb's main value")
     send.add_argument("--timeout", type=float, default=5.0, help="seconds to wait for the reply")
+
+    for name, command in sorted((extra or {}).items()):
+        if name in COMMANDS:
+            log.warning("command '%s' from a plug-in is shadowed by the built-in one", name)
+            continue
+        command.arguments(sub.add_parser(name, parents=[bus_options] if command.bus else [], help=command.help))
     return top
 
 
@@ -263,9 +307,10 @@ COMMANDS: dict[str, Callable[[argparse.Namespace, Environment], Exit]] = {
 
 def main(argv: Sequence[str] | None = None, env: Environment | None = None) -> int:
     env = env or Environment()
+    extra = plugin_commands()
     try:
         with contextlib.redirect_stdout(env.stdout), contextlib.redirect_stderr(env.stderr):
-            args = parser().parse_args(argv)
+            args = parser(extra).parse_args(argv)
     except SystemExit as exc:  # argparse has printed its message
         return int(exc.code or 0)
     handler = logging.StreamHandler(env.stderr)
@@ -274,7 +319,8 @@ def main(argv: Sequence[str] | None = None, env: Environment | None = None) -> i
     logger.addHandler(handler)
     logger.setLevel((logging.WARNING, logging.INFO, logging.DEBUG)[min(args.verbose, 2)])
     try:
-        return int(COMMANDS[args.command](args, env))
+        run = COMMANDS.get(args.command) or extra[args.command].run
+        return int(run(args, env))
     except KeyboardInterrupt:
         return int(Exit.INTERRUPTED)
     except Exception as exc:

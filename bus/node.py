@@ -9,6 +9,7 @@
 from __future__ import annotations
 
 import socket
+import time
 from collections.abc import Callable
 from typing import Any
 
@@ -42,9 +43,10 @@ class Bus:
         self.session.put(key, codec.encode(message), encoding=codec.ENCODING,
                          congestion_control=zenoh.CongestionControl.BLOCK)
 
-    def subscribe(self, keyexpr: str, maxlen: int = 1024,
-                  queue: SampleQueue | None = None) -> tuple[zenoh.Subscriber, SampleQueue]:
-        """Samples of ``keyexpr`` as ``(key, payload bytes)`` in a bounded queue.
+    def subscribe(self, keyexpr: str, maxlen: int = 1024, queue: SampleQueue | None = None,
+                  stamped: bool = False) -> tuple[zenoh.Subscriber, SampleQueue]:
+        """Samples of ``keyexpr`` as ``(key, payload bytes)`` in a bounded queue
+        (``(key, payload, time.monotonic_ns())`` of arrival if ``stamped``).
 
         ``keyexpr`` may use globs inside a chunk (``pepper/joints/R*``); a bad one
         raises ``ConfigError``. Pass ``queue`` to feed several subscriptions into one."""
@@ -54,7 +56,10 @@ class Bus:
         def enqueue(sample: zenoh.Sample) -> None:
             queue.put((str(sample.key_expr), sample.payload.to_bytes()))
 
-        return self.session.declare_subscriber(keyexpr, enqueue), queue
+        def enqueue_stamped(sample: zenoh.Sample) -> None:
+            queue.put((str(sample.key_expr), sample.payload.to_bytes(), time.monotonic_ns()))
+
+        return self.session.declare_subscriber(keyexpr, enqueue_stamped if stamped else enqueue), queue
 
     def serve(self, keyexpr: str, handler: Callable[[zenoh.Query], None]) -> zenoh.Queryable:
         return self.session.declare_queryable(keyexpr, handler)

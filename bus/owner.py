@@ -25,9 +25,21 @@ from .. import schemas
 from . import codec, commands, keys
 from .adapter import Adapter
 from .errors import CommandError, OwnershipError
+from .node import Bus
 from .robot import RobotModel
 
 log = logging.getLogger(__name__)
+
+
+def claim(bus: Bus, robot: str, hint: str = "stop that node or give this robot another name") -> zenoh.LivelinessToken:
+    """The liveliness token that makes ``bus``'s node the owner of ``robot``;
+    ``OwnershipError`` naming the owner (and ``hint``) if it is taken."""
+    if bus.alive(keys.robot_token(robot)):
+        replies = bus.query(keys.info(robot), timeout=1.0)
+        owner = replies[0].get("owner", {}) if replies else {}
+        who = f"node '{owner.get('node')}' on host '{owner.get('host')}'" if owner else "another node"
+        raise OwnershipError(f"robot '{robot}' is already owned by {who}; {hint}")
+    return bus.token(keys.robot_token(robot))
 
 
 class RobotAdapter(Adapter):
@@ -53,14 +65,7 @@ class RobotAdapter(Adapter):
         self.spawn(self._acquire, "acquire")
 
     def _claim(self) -> None:
-        if self.bus.alive(keys.robot_token(self.robot)):
-            replies = self.bus.query(keys.info(self.robot), timeout=1.0)
-            owner = replies[0].get("owner", {}) if replies else {}
-            who = (f"node '{owner.get('node')}' on host '{owner.get('host')}'" if owner
-                   else "another node")
-            raise OwnershipError(f"robot '{self.robot}' is already owned by {who}; "
-                                 f"stop that node or give this robot another name")
-        self.own(self.bus.token(keys.robot_token(self.robot)))
+        self.own(claim(self.bus, self.robot))
 
     def _open(self) -> None:
         """Hook: connect to the robot and set ``self.model`` (and ``self.rate_hz``)."""

@@ -1,0 +1,6 @@
+"""Recordings of the bus in MCAP files: record, replay, recover, export, plot."""
+
+from .reading import Message, Recording, RecordingError, recover
+from .writer import RecordingWriter
+
+__all__ = ["Message", "Recording", "RecordingError", "RecordingWriter", "recover"]

@@ -1,0 +1,191 @@
+"""``Recording``: an MCAP file made by the recorder, checked on open and read
+message by message (never whole into memory).
+
+>>> import os, tempfile
+>>> from sonibus.adapters.recorder.writer import RecordingWriter
+>>> path = os.path.join(tempfile.mkdtemp(), "doc.mcap")
+>>> with RecordingWriter(path) as out:
+...     for seq in range(3):
+...         out.write("pepper/joints/HeadYaw", (10 + seq) * 10**7, {"t": 0.1 + seq / 100, "seq": seq, "v": 0.5})
+>>> with Recording(path) as recording:
+...     print(recording.keys, round(recording.duration_s, 3))
+...     print([m.data["seq"] for m in recording.messages()])
+['pepper/joints/HeadYaw'] 0.02
+[0, 1, 2]
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Iterator, Sequence
+from dataclasses import dataclass
+from typing import Any, BinaryIO
+
+import zenoh
+from mcap.exceptions import McapError
+from mcap.reader import SeekingReader
+from mcap.records import Channel, Metadata
+from mcap.records import Message as McapMessage
+from mcap.stream_reader import StreamReader
+
+from sonibus.bus import keys
+from sonibus.bus.errors import SonibusError
+
+from .channels import MESSAGE_ENCODING, from_json
+from .writer import METADATA_RECORDING, RecordingWriter
+
+MAGIC = b"\x89MCAP0\r\n"
+
+
+class RecordingError(SonibusError):
+    """A file that is not a usable recording; the message says why and what to do."""
+
+
+@dataclass(frozen=True)
+class Message:
+    """One recorded message: its key, when the recorder got it (``log_ns``), when
+    it was acquired (``publish_ns``, from its ``t``), and the message itself."""
+
+    key: str
+    log_ns: int
+    publish_ns: int
+    data: dict[str, Any]
+
+
+class Recording:
+    """An MCAP recording, opened and checked: ``RecordingError`` if it is not one."""
+
+    def __init__(self, path: str) -> None:
+        self.path = path
+        _check_file(path)
+        self._file: BinaryIO = open(path, "rb")  # noqa: SIM115 — closed by close()
+        try:
+            self._reader = SeekingReader(self._file)
+            summary = self._reader.get_summary()
+        except (McapError, ValueError, EOFError) as exc:
+            self._file.close()
+            raise RecordingError(f"{path} is damaged: {type(exc).__name__}: {exc}") from None
+        if summary is None or summary.statistics is None:
+            self._file.close()
+            raise RecordingError(f"{path} has no summary; {_RECOVER.format(path=path)}")
+        stats = summary.statistics
+        if stats.message_count == 0:
+            self._file.close()
+            raise RecordingError(f"{path} is an empty recording: it holds no messages")
+        self.start_ns, self.end_ns = stats.message_start_time, stats.message_end_time
+        self.message_count = stats.message_count
+        self._channels: dict[int, Channel] = summary.channels
+        self.counts = {c.topic: stats.channel_message_counts.get(cid, 0) for cid, c in summary.channels.items()}
+        self.metadata = {m.name: dict(m.metadata) for m in self._reader.iter_metadata()}
+
+    @property
+    def keys(self) -> list[str]:
+        return sorted(k for k, n in self.counts.items() if n)
+
+    @property
+    def robots(self) -> list[str]:
+        return sorted({k.partition("/")[0] for k in self.keys})
+
+    @property
+    def duration_s(self) -> float:
+        return (self.end_ns - self.start_ns) / 1e9
+
+    def rate_hz(self, key: str) -> float:
+        """Messages per second on ``key`` over the whole recording."""
+        return self.counts.get(key, 0) / self.duration_s if self.duration_s > 0 else 0.0
+
+    def matching(self, patterns: Sequence[str]) -> list[str]:
+        """The recorded keys that any of ``patterns`` selects; ``RecordingError`` if none does."""
+        wanted = [zenoh.KeyExpr(keys.expr(p)) for p in patterns]
+        found = [k for k in self.keys if any(w.intersects(zenoh.KeyExpr(k)) for w in wanted)]
+        if not found:
+            shown = ", ".join(self.keys[:8]) + (", ..." if len(self.keys) > 8 else "")
+            raise RecordingError(f"no key in {self.path} matches {' '.join(patterns)} — it holds {shown}")
+        return found
+
+    def messages(self, keys: Sequence[str] | None = None, start_s: float | None = None,
+                 end_s: float | None = None) -> Iterator[Message]:
+        """Messages in the order they were recorded, optionally only ``keys`` and
+        only between ``start_s`` and ``end_s`` seconds from the start."""
+        start = self.start_ns + int(start_s * 1e9) if start_s is not None else None
+        end = self.start_ns + int(end_s * 1e9) + 1 if end_s is not None else None
+        for _, channel, message in self._reader.iter_messages(topics=keys, start_time=start, end_time=end,
+                                                                log_time_order=False):
+            yield _message(channel, message)
+
+    def infos(self) -> dict[str, dict[str, Any]]:
+        """The last recorded ``<robot>/info`` of each robot."""
+        found = {}
+        info_keys = [k for k in self.keys if k.endswith("/info")]
+        if info_keys:
+            for message in self.messages(info_keys):
+                found[message.key.partition("/")[0]] = message.data
+        return found
+
+    def close(self) -> None:
+        self._file.close()
+
+    def __enter__(self) -> Recording:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+_RECOVER = ("it was not closed cleanly (a killed recorder, an unfinished copy); "
+            "'sonibus recover {path}' keeps what it holds up to its last complete chunk")
+
+
+def _check_file(path: str) -> None:
+    try:
+        size = os.path.getsize(path)
+        with open(path, "rb") as f:
+            head = f.read(len(MAGIC))
+            f.seek(max(0, size - len(MAGIC)))
+            tail = f.read(len(MAGIC))
+    except OSError as exc:
+        raise RecordingError(f"cannot read {path}: {exc.strerror}") from None
+    if size == 0:
+        raise RecordingError(f"{path} is empty (0 bytes), not a recording")
+    if head != MAGIC:
+        raise RecordingError(f"{path} is not an MCAP file (it starts with {head[:8]!r})")
+    if tail != MAGIC or size < 2 * len(MAGIC):
+        raise RecordingError(f"{path} is truncated: " + _RECOVER.format(path=path))
+
+
+def _message(channel: Channel, message: McapMessage) -> Message:
+    if channel.message_encoding != MESSAGE_ENCODING:
+        raise RecordingError(f"channel {channel.topic} is {channel.message_encoding}, not {MESSAGE_ENCODING}: "
+                             "not a sonibus recording")
+    return Message(channel.topic, message.log_time, message.publish_time, from_json(message.data))
+
+
+def recover(path: str, out: str) -> int:
+    """Copy every message of the damaged recording ``path`` that can be read into a
+    new, complete recording ``out``; returns how many."""
+    try:
+        with open(path, "rb") as f:
+            head = f.read(len(MAGIC))
+    except OSError as exc:
+        raise RecordingError(f"cannot read {path}: {exc.strerror}") from None
+    if head != MAGIC:
+        raise RecordingError(f"{path} is not an MCAP file (it starts with {head[:8]!r})")
+    channels: dict[int, Channel] = {}
+    kept = 0
+    with open(path, "rb") as f, RecordingWriter(out) as writer:
+        try:
+            for record in StreamReader(f, skip_magic=False).records:
+                if isinstance(record, Channel):
+                    channels[record.id] = record
+                elif isinstance(record, McapMessage) and record.channel_id in channels:
+                    found = _message(channels[record.channel_id], record)
+                    writer.write(found.key, found.log_ns, found.data)
+                    kept += 1
+                elif isinstance(record, Metadata) and record.name == METADATA_RECORDING:
+                    writer.add_metadata(record.name, dict(record.metadata))
+        except (McapError, ValueError, EOFError, MemoryError):
+            pass  # the damaged end: everything before it is kept
+    if kept == 0:
+        os.unlink(out)
+        raise RecordingError(f"{path} holds no complete chunk: nothing to recover")
+    return kept

@@ -1,0 +1,174 @@
+"""``replay``: a recording back onto the bus with its original timing, so every
+sink works as if the robot were there.
+
+    [nodes.take1]
+    adapter = "replay"
+    path = "recordings/show.mcap"
+    loop = true
+    rename = {pepper = "pepper_take1"}     # beside the live pepper
+
+Messages are scheduled against the recording's timeline (never a sleep between
+messages), so timing does not drift; ``t`` is moved to now and ``seq`` keeps
+counting across loops, so sinks' stale-sample checks and frame reassembly work
+unchanged. The replayed robots are owned like real ones (liveliness, ``<robot>/info``
+from the recording) but take no commands: they answer ``failed``, and ``stop`` ok.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+import zenoh
+
+from sonibus.bus import codec, commands, keys
+from sonibus.bus.adapter import Adapter
+from sonibus.bus.errors import CommandError
+from sonibus.bus.keys import Key
+from sonibus.bus.options import bad
+from sonibus.bus.owner import claim
+
+from .reading import Message, Recording, RecordingError
+
+log = logging.getLogger(__name__)
+
+MAX_LATE_S = 0.1  # samples later than this are skipped (events never): no bursts of stale data
+
+
+@dataclass(frozen=True)
+class ReplayConfig:
+    path: str
+    speed: float = 1.0
+    loop: bool = False
+    start: float = 0.0                  # s from the recording's start
+    end: float | None = None            # s from the recording's start; None: to its end
+    rename: dict[str, str] = field(default_factory=dict)   # recorded robot → name on the bus
+    keys: tuple[str, ...] = ()          # key expressions of what to replay; empty: everything
+
+    def __post_init__(self) -> None:
+        if not 0 < self.speed <= 100:
+            raise bad("speed", f"{self.speed} must be more than 0 and at most 100")
+        if self.start < 0:
+            raise bad("start", f"{self.start} must be 0 or more")
+        if self.end is not None and self.end <= self.start:
+            raise bad("end", f"{self.end} must be after start ({self.start})")
+        for old, new in self.rename.items():
+            try:
+                keys.check_name("robot", new)
+            except ValueError as exc:
+                raise bad("rename", f"{old} → {exc}") from None
+        object.__setattr__(self, "keys", keys.patterns(self.keys, "keys") if self.keys else ())
+
+
+class Replay(Adapter):
+    """Replays an MCAP recording onto the bus with its original timing."""
+
+    Config = ReplayConfig
+
+    def __init__(self, config: ReplayConfig, *, name: str = "") -> None:
+        super().__init__(config, name=name)
+        self.position_s, self.window_s, self.loops = 0.0, 0.0, 0   # progress: seconds into the window, passes
+        self.stats = {"published": 0, "late": 0}
+        self.finished = threading.Event()                          # set at the end of a replay without loop
+
+    def _start(self) -> None:
+        cfg: ReplayConfig = self.config
+        self.recording = self.own(Recording(cfg.path))
+        chosen = self.recording.matching(cfg.keys) if cfg.keys else self.recording.keys
+        self.keys = [k for k in chosen if Key.parse(k).section != "cmd"]
+        robots = sorted({k.partition("/")[0] for k in self.keys})
+        unknown = sorted(set(cfg.rename) - set(robots))
+        if unknown:
+            raise RecordingError(f"--as {unknown[0]}: no robot '{unknown[0]}' in {cfg.path} — "
+                                 f"it holds {', '.join(robots)}")
+        self.names = {robot: cfg.rename.get(robot, robot) for robot in robots}
+        self.window_s = min(cfg.end or self.recording.duration_s, self.recording.duration_s) - cfg.start
+        if self.window_s < 0:
+            raise RecordingError(f"--start {cfg.start:g}: {cfg.path} lasts only {self.recording.duration_s:.1f} s")
+        infos = self.recording.infos()
+        for robot, name in self.names.items():
+            self.own(claim(self.bus, name, f"replay it under another name: --as {robot}={name}_replay"))
+            if robot in infos:
+                self.own(self.bus.serve(keys.info(name), self._info_server(self._info(infos[robot], name))))
+            self.own(self.bus.serve(keys.command(name), self._refuse))
+        rates = [float(i.get("rate_hz") or 0) for i in infos.values()]
+        self._gap_s = 1.0 / max(rates) if rates and max(rates) > 0 else 0.01
+        self._publishers: dict[str, zenoh.Publisher] = {}
+        self.spawn(self._play, "play")
+
+    def _info(self, info: dict[str, Any], name: str) -> dict[str, Any]:
+        return {**info, "robot": name, "owner": {"host": self.bus.host, "node": self.name},
+                "replay": {"file": os.path.basename(self.config.path), "robot": info.get("robot", name),
+                           "speed": self.config.speed}}
+
+    @staticmethod
+    def _info_server(info: dict[str, Any]) -> Callable[[zenoh.Query], None]:
+        payload = codec.encode(info)
+        return lambda query: query.reply(query.key_expr, payload, encoding=codec.ENCODING)
+
+    def _refuse(self, query: zenoh.Query) -> None:
+        robot, _, verb = str(query.key_expr).partition("/cmd/")
+        if verb == "stop":
+            reply = commands.ok_reply(verb, {})
+        else:
+            reply = commands.error_reply(verb, CommandError(
+                "failed", f"'{robot}' is a replay of {os.path.basename(self.config.path)}: it takes no commands"))
+        query.reply(query.key_expr, codec.encode(reply), encoding=codec.ENCODING)
+
+    # -- playing ------------------------------------------------------------------
+
+    def _play(self) -> None:
+        cfg: ReplayConfig = self.config
+        origin_ns = self.recording.start_ns + int(cfg.start * 1e9)
+        start = time.monotonic() + 0.05  # a moment for subscribers to see the new publishers
+        wall = time.time() - time.monotonic()
+        first_seq: dict[str, int] = {}
+        last_seq: dict[str, int] = {}
+        while not self.stopping.is_set():
+            seq_shift = {robot: last_seq[robot] + 1 - first for robot, first in first_seq.items()}
+            for message in self.recording.messages(self.keys, cfg.start, cfg.end):
+                offset_s = (message.log_ns - origin_ns) / 1e9
+                due = start + offset_s / cfg.speed
+                if self.stopping.wait(max(0.0, due - time.monotonic())):
+                    return
+                self.position_s = offset_s
+                if message.key.endswith("/info"):
+                    continue
+                seq = message.data.get("seq")
+                if isinstance(seq, int):
+                    robot = message.key.partition("/")[0]
+                    first_seq.setdefault(robot, seq)
+                    seq = last_seq[robot] = seq + seq_shift.get(robot, 0)
+                self._publish(message, start + wall - origin_ns / 1e9 / cfg.speed, seq,
+                              time.monotonic() - due > MAX_LATE_S)
+            self.loops += 1
+            if not cfg.loop:
+                break
+            start += (self.window_s + self._gap_s) / cfg.speed
+        self.finished.set()
+        log.info("%s: replay of %s finished", self.name, cfg.path)
+
+    def _publish(self, message: Message, t_origin: float, seq: Any, late: bool) -> None:
+        robot, _, rest = message.key.partition("/")
+        key = f"{self.names[robot]}/{rest}"
+        data = dict(message.data)
+        if isinstance(data.get("t"), int | float):
+            data["t"] = t_origin + data["t"] / self.config.speed
+        if seq is not None:
+            data["seq"] = seq
+        if rest.startswith("events/"):
+            self.bus.put(key, data)
+        elif late:
+            self.stats["late"] += 1
+            return
+        else:
+            publisher = self._publishers.get(key)
+            if publisher is None:
+                publisher = self._publishers[key] = self.own(self.bus.stream_publisher(key))
+            publisher.put(codec.encode(data))
+        self.stats["published"] += 1

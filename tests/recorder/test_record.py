@@ -1,0 +1,168 @@
+"""The recorder: every sample on the bus lands in the file, in order, schema-valid,
+readable by the ``mcap`` library itself; a killed recorder loses at most its last
+chunk; a full queue is counted, never silent."""
+
+from __future__ import annotations
+
+import json
+import signal
+import threading
+from collections import defaultdict
+
+import jsonschema
+import pytest
+from mcap.exceptions import EndOfFile
+from mcap.reader import make_reader
+from mcap.records import Footer
+from mcap.records import Message as McapMessage
+from mcap.stream_reader import StreamReader
+
+from sonibus.adapters.recorder.recorder import Recorder, RecorderConfig
+from sonibus.bus import ConfigError
+
+from ..conftest import SONIBUS, run_cli, wait_for
+from .conftest import HEY, record_sim
+
+
+def read_back(path):
+    """Every message of ``path`` as (topic, log_time, publish_time, decoded), with the library's reader."""
+    with open(path, "rb") as f:
+        reader = make_reader(f)
+        summary = reader.get_summary()
+        out = [(channel.topic, message.log_time, message.publish_time, json.loads(message.data), schema)
+               for schema, channel, message in reader.iter_messages(log_time_order=False)]
+        metadata = {m.name: dict(m.metadata) for m in reader.iter_metadata()}
+    return summary, out, metadata
+
+
+def test_every_sample_is_in_the_file_in_order_and_schema_valid(recorded):
+    path, reference = recorded
+    summary, messages, metadata = read_back(path)
+    by_key = defaultdict(list)
+    for topic, _, _, data, _ in messages:
+        by_key[topic].append(data)
+    seen = defaultdict(list)
+    for key, data in reference:
+        seen[key].append(data)
+    assert len(seen["pepper/joints/HeadYaw"]) >= 100
+    for key, data in seen.items():
+        assert by_key[key] == data, f"{key}: the file differs from what the bus carried"
+    joints = [k for k in by_key if "/joints/" in k]
+    assert len(joints) == 17
+    for key in joints:
+        seqs = [d["seq"] for d in by_key[key]]
+        assert seqs == list(range(seqs[0], seqs[0] + len(seqs))), f"{key}: a gap or a reordering"
+    behaviors = [(d["name"], d["state"]) for d in by_key["pepper/events/behavior"]]
+    assert (HEY, "started") in behaviors
+    assert any(d["state"] == "started" for d in by_key["pepper/events/speech"])
+    assert by_key["pepper/info"][0]["robot"] == "pepper" and len(by_key["pepper/info"]) == 1
+    # Times: log time never goes back; the publish time is the sample's own t.
+    log_times = [log for _, log, _, _, _ in messages]
+    assert log_times == sorted(log_times)
+    for _, _, publish, data, _ in messages:
+        if "t" in data:
+            assert publish == int(data["t"] * 1e9)
+    # Each channel carries its JSON Schema: the file validates by itself (as Foxglove reads it).
+    for _, _, _, data, schema in messages:
+        assert schema.encoding == "jsonschema" and schema.name.startswith("sonibus.v1.")
+        jsonschema.validate(data, json.loads(schema.data))
+    assert {c.message_encoding for c in summary.channels.values()} == {"json"}
+    assert metadata["sonibus.stats"]["dropped"] == "0"
+    assert metadata["sonibus.recording"]["node"] == "logger"
+
+
+def test_a_key_expression_records_only_what_it_selects(net, tmp_path):
+    path = tmp_path / "head.mcap"
+    record_sim(net, path, frames=20, subscribe=("pepper/joints/Head*",))
+    _, messages, _ = read_back(path)
+    assert {topic for topic, *_ in messages} == {"pepper/joints/HeadYaw", "pepper/joints/HeadPitch", "pepper/info"}
+
+
+def test_a_full_queue_is_counted_and_reported(net, tmp_path):
+    recorder = net.start(Recorder(RecorderConfig(path=str(tmp_path / "slow.mcap"), queue=16), name="logger"))
+    disk = threading.Event()
+    write = recorder._writer.write
+
+    def slow_disk(*args):  # a disk that stalls: the queue must fill and say so
+        disk.wait(10)
+        write(*args)
+
+    recorder._writer.write = slow_disk
+    net.sim("pepper", rate_hz=100)
+    wait_for(lambda: recorder.status()["dropped"] > 0, what="drops to be counted")
+    disk.set()
+    recorder.stop()
+    _, _, metadata = read_back(tmp_path / "slow.mcap")
+    assert int(metadata["sonibus.stats"]["dropped"]) == recorder._queue.dropped > 0
+    assert "dropped" in str(recorder.status())
+
+
+def test_sigkill_leaves_a_file_readable_up_to_its_last_chunk(net, tmp_path, spawn):
+    path = tmp_path / "killed.mcap"
+    recording = spawn(SONIBUS, "record", str(path), *net.cli_args())
+    net.sim("pepper", rate_hz=50)
+    wait_for(lambda: path.exists() and path.stat().st_size > 20_000, timeout=20, what="two chunks on disk")
+    recording.kill()
+    messages, complete = [], False
+    with open(path, "rb") as f, pytest.raises(EndOfFile):  # it ends mid-record: that is the point
+        for record in StreamReader(f).records:
+            complete = complete or isinstance(record, Footer)
+            if isinstance(record, McapMessage):
+                messages.append(record)
+    assert not complete and len(messages) >= 17 * 10
+    info = run_cli("info", str(path))
+    assert info.returncode == 1
+    assert "truncated" in info.stderr and "sonibus recover" in info.stderr and len(info.stderr.splitlines()) == 1
+    saved = run_cli("recover", str(path))
+    assert saved.returncode == 0, saved.stderr
+    assert f"recovered {len(messages)} messages" in saved.stdout
+    _, recovered, _ = read_back(tmp_path / "killed.recovered.mcap")
+    assert [json.loads(m.data) for m in messages] == [data for _, _, _, data, _ in recovered]
+
+
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
+def test_a_signal_ends_recording_cleanly_with_a_summary(net, tmp_path, spawn, sig):
+    path = tmp_path / "clean.mcap"
+    recording = spawn(SONIBUS, "record", str(path), *net.cli_args(), "--status-every", "0.2")
+    net.sim("pepper", rate_hz=50)
+    wait_for(lambda: path.exists() and path.stat().st_size > 5_000, timeout=20, what="data on disk")
+    code, out, err = recording.stop(sig, timeout=3)
+    assert code == 0, err
+    assert out.startswith(f"recorded {path}") and "0 dropped" in out
+    assert "recording " in err  # the status lines
+    summary, messages, metadata = read_back(path)
+    assert summary.statistics.message_count == len(messages) > 17
+    assert metadata["sonibus.stats"]["dropped"] == "0"
+
+
+def test_an_existing_file_is_kept_unless_forced(net, tmp_path):
+    path = tmp_path / "keep.mcap"
+    path.write_bytes(b"precious")
+    with pytest.raises(ConfigError, match="exists"):
+        net.start(Recorder(RecorderConfig(path=str(path)), name="logger"))
+    assert path.read_bytes() == b"precious"
+    net.start(Recorder(RecorderConfig(path=str(path), overwrite=True), name="logger")).stop()
+    assert path.read_bytes().startswith(b"\x89MCAP")
+
+
+def test_time_in_the_path_names_each_recording(net, tmp_path):
+    recorder = net.start(Recorder(RecorderConfig(path=str(tmp_path / "show-{time}.mcap")), name="logger"))
+    recorder.stop()
+    (made,) = tmp_path.glob("show-*.mcap")
+    assert made.name[5:20].replace("-", "").isdigit()
+
+
+def test_bad_options_name_the_key():
+    with pytest.raises(ConfigError, match="key 'subscribe'"):
+        RecorderConfig(path="x.mcap", subscribe=("a//b",))
+    with pytest.raises(ConfigError, match="key 'path'"):
+        RecorderConfig(path="")
+    with pytest.raises(ConfigError, match="key 'queue'"):
+        RecorderConfig(path="x.mcap", queue=0)
+
+
+def test_record_cli_rejects_a_bad_key_expression(tmp_path):
+    result = run_cli("record", str(tmp_path / "x.mcap"), "pepper//joints", "--no-multicast", "--duration", "1")
+    assert result.returncode == 2
+    assert "not a valid key expression" in result.stderr and len(result.stderr.splitlines()) == 1
+    assert not (tmp_path / "x.mcap").exists()
