@@ -14,6 +14,8 @@ from sonibus.bus import runner
 from sonibus.bus.cli import Command, Environment, Exit, bus_config
 from sonibus.bus.errors import ConfigError
 
+from .export import export_csv
+from .plot import plot
 from .reading import Recording, RecordingError, recover
 from .recorder import Recorder, RecorderConfig, describe
 from .replay import Replay, ReplayConfig
@@ -194,3 +196,38 @@ def _recover(args: argparse.Namespace, env: Environment) -> Exit:
 RECOVER = Command("recover", "save what a damaged recording holds into a new file", _recover_arguments, _recover)
 
 
+
+
+# -- export, plot -------------------------------------------------------------------
+
+
+def _export_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("file", metavar="FILE.mcap")
+    p.add_argument("--csv", required=True, metavar="DIR", help="folder for <robot>.csv and events.csv")
+
+
+def _export(args: argparse.Namespace, env: Environment) -> Exit:
+    with Recording(args.file) as recording:
+        for path in export_csv(recording, args.csv):
+            env.say(path)
+    return Exit.OK
+
+
+EXPORT = Command("export", "a recording as CSV files (one per robot, one of events)", _export_arguments, _export)
+
+
+def _plot_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("file", metavar="FILE.mcap")
+    p.add_argument("-o", "--output", metavar="OUT.png", help="default: FILE.png (.svg and .pdf work too)")
+    p.add_argument("--keys", nargs="+", metavar="KEYEXPR", help="plot only these keys")
+    p.add_argument("--title", help="default: the file, its length and robots")
+
+
+def _plot(args: argparse.Namespace, env: Environment) -> Exit:
+    out = args.output or os.path.splitext(args.file)[0] + ".png"
+    with Recording(args.file) as recording:
+        env.say(plot(recording, out, args.keys, args.title))
+    return Exit.OK
+
+
+PLOT = Command("plot", "joint trajectories per chain with behaviors and speech marked", _plot_arguments, _plot)

@@ -108,8 +108,8 @@ class Recording:
         """Messages in the order they were recorded, optionally only ``keys`` and
         only between ``start_s`` and ``end_s`` seconds from the start."""
         start = self.start_ns + int(start_s * 1e9) if start_s is not None else None
-        end = self.start_ns + int(end_s * 1e9) + 1 if end_s is not None else None
-        for _, channel, message in self._reader.iter_messages(topics=keys, start_time=start, end_time=end,
+        end = self.start_ns + int(end_s * 1e9) if end_s is not None else None
+        for _, channel, message in self._reader.iter_messages(topics=keys, starting_at=start, ending_at=end,
                                                                 log_time_order=False):
             yield _message(channel, message)
 

@@ -1,0 +1,154 @@
+"""A picture of a recording: joint positions, one panel per chain and robot, under
+behaviors and speech (shaded spans) and postures (vertical lines). Needs matplotlib.
+
+>>> import os, tempfile
+>>> from sonibus.adapters.recorder.reading import Recording
+>>> from sonibus.adapters.recorder.writer import RecordingWriter
+>>> path = os.path.join(tempfile.mkdtemp(), "doc.mcap")
+>>> with RecordingWriter(path) as out:
+...     for seq in range(20):
+...         out.write("pepper/joints/HeadYaw", seq * 10**7, {"t": 1.7e9 + seq / 100, "seq": seq, "v": seq / 20})
+...     out.write("pepper/events/behavior", 5 * 10**7, {"t": 1.7e9 + 0.05, "kind": "behavior",
+...                                                    "name": "animations/Stand/Gestures/Hey_1", "state": "started"})
+>>> with Recording(path) as recording:
+...     os.path.basename(plot(recording, path.replace(".mcap", ".png")))
+'doc.png'
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Sequence
+from typing import TYPE_CHECKING, Any
+
+from .reading import Recording, RecordingError
+
+if TYPE_CHECKING:
+    from matplotlib.axes import Axes
+    from matplotlib.figure import Figure
+
+UNITS = {"rad": "rad", "fraction": "open 0..1"}
+SPANS = {"behavior": {"color": "tab:orange", "alpha": 0.15}, "speech": {"color": "tab:blue", "alpha": 0.12}}
+MARKED = ("behavior", "speech", "posture")
+
+
+def plot(recording: Recording, out: str, keys: Sequence[str] | None = None, title: str | None = None) -> str:
+    """Draw ``recording`` into the image ``out`` (its format from the extension); returns ``out``.
+    ``keys`` (key expressions) choose the joints; the events of their robots are always marked."""
+    figure(recording, keys, title).savefig(out, dpi=120)
+    return out
+
+
+def figure(recording: Recording, keys: Sequence[str] | None = None, title: str | None = None) -> Figure:
+    """The matplotlib figure ``plot`` saves; ``RecordingError`` if there is no joint nor event to draw."""
+    try:  # a bare Figure renders without pyplot, so no backend is chosen for the caller
+        from matplotlib.figure import Figure
+    except ImportError:
+        raise RecordingError("sonibus plot needs matplotlib: pip install 'sonibus[plot]'") from None
+
+    chosen = recording.matching(keys) if keys else recording.keys
+    joints = [k for k in chosen if _section(k) == "joints"]
+    robots = sorted({_robot(k) for k in joints or [k for k in chosen if _section(k) == "events"]})
+    events = [k for k in recording.keys if _robot(k) in robots and _section(k) == "events"
+              and k.rsplit("/", 1)[1] in MARKED]
+    if not robots:
+        raise RecordingError(f"nothing to plot in {recording.path}: no joint nor event key among "
+                             f"{', '.join(chosen[:8])}{', ...' if len(chosen) > 8 else ''}")
+    series: dict[str, tuple[list[float], list[float]]] = {k: ([], []) for k in joints}
+    happened: dict[str, list[tuple[float, dict[str, Any]]]] = {robot: [] for robot in robots}
+    for message in recording.messages(joints + events):
+        x = (message.publish_ns - recording.start_ns) / 1e9
+        if message.key in series:
+            series[message.key][0].append(x)
+            series[message.key][1].append(message.data["v"])
+        else:
+            happened[_robot(message.key)].append((x, message.data))
+    # acquisition precedes logging: the first samples can lie just before the start
+    begin = min([0.0, *(xs[0] for xs, _ in series.values() if xs)])
+    end = max([recording.duration_s, *(xs[-1] for xs, _ in series.values() if xs)])
+    infos = recording.infos()
+    panels = [(robot, *panel) for robot in robots
+              for panel in _panels([k for k in joints if _robot(k) == robot], infos.get(robot))]
+
+    fig = Figure(figsize=(11, 1.2 + 2.0 * len(panels)), dpi=120, layout="constrained")
+    axes = list(fig.subplots(len(panels), 1, sharex=True, squeeze=False)[:, 0])
+    for ax, (robot, chain, names, units) in zip(axes, panels, strict=True):
+        for name in names:
+            ax.plot(*series[f"{robot}/joints/{name}"], lw=1, label=name)
+        label = f"{robot} {chain}" if len(robots) > 1 else chain
+        ax.set_ylabel(f"{label}\n{units}" if units else label, fontsize=8)
+        if names:
+            ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.005, 1), frameon=False)
+        else:
+            ax.set_yticks([])
+    for robot in robots:
+        mine = [ax for ax, panel in zip(axes, panels, strict=True) if panel[0] == robot]
+        _mark(mine, happened[robot], end)
+    axes[-1].set_xlim(begin, end)
+    axes[-1].set_xlabel("s since the recording start")
+    fig.suptitle(title or f"{os.path.basename(recording.path)} — {recording.duration_s:.1f} s — {', '.join(robots)}")
+    return fig
+
+
+def _section(key: str) -> str:
+    parts = key.split("/")
+    return parts[1] if len(parts) >= 3 else ""
+
+
+def _robot(key: str) -> str:
+    return key.partition("/")[0]
+
+
+def _panels(keys: list[str], info: dict[str, Any] | None) -> list[tuple[str, list[str], str]]:
+    """(chain, joints, unit label) of each panel of a robot, in its info's order; one "joints" panel without info."""
+    names = {k.split("/", 2)[2] for k in keys}
+    if not names:
+        return [("events", [], "")]
+    chains: dict[str, list[str]] = {}
+    units: dict[str, list[str]] = {}
+    for joint in (info or {}).get("joints", []):
+        if joint.get("name") in names:
+            chain = joint.get("chain") or "other"
+            chains.setdefault(chain, []).append(joint["name"])
+            unit = UNITS.get(joint.get("unit"), joint.get("unit", ""))
+            if unit not in units.setdefault(chain, []):
+                units[chain].append(unit)
+    rest = sorted(names - {n for group in chains.values() for n in group})
+    if rest:
+        chains["joints" if not chains else "other"] = rest
+    return [(chain, group, ", ".join(units.get(chain, []))) for chain, group in chains.items()]
+
+
+def _mark(axes: list[Axes], events: list[tuple[float, dict[str, Any]]], end: float) -> None:
+    """Behaviors and speech as spans (an unclosed one lasts to ``end``), postures as lines; labels on the top panel."""
+    spans: list[tuple[str, float, float, str]] = []
+    running: dict[str, float] = {}
+    speaking: tuple[float, str] | None = None
+    for x, data in events:
+        kind, state, name = data.get("kind"), data.get("state"), str(data.get("name", ""))
+        if kind == "behavior":
+            # a stop with no start: the behavior was running when the recording began
+            if name in running or state != "started":
+                spans.append(("behavior", running.pop(name, 0.0), x, name.rstrip("/").rsplit("/", 1)[-1]))
+            if state == "started":
+                running[name] = x
+        elif kind == "speech":
+            text = str(data.get("text", ""))
+            text = text if len(text) <= 30 else text[:29] + "…"
+            if speaking or state != "started":  # a new sentence also ends the previous one, done or not
+                start, said = speaking or (0.0, text)
+                spans.append(("speech", start, x, said))
+            speaking = (x, text) if state == "started" else None
+        elif kind == "posture":
+            for ax in axes:
+                ax.axvline(x, color="tab:green", lw=0.8, ls="--" if state == "started" else ":", gid="posture")
+            if state == "started":
+                axes[0].text(x, 0.5, name, transform=axes[0].get_xaxis_transform(), fontsize=7, rotation=90,
+                             va="center", ha="left", color="tab:green", clip_on=True)
+    spans += [("behavior", x, end, name.rstrip("/").rsplit("/", 1)[-1]) for name, x in running.items()]
+    spans += [("speech", speaking[0], end, speaking[1])] if speaking else []
+    for kind, start, stop, label in spans:
+        for ax in axes:
+            ax.axvspan(start, stop, gid=kind, lw=0, **SPANS[kind])
+        axes[0].text(start, 0.98 if kind == "behavior" else 0.02, label, transform=axes[0].get_xaxis_transform(),
+                     fontsize=7, va="top" if kind == "behavior" else "bottom", ha="left", clip_on=True)
