@@ -68,10 +68,13 @@ class Command:
 COMMAND_GROUP = "sonibus.commands"
 
 
-def plugin_commands() -> dict[str, Command]:
-    """Installed subcommands by name; a broken one is logged and skipped."""
+def plugin_commands(wanted: str | None = None) -> dict[str, Command]:
+    """Installed subcommands by name (only ``wanted``, if given, is imported);
+    a broken one is logged and skipped. An entry point's name is its command's name."""
     found = {}
     for ep in entry_points(group=COMMAND_GROUP):
+        if wanted is not None and ep.name != wanted:
+            continue
         try:
             command = ep.load()
         except Exception as exc:
@@ -83,6 +86,11 @@ def plugin_commands() -> dict[str, Command]:
         else:
             log.warning("command '%s' (%s) is not a sonibus.bus.cli.Command (skipped)", ep.name, ep.value)
     return found
+
+
+def _command_word(argv: Sequence[str]) -> str | None:
+    """The subcommand named in ``argv`` (the top-level options take no value)."""
+    return next((word for word in argv if not word.startswith("-")), None)
 
 
 # -- parsing -------------------------------------------------------------------------
@@ -307,19 +315,29 @@ COMMANDS: dict[str, Callable[[argparse.Namespace, Environment], Exit]] = {
 
 def main(argv: Sequence[str] | None = None, env: Environment | None = None) -> int:
     env = env or Environment()
-    extra = plugin_commands()
-    try:
-        with contextlib.redirect_stdout(env.stdout), contextlib.redirect_stderr(env.stderr):
-            args = parser(extra).parse_args(argv)
-    except SystemExit as exc:  # argparse has printed its message
-        return int(exc.code or 0)
+    argv = sys.argv[1:] if argv is None else list(argv)
     handler = logging.StreamHandler(env.stderr)
     handler.setFormatter(logging.Formatter("sonibus: %(levelname)s: %(message)s"))
     logger = logging.getLogger("sonibus")
     logger.addHandler(handler)
-    logger.setLevel((logging.WARNING, logging.INFO, logging.DEBUG)[min(args.verbose, 2)])
+    logger.setLevel(logging.WARNING)
     try:
-        run = COMMANDS.get(args.command) or extra[args.command].run
+        word = _command_word(argv)
+        named = word in {ep.name for ep in entry_points(group=COMMAND_GROUP)}
+        extra = {} if word in COMMANDS else plugin_commands(word if named else None)
+        try:
+            with contextlib.redirect_stdout(env.stdout), contextlib.redirect_stderr(env.stderr):
+                args = parser(extra).parse_args(argv)
+        except SystemExit as exc:  # argparse has printed its message
+            return int(exc.code or 0)
+        logger.setLevel((logging.WARNING, logging.INFO, logging.DEBUG)[min(args.verbose, 2)])
+        return _run(args, env, COMMANDS.get(args.command) or extra[args.command].run)
+    finally:
+        logger.removeHandler(handler)
+
+
+def _run(args: argparse.Namespace, env: Environment, run: Callable[[argparse.Namespace, Environment], int]) -> int:
+    try:
         return int(run(args, env))
     except KeyboardInterrupt:
         return int(Exit.INTERRUPTED)
@@ -328,8 +346,6 @@ def main(argv: Sequence[str] | None = None, env: Environment | None = None) -> i
             raise
         print(f"sonibus: error: {_one_line(exc)}", file=env.stderr, flush=True)
         return int(_status(exc))
-    finally:
-        logger.removeHandler(handler)
 
 
 def _status(exc: Exception) -> Exit:

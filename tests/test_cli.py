@@ -49,6 +49,29 @@ def test_adapters_lists_installed_and_warns_about_broken_plugin():
     assert "Traceback" not in result.stderr
 
 
+# -- subcommands from plug-ins (entry-point group sonibus.commands) ---------------------
+
+
+def test_a_plugin_subcommand_runs_and_a_broken_one_is_named(tmp_path):
+    lines = tmp_path / "samples.jsonl"
+    lines.write_text('{"a": 1}\n{"a": 2}\n')
+    result = run_cli("jsonl-count", str(lines))
+    assert (result.returncode, result.stdout, result.stderr) == (0, "2 lines\n", "")
+    broken = run_cli("broken-command")
+    assert broken.returncode == 2
+    assert "command 'broken-command'" in broken.stderr and "DoesNotExist" in broken.stderr
+    assert "Traceback" not in broken.stderr
+
+
+def test_help_lists_plugin_subcommands_and_other_commands_load_none():
+    listed = run_cli("--help")
+    assert listed.returncode == 0
+    for name in ("record", "replay", "info", "plot", "export", "recover", "jsonl-count"):
+        assert f"    {name} " in listed.stdout, name
+    assert listed.stderr.count("broken-command") == 1  # the broken one is reported, not fatal
+    assert run_cli("send", "--help").stderr == ""  # a built-in command imports no plug-in
+
+
 # -- send -------------------------------------------------------------------------------
 
 

@@ -1,11 +1,14 @@
-"""A plug-in adapter outside the sonibus tree: writes samples as JSON lines."""
+"""A plug-in outside the sonibus tree: an adapter that writes samples as JSON lines,
+and a subcommand that counts them."""
 
 from __future__ import annotations
 
+import argparse
 import json
 from dataclasses import dataclass
 
 from sonibus.bus import Adapter, decode
+from sonibus.bus.cli import Command, Environment
 
 
 @dataclass(frozen=True)
@@ -32,3 +35,16 @@ class JsonLinesSink(Adapter):
                 key, payload = item
                 self._file.write(json.dumps({"key": key, **decode(payload)}) + "\n")
                 self._file.flush()
+
+
+def _count_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("file", help="a file written by the jsonl sink")
+
+
+def _count(args: argparse.Namespace, env: Environment) -> int:
+    with open(args.file, encoding="utf-8") as f:
+        env.say(f"{sum(1 for _ in f)} lines")
+    return 0
+
+
+COUNT = Command("jsonl-count", "count the lines a jsonl sink wrote", _count_arguments, _count)
