@@ -8,7 +8,9 @@ sink works as if the robot were there.
     rename = {pepper = "pepper_take1"}     # beside the live pepper
 
 Messages are scheduled against the recording's timeline (never a sleep between
-messages), so timing does not drift; ``t`` is moved to now and ``seq`` keeps
+messages), so timing does not drift: each at the time the robot took it (its
+``t``, the MCAP publish time), so a frame leaves whole, without the jitter the
+live bus added; ``t`` is moved to now and ``seq`` keeps
 counting across loops, so sinks' stale-sample checks and frame reassembly work
 unchanged. The replayed robots are owned like real ones (liveliness, ``<robot>/info``
 from the recording) but take no commands: they answer ``failed``, and ``stop`` ok.
@@ -38,6 +40,7 @@ from .reading import Message, Recording, RecordingError
 log = logging.getLogger(__name__)
 
 MAX_LATE_S = 0.1  # samples later than this are skipped (events never): no bursts of stale data
+LEAD_S = 0.2      # between declaring the publishers and the first message: Zenoh settles its routes
 
 
 @dataclass(frozen=True)
@@ -98,7 +101,8 @@ class Replay(Adapter):
             self.own(self.bus.serve(keys.command(name), self._refuse))
         rates = [float(i.get("rate_hz") or 0) for i in infos.values()]
         self._gap_s = 1.0 / max(rates) if rates and max(rates) > 0 else 0.01
-        self._publishers: dict[str, zenoh.Publisher] = {}
+        self._publishers = {self._renamed(key): self.own(self.bus.stream_publisher(self._renamed(key)))
+                            for key in self.keys if Key.parse(key).section in ("joints", "derived")}
         self.spawn(self._play, "play")
 
     def _info(self, info: dict[str, Any], name: str) -> dict[str, Any]:
@@ -125,14 +129,14 @@ class Replay(Adapter):
     def _play(self) -> None:
         cfg: ReplayConfig = self.config
         origin_ns = self.recording.start_ns + int(cfg.start * 1e9)
-        start = time.monotonic() + 0.05  # a moment for subscribers to see the new publishers
+        start = time.monotonic() + LEAD_S
         wall = time.time() - time.monotonic()
         first_seq: dict[str, int] = {}
         last_seq: dict[str, int] = {}
         while not self.stopping.is_set():
             seq_shift = {robot: last_seq[robot] + 1 - first for robot, first in first_seq.items()}
             for message in self.recording.messages(self.keys, cfg.start, cfg.end):
-                offset_s = (message.log_ns - origin_ns) / 1e9
+                offset_s = (message.publish_ns - origin_ns) / 1e9  # the robot's timeline: a frame leaves whole
                 due = start + offset_s / cfg.speed
                 if self.stopping.wait(max(0.0, due - time.monotonic())):
                     return
@@ -153,22 +157,23 @@ class Replay(Adapter):
         self.finished.set()
         log.info("%s: replay of %s finished", self.name, cfg.path)
 
+    def _renamed(self, key: str) -> str:
+        robot, _, rest = key.partition("/")
+        return f"{self.names[robot]}/{rest}"
+
     def _publish(self, message: Message, t_origin: float, seq: Any, late: bool) -> None:
-        robot, _, rest = message.key.partition("/")
-        key = f"{self.names[robot]}/{rest}"
+        key = self._renamed(message.key)
         data = dict(message.data)
         if isinstance(data.get("t"), int | float):
             data["t"] = t_origin + data["t"] / self.config.speed
         if seq is not None:
             data["seq"] = seq
-        if rest.startswith("events/"):
+        publisher = self._publishers.get(key)
+        if publisher is None:  # events: few, and never dropped
             self.bus.put(key, data)
         elif late:
             self.stats["late"] += 1
             return
         else:
-            publisher = self._publishers.get(key)
-            if publisher is None:
-                publisher = self._publishers[key] = self.own(self.bus.stream_publisher(key))
             publisher.put(codec.encode(data))
         self.stats["published"] += 1

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import itertools
 import socket
+import struct
 import threading
 import time
 from collections.abc import Callable
@@ -144,12 +145,19 @@ def oscdump_lines(process: Any) -> list[str]:
     return [line for line in list(process.lines) if PROBE not in line]
 
 
+SO_TIMESTAMPNS = getattr(socket, "SO_TIMESTAMPNS", 35)  # Linux
+
+
 class Datagrams:
-    """A UDP socket on 127.0.0.1 that keeps every datagram with its arrival time (monotonic)."""
+    """A UDP socket on 127.0.0.1 that keeps every datagram with its arrival time
+    (monotonic), and in ``stamps`` the kernel's receive time of each (epoch seconds:
+    precise to microseconds whatever this process is doing)."""
 
     def __init__(self) -> None:
         self.socket = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         self.socket.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 1 << 22)
+        self.socket.setsockopt(socket.SOL_SOCKET, SO_TIMESTAMPNS, 1)
+        self.stamps: list[float] = []
         self.socket.bind(("127.0.0.1", 0))
         self.socket.settimeout(0.05)
         self.port: int = self.socket.getsockname()[1]
@@ -168,11 +176,15 @@ class Datagrams:
     def _receive(self) -> None:
         while not self._closed.is_set():
             try:
-                data = self.socket.recv(65536)
+                data, ancillary, _, _ = self.socket.recvmsg(65536, socket.CMSG_SPACE(16))
             except TimeoutError:
                 continue
             except OSError:
                 return
+            for level, kind, raw in ancillary:
+                if level == socket.SOL_SOCKET and kind == SO_TIMESTAMPNS:
+                    seconds, nanoseconds = struct.unpack("qq", raw[:16])
+                    self.stamps.append(seconds + nanoseconds / 1e9)
             self.items.append((time.monotonic(), data))
 
     def close(self) -> None:

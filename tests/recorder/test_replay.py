@@ -10,14 +10,15 @@ import time
 import numpy as np
 import pytest
 
-from sonibus.adapters.osc import OscSink, OscSinkConfig
 from sonibus.adapters.recorder import Recording
 from sonibus.adapters.recorder.replay import Replay, ReplayConfig
-from sonibus.bus import CommandError, OwnershipError, decode, robot_info, send_command
+from sonibus.bus import CommandError, OwnershipError, decode, encode, robot_info, send_command
 
-from ..conftest import free_port, run_cli, wait_for
-from ..osc.pd import oscdump_lines, start_oscdump
+from ..conftest import SONIBUS, free_port, run_cli, wait_for
+from ..osc.pd import Datagrams, oscdump_lines, start_oscdump
 from .conftest import HEY, record_sim, settle
+
+LATENCY_MS = 50  # the oscdump target gets each frame as a bundle timetagged t + 50 ms
 
 
 def oscdump_time(line: str) -> float:
@@ -25,31 +26,74 @@ def oscdump_time(line: str) -> float:
     return int(sec, 16) + int(frac, 16) / 2**32
 
 
-def test_replay_into_osc_equals_live_and_keeps_its_timing(net, tmp_path, spawn):
-    port = free_port(socket.SOCK_DGRAM)
+def start_sink(net, spawn, tmp_path, port, clock):
+    """The OSC sink as its own process (as in an installation), once it forwards: to
+    oscdump on ``port`` and to ``clock``, a socket that reads the kernel's receive times."""
+    config = tmp_path / "sound.toml"
+    config.write_text(f'[nodes.sound]\nadapter = "osc"\nsubscribe = "pepper/joints/*"\ntargets = [\n'
+                      f'  {{to = "127.0.0.1:{port}", bundle = true, latency_ms = {LATENCY_MS}}},\n'
+                      f'  "{clock.target}",\n]\n')
+    spawn(SONIBUS, "run", str(config), *net.cli_args())
+    probe = net.bus("probe")
     dump = start_oscdump(spawn, port)
-    net.start(OscSink(OscSinkConfig(subscribe="pepper/joints/*", targets=(f"127.0.0.1:{port}",)), name="sound"))
+    publisher = probe.stream_publisher("pepper/joints/Probe")
+    wait_for(lambda: publisher.put(encode({"t": time.time(), "seq": 0, "v": 0.0})) or probed(dump),
+             timeout=20, what="the sink to forward")
+    publisher.undeclare()
+    return dump
+
+
+def probed(dump):
+    return any("/Probe" in line for line in oscdump_lines(dump))
+
+
+def forwarded(dump):
+    return [line for line in oscdump_lines(dump) if "/Probe" not in line]
+
+
+def test_replay_into_osc_equals_live_and_keeps_its_timing(net, tmp_path, spawn):
+    clock = Datagrams()
+    try:
+        check_replay_into_osc(net, tmp_path, spawn, clock)
+    finally:
+        clock.close()
+
+
+def check_replay_into_osc(net, tmp_path, spawn, clock):
+    dump = start_sink(net, spawn, tmp_path, free_port(socket.SOCK_DGRAM), clock)
     path = tmp_path / "live.mcap"
     _, reference = record_sim(net, path, frames=150)
     sent = sum(1 for key, _ in reference if "/joints/" in key)
-    settle(lambda: len(oscdump_lines(dump)))
-    live = oscdump_lines(dump)
+    settle(lambda: len(forwarded(dump)))
+    live = forwarded(dump)
     assert len(live) == sent, "the live run lost samples: the comparison needs all of them"
+    wait_for(lambda: len(clock.stamps) >= sent, what="the live samples at the clock socket")
+    first_replayed = len(clock.stamps)
 
     result = run_cli("replay", str(path), *net.cli_args(), timeout=30)
     assert result.returncode == 0, result.stderr
-    settle(lambda: len(oscdump_lines(dump)))
-    replayed = oscdump_lines(dump)[len(live):]
+    settle(lambda: len(forwarded(dump)))
+    replayed = forwarded(dump)[len(live):]
     assert [line.split(" ", 1)[1] for line in replayed] == [line.split(" ", 1)[1] for line in live]
 
+    # Timing. A receiver that honours timetags (liblo, SuperCollider) plays each frame at
+    # t + latency: oscdump prints that instant, so these intervals are what it plays.
     with Recording(str(path)) as recording:
-        logged = [m.log_ns / 1e9 for m in recording.messages([k for k in recording.keys if "/joints/" in k])]
-    arrived = [oscdump_time(line) for line in replayed]
-    error = np.array(arrived) - arrived[0] - (np.array(logged) - logged[0])
-    error -= np.median(error)
-    p99_ms = float(np.percentile(np.abs(error), 99)) * 1e3
-    print(f"replay timing error at oscdump: p50 {np.median(np.abs(error)) * 1e3:.3f} ms, p99 {p99_ms:.3f} ms")
-    assert p99_ms <= 2.0, f"timing error p99 {p99_ms:.2f} ms"
+        taken = np.array([m.publish_ns / 1e9 for m in recording.messages([k for k in recording.keys
+                                                                            if "/joints/" in k])])
+    played = np.array([oscdump_time(line) for line in replayed])
+    played_ms = np.abs(np.diff(played) - np.diff(taken)) * 1e3
+    drift_ms = abs((played[-1] - played[0]) - (taken[-1] - taken[0])) * 1e3
+    # Plain messages carry no time: the kernel's receive stamps show what the bus and the
+    # sink add (oscdump's own clock jitters 2-3 ms p99 here even for a perfect sender).
+    wait_for(lambda: len(clock.stamps) >= first_replayed + len(taken), what="the replayed samples at the clock")
+    arrived = np.array(clock.stamps[first_replayed:first_replayed + len(taken)])
+    arrived_ms = np.abs(np.diff(arrived) - np.diff(taken)) * 1e3
+    print(f"replay inter-message timing error: as played (timetags) p99 {np.percentile(played_ms, 99):.3f} ms, "
+          f"drift {drift_ms:.3f} ms; on arrival p50 {np.median(arrived_ms):.3f} ms, "
+          f"p99 {np.percentile(arrived_ms, 99):.3f} ms")
+    assert np.percentile(played_ms, 99) <= 2.0 and drift_ms <= 2.0
+    assert np.percentile(arrived_ms, 99) <= 10.0, "plain messages arrive in time too (VM jitter allowed)"
 
 
 def test_a_renamed_replay_runs_beside_the_live_robot_and_takes_no_commands(net, recorded):
