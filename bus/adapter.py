@@ -17,11 +17,12 @@ from __future__ import annotations
 
 import logging
 import threading
+import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any, ClassVar
 
-from . import keys
+from . import codec, keys, presence
 from .node import Bus
 
 log = logging.getLogger(__name__)
@@ -45,8 +46,11 @@ class Adapter:
             raise TypeError(f"{type(self).__name__} takes a {self.Config.__name__}, "
                             f"got {type(self.config).__name__}")
         self.name = name or type(self).__name__.lower()
+        self.kind = type(self).__name__   # the adapter's registered name, once built from a configuration
         self.state = "new"
         self.stopping = threading.Event()
+        self.robots: list[str] = []       # robots this node owns (see claim_robot)
+        self.since = 0.0                  # when it started (epoch seconds)
         self._bus: Bus | None = None
         self._threads: list[threading.Thread] = []
         self._entities: list[Any] = []
@@ -63,8 +67,12 @@ class Adapter:
             raise RuntimeError(f"{self!r} cannot start: it is {self.state}")
         self._bus = bus.for_node(self.name)
         self.state = "starting"
+        self.since = time.time()
         try:
-            self.own(self._bus.token(keys.node_token(self._bus.host, self.name)))
+            node_key = keys.node_token(self._bus.host, self.name)
+            self.own(self._bus.token(node_key))
+            self.own(self._bus.serve(node_key, lambda q: q.reply(q.key_expr, codec.encode(self.describe()),
+                                                                 encoding=codec.ENCODING)))
             self._start()
         except BaseException:
             self.stop()
@@ -88,6 +96,16 @@ class Adapter:
                 _undeclare(entity)
             self._entities.clear()
             self.state = "stopped"
+
+    def describe(self) -> dict[str, Any]:
+        """What ``sonibus nodes`` shows of this node (served on its node key)."""
+        return {"host": self.bus.host, "node": self.name, "adapter": self.kind, "robots": list(self.robots),
+                "since": self.since, "state": self.state}
+
+    def claim_robot(self, robot: str, hint: str = "stop that node or give this robot another name") -> None:
+        """Become the owner of ``robot`` until stopped; ``OwnershipError`` if it has one."""
+        self.own(presence.claim(self.bus, robot, hint))
+        self.robots.append(robot)
 
     def spawn(self, target: Callable[[], None], name: str) -> threading.Thread:
         """Run ``target`` on a thread joined by ``stop()``; it must return once ``stopping`` is set."""

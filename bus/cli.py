@@ -9,6 +9,7 @@ import enum
 import json
 import logging
 import signal
+import socket
 import sys
 import threading
 import time
@@ -20,7 +21,7 @@ from typing import Any, TextIO
 
 from .. import schemas
 from . import codec, config, keys, registry, runner
-from .client import robot_info, send_command
+from .client import robot_info, send_command, wait_for_robot
 from .errors import CommandError, ConfigError, RobotNotFound, SonibusError
 from .node import Bus
 from .session import MODES, BusConfig, open_session
@@ -112,6 +113,13 @@ def parser(extra: dict[str, Command] | None = None) -> argparse.ArgumentParser:
     group.add_argument("--zenoh", action="append", metavar="KEY=JSON", default=[],
                        help="raw Zenoh option, e.g. transport/link/tx/lease=2000")
 
+    machine = argparse.ArgumentParser(add_help=False)
+    group = machine.add_argument_group("installation")
+    group.add_argument("--config", dest="bus_file", metavar="CONFIG.toml",
+                       help="join the bus as the [bus] table of this installation file says")
+    group.add_argument("--host", help="with --config: use its [bus.hosts.HOST] settings (default: this machine)")
+    joins = [bus_options, machine]
+
     demo = sub.add_parser("demo", parents=[bus_options], help="simulated robot → OSC, with a live view")
     demo.add_argument("--robot", default="pepper", help="robot name: pepper, nao, pepper2... (default: pepper)")
     demo.add_argument("--port", type=int, default=9000, help="UDP port of the OSC receiver (default: 9000)")
@@ -122,18 +130,21 @@ def parser(extra: dict[str, Command] | None = None) -> argparse.ArgumentParser:
     run = sub.add_parser("run", parents=[bus_options], help="run the nodes of an installation file")
     run.add_argument("config", metavar="CONFIG.toml")
     run.add_argument("--only", nargs="+", metavar="NODE", help="run only these nodes")
+    run.add_argument("--host", help="run the nodes of this host (default: this machine's name)")
+
+    sub.add_parser("router", parents=joins, help="run a Zenoh router (joins subnets)")
 
     sub.add_parser("adapters", help="list installed adapters")
 
-    nodes = sub.add_parser("nodes", parents=[bus_options], help="list live nodes and robots")
+    nodes = sub.add_parser("nodes", parents=joins, help="list live nodes and robots")
     nodes.add_argument("--timeout", type=float, default=1.0, help="seconds to wait for answers")
 
-    echo = sub.add_parser("echo", parents=[bus_options], help="print samples as they arrive")
+    echo = sub.add_parser("echo", parents=joins, help="print samples as they arrive")
     echo.add_argument("keyexpr", metavar="KEYEXPR", help="e.g. 'pepper/joints/*' or '*/events/**'")
     echo.add_argument("--count", type=int, help="exit after this many samples")
     echo.add_argument("--duration", type=float, help="exit after this many seconds")
 
-    send = sub.add_parser("send", parents=[bus_options], help="send a command to a robot, print the reply")
+    send = sub.add_parser("send", parents=joins, help="send a command to a robot, print the reply")
     send.add_argument("robot", metavar="ROBOT")
     send.add_argument("verb", metavar="VERB", help=", ".join(schemas.command_verbs()))
     send.add_argument("args", nargs="*", metavar="ARG", help="NAME=VALUE, or the verb's main value")
@@ -143,12 +154,14 @@ def parser(extra: dict[str, Command] | None = None) -> argparse.ArgumentParser:
         if name in COMMANDS:
             log.warning("command '%s' from a plug-in is shadowed by the built-in one", name)
             continue
-        command.arguments(sub.add_parser(name, parents=[bus_options] if command.bus else [], help=command.help))
+        command.arguments(sub.add_parser(name, parents=joins if command.bus else [], help=command.help))
     return top
 
 
 def bus_config(args: argparse.Namespace, base: BusConfig | None = None) -> BusConfig:
-    """``base`` (or defaults) with the command-line bus options applied."""
+    """``base`` (or the ``--config`` file's, or defaults) with the command-line bus options applied."""
+    if base is None and getattr(args, "bus_file", None):
+        base = config.load(args.bus_file).bus.for_host(args.host or socket.gethostname())
     cfg = base or BusConfig()
     changes: dict[str, Any] = {}
     if args.mode:
@@ -243,10 +256,22 @@ def cmd_demo(args: argparse.Namespace, env: Environment) -> Exit:
 
 def cmd_run(args: argparse.Namespace, env: Environment) -> Exit:
     installation = config.load(args.config)
-    adapters = runner.build(installation, args.only)
+    host = args.host or socket.gethostname()
+    adapters = runner.build(installation, args.only, host)
     names = ", ".join(f"{a.name} ({type(a).__name__})" for a in adapters)
-    runner.run(adapters, bus_config(args, installation.bus), env.stop,
-               on_started=lambda bus: env.say(f"sonibus: running {names} on {bus.host}"))
+    runner.run(adapters, bus_config(args, installation.bus.for_host(host)), env.stop,
+               on_started=lambda bus: env.say(f"sonibus: running {names} on {bus.host}"), host=host)
+    return Exit.OK
+
+
+def cmd_router(args: argparse.Namespace, env: Environment) -> Exit:
+    cfg = replace(bus_config(args), mode="router")
+    if not cfg.listen:
+        cfg = replace(cfg, listen=("tcp/0.0.0.0:7447",))
+    with open_session(cfg) as session:
+        env.say(f"sonibus router {session.zid()} listening on {', '.join(cfg.listen)}")
+        while not env.stop.wait(0.25):
+            pass
     return Exit.OK
 
 
@@ -261,10 +286,15 @@ def cmd_nodes(args: argparse.Namespace, env: Environment) -> Exit:
         bus = Bus(session)
         nodes = bus.alive(f"{keys.NODES}/**", timeout=args.timeout)
         robots = bus.alive(f"{keys.ROBOTS}/*", timeout=args.timeout)
+        described = {(d.get("host"), d.get("node")): d for d in bus.query(f"{keys.NODES}/**", timeout=args.timeout)}
+        now = time.time()
         env.say(f"{len(nodes)} node(s)")
         for key in nodes:
             host, _, node = key[len(keys.NODES) + 1:].partition("/")
-            env.say(f"  node  {node:<16} on {host}")
+            about = described.get((host, node), {})
+            owns = f"  owns {', '.join(about['robots'])}" if about.get("robots") else ""
+            since = f"  up {_duration(now - about['since'])}" if about.get("since") else ""
+            env.say(f"  node  {node:<16} on {host:<12} {about.get('adapter', '?'):<12}{since}{owns}")
         env.say(f"{len(robots)} robot(s)")
         for key in robots:
             name = key[len(keys.ROBOTS) + 1:]
@@ -273,6 +303,14 @@ def cmd_nodes(args: argparse.Namespace, env: Environment) -> Exit:
             env.say(f"  robot {name:<16} {info.get('model', '?'):<8} {info.get('rate_hz', 0):g} frames/s  "
                     f"owned by {owner.get('node', '?')} on {owner.get('host', '?')}")
     return Exit.OK
+
+
+def _duration(seconds: float) -> str:
+    """``3h02m``, ``4m10s``, ``12s``."""
+    seconds = max(0, int(seconds))
+    if seconds >= 3600:
+        return f"{seconds // 3600}h{seconds % 3600 // 60:02d}m"
+    return f"{seconds // 60}m{seconds % 60:02d}s" if seconds >= 60 else f"{seconds}s"
 
 
 def cmd_echo(args: argparse.Namespace, env: Environment) -> Exit:
@@ -302,13 +340,15 @@ def cmd_echo(args: argparse.Namespace, env: Environment) -> Exit:
 def cmd_send(args: argparse.Namespace, env: Environment) -> Exit:
     request = command_args(args.verb, args.args)
     with open_session(bus_config(args)) as session:
-        result = send_command(Bus(session), args.robot, args.verb, request, timeout=args.timeout)
+        bus = Bus(session)
+        wait_for_robot(bus, args.robot, min(2.0, args.timeout))  # not found after this: the command says so
+        result = send_command(bus, args.robot, args.verb, request, timeout=args.timeout)
     env.say(json.dumps(result))
     return Exit.OK
 
 
 COMMANDS: dict[str, Callable[[argparse.Namespace, Environment], Exit]] = {
-    "demo": cmd_demo, "run": cmd_run, "adapters": cmd_adapters, "nodes": cmd_nodes,
+    "demo": cmd_demo, "run": cmd_run, "router": cmd_router, "adapters": cmd_adapters, "nodes": cmd_nodes,
     "echo": cmd_echo, "send": cmd_send,
 }
 

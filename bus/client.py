@@ -99,6 +99,17 @@ def send_command(bus: Bus, robot: str, verb: str, args: dict[str, Any] | None = 
     return outcomes[0]
 
 
+def wait_for_robot(bus: Bus, robot: str, timeout: float = 2.0) -> bool:
+    """Whether ``robot`` is on the bus, waiting up to ``timeout`` for it: a process
+    that has just joined may not have found its peers yet (multicast discovery)."""
+    deadline = time.monotonic() + timeout
+    while True:
+        if bus.alive(keys.robot_token(robot), timeout=0.25):
+            return True
+        if time.monotonic() >= deadline:
+            return False
+
+
 def robot_info(bus: Bus, robot: str, timeout: float = 2.0) -> dict[str, Any] | None:
     """The robot's description from ``<robot>/info``, or None if nobody serves it."""
     replies = bus.query(keys.info(robot), timeout=timeout)

@@ -31,10 +31,13 @@ class NodeSpec:
     options: dict[str, Any] = field(default_factory=dict)
     where: str = ""
     lines: dict[str, int] = field(default_factory=dict)
+    host: str = ""   # the machine that runs it; "" for any machine that runs the file
 
     def build(self, cls: type[Adapter]) -> Adapter:
         """The adapter, with its options checked against ``cls.Config``."""
-        return cls(from_mapping(cls.Config, self.options, self.where, self.lines), name=self.name)
+        adapter = cls(from_mapping(cls.Config, self.options, self.where, self.lines), name=self.name)
+        adapter.kind = self.adapter
+        return adapter
 
     def at(self, key: str) -> str:
         """Where ``key`` of this node is set, for messages."""
@@ -49,13 +52,22 @@ class Installation:
     nodes: dict[str, NodeSpec]
     path: str = ""
 
-    def select(self, only: list[str] | None) -> list[NodeSpec]:
-        if not only:
+    def select(self, only: list[str] | None = None, host: str | None = None) -> list[NodeSpec]:
+        """The nodes named in ``only``; else those for ``host`` (nodes pinned to it
+        and nodes without a ``host``); else all."""
+        if only:
+            for name in only:
+                if name not in self.nodes:
+                    raise ConfigError(f"{self.path}: no node '{name}' — nodes: {', '.join(self.nodes)}")
+            return [self.nodes[n] for n in only]
+        if host is None:
             return list(self.nodes.values())
-        for name in only:
-            if name not in self.nodes:
-                raise ConfigError(f"{self.path}: no node '{name}' — nodes: {', '.join(self.nodes)}")
-        return [self.nodes[n] for n in only]
+        chosen = [spec for spec in self.nodes.values() if spec.host in ("", host)]
+        if not chosen:
+            hosts = sorted({spec.host for spec in self.nodes.values()})
+            raise ConfigError(f"{self.path}: no node for host '{host}' — hosts: {', '.join(hosts)}; "
+                              f"use --host NAME or --only NODE")
+        return chosen
 
 
 def load(path: str | Path) -> Installation:
@@ -84,6 +96,12 @@ def parse(text: str, path: str = "<string>") -> Installation:
     if not isinstance(bus_table, dict):
         raise ConfigError(f"{path}: 'bus' must be a table")
     bus = from_mapping(BusConfig, bus_table, f"{path} [bus]", _lines(text, "bus", bus_table))
+    bus = bus.relative_to(Path(path).resolve().parent)
+    for host in bus.hosts:
+        try:
+            bus.for_host(host)
+        except ConfigError as exc:
+            raise ConfigError(f"{path} {exc}") from None
     nodes_table = data.get("nodes", {})
     if not isinstance(nodes_table, dict) or not nodes_table:
         raise ConfigError(f"{path}: no [nodes.NAME] table — an installation needs at least one node")
@@ -98,9 +116,13 @@ def parse(text: str, path: str = "<string>") -> Installation:
             raise ConfigError(f"{where}: must be a table")
         options = dict(table)
         adapter = options.pop("adapter", None)
+        host = options.pop("host", "")
+        lines = _lines(text, f"nodes.{name}", table)
         if not isinstance(adapter, str):
             raise ConfigError(f"{where}: missing key 'adapter' (a string: see `sonibus adapters`)")
-        nodes[name] = NodeSpec(name, adapter, options, where, _lines(text, f"nodes.{name}", table))
+        if not isinstance(host, str):
+            raise ConfigError(f"{located(where, lines, 'host')}: key 'host': {host!r} is not a string")
+        nodes[name] = NodeSpec(name, adapter, options, where, lines, host)
     return Installation(bus, nodes, path)
 
 

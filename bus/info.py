@@ -1,11 +1,19 @@
 """Asking robots for ``<robot>/info`` without waiting: sinks call ``ask`` from
 their hot path as often as they like; at most one query per robot is sent per
 ``retry_s``, and each answer is handed to ``on_info`` on a Zenoh thread (which
-should only store or enqueue it)."""
+should only store or enqueue it).
+
+One query covers ``<robot>/info/**``: the owner's description, and what
+feature processors say on ``<robot>/info/derived`` about the derived keys they
+publish. ``on_info`` gets the owner's info with those ``derived`` entries (and
+``unavailable`` reasons) added, once the query is over; without an owner's
+answer it is not called.
+"""
 
 from __future__ import annotations
 
 import math
+import threading
 import time
 from collections.abc import Callable
 from typing import Any
@@ -29,15 +37,49 @@ class InfoRequests:
         if now - self._asked.get(robot, -math.inf) < self.retry_s:
             return
         self._asked[robot] = now
+        merge = _Merge(robot, self.on_info, self.on_error)
+        self.bus.session.get(keys.info(robot) + "/**", zenoh.handlers.Callback(merge.take, merge.finish),
+                             timeout=self.retry_s)
 
-        def take(reply: zenoh.Reply) -> None:
-            if reply.ok is None:
-                return
-            try:
-                info = codec.decode(reply.ok.payload)
-            except codec.DecodeError as exc:
-                self.on_error(robot, f"{robot}/info unusable: {exc}")
-                return
-            self.on_info(robot, info)
 
-        self.bus.session.get(keys.info(robot), handler=take, timeout=self.retry_s)
+class _Merge:
+    """The replies to one info query, merged when the query ends."""
+
+    def __init__(self, robot: str, on_info: Callable[[str, dict[str, Any]], None],
+                 on_error: Callable[[str, str], None]) -> None:
+        self.robot, self.on_info, self.on_error = robot, on_info, on_error
+        self.main: dict[str, Any] | None = None
+        self.derived: list[dict[str, Any]] = []
+        self.unavailable: dict[str, Any] = {}
+        self._lock = threading.Lock()
+
+    def take(self, reply: zenoh.Reply) -> None:
+        if reply.ok is None:
+            return
+        key = str(reply.ok.key_expr)
+        main = key in (keys.info(self.robot), keys.info(self.robot) + "/**")  # owners reply on the query's key
+        try:
+            message = codec.decode(reply.ok.payload)
+        except codec.DecodeError as exc:
+            self.on_error(self.robot, f"{keys.info(self.robot) if main else key} unusable: {exc}")
+            return
+        with self._lock:
+            if main:
+                self.main = message
+            elif key == keys.derived_info(self.robot):
+                derived, unavailable = message.get("derived"), message.get("unavailable")
+                if isinstance(derived, list):
+                    self.derived.extend(d for d in derived if isinstance(d, dict))
+                if isinstance(unavailable, dict):
+                    self.unavailable.update(unavailable)
+
+    def finish(self) -> None:
+        with self._lock:
+            if self.main is None:
+                return
+            info = dict(self.main)
+            if self.derived:
+                info["derived"] = [*info.get("derived", ()), *self.derived]
+            if self.unavailable:
+                info["unavailable"] = {**info.get("unavailable", {}), **self.unavailable}
+        self.on_info(self.robot, info)

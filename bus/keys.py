@@ -20,6 +20,10 @@ def joints(robot: str = "*") -> str:
     return f"{robot}/joints/*"
 
 
+def derived(robot: str, feature: str, name: str) -> str:
+    return f"{robot}/derived/{feature}/{name}"
+
+
 def event(robot: str, kind: str) -> str:
     return f"{robot}/events/{kind}"
 
@@ -30,6 +34,11 @@ def command(robot: str, verb: str = "**") -> str:
 
 def info(robot: str) -> str:
     return f"{robot}/info"
+
+
+def derived_info(robot: str) -> str:
+    """Where feature processors describe the derived keys they publish for ``robot``."""
+    return f"{robot}/info/derived"
 
 
 def node_token(host: str, node: str) -> str:

@@ -24,22 +24,10 @@ import zenoh
 from .. import schemas
 from . import codec, commands, keys
 from .adapter import Adapter
-from .errors import CommandError, OwnershipError
-from .node import Bus
+from .errors import CommandError
 from .robot import RobotModel
 
 log = logging.getLogger(__name__)
-
-
-def claim(bus: Bus, robot: str, hint: str = "stop that node or give this robot another name") -> zenoh.LivelinessToken:
-    """The liveliness token that makes ``bus``'s node the owner of ``robot``;
-    ``OwnershipError`` naming the owner (and ``hint``) if it is taken."""
-    if bus.alive(keys.robot_token(robot)):
-        replies = bus.query(keys.info(robot), timeout=1.0)
-        owner = replies[0].get("owner", {}) if replies else {}
-        who = f"node '{owner.get('node')}' on host '{owner.get('host')}'" if owner else "another node"
-        raise OwnershipError(f"robot '{robot}' is already owned by {who}; {hint}")
-    return bus.token(keys.robot_token(robot))
 
 
 class RobotAdapter(Adapter):
@@ -65,7 +53,7 @@ class RobotAdapter(Adapter):
         self.spawn(self._acquire, "acquire")
 
     def _claim(self) -> None:
-        self.own(claim(self.bus, self.robot))
+        self.claim_robot(self.robot)
 
     def _open(self) -> None:
         """Hook: connect to the robot and set ``self.model`` (and ``self.rate_hz``)."""

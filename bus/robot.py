@@ -76,10 +76,16 @@ def models() -> tuple[str, ...]:
 @cache
 def load_model(name: str) -> RobotModel:
     """The model called ``name`` (``pepper`` or ``nao``)."""
+    return _build(name, reference(name))
+
+
+def reference(name: str) -> dict[str, Any]:
+    """The raw entry of model ``name`` in ``robots.json`` (``arm_chain``,
+    ``fk_test_vectors_torso_frame_m``, sources...); ``KeyError`` for an unknown model."""
     table = _reference()
     if name not in table:
         raise KeyError(f"unknown robot model '{name}' — known models: {', '.join(table)}")
-    return _build(name, table[name])
+    return table[name]  # type: ignore[no-any-return]
 
 
 @cache

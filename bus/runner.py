@@ -16,10 +16,10 @@ from .session import BusConfig, open_session
 log = logging.getLogger(__name__)
 
 
-def build(installation: Installation, only: list[str] | None = None) -> list[Adapter]:
+def build(installation: Installation, only: list[str] | None = None, host: str | None = None) -> list[Adapter]:
     """Every selected node's adapter, configured; all errors before anything starts."""
     adapters = []
-    for spec in installation.select(only):
+    for spec in installation.select(only, host):
         try:
             cls = registry.load(spec.adapter)
         except AdapterError as exc:
@@ -29,11 +29,12 @@ def build(installation: Installation, only: list[str] | None = None) -> list[Ada
 
 
 def run(adapters: list[Adapter], bus_config: BusConfig, stop: threading.Event,
-        on_started: Callable[[Bus], None] | None = None) -> None:
+        on_started: Callable[[Bus], None] | None = None, host: str | None = None) -> None:
     """Open one session, start ``adapters`` in order, wait for ``stop``, stop them in
-    reverse order and close the session — also on Ctrl-C or an error."""
-    with open_session(bus_config) as session:
-        bus = Bus(session)
+    reverse order and close the session — also on Ctrl-C or an error. ``host`` names
+    this machine on the bus (default: its hostname)."""
+    with open_session(bus_config, wait=True) as session:
+        bus = Bus(session, host=host)
         started: list[Adapter] = []
         try:
             for adapter in adapters:

@@ -10,6 +10,9 @@ tools=(
   "oscsend liblo-tools"
   "pd puredata-core"
   "jackd jackd2"
+  "ip iproute2"
+  "sysctl procps"
+  "openssl openssl"
 )
 
 missing=()

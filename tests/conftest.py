@@ -103,10 +103,12 @@ def net() -> Iterator[Network]:
 class Process:
     """A child process that is always ended, also when the test fails.
 
-    With ``collect=True`` its stdout lines are gathered in ``lines`` as they come."""
+    With ``collect=True`` its stdout lines (and stderr's, with ``merge=True``) are
+    gathered in ``lines`` as they come."""
 
-    def __init__(self, args: list[str], collect: bool = False, **kwargs: Any) -> None:
-        self.popen = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+    def __init__(self, args: list[str], collect: bool = False, merge: bool = False, **kwargs: Any) -> None:
+        self.popen = subprocess.Popen(args, stdout=subprocess.PIPE,
+                                      stderr=subprocess.STDOUT if merge else subprocess.PIPE, text=True,
                                       start_new_session=True, **kwargs)
         self.lines: list[str] = []
         if collect:

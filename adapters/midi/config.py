@@ -53,7 +53,7 @@ def _port(port: str, connect: str) -> None:
 @dataclass(frozen=True, kw_only=True)
 class MapEntry:
     """One controller of the sink: ``{key = "pepper/joints/HeadYaw", cc = 1, resolution = 14}``
-    or ``{key = ..., pitchbend = true}``."""
+    or ``{key = ..., pitchbend = true}``; a derived key (``pepper/derived/qom/RArm``) sends its first number."""
 
     key: str
     cc: int = -1
@@ -63,8 +63,10 @@ class MapEntry:
 
     def __post_init__(self) -> None:
         robot, section, name = ([*self.key.split("/", 2), "", ""])[:3]
-        if not robot or section != "joints" or not name or "*" in self.key:
-            raise bad("key", f"'{self.key}' is not a joint key such as \"pepper/joints/HeadYaw\"")
+        if not robot or section not in ("joints", "derived") or not name or "*" in self.key \
+                or ("/" in name) != (section == "derived"):
+            raise bad("key", f"'{self.key}' is not a joint key such as \"pepper/joints/HeadYaw\" "
+                             f"or a derived key such as \"pepper/derived/qom/RArm\"")
         _range("channel", self.channel, 0, 16)
         if self.pitchbend:
             if self.cc != -1:

@@ -9,7 +9,7 @@ import time
 from dataclasses import dataclass, field
 from typing import Any
 
-from sonibus.bus import codec
+from sonibus.bus import codec, presence
 from sonibus.bus.adapter import Adapter
 from sonibus.bus.info import InfoRequests
 from sonibus.bus.keys import Key
@@ -84,6 +84,7 @@ class MidiSink(Adapter):
                                   lambda robot, text: self._warn("info", text), INFO_RETRY_S)
         for pattern in cfg.subscribe:
             self.own(self.bus.subscribe(pattern, queue=self._queue)[0])
+        self.own(presence.connection_events(self.bus, self._queue, cfg.subscribe))  # a robot's loss and return
         self.spawn(self._forward, "forward")
         log.info("%s: MIDI out on %s", self.name, f"'{cfg.connect}'" if cfg.connect else f"virtual port '{cfg.port}'")
 
@@ -139,7 +140,7 @@ class MidiSink(Adapter):
             if source.section == "events":
                 self._event(source, message)
                 return
-            if source.section != "joints":
+            if source.section not in ("joints", "derived"):
                 return
             _, _, values = codec.sample_values(message)
         except (codec.DecodeError, KeyError, TypeError, ValueError) as exc:
@@ -200,15 +201,21 @@ class MidiSink(Adapter):
         cfg: MidiSinkConfig = self.config
         entry = cfg.entries.get(source.key)
         controller = None
-        span = robot.ranges.get(source.name)
+        joint = source.section == "joints"
+        span = robot.ranges.get(source.name if joint else f"{source.feature}/{source.name}")
         if span is None:
+            if entry is not None and not joint:  # its processor may have started after the info came: ask again
+                self._warn("unknown", f"map key '{source.key}': no range for it in {source.robot}/info/derived "
+                                      f"yet (is a features node running?)")
+                self._info.ask(source.robot)
+                return None
             if entry is not None:
                 self._warn("unknown", f"map key '{source.key}': {source.robot} has no joint '{source.name}' "
                                       f"— known joints: {', '.join(robot.order)}")
         elif entry is not None:
             controller = _Controller(entry.channel or robot.channel, -1 if entry.pitchbend else entry.cc,
                                      14 if entry.pitchbend else entry.resolution, *span)
-        elif cfg.auto_map:
+        elif cfg.auto_map and joint:  # derived values only by an explicit map entry
             cc = mapping.FIRST_CC + robot.order.index(source.name)
             if cc <= 119:
                 controller = _Controller(robot.channel, cc, 7, *span)
@@ -221,6 +228,8 @@ class MidiSink(Adapter):
         robot = self._robot(name)
         try:
             robot.ranges = {j["name"]: (float(j["min"]), float(j["max"])) for j in info.get("joints", [])}
+            robot.ranges.update({d["name"]: (float(d["min"]), float(d["max"])) for d in info.get("derived", [])
+                                 if "min" in d and "max" in d})
             robot.order = [j["name"] for j in info.get("joints", [])]
             robot.behaviors = [str(b) for b in info.get("behaviors", [])]
             robot.rate_hz = float(info.get("rate_hz") or 0.0)

@@ -10,15 +10,15 @@ import time
 from collections.abc import Callable, Sequence
 from typing import Any
 
-from sonibus.bus import codec
+from sonibus.bus import codec, presence
 from sonibus.bus.adapter import Adapter
 from sonibus.bus.errors import ConfigError
+from sonibus.bus.frames import Frame, FrameAssembler
 from sonibus.bus.info import InfoRequests
 from sonibus.bus.keys import Key
 from sonibus.bus.queue import SampleQueue
 
 from .config import OscSinkConfig, Target, parse_target
-from .frames import Frame, FrameAssembler
 from .profiles import PROFILES
 
 log = logging.getLogger(__name__)
@@ -77,6 +77,7 @@ class OscSink(Adapter):
         self._queue = self.own(SampleQueue(cfg.queue))
         for pattern in cfg.subscribe:
             self.own(self.bus.subscribe(pattern, queue=self._queue)[0])
+        self.own(presence.connection_events(self.bus, self._queue, cfg.subscribe))  # a robot's loss and return
         self.spawn(self._forward, "forward")
 
     def _stop(self) -> None:
@@ -216,6 +217,8 @@ class OscSink(Adapter):
             return None
         span = ranges.get(source.name if source.section == "joints" else f"{source.feature}/{source.name}")
         if span is None:
+            if source.section == "derived":  # its processor may have started after the info came: ask again
+                self._info.ask(source.robot)
             return values
         low, high = span
         return tuple(min(1.0, max(0.0, (v - low) / (high - low))) if high > low else 0.0 for v in values)

@@ -33,7 +33,6 @@ from sonibus.bus.adapter import Adapter
 from sonibus.bus.errors import CommandError
 from sonibus.bus.keys import Key
 from sonibus.bus.options import bad
-from sonibus.bus.owner import claim
 
 from .reading import Message, Recording, RecordingError
 
@@ -95,7 +94,7 @@ class Replay(Adapter):
             raise RecordingError(f"--start {cfg.start:g}: {cfg.path} lasts only {self.recording.duration_s:.1f} s")
         infos = self.recording.infos()
         for robot, name in self.names.items():
-            self.own(claim(self.bus, name, f"replay it under another name: --as {robot}={name}_replay"))
+            self.claim_robot(name, f"replay it under another name: --as {robot}={name}_replay")
             if robot in infos:
                 self.own(self.bus.serve(keys.info(name), self._info_server(self._info(infos[robot], name))))
             self.own(self.bus.serve(keys.command(name), self._refuse))

@@ -306,7 +306,8 @@ def test_one_sink_serves_messages_bundles_and_pepperosc_at_once(net, receivers):
     # Plain target: one message per joint sample, events as messages; no bundles.
     assert not any(OscBundle.dgram_is_bundle(d) for d in plain.data())
     plain_messages = messages(plain)
-    assert {a for a, _ in plain_messages} == joints | {"/pepper/events/behavior", "/pepper/events/command"}
+    assert {a for a, _ in plain_messages} == joints | {"/pepper/events/behavior", "/pepper/events/command",
+                                                    "/pepper/events/connection"}  # the robot is there
     # Bundle target: joints only inside bundles (t + 20 ms), events as plain messages.
     for dgram in bundled.data():
         if OscBundle.dgram_is_bundle(dgram):

@@ -1,0 +1,94 @@
+"""What a processor serves on ``<robot>/info/derived``: every derived key it
+publishes, with its unit and range, so sinks can scale it, and what it cannot
+compute and why.
+
+Ranges are physical bounds: a joint velocity ±its maximum velocity; a hand
+position the box its arm can reach (``box``; ``min``/``max`` is the cube around
+it, one span for x, y and z); a hand speed the sum over the arm's joints of
+maximum velocity × the length of the arm after the joint; a QoM the weighted
+sum of its joints' maximum velocities.
+
+>>> from sonibus.bus.robot import load_model
+>>> from sonibus.adapters.features import FeaturesConfig
+>>> from sonibus.adapters.features.table import describe as robot
+>>> info = {"model": "pepper", "joints": [j.to_info() for j in load_model("pepper").joints]}
+>>> entries = derived(robot("pepper", info), FeaturesConfig(), {"host": "h", "node": "features"})["derived"]
+>>> [e for e in entries if e["name"] == "velocity/HeadYaw"][0]["max"]
+7.33998
+"""
+
+from __future__ import annotations
+
+from functools import cache
+from typing import Any
+
+import numpy as np
+
+from sonibus.bus import keys
+
+from .config import FeaturesConfig
+from .kinematics import load_arms
+from .motion import weights
+from .table import Robot
+
+
+@cache
+def _reach(model: str, limits: tuple[tuple[tuple[float, float], ...], ...]) -> tuple[np.ndarray, np.ndarray]:
+    return load_arms(model).reach_boxes(limits)
+
+
+def _entry(robot: str, feature: str, name: str, unit: str, low: float | None, high: float | None,
+           size: int = 1, **more: Any) -> dict[str, Any]:
+    entry = {"name": f"{feature}/{name}", "key": keys.derived(robot, feature, name), "unit": unit, "size": size}
+    if low is not None and high is not None:
+        entry.update(min=round(float(low), 6), max=round(float(high), 6))
+    return {**entry, **more}
+
+
+def derived(robot: Robot, config: FeaturesConfig, processor: dict[str, str]) -> dict[str, Any]:
+    """The ``<robot>/info/derived`` reply for ``robot``."""
+    out: list[dict[str, Any]] = []
+    name = robot.name
+    if config.publishes("velocity"):
+        out += [_entry(name, "velocity", j.name, j.velocity_unit, -j.max_velocity if j.max_velocity else None,
+                       j.max_velocity) for j in robot.joints]
+    out += _hands(robot, config)
+    w = weights([j.unit for j in robot.joints], robot.names, config.weights)
+    known = all(j.max_velocity for j, weight in zip(robot.joints, w, strict=True) if weight)
+    vmax = np.array([j.max_velocity or 0.0 for j in robot.joints])
+    groups = robot.groups
+    if config.publishes("qom"):
+        out += [_entry(name, "qom", group, "rad/s", 0.0, float(w[i] @ vmax[i]) if known else None,
+                       joints=[robot.names[k] for k in i if w[k]]) for group, i in groups.items()]
+    reply: dict[str, Any] = {"robot": name, "derived": out, "processor": processor,
+                             "filter": {"cutoff_hz": config.cutoff_hz, "max_gap_s": config.max_gap_s}}
+    if config.publishes("motion"):
+        reply["events"] = {"motion": {"key": keys.event(name, "motion"),
+                                      "chains": [c for c, i in groups.items() if c != "Body" and w[i].sum() > 0]}}
+    hands = [f for f in ("hand", "hand_speed") if config.publishes(f)]
+    if robot.arms is None and hands:
+        reply["unavailable"] = dict.fromkeys(hands, robot.unavailable)
+    return reply
+
+
+def _hands(robot: Robot, config: FeaturesConfig) -> list[dict[str, Any]]:
+    arms, index = robot.arms, robot.arm_joints
+    if arms is None or index is None:
+        return []
+    joints = [[robot.joints[i] for i in arm] for arm in index]
+    out = []
+    if config.publishes("hand"):
+        limits = tuple(tuple((j.min if j.min is not None else -np.pi, j.max if j.max is not None else np.pi)
+                             for j in arm) for arm in joints)
+        low, high = _reach(robot.model, limits)
+        out += [_entry(robot.name, "hand", side, "m", low[a].min(), high[a].max(), 3, axes=["x", "y", "z"],
+                       frame="Torso", box={"min": low[a].tolist(), "max": high[a].tolist()})
+                for a, side in enumerate(arms.sides)]
+    if config.publishes("hand_speed"):
+        levers = arms.lever_arms()
+        for a, side in enumerate(arms.sides):
+            bound = None
+            if all(j.max_velocity for j in joints[a]):
+                bound = np.ceil(sum(j.max_velocity * r for j, r in zip(joints[a], levers[a], strict=True)) * 10) / 10
+            out.append(_entry(robot.name, "hand_speed", side, "m/s", 0.0 if bound else None, bound))
+    return out

@@ -1,0 +1,80 @@
+"""Velocities of sampled signals, smoothed, from the samples' own times.
+
+Per signal, the mean velocity over each step, ``r_k = (q_k − q_(k-1)) / Δt_k``,
+goes through a first-order low-pass with cut-off ``fc`` (Hz), ``τ = 1/(2π·fc)``,
+solved exactly for a velocity that changes linearly across the step (the
+slope ``s_k`` taken from the previous step):
+
+    v_k = e_k · v_(k-1) + (1 − e_k) · (r_k + s_k · δ_k)
+    e_k = exp(−Δt_k / τ)
+    s_k = (r_k − r_(k-1)) / ((Δt_k + Δt_(k-1)) / 2)
+    δ_k = Δt_k / 2 − τ + Δt_k · e_k / (1 − e_k)     (where the filter's weight
+                                                     sits, after the step's middle)
+
+Every step uses its real ``Δt``, so a dropped frame is a longer step, not a
+wrong velocity. A signal's first sample (and the first after a gap longer than
+``max_gap_s``, or after its time went backwards) starts it over from rest
+(``v = 0``, no slope), so a start makes no burst from noise. A NaN sample is
+skipped: that signal keeps its state.
+
+>>> f = VelocityFilter(1, cutoff_hz=5.0)
+>>> f.update(0.00, np.array([0.0])).tolist(), f.update(0.01, np.array([0.01])).tolist()
+([False], [True])
+>>> f.velocity.round(3).tolist()          # 1 rad/s from rest: 1 − exp(−0.01 / τ)
+[0.27]
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+
+class VelocityFilter:
+    """``update(t, q)`` with ``n`` values at time ``t`` (s); ``velocity`` holds the estimates."""
+
+    def __init__(self, n: int, cutoff_hz: float, max_gap_s: float = 0.5) -> None:
+        if not cutoff_hz > 0 or not max_gap_s > 0:
+            raise ValueError(f"cut-off ({cutoff_hz} Hz) and max gap ({max_gap_s} s) must be more than 0")
+        self.cutoff_hz, self.max_gap_s = cutoff_hz, max_gap_s
+        self.tau = 1.0 / (2.0 * math.pi * cutoff_hz)
+        self.velocity = np.zeros(n)
+        self.known = np.zeros(n, dtype=bool)  # has a velocity (and a step to take the slope from)
+        self._last_q = np.full(n, np.nan)
+        self._last_t = np.full(n, np.nan)
+        self._last_r = np.zeros(n)
+        self._last_dt = np.ones(n)
+
+    def update(self, t: float, q: np.ndarray) -> np.ndarray:
+        """Take the values ``q`` sampled at ``t``; returns which signals have a velocity for ``t``."""
+        dt = t - self._last_t
+        finite = np.isfinite(q)
+        with np.errstate(invalid="ignore"):
+            step = finite & (dt > 0) & (dt <= self.max_gap_s)
+        if step.all():  # the usual frame: no boolean indexing
+            self._step(slice(None), dt, q)
+        elif step.any():
+            self._step(step, dt[step], q[step])
+        start = finite & ~step
+        if start.any():
+            self.velocity[start] = 0.0
+            self.known[start] = False
+        np.copyto(self._last_q, q, where=finite)
+        np.copyto(self._last_t, t, where=finite)
+        return step
+
+    def _step(self, step: np.ndarray | slice, dt: np.ndarray, q: np.ndarray) -> None:
+        r = (q - self._last_q[step]) / dt
+        e = np.exp(-dt / self.tau)
+        delta = dt / 2 - self.tau + dt * e / (1.0 - e)
+        slope = np.where(self.known[step], (r - self._last_r[step]) / ((dt + self._last_dt[step]) / 2), 0.0)
+        self.velocity[step] = e * self.velocity[step] + (1.0 - e) * (r + slope * delta)
+        self.known[step] = True
+        self._last_r[step], self._last_dt[step] = r, dt
+
+    def reset(self) -> None:
+        """Forget everything: the next samples start over."""
+        self.velocity[:] = 0.0
+        self.known[:] = False
+        self._last_q[:] = self._last_t[:] = np.nan

@@ -1,0 +1,132 @@
+"""The ``features`` adapter: joint samples in, derived values and motion events out.
+
+A node is a loop over events: one worker takes samples (and robot infos) from
+a queue, reassembles each robot's frames by ``seq``, computes the frame's
+features and publishes them; ``<robot>/info/derived`` describes what it publishes.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import time
+from typing import Any
+
+import zenoh
+
+from sonibus.bus import codec, keys
+from sonibus.bus.adapter import Adapter
+from sonibus.bus.frames import Frame, FrameAssembler
+from sonibus.bus.info import InfoRequests
+from sonibus.bus.queue import SampleQueue
+
+from . import catalog, table
+from .compute import RobotFeatures
+from .config import FeaturesConfig
+
+log = logging.getLogger(__name__)
+
+WARN_EVERY_S = 10.0
+INFO = "\0info"  # queue items carrying a robot's info, so only the worker touches state
+
+
+class Features(Adapter):
+    """Derived movement features: joint velocities, hand positions and speeds, quantity of motion, motion onsets."""
+
+    Config = FeaturesConfig
+
+    def _start(self) -> None:
+        cfg: FeaturesConfig = self.config
+        self.stats = dict.fromkeys(("received", "frames", "published", "events", "bad", "late", "missing", "nan",
+                                    "waiting_info"), 0)
+        self.robot_features: dict[str, RobotFeatures] = {}  # robot → its features, once its info came
+        self._last_warning: dict[str, float] = {}
+        self._publishers: dict[str, zenoh.Publisher] = {}
+        self._frames = FrameAssembler(cfg.max_wait_ms / 1000.0)
+        self._queue = self.own(SampleQueue(cfg.queue))
+        self._info = InfoRequests(self.bus, lambda robot, info: self._queue.put((INFO, (robot, info))),
+                                  lambda robot, text: self._warn("info", text))
+        for robot in cfg.robots:
+            self.own(self.bus.subscribe(keys.joints(robot), queue=self._queue)[0])
+        self.spawn(self._run, "features")
+
+    def _stop(self) -> None:
+        if hasattr(self, "stats"):
+            log.info("%s: stopping; %s", self.name, ", ".join(f"{k} {v}" for k, v in self.stats.items()))
+
+    # -- the loop ---------------------------------------------------------------------
+
+    def _run(self) -> None:
+        while not self.stopping.is_set():
+            expiry = self._frames.next_expiry()
+            item = self._queue.get(timeout=0.2 if expiry is None else max(0.0, min(0.2, expiry - time.monotonic())))
+            if item is not None:
+                self._take(*item)
+            for frame in self._frames.expire():
+                self.process(frame)
+
+    def _take(self, key: str, payload: Any) -> None:
+        if key == INFO:
+            self._learn(*payload)
+            return
+        self.stats["received"] += 1
+        robot = key.partition("/")[0]
+        if robot not in self.robot_features:
+            self.stats["waiting_info"] += 1
+            self._info.ask(robot)
+            return
+        try:
+            t, seq, values = codec.sample_values(codec.decode(payload))
+        except (codec.DecodeError, KeyError, TypeError, ValueError) as exc:
+            self.stats["bad"] += 1
+            self._warn("bad", f"sample on '{key}' skipped: {type(exc).__name__}: {exc}")
+            return
+        for frame in self._frames.add(robot, key, seq, t, values[0]):
+            self.process(frame)
+        self.stats["late"] = self._frames.late
+
+    def process(self, frame: Frame) -> None:
+        """Compute and publish the features of one frame."""
+        features = self.robot_features[frame.robot]
+        out = features.step(frame.t, frame.seq, frame.values)
+        self.stats["frames"] += 1
+        if (out.missing or out.nan) and features.frames > 1:  # the first frame began before the robot's info came
+            self.stats["missing"] += out.missing
+            self.stats["nan"] += out.nan
+            self._warn("incomplete", f"{frame.robot}: frame {frame.seq} lacks {out.missing} joint(s) and has "
+                                     f"{out.nan} NaN; their velocities are held")
+        for key, message in out.samples:
+            publisher = self._publishers.get(key)
+            if publisher is None:
+                publisher = self._publishers[key] = self.own(self.bus.stream_publisher(key))
+            publisher.put(codec.encode(message))
+        self.stats["published"] += len(out.samples)
+        for key, message in out.events:
+            self.bus.put(key, message)
+        self.stats["events"] += len(out.events)
+
+    # -- robots -----------------------------------------------------------------------
+
+    def _learn(self, robot: str, info: dict[str, Any]) -> None:
+        if robot in self.robot_features:
+            return
+        cfg: FeaturesConfig = self.config
+        try:
+            described = table.describe(robot, info)
+        except ValueError as exc:
+            self._warn("info", f"{robot}: no features: {exc}")
+            return
+        if described.arms is None and (cfg.publishes("hand") or cfg.publishes("hand_speed")):
+            log.warning("%s: %s: hand positions unavailable: %s", self.name, robot, described.unavailable)
+        reply = catalog.derived(described, cfg, {"host": self.bus.host, "node": self.name})
+        payload, where = codec.encode(reply), keys.derived_info(robot)
+        self.own(self.bus.serve(where, lambda query: query.reply(where, payload, encoding=codec.ENCODING)))
+        self.robot_features[robot] = RobotFeatures(described, cfg)
+        log.info("%s: %s (model '%s'): %d joints, %d derived keys", self.name, robot, described.model,
+                 len(described.joints), len(reply["derived"]))
+
+    def _warn(self, kind: str, message: str) -> None:
+        now = time.monotonic()
+        if now - self._last_warning.get(kind, -math.inf) >= WARN_EVERY_S:
+            self._last_warning[kind] = now
+            log.warning("%s: %s (%s)", self.name, message, ", ".join(f"{k} {v}" for k, v in self.stats.items() if v))

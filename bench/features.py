@@ -1,0 +1,133 @@
+"""Cost of the features processor per Pepper frame at 100 Hz, beside a baseline.
+
+- per frame, no bus: N synthetic Pepper frames (17 joints moving, 100 Hz) go
+  through what the processor does for each frame — decode the 17 msgpack
+  samples, reassemble the frame, compute every feature (velocity, hands, hand
+  speeds, QoM, onsets), encode the 26 derived samples — timed per frame.
+  Baseline, same run: only decoding the 17 samples.
+- on the bus: a simulated Pepper at 100 frames/s and the ``features`` node in
+  this process, connected over loopback; CPU time of the node's worker thread
+  (it also hands the samples to Zenoh) over the run, as % of one core.
+
+    .venv/bin/python bench/features.py [--frames 20000] [--seconds 10]
+
+Writes bench/results/features.json and prints a table.
+"""
+
+from __future__ import annotations
+
+import argparse
+import gc
+import os
+import threading
+import time
+
+import numpy as np
+from common import free_port, write
+
+from sonibus.adapters.features import Features, FeaturesConfig
+from sonibus.adapters.features.compute import RobotFeatures
+from sonibus.adapters.features.table import describe
+from sonibus.adapters.sim import SimConfig, SimRobot
+from sonibus.bus import Bus, BusConfig, codec, keys, load_model, open_session, robot_info, send_command
+from sonibus.bus.frames import FrameAssembler
+
+RATE_HZ = 100.0
+MODEL = load_model("pepper")
+
+
+def frames(n: int) -> list[list[tuple[str, bytes]]]:
+    """``n`` frames of encoded joint samples: every joint swinging around the middle of its range."""
+    t0 = time.time()
+    out = []
+    for k in range(n):
+        t = t0 + k / RATE_HZ
+        frame = []
+        for i, joint in enumerate(MODEL.joints):
+            middle, half = (joint.min + joint.max) / 2, (joint.max - joint.min) / 2
+            value = middle + 0.3 * half * np.sin(2 * np.pi * 0.5 * (t - t0) + i)
+            frame.append((keys.joint("pepper", joint.name), codec.encode({"t": t, "seq": k, "v": float(value)})))
+        out.append(frame)
+    return out
+
+
+def per_frame(data: list[list[tuple[str, bytes]]], features: bool) -> list[float]:
+    """Seconds per frame for decoding only, or for the processor's whole per-frame work."""
+    info = {"model": "pepper", "joints": [j.to_info() for j in MODEL.joints]}
+    robot = RobotFeatures(describe("pepper", info), FeaturesConfig())
+    assembler = FrameAssembler()
+    times = []
+    gc.disable()
+    for frame in data:
+        started = time.perf_counter()
+        for key, payload in frame:
+            t, seq, values = codec.sample_values(codec.decode(payload))
+            if features:
+                for done in assembler.add("pepper", key, seq, t, values[0]):
+                    out = robot.step(done.t, done.seq, done.values)
+                    for _, message in out.samples:
+                        codec.encode(message)
+        times.append(time.perf_counter() - started)
+    gc.enable()
+    return times[100:]  # warm caches first
+
+
+def stats(seconds: list[float]) -> dict[str, float]:
+    a = np.array(seconds) * 1e6
+    return {"frames": len(a), "p50_us": float(np.percentile(a, 50)), "p99_us": float(np.percentile(a, 99)),
+            "mean_us": float(a.mean()), "cpu_percent_at_100hz": float(a.mean() * RATE_HZ / 1e4)}
+
+
+def on_bus(seconds: float) -> dict[str, float]:
+    """The features node's worker thread CPU time while a simulated Pepper streams at 100 Hz."""
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    robot_session = open_session(BusConfig(multicast=False, listen=(endpoint,)))
+    node_session = open_session(BusConfig(multicast=False, connect=(endpoint,)))
+    sim = SimRobot(SimConfig(robot="pepper", rate_hz=RATE_HZ, idle=True), name="sim-pepper")
+    node = Features(FeaturesConfig(robots="pepper"), name="features")
+    try:
+        sim.start(Bus(robot_session))
+        node.start(Bus(node_session))
+        bus = Bus(node_session, node="bench")
+        while robot_info(bus, "pepper", timeout=0.5) is None or "pepper" not in node.robot_features:
+            time.sleep(0.05)
+        send_command(bus, "pepper", "behavior/run", {"name": "animations/Stand/Gestures/Enthusiastic_4"})
+        time.sleep(1.0)  # the frames queued while the node learned the robot are behind it
+        worker = next(t for t in threading.enumerate() if t.name == "features:features")  # decode, compute, publish
+        clock = time.pthread_getcpuclockid(worker.ident)
+        cpu0, wall0, frames0 = time.clock_gettime(clock), time.monotonic(), node.stats["frames"]
+        time.sleep(seconds)
+        cpu, wall, done = time.clock_gettime(clock) - cpu0, time.monotonic() - wall0, node.stats["frames"] - frames0
+    finally:
+        node.stop()
+        sim.stop()
+        node_session.close()
+        robot_session.close()
+    return {"seconds": wall, "frames": done, "frames_per_s": done / wall, "cpu_percent": 100 * cpu / wall,
+            "cpu_us_per_frame": 1e6 * cpu / max(done, 1)}
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--frames", type=int, default=20_000)
+    parser.add_argument("--seconds", type=float, default=10.0)
+    args = parser.parse_args()
+    machine = f"{os.cpu_count()} cores, load {os.getloadavg()[0]:.2f}"
+    data = frames(args.frames + 100)
+    base, full = stats(per_frame(data, False)), stats(per_frame(data, True))
+    bus = on_bus(args.seconds)
+    result = {"model": "pepper", "joints": len(MODEL.joints), "rate_hz": RATE_HZ, "machine": machine,
+              "decode_only": base, "features": full, "ratio_p50": full["p50_us"] / base["p50_us"],
+              "ratio_p99": full["p99_us"] / base["p99_us"], "on_bus": bus}
+    print(f"{'per frame':<12} {'p50 µs':>8} {'p99 µs':>8} {'CPU % @100 Hz':>14}")
+    for name, row in (("decode only", base), ("features", full)):
+        print(f"{name:<12} {row['p50_us']:>8.0f} {row['p99_us']:>8.0f} {row['cpu_percent_at_100hz']:>14.2f}")
+    print(f"ratio p50 {result['ratio_p50']:.1f}, p99 {result['ratio_p99']:.1f}")
+    print(f"on the bus: {bus['frames_per_s']:.1f} frames/s, worker thread {bus['cpu_percent']:.1f} % of a core "
+          f"({bus['cpu_us_per_frame']:.0f} µs/frame)")
+    write("features", result)
+    print(machine)
+
+
+if __name__ == "__main__":
+    main()

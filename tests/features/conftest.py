@@ -1,0 +1,68 @@
+"""What the features tests share: a robot's info, a fake owner that publishes
+exactly the frames a test wants, and synthetic trajectories."""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterator, Mapping
+from typing import Any
+
+import numpy as np
+import pytest
+
+from sonibus.bus import codec, keys, load_model
+
+T0 = 1_700_000_000.0  # frames carry UNIX times
+
+
+def model_info(model: str, robot: str | None = None) -> dict[str, Any]:
+    """``<robot>/info`` as a robot owner of ``model`` serves it (the parts the processor reads)."""
+    return {"robot": robot or model, "model": model, "rate_hz": 100.0,
+            "joints": [j.to_info() for j in load_model(model).joints]}
+
+
+class FakeOwner:
+    """Serves ``<robot>/info`` and publishes joint frames as a test writes them."""
+
+    def __init__(self, bus: Any, robot: str, info: dict[str, Any]) -> None:
+        self.bus, self.robot, self.seq = bus, robot, 0
+        payload = codec.encode(info)
+        self.queryable = bus.serve(keys.info(robot), lambda q: q.reply(keys.info(robot), payload,
+                                                                       encoding=codec.ENCODING))
+        self._publishers: dict[str, Any] = {}
+
+    def frame(self, t: float, positions: Mapping[str, Any], seq: int | None = None) -> int:
+        """One frame: every joint of ``positions`` at ``t`` (values may be NaN); returns its seq."""
+        self.seq = self.seq + 1 if seq is None else seq
+        for joint, value in positions.items():
+            key = keys.joint(self.robot, joint)
+            if key not in self._publishers:
+                self._publishers[key] = self.bus.session.declare_publisher(key)
+            self._publishers[key].put(codec.encode({"t": t, "seq": self.seq, "v": value}))
+        return self.seq
+
+    def close(self) -> None:
+        self.queryable.undeclare()
+        for publisher in self._publishers.values():
+            publisher.undeclare()
+
+
+@pytest.fixture
+def owner(net) -> Iterator[Callable[..., FakeOwner]]:
+    made: list[FakeOwner] = []
+
+    def make(robot: str, info: dict[str, Any]) -> FakeOwner:
+        made.append(FakeOwner(net.bus(f"owner-{robot}"), robot, info))
+        return made[-1]
+
+    yield make
+    for fake in made:
+        fake.close()
+
+
+def gesture(t: np.ndarray, start: float, duration: float, amplitude: float) -> np.ndarray:
+    """A smooth out-and-back movement (raised cosine) from ``start``, lasting ``duration``."""
+    x = np.clip((t - start) / duration, 0.0, 1.0)
+    return amplitude * 0.5 * (1.0 - np.cos(2.0 * np.pi * x))
+
+
+from ..midi.conftest import jack, reader  # noqa: E402, F401  (JACK fixtures for the MIDI sink test)

@@ -1,0 +1,194 @@
+"""The ``features`` processor on a real bus: derived values with their frame's
+``t`` and ``seq``, motion events from a simulated behavior, ``<robot>/info/derived``,
+an unknown model, and bad input."""
+
+from __future__ import annotations
+
+import logging
+import math
+import threading
+
+import pytest
+
+from sonibus import schemas
+from sonibus.adapters.features import Features, FeaturesConfig
+from sonibus.bus import ConfigError, decode, encode, keys, load_model, robot_info, send_command
+from sonibus.bus.info import InfoRequests
+
+from ..conftest import wait_for
+from .conftest import T0, model_info
+
+HEY = "animations/Stand/Gestures/Hey_1"
+PEPPER = load_model("pepper")
+
+
+def start(net, **options) -> Features:
+    return net.start(Features(FeaturesConfig(**options), name="features"))
+
+
+def collect(bus, pattern: str) -> tuple[object, list[tuple[str, dict]]]:
+    """Every message on ``pattern`` as (key, decoded message), gathered as it comes."""
+    got: list[tuple[str, dict]] = []
+    lock = threading.Lock()
+
+    def take(sample) -> None:
+        with lock:
+            got.append((str(sample.key_expr), decode(sample.payload.to_bytes())))
+
+    return bus.session.declare_subscriber(keys.expr(pattern), take), got
+
+
+def test_derived_values_carry_their_frames_t_and_seq(net):
+    watch = net.bus("watch")
+    joints_sub, joints = collect(watch, "pepper/joints/HeadYaw")
+    derived_sub, derived = collect(watch, "pepper/derived/**")
+    net.sim("pepper", rate_hz=50)
+    start(net, robots="pepper")
+    wait_for(lambda: robot_info(watch, "pepper", timeout=0.5), what="pepper/info")
+    send_command(watch, "pepper", "behavior/run", {"name": HEY})
+    expected = {*(f"pepper/derived/velocity/{j}" for j in PEPPER.joint_names),
+                *(f"pepper/derived/{f}/{s}" for f in ("hand", "hand_speed") for s in "LR"),
+                *(f"pepper/derived/qom/{c}" for c in ("Head", "LArm", "Leg", "RArm", "Body"))}
+    wait_for(lambda: {k for k, _ in list(derived)} == expected
+             and any(k.endswith("qom/RArm") and m["v"] > 1.0 for k, m in list(derived)),
+             what="every derived key, and the right arm moving")
+    joints_sub.undeclare()
+    derived_sub.undeclare()
+    frames = {m["seq"]: m["t"] for _, m in joints}
+    checked = 0
+    for key, message in derived:
+        schemas.validate("derived_sample", message)
+        if message["seq"] in frames:
+            assert message["t"] == frames[message["seq"]], key
+            checked += 1
+        size = 3 if "/hand/" in key else 1
+        assert (len(message["v"]) if isinstance(message["v"], list) else 1) == size, key
+    assert checked >= 0.9 * len(derived)
+    hand = [m["v"] for k, m in derived if k == "pepper/derived/hand/R"]
+    assert all(-0.6 < x < 0.6 for v in hand for x in v)
+
+
+def test_a_behavior_gives_one_onset_and_one_offset_for_the_arm_that_moves(net):
+    watch = net.bus("watch")
+    subscriber, events = collect(watch, "pepper/events/*")
+    net.sim("pepper", rate_hz=50)
+    features = start(net, robots="pepper")
+    wait_for(lambda: features.stats["frames"] > 10, what="frames processed")
+    send_command(watch, "pepper", "behavior/run", {"name": HEY})
+
+    def motion(chain: str) -> list[dict]:
+        return [m for k, m in list(events) if k == "pepper/events/motion" and m["chain"] == chain]
+
+    wait_for(lambda: [m["state"] for m in motion("RArm")] == ["onset", "offset"], timeout=8,
+             what="the right arm's onset and offset")
+    stopped = wait_for(lambda: [m for k, m in list(events) if k == "pepper/events/behavior"
+                                and m["state"] == "stopped"], what="the behavior's end")
+    subscriber.undeclare()
+    started = next(m for k, m in events if k == "pepper/events/behavior" and m["state"] == "started")
+    onset, offset = motion("RArm")
+    assert started["t"] - 0.05 <= onset["t"] <= started["t"] + 0.4
+    assert stopped[0]["t"] - 0.6 <= offset["t"] <= stopped[0]["t"] + 0.5
+    assert motion("LArm") == [] and motion("Leg") == []
+    for _, message in events:
+        schemas.validate("event", message)
+
+
+def test_info_derived_is_served_and_merged_into_the_robots_info(net):
+    net.sim("pepper", rate_hz=50)
+    start(net, robots="pepper")
+    watch = net.bus("watch")
+    reply = wait_for(lambda: watch.query(keys.derived_info("pepper"), timeout=0.5), what="pepper/info/derived")[0]
+    schemas.validate("derived_info", reply)
+    assert "unavailable" not in reply
+    entries = {d["name"]: d for d in reply["derived"]}
+    assert entries["velocity/RHand"]["unit"] == "1/s" and entries["velocity/HeadYaw"]["unit"] == "rad/s"
+    assert entries["hand/R"]["box"]["min"][2] < -0.2 < 0.4 < entries["hand/R"]["box"]["max"][2]
+    assert entries["qom/Body"]["max"] == pytest.approx(sum(j.max_velocity for j in PEPPER.joints if j.unit == "rad"))
+    assert reply["events"]["motion"]["chains"] == ["Head", "LArm", "Leg", "RArm"]
+
+    answers: list[tuple[str, dict]] = []
+    requests = InfoRequests(watch, lambda robot, info: answers.append((robot, info)), lambda robot, text: None)
+    ghost = watch.serve(keys.derived_info("ghost"), lambda q: q.reply(keys.derived_info("ghost"), encode(reply)))
+    requests.ask("ghost")        # derived values but no owner: no answer at all
+    requests.ask("pepper")
+    wait_for(lambda: answers, what="pepper's merged info")
+    ghost.undeclare()
+    (robot, info), = answers
+    schemas.validate("robot_info", info)
+    assert robot == "pepper" and info["model"] == "pepper"
+    assert {d["name"] for d in info["derived"]} == set(entries)
+
+
+def pump(fake, values, until, what: str, timeout: float = 5.0) -> int:
+    """Publish frames (one per poll, 10 ms apart in ``t``) until ``until()``; returns the last seq."""
+    def step():
+        seq = fake.seq + 1
+        fake.frame(T0 + seq * 0.01, values(seq))
+        return until()
+    wait_for(step, timeout=timeout, what=what)
+    return fake.seq
+
+
+def test_an_unknown_model_gets_velocity_and_qom_and_is_told_why_not_hands(net, owner, caplog):
+    caplog.set_level(logging.INFO, logger="sonibus.adapters.features")
+    joints = [{"name": "Neck", "unit": "rad", "min": -1.0, "max": 1.0, "max_velocity": 2.0, "chain": "Head"},
+              {"name": "Elbow", "unit": "rad", "min": -2.0, "max": 2.0, "max_velocity": 4.0, "chain": "Arm"},
+              {"name": "Grip", "unit": "fraction", "min": 0.0, "max": 1.0, "max_velocity": 1.0, "chain": "Arm"}]
+    fake = owner("bot", {"robot": "bot", "model": "robbie", "rate_hz": 100.0, "joints": joints})
+    features = start(net, robots="bot")
+    watch = net.bus("watch")
+    subscriber, derived = collect(watch, "bot/derived/**")
+    expected = {"bot/derived/velocity/Neck", "bot/derived/velocity/Elbow", "bot/derived/velocity/Grip",
+                "bot/derived/qom/Head", "bot/derived/qom/Arm", "bot/derived/qom/Body"}
+    pump(fake, lambda k: {"Neck": 0.0, "Elbow": 0.5 * math.sin(k * 0.05), "Grip": 0.5},
+         lambda: {k for k, _ in list(derived)} == expected and features.stats["frames"] >= 20, "velocity and QoM")
+    subscriber.undeclare()
+    assert {k for k, _ in derived} == expected  # no hands
+    assert max(m["v"] for k, m in derived if k == "bot/derived/qom/Arm") > 0.05
+    reply = watch.query(keys.derived_info("bot"))[0]
+    schemas.validate("derived_info", reply)
+    reason = "no kinematics for model 'robbie'"
+    assert reply["unavailable"] == {"hand": reason, "hand_speed": reason}
+    warnings = [r.getMessage() for r in caplog.records if r.levelno == logging.WARNING]
+    assert warnings == [f"features: bot: hand positions unavailable: {reason}"]
+
+
+def test_nan_missing_joints_and_garbage_are_counted_not_fatal(net, owner, caplog):
+    caplog.set_level(logging.WARNING, logger="sonibus.adapters.features")
+    fake = owner("pepper", model_info("pepper"))
+    features = start(net, robots="pepper")
+    watch = net.bus("watch")
+    subscriber, derived = collect(watch, "pepper/derived/velocity/HeadYaw")
+    pose = PEPPER.posture("StandInit")
+    pump(fake, lambda k: pose, lambda: features.stats["frames"] >= 5, "the first frames")
+
+    def broken(k: int) -> dict:
+        if k % 3 == 0:
+            return {**pose, "HeadYaw": math.nan}
+        if k % 3 == 1:
+            return {j: v for j, v in pose.items() if j != "RHand"}
+        fake.bus.session.put("pepper/joints/HeadPitch", b"\xc1 not msgpack")
+        return pose
+
+    pump(fake, broken, lambda: min(features.stats[s] for s in ("nan", "missing", "bad")) >= 5, "bad input counted")
+    before = len(derived)
+    pump(fake, lambda k: {**pose, "HeadYaw": 0.001 * k}, lambda: len(derived) > before + 5, "values after bad input")
+    subscriber.undeclare()
+    assert features.state == "running"
+    assert all(math.isfinite(m["v"]) for _, m in derived)
+    warned = [r.getMessage() for r in caplog.records if r.levelno == logging.WARNING]
+    assert len([w for w in warned if "lacks" in w]) == 1, warned   # at most one every 10 s
+    assert len([w for w in warned if "skipped" in w]) == 1, warned
+
+
+@pytest.mark.parametrize(("options", "fragment"), [
+    ({"robots": "pepper/joints"}, "not a robot name"),
+    ({"features": ("velocity", "speed")}, "'speed' is unknown"),
+    ({"features": ()}, "is empty"),
+    ({"onset": 0.2, "offset": 0.3}, "below onset"),
+    ({"cutoff_hz": 0.0}, "key 'cutoff_hz'"),
+    ({"weights": {"HeadYaw": -1.0}}, "HeadYaw = -1.0"),
+])
+def test_bad_options_are_config_errors(options, fragment):
+    with pytest.raises(ConfigError, match=fragment):
+        FeaturesConfig(**options)

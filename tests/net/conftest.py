@@ -1,0 +1,47 @@
+"""Fixtures of the multi-host tests: a ``Topology`` of network namespaces per test,
+stale namespaces of crashed runs removed once per session, and the figures the
+tests measured (loss detection, reconnection, bursts) printed at the end."""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+
+import pytest
+
+from .netns import Topology, remove_stale, root_reason
+
+FIGURES: list[str] = []
+
+
+@pytest.fixture(scope="session")
+def _stale_removed() -> None:
+    if root_reason() is None:
+        remove_stale()
+
+
+@pytest.fixture
+def topology(_stale_removed: None) -> Iterator[Topology]:
+    reason = root_reason()
+    if reason is not None:
+        pytest.skip(reason)
+    topo = Topology()
+    try:
+        yield topo
+    finally:
+        topo.close()
+
+
+@pytest.fixture
+def figure(request: pytest.FixtureRequest):
+    """``figure("loss detected", 1.62, "s")``: a measured value, shown in the summary."""
+    def record(name: str, value: float, unit: str = "") -> None:
+        shown = f"{value:.3f}" if isinstance(value, float) else str(value)
+        FIGURES.append(f"{request.node.name}: {name}: {shown}{f' {unit}' if unit else ''}")
+    return record
+
+
+def pytest_terminal_summary(terminalreporter: pytest.TerminalReporter) -> None:
+    if FIGURES:
+        terminalreporter.section("multi-host figures")
+        for line in FIGURES:
+            terminalreporter.write_line(line)
