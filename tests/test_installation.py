@@ -192,3 +192,22 @@ def test_the_three_machine_example_lets_only_the_control_machine_command(spawn):
     assert "owns pepper" in seen.stdout, "the sound machine still sees the robot and its data"
     stranger = run_cli("nodes", "--config", show, "--host", "visitor", "--connect", endpoint, "--no-multicast")
     assert "0 robot(s)" in stranger.stdout, "a machine without a user of users.txt does not join"
+
+
+def test_when_one_robot_leaves_the_other_keeps_playing(net):
+    receiver = Datagrams()
+    try:
+        net.start(OscSink(OscSinkConfig(subscribe=("*/joints/HeadYaw", "*/events/*"), targets=(receiver.target,)),
+                          name="sound"))
+        pepper = net.sim("pepper", rate_hz=20)
+        net.sim("nao", rate_hz=20)
+        wait_for(lambda: any(d.startswith(b"/nao/joints/") for d in receiver.data()), what="nao")
+        pepper.stop()
+        wait_for(lambda: any(d.startswith(b"/pepper/events/connection") and b"lost" in d for d in receiver.data()),
+                 what="pepper lost")
+        after = len(receiver.data())
+        wait_for(lambda: sum(d.startswith(b"/nao/joints/") for d in receiver.data()[after:]) >= 10,
+                 what="nao still streaming")
+        assert not any(d.startswith(b"/nao/events/connection") and b"lost" in d for d in receiver.data())
+    finally:
+        receiver.close()

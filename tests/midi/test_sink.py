@@ -139,3 +139,20 @@ def test_a_hardware_port_warns_of_too_many_messages(net, fake, jack, caplog):
 def test_bad_options_name_the_key(options, message):
     with pytest.raises(ConfigError, match=message):
         MidiSinkConfig(**options)
+
+
+def test_a_robot_that_leaves_the_bus_silences_its_notes(net, reader):
+    """No `connection` event from anyone: the robot's owner just vanishes (a crash, a cut
+    link); the sink learns it from liveliness and sends all-notes-off."""
+    from sonibus.bus import robot_info, send_command
+
+    sink(net)
+    midi = reader("daw:sonibus")
+    robot = net.sim("pepper", rate_hz=20)
+    bus = net.bus("cmd")
+    wait_for(lambda: robot_info(bus, "pepper", timeout=0.5), what="pepper/info")
+    wait_for(lambda: midi.cc(1, 20), what="pepper's joints on channel 1")
+    send_command(bus, "pepper", "behavior/run", {"name": "animations/Stand/Gestures/Hey_1"})
+    wait_for(lambda: any(m[0] == 0x90 for m in midi.messages), what="the behavior's note on")
+    robot.stop()
+    wait_for(lambda: [0xB0, 123, 0] in midi.messages, what="all notes off when pepper leaves")
