@@ -6,7 +6,7 @@ process 2 the OSC sink (extra args t and seq), process 3 receives. Baseline:
 one process sends the same messages (same rate, same t/seq args) straight to
 the receiver. Latency = arrival time − t (one host, one clock).
 
-    .venv/bin/python bench/osc_latency.py [--robots 2] [--rate 100] [--seconds 10]
+    .venv/bin/python bench/osc_latency.py [--robots 1,2,10] [--rate 100] [--seconds 10]
 
 Writes bench/results/osc_latency.json and prints a table.
 """
@@ -88,7 +88,7 @@ def baseline(port: int, robots: int, rate: float, seconds: float) -> None:
         time.sleep(max(0.0, start + frame * period - time.monotonic()))
 
 
-def measure(path: str, robots: int, rate: float, seconds: float) -> dict[str, float]:
+def measure(path: str, robots: int, rate: float, seconds: float, options: str = "") -> dict[str, float]:
     port = free_port(socket.SOCK_DGRAM)
     ready, out = multiprocessing.Event(), multiprocessing.Queue()
     receiver = multiprocessing.Process(target=receive, args=(port, seconds + 2.0, ready, out))
@@ -104,7 +104,7 @@ def measure(path: str, robots: int, rate: float, seconds: float) -> dict[str, fl
             nodes = "".join(f'[nodes.robot{r}]\nadapter = "sim"\nrobot = "robot{r}"\nmodel = "pepper"\n'
                             f'rate_hz = {rate}\nidle = true\n\n' for r in range(robots))
             config.write_text(
-                f'[bus]\nmulticast = false\n\n{nodes}'
+                f'[bus]\nmulticast = false\n{options}\n\n{nodes}'
                 f'[nodes.sound]\nadapter = "osc"\nsubscribe = "*/joints/*"\n'
                 f'targets = ["127.0.0.1:{port}"]\nextra = ["t", "seq"]\n')
             robot_nodes = [f"robot{r}" for r in range(robots)]
@@ -112,7 +112,10 @@ def measure(path: str, robots: int, rate: float, seconds: float) -> dict[str, fl
                                               "--listen", f"tcp/127.0.0.1:{zport}"], stdout=subprocess.DEVNULL))
             children.append(subprocess.Popen([SONIBUS, "-v", "run", str(config), "--only", "sound",
                                               "--connect", f"tcp/127.0.0.1:{zport}"], stdout=subprocess.DEVNULL))
-            time.sleep(seconds)
+            time.sleep(1.0)  # start-up is not measured
+            before = [cpu_seconds(c.pid) for c in children]
+            time.sleep(seconds - 1.0)
+            cpu = [(cpu_seconds(c.pid) - b) / (seconds - 1.0) * 100 for c, b in zip(children, before, strict=True)]
     finally:
         for child in children:
             child.send_signal(signal.SIGINT)
@@ -122,7 +125,16 @@ def measure(path: str, robots: int, rate: float, seconds: float) -> dict[str, fl
     warmup = 1.0  # the first second: sessions connecting, caches filling
     if path != "baseline" and records:
         records = records[int(len(records) * warmup / seconds):]
-    return summarize(records, robots)
+    summary = summarize(records, robots)
+    if path != "baseline":
+        summary.update(cpu_robots_pct=cpu[0], cpu_sink_pct=cpu[1], cpu_sink_per_robot_pct=cpu[1] / robots)
+    return summary
+
+
+def cpu_seconds(pid: int) -> float:
+    """User + system CPU time of process ``pid`` so far (Linux /proc)."""
+    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
 
 
 def cpu_note() -> str:
@@ -131,18 +143,24 @@ def cpu_note() -> str:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--robots", type=int, default=2)
+    parser.add_argument("--robots", default="2", help="robot counts, comma-separated (e.g. 1,2,10)")
     parser.add_argument("--rate", type=float, default=100.0)
     parser.add_argument("--seconds", type=float, default=10.0)
+    parser.add_argument("--options", default="", help='extra [bus] TOML, e.g. options = {"a/b" = 1}')
     args = parser.parse_args()
-    before = cpu_note()
-    base = measure("baseline", args.robots, args.rate, args.seconds)
-    bus = measure("sonibus", args.robots, args.rate, args.seconds)
-    result = {"robots": args.robots, "joints": JOINTS, "rate_hz": args.rate, "seconds": args.seconds,
-              "machine": before, "baseline_no_bus": base, "sonibus": bus}
-    compare(result, base, bus, ["messages", "p50_us", "p99_us", "p999_us", "lost_messages"])
-    write("osc_latency", result)
-    print(before)
+    runs = []
+    for robots in (int(n) for n in args.robots.split(",")):
+        before = cpu_note()
+        base = measure("baseline", robots, args.rate, args.seconds)
+        bus = measure("sonibus", robots, args.rate, args.seconds, args.options)
+        result = {"robots": robots, "joints": JOINTS, "rate_hz": args.rate, "seconds": args.seconds,
+                  "machine": before, "baseline_no_bus": base, "sonibus": bus}
+        print(f"-- {robots} robot(s) x {JOINTS} joints x {args.rate:g} Hz ({before})")
+        compare(result, base, bus, ["messages", "p50_us", "p99_us", "p999_us", "lost_messages"])
+        print(f"CPU: robots {bus['cpu_robots_pct']:.1f} %, sink {bus['cpu_sink_pct']:.1f} % "
+              f"({bus['cpu_sink_per_robot_pct']:.1f} % per robot)")
+        runs.append(result)
+    write("osc_latency", {"runs": runs})
 
 
 if __name__ == "__main__":

@@ -45,8 +45,9 @@ def test_every_sample_is_in_the_file_in_order_and_schema_valid(recorded):
     for key, data in reference:
         seen[key].append(data)
     assert len(seen["pepper/joints/HeadYaw"]) >= 100
-    for key, data in seen.items():
-        assert by_key[key] == data, f"{key}: the file differs from what the bus carried"
+    for key, data in seen.items():  # the file may start a frame earlier: the watcher joined after the recorder
+        assert by_key[key][-len(data):] == data, f"{key}: the file differs from what the bus carried"
+        assert len(by_key[key]) - len(data) <= 2, f"{key}: the watcher saw much less than the file holds"
     joints = [k for k in by_key if "/joints/" in k]
     assert len(joints) == 17
     for key in joints:

@@ -1,0 +1,158 @@
+"""`make bench`: every benchmark in turn, then the summary table in
+docs/performance.md (between its `bench:begin` and `bench:end` marks), each
+sonibus figure beside its baseline from the same run and the goal.
+
+    .venv/bin/python bench/run.py [--only osc_latency sink_throughput ...] [--table-only]
+
+Each script writes bench/results/<name>.json; this file only runs them and
+reads what they wrote, so a script can also be run alone.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import subprocess
+import sys
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+HERE = Path(__file__).resolve().parent
+DOC = HERE.parent / "docs" / "performance.md"
+BEGIN, END = "<!-- bench:begin -->", "<!-- bench:end -->"
+
+# name → (arguments, time limit in s); together well under 10 minutes
+SCRIPTS: dict[str, tuple[list[str], float]] = {
+    "osc_latency": (["--robots", "1,2,10", "--seconds", "8"], 150),
+    "sink_throughput": ([], 120),
+    "naoqi_rate": ([], 90),
+    "midi_rate": ([], 90),
+    "recorder_rate": ([], 90),
+    "stop_latency": ([], 90),
+    "features": ([], 90),
+}
+
+
+def run(names: list[str]) -> dict[str, str]:
+    """Run the scripts; what happened to each ("ok", or why not)."""
+    outcome = {}
+    for name in names:
+        args, limit = SCRIPTS[name]
+        started = time.monotonic()
+        print(f"== {name} {' '.join(args)}", flush=True)
+        try:
+            done = subprocess.run([sys.executable, str(HERE / f"{name}.py"), *args], cwd=HERE, timeout=limit)
+            outcome[name] = "ok" if done.returncode == 0 else f"exit {done.returncode}"
+        except subprocess.TimeoutExpired:
+            outcome[name] = f"over its {limit:g} s limit"
+        print(f"== {name}: {outcome[name]} in {time.monotonic() - started:.0f} s", flush=True)
+    return outcome
+
+
+def result(name: str) -> dict[str, Any] | None:
+    path = HERE / "results" / f"{name}.json"
+    return json.loads(path.read_text()) if path.exists() else None
+
+
+def _us(value: float) -> str:
+    return f"{value:,.0f} µs" if value < 10_000 else f"{value / 1000:,.1f} ms"
+
+
+Row = tuple[str, str, str, str, str, str]  # scenario, sonibus, baseline, ratio, goal, met
+
+
+def rows_osc_latency(r: dict[str, Any]) -> list[Row]:
+    out = []
+    for run_ in r.get("runs", []):
+        bus, base, n = run_["sonibus"], run_["baseline_no_bus"], run_["robots"]
+        two = n == 2
+        met = bus["p50_us"] <= 2 * base["p50_us"] and bus["p99_us"] <= 500 and bus["lost_messages"] == 0
+        out.append((f"(a) {n} robot(s) × 17 × 100 Hz → OSC, p50 / p99",
+                    f"{_us(bus['p50_us'])} / {_us(bus['p99_us'])}, lost {bus['lost_messages']}",
+                    f"{_us(base['p50_us'])} / {_us(base['p99_us'])} (no bus)",
+                    f"{bus['p50_us'] / base['p50_us']:.1f}× / {bus['p99_us'] / base['p99_us']:.1f}×",
+                    "p50 ≤ 2×, p99 ≤ 0.5 ms, no loss" if two else "no loss" if n >= 10 else "",
+                    ("yes" if met else "no") if two else ("yes" if bus["lost_messages"] == 0 else "no")))
+        if "cpu_sink_per_robot_pct" in bus:
+            out.append((f"(a) OSC sink CPU per robot ({n} robot(s))", f"{bus['cpu_sink_per_robot_pct']:.1f} %",
+                        "", "", "≤ 2 % of a core", "yes" if bus["cpu_sink_per_robot_pct"] <= 2 else "no"))
+    return out
+
+
+def rows_naoqi_rate(r: dict[str, Any]) -> list[Row]:
+    out = []
+    for delay, runs in r.get("runs", {}).items():
+        bus, old = runs["sonibus_max"], runs["pepperosc_max"]
+        ratio = bus["rate_hz"] / old["rate_hz"]
+        out.append((f"(c) NAOqi frames/s, {delay.replace('_', ' ')}", f"{bus['rate_hz']:,.0f}/s",
+                    f"{old['rate_hz']:,.1f}/s (PepperOSC)", f"{ratio:.1f}×", "≥ 10×", "yes" if ratio >= 10 else "no"))
+        paced = runs["sonibus_100hz"]
+        out.append((f"(c) NAOqi jitter at 100 Hz, {delay.replace('_', ' ')}", f"p99 {paced['jitter_p99_ms']:.2f} ms",
+                    f"p99 {runs['pepperosc_100hz']['jitter_p99_ms']:.2f} ms (PepperOSC)", "", "p99 ≤ 1 ms",
+                    "yes" if paced["jitter_p99_ms"] <= 1 else "no"))
+    return out
+
+
+def rows_features(r: dict[str, Any]) -> list[Row]:
+    f, base = r["features"], r["decode_only"]
+    return [("features per Pepper frame, p50 / p99", f"{_us(f['p50_us'])} / {_us(f['p99_us'])}",
+             f"{_us(base['p50_us'])} / {_us(base['p99_us'])} (decode only)", f"{f['p50_us'] / base['p50_us']:.1f}×",
+             "", "")]
+
+
+def rows_generic(r: dict[str, Any]) -> list[Row]:
+    """Scripts that state their own summary rows: ``{"summary": [{scenario, sonibus, baseline, ...}]}``."""
+    return [(s["scenario"], s["sonibus"], s.get("baseline", ""), s.get("ratio", ""), s.get("goal", ""),
+             s.get("met", "")) for s in r.get("summary", [])]
+
+
+ROWS: dict[str, Callable[[dict[str, Any]], list[Row]]] = {
+    "osc_latency": rows_osc_latency, "naoqi_rate": rows_naoqi_rate, "features": rows_features,
+}
+
+
+def table() -> str:
+    lines = ["| scenario | sonibus | baseline, same run | ratio | goal | met |", "|---|---|---|---|---|---|"]
+    machines = set()
+    for name in SCRIPTS:
+        r = result(name)
+        if r is None:
+            lines.append(f"| {name} | not run | | | | |")
+            continue
+        machines.add(str(r.get("machine") or (r.get("runs") or [{}])[0].get("machine", "")))
+        for row in ROWS.get(name, rows_generic)(r):
+            lines.append("| " + " | ".join(row) + " |")
+    when = time.strftime("%Y-%m-%d %H:%M", time.localtime())
+    return "\n".join([f"Last `make bench`: {when}; {'; '.join(sorted(m for m in machines if m))}.", "", *lines])
+
+
+def update_doc() -> None:
+    text = DOC.read_text(encoding="utf-8")
+    block = f"{BEGIN}\n{table()}\n{END}"
+    if BEGIN in text and END in text:
+        text = text[:text.index(BEGIN)] + block + text[text.index(END) + len(END):]
+    else:
+        head, sep, rest = text.partition("\n## ")
+        text = f"{head}\n## Summary (`make bench`)\n\n{block}\n\n{sep.strip()} {rest}" if sep else f"{text}\n{block}\n"
+    DOC.write_text(text, encoding="utf-8")
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--only", nargs="+", choices=sorted(SCRIPTS), help="run only these")
+    parser.add_argument("--table-only", action="store_true", help="rewrite the table from the last results")
+    args = parser.parse_args()
+    started = time.monotonic()
+    outcome = {} if args.table_only else run(args.only or list(SCRIPTS))
+    update_doc()
+    print(table())
+    print(f"\n{DOC} updated in {time.monotonic() - started:.0f} s")
+    failed = {n: o for n, o in outcome.items() if o != "ok"}
+    if failed:
+        sys.exit(f"benchmarks that did not finish: {failed}")
+
+
+if __name__ == "__main__":
+    main()
