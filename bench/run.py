@@ -32,6 +32,7 @@ SCRIPTS: dict[str, tuple[list[str], float]] = {
     "recorder_rate": ([], 90),
     "stop_latency": ([], 90),
     "features": ([], 90),
+    "zenoh_hop": ([], 90),
 }
 
 

@@ -415,4 +415,5 @@ def console_main() -> None:
             raise KeyboardInterrupt
 
     signal.signal(signal.SIGTERM, terminate)
+    signal.signal(signal.SIGINT, terminate)  # also when started in the background, where SIGINT is ignored
     sys.exit(main(sys.argv[1:], env))

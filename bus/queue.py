@@ -27,7 +27,8 @@ class SampleQueue:
             if len(self._items) == self._items.maxlen:
                 self.dropped += 1
             self._items.append(item)
-            self._ready.notify()
+            if len(self._items) == 1:  # only an empty queue has someone to wake
+                self._ready.notify()
 
     def get(self, timeout: float | None = None) -> Any | None:
         """The oldest item, or None when closed or after ``timeout`` seconds."""
@@ -35,6 +36,16 @@ class SampleQueue:
             if not self._items and not self._closed:
                 self._ready.wait(timeout)
             return self._items.popleft() if self._items else None
+
+    def drain(self, timeout: float | None = None) -> list[Any]:
+        """Every item waiting (oldest first), waiting up to ``timeout`` for one: a
+        consumer that takes a frame's samples in one go wakes once, not per sample."""
+        with self._ready:
+            if not self._items and not self._closed:
+                self._ready.wait(timeout)
+            items = list(self._items)
+            self._items.clear()
+            return items
 
     def close(self) -> None:
         with self._ready:

@@ -93,9 +93,9 @@ class OscSink(Adapter):
 
     def _forward(self) -> None:
         while not self.stopping.is_set():
-            item = self._queue.get(timeout=self._wait())
+            items = self._queue.drain(timeout=self._wait())
             now = time.monotonic()
-            if item is not None:
+            for item in items:
                 self._take(*item, now)
             self._tick(now)
 

@@ -102,8 +102,7 @@ class Recorder(Adapter):
     def _write(self) -> None:
         try:
             while not self.stopping.is_set():
-                item = self._queue.get(timeout=0.2)
-                if item is not None:
+                for item in self._queue.drain(timeout=0.2):
                     self._record(*item)
                 self._report()
             while (item := self._queue.get(timeout=0)) is not None:  # what arrived before stop
