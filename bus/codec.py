@@ -3,10 +3,12 @@
 from __future__ import annotations
 
 import math
-from typing import Any
+from typing import Any, NamedTuple
 
 import msgpack
 import zenoh
+
+from .keys import Key
 
 ENCODING = zenoh.Encoding("application/msgpack")
 
@@ -46,6 +48,31 @@ def sample_values(message: dict[str, Any]) -> tuple[float, int, tuple[float, ...
     if not values or not all(number(v) for v in values):
         raise ValueError(f"v = {value!r} is not a number or a non-empty list of numbers")
     return float(t), seq, tuple(float(v) for v in values)
+
+
+class Incoming(NamedTuple):
+    """A message as a sink takes it: an event (``event`` set) or a sample (``t``, ``seq``, ``values``)."""
+
+    source: Key
+    event: dict[str, Any] | None = None
+    t: float = 0.0
+    seq: int = 0
+    values: tuple[float, ...] = ()
+
+
+BAD = (DecodeError, KeyError, TypeError, ValueError)  # what ``incoming`` raises for a bad message
+
+
+def incoming(key: str, payload: bytes, parsed: dict[str, Key]) -> Incoming:
+    """Decode what a sink received on ``key``; ``parsed`` caches the keys taken apart.
+    Raises one of ``BAD``, saying what is wrong."""
+    source = parsed.get(key)
+    if source is None:
+        source = parsed[key] = Key.parse(key)
+    message = decode(payload)
+    if source.section == "events":
+        return Incoming(source, message)
+    return Incoming(source, None, *sample_values(message))
 
 
 def number(value: Any) -> bool:

@@ -29,15 +29,17 @@ def free_port(kind: int = socket.SOCK_STREAM) -> int:
         return s.getsockname()[1]
 
 
-def wait_for(predicate: Callable[[], Any], timeout: float = 5.0, what: str = "condition") -> Any:
-    """Poll ``predicate`` until it returns something truthy; fail after ``timeout``."""
+def wait_for(predicate: Callable[[], Any], timeout: float = 5.0, what: str = "condition",
+             explain: Callable[[], str] | None = None) -> Any:
+    """Poll ``predicate`` until it returns something truthy; fail after ``timeout``
+    (with ``explain()`` in the message, if given)."""
     deadline = time.monotonic() + timeout
     while True:
         value = predicate()
         if value:
             return value
         if time.monotonic() > deadline:
-            pytest.fail(f"timed out after {timeout} s waiting for {what}")
+            pytest.fail(f"timed out after {timeout} s waiting for {what}" + (f"\n{explain()}" if explain else ""))
         time.sleep(0.01)
 
 

@@ -132,20 +132,16 @@ class MidiSink(Adapter):
             self._learn(*payload)
             return
         self.stats["received"] += 1
-        source = self._sources.get(key)
-        if source is None:
-            source = self._sources[key] = Key.parse(key)
         try:
-            message = codec.decode(payload)
-            if source.section == "events":
-                self._event(source, message)
-                return
-            if source.section not in ("joints", "derived"):
-                return
-            _, _, values = codec.sample_values(message)
-        except (codec.DecodeError, KeyError, TypeError, ValueError) as exc:
+            source, event, _, _, values = codec.incoming(key, payload, self._sources)
+        except codec.BAD as exc:
             self.stats["bad"] += 1
             self._warn("bad", f"sample on '{key}' not sent: {type(exc).__name__}: {exc}")
+            return
+        if event is not None:
+            self._event(source, event)
+            return
+        if source.section not in ("joints", "derived"):
             return
         robot = self._robot(source.robot)
         if not robot.known:

@@ -123,18 +123,14 @@ class OscSink(Adapter):
 
     def _take(self, key: str, payload: bytes, now: float) -> None:
         self.stats["received"] += 1
-        source = self._sources.get(key)
-        if source is None:
-            source = self._sources[key] = Key.parse(key)
         try:
-            message = codec.decode(payload)
-            if source.section == "events":
-                self._event(source, message)
-                return
-            t, seq, values = codec.sample_values(message)
-        except (codec.DecodeError, KeyError, TypeError, ValueError) as exc:
+            source, event, t, seq, values = codec.incoming(key, payload, self._sources)
+        except codec.BAD as exc:
             self.stats["bad"] += 1
             self._warn("bad", f"sample on '{key}' not sent: {type(exc).__name__}: {exc}")
+            return
+        if event is not None:
+            self._event(source, event)
             return
         max_age = self.config.max_age_ms / 1000.0
         if max_age and time.time() - t > max_age:

@@ -20,6 +20,7 @@ from typing import Any
 
 import pytest
 
+from ..conftest import wait_for
 from .netns import Host, Message, NsProcess, OscDump, Topology
 
 pytestmark = pytest.mark.external
@@ -61,14 +62,7 @@ def show(tmp_path: Path, text: str, name: str = "show.toml") -> str:
 
 def until(topology: Topology, predicate: Callable[[], Any], timeout: float, what: str) -> Any:
     """``predicate()`` once truthy; else fail, with what every process said."""
-    deadline = time.monotonic() + timeout
-    while True:
-        value = predicate()
-        if value:
-            return value
-        if time.monotonic() > deadline:
-            pytest.fail(f"timed out after {timeout} s waiting for {what}\n{topology.report()}")
-        time.sleep(0.01)
+    return wait_for(predicate, timeout, what, topology.report)
 
 
 def started(topology: Topology, process: NsProcess, marker: str = "sonibus: running", timeout: float = 20.0) -> None:
