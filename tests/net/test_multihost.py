@@ -73,6 +73,14 @@ def started(topology: Topology, process: NsProcess, marker: str = "sonibus: runn
         pytest.fail(f"{process.describe()}\n{topology.report()}")
 
 
+def run_show(topology: Topology, path: str, *hosts: Host) -> list[NsProcess]:
+    """``sonibus run FILE --host NAME`` on each of ``hosts``, once each has started."""
+    runs = [host.sonibus("run", path, "--host", host.name) for host in hosts]
+    for process in runs:
+        started(topology, process)
+    return runs
+
+
 def joint(dump: OscDump, robot: str = "pepper", name: str = "HeadYaw", since: float = 0.0) -> list[Message]:
     return [m for m in dump.messages(f"/{robot}/joints/{name}") if m.read >= since]
 
@@ -207,9 +215,7 @@ def test_two_subnets_joined_only_by_a_zenoh_router(topology, tmp_path):
         {SINK}
         """)
     dump = sound.oscdump()
-    runs = [robot.sonibus("run", path, "--host", "robot"), sound.sonibus("run", path, "--host", "sound")]
-    for process in runs:
-        started(topology, process)
+    run_show(topology, path, robot, sound)
     streaming(topology, dump)
 
     start = time.time()
@@ -247,10 +253,7 @@ def point_to_point(tmp_path: Path, robot: Host, extra: str = "", rate: int = RAT
 
 def start_pair(topology: Topology, path: str, robot: Host, sound: Host) -> tuple[OscDump, NsProcess, NsProcess]:
     dump = sound.oscdump()
-    robot_run = robot.sonibus("run", path, "--host", "robot")
-    sound_run = sound.sonibus("run", path, "--host", "sound")
-    for process in (robot_run, sound_run):
-        started(topology, process)
+    robot_run, sound_run = run_show(topology, path, robot, sound)
     streaming(topology, dump, count=RATE)  # a second of data
     return dump, robot_run, sound_run
 
@@ -348,9 +351,7 @@ def test_two_robots_on_two_hosts_reach_one_sink(topology, tmp_path):
         {SINK}
         """)
     dump = sound.oscdump()
-    runs = [host.sonibus("run", path, "--host", host.name) for host in (hosta, hostb, sound)]
-    for process in runs:
-        started(topology, process)
+    run_show(topology, path, hosta, hostb, sound)
     streaming(topology, dump, "pepper")
     streaming(topology, dump, "nao")
     assert {m.address for m in dump.messages() if "/joints/" in m.address} == \
@@ -474,9 +475,7 @@ def test_access_control_lets_control_command_and_sound_only_listen(topology, tmp
         {SINK}
         """)
     dump = sound.oscdump()
-    runs = [robot.sonibus("run", path, "--host", "robot"), sound.sonibus("run", path, "--host", "sound")]
-    for process in runs:
-        started(topology, process)
+    run_show(topology, path, robot, sound)
     streaming(topology, dump)  # the sound user gets data
     bus = ["--no-multicast", "--connect", endpoint]
 
