@@ -63,18 +63,21 @@ def check_replay_into_osc(net, tmp_path, spawn, clock):
     dump = start_sink(net, spawn, tmp_path, free_port(socket.SOCK_DGRAM), clock)
     path = tmp_path / "live.mcap"
     record_sim(net, path, frames=150)
-    with Recording(str(path)) as recording:  # the sink and the recorder both saw every frame from the first
-        sent = sum(recording.counts[k] for k in recording.keys if "/joints/" in k)
+    with Recording(str(path)) as recording:
+        recorded = sum(recording.counts[k] for k in recording.keys if "/joints/" in k)
     settle(lambda: len(forwarded(dump)))
-    live = forwarded(dump)
-    assert len(live) == sent, "the live run lost samples: the comparison needs all of them"
-    wait_for(lambda: len(clock.stamps) >= sent, what="the live samples at the clock socket")
+    # The robot starts right after the recorder: its first frame or two can leave before the
+    # recorder's subscription has reached it (the sink's, older, has). Past that: nothing lost.
+    everything = forwarded(dump)
+    assert 0 <= len(everything) - recorded <= 2 * 17, (len(everything), recorded)
+    live = everything[len(everything) - recorded:]
+    wait_for(lambda: len(clock.stamps) >= len(everything), what="the live samples at the clock socket")
     first_replayed = len(clock.stamps)
 
     result = run_cli("replay", str(path), *net.cli_args(), timeout=30)
     assert result.returncode == 0, result.stderr
     settle(lambda: len(forwarded(dump)))
-    replayed = forwarded(dump)[len(live):]
+    replayed = forwarded(dump)[len(everything):]
     assert [line.split(" ", 1)[1] for line in replayed] == [line.split(" ", 1)[1] for line in live]
 
     # Timing. A receiver that honours timetags (liblo, SuperCollider) plays each frame at
