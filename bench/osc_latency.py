@@ -50,10 +50,23 @@ def receive(port: int, seconds: float, ready: multiprocessing.Event, out: multip
         except TimeoutError:
             continue
         now = time.time()
-        address = data[:data.index(b"\0")]
-        t, seq = struct.unpack(">di", data[-12:])
-        records.append((address, seq, now - t))
+        for message in _messages(data):
+            address = message[:message.index(b"\0")]
+            t, seq = struct.unpack(">di", message[-12:])
+            records.append((address, seq, now - t))
     out.put(records)
+
+
+def _messages(data: bytes) -> list[bytes]:
+    """The OSC messages of a datagram: itself, or a bundle's elements."""
+    if not data.startswith(b"#bundle\0"):
+        return [data]
+    out, at = [], 16
+    while at < len(data):
+        size = struct.unpack(">i", data[at:at + 4])[0]
+        out.append(data[at + 4:at + 4 + size])
+        at += 4 + size
+    return out
 
 
 def summarize(records: list[tuple[bytes, int, float]], robots: int) -> dict[str, float]:
@@ -88,7 +101,8 @@ def baseline(port: int, robots: int, rate: float, seconds: float) -> None:
         time.sleep(max(0.0, start + frame * period - time.monotonic()))
 
 
-def measure(path: str, robots: int, rate: float, seconds: float, options: str = "") -> dict[str, float]:
+def measure(path: str, robots: int, rate: float, seconds: float, options: str = "",
+            sink: str = "") -> dict[str, float]:
     port = free_port(socket.SOCK_DGRAM)
     ready, out = multiprocessing.Event(), multiprocessing.Queue()
     receiver = multiprocessing.Process(target=receive, args=(port, seconds + 2.0, ready, out))
@@ -106,7 +120,7 @@ def measure(path: str, robots: int, rate: float, seconds: float, options: str = 
             config.write_text(
                 f'[bus]\nmulticast = false\n{options}\n\n{nodes}'
                 f'[nodes.sound]\nadapter = "osc"\nsubscribe = "*/joints/*"\n'
-                f'targets = ["127.0.0.1:{port}"]\nextra = ["t", "seq"]\n')
+                f'targets = ["127.0.0.1:{port}"]\nextra = ["t", "seq"]\n{sink}\n')
             robot_nodes = [f"robot{r}" for r in range(robots)]
             children.append(subprocess.Popen([SONIBUS, "run", str(config), "--only", *robot_nodes,
                                               "--listen", f"tcp/127.0.0.1:{zport}"], stdout=subprocess.DEVNULL))
@@ -147,12 +161,14 @@ def main() -> None:
     parser.add_argument("--rate", type=float, default=100.0)
     parser.add_argument("--seconds", type=float, default=10.0)
     parser.add_argument("--options", default="", help='extra [bus] TOML, e.g. options = {"a/b" = 1}')
+    parser.add_argument("--sink", default="", help='extra OSC sink TOML, e.g. "bundle = true"')
+    parser.add_argument("--name", default="osc_latency", help="results file name")
     args = parser.parse_args()
     runs = []
     for robots in (int(n) for n in args.robots.split(",")):
         before = cpu_note()
         base = measure("baseline", robots, args.rate, args.seconds)
-        bus = measure("sonibus", robots, args.rate, args.seconds, args.options)
+        bus = measure("sonibus", robots, args.rate, args.seconds, args.options, args.sink)
         result = {"robots": robots, "joints": JOINTS, "rate_hz": args.rate, "seconds": args.seconds,
                   "machine": before, "baseline_no_bus": base, "sonibus": bus}
         print(f"-- {robots} robot(s) x {JOINTS} joints x {args.rate:g} Hz ({before})")
@@ -160,7 +176,7 @@ def main() -> None:
         print(f"CPU: robots {bus['cpu_robots_pct']:.1f} %, sink {bus['cpu_sink_pct']:.1f} % "
               f"({bus['cpu_sink_per_robot_pct']:.1f} % per robot)")
         runs.append(result)
-    write("osc_latency", {"runs": runs})
+    write(args.name, {"runs": runs, "sink_options": args.sink})
 
 
 if __name__ == "__main__":

@@ -23,16 +23,18 @@ HERE = Path(__file__).resolve().parent
 DOC = HERE.parent / "docs" / "performance.md"
 BEGIN, END = "<!-- bench:begin -->", "<!-- bench:end -->"
 
-# name → (arguments, time limit in s); together well under 10 minutes
-SCRIPTS: dict[str, tuple[list[str], float]] = {
-    "osc_latency": (["--robots", "1,2,10", "--seconds", "8"], 150),
-    "sink_throughput": ([], 120),
-    "naoqi_rate": ([], 90),
-    "midi_rate": ([], 90),
-    "recorder_rate": ([], 90),
-    "stop_latency": ([], 90),
-    "features": ([], 90),
-    "zenoh_hop": ([], 90),
+# results name → (script, arguments, time limit in s); together well under 10 minutes
+SCRIPTS: dict[str, tuple[str, list[str], float]] = {
+    "osc_latency": ("osc_latency", ["--robots", "1,2,10", "--seconds", "8"], 150),
+    "osc_latency_bundles": ("osc_latency", ["--robots", "2,10", "--seconds", "8", "--sink", "bundle = true",
+                                            "--name", "osc_latency_bundles"], 120),
+    "sink_throughput": ("sink_throughput", [], 120),
+    "naoqi_rate": ("naoqi_rate", [], 90),
+    "midi_rate": ("midi_rate", [], 90),
+    "recorder_rate": ("recorder_rate", [], 90),
+    "stop_latency": ("stop_latency", [], 90),
+    "features": ("features", [], 90),
+    "zenoh_hop": ("zenoh_hop", [], 90),
 }
 
 
@@ -40,11 +42,11 @@ def run(names: list[str]) -> dict[str, str]:
     """Run the scripts; what happened to each ("ok", or why not)."""
     outcome = {}
     for name in names:
-        args, limit = SCRIPTS[name]
+        script, args, limit = SCRIPTS[name]
         started = time.monotonic()
-        print(f"== {name} {' '.join(args)}", flush=True)
+        print(f"== {name}: {script}.py {' '.join(args)}", flush=True)
         try:
-            done = subprocess.run([sys.executable, str(HERE / f"{name}.py"), *args], cwd=HERE, timeout=limit)
+            done = subprocess.run([sys.executable, str(HERE / f"{script}.py"), *args], cwd=HERE, timeout=limit)
             outcome[name] = "ok" if done.returncode == 0 else f"exit {done.returncode}"
         except subprocess.TimeoutExpired:
             outcome[name] = f"over its {limit:g} s limit"
@@ -66,18 +68,19 @@ Row = tuple[str, str, str, str, str, str]  # scenario, sonibus, baseline, ratio,
 
 def rows_osc_latency(r: dict[str, Any]) -> list[Row]:
     out = []
+    shape = f" ({r['sink_options']})" if r.get("sink_options") else ""
     for run_ in r.get("runs", []):
         bus, base, n = run_["sonibus"], run_["baseline_no_bus"], run_["robots"]
         two = n == 2
         met = bus["p50_us"] <= 2 * base["p50_us"] and bus["p99_us"] <= 500 and bus["lost_messages"] == 0
-        out.append((f"(a) {n} robot(s) × 17 × 100 Hz → OSC, p50 / p99",
+        out.append((f"(a) {n} robot(s) × 17 × 100 Hz → OSC{shape}, p50 / p99",
                     f"{_us(bus['p50_us'])} / {_us(bus['p99_us'])}, lost {bus['lost_messages']}",
                     f"{_us(base['p50_us'])} / {_us(base['p99_us'])} (no bus)",
                     f"{bus['p50_us'] / base['p50_us']:.1f}× / {bus['p99_us'] / base['p99_us']:.1f}×",
                     "p50 ≤ 2×, p99 ≤ 0.5 ms, no loss" if two else "no loss",
                     ("yes" if met else "no") if two else ("yes" if bus["lost_messages"] == 0 else "no")))
         if "cpu_sink_per_robot_pct" in bus:
-            out.append((f"(a) OSC sink CPU per robot ({n} robot(s))", f"{bus['cpu_sink_per_robot_pct']:.1f} %",
+            out.append((f"(a) OSC sink CPU per robot ({n} robot(s)){shape}", f"{bus['cpu_sink_per_robot_pct']:.1f} %",
                         "", "", "≤ 2 % of a core", "yes" if bus["cpu_sink_per_robot_pct"] <= 2 else "no"))
     return out
 
@@ -110,7 +113,8 @@ def rows_generic(r: dict[str, Any]) -> list[Row]:
 
 
 ROWS: dict[str, Callable[[dict[str, Any]], list[Row]]] = {
-    "osc_latency": rows_osc_latency, "naoqi_rate": rows_naoqi_rate, "features": rows_features,
+    "osc_latency": rows_osc_latency, "osc_latency_bundles": rows_osc_latency, "naoqi_rate": rows_naoqi_rate,
+    "features": rows_features,
 }
 
 
