@@ -71,7 +71,7 @@ class Adapter:
         try:
             node_key = keys.node_token(self._bus.host, self.name)
             self.own(self._bus.token(node_key))
-            self.own(self._bus.serve(node_key, lambda q: q.reply(q.key_expr, codec.encode(self.describe()),
+            self.own(self._bus.serve(node_key, lambda q: q.reply(node_key, codec.encode(self.describe()),
                                                                  encoding=codec.ENCODING)))
             self._start()
         except BaseException:

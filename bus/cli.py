@@ -70,10 +70,14 @@ COMMAND_GROUP = "sonibus.commands"
 
 
 def plugin_commands(wanted: str | None = None) -> dict[str, Command]:
-    """Installed subcommands by name (only ``wanted``, if given, is imported);
-    a broken one is logged and skipped. An entry point's name is its command's name."""
+    """Installed subcommands by name — only ``wanted`` is imported if it is one of
+    them, else all; a broken one is logged and skipped. An entry point's name is its
+    command's name."""
     found = {}
-    for ep in entry_points(group=COMMAND_GROUP):
+    installed = entry_points(group=COMMAND_GROUP)
+    if wanted not in installed.names:
+        wanted = None
+    for ep in installed:
         if wanted is not None and ep.name != wanted:
             continue
         try:
@@ -363,8 +367,7 @@ def main(argv: Sequence[str] | None = None, env: Environment | None = None) -> i
     logger.setLevel(logging.WARNING)
     try:
         word = _command_word(argv)
-        named = word in {ep.name for ep in entry_points(group=COMMAND_GROUP)}
-        extra = {} if word in COMMANDS else plugin_commands(word if named else None)
+        extra = {} if word in COMMANDS else plugin_commands(word)
         try:
             with contextlib.redirect_stdout(env.stdout), contextlib.redirect_stderr(env.stderr):
                 args = parser(extra).parse_args(argv)

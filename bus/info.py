@@ -57,7 +57,8 @@ class _Merge:
         if reply.ok is None:
             return
         key = str(reply.ok.key_expr)
-        main = key in (keys.info(self.robot), keys.info(self.robot) + "/**")  # owners reply on the query's key
+        # an owner answers on its own key, or (a common Zenoh idiom) on the query's
+        main = key in (keys.info(self.robot), keys.info(self.robot) + "/**")
         try:
             message = codec.decode(reply.ok.payload)
         except codec.DecodeError as exc:

@@ -102,7 +102,7 @@ class RobotAdapter(Adapter):
     # -- serving ----------------------------------------------------------------
 
     def _serve_info(self, query: zenoh.Query) -> None:
-        query.reply(query.key_expr, codec.encode(self.robot_info()), encoding=codec.ENCODING)
+        query.reply(keys.info(self.robot), codec.encode(self.robot_info()), encoding=codec.ENCODING)
 
     def _serve_command(self, query: zenoh.Query) -> None:
         verb = str(query.key_expr)[len(keys.command(self.robot, "")):]

@@ -111,8 +111,8 @@ class Replay(Adapter):
 
     @staticmethod
     def _info_server(info: dict[str, Any]) -> Callable[[zenoh.Query], None]:
-        payload = codec.encode(info)
-        return lambda query: query.reply(query.key_expr, payload, encoding=codec.ENCODING)
+        payload, key = codec.encode(info), keys.info(info["robot"])
+        return lambda query: query.reply(key, payload, encoding=codec.ENCODING)
 
     def _refuse(self, query: zenoh.Query) -> None:
         robot, _, verb = str(query.key_expr).partition("/cmd/")
