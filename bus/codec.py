@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Callable, Sequence
 from typing import Any, NamedTuple
 
 import msgpack
@@ -39,32 +40,62 @@ def decode(payload: bytes | zenoh.ZBytes | None) -> dict[str, Any]:
 def sample_values(message: dict[str, Any]) -> tuple[float, int, tuple[float, ...]]:
     """``t``, ``seq`` and the values (one float or more) of a joint or derived sample;
     ``KeyError``, ``TypeError`` or ``ValueError`` saying what is wrong."""
-    t, seq, value = message["t"], message["seq"], message["v"]
+    t, seq = stamp(message)
+    value = message["v"]
+    values = (value,) if number(value) else tuple(value) if isinstance(value, list | tuple) else ()
+    if not values or not all(number(v) for v in values):
+        raise ValueError(f"v = {value!r} is not a number or a non-empty list of numbers")
+    return t, seq, tuple(float(v) for v in values)
+
+
+def stamp(message: dict[str, Any]) -> tuple[float, int]:
+    """``t`` and ``seq`` of a sample or frame; ``KeyError``, ``TypeError`` or ``ValueError`` otherwise."""
+    t, seq = message["t"], message["seq"]
     if not number(t) or not math.isfinite(t):
         raise ValueError(f"t = {t!r} is not a finite time")
     if not isinstance(seq, int) or isinstance(seq, bool):
         raise TypeError(f"seq = {seq!r} is not an integer")
-    values = (value,) if number(value) else tuple(value) if isinstance(value, list | tuple) else ()
-    if not values or not all(number(v) for v in values):
-        raise ValueError(f"v = {value!r} is not a number or a non-empty list of numbers")
-    return float(t), seq, tuple(float(v) for v in values)
+    return float(t), seq
+
+
+def frame(t: float, seq: int, names: Sequence[str], values: Sequence[float],
+          extra: dict[str, Sequence[float]] | None = None) -> dict[str, Any]:
+    """A frame message (``<robot>/frame``): ``values`` and each ``extra`` quantity in the order of ``names``."""
+    return {"t": t, "seq": seq, "names": list(names), "v": list(values),
+            **{quantity: list(v) for quantity, v in (extra or {}).items()}}
+
+
+def frame_joints(message: dict[str, Any]) -> tuple[list[str], list[float]]:
+    """The joint names and positions of a frame (``names`` and ``v``, the same length)."""
+    names, values = message["names"], message["v"]
+    if not isinstance(names, list) or not isinstance(values, list) or len(names) != len(values):
+        raise ValueError("names and v are not two lists of the same length")
+    if not all(isinstance(n, str) and n and "/" not in n for n in names):
+        raise ValueError(f"names = {names!r} are not all joint names")
+    if not all(number(v) for v in values):
+        raise ValueError(f"v = {values!r} are not all numbers")
+    return names, values
 
 
 class Incoming(NamedTuple):
-    """A message as a sink takes it: an event (``event`` set) or a sample (``t``, ``seq``, ``values``)."""
+    """A message as a sink takes it: an event (``event`` set), a sample (``t``,
+    ``seq``, ``values``) or a frame (``t``, ``seq`` and its joint ``samples``)."""
 
     source: Key
     event: dict[str, Any] | None = None
     t: float = 0.0
     seq: int = 0
     values: tuple[float, ...] = ()
+    samples: tuple[Incoming, ...] = ()
 
 
 BAD = (DecodeError, KeyError, TypeError, ValueError)  # what ``incoming`` raises for a bad message
 
 
-def incoming(key: str, payload: bytes, parsed: dict[str, Key]) -> Incoming:
-    """Decode what a sink received on ``key``; ``parsed`` caches the keys taken apart.
+def incoming(key: str, payload: bytes, parsed: dict[str, Key],
+             accepts: Callable[[str], bool] = lambda key: True) -> Incoming:
+    """Decode what a sink received on ``key``; ``parsed`` caches the keys taken apart;
+    a frame keeps the joints ``accepts`` (see ``streams.Streams``).
     Raises one of ``BAD``, saying what is wrong."""
     source = parsed.get(key)
     if source is None:
@@ -72,6 +103,15 @@ def incoming(key: str, payload: bytes, parsed: dict[str, Key]) -> Incoming:
     message = decode(payload)
     if source.section == "events":
         return Incoming(source, message)
+    if source.section == "frame":
+        t, seq = stamp(message)
+        samples = []
+        for name, value in zip(*frame_joints(message), strict=True):
+            joint = f"{source.robot}/joints/{name}"
+            if accepts(joint):
+                parsed_joint = parsed.get(joint) or parsed.setdefault(joint, Key.parse(joint))
+                samples.append(Incoming(parsed_joint, None, t, seq, (float(value),)))
+        return Incoming(source, None, t, seq, (), tuple(samples))
     return Incoming(source, None, *sample_values(message))
 
 

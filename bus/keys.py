@@ -20,6 +20,11 @@ def joints(robot: str = "*") -> str:
     return f"{robot}/joints/*"
 
 
+def frame(robot: str = "*") -> str:
+    """Where a robot owner publishes each frame whole (every joint of one instant)."""
+    return f"{robot}/frame"
+
+
 def derived(robot: str, feature: str, name: str) -> str:
     return f"{robot}/derived/{feature}/{name}"
 

@@ -38,28 +38,37 @@ class Bus:
             key, encoding=codec.ENCODING, congestion_control=zenoh.CongestionControl.DROP,
             priority=zenoh.Priority.DATA_HIGH, express=False)
 
+    def frame_publisher(self, key: str) -> zenoh.Publisher:
+        """A publisher for one message per frame: like ``stream_publisher``, but
+        ``express`` (one sample per frame has nothing to batch with)."""
+        return self.session.declare_publisher(
+            key, encoding=codec.ENCODING, congestion_control=zenoh.CongestionControl.DROP,
+            priority=zenoh.Priority.DATA_HIGH, express=True)
+
     def put(self, key: str, message: dict[str, Any]) -> None:
         """Send one message reliably (events: low rate, must not be dropped)."""
         self.session.put(key, codec.encode(message), encoding=codec.ENCODING,
                          congestion_control=zenoh.CongestionControl.BLOCK)
 
     def subscribe(self, keyexpr: str, maxlen: int = 1024, queue: SampleQueue | None = None,
-                  stamped: bool = False) -> tuple[zenoh.Subscriber, SampleQueue]:
+                  stamped: bool = False, skip: Callable[[str], bool] | None = None,
+                  ) -> tuple[zenoh.Subscriber, SampleQueue]:
         """Samples of ``keyexpr`` as ``(key, payload bytes)`` in a bounded queue
         (``(key, payload, time.monotonic_ns())`` of arrival if ``stamped``).
 
         ``keyexpr`` may use globs inside a chunk (``pepper/joints/R*``); a bad one
-        raises ``ConfigError``. Pass ``queue`` to feed several subscriptions into one."""
+        raises ``ConfigError``. Pass ``queue`` to feed several subscriptions into one,
+        ``skip`` to leave out the keys it returns True for."""
         keyexpr = keys.expr(keyexpr)
         queue = queue if queue is not None else SampleQueue(maxlen)
 
         def enqueue(sample: zenoh.Sample) -> None:
-            queue.put((str(sample.key_expr), sample.payload.to_bytes()))
+            key = str(sample.key_expr)
+            if skip is None or not skip(key):
+                queue.put((key, sample.payload.to_bytes(), time.monotonic_ns()) if stamped
+                          else (key, sample.payload.to_bytes()))
 
-        def enqueue_stamped(sample: zenoh.Sample) -> None:
-            queue.put((str(sample.key_expr), sample.payload.to_bytes(), time.monotonic_ns()))
-
-        return self.session.declare_subscriber(keyexpr, enqueue_stamped if stamped else enqueue), queue
+        return self.session.declare_subscriber(keyexpr, enqueue), queue
 
     def serve(self, keyexpr: str, handler: Callable[[zenoh.Query], None]) -> zenoh.Queryable:
         return self.session.declare_queryable(keyexpr, handler)

@@ -46,6 +46,7 @@ class RobotAdapter(Adapter):
         self._claim()
         self._open()
         self._streams: dict[str, zenoh.Publisher] = {}
+        self._frames = self.own(self.bus.frame_publisher(keys.frame(self.robot)))
         for name in self.model.joint_names:
             self._joint_publisher(name)
         self.own(self.bus.serve(keys.info(self.robot), self._serve_info))
@@ -68,8 +69,13 @@ class RobotAdapter(Adapter):
     def publish_frame(self, t: float, seq: int, positions: Sequence[float], names: Sequence[str] | None = None,
                       extra: dict[str, Sequence[float]] | None = None) -> None:
         """One frame: ``positions`` in the order of ``names`` (default: the model's joints);
-        ``extra`` adds quantities (``cmd``, ``cur``, ``temp``) in the same order."""
-        for index, (name, value) in enumerate(zip(names or self.model.joint_names, positions, strict=True)):
+        ``extra`` adds quantities (``cmd``, ``cur``, ``temp``) in the same order.
+        Published whole on ``<robot>/frame``, then per joint."""
+        names = names or self.model.joint_names
+        if len(names) != len(positions) or any(len(v) != len(names) for v in (extra or {}).values()):
+            raise ValueError(f"{len(names)} joint names but {len(positions)} positions (or extras)")
+        self._frames.put(codec.encode(codec.frame(t, seq, names, positions, extra)))
+        for index, (name, value) in enumerate(zip(names, positions, strict=True)):
             sample = {"t": t, "seq": seq, "v": value}
             if extra:
                 for quantity, values in extra.items():

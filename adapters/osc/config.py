@@ -111,6 +111,7 @@ class OscSinkConfig(TargetSettings):
     targets: tuple[str | dict[str, Any], ...] = ("127.0.0.1:9000",)
     max_age_ms: float = 100.0      # drop samples older than this (0: keep all)
     queue: int = 8192              # samples buffered before the oldest are dropped
+    per_joint_keys: bool = False   # joints from <robot>/joints/* instead of <robot>/frame (bus/streams.py)
 
     def __post_init__(self) -> None:
         super().__post_init__()

@@ -17,6 +17,7 @@ from sonibus.bus.frames import Frame, FrameAssembler
 from sonibus.bus.info import InfoRequests
 from sonibus.bus.keys import Key
 from sonibus.bus.queue import SampleQueue
+from sonibus.bus.streams import Streams
 
 from .config import OscSinkConfig, Target, parse_target
 from .profiles import PROFILES
@@ -75,8 +76,7 @@ class OscSink(Adapter):
         self._frames = FrameAssembler()
         self._socket = self.own(socket.socket(socket.AF_INET, socket.SOCK_DGRAM))
         self._queue = self.own(SampleQueue(cfg.queue))
-        for pattern in cfg.subscribe:
-            self.own(self.bus.subscribe(pattern, queue=self._queue)[0])
+        self._streams = self.own(Streams(self.bus, cfg.subscribe, self._queue, per_joint_keys=cfg.per_joint_keys))
         self.own(presence.connection_events(self.bus, self._queue, cfg.subscribe))  # a robot's loss and return
         self.spawn(self._forward, "forward")
 
@@ -124,26 +124,33 @@ class OscSink(Adapter):
     def _take(self, key: str, payload: bytes, now: float) -> None:
         self.stats["received"] += 1
         try:
-            source, event, t, seq, values = codec.incoming(key, payload, self._sources)
+            message = codec.incoming(key, payload, self._sources, self._streams.accepts)
         except codec.BAD as exc:
             self.stats["bad"] += 1
             self._warn("bad", f"sample on '{key}' not sent: {type(exc).__name__}: {exc}")
             return
-        if event is not None:
-            self._event(source, event)
+        if message.event is not None:
+            self._event(message.source, message.event)
             return
         max_age = self.config.max_age_ms / 1000.0
-        if max_age and time.time() - t > max_age:
+        if max_age and time.time() - message.t > max_age:
             self.stats["stale"] += 1
             self._warn("stale", f"samples older than {self.config.max_age_ms:g} ms dropped (clocks in step?)")
             return
+        samples = message.samples if message.source.section == "frame" else (message,)
         for link in self._sample_links:
-            self._sample_to(link, source, values, t, seq, now)
-        if self._frame_links:
-            frames = self._frames.add(source.robot, key, seq, t, (source, values))
-            self.stats["late"] = self._frames.late
-            for frame in frames:
-                self._send_frame(frame, now)
+            for source, _, t, seq, values, _ in samples:
+                self._sample_to(link, source, values, t, seq, now)
+        if not self._frame_links or not samples:
+            return
+        if message.source.section == "frame":  # a frame that came whole
+            self._send_frame(Frame(message.source.robot, message.seq, message.t,
+                                   {s.source.key: (s.source, s.values) for s in samples}), now)
+            return
+        frames = self._frames.add(message.source.robot, key, message.seq, message.t, (message.source, message.values))
+        self.stats["late"] = self._frames.late
+        for frame in frames:
+            self._send_frame(frame, now)
 
     # -- per target ------------------------------------------------------------------
 

@@ -1,0 +1,92 @@
+"""What a sink subscribes to for the keys it asks for.
+
+A robot owner publishes each frame twice: a sample per joint on
+``<robot>/joints/<Joint>`` (for anyone) and the whole frame once on
+``<robot>/frame``. A sink that asks for joint keys (``*/joints/*``,
+``pepper/joints/R*``) is served from the frames of the robots its patterns
+name, and lets through the joints the patterns select: one Zenoh sample per
+frame reaches its process instead of one per joint (docs/performance.md).
+Publishers that put joint keys only (a script of your own) need
+``per_joint_keys = true``.
+
+>>> plan(["*/joints/*", "*/events/*"])
+Plan(frames=('*/frame',), keys=('*/events/*',), broad=())
+>>> plan(["pepper/**"]).broad, plan(["pepper/joints/R*"], per_joint_keys=True).keys
+(('pepper/**',), ('pepper/joints/R$*',))
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+from dataclasses import dataclass
+
+import zenoh
+
+from . import keys
+from .node import Bus
+from .queue import SampleQueue
+
+_JOINTS = zenoh.KeyExpr(keys.joints())
+
+
+@dataclass(frozen=True)
+class Plan:
+    """Key expressions to subscribe to: ``frames`` (frame keys), ``keys`` (as given)
+    and ``broad`` (patterns that select joints and more: subscribed without their
+    joint and frame keys, which come from ``frames``)."""
+
+    frames: tuple[str, ...] = ()
+    keys: tuple[str, ...] = ()
+    broad: tuple[str, ...] = ()
+
+
+def plan(patterns: Iterable[str], per_joint_keys: bool = False) -> Plan:
+    """How to subscribe to ``patterns`` (user patterns; see ``keys.expr``)."""
+    frames: list[str] = []
+    direct: list[str] = []
+    broad: list[str] = []
+    for pattern in (keys.expr(p) for p in patterns):
+        selected = zenoh.KeyExpr(pattern)
+        if per_joint_keys or not selected.intersects(_JOINTS):
+            direct.append(pattern)
+            continue
+        robot = pattern.split("/")[0]
+        frame = keys.frame("*" if "**" in robot else robot)
+        if frame not in frames:
+            frames.append(frame)
+        if not _JOINTS.includes(selected):  # it selects more than joints
+            broad.append(pattern)
+    return Plan(tuple(frames), tuple(direct), tuple(broad))
+
+
+class Streams:
+    """The subscriptions of ``patterns`` into ``queue``; ``accepts(key)`` tells
+    whether a joint of a frame is one the patterns select."""
+
+    def __init__(self, bus: Bus, patterns: Iterable[str], queue: SampleQueue, *,
+                 per_joint_keys: bool = False, stamped: bool = False) -> None:
+        self.plan = plan(patterns := tuple(patterns), per_joint_keys)
+        self._selected = [zenoh.KeyExpr(keys.expr(p)) for p in patterns]
+        self._accepted: dict[str, bool] = {}
+        self.subscribers = [bus.subscribe(k, queue=queue, stamped=stamped)[0]
+                            for k in self.plan.frames + self.plan.keys]
+        self.subscribers += [bus.subscribe(k, queue=queue, stamped=stamped, skip=_from_frames)[0]
+                             for k in self.plan.broad]
+
+    def accepts(self, key: str) -> bool:
+        """Whether joint ``key`` (taken from a frame) is one the patterns select."""
+        accepted = self._accepted.get(key)
+        if accepted is None:
+            accepted = self._accepted[key] = any(p.intersects(key) for p in self._selected)
+        return accepted
+
+    def undeclare(self) -> None:
+        for subscriber in self.subscribers:
+            subscriber.undeclare()
+        self.subscribers.clear()
+
+
+def _from_frames(key: str) -> bool:
+    """Joint and frame keys, which a broad pattern's subscription leaves to the frames."""
+    chunks = key.split("/")
+    return (len(chunks) == 2 and chunks[1] == "frame") or (len(chunks) == 3 and chunks[1] == "joints")
