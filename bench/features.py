@@ -1,10 +1,10 @@
 """Cost of the features processor per Pepper frame at 100 Hz, beside a baseline.
 
-- per frame, no bus: N synthetic Pepper frames (17 joints moving, 100 Hz) go
-  through what the processor does for each frame — decode the 17 msgpack
-  samples, reassemble the frame, compute every feature (velocity, hands, hand
-  speeds, QoM, onsets), encode the 26 derived samples — timed per frame.
-  Baseline, same run: only decoding the 17 samples.
+- per frame, no bus: N synthetic Pepper frames (17 joints moving, 100 Hz, each
+  one ``pepper/frame`` message as a robot owner puts it) go through what the
+  processor does for each frame — decode the frame, compute every feature
+  (velocity, hands, hand speeds, QoM, onsets), encode the 26 derived samples —
+  timed per frame. Baseline, same run: only decoding the frame.
 - on the bus: a simulated Pepper at 100 frames/s and the ``features`` node in
   this process, connected over loopback; CPU time of the node's worker thread
   (it also hands the samples to Zenoh) over the run, as % of one core.
@@ -27,46 +27,44 @@ from common import free_port, write
 
 from sonibus.adapters.features import Features, FeaturesConfig
 from sonibus.adapters.features.compute import RobotFeatures
+from sonibus.adapters.features.processor import whole
 from sonibus.adapters.features.table import describe
 from sonibus.adapters.sim import SimConfig, SimRobot
 from sonibus.bus import Bus, BusConfig, codec, keys, load_model, open_session, robot_info, send_command
-from sonibus.bus.frames import FrameAssembler
 
 RATE_HZ = 100.0
 MODEL = load_model("pepper")
 
 
-def frames(n: int) -> list[list[tuple[str, bytes]]]:
-    """``n`` frames of encoded joint samples: every joint swinging around the middle of its range."""
+def frames(n: int) -> list[bytes]:
+    """``n`` encoded frames (``pepper/frame``): every joint swinging around the middle of its range."""
     t0 = time.time()
+    middle = np.array([(j.min + j.max) / 2 for j in MODEL.joints])
+    half = np.array([(j.max - j.min) / 2 for j in MODEL.joints])
+    phase = np.arange(len(MODEL.joints))
     out = []
     for k in range(n):
         t = t0 + k / RATE_HZ
-        frame = []
-        for i, joint in enumerate(MODEL.joints):
-            middle, half = (joint.min + joint.max) / 2, (joint.max - joint.min) / 2
-            value = middle + 0.3 * half * np.sin(2 * np.pi * 0.5 * (t - t0) + i)
-            frame.append((keys.joint("pepper", joint.name), codec.encode({"t": t, "seq": k, "v": float(value)})))
-        out.append(frame)
+        values = middle + 0.3 * half * np.sin(2 * np.pi * 0.5 * (t - t0) + phase)
+        out.append(codec.encode(codec.frame(t, k, MODEL.joint_names, values.tolist())))
     return out
 
 
-def per_frame(data: list[list[tuple[str, bytes]]], features: bool) -> list[float]:
+def per_frame(data: list[bytes], features: bool) -> list[float]:
     """Seconds per frame for decoding only, or for the processor's whole per-frame work."""
     info = {"model": "pepper", "joints": [j.to_info() for j in MODEL.joints]}
     robot = RobotFeatures(describe("pepper", info), FeaturesConfig())
-    assembler = FrameAssembler()
+    key, parsed = keys.frame("pepper"), {}
     times = []
     gc.disable()
-    for frame in data:
+    for payload in data:
         started = time.perf_counter()
-        for key, payload in frame:
-            t, seq, values = codec.sample_values(codec.decode(payload))
-            if features:
-                for done in assembler.add("pepper", key, seq, t, values[0]):
-                    out = robot.step(done.t, done.seq, done.values)
-                    for _, message in out.samples:
-                        codec.encode(message)
+        message = codec.incoming(key, payload, parsed)
+        if features:
+            frame = whole(message)
+            out = robot.step(frame.t, frame.seq, frame.values)
+            for _, sample in out.samples:
+                codec.encode(sample)
         times.append(time.perf_counter() - started)
     gc.enable()
     return times[100:]  # warm caches first

@@ -7,12 +7,13 @@ a 5.3 ms period; always stopped at the end) carries everything. A reader
 process opens the JACK MIDI input ``bench-reader:in`` and counts what arrives.
 
 sonibus path, per step of the ramp: publisher process(es) act as fake robots
-(serve ``botN/info``: 17 joints in 0..1, and put joint samples whose 7-bit
-value changes every frame, so each sample is one control change) paced in
-batches of one frame per robot, as in ``sink_throughput.py``; the ``midi`` sink
+(serve ``botN/info``: 17 joints in 0..1, and put frames whose joints' 7-bit
+values change every frame, so each joint sample is one control change) paced
+one frame per robot at a time, as in ``sink_throughput.py``: each frame whole
+on ``botN/frame``, then per joint, as a robot owner does; the ``midi`` sink
 runs in its own process (``sonibus run``, ``api = "jack"``, ``connect =
-"bench-reader:in"``), fresh each step so its counters (``sent``,
-``queue_dropped``) are per step. Baseline, same run, interleaved: one process
+"bench-reader:in"``; it takes the frames), fresh each step so its counters
+(``sent``, ``queue_dropped``) are per step. Baseline, same run, interleaved: one process
 sends the same control changes with python-rtmidi straight to the reader at
 the same rate; then once unpaced, as fast as it goes (JACK's own limit: what
 one client's port carries per period).

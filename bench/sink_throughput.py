@@ -1,9 +1,9 @@
 """Maximum lossless joint samples/s through one OSC sink process, beside raw UDP
 sent straight from one Python process at the same rates (issue 9, scenario b).
 
-sonibus path, per step of the ramp: publisher process(es) put joint samples
-(``botN/joints/JK``, msgpack ``{"t", "seq", "v"}``, ``Bus.stream_publisher``)
-paced in batches of one frame of 17 joints per robot; the OSC sink is its own
+sonibus path, per step of the ramp: publisher process(es) put frames of 17
+joints per robot as a robot owner does (``botN/frame`` whole, then
+``botN/joints/JK`` each, msgpack, ``Bus.frame_publisher``/``stream_publisher``); the OSC sink is its own
 process (``sonibus run``, ``max_age_ms = 0`` so nothing is dropped as stale,
 listening on loopback TCP, the publishers connect to it); a receiver process
 counts the datagrams (8 MB socket buffer, gc off). Each step gets a fresh sink
@@ -111,10 +111,12 @@ def stop_children(children: list[Any]) -> None:
 
 
 def publish(endpoint: str, robots: list[int], frames_per_s: float, seconds: float, ready: Any, go: Any,
-            finish: Any, out: Any, value: str = "sine", info: bool = False) -> None:
+            finish: Any, out: Any, value: str = "sine", info: bool = False, per_joint_keys: bool = False) -> None:
     """Put one frame of 17 joints of each of ``robots`` every 1/``frames_per_s`` s, ``seconds``
-    long, once ``go`` is set; report what was put, how long it took and the CPU used, then stay
-    connected until ``finish`` (so the sink drains before anything leaves).
+    long, once ``go`` is set, as a robot owner does (the frame whole, then each joint); report
+    how many joint samples were put, how long it took and the CPU used, then stay connected
+    until ``finish`` (so the sink drains before anything leaves). Waits for a subscriber of
+    the frames (of the joint keys if ``per_joint_keys``).
 
     ``value``: ``sine`` (a wave per joint) or ``ramp`` (changes every frame by 1/127 of the
     range, so a 7-bit MIDI controller changes with every sample). ``info``: serve ``botN/info``
@@ -126,7 +128,10 @@ def publish(endpoint: str, robots: list[int], frames_per_s: float, seconds: floa
     session = open_session(BusConfig(multicast=False, connect=(endpoint,)))
     try:
         bus = Bus(session, node=f"bench-publisher-{robots[0]}")
-        streams = [[bus.stream_publisher(f"bot{r}/joints/J{j}") for j in range(JOINTS)] for r in robots]
+        names = [f"J{j}" for j in range(JOINTS)]
+        streams = [[bus.stream_publisher(f"bot{r}/joints/{n}") for n in names] for r in robots]
+        frames_out = [bus.frame_publisher(f"bot{r}/frame") for r in robots]
+        watched = [p for row in streams for p in row] if per_joint_keys else frames_out
         queryables = []  # kept referenced for the life of the session
         for r in robots if info else ():
             description = codec.encode({"robot": f"bot{r}", "rate_hz": frames_per_s, "behaviors": [],
@@ -134,19 +139,26 @@ def publish(endpoint: str, robots: list[int], frames_per_s: float, seconds: floa
             queryables.append(bus.serve(f"bot{r}/info", lambda q, d=description: q.reply(
                 q.key_expr, d, encoding=codec.ENCODING)))
         deadline = time.monotonic() + 30.0
-        while not all(p.matching_status.matching for row in streams for p in row):
+        while not all(p.matching_status.matching for p in watched):
             if time.monotonic() > deadline:
-                out.put({"error": f"no subscriber matched bot{robots[0]}/joints/* within 30 s"})
+                out.put({"error": f"no subscriber matched bot{robots[0]}'s frames or joints within 30 s"})
                 return
             time.sleep(0.02)
 
         def value_of(frame: int, j: int) -> float:
             return (frame + j) % 128 / 127.0 if value == "ramp" else 0.5 * ((frame * 0.01 + j) % 2.0) - 0.5
 
+        def put_frame(frame: int, t: float) -> int:
+            for row, whole in zip(streams, frames_out, strict=True):
+                values = [value_of(frame, j) for j in range(JOINTS)]
+                whole.put(encode(codec.frame(t, frame, names, values)))
+                for publisher, v in zip(row, values, strict=True):
+                    publisher.put(encode({"t": t, "seq": frame, "v": v}))
+            return JOINTS * len(streams)
+
+        encode = codec.encode
         for frame in range(-5, 0) if info else ():  # the sink asks for the info on its first sample
-            for row in streams:
-                for j, publisher in enumerate(row):
-                    publisher.put(codec.encode({"t": time.time(), "seq": frame, "v": value_of(frame, j)}))
+            put_frame(frame, time.time())
             time.sleep(0.1)
         ready.set()
         deadline = time.monotonic() + 60.0
@@ -155,15 +167,10 @@ def publish(endpoint: str, robots: list[int], frames_per_s: float, seconds: floa
                 return
         frames = round(seconds * frames_per_s)
         period = 1.0 / frames_per_s
-        encode = codec.encode
         cpu0, start = time.process_time(), time.monotonic()
         sent = frame = 0
         while frame < frames and time.monotonic() - start < 2.0 * seconds:
-            t = time.time()
-            for row in streams:
-                for j, publisher in enumerate(row):
-                    publisher.put(encode({"t": t, "seq": frame, "v": value_of(frame, j)}))
-                    sent += 1
+            sent += put_frame(frame, time.time())
             frame += 1
             wait = start + frame * period - time.monotonic()
             if wait > 0:
@@ -180,13 +187,14 @@ class Publishers:
     """``count`` publisher processes sharing ``robots`` robots, started together."""
 
     def __init__(self, endpoint: str, count: int, robots: int, rate: float, seconds: float,
-                 value: str = "sine", info: bool = False) -> None:
+                 value: str = "sine", info: bool = False, per_joint_keys: bool = False) -> None:
         self.go, self.finish, self.out = CONTEXT.Event(), CONTEXT.Event(), CONTEXT.Queue()
         self.ready = [CONTEXT.Event() for _ in range(count)]
         frames_per_s = rate / (robots * JOINTS)
         shares = [list(range(robots))[i::count] for i in range(count)]
         self.processes = [CONTEXT.Process(target=publish, args=(endpoint, share, frames_per_s, seconds, ready,
-                                                                 self.go, self.finish, self.out, value, info),
+                                                                 self.go, self.finish, self.out, value, info,
+                                                                 per_joint_keys),
                                           daemon=True)
                           for share, ready in zip(shares, self.ready, strict=True)]
         for process in self.processes:

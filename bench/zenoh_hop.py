@@ -1,9 +1,10 @@
 """The floor under every sonibus latency: one Zenoh hop between two Python
 processes, nothing of sonibus on it. A publisher process puts one frame of 17
-joint samples (one key each, as sonibus does) every 10 ms; a subscriber
+joint samples (one key each, as sonibus's per-joint keys) every 10 ms; a subscriber
 process stamps each sample in its callback. Latency = arrival − t (one host,
 one clock). Variants: the default (`express=False`, batching on), `express=True`,
-batching off, and a batching time limit of 0. Baseline, same run: the same 17
+batching off, a batching time limit of 0, and one key per frame (`express`, as
+`<robot>/frame`). Baseline, same run: the same 17
 datagrams per frame over plain UDP between two processes.
 
     .venv/bin/python bench/zenoh_hop.py [--frames 600]
@@ -24,11 +25,12 @@ from typing import Any
 from common import free_port, latency_stats, write
 
 JOINTS = 17
-VARIANTS: dict[str, tuple[dict[str, Any], bool]] = {
-    "default (express off, batching 1 ms)": ({}, False),
-    "express": ({}, True),
-    "batching off": ({"transport/link/tx/queue/batching/enabled": False}, False),
-    "batching time limit 0": ({"transport/link/tx/queue/batching/time_limit": 0}, False),
+VARIANTS: dict[str, tuple[dict[str, Any], bool, int]] = {  # Zenoh options, express, keys per frame
+    "default (express off, batching 1 ms)": ({}, False, JOINTS),
+    "express": ({}, True, JOINTS),
+    "batching off": ({"transport/link/tx/queue/batching/enabled": False}, False, JOINTS),
+    "batching time limit 0": ({"transport/link/tx/queue/batching/time_limit": 0}, False, JOINTS),
+    "one key per frame, express (as <robot>/frame)": ({}, True, 1),
 }
 
 
@@ -43,12 +45,12 @@ def _config(extra: dict[str, Any], **endpoints: str) -> Any:
     return config
 
 
-def _publish(extra: dict[str, Any], express: bool, endpoint: str, frames: int, go: Any) -> None:
+def _publish(extra: dict[str, Any], express: bool, keys: int, endpoint: str, frames: int, go: Any) -> None:
     import zenoh
     session = zenoh.open(_config(extra, listen=endpoint))
     publishers = [session.declare_publisher(f"r/joints/J{j}", congestion_control=zenoh.CongestionControl.DROP,
                                             priority=zenoh.Priority.DATA_HIGH, express=express)
-                  for j in range(JOINTS)]
+                  for j in range(keys)]
     go.wait(10)
     time.sleep(0.5)
     start = time.monotonic()
@@ -74,11 +76,11 @@ def _subscribe(extra: dict[str, Any], endpoint: str, go: Any, done: Any, out: An
     out.put(seen)
 
 
-def zenoh_hop(extra: dict[str, Any], express: bool, frames: int) -> dict[str, float]:
+def zenoh_hop(extra: dict[str, Any], express: bool, keys: int, frames: int) -> dict[str, float]:
     ctx = mp.get_context("spawn")  # never fork a process that has opened a Zenoh session
     endpoint = f"tcp/127.0.0.1:{free_port()}"
     go, done, out = ctx.Event(), ctx.Event(), ctx.Queue()
-    publisher = ctx.Process(target=_publish, args=(extra, express, endpoint, frames, go))
+    publisher = ctx.Process(target=_publish, args=(extra, express, keys, endpoint, frames, go))
     publisher.start()
     subscriber = ctx.Process(target=_subscribe, args=(extra, endpoint, go, done, out))
     subscriber.start()
@@ -86,7 +88,7 @@ def zenoh_hop(extra: dict[str, Any], express: bool, frames: int) -> dict[str, fl
     done.set()
     got = out.get(timeout=30)
     subscriber.join(10)
-    return latency_stats(got[JOINTS * 100:])  # the first second: connecting
+    return latency_stats(got[keys * 100:])  # the first second: connecting
 
 
 def _udp_send(port: int, frames: int, go: Any) -> None:
@@ -126,7 +128,7 @@ def main() -> None:
     args = parser.parse_args()
     machine = f"{os.cpu_count()} cores, load {os.getloadavg()[0]:.2f}"
     base = udp_hop(args.frames)
-    runs = {name: zenoh_hop(extra, express, args.frames) for name, (extra, express) in VARIANTS.items()}
+    runs = {name: zenoh_hop(*variant, args.frames) for name, variant in VARIANTS.items()}
     print(f"{'path':<40} {'p50_us':>8} {'p99_us':>8} {'p999_us':>8}")
     for name, row in {"plain UDP (baseline)": base, **runs}.items():
         print(f"{name:<40} {row['p50_us']:>8.0f} {row['p99_us']:>8.0f} {row['p999_us']:>8.0f}")

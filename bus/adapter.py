@@ -16,6 +16,7 @@ liveliness token, worker threads joined and Zenoh entities undeclared on stop.
 from __future__ import annotations
 
 import logging
+import math
 import threading
 import time
 from collections.abc import Callable
@@ -28,6 +29,7 @@ from .node import Bus
 log = logging.getLogger(__name__)
 
 JOIN_TIMEOUT_S = 2.0
+WARN_EVERY_S = 10.0  # at most one warning of a kind in this time
 
 
 @dataclass(frozen=True)
@@ -51,6 +53,8 @@ class Adapter:
         self.stopping = threading.Event()
         self.robots: list[str] = []       # robots this node owns (see claim_robot)
         self.since = 0.0                  # when it started (epoch seconds)
+        self.stats: dict[str, int] = {}   # counters a subclass keeps (received, sent, bad, ...)
+        self._last_warning: dict[str, float] = {}
         self._bus: Bus | None = None
         self._threads: list[threading.Thread] = []
         self._entities: list[Any] = []
@@ -106,6 +110,14 @@ class Adapter:
         """Become the owner of ``robot`` until stopped; ``OwnershipError`` if it has one."""
         self.own(presence.claim(self.bus, robot, hint))
         self.robots.append(robot)
+
+    def warn(self, kind: str, message: str) -> None:
+        """Log a warning, at most one of each ``kind`` every ``WARN_EVERY_S`` (with the
+        counters that are not zero): bad input at 100 Hz must not flood the log."""
+        now = time.monotonic()
+        if now - self._last_warning.get(kind, -math.inf) >= WARN_EVERY_S:
+            self._last_warning[kind] = now
+            log.warning("%s: %s (%s)", self.name, message, ", ".join(f"{k} {v}" for k, v in self.stats.items() if v))
 
     def spawn(self, target: Callable[[], None], name: str) -> threading.Thread:
         """Run ``target`` on a thread joined by ``stop()``; it must return once ``stopping`` is set."""

@@ -70,10 +70,11 @@ def frame_joints(message: dict[str, Any]) -> tuple[list[str], list[float]]:
     names, values = message["names"], message["v"]
     if not isinstance(names, list) or not isinstance(values, list) or len(names) != len(values):
         raise ValueError("names and v are not two lists of the same length")
-    if not all(isinstance(n, str) and n and "/" not in n for n in names):
-        raise ValueError(f"names = {names!r} are not all joint names")
-    if not all(number(v) for v in values):
-        raise ValueError(f"v = {values!r} are not all numbers")
+    for name, value in zip(names, values, strict=True):
+        if not isinstance(name, str) or not name or "/" in name:
+            raise ValueError(f"names = {names!r} are not all joint names")
+        if value.__class__ is not float and not number(value):
+            raise ValueError(f"v = {values!r} are not all numbers")
     return names, values
 
 
@@ -87,6 +88,11 @@ class Incoming(NamedTuple):
     seq: int = 0
     values: tuple[float, ...] = ()
     samples: tuple[Incoming, ...] = ()
+
+    @property
+    def joints(self) -> tuple[Incoming, ...]:
+        """The samples it carries: a frame's, or itself."""
+        return self.samples if self.source.section == "frame" else (self,)
 
 
 BAD = (DecodeError, KeyError, TypeError, ValueError)  # what ``incoming`` raises for a bad message
@@ -106,8 +112,9 @@ def incoming(key: str, payload: bytes, parsed: dict[str, Key],
     if source.section == "frame":
         t, seq = stamp(message)
         samples = []
+        prefix = f"{source.robot}/joints/"
         for name, value in zip(*frame_joints(message), strict=True):
-            joint = f"{source.robot}/joints/{name}"
+            joint = prefix + name
             if accepts(joint):
                 parsed_joint = parsed.get(joint) or parsed.setdefault(joint, Key.parse(joint))
                 samples.append(Incoming(parsed_joint, None, t, seq, (float(value),)))

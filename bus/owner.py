@@ -47,6 +47,10 @@ class RobotAdapter(Adapter):
         self._open()
         self._streams: dict[str, zenoh.Publisher] = {}
         self._frames = self.own(self.bus.frame_publisher(keys.frame(self.robot)))
+        # Per-joint keys cost an encode and a put per joint: made only while someone subscribes to one.
+        interest = self.own(self.bus.session.declare_publisher(keys.joints(self.robot)))
+        self._joints_wanted = interest.matching_status.matching
+        self.own(interest.declare_matching_listener(lambda status: setattr(self, "_joints_wanted", status.matching)))
         for name in self.model.joint_names:
             self._joint_publisher(name)
         self.own(self.bus.serve(keys.info(self.robot), self._serve_info))
@@ -70,11 +74,13 @@ class RobotAdapter(Adapter):
                       extra: dict[str, Sequence[float]] | None = None) -> None:
         """One frame: ``positions`` in the order of ``names`` (default: the model's joints);
         ``extra`` adds quantities (``cmd``, ``cur``, ``temp``) in the same order.
-        Published whole on ``<robot>/frame``, then per joint."""
+        Published whole on ``<robot>/frame``, then per joint (while anyone listens there)."""
         names = names or self.model.joint_names
         if len(names) != len(positions) or any(len(v) != len(names) for v in (extra or {}).values()):
             raise ValueError(f"{len(names)} joint names but {len(positions)} positions (or extras)")
         self._frames.put(codec.encode(codec.frame(t, seq, names, positions, extra)))
+        if not self._joints_wanted:
+            return
         for index, (name, value) in enumerate(zip(names, positions, strict=True)):
             sample = {"t": t, "seq": seq, "v": value}
             if extra:

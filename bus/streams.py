@@ -22,7 +22,7 @@ from dataclasses import dataclass
 
 import zenoh
 
-from . import keys
+from . import codec, keys
 from .node import Bus
 from .queue import SampleQueue
 
@@ -31,9 +31,9 @@ _JOINTS = zenoh.KeyExpr(keys.joints())
 
 @dataclass(frozen=True)
 class Plan:
-    """Key expressions to subscribe to: ``frames`` (frame keys), ``keys`` (as given)
-    and ``broad`` (patterns that select joints and more: subscribed without their
-    joint and frame keys, which come from ``frames``)."""
+    """Key expressions to subscribe to: ``frames`` (frame keys), ``keys`` (as given,
+    without frame keys) and ``broad`` (patterns that select joints and more:
+    subscribed without their joint and frame keys, which come from ``frames``)."""
 
     frames: tuple[str, ...] = ()
     keys: tuple[str, ...] = ()
@@ -48,7 +48,7 @@ def plan(patterns: Iterable[str], per_joint_keys: bool = False) -> Plan:
     for pattern in (keys.expr(p) for p in patterns):
         selected = zenoh.KeyExpr(pattern)
         if per_joint_keys or not selected.intersects(_JOINTS):
-            direct.append(pattern)
+            direct.append(pattern)  # (subscribed without frame keys: pepper/** would take them twice)
             continue
         robot = pattern.split("/")[0]
         frame = keys.frame("*" if "**" in robot else robot)
@@ -68,10 +68,15 @@ class Streams:
         self.plan = plan(patterns := tuple(patterns), per_joint_keys)
         self._selected = [zenoh.KeyExpr(keys.expr(p)) for p in patterns]
         self._accepted: dict[str, bool] = {}
-        self.subscribers = [bus.subscribe(k, queue=queue, stamped=stamped)[0]
-                            for k in self.plan.frames + self.plan.keys]
+        self._parsed: dict[str, keys.Key] = {}
+        self.subscribers = [bus.subscribe(k, queue=queue, stamped=stamped)[0] for k in self.plan.frames]
+        self.subscribers += [bus.subscribe(k, queue=queue, stamped=stamped, skip=_frame)[0] for k in self.plan.keys]
         self.subscribers += [bus.subscribe(k, queue=queue, stamped=stamped, skip=_from_frames)[0]
                              for k in self.plan.broad]
+
+    def incoming(self, key: str, payload: bytes) -> codec.Incoming:
+        """Decode what came on ``key`` (``codec.incoming``: a frame keeps the selected joints)."""
+        return codec.incoming(key, payload, self._parsed, self.accepts)
 
     def accepts(self, key: str) -> bool:
         """Whether joint ``key`` (taken from a frame) is one the patterns select."""
@@ -86,7 +91,10 @@ class Streams:
         self.subscribers.clear()
 
 
+def _frame(key: str) -> bool:
+    return key.endswith("/frame") and key.count("/") == 1
+
+
 def _from_frames(key: str) -> bool:
     """Joint and frame keys, which a broad pattern's subscription leaves to the frames."""
-    chunks = key.split("/")
-    return (len(chunks) == 2 and chunks[1] == "frame") or (len(chunks) == 3 and chunks[1] == "joints")
+    return _frame(key) or (key.count("/") == 2 and key.split("/")[1] == "joints")

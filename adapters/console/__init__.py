@@ -9,7 +9,8 @@ from typing import TextIO
 
 from sonibus.bus import codec
 from sonibus.bus.adapter import Adapter
-from sonibus.bus.keys import Key
+from sonibus.bus.queue import SampleQueue
+from sonibus.bus.streams import Streams
 
 __all__ = ["ConsoleConfig", "ConsoleView"]
 
@@ -22,6 +23,7 @@ class ConsoleConfig:
     joints: tuple[str, ...] = ("HeadYaw", "HeadPitch", "RShoulderPitch", "RElbowRoll", "LShoulderPitch")
     every_s: float = 1.0
     events: bool = True
+    per_joint_keys: bool = False  # joints from <robot>/joints/* instead of <robot>/frame (bus/streams.py)
 
 
 class ConsoleView(Adapter):
@@ -32,9 +34,9 @@ class ConsoleView(Adapter):
 
     def _start(self) -> None:
         cfg: ConsoleConfig = self.config
-        subscriber, self._queue = self.bus.subscribe(f"{cfg.robots}/**", 8192)
-        self.own(subscriber)
-        self.own(self._queue)
+        self._queue = self.own(SampleQueue(8192))
+        self._streams = self.own(Streams(self.bus, [f"{cfg.robots}/**"], self._queue,
+                                         per_joint_keys=cfg.per_joint_keys))
         self._values: dict[str, dict[str, float]] = {}
         self._frames: dict[str, set[int]] = {}
         self.spawn(self._run, "view")
@@ -51,15 +53,18 @@ class ConsoleView(Adapter):
 
     def _take(self, key: str, payload: bytes) -> None:
         try:
-            parsed, message = Key.parse(key), codec.decode(payload)
-        except ValueError:
+            message = self._streams.incoming(key, payload)
+        except codec.BAD:
             return
-        if parsed.section == "joints":
-            self._values.setdefault(parsed.robot, {})[parsed.name] = message.get("v", float("nan"))
-            self._frames.setdefault(parsed.robot, set()).add(message.get("seq", -1))
-        elif parsed.section == "events" and self.config.events and parsed.name != "command":
-            details = " ".join(f"{k}={v}" for k, v in message.items() if k not in ("t", "kind"))
-            self._print(f"{parsed.robot:<8} event {parsed.name}: {details}")
+        source = message.source
+        if source.section in ("joints", "frame"):
+            values = self._values.setdefault(source.robot, {})
+            for sample in message.joints:
+                values[sample.source.name] = sample.values[0]
+            self._frames.setdefault(source.robot, set()).add(message.seq)
+        elif message.event is not None and self.config.events and source.name != "command":
+            details = " ".join(f"{k}={v}" for k, v in message.event.items() if k not in ("t", "kind"))
+            self._print(f"{source.robot:<8} event {source.name}: {details}")
 
     def _print_rates(self) -> None:
         for robot, values in sorted(self._values.items()):

@@ -28,8 +28,9 @@ class FeaturesConfig:
     offset: float = 0.2                       # ...and that ends it (lower: hysteresis)
     min_duration_s: float = 0.08              # how long the QoM must stay past a threshold
     weights: dict[str, float] | None = None   # QoM weight per joint (default: 1 per rad joint, 0 for hands)
-    max_wait_ms: float = 50.0                 # a frame missing joints is processed after this long
-    queue: int = 8192                         # samples buffered before the oldest are dropped
+    max_wait_ms: float = 50.0                 # per_joint_keys: a frame missing joints is processed after this
+    queue: int = 8192                         # messages buffered before the oldest are dropped
+    per_joint_keys: bool = False              # joints from <robot>/joints/* instead of <robot>/frame
 
     def __post_init__(self) -> None:
         found = (self.robots,) if isinstance(self.robots, str) else tuple(self.robots)

@@ -1,14 +1,14 @@
-"""The ``features`` adapter: joint samples in, derived values and motion events out.
+"""The ``features`` adapter: joint frames in, derived values and motion events out.
 
-A node is a loop over events: one worker takes samples (and robot infos) from
-a queue, reassembles each robot's frames by ``seq``, computes the frame's
-features and publishes them; ``<robot>/info/derived`` describes what it publishes.
+A node is a loop over events: one worker takes each robot's frames (and robot
+infos) from a queue — whole from ``<robot>/frame``, or with ``per_joint_keys``
+reassembled by ``seq`` from the joint samples — computes the frame's features
+and publishes them; ``<robot>/info/derived`` describes what it publishes.
 """
 
 from __future__ import annotations
 
 import logging
-import math
 import time
 from typing import Any
 
@@ -19,6 +19,7 @@ from sonibus.bus.adapter import Adapter
 from sonibus.bus.frames import Frame, FrameAssembler
 from sonibus.bus.info import InfoRequests
 from sonibus.bus.queue import SampleQueue
+from sonibus.bus.streams import Streams
 
 from . import catalog, table
 from .compute import RobotFeatures
@@ -26,7 +27,6 @@ from .config import FeaturesConfig
 
 log = logging.getLogger(__name__)
 
-WARN_EVERY_S = 10.0
 INFO = "\0info"  # queue items carrying a robot's info, so only the worker touches state
 
 
@@ -40,14 +40,13 @@ class Features(Adapter):
         self.stats = dict.fromkeys(("received", "frames", "published", "events", "bad", "late", "missing", "nan",
                                     "waiting_info"), 0)
         self.robot_features: dict[str, RobotFeatures] = {}  # robot → its features, once its info came
-        self._last_warning: dict[str, float] = {}
         self._publishers: dict[str, zenoh.Publisher] = {}
-        self._frames = FrameAssembler(cfg.max_wait_ms / 1000.0)
+        self._frames = FrameAssembler(cfg.max_wait_ms / 1000.0)  # with per_joint_keys
         self._queue = self.own(SampleQueue(cfg.queue))
         self._info = InfoRequests(self.bus, lambda robot, info: self._queue.put((INFO, (robot, info))),
-                                  lambda robot, text: self._warn("info", text))
-        for robot in cfg.robots:
-            self.own(self.bus.subscribe(keys.joints(robot), queue=self._queue)[0])
+                                  lambda robot, text: self.warn("info", text))
+        self._streams = self.own(Streams(self.bus, [keys.joints(r) for r in cfg.robots], self._queue,
+                                         per_joint_keys=cfg.per_joint_keys))
         self.spawn(self._run, "features")
 
     def _stop(self) -> None:
@@ -76,12 +75,15 @@ class Features(Adapter):
             self._info.ask(robot)
             return
         try:
-            t, seq, values = codec.sample_values(codec.decode(payload))
-        except (codec.DecodeError, KeyError, TypeError, ValueError) as exc:
+            message = self._streams.incoming(key, payload)
+        except codec.BAD as exc:
             self.stats["bad"] += 1
-            self._warn("bad", f"sample on '{key}' skipped: {type(exc).__name__}: {exc}")
+            self.warn("bad", f"sample on '{key}' skipped: {type(exc).__name__}: {exc}")
             return
-        for frame in self._frames.add(robot, key, seq, t, values[0]):
+        if message.source.section == "frame":
+            self.process(whole(message))
+            return
+        for frame in self._frames.add(robot, key, message.seq, message.t, message.values[0]):
             self.process(frame)
         self.stats["late"] = self._frames.late
 
@@ -93,7 +95,7 @@ class Features(Adapter):
         if (out.missing or out.nan) and features.frames > 1:  # the first frame began before the robot's info came
             self.stats["missing"] += out.missing
             self.stats["nan"] += out.nan
-            self._warn("incomplete", f"{frame.robot}: frame {frame.seq} lacks {out.missing} joint(s) and has "
+            self.warn("incomplete", f"{frame.robot}: frame {frame.seq} lacks {out.missing} joint(s) and has "
                                      f"{out.nan} NaN; their velocities are held")
         for key, message in out.samples:
             publisher = self._publishers.get(key)
@@ -114,7 +116,7 @@ class Features(Adapter):
         try:
             described = table.describe(robot, info)
         except ValueError as exc:
-            self._warn("info", f"{robot}: no features: {exc}")
+            self.warn("info", f"{robot}: no features: {exc}")
             return
         if described.arms is None and (cfg.publishes("hand") or cfg.publishes("hand_speed")):
             log.warning("%s: %s: hand positions unavailable: %s", self.name, robot, described.unavailable)
@@ -125,8 +127,8 @@ class Features(Adapter):
         log.info("%s: %s (model '%s'): %d joints, %d derived keys", self.name, robot, described.model,
                  len(described.joints), len(reply["derived"]))
 
-    def _warn(self, kind: str, message: str) -> None:
-        now = time.monotonic()
-        if now - self._last_warning.get(kind, -math.inf) >= WARN_EVERY_S:
-            self._last_warning[kind] = now
-            log.warning("%s: %s (%s)", self.name, message, ", ".join(f"{k} {v}" for k, v in self.stats.items() if v))
+
+
+def whole(message: codec.Incoming) -> Frame:
+    """The frame of a message taken from ``<robot>/frame``: joint key → position."""
+    return Frame(message.source.robot, message.seq, message.t, {s.source.key: s.values[0] for s in message.samples})

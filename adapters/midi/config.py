@@ -94,6 +94,7 @@ class MidiSinkConfig:
     speech_note: int = SPEECH_NOTE
     velocity: int = 100
     queue: int = 8192
+    per_joint_keys: bool = False        # joints from <robot>/joints/* instead of <robot>/frame (bus/streams.py)
 
     def __post_init__(self) -> None:
         _port(self.port, self.connect)

@@ -14,13 +14,13 @@ from sonibus.bus.adapter import Adapter
 from sonibus.bus.info import InfoRequests
 from sonibus.bus.keys import Key
 from sonibus.bus.queue import SampleQueue
+from sonibus.bus.streams import Streams
 
 from . import mapping, ports
 from .config import MidiSinkConfig
 
 log = logging.getLogger(__name__)
 
-WARN_EVERY_S = 10.0
 INFO_RETRY_S = 2.0
 HARDWARE_MESSAGES_PER_S = 1000   # 31250 baud / 30 bits per 3-byte message ≈ 1041
 INFO = "\0info"                  # queue items carrying a robot's info, so only the worker touches state
@@ -70,8 +70,6 @@ class MidiSink(Adapter):
         self.stats = dict.fromkeys(("received", "sent", "notes", "held", "bad", "waiting_info", "unmapped",
                                     "send_errors"), 0)
         self.estimated_rate = 0.0   # 3-byte messages/s the mapping may produce at the robots' rates
-        self._last_warning: dict[str, float] = {}
-        self._sources: dict[str, Key] = {}
         self._robots: dict[str, _Robot] = {}
         self._controllers: dict[str, _Controller | None] = {}
         self._held: set[str] = set()
@@ -81,9 +79,8 @@ class MidiSink(Adapter):
         self.own(ports.Closer(self._out))
         self._queue = self.own(SampleQueue(cfg.queue))
         self._info = InfoRequests(self.bus, lambda robot, info: self._queue.put((INFO, (robot, info))),
-                                  lambda robot, text: self._warn("info", text), INFO_RETRY_S)
-        for pattern in cfg.subscribe:
-            self.own(self.bus.subscribe(pattern, queue=self._queue)[0])
+                                  lambda robot, text: self.warn("info", text), INFO_RETRY_S)
+        self._streams = self.own(Streams(self.bus, cfg.subscribe, self._queue, per_joint_keys=cfg.per_joint_keys))
         self.own(presence.connection_events(self.bus, self._queue, cfg.subscribe))  # a robot's loss and return
         self.spawn(self._forward, "forward")
         log.info("%s: MIDI out on %s", self.name, f"'{cfg.connect}'" if cfg.connect else f"virtual port '{cfg.port}'")
@@ -131,16 +128,21 @@ class MidiSink(Adapter):
         if key == INFO:
             self._learn(*payload)
             return
-        self.stats["received"] += 1
         try:
-            source, event, _, _, values = codec.incoming(key, payload, self._sources)
+            message = self._streams.incoming(key, payload)
         except codec.BAD as exc:
+            self.stats["received"] += 1
             self.stats["bad"] += 1
-            self._warn("bad", f"sample on '{key}' not sent: {type(exc).__name__}: {exc}")
+            self.warn("bad", f"sample on '{key}' not sent: {type(exc).__name__}: {exc}")
             return
-        if event is not None:
-            self._event(source, event)
+        self.stats["received"] += len(message.samples) or 1  # a frame counts as its samples
+        if message.event is not None:
+            self._event(message.source, message.event)
             return
+        for sample in message.joints:
+            self._sample(sample.source, sample.values[0], now)
+
+    def _sample(self, source: Key, value: float, now: float) -> None:
         if source.section not in ("joints", "derived"):
             return
         robot = self._robot(source.robot)
@@ -151,10 +153,10 @@ class MidiSink(Adapter):
         controller = self._controller(source, robot)
         if controller is None:
             return
-        number = mapping.scale(values[0], controller.low, controller.high, controller.top)
+        number = mapping.scale(value, controller.low, controller.high, controller.top)
         if now - controller.last_sent < self._interval:
             controller.held = number     # the newest waits for its turn
-            self._held.add(key)
+            self._held.add(source.key)
             self.stats["held"] += 1
         elif number != controller.last:
             self._emit(controller, number, now)
@@ -170,7 +172,7 @@ class MidiSink(Adapter):
             self.stats["sent"] += 1
         except Exception as exc:  # rtmidi raises its own errors for a port gone away
             self.stats["send_errors"] += 1
-            self._warn("send", f"cannot send MIDI: {exc}")
+            self.warn("send", f"cannot send MIDI: {exc}")
 
     # -- mapping ----------------------------------------------------------------------
 
@@ -187,7 +189,7 @@ class MidiSink(Adapter):
         taken = set(fixed.values()) | {r.channel for r in self._robots.values()}
         free = [c for c in range(1, 17) if c not in taken]
         if not free:
-            self._warn("channels", f"more than 16 robots: '{name}' shares channel 16 (set channels = {{...}})")
+            self.warn("channels", f"more than 16 robots: '{name}' shares channel 16 (set channels = {{...}})")
             return 16
         return free[0]
 
@@ -201,12 +203,12 @@ class MidiSink(Adapter):
         span = robot.ranges.get(source.name if joint else f"{source.feature}/{source.name}")
         if span is None:
             if entry is not None and not joint:  # its processor may have started after the info came: ask again
-                self._warn("unknown", f"map key '{source.key}': no range for it in {source.robot}/info/derived "
+                self.warn("unknown", f"map key '{source.key}': no range for it in {source.robot}/info/derived "
                                       f"yet (is a features node running?)")
                 self._info.ask(source.robot)
                 return None
             if entry is not None:
-                self._warn("unknown", f"map key '{source.key}': {source.robot} has no joint '{source.name}' "
+                self.warn("unknown", f"map key '{source.key}': {source.robot} has no joint '{source.name}' "
                                       f"— known joints: {', '.join(robot.order)}")
         elif entry is not None:
             controller = _Controller(entry.channel or robot.channel, -1 if entry.pitchbend else entry.cc,
@@ -230,7 +232,7 @@ class MidiSink(Adapter):
             robot.behaviors = [str(b) for b in info.get("behaviors", [])]
             robot.rate_hz = float(info.get("rate_hz") or 0.0)
         except (KeyError, TypeError, ValueError) as exc:
-            self._warn("info", f"{name}/info unusable: {exc}")
+            self.warn("info", f"{name}/info unusable: {exc}")
             return
         robot.known = True
         self._estimate()
@@ -292,7 +294,7 @@ class MidiSink(Adapter):
             robot.behaviors.append(name)  # started but not listed: the next free note
         number = mapping.FIRST_BEHAVIOR_NOTE + robot.behaviors.index(name)
         if number > 127:
-            self._warn("notes", f"behavior '{name}' has no note left (more than 68 behaviors); "
+            self.warn("notes", f"behavior '{name}' has no note left (more than 68 behaviors); "
                                 f"set behavior_note for one fixed note")
             return None
         return number
@@ -306,9 +308,4 @@ class MidiSink(Adapter):
 
     # -- info and warnings ------------------------------------------------------------
 
-    def _warn(self, kind: str, message: str) -> None:
-        now = time.monotonic()
-        if now - self._last_warning.get(kind, -math.inf) >= WARN_EVERY_S:
-            self._last_warning[kind] = now
-            log.warning("%s: %s (%s)", self.name, message, ", ".join(f"{k} {v}" for k, v in self.stats.items() if v))
 

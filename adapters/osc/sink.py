@@ -24,7 +24,6 @@ from .profiles import PROFILES
 
 log = logging.getLogger(__name__)
 
-WARN_EVERY_S = 10.0
 INFO_RETRY_S = 2.0
 
 
@@ -65,10 +64,8 @@ class OscSink(Adapter):
     def _start(self) -> None:
         cfg: OscSinkConfig = self.config
         self.stats = dict.fromkeys(("received", "sent", "stale", "bad", "late", "waiting_info", "send_errors"), 0)
-        self._last_warning: dict[str, float] = {}
-        self._sources: dict[str, Key] = {}
         self._ranges: dict[str, dict[str, tuple[float, float]]] = {}
-        self._info = InfoRequests(self.bus, self._take_info, lambda robot, text: self._warn("info", text),
+        self._info = InfoRequests(self.bus, self._take_info, lambda robot, text: self.warn("info", text),
                                   INFO_RETRY_S)
         self._links = [_Link(t, _resolve(t.to)) for t in cfg.resolved_targets()]
         self._sample_links = [link for link in self._links if not link.target.framed]
@@ -122,22 +119,23 @@ class OscSink(Adapter):
                     self._sample_to(link, *held, now)
 
     def _take(self, key: str, payload: bytes, now: float) -> None:
-        self.stats["received"] += 1
         try:
-            message = codec.incoming(key, payload, self._sources, self._streams.accepts)
+            message = self._streams.incoming(key, payload)
         except codec.BAD as exc:
+            self.stats["received"] += 1
             self.stats["bad"] += 1
-            self._warn("bad", f"sample on '{key}' not sent: {type(exc).__name__}: {exc}")
+            self.warn("bad", f"sample on '{key}' not sent: {type(exc).__name__}: {exc}")
             return
+        self.stats["received"] += len(message.samples) or 1  # a frame counts as its samples
         if message.event is not None:
             self._event(message.source, message.event)
             return
         max_age = self.config.max_age_ms / 1000.0
         if max_age and time.time() - message.t > max_age:
             self.stats["stale"] += 1
-            self._warn("stale", f"samples older than {self.config.max_age_ms:g} ms dropped (clocks in step?)")
+            self.warn("stale", f"samples older than {self.config.max_age_ms:g} ms dropped (clocks in step?)")
             return
-        samples = message.samples if message.source.section == "frame" else (message,)
+        samples = message.joints
         for link in self._sample_links:
             for source, _, t, seq, values, _ in samples:
                 self._sample_to(link, source, values, t, seq, now)
@@ -198,7 +196,7 @@ class OscSink(Adapter):
             rendered = render(*args)
         except (struct.error, OverflowError, ValueError, TypeError) as exc:
             self.stats["bad"] += 1
-            self._warn("encode", f"not sent to {link.target.to}, OSC cannot carry it: {exc}")
+            self.warn("encode", f"not sent to {link.target.to}, OSC cannot carry it: {exc}")
             return
         for datagram in [rendered] if isinstance(rendered, bytes) else rendered or ():
             try:
@@ -206,7 +204,7 @@ class OscSink(Adapter):
                 self.stats["sent"] += 1
             except OSError as exc:
                 self.stats["send_errors"] += 1
-                self._warn("send", f"cannot send to {link.target.to}: {exc.strerror or exc}")
+                self.warn("send", f"cannot send to {link.target.to}: {exc.strerror or exc}")
 
     # -- normalization ----------------------------------------------------------------
 
@@ -232,15 +230,10 @@ class OscSink(Adapter):
             ranges.update({d["name"]: (float(d["min"]), float(d["max"])) for d in info.get("derived", [])
                            if "min" in d and "max" in d})
         except (KeyError, TypeError, ValueError) as exc:
-            self._warn("info", f"{robot}/info unusable: {exc}")
+            self.warn("info", f"{robot}/info unusable: {exc}")
             return
         self._ranges[robot] = ranges
 
-    def _warn(self, kind: str, message: str) -> None:
-        now = time.monotonic()
-        if now - self._last_warning.get(kind, -math.inf) >= WARN_EVERY_S:
-            self._last_warning[kind] = now
-            log.warning("%s: %s (%s)", self.name, message, ", ".join(f"{k} {v}" for k, v in self.stats.items() if v))
 
 
 

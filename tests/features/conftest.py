@@ -21,7 +21,8 @@ def model_info(model: str, robot: str | None = None) -> dict[str, Any]:
 
 
 class FakeOwner:
-    """Serves ``<robot>/info`` and publishes joint frames as a test writes them."""
+    """Serves ``<robot>/info`` and publishes joint frames as a test writes them: whole on
+    ``<robot>/frame`` and then per joint, as a robot owner does."""
 
     def __init__(self, bus: Any, robot: str, info: dict[str, Any]) -> None:
         self.bus, self.robot, self.seq = bus, robot, 0
@@ -30,15 +31,23 @@ class FakeOwner:
                                                                        encoding=codec.ENCODING))
         self._publishers: dict[str, Any] = {}
 
-    def frame(self, t: float, positions: Mapping[str, Any], seq: int | None = None) -> int:
-        """One frame: every joint of ``positions`` at ``t`` (values may be NaN); returns its seq."""
+    def frame(self, t: float, positions: Mapping[str, Any], seq: int | None = None,
+              whole: bool = True, joints: bool = True) -> int:
+        """One frame: every joint of ``positions`` at ``t`` (values may be NaN); returns its seq.
+        ``whole=False`` puts the joint keys only (as a script of one's own may), ``joints=False``
+        the frame only."""
         self.seq = self.seq + 1 if seq is None else seq
-        for joint, value in positions.items():
-            key = keys.joint(self.robot, joint)
-            if key not in self._publishers:
-                self._publishers[key] = self.bus.session.declare_publisher(key)
-            self._publishers[key].put(codec.encode({"t": t, "seq": self.seq, "v": value}))
+        if whole:
+            self.put(keys.frame(self.robot), codec.frame(t, self.seq, list(positions), list(positions.values())))
+        for joint, value in positions.items() if joints else ():
+            self.put(keys.joint(self.robot, joint), {"t": t, "seq": self.seq, "v": value})
         return self.seq
+
+    def put(self, key: str, message: dict[str, Any] | bytes) -> None:
+        """``message`` (encoded unless bytes already) on ``key``."""
+        if key not in self._publishers:
+            self._publishers[key] = self.bus.session.declare_publisher(key)
+        self._publishers[key].put(message if isinstance(message, bytes) else codec.encode(message))
 
     def close(self) -> None:
         self.queryable.undeclare()

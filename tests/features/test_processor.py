@@ -153,10 +153,11 @@ def test_an_unknown_model_gets_velocity_and_qom_and_is_told_why_not_hands(net, o
     assert warnings == [f"features: bot: hand positions unavailable: {reason}"]
 
 
-def test_nan_missing_joints_and_garbage_are_counted_not_fatal(net, owner, caplog):
+@pytest.mark.parametrize("per_joint_keys", [False, True], ids=["frames", "joint-keys"])
+def test_nan_missing_joints_and_garbage_are_counted_not_fatal(net, owner, caplog, per_joint_keys):
     caplog.set_level(logging.WARNING, logger="sonibus.adapters.features")
     fake = owner("pepper", model_info("pepper"))
-    features = start(net, robots="pepper")
+    features = start(net, robots="pepper", per_joint_keys=per_joint_keys)
     watch = net.bus("watch")
     subscriber, derived = collect(watch, "pepper/derived/velocity/HeadYaw")
     pose = PEPPER.posture("StandInit")
@@ -167,7 +168,7 @@ def test_nan_missing_joints_and_garbage_are_counted_not_fatal(net, owner, caplog
             return {**pose, "HeadYaw": math.nan}
         if k % 3 == 1:
             return {j: v for j, v in pose.items() if j != "RHand"}
-        fake.bus.session.put("pepper/joints/HeadPitch", b"\xc1 not msgpack")
+        fake.put("pepper/joints/HeadPitch" if per_joint_keys else "pepper/frame", b"\xc1 not msgpack")
         return pose
 
     pump(fake, broken, lambda: min(features.stats[s] for s in ("nan", "missing", "bad")) >= 5, "bad input counted")
@@ -179,6 +180,24 @@ def test_nan_missing_joints_and_garbage_are_counted_not_fatal(net, owner, caplog
     warned = [r.getMessage() for r in caplog.records if r.levelno == logging.WARNING]
     assert len([w for w in warned if "lacks" in w]) == 1, warned   # at most one every 10 s
     assert len([w for w in warned if "skipped" in w]) == 1, warned
+
+
+@pytest.mark.parametrize("per_joint_keys", [False, True], ids=["frames", "joint-keys"])
+def test_frames_are_taken_or_with_per_joint_keys_the_joint_keys(net, owner, per_joint_keys):
+    """A robot owner puts both; a script may put only one: the processor takes what its option says."""
+    fake = owner("pepper", model_info("pepper"))
+    features = start(net, robots="pepper", per_joint_keys=per_joint_keys)
+    subscriber, derived = collect(net.bus("watch"), "pepper/derived/velocity/HeadYaw")
+    pose = PEPPER.posture("StandInit")
+    last = pump(fake, lambda k: pose, lambda: derived, "HeadYaw's velocity")
+    wait_for(lambda: any(m["seq"] == last for _, m in list(derived)), what="the last frame pumped, processed")
+    frames = features.stats["frames"]
+    unheard = fake.frame(T0 + (last + 1) * 0.01, pose, whole=per_joint_keys, joints=not per_joint_keys)
+    heard = fake.frame(T0 + (last + 2) * 0.01, pose, whole=not per_joint_keys, joints=per_joint_keys)
+    wait_for(lambda: any(m["seq"] == heard for _, m in list(derived)), what="the frame after the unheard one")
+    subscriber.undeclare()
+    assert features.stats["frames"] == frames + 1
+    assert unheard not in {m["seq"] for _, m in derived}
 
 
 @pytest.mark.parametrize(("options", "fragment"), [

@@ -87,7 +87,8 @@ def writer(jack) -> Iterator[Any]:
 
 
 class FakeRobot:
-    """Serves ``<robot>/info`` and puts exact joint values and events on the bus."""
+    """Serves ``<robot>/info`` and puts exact joint values and events on the bus: each
+    frame on ``<robot>/frame`` and then per joint, as a robot owner does."""
 
     def __init__(self, bus: Any, robot: str = "bot", joints: tuple[tuple[str, float, float], ...] = (
             ("A", -2.0, 2.0), ("B", 0.0, 1.0)), behaviors: tuple[str, ...] = ("wave", "nod"),
@@ -98,9 +99,18 @@ class FakeRobot:
         self.queryable = bus.serve(keys.info(robot), lambda q: q.reply(q.key_expr, codec.encode(info),
                                                                        encoding=codec.ENCODING))
 
-    def joint(self, name: str, value: float) -> None:
+    def frame(self, values: dict[str, float], whole: bool = True, joints: bool = True) -> None:
+        """One frame of ``values``: whole on ``<robot>/frame`` and on the joint keys; ``whole=False``
+        puts the joint keys only (as a script of one's own may), ``joints=False`` the frame only."""
         self.seq += 1
-        self.bus.put(keys.joint(self.robot, name), {"t": time.time(), "seq": self.seq, "v": value})
+        t = time.time()
+        if whole:
+            self.bus.put(keys.frame(self.robot), codec.frame(t, self.seq, list(values), list(values.values())))
+        for name, value in values.items() if joints else ():
+            self.bus.put(keys.joint(self.robot, name), {"t": t, "seq": self.seq, "v": value})
+
+    def joint(self, name: str, value: float) -> None:
+        self.frame({name: value})
 
     def event(self, kind: str, **fields: Any) -> None:
         self.bus.put(keys.event(self.robot, kind), {"t": time.time(), "kind": kind, **fields})

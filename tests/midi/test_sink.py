@@ -1,5 +1,5 @@
 """The sink through a real JACK MIDI port: scaling, 14-bit, pitch bend, dedupe,
-the rate cap, channels, and events as notes."""
+the rate cap, channels, events as notes, frames or joint keys, and bad frames."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ import pytest
 import rtmidi
 
 from sonibus.adapters.midi import MidiSink, MidiSinkConfig
-from sonibus.bus import ConfigError
+from sonibus.bus import ConfigError, encode, keys
 
 from ..conftest import wait_for
 
@@ -79,6 +79,44 @@ def test_channels_in_the_order_robots_are_first_seen(net, fake, reader):
     until_sent(two, "A", 2.0, midi, lambda r: r.cc(2, 20) == [127], "robot two on channel 2")
     until_sent(late, "B", 1.0, midi, lambda r: r.cc(9, 21) == [127], "the fixed channel")
     assert daw.channels == {"one": 1, "two": 2, "late": 9}
+
+
+@pytest.mark.parametrize("per_joint_keys", [False, True], ids=["frames", "joint-keys"])
+def test_frames_are_heard_or_with_per_joint_keys_the_joint_keys(net, fake, reader, per_joint_keys):
+    """A robot owner puts both; a script may put only one: the sink hears what its option says."""
+    daw = sink(net, per_joint_keys=per_joint_keys)
+    midi = reader("daw:sonibus")
+    bot = fake()
+    until_sent(bot, "A", 0.0, midi, lambda r: r.cc(1, 20) == [64], "A mid-range from frames and joint keys")
+    bot.joint("B", 1.0)
+    wait_for(lambda: midi.cc(1, 21) == [127], what="B at its maximum: what was put before is taken")
+    received = daw.stats["received"]
+    bot.frame({"A": 2.0, "B": 0.0}, whole=per_joint_keys, joints=not per_joint_keys)    # not heard
+    bot.frame({"A": -2.0, "B": 0.5}, whole=not per_joint_keys, joints=per_joint_keys)   # heard, after it
+    wait_for(lambda: midi.cc(1, 21) == [127, 64], what="B half up")
+    assert midi.cc(1, 20) == [64, 0]
+    assert daw.stats["received"] == received + 2     # each joint once, never twice
+
+
+BAD_FRAMES = [
+    b"\xc1 not msgpack",
+    encode({"t": 1.0, "seq": 1, "names": ["A", "B"], "v": [0.5]}),    # a value short
+    encode({"t": 1.0, "seq": 1, "names": ["A"], "v": [None]}),
+    encode({"t": 1.0, "names": ["A"], "v": [0.5]}),                    # no seq
+]
+
+
+def test_a_malformed_frame_is_counted_and_the_sink_goes_on(net, fake, reader):
+    daw = sink(net)
+    midi = reader("daw:sonibus")
+    bot = fake()
+    until_sent(bot, "A", 0.0, midi, lambda r: r.cc(1, 20) == [64], "A mid-range")
+    for payload in BAD_FRAMES:
+        bot.bus.session.put(keys.frame("bot"), payload)
+    bot.joint("A", 2.0)                       # after the bad ones, from the same session
+    wait_for(lambda: midi.cc(1, 20) == [64, 127], what="A at its maximum after the bad frames")
+    assert daw.stats["bad"] == len(BAD_FRAMES)
+    assert daw.state == "running"
 
 
 def test_events_as_notes_and_connection_lost_silences_every_channel(net, fake, reader):

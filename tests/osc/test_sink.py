@@ -7,7 +7,7 @@ import socket
 import pytest
 
 from sonibus.adapters.osc import OscSink, OscSinkConfig
-from sonibus.bus import ConfigError
+from sonibus.bus import ConfigError, encode
 
 from ..conftest import free_port, require_tool, wait_for
 
@@ -27,15 +27,32 @@ def test_sink_serves_every_target_with_its_template(net, spawn):
     assert sink.stats["bad"] == 0
 
 
-def test_a_bad_sample_is_skipped_and_the_stream_goes_on(net, spawn):
+BAD_FRAMES = [
+    b"\xc1not msgpack",
+    b"\x93\x01\x02\x03",                                                       # a list, not a map
+    encode({"t": 1.0, "seq": 1, "v": [0.1]}),                                 # no names
+    encode({"t": 1.0, "seq": 1, "names": ["HeadYaw", "HeadPitch"], "v": [0.1]}),  # one value short
+    encode({"t": 1.0, "seq": 1, "names": ["HeadYaw"], "v": ["high"]}),
+    encode({"t": 1.0, "seq": 1, "names": ["Head/Yaw"], "v": [0.1]}),
+    encode({"t": float("nan"), "seq": 1, "names": ["HeadYaw"], "v": [0.1]}),
+]
+
+
+@pytest.mark.parametrize("per_joint_keys", [False, True], ids=["frames", "joint-keys"])
+def test_a_bad_sample_is_skipped_and_the_stream_goes_on(net, spawn, per_joint_keys):
     oscdump = require_tool("oscdump", "liblo-tools")
     port = free_port(socket.SOCK_DGRAM)
     receiver = spawn(oscdump, "-L", str(port), collect=True)
-    sink = net.start(OscSink(OscSinkConfig(targets=(f"127.0.0.1:{port}",)), name="sound"))
+    sink = net.start(OscSink(OscSinkConfig(targets=(f"127.0.0.1:{port}",), per_joint_keys=per_joint_keys),
+                             name="sound"))
     other = net.bus("stranger")
-    for payload in (b"\xc1not msgpack", b"\x93\x01\x02\x03", b"\x81\xa1v\xa3str"):
-        other.session.put("pepper/joints/HeadYaw", payload)
-    wait_for(lambda: sink.stats["bad"] == 3, what="three bad samples counted")
+    key, bad = ("pepper/joints/HeadYaw", [*BAD_FRAMES[:2], b"\x81\xa1v\xa3str"]) if per_joint_keys \
+        else ("pepper/frame", BAD_FRAMES)
+    publisher = other.session.declare_publisher(key)
+    wait_for(lambda: publisher.matching_status.matching, what="the sink's subscription")
+    for payload in bad:
+        publisher.put(payload)
+    wait_for(lambda: sink.stats["bad"] == len(bad), what=f"{len(bad)} bad messages counted")
     net.sim("pepper", rate_hz=50)
     wait_for(lambda: len(receiver.lines) >= 17, what="good samples after bad ones")
     assert sink.state == "running"

@@ -40,19 +40,6 @@ def f32(value: float) -> float:
     return float(np.float32(value))
 
 
-@pytest.fixture
-def receivers():
-    made: list[Datagrams] = []
-
-    def make() -> Datagrams:
-        made.append(Datagrams())
-        return made[-1]
-
-    yield make
-    for receiver in made:
-        receiver.close()
-
-
 def record(bus, pattern: str = "pepper/joints/*"):
     """Samples as the bus carries them: seq → {joint: (t, v)}, filled as they come."""
     frames: dict[int, dict[str, tuple[float, float]]] = defaultdict(dict)
@@ -82,6 +69,11 @@ def messages(receiver: Datagrams, prefix: str = "") -> list[tuple[str, list]]:
             if timed.message.address.startswith(prefix):
                 out.append((timed.message.address, timed.message.params))
     return out
+
+
+def keyed(subscribe, **options) -> OscSinkConfig:
+    """A sink config for sources that put joint keys only (a test's bus, not a robot owner)."""
+    return OscSinkConfig(subscribe=subscribe, per_joint_keys=True, **options)
 
 
 def sample(seq: int, v, t: float | None = None) -> dict:
@@ -181,7 +173,7 @@ def test_a_lost_sample_does_not_split_the_frames_after_it(net, receivers):
     """Frame B lost J4 on the way (joint streams drop under congestion). B goes out without it,
     and every later frame goes out whole, in one bundle."""
     raw = receivers()
-    net.start(OscSink(OscSinkConfig(subscribe="toy/joints/*", targets=(raw.target,), bundle=True), name="sound"))
+    net.start(OscSink(keyed("toy/joints/*", targets=(raw.target,), bundle=True), name="sound"))
     src = net.bus("toy")
     names = ("J1", "J2", "J3", "J4")
     seq = 0
@@ -244,7 +236,7 @@ def test_normalized_values_use_info_not_the_model(net, receivers):
     info = {"robot": "toy", "joints": [{"name": "A", "min": -2.0, "max": 2.0}, {"name": "B", "min": 0.0, "max": 10.0}],
             "derived": [{"name": "hand/RHand", "min": 0.0, "max": 2.0}]}
     queryable = owner.serve("toy/info", lambda query: query.reply(query.key_expr, encode(info)))
-    sink = net.start(OscSink(OscSinkConfig(subscribe=("toy/joints/*", "toy/derived/**"), targets=(raw.target,),
+    sink = net.start(OscSink(keyed(("toy/joints/*", "toy/derived/**"), targets=(raw.target,),
                                            values="normalized"), name="sound"))
     handshake(owner, "toy/joints/A", raw, sample(0, 1.0))
     assert sink.stats["waiting_info"] >= 1  # what came before the info was not sent raw
@@ -359,7 +351,7 @@ def test_rate_cap_sends_ten_a_second_and_always_the_newest(net, receivers):
 def test_rate_cap_sends_the_newest_of_a_burst_when_its_turn_comes(net, receivers, options):
     """Ten samples at once, then nothing: the first goes out, the newest a turn later, nothing between."""
     raw = receivers()
-    net.start(OscSink(OscSinkConfig(subscribe="toy/joints/*", targets=(raw.target,), max_rate_hz=10, **options),
+    net.start(OscSink(keyed("toy/joints/*", targets=(raw.target,), max_rate_hz=10, **options),
                       name="sound"))
     src = net.bus("toy")
     handshake(src, "toy/joints/Hello", raw)
@@ -447,8 +439,8 @@ def test_events_arrive_with_their_documented_arguments(net, receivers):
 
 def test_stale_samples_are_dropped_unless_max_age_is_0(net, receivers):
     fresh_only, everything = receivers(), receivers()
-    keeping = net.start(OscSink(OscSinkConfig(subscribe="toy/joints/*", targets=(fresh_only.target,)), name="live"))
-    keeping_all = net.start(OscSink(OscSinkConfig(subscribe="toy/joints/*", targets=(everything.target,),
+    keeping = net.start(OscSink(keyed("toy/joints/*", targets=(fresh_only.target,)), name="live"))
+    keeping_all = net.start(OscSink(keyed("toy/joints/*", targets=(everything.target,),
                                                   max_age_ms=0), name="all"))
     src = net.bus("toy")
     handshake(src, "toy/joints/Hello", fresh_only)
@@ -468,7 +460,7 @@ def test_stale_samples_are_dropped_unless_max_age_is_0(net, receivers):
 
 def test_the_sink_survives_garbage_and_sends_derived_vectors(net, receivers):
     raw = receivers()
-    sink = net.start(OscSink(OscSinkConfig(subscribe=("pepper/joints/*", "pepper/derived/**", "pepper/events/*"),
+    sink = net.start(OscSink(keyed(("pepper/joints/*", "pepper/derived/**", "pepper/events/*"),
                                            targets=(raw.target,)), name="sound"))
     src = net.bus("src")
     handshake(src, "pepper/joints/Hello", raw)
@@ -504,7 +496,7 @@ def test_the_sink_survives_garbage_and_sends_derived_vectors(net, receivers):
 def test_a_value_osc_cannot_carry_does_not_stop_the_sink(net, receivers, key, message, options):
     """The forward loop must go on: the sample is refused (counted bad) or sent as float32 ±inf."""
     raw = receivers()
-    sink = net.start(OscSink(OscSinkConfig(subscribe=("toy/joints/*", "toy/events/*"), targets=(raw.target,),
+    sink = net.start(OscSink(keyed(("toy/joints/*", "toy/events/*"), targets=(raw.target,),
                                            **options), name="sound"))
     src = net.bus("toy")
     handshake(src, "toy/joints/Hello", raw)
@@ -525,7 +517,7 @@ def test_a_value_osc_cannot_carry_does_not_stop_the_sink(net, receivers, key, me
 ], ids=["v-string", "v-empty", "t-nan", "t-inf"])
 def test_a_malformed_sample_is_counted_not_sent(net, receivers, message):
     raw = receivers()
-    sink = net.start(OscSink(OscSinkConfig(subscribe="toy/joints/*", targets=(raw.target,)), name="sound"))
+    sink = net.start(OscSink(keyed("toy/joints/*", targets=(raw.target,)), name="sound"))
     src = net.bus("toy")
     handshake(src, "toy/joints/Hello", raw)
     src.put("toy/joints/A", {"t": time.time(), **message})

@@ -1,0 +1,81 @@
+"""The frame key beside the per-joint keys: what a robot owner publishes, and what
+``bus.streams`` subscribes to for a sink's patterns."""
+
+from __future__ import annotations
+
+import threading
+
+import pytest
+
+from sonibus import schemas
+from sonibus.bus import codec
+from sonibus.bus.queue import SampleQueue
+from sonibus.bus.streams import Plan, Streams, plan
+
+from .conftest import wait_for
+
+
+@pytest.mark.parametrize(("patterns", "per_joint_keys", "expected"), [
+    (["*/joints/*"], False, Plan(frames=("*/frame",))),
+    (["pepper/joints/R*", "nao/joints/*"], False, Plan(frames=("pepper/frame", "nao/frame"))),
+    (["*/joints/*", "*/derived/**", "*/events/*"], False,
+     Plan(frames=("*/frame",), keys=("*/derived/**", "*/events/*"))),
+    (["**"], False, Plan(frames=("*/frame",), broad=("**",))),
+    (["pepper/**"], False, Plan(frames=("pepper/frame",), broad=("pepper/**",))),
+    (["**/HeadYaw"], False, Plan(frames=("*/frame",), broad=("**/HeadYaw",))),
+    (["pepper/joints/R*", "pepper/**"], True, Plan(keys=("pepper/joints/R$*", "pepper/**"))),
+])
+def test_joint_patterns_are_served_from_frames(patterns, per_joint_keys, expected):
+    assert plan(patterns, per_joint_keys) == expected
+
+
+def test_a_frame_holds_the_values_of_the_joint_samples(net):
+    """Late subscribers of joint keys are served too (the owner puts them only while someone listens)."""
+    watcher = net.bus("watcher")
+    frames: dict[int, dict] = {}
+    joints: dict[int, dict[str, dict]] = {}
+    lock = threading.Lock()
+
+    def take_frame(sample) -> None:
+        message = codec.decode(sample.payload.to_bytes())
+        with lock:
+            frames[message["seq"]] = message
+
+    def take_joint(sample) -> None:
+        message = codec.decode(sample.payload.to_bytes())
+        with lock:
+            joints.setdefault(message["seq"], {})[str(sample.key_expr).rsplit("/", 1)[1]] = message
+
+    subscribers = [watcher.session.declare_subscriber("pepper/frame", take_frame)]
+    robot = net.sim("pepper", rate_hz=50)
+    wait_for(lambda: len(frames) >= 5, what="five frames")
+    subscribers.append(watcher.session.declare_subscriber("pepper/joints/*", take_joint))
+    complete = lambda: [s for s, j in list(joints.items()) if len(j) == 17 and s in frames]  # noqa: E731
+    wait_for(lambda: len(complete()) >= 5, what="five frames also as joint samples")
+    with lock:
+        for seq in complete():
+            frame = frames[seq]
+            schemas.validate("frame", frame)
+            assert frame["names"] == list(robot.model.joint_names)
+            for name, value in zip(frame["names"], frame["v"], strict=True):
+                assert joints[seq][name] == {"t": frame["t"], "seq": seq, "v": value}
+    for subscriber in subscribers:
+        subscriber.undeclare()
+
+
+def test_a_broad_pattern_takes_each_joint_once(net):
+    """``pepper/**`` selects joint and frame keys; the joints come from the frames only."""
+    sink = net.bus("sink")
+    queue = SampleQueue(100_000)
+    streams = Streams(sink, ["pepper/**"], queue)
+    net.sim("pepper", rate_hz=50)
+    watcher = net.bus("watcher").session.declare_subscriber("pepper/joints/*", lambda sample: None)  # joints put too
+    taken: list[codec.Incoming] = []
+    wait_for(lambda: taken.extend(streams.incoming(*item) for item in queue.drain(0.05)) or len(taken) >= 60,
+             what="60 messages")
+    seqs = [m.seq for m in taken if m.source.section == "frame"]
+    assert seqs and len(seqs) == len(set(seqs))
+    assert all(m.source.section in ("frame", "events") for m in taken), {m.source.key for m in taken}
+    assert all(len(m.joints) == 17 for m in taken if m.source.section == "frame")
+    watcher.undeclare()
+    streams.undeclare()
