@@ -35,6 +35,7 @@ SCRIPTS: dict[str, tuple[str, list[str], float]] = {
     "stop_latency": ("stop_latency", [], 90),
     "features": ("features", [], 90),
     "zenoh_hop": ("zenoh_hop", [], 90),
+    "receive_cpu": ("receive_cpu", [], 60),
 }
 
 

@@ -154,13 +154,15 @@ class OscSink(Adapter):
 
     def _sample_to(self, link: _Link, source: Key, values: Sequence[float], t: float, seq: int,
                    now: float) -> None:
-        if not link.turn(source.key, now):
-            link.held[source.key] = (source, values, t, seq)  # filtered when its turn comes
+        key = source.key
+        if link.min_interval and not link.turn(key, now):
+            link.held[key] = (source, values, t, seq)  # filtered when its turn comes
             return
         scaled = self._scaled(link, source, values)
-        if scaled is None or not link.changed(source.key, scaled):
+        if scaled is None or (link.filtering and not link.changed(key, scaled)):
             return
-        link.last_sent[source.key] = now
+        if link.min_interval:
+            link.last_sent[key] = now
         self._send(link, link.profile.sample, source, scaled, t, seq)
 
     def _send_frame(self, frame: Frame, now: float) -> None:
