@@ -1,12 +1,16 @@
 """Recorder samples/s with no drop, beside the MCAP writer's own ceiling
 (issue 9, scenario e).
 
-sonibus path, per step of the ramp: publisher process(es) put joint samples
-(``botN/joints/JK``, msgpack, as in ``sink_throughput.py``: batches of one
-frame of 17 joints per robot), the recorder is its own process (``sonibus run``
-with ``adapter = "recorder"``, a fresh file each step, listening on loopback
-TCP). When the publishers are done the recorder is stopped (SIGTERM: it writes
-what is still queued, then the summary); the file's message count and the
+sonibus path, per step of the ramp: publisher process(es) put frames as a
+robot owner does (``RobotAdapter.publish_frame``; ``sink_throughput.publish``):
+each frame of 17 joints whole on ``botN/frame`` (``codec.frame``,
+``Bus.stream_publisher``), then its samples on ``botN/joints/JK``; the
+recorder is its own process (``sonibus run`` with ``adapter = "recorder"``,
+``subscribe = ["*/joints/*"]``, so it takes the frames and writes each joint's
+sample; a fresh file each step, listening on loopback TCP). Rates and counts
+are joint samples (a frame of 17 joints is 17). When the publishers are done
+the recorder is stopped (SIGTERM: it writes what is still queued, then the
+summary); the file's message count and the
 recorder's ``sonibus.stats`` metadata (``dropped``: its queue was full) say
 what was kept: ``lost`` = put − in the file; of it, ``dropped`` went in the
 recorder's full queue, the rest never reached the recorder (``received``:
@@ -14,7 +18,7 @@ Zenoh's DROP congestion control on the publishers' side when the recorder's
 socket reader falls behind). ``written/s`` = messages in the file / time from
 the start of the step until the recorder exited. ``drain`` is how long the recorder took to finish after the
 publishers ended: a recorder that keeps up finishes in well under a second,
-one that fell behind is still emptying its queue (65,536 messages deep, so a
+one that fell behind is still emptying its queue (65,536 frames deep, so a
 short step can be drop-free without keeping up; ``kept up`` needs both).
 
 Baselines, same run, one process each, as fast as they go: the ``mcap``
@@ -23,7 +27,7 @@ same channels, 1 MB chunks, zstd) — the file format's own ceiling — and
 sonibus's ``RecordingWriter.write`` (JSON encoding included), i.e. the
 recorder's writing code without the bus.
 
-    .venv/bin/python bench/recorder_rate.py [--rates 5000 10000 20000 30000 40000 60000]
+    .venv/bin/python bench/recorder_rate.py [--rates 10000 20000 40000 60000 80000 100000]
         [--seconds 3] [--robots 4] [--publishers 2]
 
 Writes bench/results/recorder_rate.json and prints a table.
@@ -119,7 +123,7 @@ def step(rate: float, seconds: float, robots: int, publishers: int, folder: Path
                                     stdout=subprocess.DEVNULL, stderr=log, start_new_session=True)
     group = None
     try:
-        group = Publishers(endpoint, publishers, robots, rate, seconds)
+        group = Publishers(endpoint, publishers, robots, rate, seconds)  # frame whole, then per joint
         group.wait_ready(recorder)
         cpu0, threads0, started = cpu_seconds(recorder.pid), thread_cpu(recorder.pid), time.monotonic()
         pub = group.run(timeout=3 * seconds + 30)
@@ -149,7 +153,7 @@ def step(rate: float, seconds: float, robots: int, publishers: int, folder: Path
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--rates", type=float, nargs="+", default=[5000, 10000, 20000, 30000, 40000, 60000],
+    parser.add_argument("--rates", type=float, nargs="+", default=[10000, 20000, 40000, 60000, 80000, 100000],
                         help="offered joint samples/s, one step each")
     parser.add_argument("--seconds", type=float, default=3.0, help="length of each step")
     parser.add_argument("--robots", type=int, default=4, help="robots of 17 joints; a batch is one frame of each")

@@ -3,7 +3,7 @@ sent straight from one Python process at the same rates (issue 9, scenario b).
 
 sonibus path, per step of the ramp: publisher process(es) put frames of 17
 joints per robot as a robot owner does (``botN/frame`` whole, then
-``botN/joints/JK`` each, msgpack, ``Bus.frame_publisher``/``stream_publisher``); the OSC sink is its own
+``botN/joints/JK`` each, msgpack, ``Bus.stream_publisher``); the OSC sink is its own
 process (``sonibus run``, ``max_age_ms = 0`` so nothing is dropped as stale,
 listening on loopback TCP, the publishers connect to it); a receiver process
 counts the datagrams (8 MB socket buffer, gc off). Each step gets a fresh sink
@@ -130,7 +130,7 @@ def publish(endpoint: str, robots: list[int], frames_per_s: float, seconds: floa
         bus = Bus(session, node=f"bench-publisher-{robots[0]}")
         names = [f"J{j}" for j in range(JOINTS)]
         streams = [[bus.stream_publisher(f"bot{r}/joints/{n}") for n in names] for r in robots]
-        frames_out = [bus.frame_publisher(f"bot{r}/frame") for r in robots]
+        frames_out = [bus.stream_publisher(f"bot{r}/frame") for r in robots]
         watched = [p for row in streams for p in row] if per_joint_keys else frames_out
         queryables = []  # kept referenced for the life of the session
         for r in robots if info else ():

@@ -3,8 +3,8 @@ processes, nothing of sonibus on it. A publisher process puts one frame of 17
 joint samples (one key each, as sonibus's per-joint keys) every 10 ms; a subscriber
 process stamps each sample in its callback. Latency = arrival − t (one host,
 one clock). Variants: the default (`express=False`, batching on), `express=True`,
-batching off, a batching time limit of 0, and one key per frame (`express`, as
-`<robot>/frame`). Baseline, same run: the same 17
+batching off, a batching time limit of 0, and one key per frame (as
+`<robot>/frame`), `express` or not. Baseline, same run: the same 17
 datagrams per frame over plain UDP between two processes.
 
     .venv/bin/python bench/zenoh_hop.py [--frames 600]
@@ -30,7 +30,8 @@ VARIANTS: dict[str, tuple[dict[str, Any], bool, int]] = {  # Zenoh options, expr
     "express": ({}, True, JOINTS),
     "batching off": ({"transport/link/tx/queue/batching/enabled": False}, False, JOINTS),
     "batching time limit 0": ({"transport/link/tx/queue/batching/time_limit": 0}, False, JOINTS),
-    "one key per frame, express (as <robot>/frame)": ({}, True, 1),
+    "one key per frame, express": ({}, True, 1),
+    "one key per frame, express off (as <robot>/frame)": ({}, False, 1),
 }
 
 

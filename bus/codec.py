@@ -78,6 +78,27 @@ def frame_joints(message: dict[str, Any]) -> tuple[list[str], list[float]]:
     return names, values
 
 
+FRAME_FIELDS = ("t", "seq", "names", "v")  # a frame's own fields; every other one is a quantity per joint
+
+
+def frame_samples(message: dict[str, Any]) -> list[tuple[str, dict[str, Any]]]:
+    """Each joint of a frame with the sample its own key carries (``t``, ``seq``, ``v``
+    and its extra quantities); raises one of ``BAD``, saying what is wrong.
+
+    >>> frame_samples(frame(1.5, 7, ["HeadYaw", "HeadPitch"], [0.1, 0.2], {"cmd": [0.0, 0.3]}))[1]
+    ('HeadPitch', {'t': 1.5, 'seq': 7, 'v': 0.2, 'cmd': 0.3})
+    """
+    stamp(message)  # checked; the samples keep t and seq as sent
+    names, values = frame_joints(message)
+    extra = {quantity: v for quantity, v in message.items() if quantity not in FRAME_FIELDS}
+    for quantity, v in extra.items():
+        if not isinstance(v, list) or len(v) != len(names) or not all(number(x) for x in v):
+            raise ValueError(f"{quantity} is not a list of {len(names)} numbers")
+    t, seq = message["t"], message["seq"]
+    return [(name, {"t": t, "seq": seq, "v": value, **{q: v[i] for q, v in extra.items()}})
+            for i, (name, value) in enumerate(zip(names, values, strict=True))]
+
+
 class Incoming(NamedTuple):
     """A message as a sink takes it: an event (``event`` set), a sample (``t``,
     ``seq``, ``values``) or a frame (``t``, ``seq`` and its joint ``samples``)."""

@@ -25,6 +25,11 @@ def frame(robot: str = "*") -> str:
     return f"{robot}/frame"
 
 
+def is_frame(key: str) -> bool:
+    """Whether ``key`` is a robot's frame key (``pepper/frame``)."""
+    return key.endswith("/frame") and key.count("/") == 1
+
+
 def derived(robot: str, feature: str, name: str) -> str:
     return f"{robot}/derived/{feature}/{name}"
 

