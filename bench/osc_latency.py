@@ -2,7 +2,9 @@
 separate receiver process, beside the same OSC sent straight (no bus).
 
 sonibus path: process 1 runs the simulated robots (`sonibus run --only`),
-process 2 the OSC sink (extra args t and seq), process 3 receives. Baseline:
+process 2 the OSC sink (extra args t and seq), process 3 receives; with
+`--one-process`, robots and sink share process 1, as `sonibus run show.toml`
+runs every node of one machine. Baseline:
 one process sends the same messages (same rate, same t/seq args) straight to
 the receiver. Latency = arrival time − t (one host, one clock).
 
@@ -102,7 +104,7 @@ def baseline(port: int, robots: int, rate: float, seconds: float) -> None:
 
 
 def measure(path: str, robots: int, rate: float, seconds: float, options: str = "",
-            sink: str = "") -> dict[str, float]:
+            sink: str = "", one_process: bool = False) -> dict[str, float]:
     port = free_port(socket.SOCK_DGRAM)
     ready, out = multiprocessing.Event(), multiprocessing.Queue()
     receiver = multiprocessing.Process(target=receive, args=(port, seconds + 2.0, ready, out))
@@ -122,10 +124,13 @@ def measure(path: str, robots: int, rate: float, seconds: float, options: str = 
                 f'[nodes.sound]\nadapter = "osc"\nsubscribe = "*/joints/*"\n'
                 f'targets = ["127.0.0.1:{port}"]\nextra = ["t", "seq"]\n{sink}\n')
             robot_nodes = [f"robot{r}" for r in range(robots)]
-            children.append(subprocess.Popen([SONIBUS, "run", str(config), "--only", *robot_nodes,
-                                              "--listen", f"tcp/127.0.0.1:{zport}"], stdout=subprocess.DEVNULL))
-            children.append(subprocess.Popen([SONIBUS, "-v", "run", str(config), "--only", "sound",
-                                              "--connect", f"tcp/127.0.0.1:{zport}"], stdout=subprocess.DEVNULL))
+            if one_process:  # as `sonibus run show.toml` runs every node of one machine
+                children.append(subprocess.Popen([SONIBUS, "-v", "run", str(config)], stdout=subprocess.DEVNULL))
+            else:
+                children.append(subprocess.Popen([SONIBUS, "run", str(config), "--only", *robot_nodes,
+                                                  "--listen", f"tcp/127.0.0.1:{zport}"], stdout=subprocess.DEVNULL))
+                children.append(subprocess.Popen([SONIBUS, "-v", "run", str(config), "--only", "sound",
+                                                  "--connect", f"tcp/127.0.0.1:{zport}"], stdout=subprocess.DEVNULL))
             time.sleep(1.0)  # start-up is not measured
             before = [cpu_seconds(c.pid) for c in children]
             time.sleep(seconds - 1.0)
@@ -140,7 +145,9 @@ def measure(path: str, robots: int, rate: float, seconds: float, options: str = 
     if path != "baseline" and records:
         records = records[int(len(records) * warmup / seconds):]
     summary = summarize(records, robots)
-    if path != "baseline":
+    if path != "baseline" and one_process:
+        summary.update(cpu_process_pct=cpu[0])
+    elif path != "baseline":
         summary.update(cpu_robots_pct=cpu[0], cpu_sink_pct=cpu[1], cpu_sink_per_robot_pct=cpu[1] / robots)
     return summary
 
@@ -162,21 +169,25 @@ def main() -> None:
     parser.add_argument("--seconds", type=float, default=10.0)
     parser.add_argument("--options", default="", help='extra [bus] TOML, e.g. options = {"a/b" = 1}')
     parser.add_argument("--sink", default="", help='extra OSC sink TOML, e.g. "bundle = true"')
+    parser.add_argument("--one-process", action="store_true", help="robots and sink in one process")
     parser.add_argument("--name", default="osc_latency", help="results file name")
     args = parser.parse_args()
     runs = []
     for robots in (int(n) for n in args.robots.split(",")):
         before = cpu_note()
         base = measure("baseline", robots, args.rate, args.seconds)
-        bus = measure("sonibus", robots, args.rate, args.seconds, args.options, args.sink)
+        bus = measure("sonibus", robots, args.rate, args.seconds, args.options, args.sink, args.one_process)
         result = {"robots": robots, "joints": JOINTS, "rate_hz": args.rate, "seconds": args.seconds,
                   "machine": before, "baseline_no_bus": base, "sonibus": bus}
         print(f"-- {robots} robot(s) x {JOINTS} joints x {args.rate:g} Hz ({before})")
         compare(result, base, bus, ["messages", "p50_us", "p99_us", "p999_us", "lost_messages"])
-        print(f"CPU: robots {bus['cpu_robots_pct']:.1f} %, sink {bus['cpu_sink_pct']:.1f} % "
-              f"({bus['cpu_sink_per_robot_pct']:.1f} % per robot)")
+        if args.one_process:
+            print(f"CPU: robots and sink {bus['cpu_process_pct']:.1f} %")
+        else:
+            print(f"CPU: robots {bus['cpu_robots_pct']:.1f} %, sink {bus['cpu_sink_pct']:.1f} % "
+                  f"({bus['cpu_sink_per_robot_pct']:.1f} % per robot)")
         runs.append(result)
-    write(args.name, {"runs": runs, "sink_options": args.sink})
+    write(args.name, {"runs": runs, "sink_options": args.sink, "one_process": args.one_process})
 
 
 if __name__ == "__main__":

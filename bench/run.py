@@ -28,7 +28,11 @@ SCRIPTS: dict[str, tuple[str, list[str], float]] = {
     "osc_latency": ("osc_latency", ["--robots", "1,2,10", "--seconds", "8"], 150),
     "osc_latency_bundles": ("osc_latency", ["--robots", "2,10", "--seconds", "8", "--sink", "bundle = true",
                                             "--name", "osc_latency_bundles"], 120),
+    "osc_latency_one_process": ("osc_latency", ["--robots", "2", "--seconds", "8", "--one-process",
+                                                "--name", "osc_latency_one_process"], 60),
     "sink_throughput": ("sink_throughput", [], 120),
+    "sink_throughput_bundles": ("sink_throughput", ["--bundles", "--name", "sink_throughput_bundles",
+                                                    "--rates", "40000", "100000", "150000", "200000"], 90),
     "naoqi_rate": ("naoqi_rate", [], 90),
     "midi_rate": ("midi_rate", [], 90),
     "recorder_rate": ("recorder_rate", [], 90),
@@ -70,6 +74,7 @@ Row = tuple[str, str, str, str, str, str]  # scenario, sonibus, baseline, ratio,
 def rows_osc_latency(r: dict[str, Any]) -> list[Row]:
     out = []
     shape = f" ({r['sink_options']})" if r.get("sink_options") else ""
+    shape += " (robots and sink in one process)" if r.get("one_process") else ""
     for run_ in r.get("runs", []):
         bus, base, n = run_["sonibus"], run_["baseline_no_bus"], run_["robots"]
         two = n == 2
@@ -114,7 +119,8 @@ def rows_generic(r: dict[str, Any]) -> list[Row]:
 
 
 ROWS: dict[str, Callable[[dict[str, Any]], list[Row]]] = {
-    "osc_latency": rows_osc_latency, "osc_latency_bundles": rows_osc_latency, "naoqi_rate": rows_naoqi_rate,
+    "osc_latency": rows_osc_latency, "osc_latency_bundles": rows_osc_latency,
+    "osc_latency_one_process": rows_osc_latency, "naoqi_rate": rows_naoqi_rate,
     "features": rows_features,
 }
 

@@ -6,7 +6,8 @@ joints per robot as a robot owner does (``botN/frame`` whole, then
 ``botN/joints/JK`` each, msgpack, ``Bus.stream_publisher``); the OSC sink is its own
 process (``sonibus run``, ``max_age_ms = 0`` so nothing is dropped as stale,
 listening on loopback TCP, the publishers connect to it); a receiver process
-counts the datagrams (8 MB socket buffer, gc off). Each step gets a fresh sink
+counts the datagrams (8 MB socket buffer, gc off). ``--bundles``: the sink
+sends a bundle per frame and the baseline the same bundles. Each step gets a fresh sink
 and publishers, so the sink's own counters (``received``, ``sent``,
 ``queue_dropped``) are per step. Baseline, same run, interleaved: one process
 sends the same OSC datagrams (built beforehand) with ``sendto`` to the same
@@ -322,11 +323,11 @@ def sink_stats(log: str) -> dict[str, int]:
 
 
 def step_sonibus(receiver: Receiver, rate: float, seconds: float, robots: int, publishers: int,
-                 folder: Path) -> dict[str, Any]:
+                 folder: Path, bundles: bool = False) -> dict[str, Any]:
     endpoint = f"tcp/127.0.0.1:{free_port()}"
     config = folder / "sink.toml"
     config.write_text(f'[bus]\nmulticast = false\n\n[nodes.sound]\nadapter = "osc"\nsubscribe = "*/joints/*"\n'
-                      f'targets = ["127.0.0.1:{receiver.port}"]\nmax_age_ms = 0\n')
+                      f'targets = ["127.0.0.1:{receiver.port}"]\nmax_age_ms = 0\nbundle = {str(bundles).lower()}\n')
     log_path = folder / f"sink-{rate:g}.log"
     with open(log_path, "w") as log:
         sink = subprocess.Popen([SONIBUS, "-v", "run", str(config), "--no-multicast", "--listen", endpoint],
@@ -344,14 +345,14 @@ def step_sonibus(receiver: Receiver, rate: float, seconds: float, robots: int, p
         sink_cpu, receiver_cpu = sink_user + sink_sys, cpu_seconds(receiver.process.pid) - receiver_cpu0
         window = time.monotonic() - started
         threads = thread_share(threads0, thread_cpu(sink.pid), window)
-        count, last = receiver.settle(pub["sent"], count0)
+        count, last = receiver.settle(pub["sent"] // _per(bundles), count0)
         drops = receiver.drops() - drops0
     finally:
         if group is not None:
             group.close()
         stop_process(sink)
     stats = sink_stats(log_path.read_text())
-    delivered = count - count0
+    delivered = (count - count0) * _per(bundles)
     return {"offered_per_s": rate, "sent": pub["sent"], "achieved_per_s": pub["achieved_per_s"],
             "publisher_cpu_percent": pub["cpu_percent"], "delivered": delivered,
             "delivered_per_s": delivered / pub["seconds"], "lost": pub["sent"] - delivered,
@@ -363,16 +364,24 @@ def step_sonibus(receiver: Receiver, rate: float, seconds: float, robots: int, p
             "receiver_socket_drops": drops, "sink": stats}
 
 
-def send_raw(port: int, robots: int, rate: float, seconds: float, ready: Any, go: Any, out: Any) -> None:
-    """The baseline: the sink's datagrams, built beforehand, sent with sendto in the same batches
-    (``rate`` 0: unpaced, as fast as it goes)."""
+def _per(bundles: bool) -> int:
+    """Joint samples per datagram."""
+    return JOINTS if bundles else 1
+
+
+def send_raw(port: int, robots: int, rate: float, seconds: float, ready: Any, go: Any, out: Any,
+             bundles: bool = False) -> None:
+    """The baseline: the sink's datagrams (a message per joint, or a bundle per frame), built
+    beforehand, sent with sendto in the same batches (``rate`` 0: unpaced, as fast as it goes)."""
     gc.disable()
-    from sonibus.adapters.osc.encode import floats
+    from sonibus.adapters.osc.encode import bundle, floats, timetag
     sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     sock.setsockopt(socket.SOL_SOCKET, socket.SO_SNDBUF, 4 << 20)
     batch = [floats(f"/bot{r}/joints/J{j}", (0.25,)) for r in range(robots) for j in range(JOINTS)]
+    if bundles:
+        batch = [bundle(timetag(time.time()), batch[r * JOINTS:(r + 1) * JOINTS]) for r in range(robots)]
     destination = ("127.0.0.1", port)
-    period = len(batch) / rate if rate else 0.0
+    period = len(batch) * _per(bundles) / rate if rate else 0.0
     frames = round(seconds / period) if rate else sys.maxsize
     ready.set()
     go.wait(30)
@@ -381,7 +390,7 @@ def send_raw(port: int, robots: int, rate: float, seconds: float, ready: Any, go
     while frame < frames and time.monotonic() - start < (2.0 if rate else 1.0) * seconds:
         for datagram in batch:
             sock.sendto(datagram, destination)
-        sent += len(batch)
+        sent += len(batch) * _per(bundles)
         frame += 1
         wait = start + frame * period - time.monotonic()
         if wait > 0:
@@ -392,9 +401,10 @@ def send_raw(port: int, robots: int, rate: float, seconds: float, ready: Any, go
     sock.close()
 
 
-def step_raw(receiver: Receiver, rate: float, seconds: float, robots: int) -> dict[str, Any]:
+def step_raw(receiver: Receiver, rate: float, seconds: float, robots: int,
+             bundles: bool = False) -> dict[str, Any]:
     ready, go, out = CONTEXT.Event(), CONTEXT.Event(), CONTEXT.Queue()
-    sender = CONTEXT.Process(target=send_raw, args=(receiver.port, robots, rate, seconds, ready, go, out),
+    sender = CONTEXT.Process(target=send_raw, args=(receiver.port, robots, rate, seconds, ready, go, out, bundles),
                              daemon=True)
     sender.start()
     try:
@@ -407,11 +417,11 @@ def step_raw(receiver: Receiver, rate: float, seconds: float, robots: int) -> di
         pub = out.get(timeout=3 * seconds + 30)
         receiver_cpu = cpu_seconds(receiver.process.pid) - receiver_cpu0
         window = time.monotonic() - started
-        count, last = receiver.settle(pub["sent"], count0)
+        count, last = receiver.settle(pub["sent"] // _per(bundles), count0)
         drops = receiver.drops() - drops0
     finally:
         stop_children([sender])
-    delivered = count - count0
+    delivered = (count - count0) * _per(bundles)
     return {"offered_per_s": rate, "sent": pub["sent"], "achieved_per_s": pub["sent"] / pub["seconds"],
             "publisher_cpu_percent": pub["cpu_percent"], "delivered": delivered,
             "delivered_per_s": delivered / pub["seconds"], "lost": pub["sent"] - delivered,
@@ -427,12 +437,15 @@ def best(steps: list[dict[str, Any]]) -> float:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--rates", type=float, nargs="+", default=[5000, 10000, 20000, 30000, 40000, 80000, 120000],
+    parser.add_argument("--rates", type=float, nargs="+", default=[10000, 20000, 40000, 60000, 80000, 100000, 120000],
                         help="offered joint samples/s, one step each")
     parser.add_argument("--seconds", type=float, default=3.0, help="length of each step")
     parser.add_argument("--robots", type=int, default=4, help="robots of 17 joints; a batch is one frame of each")
     parser.add_argument("--publishers", type=int, default=2,
                         help="publisher processes sharing the robots (one offers ~90k/s here beside the sink)")
+    parser.add_argument("--bundles", action="store_true",
+                        help="the sink sends a bundle per frame (bundle = true), the baseline the same bundles")
+    parser.add_argument("--name", default="sink_throughput", help="results file name")
     args = parser.parse_args()
     machine = f"{os.cpu_count()} cores, load {os.getloadavg()[0]:.2f}"
     raw: list[dict[str, Any]] = []
@@ -441,22 +454,25 @@ def main() -> None:
     try:
         with tempfile.TemporaryDirectory() as folder:
             for rate in args.rates:
-                raw.append(step_raw(receiver, rate, args.seconds, args.robots))
-                bus.append(step_sonibus(receiver, rate, args.seconds, args.robots, args.publishers, Path(folder)))
+                raw.append(step_raw(receiver, rate, args.seconds, args.robots, args.bundles))
+                bus.append(step_sonibus(receiver, rate, args.seconds, args.robots, args.publishers, Path(folder),
+                                        args.bundles))
                 print(f"  {rate:>8.0f}/s: raw loss {raw[-1]['loss_percent']:.2f} %, "
                       f"sonibus loss {bus[-1]['loss_percent']:.2f} %", flush=True)
-            unpaced = step_raw(receiver, 0.0, args.seconds, args.robots)  # raw UDP's own ceiling here
+            unpaced = step_raw(receiver, 0.0, args.seconds, args.robots, args.bundles)  # raw UDP's ceiling here
     finally:
         receiver.close()
     result = {"joints": JOINTS, "robots": args.robots, "publishers": args.publishers, "seconds": args.seconds,
+              "bundles": args.bundles,
               "machine": machine, "raw_udp": raw, "sonibus": bus, "raw_udp_unpaced": unpaced,
               "max_lossless_raw_per_s": best(raw), "max_lossless_sonibus_per_s": best(bus)}
     result["ratio_lossless"] = result["max_lossless_sonibus_per_s"] / max(1.0, result["max_lossless_raw_per_s"])
     at_least = "≥ " if raw and best(raw) == raw[-1]["offered_per_s"] else ""
     top = next((s for s in bus if s["offered_per_s"] == result["max_lossless_sonibus_per_s"]), None)
-    sink_cpu = f", sink {top['sink_cpu_percent']:.0f} % CPU" if top else ""
+    sink_cpu = f", sink {top['sink_cpu_percent']:.0f} % CPU, lag {top['lag_s'] or 0:.2f} s" if top else ""
+    shape = "a bundle per frame" if args.bundles else "a message per joint"
     result["summary"] = [{  # the row of bench/run.py's table
-        "scenario": "(b) lossless joint samples/s through one OSC sink process",
+        "scenario": f"(b) lossless joint samples/s through one OSC sink process ({shape})",
         "sonibus": f"{result['max_lossless_sonibus_per_s']:,.0f}/s{sink_cpu}",
         "baseline": f"{at_least}{result['max_lossless_raw_per_s']:,.0f}/s raw UDP (unpaced "
                     f"{unpaced['delivered_per_s']:,.0f}/s)",
@@ -479,7 +495,7 @@ def main() -> None:
           f"receiver {unpaced['receiver_cpu_percent']:.0f} %)")
     print(f"max lossless: raw UDP {at_least}{result['max_lossless_raw_per_s']:.0f}/s, sonibus "
           f"{result['max_lossless_sonibus_per_s']:.0f}/s (ratio {result['ratio_lossless']:.2f}); goal ≥ 100000/s")
-    write("sink_throughput", result)
+    write(args.name, result)
     print(machine)
 
 

@@ -432,7 +432,7 @@ def test_access_control_lets_control_command_and_sound_only_listen(topology, tmp
         permission = "allow"
         flows = ["egress", "ingress"]
         messages = {json.dumps(DATA_MESSAGES)}
-        key_exprs = ["*/joints/**", "*/derived/**", "*/events/**", "*/info", "*/info/**", "sonibus/**"]
+        key_exprs = ["*/frame", "*/joints/**", "*/derived/**", "*/events/**", "*/info", "*/info/**", "sonibus/**"]
 
         [[bus.hosts.robot.access_control.rules]]
         id = "commands"
