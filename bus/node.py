@@ -36,7 +36,7 @@ class Bus:
         lost samples on a busy 2-core machine, at no cost in latency (docs/performance.md)."""
         return self.session.declare_publisher(
             key, encoding=codec.ENCODING, congestion_control=zenoh.CongestionControl.DROP,
-            priority=zenoh.Priority.DATA_HIGH, express=True)
+            priority=zenoh.Priority.DATA_HIGH, express=False)
 
     def put(self, key: str, message: dict[str, Any]) -> None:
         """Send one message reliably (events: low rate, must not be dropped)."""
