@@ -36,8 +36,6 @@ POSITION = "Device/SubDeviceList/{}/Position/Sensor/Value"
 FAST_HZ = 1000.0  # the adapter's highest rate: the pacer then never waits
 
 
-
-
 def serve_fake(url: str, delay_ms: float, ready: multiprocessing.Event, stop: multiprocessing.Event) -> None:
     from sonibus.adapters.sim.naoqi import FakeNaoqi, FakeNaoqiConfig
     fake = FakeNaoqi(FakeNaoqiConfig(listen=url, model="pepper", rate_hz=100, delay_ms=delay_ms)).start()

@@ -34,8 +34,6 @@ SONIBUS = str(Path(sys.executable).with_name("sonibus"))
 JOINTS = 17
 
 
-
-
 def receive(port: int, seconds: float, ready: multiprocessing.Event, out: multiprocessing.Queue) -> None:
     """Record (address, seq, latency) of every message ending in args ,fdi (v, t, seq)."""
     gc.disable()

@@ -33,8 +33,6 @@ NTP_EPOCH = 2208988800
 LINE = re.compile(r"^([0-9a-f]{8})\.([0-9a-f]{8}) (\S+) f (\S+)$")
 
 
-
-
 def as_float32_text(value: float) -> str:
     return f"{struct.unpack('f', struct.pack('f', value))[0]:f}"
 
@@ -58,8 +56,6 @@ class OscDump:
     def close(self) -> None:
         self.proc.terminate()
         self.proc.wait(5)
-
-
 
 
 def sonibus_path(seconds: float, rate: float) -> dict[str, float]:

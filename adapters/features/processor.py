@@ -128,7 +128,6 @@ class Features(Adapter):
                  len(described.joints), len(reply["derived"]))
 
 
-
 def whole(message: codec.Incoming) -> Frame:
     """The frame of a message taken from ``<robot>/frame``: joint key → position."""
     return Frame(message.source.robot, message.seq, message.t, {s.source.key: s.values[0] for s in message.samples})

@@ -37,7 +37,6 @@ def _tables(cls: type[T], key: str, entries: tuple[dict[str, Any], ...]) -> tupl
     return tuple(out)
 
 
-
 def _robot(robot: str) -> None:
     try:
         keys.check_name("robot", robot)

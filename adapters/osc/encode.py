@@ -19,7 +19,6 @@ NTP_OFFSET = 2208988800  # seconds from 1900-01-01 (NTP) to 1970-01-01 (UNIX)
 IMMEDIATELY = 1          # the OSC timetag meaning "now"
 
 
-
 class Double(float):
     """A float sent as a 64-bit OSC double (tag ``d``), e.g. UNIX timestamps."""
 

@@ -21,7 +21,6 @@ EVENT_ARGS: dict[str, tuple[str, ...]] = {
 }
 
 
-
 def event_args(kind: str, fields: dict[str, Any]) -> list[encode.Arg]:
     names = EVENT_ARGS.get(kind) or sorted(k for k in fields if k not in ("t", "kind"))
     out: list[encode.Arg] = []

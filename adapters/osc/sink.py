@@ -237,9 +237,6 @@ class OscSink(Adapter):
         self._ranges[robot] = ranges
 
 
-
-
-
 def _resolve(target: str) -> tuple[str, int]:
     host, port = parse_target(target)
     try:

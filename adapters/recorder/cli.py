@@ -198,8 +198,6 @@ def _recover(args: argparse.Namespace, env: Environment) -> Exit:
 RECOVER = Command("recover", "save what a damaged recording holds into a new file", _recover_arguments, _recover)
 
 
-
-
 # -- export, plot -------------------------------------------------------------------
 
 

@@ -84,8 +84,6 @@ def writer(jack) -> Iterator[Any]:
     out.delete()
 
 
-
-
 class FakeRobot:
     """Serves ``<robot>/info`` and puts exact joint values and events on the bus: each
     frame on ``<robot>/frame`` and then per joint, as a robot owner does."""
