@@ -9,7 +9,7 @@ from typing import Any, NamedTuple
 import msgpack
 import zenoh
 
-from .keys import Key
+from .keys import NOT_IN_NAMES, Key
 
 ENCODING = zenoh.Encoding("application/msgpack")
 
@@ -71,8 +71,8 @@ def frame_joints(message: dict[str, Any]) -> tuple[list[str], list[float]]:
     if not isinstance(names, list) or not isinstance(values, list) or len(names) != len(values):
         raise ValueError("names and v are not two lists of the same length")
     for name, value in zip(names, values, strict=True):
-        if not isinstance(name, str) or not name or "/" in name:
-            raise ValueError(f"names = {names!r} are not all joint names")
+        if not isinstance(name, str) or not name or any(c in name for c in NOT_IN_NAMES):
+            raise ValueError(f"names = {names!r} are not all joint names (one key chunk, no wildcards)")
         if value.__class__ is not float and not number(value):
             raise ValueError(f"v = {values!r} are not all numbers")
     return names, values

@@ -41,6 +41,11 @@ class FrameAssembler:
 
     def add(self, robot: str, key: str, seq: int, t: float, item: Any) -> list[Frame]:
         """Add a sample; returns the frames it completed (zero, one or two)."""
+        return self.extend(robot, seq, t, {key: item})
+
+    def extend(self, robot: str, seq: int, t: float, items: dict[str, Any]) -> list[Frame]:
+        """Add several samples of one frame at once (a frame that came whole, to be
+        joined by the derived values of its ``seq``); returns the frames completed."""
         done: list[Frame] = []
         frame = self._open.get(robot)
         if frame is not None and seq != frame.seq:
@@ -54,7 +59,7 @@ class FrameAssembler:
             return done
         if frame is None:
             frame = self._open[robot] = Frame(robot, seq, t)
-        frame.values[key] = item
+        frame.values.update(items)
         expected = self._expected.get(robot)
         if expected and expected <= frame.values.keys():
             done.append(self._close(robot))

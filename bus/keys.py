@@ -81,9 +81,12 @@ class Key:
         return cls(str(key), robot, section, name, feature)
 
 
+NOT_IN_NAMES = "/*$?#@ "  # what a name must not hold to be one plain key chunk
+
+
 def check_name(kind: str, name: str) -> str:
     """A robot or node name must be one plain key chunk."""
-    if not name or any(c in name for c in "/*$?#@ ") :
+    if not name or any(c in name for c in NOT_IN_NAMES):
         raise ValueError(f"{kind} name '{name}' must be non-empty without '/', '*', '$', '?', '#', '@' or spaces")
     return name
 

@@ -17,6 +17,7 @@ Plan(frames=('*/frame',), keys=('*/events/*',), broad=())
 
 from __future__ import annotations
 
+import itertools
 from collections.abc import Iterable
 from dataclasses import dataclass
 
@@ -27,6 +28,7 @@ from .node import Bus
 from .queue import SampleQueue
 
 _JOINTS = zenoh.KeyExpr(keys.joints())
+MAX_KEYS = 10_000  # keys taken apart and remembered
 
 
 @dataclass(frozen=True)
@@ -56,6 +58,8 @@ def plan(patterns: Iterable[str], per_joint_keys: bool = False) -> Plan:
             frames.append(frame)
         if not _JOINTS.includes(selected):  # it selects more than joints
             broad.append(pattern)
+    if any(zenoh.KeyExpr(a).intersects(zenoh.KeyExpr(b)) for a, b in itertools.combinations(frames, 2)):
+        frames = [keys.frame()]  # one subscription, or a frame would come twice; accepts() keeps the robots asked
     return Plan(tuple(frames), tuple(direct), tuple(broad))
 
 
@@ -77,6 +81,9 @@ class Streams:
 
     def incoming(self, key: str, payload: bytes) -> codec.Incoming:
         """Decode what came on ``key`` (``codec.incoming``: a frame keeps the selected joints)."""
+        if len(self._parsed) > MAX_KEYS:  # names made up on the fly must not grow these for ever
+            self._parsed.clear()
+            self._accepted.clear()
         return codec.incoming(key, payload, self._parsed, self.accepts)
 
     def accepts(self, key: str) -> bool:

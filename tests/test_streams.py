@@ -24,6 +24,8 @@ from .conftest import wait_for
     (["pepper/**"], False, Plan(frames=("pepper/frame",), broad=("pepper/**",))),
     (["**/HeadYaw"], False, Plan(frames=("*/frame",), broad=("**/HeadYaw",))),
     (["pepper/joints/R*", "pepper/**"], True, Plan(keys=("pepper/joints/R$*", "pepper/**"))),
+    (["*/joints/HeadYaw", "pepper/joints/R*"], False, Plan(frames=("*/frame",))),  # overlapping: one frame key
+    (["pepper/**", "*/joints/*"], False, Plan(frames=("*/frame",), broad=("pepper/**",))),
 ])
 def test_joint_patterns_are_served_from_frames(patterns, per_joint_keys, expected):
     assert plan(patterns, per_joint_keys) == expected

@@ -7,7 +7,7 @@ import time
 from dataclasses import dataclass
 from typing import TextIO
 
-from sonibus.bus import codec
+from sonibus.bus import codec, keys
 from sonibus.bus.adapter import Adapter
 from sonibus.bus.queue import SampleQueue
 from sonibus.bus.streams import Streams
@@ -35,8 +35,9 @@ class ConsoleView(Adapter):
     def _start(self) -> None:
         cfg: ConsoleConfig = self.config
         self._queue = self.own(SampleQueue(8192))
-        self._streams = self.own(Streams(self.bus, [f"{cfg.robots}/**"], self._queue,
-                                         per_joint_keys=cfg.per_joint_keys))
+        # Joints and events by name: a broad "*/**" would keep every owner putting its per-joint keys.
+        self._streams = self.own(Streams(self.bus, [keys.joints(cfg.robots), keys.event(cfg.robots, "*")],
+                                         self._queue, per_joint_keys=cfg.per_joint_keys))
         self._values: dict[str, dict[str, float]] = {}
         self._frames: dict[str, set[int]] = {}
         self.spawn(self._run, "view")

@@ -141,11 +141,9 @@ class OscSink(Adapter):
                 self._sample_to(link, source, values, t, seq, now)
         if not self._frame_links or not samples:
             return
-        if message.source.section == "frame":  # a frame that came whole
-            self._send_frame(Frame(message.source.robot, message.seq, message.t,
-                                   {s.source.key: (s.source, s.values) for s in samples}), now)
-            return
-        frames = self._frames.add(message.source.robot, key, message.seq, message.t, (message.source, message.values))
+        # Joints and derived values of one seq go out in one bundle, however they came.
+        frames = self._frames.extend(message.source.robot, message.seq, message.t,
+                                     {s.source.key: (s.source, s.values) for s in samples})
         self.stats["late"] = self._frames.late
         for frame in frames:
             self._send_frame(frame, now)

@@ -24,6 +24,7 @@ import logging
 import os
 import threading
 import time
+from collections import deque
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -42,6 +43,7 @@ log = logging.getLogger(__name__)
 
 MAX_LATE_S = 0.1  # samples later than this are skipped (events never): no bursts of stale data
 LEAD_S = 0.2      # between declaring the publishers and the first message: Zenoh settles its routes
+GATHER_NS = 5_000_000  # a frame's joint samples reach a recorder within this of each other
 
 
 @dataclass(frozen=True)
@@ -170,7 +172,7 @@ class Replay(Adapter):
         return f"{self.names[robot]}/{rest}"
 
     def _publish_frame(self, samples: list[Message], t_origin: float, seq: int, late: bool) -> None:
-        """One robot's joint samples of one frame: the frame whole, then each sample (as a robot owner does)."""
+        """One robot's joint samples of one frame: the frame whole, then each sample on its key."""
         if late:
             self.stats["late"] += len(samples)
             return
@@ -213,25 +215,27 @@ def _in_frame(message: Message) -> bool:
 
 def _moments(messages: Iterable[Message]) -> Iterator[tuple[bool, list[Message]]]:
     """The messages grouped as they are due: ``(True, samples)`` for the joint samples
-    of one robot and one frame (one after the other in the file, the same ``seq``
-    and ``t``), ``(False, [message])`` for any other message."""
-    moment: list[Message] = []
-    framed = False
+    of one robot and one frame (the same ``seq`` and ``t``, recorded within
+    ``GATHER_NS`` of the first: per-joint recordings interleave robots),
+    ``(False, [message])`` for any other message; in the order they were recorded."""
+    waiting: deque[tuple[tuple[str, int, float] | None, list[Message]]] = deque()
+    gathering: dict[tuple[str, int, float], list[Message]] = {}
     for message in messages:
-        in_frame = _in_frame(message)
-        if framed and in_frame and _same_frame(moment[0], message):
-            moment.append(message)
+        while waiting and (waiting[0][0] is None or message.log_ns - waiting[0][1][0].log_ns > GATHER_NS):
+            frame, moment = waiting.popleft()
+            gathering.pop(frame, None)  # type: ignore[arg-type]
+            yield frame is not None, moment
+        if not _in_frame(message):
+            waiting.append((None, [message]))
             continue
-        if moment:
-            yield framed, moment
-        moment, framed = [message], in_frame
-    if moment:
-        yield framed, moment
-
-
-def _same_frame(a: Message, b: Message) -> bool:
-    return (a.key.partition("/")[0] == b.key.partition("/")[0] and a.data["seq"] == b.data["seq"]
-            and a.data["t"] == b.data["t"])
+        frame = (message.key.partition("/")[0], message.data["seq"], message.data["t"])
+        if frame in gathering:
+            gathering[frame].append(message)
+        else:
+            gathering[frame] = [message]
+            waiting.append((frame, gathering[frame]))
+    for frame, moment in waiting:
+        yield frame is not None, moment
 
 
 def _join(samples: Sequence[dict[str, Any]]) -> tuple[list[float], dict[str, list[float]]]:

@@ -103,6 +103,7 @@ BAD_FRAMES = [
     encode({"t": 1.0, "seq": 1, "names": ["A", "B"], "v": [0.5]}),    # a value short
     encode({"t": 1.0, "seq": 1, "names": ["A"], "v": [None]}),
     encode({"t": 1.0, "names": ["A"], "v": [0.5]}),                    # no seq
+    encode({"t": 1.0, "seq": 1, "names": ["A?"], "v": [0.5]}),         # a wildcard in the name
 ]
 
 

@@ -34,6 +34,8 @@ BAD_FRAMES = [
     encode({"t": 1.0, "seq": 1, "names": ["HeadYaw", "HeadPitch"], "v": [0.1]}),  # one value short
     encode({"t": 1.0, "seq": 1, "names": ["HeadYaw"], "v": ["high"]}),
     encode({"t": 1.0, "seq": 1, "names": ["Head/Yaw"], "v": [0.1]}),
+    encode({"t": 1.0, "seq": 1, "names": ["Head$Yaw"], "v": [0.1]}),              # not one plain key chunk
+    encode({"t": 1.0, "seq": 1, "names": ["*"], "v": [0.1]}),
     encode({"t": float("nan"), "seq": 1, "names": ["HeadYaw"], "v": [0.1]}),
 ]
 

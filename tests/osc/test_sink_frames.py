@@ -81,3 +81,31 @@ def test_a_frame_of_a_script_is_heard_and_a_stale_one_dropped(net, receivers):
     publisher.put(encode(frame(time.time(), 2, ["A", "B"], [0.75, 1.0])))
     wait_for(lambda: len(raw.items) == 2, what="the fresh frame's two samples")
     assert sorted(OscPacket(d).messages[0].message.params[0] for d in raw.data()) == [0.75, 1.0]
+
+
+def test_a_bundle_joins_a_frame_and_the_derived_values_of_its_seq(net, receivers):
+    """As a features node's derived values come: after their frame, before the next one."""
+    raw = receivers()
+    sink = net.start(OscSink(OscSinkConfig(subscribe=("toy/joints/*", "toy/derived/**"), targets=(raw.target,),
+                                           bundle=True, extra=("seq",)), name="sound"))
+    src = net.bus("script")
+    whole, derived = src.stream_publisher("toy/frame"), src.stream_publisher("toy/derived/speed/A")
+    wait_for(lambda: whole.matching_status.matching and derived.matching_status.matching, what="the subscriptions")
+
+    def bundles() -> dict[int, list[set[str]]]:
+        """seq → the addresses of each bundle that held it."""
+        found: dict[int, list[set[str]]] = {}
+        for datagram in raw.data():
+            messages = [m.message for m in OscPacket(datagram).messages]
+            found.setdefault(messages[0].params[-1], []).append({m.address for m in messages})
+        return found
+
+    for seq in range(1, 6):
+        t = time.time()
+        whole.put(encode(frame(t, seq, ["A", "B"], [0.1 * seq, 0.2])))
+        wait_for(lambda s=seq: sink.stats["received"] == 3 * s - 1, what=f"frame {seq} at the sink")
+        derived.put(encode({"t": t, "seq": seq, "v": 0.5}))
+        wait_for(lambda s=seq: sink.stats["received"] == 3 * s, what=f"the derived value of frame {seq}")
+    wait_for(lambda: 5 in bundles(), what="the last bundle")
+    assert all(bundles()[seq] == [{"/toy/joints/A", "/toy/joints/B", "/toy/derived/speed/A"}]
+               for seq in range(1, 6)), bundles()

@@ -122,6 +122,7 @@ def test_a_bad_frame_is_counted_and_the_recording_goes_on(net, tmp_path):
     wait_for(lambda: frames.matching_status.matching, what="the recorder's frame subscription")
     good = codec.frame(time.time(), 0, ["A", "B"], [0.1, 0.2], {"cmd": [0.3, 0.4]})
     bad = [b"\xc1 not msgpack", encode([1, 2]), encode({**good, "v": [0.1]}), encode({**good, "names": ["A", "x/y"]}),
+           encode({**good, "names": ["A", "x$y"]}), encode({**good, "names": ["A", "**"]}),
            encode({**good, "cmd": [0.3]}), encode({**good, "t": "now"}), encode({k: v for k, v in good.items()
                                                                                  if k != "seq"})]
     frames.put(encode(good))
@@ -198,3 +199,22 @@ def test_replay_publishes_each_frame_whole_and_per_joint_with_the_same_values(ne
         assert joints[seq] == {name: {"t": frame["t"], "seq": seq, "v": values[i], "cmd": frame["cmd"][i],
                                       "temp": frame["temp"][i]} for i, name in enumerate(names)}
     assert set(joints) == set(frames), "every joint sample has its frame"
+
+
+def test_replay_gathers_a_frame_whose_joints_are_interleaved_with_another_robots():
+    """Per-joint recordings (older files, ``per_joint_keys``) interleave robots' samples."""
+    from sonibus.adapters.recorder.reading import Message
+    from sonibus.adapters.recorder.replay import _moments
+
+    def sample(key: str, log_ns: int, seq: int, t: float) -> Message:
+        return Message(key, log_ns, int(t * 1e9), {"t": t, "seq": seq, "v": 0.1})
+
+    recorded = [sample("pepper/joints/HeadYaw", 0, 5, 1.0), sample("nao/joints/HeadYaw", 100, 9, 1.001),
+                sample("pepper/joints/HeadPitch", 200, 5, 1.0), Message("pepper/events/x", 250, 0, {"kind": "x"}),
+                sample("nao/joints/HeadPitch", 300, 9, 1.001), sample("pepper/joints/HeadYaw", 10_000_000, 6, 1.01)]
+    assert [(framed, [m.key for m in moment]) for framed, moment in _moments(recorded)] == [
+        (True, ["pepper/joints/HeadYaw", "pepper/joints/HeadPitch"]),
+        (True, ["nao/joints/HeadYaw", "nao/joints/HeadPitch"]),
+        (False, ["pepper/events/x"]),
+        (True, ["pepper/joints/HeadYaw"]),
+    ]
