@@ -18,7 +18,7 @@ Plan(frames=('*/frame',), keys=('*/events/*',), broad=())
 from __future__ import annotations
 
 import itertools
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 
 import zenoh
@@ -85,6 +85,20 @@ class Streams:
             self._parsed.clear()
             self._accepted.clear()
         return codec.incoming(key, payload, self._parsed, self.accepts)
+
+    def take(self, key: str, payload: bytes, stats: dict[str, int],
+             warn: Callable[[str, str], None]) -> codec.Incoming | None:
+        """``incoming``, counted in a sink's ``stats`` (``received``, a frame as its
+        samples; ``bad``); a bad message is ``warn``ed about and gives None."""
+        try:
+            message = self.incoming(key, payload)
+        except codec.BAD as exc:
+            stats["received"] += 1
+            stats["bad"] += 1
+            warn("bad", f"message on '{key}' not sent: {type(exc).__name__}: {exc}")
+            return None
+        stats["received"] += len(message.samples) or 1
+        return message
 
     def accepts(self, key: str) -> bool:
         """Whether joint ``key`` (taken from a frame) is one the patterns select."""

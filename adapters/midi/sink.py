@@ -9,7 +9,7 @@ import time
 from dataclasses import dataclass, field
 from typing import Any
 
-from sonibus.bus import codec, presence
+from sonibus.bus import presence
 from sonibus.bus.adapter import Adapter
 from sonibus.bus.info import InfoRequests
 from sonibus.bus.keys import Key
@@ -128,14 +128,9 @@ class MidiSink(Adapter):
         if key == INFO:
             self._learn(*payload)
             return
-        try:
-            message = self._streams.incoming(key, payload)
-        except codec.BAD as exc:
-            self.stats["received"] += 1
-            self.stats["bad"] += 1
-            self.warn("bad", f"sample on '{key}' not sent: {type(exc).__name__}: {exc}")
+        message = self._streams.take(key, payload, self.stats, self.warn)
+        if message is None:
             return
-        self.stats["received"] += len(message.samples) or 1  # a frame counts as its samples
         if message.event is not None:
             self._event(message.source, message.event)
             return

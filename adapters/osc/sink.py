@@ -10,7 +10,7 @@ import time
 from collections.abc import Callable, Sequence
 from typing import Any
 
-from sonibus.bus import codec, presence
+from sonibus.bus import presence
 from sonibus.bus.adapter import Adapter
 from sonibus.bus.errors import ConfigError
 from sonibus.bus.frames import Frame, FrameAssembler
@@ -119,14 +119,9 @@ class OscSink(Adapter):
                     self._sample_to(link, *held, now)
 
     def _take(self, key: str, payload: bytes, now: float) -> None:
-        try:
-            message = self._streams.incoming(key, payload)
-        except codec.BAD as exc:
-            self.stats["received"] += 1
-            self.stats["bad"] += 1
-            self.warn("bad", f"sample on '{key}' not sent: {type(exc).__name__}: {exc}")
+        message = self._streams.take(key, payload, self.stats, self.warn)
+        if message is None:
             return
-        self.stats["received"] += len(message.samples) or 1  # a frame counts as its samples
         if message.event is not None:
             self._event(message.source, message.event)
             return
