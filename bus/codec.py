@@ -71,11 +71,22 @@ def frame_joints(message: dict[str, Any]) -> tuple[list[str], list[float]]:
     if not isinstance(names, list) or not isinstance(values, list) or len(names) != len(values):
         raise ValueError("names and v are not two lists of the same length")
     for name, value in zip(names, values, strict=True):
-        if not isinstance(name, str) or not name or any(c in name for c in NOT_IN_NAMES):
-            raise ValueError(f"names = {names!r} are not all joint names (one key chunk, no wildcards)")
+        if name.__class__ is not str or name not in _JOINT_NAMES:
+            _check_joint_name(name)
         if value.__class__ is not float and not number(value):
             raise ValueError(f"v = {values!r} are not all numbers")
     return names, values
+
+
+_JOINT_NAMES: set[str] = set()  # names checked already: a frame's names are the same every frame
+
+
+def _check_joint_name(name: Any) -> None:
+    if not isinstance(name, str) or not name or any(c in name for c in NOT_IN_NAMES):
+        raise ValueError(f"joint name {name!r} is not one plain key chunk (no '/', wildcards or spaces)")
+    if len(_JOINT_NAMES) > 10_000:  # names made up on the fly must not grow it for ever
+        _JOINT_NAMES.clear()
+    _JOINT_NAMES.add(name)
 
 
 FRAME_FIELDS = ("t", "seq", "names", "v")  # a frame's own fields; every other one is a quantity per joint
