@@ -284,6 +284,8 @@ def main() -> None:
             if reader is not None:
                 reader.close()
             stop_process(server, timeout=5)
+            for leftover in Path("/dev/shm").glob(f"jack_sem.*_{os.environ['JACK_DEFAULT_SERVER']}_*"):
+                leftover.unlink(missing_ok=True)  # jackd 1.9 leaves its clients' semaphores
         xruns = (folder / "jackd.log").read_text(errors="replace").count("XRun")
     no_drop = [s for s in sink if s["sink"].get("queue_dropped", 1) == 0]
     result = {"joints": 17, "robots": args.robots, "seconds": args.seconds, "machine": machine,

@@ -6,6 +6,7 @@ from __future__ import annotations
 import time
 import uuid
 from collections.abc import Iterator
+from pathlib import Path
 from typing import Any
 
 import pytest
@@ -39,6 +40,8 @@ def jack(spawn, monkeypatch) -> Iterator[str]:
         pytest.fail(f"jackd -n {name} ended at start: {err[-500:]}")
     yield name
     server.stop(timeout=5)
+    for leftover in Path("/dev/shm").glob(f"jack_sem.*_{name}_*"):  # jackd 1.9 leaves its clients' semaphores
+        leftover.unlink(missing_ok=True)
 
 
 class Reader:
