@@ -84,13 +84,17 @@ def test_a_frame_is_written_as_the_samples_of_its_joint_keys_with_extras(with_ex
 
 def test_per_joint_keys_records_a_publisher_of_joint_keys_only(net, tmp_path, spawn):
     keyed, framed = tmp_path / "keyed.mcap", tmp_path / "framed.mcap"
-    default = net.start(Recorder(RecorderConfig(path=str(framed)), name="logger"))
     recording = spawn(SONIBUS, "record", str(keyed), "--per-joint-keys", *net.cli_args(), "--status-every", "0.1",
                       collect=True, merge=True)
     bus = net.bus("script")  # a script of one's own: joint keys, no frames
     publishers = [bus.stream_publisher(f"script/joints/{j}") for j in "AB"]
-    # Only the --per-joint-keys recorder subscribes to joint keys: these match once its subscription is here.
-    wait_for(lambda: all(p.matching_status.matching for p in publishers), timeout=20, what="the CLI recorder")
+    events, frames = (bus.session.declare_publisher(k) for k in ("script/events/done", "script/frame"))
+    # Only the --per-joint-keys recorder subscribes to joint keys and (so far) to events: these match once
+    # its subscriptions are here.
+    wait_for(lambda: all(p.matching_status.matching for p in [*publishers, events]), timeout=20,
+             what="the CLI recorder's subscriptions")
+    default = net.start(Recorder(RecorderConfig(path=str(framed)), name="logger"))
+    wait_for(lambda: frames.matching_status.matching, what="the default recorder's subscriptions")
     for seq in range(20):
         for i, publisher in enumerate(publishers):
             publisher.put(encode({"t": time.time(), "seq": seq, "v": seq + i / 10}))
