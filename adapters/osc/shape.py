@@ -70,7 +70,7 @@ def _joint_pairs(args: Sequence[Any]) -> dict[str, Any]:
     while index < len(args) and isinstance(args[index], str):
         if index + 1 >= len(args) or not _number(args[index + 1]):
             after = _shown(args[index + 1]) if index + 1 < len(args) else "nothing"
-            raise CommandError("bad_request", f"joints/set: joint '{args[index]}' (argument {index + 1}) "
+            raise CommandError("bad_request", f"joints/set: joint {args[index][:40]!r} (argument {index + 1}) "
                                f"must be followed by its angle, got {after}")
         names.append(args[index])
         angles.append(float(args[index + 1]))

@@ -8,7 +8,7 @@ import statistics
 import threading
 import time
 
-from hypothesis import given, settings
+from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
 from sonibus import schemas
@@ -140,6 +140,7 @@ def test_any_tcp_stream_is_frames_or_a_wire_error(chunks):
 
 @settings(max_examples=300, deadline=None)
 @given(st.sampled_from(schemas.command_verbs()), st.lists(OSC_VALUES, max_size=8))
+@example("joints/set", ["\n"])  # a joint name with a line break: the error is still one line
 def test_arguments_are_shaped_or_refused_as_bad_request(verb, args):
     try:
         request = shape.request(verb, args)
