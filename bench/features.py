@@ -30,7 +30,8 @@ from sonibus.adapters.features.compute import RobotFeatures
 from sonibus.adapters.features.processor import whole
 from sonibus.adapters.features.table import describe
 from sonibus.adapters.sim import SimConfig, SimRobot
-from sonibus.bus import Bus, BusConfig, codec, keys, load_model, open_session, robot_info, send_command
+from sonibus.bus import Bus, BusConfig, codec, keys, load_model, messages, open_session, robot_info, send_command
+from sonibus.bus.streams import Selection
 
 RATE_HZ = 100.0
 MODEL = load_model("pepper")
@@ -46,7 +47,7 @@ def frames(n: int) -> list[bytes]:
     for k in range(n):
         t = t0 + k / RATE_HZ
         values = middle + 0.3 * half * np.sin(2 * np.pi * 0.5 * (t - t0) + phase)
-        out.append(codec.encode(codec.frame(t, k, MODEL.joint_names, values.tolist())))
+        out.append(codec.encode(messages.frame(t, k, MODEL.joint_names, values.tolist())))
     return out
 
 
@@ -54,12 +55,12 @@ def per_frame(data: list[bytes], features: bool) -> list[float]:
     """Seconds per frame for decoding only, or for the processor's whole per-frame work."""
     info = {"model": "pepper", "joints": [j.to_info() for j in MODEL.joints]}
     robot = RobotFeatures(describe("pepper", info), FeaturesConfig())
-    key, parsed = keys.frame("pepper"), {}
+    key, selection = keys.frame("pepper"), Selection([keys.joints("pepper")])
     times = []
     gc.disable()
     for payload in data:
         started = time.perf_counter()
-        message = codec.incoming(key, payload, parsed)
+        message = selection.incoming(key, payload)
         if features:
             frame = whole(message)
             out = robot.step(frame.t, frame.seq, frame.values)

@@ -20,7 +20,7 @@ from typing import Any
 
 import zenoh
 
-from . import codec, keys
+from . import keys, messages
 from .node import Bus
 
 
@@ -31,13 +31,14 @@ class InfoRequests:
                  on_error: Callable[[str, str], None], retry_s: float = 2.0) -> None:
         self.bus, self.on_info, self.on_error, self.retry_s = bus, on_info, on_error, retry_s
         self._asked: dict[str, float] = {}
+        self._gate = messages.Gate()
 
     def ask(self, robot: str) -> None:
         now = time.monotonic()
         if now - self._asked.get(robot, -math.inf) < self.retry_s:
             return
         self._asked[robot] = now
-        merge = _Merge(robot, self.on_info, self.on_error)
+        merge = _Merge(robot, self.on_info, self.on_error, self._gate)
         self.bus.session.get(keys.info(robot) + "/**", zenoh.handlers.Callback(merge.take, merge.finish),
                              timeout=self.retry_s)
 
@@ -46,8 +47,8 @@ class _Merge:
     """The replies to one info query, merged when the query ends."""
 
     def __init__(self, robot: str, on_info: Callable[[str, dict[str, Any]], None],
-                 on_error: Callable[[str, str], None]) -> None:
-        self.robot, self.on_info, self.on_error = robot, on_info, on_error
+                 on_error: Callable[[str, str], None], gate: messages.Gate) -> None:
+        self.robot, self.on_info, self.on_error, self.gate = robot, on_info, on_error, gate
         self.main: dict[str, Any] | None = None
         self.derived: list[dict[str, Any]] = []
         self.unavailable: dict[str, Any] = {}
@@ -59,20 +60,20 @@ class _Merge:
         key = str(reply.ok.key_expr)
         # an owner answers on its own key, or (a common Zenoh idiom) on the query's
         main = key in (keys.info(self.robot), keys.info(self.robot) + "/**")
+        if not main and key != keys.derived_info(self.robot):
+            return
+        where = keys.info(self.robot) if main else key
         try:
-            message = codec.decode(reply.ok.payload)
-        except codec.DecodeError as exc:
-            self.on_error(self.robot, f"{keys.info(self.robot) if main else key} unusable: {exc}")
+            message = self.gate.check(keys.Key.parse(where), reply.ok.payload.to_bytes())
+        except ValueError as exc:  # messages.BadMessage
+            self.on_error(self.robot, f"{where} unusable: {exc}")
             return
         with self._lock:
             if main:
                 self.main = message
-            elif key == keys.derived_info(self.robot):
-                derived, unavailable = message.get("derived"), message.get("unavailable")
-                if isinstance(derived, list):
-                    self.derived.extend(d for d in derived if isinstance(d, dict))
-                if isinstance(unavailable, dict):
-                    self.unavailable.update(unavailable)
+            else:
+                self.derived.extend(message["derived"])
+                self.unavailable.update(message.get("unavailable", {}))
 
     def finish(self) -> None:
         with self._lock:

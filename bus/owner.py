@@ -22,7 +22,7 @@ from typing import Any
 import zenoh
 
 from .. import schemas
-from . import codec, commands, keys
+from . import codec, commands, keys, messages
 from .adapter import Adapter
 from .errors import CommandError
 from .robot import RobotModel
@@ -45,6 +45,7 @@ class RobotAdapter(Adapter):
     def _start(self) -> None:
         self._claim()
         self._open()
+        self._gate = messages.Gate()
         self._streams: dict[str, zenoh.Publisher] = {}
         self._frames = self.own(self.bus.stream_publisher(keys.frame(self.robot)))
         # Per-joint keys cost an encode and a put per joint: made only while someone subscribes to one.
@@ -75,13 +76,13 @@ class RobotAdapter(Adapter):
         """One frame: ``positions`` in the order of ``names`` (default: the model's joints);
         ``extra`` adds quantities (``cmd``, ``cur``, ``temp``) in the same order.
         Published whole on ``<robot>/frame``, then per joint (while anyone listens there)."""
-        message = codec.frame(t, seq, names or self.model.joint_names, positions, extra)
+        message = messages.frame(t, seq, names or self.model.joint_names, positions, extra)
         if len(message["names"]) != len(message["v"]) or any(len(v) != len(message["names"])
                                                              for v in (extra or {}).values()):
             raise ValueError(f"{len(message['names'])} joint names but {len(positions)} positions (or extras)")
         self._frames.put(codec.encode(message))
         if self._joints_wanted:
-            for name, sample in codec.frame_samples(message):
+            for name, sample in messages.frame_samples(message):
                 self._joint_publisher(name).put(codec.encode(sample))
 
     def _joint_publisher(self, joint: str) -> zenoh.Publisher:
@@ -117,8 +118,10 @@ class RobotAdapter(Adapter):
         args: Any = {}
         try:
             try:
-                args = codec.decode(query.payload)
-            except codec.DecodeError as exc:
+                payload = query.payload.to_bytes() if query.payload is not None else b""
+                args = self._gate.check(keys.Key.parse(str(query.key_expr)), payload)
+            except ValueError as exc:  # messages.BadMessage
+                args = {}
                 if verb != "stop":  # stop must always work
                     raise CommandError("bad_request", f"{verb}: {exc}") from None
             reply = commands.ok_reply(verb, self.execute(verb, args))

@@ -18,12 +18,13 @@ Plan(frames=('*/frame',), keys=('*/events/*',), broad=())
 from __future__ import annotations
 
 import itertools
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, MutableMapping
 from dataclasses import dataclass
+from typing import Any, NamedTuple
 
 import zenoh
 
-from . import codec, keys
+from . import keys, messages
 from .node import Bus
 from .queue import SampleQueue
 
@@ -63,39 +64,73 @@ def plan(patterns: Iterable[str], per_joint_keys: bool = False) -> Plan:
     return Plan(tuple(frames), tuple(direct), tuple(broad))
 
 
-class Streams:
-    """The subscriptions of ``patterns`` into ``queue``; ``accepts(key)`` tells
-    whether a joint of a frame is one the patterns select."""
+class Incoming(NamedTuple):
+    """A checked message as a sink takes it: an event (``event`` set), a sample
+    (``t``, ``seq``, ``values``) or a frame (``t``, ``seq`` and the ``samples`` of
+    the joints a sink's patterns select); ``message`` is the payload, decoded."""
 
-    def __init__(self, bus: Bus, patterns: Iterable[str], queue: SampleQueue, *,
-                 per_joint_keys: bool = False, stamped: bool = False) -> None:
-        self.plan = plan(patterns := tuple(patterns), per_joint_keys)
+    source: keys.Key
+    message: dict[str, Any]
+    event: dict[str, Any] | None = None
+    t: float = 0.0
+    seq: int = 0
+    values: tuple[float, ...] = ()
+    samples: tuple[Incoming, ...] = ()
+
+    @property
+    def joints(self) -> tuple[Incoming, ...]:
+        """The samples it carries: a frame's, or itself."""
+        return self.samples if self.source.section == "frame" else (self,)
+
+
+class Selection:
+    """What a sink's ``patterns`` select, and what it receives, checked by the
+    message layer's gate: ``incoming``/``take`` decode, ``accepts(key)`` tells
+    whether a joint of a frame is one the patterns select.
+
+    >>> from sonibus.bus.codec import encode
+    >>> selection = Selection(["pepper/joints/Head*"])
+    >>> frame = messages.frame(1.5, 7, ["HeadYaw", "LHand"], [0.1, 0.9])
+    >>> [s.source.name for s in selection.incoming("pepper/frame", encode(frame)).samples]
+    ['HeadYaw']
+    """
+
+    def __init__(self, patterns: Iterable[str], limits: messages.Limits | None = None) -> None:
+        self.gate = messages.Gate(limits)
         self._selected = [zenoh.KeyExpr(keys.expr(p)) for p in patterns]
         self._accepted: dict[str, bool] = {}
         self._parsed: dict[str, keys.Key] = {}
-        self.subscribers = [bus.subscribe(k, queue=queue, stamped=stamped)[0] for k in self.plan.frames]
-        self.subscribers += [bus.subscribe(k, queue=queue, stamped=stamped, skip=keys.is_frame)[0]
-                             for k in self.plan.keys]
-        self.subscribers += [bus.subscribe(k, queue=queue, stamped=stamped, skip=_from_frames)[0]
-                             for k in self.plan.broad]
 
-    def incoming(self, key: str, payload: bytes) -> codec.Incoming:
-        """Decode what came on ``key`` (``codec.incoming``: a frame keeps the selected joints)."""
-        if len(self._parsed) > MAX_KEYS:  # names made up on the fly must not grow these for ever
-            self._parsed.clear()
-            self._accepted.clear()
-        return codec.incoming(key, payload, self._parsed, self.accepts)
+    def incoming(self, key: str, payload: bytes) -> Incoming:
+        """What came on ``key``, checked by the gate (a frame keeps the selected joints);
+        ``messages.BadMessage`` saying what is wrong otherwise."""
+        source = self._key(key)
+        message = self.gate.check(source, payload)
+        section = source.section
+        if section == "frame":
+            t, seq = message["t"], message["seq"]
+            prefix = f"{source.robot}/joints/"
+            samples = tuple(Incoming(self._key(prefix + name), message, None, t, seq, (float(value),))
+                            for name, value in zip(message["names"], message["v"], strict=True)
+                            if self.accepts(prefix + name))
+            return Incoming(source, message, None, t, seq, (), samples)
+        if section in ("joints", "derived"):
+            value = message["v"]
+            values = tuple(map(float, value)) if isinstance(value, list) else (float(value),)
+            return Incoming(source, message, None, message["t"], message["seq"], values)
+        return Incoming(source, message, message)
 
-    def take(self, key: str, payload: bytes, stats: dict[str, int],
-             warn: Callable[[str, str], None]) -> codec.Incoming | None:
+    def take(self, key: str, payload: bytes, stats: MutableMapping[str, int],
+             warn: Callable[[str, str], None]) -> Incoming | None:
         """``incoming``, counted in a sink's ``stats`` (``received``, a frame as its
-        samples; ``bad``); a bad message is ``warn``ed about and gives None."""
+        samples; ``bad``); a bad message is ``warn``ed about (naming the key and the
+        reason) and gives None."""
         try:
             message = self.incoming(key, payload)
-        except codec.BAD as exc:
+        except ValueError as exc:  # messages.BadMessage, or a key that is not a data key
             stats["received"] += 1
             stats["bad"] += 1
-            warn("bad", f"message on '{key}' not sent: {type(exc).__name__}: {exc}")
+            warn("bad", f"message on '{key}' refused: {exc}")
             return None
         stats["received"] += len(message.samples) or 1
         return message
@@ -104,8 +139,32 @@ class Streams:
         """Whether joint ``key`` (taken from a frame) is one the patterns select."""
         accepted = self._accepted.get(key)
         if accepted is None:
+            if len(self._accepted) > MAX_KEYS:  # names made up on the fly must not grow it for ever
+                self._accepted.clear()
             accepted = self._accepted[key] = any(p.intersects(key) for p in self._selected)
         return accepted
+
+    def _key(self, key: str) -> keys.Key:
+        parsed = self._parsed.get(key)
+        if parsed is None:
+            if len(self._parsed) > MAX_KEYS:
+                self._parsed.clear()
+            parsed = self._parsed[key] = keys.Key.parse(key)
+        return parsed
+
+
+class Streams(Selection):
+    """The subscriptions of ``patterns`` into ``queue`` (see ``plan``), and their ``Selection``."""
+
+    def __init__(self, bus: Bus, patterns: Iterable[str], queue: SampleQueue, *,
+                 per_joint_keys: bool = False, stamped: bool = False, limits: messages.Limits | None = None) -> None:
+        super().__init__(patterns := tuple(patterns), limits)
+        self.plan = plan(patterns, per_joint_keys)
+        self.subscribers = [bus.subscribe(k, queue=queue, stamped=stamped)[0] for k in self.plan.frames]
+        self.subscribers += [bus.subscribe(k, queue=queue, stamped=stamped, skip=keys.is_frame)[0]
+                             for k in self.plan.keys]
+        self.subscribers += [bus.subscribe(k, queue=queue, stamped=stamped, skip=_from_frames)[0]
+                             for k in self.plan.broad]
 
     def undeclare(self) -> None:
         for subscriber in self.subscribers:

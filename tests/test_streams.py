@@ -10,7 +10,7 @@ import pytest
 from sonibus import schemas
 from sonibus.bus import codec
 from sonibus.bus.queue import SampleQueue
-from sonibus.bus.streams import Plan, Streams, plan
+from sonibus.bus.streams import Incoming, Plan, Streams, plan
 
 from .conftest import wait_for
 
@@ -72,7 +72,7 @@ def test_a_broad_pattern_takes_each_joint_once(net):
     streams = Streams(sink, ["pepper/**"], queue)
     net.sim("pepper", rate_hz=50)
     watcher = net.bus("watcher").session.declare_subscriber("pepper/joints/*", lambda sample: None)  # joints put too
-    taken: list[codec.Incoming] = []
+    taken: list[Incoming] = []
     wait_for(lambda: taken.extend(streams.incoming(*item) for item in queue.drain(0.05)) or len(taken) >= 60,
              what="60 messages")
     seqs = [m.seq for m in taken if m.source.section == "frame"]

@@ -7,7 +7,7 @@ import time
 from dataclasses import dataclass
 from typing import TextIO
 
-from sonibus.bus import codec, keys
+from sonibus.bus import keys
 from sonibus.bus.adapter import Adapter
 from sonibus.bus.queue import SampleQueue
 from sonibus.bus.streams import Streams
@@ -55,7 +55,7 @@ class ConsoleView(Adapter):
     def _take(self, key: str, payload: bytes) -> None:
         try:
             message = self._streams.incoming(key, payload)
-        except codec.BAD:
+        except ValueError:  # messages.BadMessage: refused by the gate
             return
         source = message.source
         if source.section in ("joints", "frame"):

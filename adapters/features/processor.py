@@ -19,7 +19,7 @@ from sonibus.bus.adapter import Adapter
 from sonibus.bus.frames import Frame, FrameAssembler
 from sonibus.bus.info import InfoRequests
 from sonibus.bus.queue import SampleQueue
-from sonibus.bus.streams import Streams
+from sonibus.bus.streams import Incoming, Streams
 
 from . import catalog, table
 from .compute import RobotFeatures
@@ -76,9 +76,9 @@ class Features(Adapter):
             return
         try:
             message = self._streams.incoming(key, payload)
-        except codec.BAD as exc:
+        except ValueError as exc:  # messages.BadMessage: refused by the gate
             self.stats["bad"] += 1
-            self.warn("bad", f"sample on '{key}' skipped: {type(exc).__name__}: {exc}")
+            self.warn("bad", f"message on '{key}' refused: {exc}")
             return
         if message.source.section == "frame":
             self.process(whole(message))
@@ -128,6 +128,6 @@ class Features(Adapter):
                  len(described.joints), len(reply["derived"]))
 
 
-def whole(message: codec.Incoming) -> Frame:
+def whole(message: Incoming) -> Frame:
     """The frame of a message taken from ``<robot>/frame``: joint key → position."""
     return Frame(message.source.robot, message.seq, message.t, {s.source.key: s.values[0] for s in message.samples})

@@ -132,8 +132,8 @@ class OscSink(Adapter):
             return
         samples = message.joints
         for link in self._sample_links:
-            for source, _, t, seq, values, _ in samples:
-                self._sample_to(link, source, values, t, seq, now)
+            for sample in samples:
+                self._sample_to(link, sample.source, sample.values, sample.t, sample.seq, now)
         if not self._frame_links or not samples:
             return
         # Joints and derived values of one seq go out in one bundle, however they came.

@@ -22,13 +22,13 @@ import time
 from dataclasses import dataclass
 from typing import Any
 
-from sonibus.bus import codec, keys
+from sonibus.bus import codec, keys, messages
 from sonibus.bus.adapter import Adapter
 from sonibus.bus.errors import ConfigError
 from sonibus.bus.info import InfoRequests
 from sonibus.bus.options import bad
 from sonibus.bus.queue import SampleQueue
-from sonibus.bus.streams import Streams
+from sonibus.bus.streams import Incoming, Streams
 
 from .writer import RecordingWriter
 
@@ -118,16 +118,10 @@ class Recorder(Adapter):
             log.info("%s: %s", self.name, describe(self.status()))
 
     def _record(self, key: str, payload: bytes, arrived_ns: int) -> None:
-        frame = keys.is_frame(key)  # (Streams delivers none with per_joint_keys)
-        try:
-            message = codec.decode(payload)
-            samples = self._joints(key, message) if frame else [(key, message)]
-        except codec.BAD as exc:
-            self.stats["received"] += 1
-            self.stats["bad"] += 1
-            log.debug("%s: %s not recorded: %s: %s", self.name, key, type(exc).__name__, exc)
+        incoming = self._streams.take(key, payload, self.stats, self.warn)  # checked by the gate, counted
+        if incoming is None:
             return
-        self.stats["received"] += len(samples)  # a frame counts as the samples it carries
+        samples = self._joints(incoming) if incoming.source.section == "frame" else [(key, incoming.message)]
         robot = key.partition("/")[0]
         if key.endswith("/info"):
             if robot in self._info_seen:
@@ -140,10 +134,10 @@ class Recorder(Adapter):
             self._writer.write(sample_key, log_ns, sample)
         self.stats["written"] += len(samples)
 
-    def _joints(self, key: str, message: dict[str, Any]) -> list[tuple[str, dict[str, Any]]]:
+    def _joints(self, frame: Incoming) -> list[tuple[str, dict[str, Any]]]:
         """The samples of a frame's joints that ``subscribe`` selects, each on its joint's key."""
-        robot = key.partition("/")[0]
-        joints = ((keys.joint(robot, name), sample) for name, sample in codec.frame_samples(message))
+        robot = frame.source.robot
+        joints = ((keys.joint(robot, name), sample) for name, sample in messages.frame_samples(frame.message))
         return [(joint, sample) for joint, sample in joints if self._streams.accepts(joint)]
 
     def _report(self) -> None:

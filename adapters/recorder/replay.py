@@ -31,7 +31,7 @@ from typing import Any
 
 import zenoh
 
-from sonibus.bus import codec, commands, keys
+from sonibus.bus import codec, commands, keys, messages
 from sonibus.bus.adapter import Adapter
 from sonibus.bus.errors import CommandError
 from sonibus.bus.keys import Key
@@ -179,7 +179,7 @@ class Replay(Adapter):
         values, extra = _join([m.data for m in samples])
         names = [Key.parse(m.key).name for m in samples]
         t = self._moved(samples[0].data["t"], t_origin)
-        self._frames[samples[0].key.partition("/")[0]].put(codec.encode(codec.frame(t, seq, names, values, extra)))
+        self._frames[samples[0].key.partition("/")[0]].put(codec.encode(messages.frame(t, seq, names, values, extra)))
         self.stats["frames"] += 1
         for message in samples:
             self._publish(message, t_origin, seq, False)
@@ -210,7 +210,7 @@ def _in_frame(message: Message) -> bool:
     """A joint sample with what a frame needs: an integer ``seq``, a number ``t`` and ``v``."""
     data = message.data
     return (Key.parse(message.key).section == "joints" and isinstance(data.get("seq"), int)
-            and not isinstance(data["seq"], bool) and codec.number(data.get("t")) and codec.number(data.get("v")))
+            and not isinstance(data["seq"], bool) and messages.number(data.get("t")) and messages.number(data.get("v")))
 
 
 def _moments(messages: Iterable[Message]) -> Iterator[tuple[bool, list[Message]]]:
@@ -240,6 +240,7 @@ def _moments(messages: Iterable[Message]) -> Iterator[tuple[bool, list[Message]]
 
 def _join(samples: Sequence[dict[str, Any]]) -> tuple[list[float], dict[str, list[float]]]:
     """The positions and extras (those every sample has, as numbers) of one frame's
-    joint samples, for ``codec.frame``."""
-    shared = [q for q in samples[0] if q not in codec.FRAME_FIELDS and all(codec.number(s.get(q)) for s in samples)]
+    joint samples, for ``messages.frame``."""
+    shared = [q for q in samples[0]
+              if q not in messages.FRAME_FIELDS and all(messages.number(s.get(q)) for s in samples)]
     return [s["v"] for s in samples], {quantity: [s[quantity] for s in samples] for quantity in shared}

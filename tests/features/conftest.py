@@ -9,7 +9,7 @@ from typing import Any
 import numpy as np
 import pytest
 
-from sonibus.bus import codec, keys, load_model
+from sonibus.bus import codec, keys, load_model, messages
 
 T0 = 1_700_000_000.0  # frames carry UNIX times
 
@@ -38,7 +38,7 @@ class FakeOwner:
         the frame only."""
         self.seq = self.seq + 1 if seq is None else seq
         if whole:
-            self.put(keys.frame(self.robot), codec.frame(t, self.seq, list(positions), list(positions.values())))
+            self.put(keys.frame(self.robot), messages.frame(t, self.seq, list(positions), list(positions.values())))
         for joint, value in positions.items() if joints else ():
             self.put(keys.joint(self.robot, joint), {"t": t, "seq": self.seq, "v": value})
         return self.seq

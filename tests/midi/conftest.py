@@ -12,7 +12,7 @@ from typing import Any
 import pytest
 import rtmidi
 
-from sonibus.bus import codec, keys
+from sonibus.bus import codec, keys, messages
 
 from ..conftest import Process, require_tool, wait_for
 
@@ -106,7 +106,7 @@ class FakeRobot:
         self.seq += 1
         t = time.time()
         if whole:
-            self.bus.put(keys.frame(self.robot), codec.frame(t, self.seq, list(values), list(values.values())))
+            self.bus.put(keys.frame(self.robot), messages.frame(t, self.seq, list(values), list(values.values())))
         for name, value in values.items() if joints else ():
             self.bus.put(keys.joint(self.robot, name), {"t": t, "seq": self.seq, "v": value})
 

@@ -19,7 +19,8 @@ from sonibus.adapters.recorder import Recording
 from sonibus.adapters.recorder.recorder import Recorder, RecorderConfig
 from sonibus.adapters.recorder.replay import Replay, ReplayConfig
 from sonibus.adapters.sim import SimRobot
-from sonibus.bus import SampleQueue, codec, config, decode, encode, runner
+from sonibus.bus import SampleQueue, config, decode, encode, runner
+from sonibus.bus.messages import frame as frame_message
 
 from ..conftest import SONIBUS, Network, wait_for
 from ..osc.pd import Datagrams
@@ -124,7 +125,7 @@ def test_a_bad_frame_is_counted_and_the_recording_goes_on(net, tmp_path):
     recorder = net.start(Recorder(RecorderConfig(path=str(path)), name="logger"))
     frames = net.bus("script").stream_publisher("bot/frame")
     wait_for(lambda: frames.matching_status.matching, what="the recorder's frame subscription")
-    good = codec.frame(time.time(), 0, ["A", "B"], [0.1, 0.2], {"cmd": [0.3, 0.4]})
+    good = frame_message(time.time(), 0, ["A", "B"], [0.1, 0.2], {"cmd": [0.3, 0.4]})
     bad = [b"\xc1 not msgpack", encode([1, 2]), encode({**good, "v": [0.1]}), encode({**good, "names": ["A", "x/y"]}),
            encode({**good, "names": ["A", "x$y"]}), encode({**good, "names": ["A", "**"]}),
            encode({**good, "cmd": [0.3]}), encode({**good, "t": "now"}), encode({k: v for k, v in good.items()
@@ -197,7 +198,7 @@ def test_replay_publishes_each_frame_whole_and_per_joint_with_the_same_values(ne
     # (frames more than 100 ms late, on a stalled machine, are skipped whole)
     assert len(frames) >= 2 * per_pass - 2 - replay.stats["late"] // JOINTS
     for seq, frame in frames.items():
-        names, values = codec.frame_joints(frame)
+        names, values = frame["names"], frame["v"]
         assert len(names) == JOINTS and set(frame) == {"t", "seq", "names", "v", "cmd", "temp"}
         assert abs(frame["t"] - time.time()) < 5, "t is moved to now"
         assert joints[seq] == {name: {"t": frame["t"], "seq": seq, "v": values[i], "cmd": frame["cmd"][i],

@@ -1,0 +1,269 @@
+"""The message layer: what each section of the key space carries, built here and
+checked here — the one gate every payload from the bus passes before a filter,
+an encoder or a file sees it.
+
+>>> gate = Gate()
+>>> gate.check(Key.parse("pepper/frame"), encode(frame(1.5, 7, ["HeadYaw"], [0.1])))
+{'t': 1.5, 'seq': 7, 'names': ['HeadYaw'], 'v': [0.1]}
+>>> gate.check(Key.parse("pepper/frame"), encode(frame(1.5, 7, ["HeadYaw"], [1e300])))
+Traceback (most recent call last):
+...
+sonibus.bus.messages.BadMessage: v[0] = 1e+300 is outside ±1e+06
+
+The rules are the schemas' (``schemas/v1/``): their bounds are read from
+there, and ``tests/test_messages.py`` checks that the gate and the schemas
+agree. What only a running node can check is added here: ``t`` no further
+ahead of this host's clock than ``Limits.max_future_s``, and payload sizes.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+from .. import schemas
+from .codec import DecodeError, decode, encode
+from .keys import Key
+
+__all__ = ["FRAME_FIELDS", "SECTIONS", "BadMessage", "Gate", "Limits", "frame", "frame_samples"]
+
+_FRAME = schemas.load("frame")["properties"]
+MAX_JOINTS: int = _FRAME["names"]["maxItems"]          # joints in one frame
+MAX_VALUE: float = _FRAME["v"]["items"]["maximum"]     # |v| of any joint or derived value (a physical bound)
+MAX_SEQ: int = _FRAME["seq"]["maximum"]
+MAX_DERIVED_SIZE: int = schemas.load("derived_sample")["properties"]["v"]["oneOf"][1]["maxItems"]
+MAX_DEPTH = 8                                          # nesting of lists and maps in an event
+FRAME_FIELDS = ("t", "seq", "names", "v")  # a frame's own fields; every other one is a quantity per joint
+_NAME = re.compile(_FRAME["names"]["items"]["pattern"].removesuffix("$") + r"\Z").match  # one plain key chunk
+
+
+class BadMessage(ValueError):
+    """A payload the gate refuses; the message says why in one line."""
+
+
+@dataclass(frozen=True)
+class Limits:
+    """What the gate lets through beyond the schemas' own rules."""
+
+    max_future_s: float = 5.0          # clock-skew tolerance: a t further ahead of this host's clock is refused
+    max_payload: int = 64 * 1024       # bytes of any payload but robot info
+    max_info_payload: int = 1 << 20    # bytes of a robot's info (joint table, behaviors)
+
+
+class Gate:
+    """``check(key, payload)``: the decoded, checked message, or ``BadMessage``.
+
+    One per node; it remembers the joint-name lists it has checked (a robot's
+    are the same every frame), at most ``MAX_KNOWN`` of them."""
+
+    MAX_KNOWN = 1024
+
+    def __init__(self, limits: Limits | None = None) -> None:
+        self.limits = limits or Limits()
+        self._known_names: set[tuple[str, ...]] = set()
+
+    def check(self, key: Key, payload: bytes) -> dict[str, Any]:
+        section = SECTIONS.get(key.section)
+        if section is None:
+            raise BadMessage(f"'{key.section}' is not a section of the key space ({', '.join(SECTIONS)})")
+        limit = self.limits.max_info_payload if key.section == "info" else self.limits.max_payload
+        if len(payload) > limit:
+            raise BadMessage(f"payload of {len(payload)} bytes is over the limit of {limit}")
+        try:
+            message = decode(payload)
+        except DecodeError as exc:
+            raise BadMessage(str(exc)) from None
+        try:
+            section(self, key, message)
+        except BadMessage:
+            raise
+        except (KeyError, TypeError, ValueError) as exc:  # a field missing or of the wrong type
+            raise BadMessage(_reason(exc)) from None
+        return message
+
+    # -- sections ---------------------------------------------------------------------
+
+    def frame(self, key: Key, message: dict[str, Any]) -> None:
+        self.stamp(message)
+        names, values = message["names"], message["v"]
+        if names.__class__ is not list or values.__class__ is not list or len(names) != len(values):
+            raise BadMessage("names and v are not two lists of the same length")
+        if len(names) > MAX_JOINTS:
+            raise BadMessage(f"{len(names)} joints in one frame, at most {MAX_JOINTS}")
+        signature = tuple(names) if all(n.__class__ is str for n in names) else None
+        if signature not in self._known_names:
+            self._check_names(names)
+            if len(self._known_names) >= self.MAX_KNOWN:  # names made up on the fly must not grow it for ever
+                self._known_names.clear()
+            self._known_names.add(signature)  # type: ignore[arg-type]
+        numbers(values, "v")
+        for quantity, extra in message.items():
+            if quantity in FRAME_FIELDS:
+                continue
+            if quantity.__class__ is not str or not _NAME(quantity):
+                raise BadMessage(f"field {quantity!r} is not a plain name")
+            if extra.__class__ is not list or len(extra) != len(names):
+                raise BadMessage(f"{quantity} is not a list of {len(names)} numbers")
+            numbers(extra, quantity)
+
+    def joint_sample(self, key: Key, message: dict[str, Any]) -> None:
+        self.stamp(message)
+        for quantity, value in message.items():
+            if quantity not in ("t", "seq"):
+                if quantity.__class__ is not str or not _NAME(quantity):
+                    raise BadMessage(f"field {quantity!r} is not a plain name")
+                numbers((value,), quantity)
+        if "v" not in message:
+            raise BadMessage("no v")
+
+    def derived_sample(self, key: Key, message: dict[str, Any]) -> None:
+        value = message.get("v")
+        if isinstance(value, list):
+            if not 0 < len(value) <= MAX_DERIVED_SIZE:
+                raise BadMessage(f"v holds {len(value)} numbers, 1..{MAX_DERIVED_SIZE} expected")
+            numbers(value, "v")
+            message = {k: v for k, v in message.items() if k != "v"} | {"v": 0.0}
+        self.joint_sample(key, message)
+
+    def event(self, key: Key, message: dict[str, Any]) -> None:
+        t, kind = message["t"], message["kind"]
+        self._time(t)
+        if kind.__class__ is not str or not kind:
+            raise BadMessage(f"kind = {_short(kind)} is not a non-empty string")
+        json_like(message, "event")
+
+    def info(self, key: Key, message: dict[str, Any]) -> None:
+        json_like(message, "info")
+        name = "derived_info" if key.name == "derived" else "robot_info"
+        error = next(schemas.validator(name).iter_errors(message), None)
+        if error is not None:
+            where = "/".join(str(p) for p in error.absolute_path)
+            raise BadMessage(f"not a {name.replace('_', ' ')}: {where + ': ' if where else ''}{_short(error.message)}")
+        for joint in message.get("joints", ()):
+            if not joint["min"] <= joint["max"]:
+                raise BadMessage(f"joint {joint['name']}: min {joint['min']} is above max {joint['max']}")
+
+    def command(self, key: Key, message: dict[str, Any]) -> None:
+        json_like(message, "arguments")
+
+    # -- shared -----------------------------------------------------------------------
+
+    def stamp(self, message: dict[str, Any]) -> tuple[float, int]:
+        """``t`` and ``seq`` of a sample or frame, checked."""
+        t, seq = message["t"], message["seq"]
+        self._time(t)
+        if seq.__class__ is not int or not 0 <= seq <= MAX_SEQ:
+            raise BadMessage(f"seq = {_short(seq)} is not an integer in 0..{MAX_SEQ}")
+        return t, seq
+
+    def _time(self, t: Any) -> None:
+        if t.__class__ is not float and not number(t):
+            raise BadMessage(f"t = {_short(t)} is not a number")
+        if not 0 <= t <= time.time() + self.limits.max_future_s:  # (NaN fails too)
+            raise BadMessage(f"t = {t!r} is not a time between 1970 and {self.limits.max_future_s:g} s from now"
+                             " (clocks in step?)")
+
+    @staticmethod
+    def _check_names(names: list[Any]) -> None:
+        for name in names:
+            if name.__class__ is not str or not _NAME(name):
+                raise BadMessage(f"joint name {_short(name)} is not one plain key chunk (no '/', wildcards or spaces)")
+        if len(set(names)) != len(names):
+            raise BadMessage("joint names are not unique")
+
+
+SECTIONS: dict[str, Callable[[Gate, Key, dict[str, Any]], None]] = {
+    "frame": Gate.frame,
+    "joints": Gate.joint_sample,
+    "derived": Gate.derived_sample,
+    "events": Gate.event,
+    "info": Gate.info,
+    "cmd": Gate.command,
+}
+"""Each section of the key space (``<robot>/<section>/...``) and its check."""
+
+
+def numbers(values: Sequence[Any], field: str) -> None:
+    """Every value a finite number within ±``MAX_VALUE``; ``BadMessage`` naming the first that is not."""
+    if all(v.__class__ is float for v in values) and min(values, default=0.0) >= -MAX_VALUE \
+            and max(values, default=0.0) <= MAX_VALUE and math.isfinite(sum(values)):
+        return  # the usual frame, in a few C loops (a NaN can hide from min and max, not from sum)
+    for i, v in enumerate(values):
+        if not number(v):
+            raise BadMessage(f"{field}[{i}] = {_short(v)} is not a number")
+        if not -MAX_VALUE <= v <= MAX_VALUE:  # (NaN fails too)
+            raise BadMessage(f"{field}[{i}] = {v!r} is outside ±{MAX_VALUE:g}")
+
+
+def json_like(value: Any, what: str, depth: int = 0) -> None:
+    """``value`` holds only what JSON can carry (maps with string keys, lists,
+    strings, finite numbers, booleans, None), nested at most ``MAX_DEPTH`` deep."""
+    if value is None or value.__class__ in (str, bool):
+        return
+    if value.__class__ is int:
+        if not -(1 << 63) <= value < 1 << 64:
+            raise BadMessage(f"{what}: integer {value} is too large")
+        return
+    if value.__class__ is float:
+        if not math.isfinite(value):
+            raise BadMessage(f"{what}: {value} is not a finite number")
+        return
+    if depth >= MAX_DEPTH:
+        raise BadMessage(f"{what}: nested deeper than {MAX_DEPTH}")
+    if value.__class__ is dict:
+        for k, v in value.items():
+            if k.__class__ is not str:
+                raise BadMessage(f"{what}: key {_short(k)} is not a string")
+            json_like(v, f"{what}.{k}" if depth < 2 else what, depth + 1)
+        return
+    if value.__class__ is list:
+        for v in value:
+            json_like(v, what, depth + 1)
+        return
+    raise BadMessage(f"{what}: {type(value).__name__} {_short(value)} cannot be carried (only JSON values)")
+
+
+def number(value: Any) -> bool:
+    """A real number (``bool`` is an ``int`` in Python, but not a number here)."""
+    return isinstance(value, int | float) and not isinstance(value, bool)
+
+
+# -- building messages ----------------------------------------------------------------
+
+def frame(t: float, seq: int, names: Sequence[str], values: Sequence[float],
+          extra: dict[str, Sequence[float]] | None = None) -> dict[str, Any]:
+    """A frame message (``<robot>/frame``): ``values`` and each ``extra`` quantity in the order of ``names``."""
+    return {"t": t, "seq": seq, "names": list(names), "v": list(values),
+            **{quantity: list(v) for quantity, v in (extra or {}).items()}}
+
+
+def frame_samples(message: dict[str, Any]) -> list[tuple[str, dict[str, Any]]]:
+    """Each joint of a (checked) frame with the sample its own key carries (``t``,
+    ``seq``, ``v`` and its extra quantities).
+
+    >>> frame_samples(frame(1.5, 7, ["HeadYaw", "HeadPitch"], [0.1, 0.2], {"cmd": [0.0, 0.3]}))[1]
+    ('HeadPitch', {'t': 1.5, 'seq': 7, 'v': 0.2, 'cmd': 0.3})
+    """
+    t, seq = message["t"], message["seq"]
+    extra = {quantity: v for quantity, v in message.items() if quantity not in FRAME_FIELDS}
+    return [(name, {"t": t, "seq": seq, "v": value, **{q: v[i] for q, v in extra.items()}})
+            for i, (name, value) in enumerate(zip(message["names"], message["v"], strict=True))]
+
+
+def _short(value: Any) -> str:
+    """``repr`` of a value, cut to fit in a one-line message."""
+    text = repr(value).replace("\n", " ")
+    return text if len(text) <= 60 else text[:57] + "..."
+
+
+def _reason(exc: Exception) -> str:
+    if isinstance(exc, KeyError):
+        return f"no {exc.args[0]!r}" if exc.args else "a field is missing"
+    return _short(str(exc)).strip("'\"")
+
+
+_ = encode  # re-exported for the doctest above
