@@ -77,7 +77,7 @@ def adapter_run(url: str, rate_hz: float, seconds: float) -> dict[str, float]:
             item = queue.get(timeout=0.5)
             if item is not None:
                 times.append(decode(item[1])["t"])
-        reads = robot.stats.reads()  # the adapter's own, over its last few seconds
+        reads = robot.read_times.reads()  # the adapter's own, over its last few seconds
     finally:
         robot.stop()
         subscriber.undeclare()

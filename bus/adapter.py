@@ -2,7 +2,10 @@
 
 A subclass sets ``Config`` (a dataclass) and overrides the ``_start`` and
 ``_stop`` hooks; the base class owns the invariants: state checks, the node's
-liveliness token, worker threads joined and Zenoh entities undeclared on stop.
+liveliness token, worker threads joined and Zenoh entities undeclared on stop,
+and a worker that dies is never silent — the node's state becomes "failed",
+a ``node`` event says so on ``sonibus/events/node``, and ``sonibus run`` ends
+with a non-zero exit (unless the worker was spawned with ``restart=True``).
 
 >>> from dataclasses import dataclass
 >>> class Hello(Adapter):
@@ -30,6 +33,7 @@ log = logging.getLogger(__name__)
 
 JOIN_TIMEOUT_S = 2.0
 WARN_EVERY_S = 10.0  # at most one warning of a kind in this time
+RESTART_AFTER_S = 1.0  # a restartable worker that failed runs again after this
 
 
 @dataclass(frozen=True)
@@ -54,6 +58,8 @@ class Adapter:
         self.robots: list[str] = []       # robots this node owns (see claim_robot)
         self.since = 0.0                  # when it started (epoch seconds)
         self.stats: dict[str, int] = {}   # counters a subclass keeps (received, sent, bad, ...)
+        self.failure = ""                 # why the node failed (a worker died), once it has
+        self._lock = threading.Lock()     # guards stats (through count) and warnings across threads
         self._last_warning: dict[str, float] = {}
         self._bus: Bus | None = None
         self._threads: list[threading.Thread] = []
@@ -81,7 +87,8 @@ class Adapter:
         except BaseException:
             self.stop()
             raise
-        self.state = "running"
+        if self.state == "starting":  # (a worker may have failed already)
+            self.state = "running"
 
     def stop(self) -> None:
         """Stop work and leave the bus; safe to call twice."""
@@ -103,41 +110,80 @@ class Adapter:
 
     def describe(self) -> dict[str, Any]:
         """What ``sonibus nodes`` shows of this node (served on its node key)."""
-        return {"host": self.bus.host, "node": self.name, "adapter": self.kind, "robots": list(self.robots),
-                "since": self.since, "state": self.state}
+        described = {"host": self.bus.host, "node": self.name, "adapter": self.kind, "robots": list(self.robots),
+                     "since": self.since, "state": self.state}
+        if self.failure:
+            described["failure"] = self.failure
+        return described
 
     def claim_robot(self, robot: str, hint: str = "stop that node or give this robot another name") -> None:
         """Become the owner of ``robot`` until stopped; ``OwnershipError`` if it has one."""
         self.own(presence.claim(self.bus, robot, hint))
         self.robots.append(robot)
 
+    def count(self, kind: str, n: int = 1) -> None:
+        """Add ``n`` to counter ``kind`` of ``stats`` (safe from any thread)."""
+        with self._lock:
+            self.stats[kind] = self.stats.get(kind, 0) + n
+
     def warn(self, kind: str, message: str) -> None:
         """Log a warning, at most one of each ``kind`` every ``WARN_EVERY_S`` (with the
-        counters that are not zero): bad input at 100 Hz must not flood the log."""
+        counters that are not zero): bad input at 100 Hz must not flood the log. Safe
+        from any thread."""
         now = time.monotonic()
-        if now - self._last_warning.get(kind, -math.inf) >= WARN_EVERY_S:
+        with self._lock:
+            if now - self._last_warning.get(kind, -math.inf) < WARN_EVERY_S:
+                return
             self._last_warning[kind] = now
-            log.warning("%s: %s (%s)", self.name, message, ", ".join(f"{k} {v}" for k, v in self.stats.items() if v))
+            counters = ", ".join(f"{k} {v}" for k, v in self.stats.items() if v)
+        log.warning("%s: %s%s", self.name, message, f" ({counters})" if counters else "")
 
-    def spawn(self, target: Callable[[], None], name: str) -> threading.Thread:
-        """Run ``target`` on a thread joined by ``stop()``; it must return once ``stopping`` is set."""
-        thread = threading.Thread(target=self._guard(target), name=f"{self.name}:{name}", daemon=True)
+    def spawn(self, target: Callable[[], None], name: str, restart: bool = False) -> threading.Thread:
+        """Run ``target`` on a thread joined by ``stop()``; it must return once ``stopping``
+        is set. If it raises, the node fails (see ``fail``) — or, with ``restart``, it
+        is logged and run again after ``RESTART_AFTER_S``."""
+        thread = threading.Thread(target=self._guard(target, name, restart), name=f"{self.name}:{name}",
+                                  daemon=True)
         self._threads.append(thread)
         thread.start()
         return thread
+
+    def fail(self, reason: str, exc: BaseException | None = None) -> None:
+        """Mark the node failed, loudly: its state (``sonibus nodes``), a log line (with
+        the traceback of ``exc``), and a ``node`` event on ``sonibus/events/node``;
+        ``sonibus run`` then stops every node and ends with an error."""
+        if self.failure:
+            return
+        self.failure = reason
+        self.state = "failed"
+        log.error("%s: %s", self.name, reason, exc_info=exc)
+        if self._bus is not None:
+            event = {"t": time.time(), "kind": "node", "host": self._bus.host, "node": self.name,
+                     "adapter": self.kind, "state": "failed", "error": reason}
+            try:
+                self._bus.put(keys.NODE_EVENTS, event)
+            except Exception as exc:  # the session may be closing: the log line and the state remain
+                log.debug("%s: node event not sent: %s", self.name, exc)
 
     def own(self, entity: Any) -> Any:
         """Undeclare/close ``entity`` (publisher, subscriber, token, queue...) on stop."""
         self._entities.append(entity)
         return entity
 
-    def _guard(self, target: Callable[[], None]) -> Callable[[], None]:
+    def _guard(self, target: Callable[[], None], name: str, restart: bool) -> Callable[[], None]:
         def run() -> None:
-            try:
-                target()
-            except Exception:
-                self.state = "failed"  # visible in repr and to whoever watches the node
-                log.exception("%s: worker %s failed", self.name, target.__name__)
+            while True:
+                try:
+                    target()
+                    return
+                except Exception as exc:
+                    reason = f"worker '{name}' failed: {type(exc).__name__}: {_first_line(exc)}"
+                    if not restart:
+                        self.fail(reason, exc)
+                        return
+                    log.warning("%s: %s; restarting it in %g s", self.name, reason, RESTART_AFTER_S)
+                    if self.stopping.wait(RESTART_AFTER_S):
+                        return
         return run
 
     def _start(self) -> None:
@@ -154,6 +200,11 @@ class Adapter:
 
     def __repr__(self) -> str:
         return f"<{type(self).__name__} {self.name!r} {self.state}>"
+
+
+def _first_line(exc: BaseException) -> str:
+    lines = str(exc).strip().splitlines()
+    return lines[0] if lines else ""
 
 
 def _undeclare(entity: Any) -> None:

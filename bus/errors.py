@@ -15,6 +15,10 @@ class AdapterError(SonibusError):
     """An adapter cannot be found, loaded or started."""
 
 
+class NodeFailed(SonibusError):
+    """A node of a running installation failed (a worker died); the message names it."""
+
+
 class OwnershipError(SonibusError):
     """A robot already has an owner on the bus."""
 

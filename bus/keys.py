@@ -10,6 +10,7 @@ from .errors import ConfigError
 
 NODES = "sonibus/nodes"
 ROBOTS = "sonibus/robots"
+NODE_EVENTS = "sonibus/events/node"  # a node's state changes (a worker failed): an event like a robot's
 
 
 def joint(robot: str, name: str) -> str:

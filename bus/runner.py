@@ -9,7 +9,7 @@ from collections.abc import Callable
 from . import registry
 from .adapter import Adapter
 from .config import Installation
-from .errors import AdapterError, ConfigError
+from .errors import AdapterError, ConfigError, NodeFailed
 from .node import Bus
 from .session import BusConfig, open_session
 
@@ -32,7 +32,8 @@ def run(adapters: list[Adapter], bus_config: BusConfig, stop: threading.Event,
         on_started: Callable[[Bus], None] | None = None, host: str | None = None) -> None:
     """Open one session, start ``adapters`` in order, wait for ``stop``, stop them in
     reverse order and close the session — also on Ctrl-C or an error. ``host`` names
-    this machine on the bus (default: its hostname)."""
+    this machine on the bus (default: its hostname). A node that fails (a worker
+    died) stops them all too, and ``NodeFailed`` says which and why."""
     with open_session(bus_config, wait=True) as session:
         bus = Bus(session, host=host)
         started: list[Adapter] = []
@@ -43,8 +44,10 @@ def run(adapters: list[Adapter], bus_config: BusConfig, stop: threading.Event,
                 log.info("started %r", adapter)
             if on_started is not None:
                 on_started(bus)
-            while not stop.wait(0.25):
-                pass
+            while not stop.wait(0.1):
+                failed = [a for a in started if a.failure]
+                if failed:
+                    raise NodeFailed("; ".join(f"node '{a.name}': {a.failure}" for a in failed))
         finally:
             for adapter in reversed(started):
                 adapter.stop()

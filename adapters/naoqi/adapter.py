@@ -41,7 +41,7 @@ class NaoqiRobot(RobotAdapter):
     def _open(self) -> None:
         self.model = load_model(self.config.model_name)  # until the robot tells its own
         self.rate_hz = self.config.rate_hz
-        self.stats = Stats()
+        self.read_times = Stats()
         self.events = RobotEvents(self.publish_event)
         self.link = Link(self.config, self._lost)
         self.commands = NaoqiCommands(self.link, self.events, lambda: self.model, self._down)
@@ -156,7 +156,7 @@ class NaoqiRobot(RobotAdapter):
         gap = int((time.monotonic() - self._lost_at) * self.rate_hz) if self._lost_at else 0
         base = self._seq + 1 + gap  # seq goes on across reconnects; the outage shows as a gap
         pacer = Pacer(self.rate_hz)
-        self.stats.clear()
+        self.read_times.clear()
         next_status = time.monotonic() + self.config.status_every_s
 
         def tick(frame: int) -> None:
@@ -173,7 +173,7 @@ class NaoqiRobot(RobotAdapter):
             self.publish_frame(read.t, self._seq, read.positions, reader.names, read.extra)
             if read.polled:
                 self.events.poll(read.polled)
-            self.stats.add(read.read_s)
+            self.read_times.add(read.read_s)
             if time.monotonic() >= next_status:
                 next_status += self.config.status_every_s
                 self.publish_event("status", **self.status(pacer.skipped))
@@ -183,7 +183,7 @@ class NaoqiRobot(RobotAdapter):
 
     def status(self, skipped: int = 0) -> dict[str, Any]:
         """Achieved rate, read latency, frames skipped."""
-        return {**self.stats.summary(), "frames_skipped": self.frames_skipped + skipped,
+        return {**self.read_times.summary(), "frames_skipped": self.frames_skipped + skipped,
                 "source": self.facts.source if self.facts else self.config.source}
 
     # -- what the bus sees --------------------------------------------------------------

@@ -1,0 +1,84 @@
+"""A worker that dies is never silent: the node's state, a ``node`` event, and
+``sonibus run`` ending with an error — unless the worker may restart."""
+
+from __future__ import annotations
+
+import threading
+from dataclasses import dataclass
+
+import msgpack
+from sonibus_testplugin import JsonLinesConfig, JsonLinesSink
+
+from sonibus.bus import Adapter, decode, keys
+
+from .conftest import SONIBUS, wait_for
+
+
+def test_a_dying_worker_fails_its_node_with_an_event_and_its_state(net, tmp_path):
+    """The third-party jsonl sink does not check payloads: garbage kills its worker."""
+    events = []
+    watcher = net.bus("watcher")
+    watcher.session.declare_subscriber(keys.NODE_EVENTS, lambda s: events.append(decode(s.payload.to_bytes())))
+    sink = net.start(JsonLinesSink(JsonLinesConfig(path=str(tmp_path / "lines.jsonl")), name="lines"))
+    script = net.bus("script").session.declare_publisher("pepper/joints/HeadYaw")
+    wait_for(lambda: script.matching_status.matching, what="the sink's subscription")
+    script.put(b"\xc1 not msgpack")
+
+    wait_for(lambda: sink.state == "failed", what="the node to fail")
+    assert sink.failure.startswith("worker 'write' failed: DecodeError: payload is not msgpack"), sink.failure
+    wait_for(lambda: events, what="the node event")
+    assert events[0] | {"t": 0} == {"t": 0, "kind": "node", "host": watcher.host, "node": "lines",
+                                    "adapter": "JsonLinesSink", "state": "failed", "error": sink.failure}
+    (described,) = watcher.query(keys.node_token(watcher.host, "lines"))
+    assert described["state"] == "failed" and described["failure"] == sink.failure
+
+
+def test_sonibus_run_ends_with_an_error_when_a_node_fails(net, spawn, tmp_path):
+    show = tmp_path / "show.toml"
+    show.write_text(f'[bus]\nmulticast = false\nconnect = ["{net.endpoint}"]\n\n'
+                    f'[nodes.lines]\nadapter = "jsonl"\npath = "{tmp_path / "lines.jsonl"}"\n')
+    script = net.bus("script").session.declare_publisher("pepper/joints/HeadYaw")
+    run = spawn(SONIBUS, "run", str(show))
+    wait_for(lambda: script.matching_status.matching, timeout=20, what="the sink's subscription")
+    script.put(msgpack.packb({"t": 1.0, "seq": 0, "v": 0.1}))
+    wait_for(lambda: (tmp_path / "lines.jsonl").exists() and (tmp_path / "lines.jsonl").read_text(),
+             what="a good sample written")
+    script.put(b"\xc1 not msgpack")
+    wait_for(lambda: run.popen.poll() is not None, timeout=10, what="sonibus run to end")
+    code, _, err = run.stop()
+    assert code == 1, err
+    last = err.strip().splitlines()[-1]
+    assert last.startswith("sonibus: error: node 'lines': worker 'write' failed: "), err
+
+
+class Flaky(Adapter):
+    """A worker that raises on its first run, then works: spawned with ``restart=True``."""
+
+    @dataclass(frozen=True)
+    class Config:
+        restart: bool = True
+
+    def _start(self) -> None:
+        self.runs = 0
+        self.working = threading.Event()
+        self.spawn(self._work, "work", restart=self.config.restart)
+
+    def _work(self) -> None:
+        self.runs += 1
+        if self.runs == 1:
+            raise RuntimeError("first run fails")
+        self.working.set()
+        self.stopping.wait()
+
+
+def test_a_restartable_worker_runs_again_and_the_node_stays_up(net, caplog):
+    flaky = net.start(Flaky(name="flaky"))
+    wait_for(flaky.working.is_set, what="the second run")
+    assert flaky.state == "running" and not flaky.failure and flaky.runs == 2
+    assert "worker 'work' failed: RuntimeError: first run fails; restarting it" in caplog.text
+
+
+def test_a_worker_that_may_not_restart_fails_the_node(net):
+    flaky = net.start(Flaky(Flaky.Config(restart=False), name="flaky"))
+    wait_for(lambda: flaky.state == "failed", what="the node to fail")
+    assert flaky.failure == "worker 'work' failed: RuntimeError: first run fails" and flaky.runs == 1
