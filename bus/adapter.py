@@ -108,6 +108,12 @@ class Adapter:
             self._entities.clear()
             self.state = "stopped"
 
+    @classmethod
+    def owned_robots(cls, config: Any) -> tuple[str, ...]:
+        """The robots a node with ``config`` will own, known before it starts (a file
+        with two owners of one robot is refused when it is loaded); default none."""
+        return ()
+
     def describe(self) -> dict[str, Any]:
         """What ``sonibus nodes`` shows of this node (served on its node key)."""
         described = {"host": self.bus.host, "node": self.name, "adapter": self.kind, "robots": list(self.robots),

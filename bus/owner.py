@@ -40,6 +40,10 @@ class RobotAdapter(Adapter):
     def robot(self) -> str:
         return self.config.robot
 
+    @classmethod
+    def owned_robots(cls, config: Any) -> tuple[str, ...]:
+        return (config.robot,)
+
     # -- lifecycle -------------------------------------------------------------
 
     def _start(self) -> None:
