@@ -82,6 +82,10 @@ class Replay(Adapter):
         self.stats = {"published": 0, "frames": 0, "late": 0}
         self.finished = threading.Event()                          # set at the end of a replay without loop
 
+    @classmethod
+    def owned_robots(cls, config: ReplayConfig) -> tuple[str, ...]:
+        return tuple(config.rename.values())  # the others' names are in the file, known at start
+
     def _start(self) -> None:
         cfg: ReplayConfig = self.config
         self.recording = self.own(Recording(cfg.path))
