@@ -76,7 +76,7 @@ class Gate:
         try:
             message = decode(payload)
         except DecodeError as exc:
-            raise BadMessage(str(exc)) from None
+            raise BadMessage(_cut(str(exc))) from None
         try:
             section(self, key, message)
         except BadMessage:
@@ -118,7 +118,7 @@ class Gate:
                     raise BadMessage(f"field {quantity!r} is not a plain name")
                 numbers((value,), quantity)
         if "v" not in message:
-            raise BadMessage("no v")
+            raise BadMessage("no 'v'")
 
     def derived_sample(self, key: Key, message: dict[str, Any]) -> None:
         value = message.get("v")
@@ -142,7 +142,7 @@ class Gate:
         error = next(schemas.validator(name).iter_errors(message), None)
         if error is not None:
             where = "/".join(str(p) for p in error.absolute_path)
-            raise BadMessage(f"not a {name.replace('_', ' ')}: {where + ': ' if where else ''}{_short(error.message)}")
+            raise BadMessage(f"not a {name.replace('_', ' ')}: {where + ': ' if where else ''}{_cut(error.message)}")
         for joint in message.get("joints", ()):
             if not joint["min"] <= joint["max"]:
                 raise BadMessage(f"joint {joint['name']}: min {joint['min']} is above max {joint['max']}")
@@ -256,14 +256,18 @@ def frame_samples(message: dict[str, Any]) -> list[tuple[str, dict[str, Any]]]:
 
 def _short(value: Any) -> str:
     """``repr`` of a value, cut to fit in a one-line message."""
-    text = repr(value).replace("\n", " ")
-    return text if len(text) <= 60 else text[:57] + "..."
+    return _cut(repr(value), 60)
+
+
+def _cut(text: str, size: int = 120) -> str:
+    text = " ".join(text.split())
+    return text if len(text) <= size else text[:size - 3] + "..."
 
 
 def _reason(exc: Exception) -> str:
     if isinstance(exc, KeyError):
         return f"no {exc.args[0]!r}" if exc.args else "a field is missing"
-    return _short(str(exc)).strip("'\"")
+    return _cut(str(exc))
 
 
 _ = encode  # re-exported for the doctest above

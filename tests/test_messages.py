@@ -1,0 +1,178 @@
+"""The message layer's gate: every section refuses what it must, in one line, and
+agrees with the schemas it reads its bounds from."""
+
+from __future__ import annotations
+
+import time
+
+import jsonschema
+import msgpack
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from sonibus import schemas
+from sonibus.bus import messages
+from sonibus.bus.keys import Key
+from sonibus.bus.messages import BadMessage, Gate, Limits
+
+FRAME, SAMPLE, DERIVED, EVENT = (Key.parse(k) for k in ("pepper/frame", "pepper/joints/HeadYaw",
+                                                         "pepper/derived/velocity/HeadYaw", "pepper/events/behavior"))
+
+
+def pack(message: object) -> bytes:
+    return msgpack.packb(message, use_bin_type=True)
+
+
+def refused(key: Key, message: object, gate: Gate | None = None) -> str:
+    with pytest.raises(BadMessage) as caught:
+        (gate or Gate()).check(key, message if isinstance(message, bytes) else pack(message))
+    reason = str(caught.value)
+    assert reason and "\n" not in reason and len(reason) < 200, reason
+    return reason
+
+
+def now_frame(**changes: object) -> dict:
+    return {**messages.frame(time.time(), 1, ["HeadYaw", "HeadPitch"], [0.1, -0.2]), **changes}
+
+
+def test_a_good_message_of_each_section_passes_unchanged():
+    gate, t = Gate(), time.time()
+    for key, message in [(FRAME, now_frame(cmd=[0.0, 0.1])), (SAMPLE, {"t": t, "seq": 3, "v": 0.5, "temp": 40}),
+                         (DERIVED, {"t": t, "seq": 3, "v": [0.1, 0.2, 0.3]}),
+                         (EVENT, {"t": t, "kind": "behavior", "name": "x", "state": "started", "extra": {"a": [1]}}),
+                         (Key.parse("pepper/cmd/say"), {"text": "hello"}), (Key.parse("pepper/cmd/stop"), {})]:
+        assert gate.check(key, pack(message)) == message
+
+
+@pytest.mark.parametrize(("message", "reason"), [
+    (now_frame(v=[1e300, 0.0]), "v[0] = 1e+300 is outside ±1e+06"),
+    (now_frame(v=[float("nan"), 0.0]), "v[0] = nan is outside ±1e+06"),
+    (now_frame(v=[0.0, float("-inf")]), "v[1] = -inf is outside ±1e+06"),
+    (now_frame(v=[0.0, "1"]), "v[1] = '1' is not a number"),
+    (now_frame(v=[0.0, True]), "v[1] = True is not a number"),
+    (now_frame(v=[0.1]), "names and v are not two lists of the same length"),
+    (now_frame(names=["HeadYaw", "HeadYaw"]), "joint names are not unique"),
+    (now_frame(names=["HeadYaw", "a/b"]), "joint name 'a/b' is not one plain key chunk"),
+    (now_frame(names=["HeadYaw", "*"]), "joint name '*' is not one plain key chunk"),
+    (now_frame(names=["HeadYaw", 7]), "joint name 7 is not one plain key chunk"),
+    (now_frame(t=time.time() + 3600), "is not a time between 1970 and 5 s from now"),
+    (now_frame(t=float("nan")), "t = nan is not a time"),
+    (now_frame(t=-1.0), "t = -1.0 is not a time"),
+    (now_frame(t="now"), "t = 'now' is not a number"),
+    (now_frame(seq=-1), "seq = -1 is not an integer in 0.."),
+    (now_frame(seq=1.5), "seq = 1.5 is not an integer"),
+    (now_frame(cmd=[0.1]), "cmd is not a list of 2 numbers"),
+    (now_frame(cmd=[0.1, b"x"]), "cmd[1] = b'x' is not a number"),
+    ({"t": time.time(), "seq": 1, "names": ["HeadYaw"]}, "no 'v'"),
+    ([1, 2], "payload is a msgpack list, expected a map"),
+])
+def test_bad_frames_are_refused_saying_why(message, reason):
+    assert reason in refused(FRAME, message)
+
+
+def test_a_frame_of_50000_made_up_joints_is_refused_before_its_names_are_looked_at():
+    names = [f"J{i}" for i in range(50_000)]
+    reason = refused(FRAME, now_frame(names=names, v=[0.0] * len(names)))
+    assert reason.startswith("payload of ") and reason.endswith(" bytes is over the limit of 65536"), reason
+    small = [f"J{i}" for i in range(messages.MAX_JOINTS + 1)]
+    assert refused(FRAME, now_frame(names=small, v=[0.0] * len(small))) == "129 joints in one frame, at most 128"
+
+
+def test_the_clock_skew_tolerance_is_configurable():
+    ahead = now_frame(t=time.time() + 30)
+    assert "30 s" not in refused(FRAME, ahead)
+    assert Gate(Limits(max_future_s=60)).check(FRAME, pack(ahead)) == ahead
+
+
+@pytest.mark.parametrize(("message", "reason"), [
+    ({"t": 1.0, "kind": "behavior", "name": b"x"}, "event.name: bytes b'x' cannot be carried"),
+    ({"t": 1.0, "kind": "behavior", "name": msgpack.ExtType(5, b"ab")}, "ExtType"),
+    ({"t": 1.0, "kind": "x", "v": float("nan")}, "event.v: nan is not a finite number"),
+    ({"t": 1.0, "kind": "x", 3: "a"}, "event: key 3 is not a string"),
+    ({"t": 1.0, "kind": "x", "deep": [[[[[[[[["too deep"]]]]]]]]]}, "nested deeper than 8"),
+    ({"t": 1.0, "kind": ""}, "kind = '' is not a non-empty string"),
+    ({"t": 1.0}, "no 'kind'"),
+    ({"t": 1.0, "kind": "x", "text": "a" * 70_000}, "over the limit of 65536"),
+])
+def test_bad_events_are_refused_saying_why(message, reason):
+    assert reason in refused(EVENT, message)
+
+
+def test_samples_and_derived_values_are_checked_like_frames():
+    t = time.time()
+    assert refused(SAMPLE, {"t": t, "seq": 0, "v": 1e300}) == "v[0] = 1e+300 is outside ±1e+06"
+    assert "no 'v'" in refused(SAMPLE, {"t": t, "seq": 0})
+    assert "field 'a/b' is not a plain name" in refused(SAMPLE, {"t": t, "seq": 0, "v": 0.1, "a/b": 1.0})
+    assert "v holds 0 numbers" in refused(DERIVED, {"t": t, "seq": 0, "v": []})
+    assert "v[2] = 'z' is not a number" in refused(DERIVED, {"t": t, "seq": 0, "v": [0.1, 0.2, "z"]})
+    assert "is outside" in refused(DERIVED, {"t": t, "seq": 0, "v": [0.1, 1e7]})
+
+
+def test_robot_info_is_checked_against_its_schema_and_its_limits():
+    info_key, derived_key = Key.parse("pepper/info"), Key.parse("pepper/info/derived")
+    assert "not a robot info: 'model' is a required property" in refused(info_key, {"robot": "pepper"})
+    assert "not a derived info" in refused(derived_key, {"robot": "pepper", "derived": "no"})
+    assert "bytes" in refused(info_key, {"robot": b"pepper"})
+
+
+def test_a_key_outside_the_sections_is_refused():
+    assert refused(Key.parse("pepper/audio/mic"), {}).startswith("'audio' is not a section of the key space")
+
+
+def test_a_payload_that_is_not_msgpack_is_refused():
+    assert refused(FRAME, b"\xc1 not msgpack").startswith("payload is not msgpack")
+
+
+# -- the gate and the schemas agree ----------------------------------------------------------
+
+NAMES = st.sampled_from(["HeadYaw", "HeadPitch", "LHand", "a/b", "R*", "x y", "", "$"])
+NUMBERS = st.one_of(st.floats(allow_nan=False, min_value=-2e6, max_value=2e6), st.integers(-10**7, 10**7),
+                    st.just(float("inf")), st.booleans(), st.text(max_size=2), st.none())
+TIMES = st.one_of(st.floats(min_value=-10, max_value=time.time() - 60, allow_nan=False), st.text(max_size=2))
+SEQS = st.one_of(st.integers(-5, 2**64 - 1), st.text(max_size=2), st.none())
+
+
+@st.composite
+def frames(draw: st.DrawFn) -> dict:
+    names = draw(st.lists(NAMES, max_size=6))
+    size = st.just(len(names))
+    message = {"t": draw(TIMES), "seq": draw(SEQS), "names": names,
+               "v": draw(st.lists(NUMBERS, min_size=len(names), max_size=len(names)))}
+    if draw(st.booleans()):
+        message[draw(st.sampled_from(["cmd", "temp", "a/b"]))] = draw(
+            size.flatmap(lambda n: st.lists(NUMBERS, min_size=n, max_size=n)))
+    return message
+
+
+@given(frames())
+@settings(max_examples=400, deadline=None)
+def test_the_gate_accepts_a_frame_exactly_when_the_schema_does(frame):
+    try:
+        Gate().check(FRAME, pack(frame))
+        accepted = True
+    except BadMessage:
+        accepted = False
+    schema_ok = schemas.validator("frame").is_valid(frame)
+    assert accepted == schema_ok, (frame, next(schemas.validator("frame").iter_errors(frame), None))
+
+
+@given(st.fixed_dictionaries({"t": TIMES, "seq": SEQS, "v": NUMBERS},
+                             optional={"cmd": NUMBERS, "a b": NUMBERS, "temp": NUMBERS}))
+@settings(max_examples=300, deadline=None)
+def test_the_gate_accepts_a_sample_exactly_when_the_schema_does(sample):
+    for key, name in ((SAMPLE, "joint_sample"), (DERIVED, "derived_sample")):
+        try:
+            Gate().check(key, pack(sample))
+            accepted = True
+        except BadMessage:
+            accepted = False
+        assert accepted == schemas.validator(name).is_valid(sample), (name, sample)
+
+
+def test_the_schemas_hold_the_bounds_the_gate_uses():
+    frame = schemas.load("frame")["properties"]
+    assert frame["names"]["maxItems"] == messages.MAX_JOINTS and frame["names"]["uniqueItems"] is True
+    for name in ("frame", "joint_sample", "derived_sample"):
+        with pytest.raises(jsonschema.ValidationError):
+            schemas.validate(name, {"t": 1.0, "seq": 0, "names": ["a"], "v": 2e6 if name != "frame" else [2e6]})
