@@ -40,6 +40,7 @@ SCRIPTS: dict[str, tuple[str, list[str], float]] = {
     "features": ("features", [], 90),
     "zenoh_hop": ("zenoh_hop", [], 90),
     "receive_cpu": ("receive_cpu", [], 60),
+    "gate": ("gate", [], 60),
 }
 
 
