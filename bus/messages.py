@@ -29,7 +29,7 @@ from .. import schemas
 from .codec import DecodeError, decode, encode
 from .keys import Key
 
-__all__ = ["FRAME_FIELDS", "SECTIONS", "BadMessage", "Gate", "Limits", "frame", "frame_samples"]
+__all__ = ["FRAME_FIELDS", "SECTIONS", "BadMessage", "Gate", "Limits", "frame", "frame_samples", "valid_part"]
 
 _FRAME = schemas.load("frame")["properties"]
 MAX_JOINTS: int = _FRAME["names"]["maxItems"]          # joints in one frame
@@ -239,6 +239,27 @@ def frame(t: float, seq: int, names: Sequence[str], values: Sequence[float],
     """A frame message (``<robot>/frame``): ``values`` and each ``extra`` quantity in the order of ``names``."""
     return {"t": t, "seq": seq, "names": list(names), "v": list(values),
             **{quantity: list(v) for quantity, v in (extra or {}).items()}}
+
+
+def valid_part(message: dict[str, Any]) -> tuple[dict[str, Any], list[str]]:
+    """A frame without the joints whose value (or extra quantity) the gate would
+    refuse, and the names left out: what a robot owner publishes when a sensor
+    glitches.
+
+    >>> valid_part(frame(1.0, 0, ["HeadYaw", "LHand"], [float("nan"), 0.5]))
+    ({'t': 1.0, 'seq': 0, 'names': ['LHand'], 'v': [0.5]}, ['HeadYaw'])
+    """
+    columns = [message["v"], *(v for q, v in message.items() if q not in FRAME_FIELDS)]
+    try:
+        for column in columns:
+            numbers(column, "v")
+        return message, []
+    except BadMessage:
+        pass
+    keep = {i for i in range(len(message["names"]))
+            if all(number(c[i]) and -MAX_VALUE <= c[i] <= MAX_VALUE for c in columns)}
+    kept = {q: [x for i, x in enumerate(v) if i in keep] if q not in ("t", "seq") else v for q, v in message.items()}
+    return kept, [n for i, n in enumerate(message["names"]) if i not in keep]
 
 
 def frame_samples(message: dict[str, Any]) -> list[tuple[str, dict[str, Any]]]:

@@ -84,6 +84,11 @@ class RobotAdapter(Adapter):
         if len(message["names"]) != len(message["v"]) or any(len(v) != len(message["names"])
                                                              for v in (extra or {}).values()):
             raise ValueError(f"{len(message['names'])} joint names but {len(positions)} positions (or extras)")
+        message, left_out = messages.valid_part(message)
+        if left_out:  # a glitching sensor: the other joints go on
+            self.count("joints_left_out", len(left_out))
+            self.warn("values", f"{self.robot}: {', '.join(left_out)} left out of frame {seq}: "
+                                f"not a finite value within ±{messages.MAX_VALUE:g}")
         self._frames.put(codec.encode(message))
         if self._joints_wanted:
             for name, sample in messages.frame_samples(message):

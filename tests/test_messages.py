@@ -176,3 +176,14 @@ def test_the_schemas_hold_the_bounds_the_gate_uses():
     for name in ("frame", "joint_sample", "derived_sample"):
         with pytest.raises(jsonschema.ValidationError):
             schemas.validate(name, {"t": 1.0, "seq": 0, "names": ["a"], "v": 2e6 if name != "frame" else [2e6]})
+
+
+def test_an_owner_leaves_out_the_joints_a_glitching_sensor_reports_and_keeps_the_rest():
+    glitch = messages.frame(time.time(), 4, ["HeadYaw", "HeadPitch", "LHand"], [0.1, float("nan"), 0.5],
+                            {"temp": [40.0, 41.0, float("inf")]})
+    kept, left_out = messages.valid_part(glitch)
+    assert left_out == ["HeadPitch", "LHand"]
+    assert kept == {"t": glitch["t"], "seq": 4, "names": ["HeadYaw"], "v": [0.1], "temp": [40.0]}
+    assert Gate().check(FRAME, pack(kept)) == kept
+    good = now_frame()
+    assert messages.valid_part(good) == (good, [])
