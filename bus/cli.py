@@ -8,6 +8,8 @@ import contextlib
 import enum
 import json
 import logging
+import os
+import re
 import signal
 import socket
 import sys
@@ -24,12 +26,17 @@ from . import codec, config, keys, registry, runner
 from .client import robot_info, send_command, wait_for_robot
 from .errors import CommandError, ConfigError, RobotNotFound, SonibusError
 from .node import Bus
-from .session import MODES, BusConfig, open_session
+from .session import MODES, BusConfig, check_endpoint, check_option, open_session
 
 log = logging.getLogger(__name__)
 
 
 class Exit(enum.IntEnum):
+    """Exit statuses: 1 error, 2 usage or configuration (a bad flag, file, table or
+    key), 3 robot not found, 4 command refused, 5 timeout, 130 interrupted (Ctrl-C,
+    SIGTERM), 141 the output was closed (``sonibus info F | head -1``: quiet, as a Unix
+    tool killed by SIGPIPE)."""
+
     OK = 0
     ERROR = 1
     USAGE = 2
@@ -37,6 +44,7 @@ class Exit(enum.IntEnum):
     REFUSED = 4
     TIMEOUT = 5
     INTERRUPTED = 130
+    OUTPUT_CLOSED = 141
 
 
 @dataclass
@@ -48,6 +56,7 @@ class Environment:
     stop: threading.Event = field(default_factory=threading.Event)
 
     def say(self, text: str) -> None:
+        """A line on stdout; ``BrokenPipeError`` once its reader went away (``_run`` ends quietly)."""
         print(text, file=self.stdout, flush=True)
 
 
@@ -170,10 +179,14 @@ def bus_config(args: argparse.Namespace, base: BusConfig | None = None) -> BusCo
     changes: dict[str, Any] = {}
     if args.mode:
         changes["mode"] = args.mode
-    if args.connect:
-        changes["connect"] = tuple(args.connect)
-    if args.listen:
-        changes["listen"] = tuple(args.listen)
+    for flag in ("connect", "listen"):
+        for endpoint in getattr(args, flag) or ():
+            try:
+                check_endpoint(endpoint, listen=flag == "listen")
+            except ValueError as exc:
+                raise ConfigError(f"--{flag} {exc}") from None
+        if getattr(args, flag):
+            changes[flag] = tuple(getattr(args, flag))
     if args.no_multicast:
         changes["multicast"] = False
     if args.namespace is not None:
@@ -182,14 +195,22 @@ def bus_config(args: argparse.Namespace, base: BusConfig | None = None) -> BusCo
         options = dict(cfg.options)
         for item in args.zenoh:
             key, sep, value = item.partition("=")
-            if not sep:
-                raise ConfigError(f"--zenoh '{item}' is not KEY=VALUE")
+            if not sep or not key:
+                raise ConfigError(f"--zenoh '{item}' is not KEY=JSON, e.g. --zenoh transport/link/tx/lease=2000")
             try:
                 options[key] = json.loads(value)
             except json.JSONDecodeError:
-                options[key] = value
+                options[key] = value  # a bare word: --zenoh mode=client
+            try:
+                check_option(key, options[key])
+            except ValueError as exc:
+                raise ConfigError(f"--zenoh '{item}': {exc}") from None
         changes["options"] = options
-    return replace(cfg, **changes) if changes else cfg
+    try:
+        return replace(cfg, **changes) if changes else cfg
+    except ConfigError as exc:  # "key 'namespace': ..." from BusConfig: name the flag instead
+        flags = {"namespace": "--namespace", "options": "--zenoh", "mode": "--mode"}
+        raise ConfigError(re.sub(r"^key '(\w+)'", lambda m: flags.get(m[1], m[0]), str(exc))) from None
 
 
 def command_args(verb: str, words: Sequence[str]) -> dict[str, Any]:
@@ -373,6 +394,8 @@ def main(argv: Sequence[str] | None = None, env: Environment | None = None) -> i
                 args = parser(extra).parse_args(argv)
         except SystemExit as exc:  # argparse has printed its message
             return int(exc.code or 0)
+        except BrokenPipeError:  # --help into a closed pipe
+            return int(Exit.OUTPUT_CLOSED)
         logger.setLevel((logging.WARNING, logging.INFO, logging.DEBUG)[min(args.verbose, 2)])
         return _run(args, env, COMMANDS.get(args.command) or extra[args.command].run)
     finally:
@@ -384,6 +407,8 @@ def _run(args: argparse.Namespace, env: Environment, run: Callable[[argparse.Nam
         return int(run(args, env))
     except KeyboardInterrupt:
         return int(Exit.INTERRUPTED)
+    except BrokenPipeError:  # whoever read our output is gone (| head): nothing to say, nobody to say it to
+        return int(Exit.OUTPUT_CLOSED)
     except Exception as exc:
         if args.traceback:
             raise
@@ -419,4 +444,7 @@ def console_main() -> None:
 
     signal.signal(signal.SIGTERM, terminate)
     signal.signal(signal.SIGINT, terminate)  # also when started in the background, where SIGINT is ignored
-    sys.exit(main(sys.argv[1:], env))
+    status = main(sys.argv[1:], env)
+    if status == Exit.OUTPUT_CLOSED:  # what stdout still buffers goes nowhere, not into an error at exit
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())  # as the Python docs on SIGPIPE say
+    sys.exit(status)

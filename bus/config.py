@@ -32,10 +32,15 @@ class NodeSpec:
     where: str = ""
     lines: dict[str, int] = field(default_factory=dict)
     host: str = ""   # the machine that runs it; "" for any machine that runs the file
+    line: int = 0    # where its table starts
+
+    def config(self, cls: type[Adapter]) -> Any:
+        """Its options checked against ``cls.Config``."""
+        return from_mapping(cls.Config, self.options, self.where, self.lines)
 
     def build(self, cls: type[Adapter]) -> Adapter:
         """The adapter, with its options checked against ``cls.Config``."""
-        adapter = cls(from_mapping(cls.Config, self.options, self.where, self.lines), name=self.name)
+        adapter = cls(self.config(cls), name=self.name)
         adapter.kind = self.adapter
         return adapter
 
@@ -69,6 +74,24 @@ class Installation:
                               f"use --host NAME or --only NODE")
         return chosen
 
+    def check_owners(self, owned: dict[str, tuple[str, ...]]) -> None:
+        """``ConfigError`` if two nodes would own one robot on the same bus (``owned``:
+        node → robots). Nodes pinned to other machines count too: they would collide there."""
+        owners: dict[tuple[str, str], NodeSpec] = {}
+        for name, robots in owned.items():
+            spec = self.nodes[name]
+            namespace = self.bus.for_host(spec.host).namespace if spec.host else self.bus.namespace
+            for robot in robots:
+                first = owners.setdefault((namespace, robot), spec)
+                if first is not spec:
+                    raise ConfigError(
+                        f"{self.path}: robot '{robot}' has two owners, {_table(first)} and {_table(spec)} — "
+                        f"a robot has one owner on the bus: remove one node or give it another robot name")
+
+
+def _table(spec: NodeSpec) -> str:
+    return f"[nodes.{spec.name}] line {spec.line}" if spec.line else f"[nodes.{spec.name}]"
+
 
 def load(path: str | Path) -> Installation:
     """Read and check an installation file; ``ConfigError`` names file, node and key."""
@@ -97,11 +120,8 @@ def parse(text: str, path: str = "<string>") -> Installation:
         raise ConfigError(f"{path}: 'bus' must be a table")
     bus = from_mapping(BusConfig, bus_table, f"{path} [bus]", _lines(text, "bus", bus_table))
     bus = bus.relative_to(Path(path).resolve().parent)
-    for host in bus.hosts:
-        try:
-            bus.for_host(host)
-        except ConfigError as exc:
-            raise ConfigError(f"{path} {exc}") from None
+    for host, override in bus.hosts.items():
+        bus.for_host(host, path, _lines(text, f"bus.hosts.{host}", override))
     nodes_table = data.get("nodes", {})
     if not isinstance(nodes_table, dict) or not nodes_table:
         raise ConfigError(f"{path}: no [nodes.NAME] table — an installation needs at least one node")
@@ -122,7 +142,7 @@ def parse(text: str, path: str = "<string>") -> Installation:
             raise ConfigError(f"{where}: missing key 'adapter' (a string: see `sonibus adapters`)")
         if not isinstance(host, str):
             raise ConfigError(f"{located(where, lines, 'host')}: key 'host': {host!r} is not a string")
-        nodes[name] = NodeSpec(name, adapter, options, where, lines, host)
+        nodes[name] = NodeSpec(name, adapter, options, where, lines, host, _line(text, "nodes", name))
     return Installation(bus, nodes, path)
 
 
@@ -132,12 +152,14 @@ def _lines(text: str, table: str, keys: Any) -> dict[str, int]:
 
 
 def _line(text: str, table: str | None, key: str) -> int:
-    """The line where ``key`` is set in ``[table]``, 0 if not found (for messages)."""
+    """The line where ``key`` is set in ``[table]`` (or its own ``[table.key]`` starts),
+    0 if not found (for messages)."""
     in_table = table is None
+    full = key if table is None else f"{table}.{key}"
     for number, line in enumerate(text.splitlines(), 1):
         stripped = line.strip()
         if stripped.startswith("["):
-            if table is None and re.match(rf"\[\[?{re.escape(key)}[.\]]", stripped):
+            if re.match(rf"\[\[?\s*{re.escape(full)}\s*[.\]]", stripped):
                 return number
             in_table = stripped.split("#", 1)[0].strip().strip("[]").strip() == table
         elif in_table and re.match(rf"{re.escape(key)}\s*=", stripped):

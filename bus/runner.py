@@ -17,7 +17,8 @@ log = logging.getLogger(__name__)
 
 
 def build(installation: Installation, only: list[str] | None = None, host: str | None = None) -> list[Adapter]:
-    """Every selected node's adapter, configured; all errors before anything starts."""
+    """Every selected node's adapter, configured; all errors before anything starts,
+    two owners of one robot among all the file's nodes too (not only the selected)."""
     adapters = []
     for spec in installation.select(only, host):
         try:
@@ -25,7 +26,21 @@ def build(installation: Installation, only: list[str] | None = None, host: str |
         except AdapterError as exc:
             raise ConfigError(f"{spec.at('adapter')}: key 'adapter': {exc}") from None
         adapters.append(spec.build(cls))
+    installation.check_owners(_owned_robots(installation))
     return adapters
+
+
+def _owned_robots(installation: Installation) -> dict[str, tuple[str, ...]]:
+    """Node → the robots it will own, for every node whose adapter loads and whose
+    options are valid (the others are checked where they run)."""
+    owned = {}
+    for spec in installation.nodes.values():
+        try:
+            cls = registry.load(spec.adapter)
+            owned[spec.name] = cls.owned_robots(spec.config(cls))
+        except (AdapterError, ConfigError):
+            continue
+    return owned
 
 
 def run(adapters: list[Adapter], bus_config: BusConfig, stop: threading.Event,

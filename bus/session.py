@@ -8,8 +8,10 @@ True
 
 from __future__ import annotations
 
+import ipaddress
 import json
 import logging
+import re
 from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
 from typing import Any
@@ -17,12 +19,20 @@ from typing import Any
 import zenoh
 
 from .errors import ConfigError
+from .keys import NOT_IN_NAMES
 from .options import bad, from_mapping
 
 log = logging.getLogger(__name__)
 
 MODES = ("peer", "client", "router")
 TLS_KEYS = ("root_ca", "cert", "key", "mutual")
+ADDRESSED = ("tcp", "udp", "tls", "quic", "ws")  # <protocol>/<host>:<port>
+PROTOCOLS = (*ADDRESSED, "unixsock-stream", "unixpipe", "serial", "vsock")
+ZENOH_OPTIONS = "Zenoh's DEFAULT_CONFIG.json5 (github.com/eclipse-zenoh/zenoh)"
+_FIELDS = {"namespace": "namespace", "access_control": "access_control",
+           "connect/endpoints": "connect", "listen/endpoints": "listen"}  # Zenoh key → ours, for errors
+_HOST_NAME = re.compile(r"[A-Za-z0-9]([A-Za-z0-9_.-]*[A-Za-z0-9])?\Z")
+_LIBRARY_SOURCE = re.compile(r"\s+at /\S+\.rs:\d+\.?")
 
 
 @dataclass(frozen=True)
@@ -74,14 +84,25 @@ class BusConfig:
                 raise bad("hosts", f"[bus.hosts.{name}] must be a table")
             if "hosts" in override:
                 raise bad("hosts", f"[bus.hosts.{name}] cannot have hosts of its own")
+        if self.namespace and not all(c and not set(c) & set(NOT_IN_NAMES) for c in self.namespace.split("/")):
+            raise bad("namespace", f"'{self.namespace}' must be plain key chunks joined by '/' (no '*', '$', "
+                      "'?', '#', '@', spaces or empty chunks), e.g. \"museum\" or \"museum/hall1\"")
+        for key, endpoints in (("connect", self.connect), ("listen", self.listen)):
+            for endpoint in endpoints:
+                try:
+                    check_endpoint(endpoint, listen=key == "listen")
+                except ValueError as exc:
+                    raise bad(key, str(exc)) from None
+        self.to_zenoh()  # what only Zenoh knows (its option names and types), found now, not at open
 
-    def for_host(self, host: str) -> BusConfig:
-        """This config with the ``[bus.hosts.HOST]`` overrides applied (if any)."""
+    def for_host(self, host: str, where: str = "", lines: dict[str, int] | None = None) -> BusConfig:
+        """This config with the ``[bus.hosts.HOST]`` overrides applied (if any);
+        ``where`` (the file) and ``lines`` (of the override's keys) go into errors."""
         override = self.hosts.get(host)
         if not override:
             return self
         base = {f.name: getattr(self, f.name) for f in fields(self) if f.name != "hosts"}
-        return from_mapping(BusConfig, {**base, **override}, f"[bus.hosts.{host}]")
+        return from_mapping(BusConfig, {**base, **override}, f"{where} [bus.hosts.{host}]".lstrip(), lines)
 
     def relative_to(self, folder: Path) -> BusConfig:
         """File names (TLS files, users file) taken relative to ``folder``, the configuration's."""
@@ -138,13 +159,87 @@ class BusConfig:
         return {**acl, "rules": rules}
 
     def to_zenoh(self) -> zenoh.Config:
+        """The ``zenoh.Config``; ``ConfigError`` names the key of this config Zenoh refused."""
         config = zenoh.Config()
         for key, value in self.entries().items():
             try:
-                config.insert_json5(key, json.dumps(value))
-            except Exception as exc:  # zenoh raises ZError with the parser's text
-                raise ConfigError(f"bus option '{key}' = {json.dumps(value)} rejected by Zenoh: {exc}") from exc
+                _insert(config, key, value)
+            except ValueError as exc:
+                raise bad("options" if key in self.options else _FIELDS.get(key, key), str(exc)) from None
         return config
+
+
+def check_option(key: str, value: Any) -> None:
+    """``ValueError`` if Zenoh has no option ``key`` (``transport/link/tx/lease``) or
+    refuses ``value`` for it, saying in one line what and how to find the right one."""
+    _insert(zenoh.Config(), key, value)
+
+
+def _insert(config: zenoh.Config, key: str, value: Any) -> None:
+    text = json.dumps(value)
+    try:
+        config.insert_json5(key, text)
+    except Exception as exc:  # zenoh's ZError: a Rust debug string with source paths
+        reason = zenoh_reason(exc)
+        if reason == "unknown key":
+            raise ValueError(f"'{key}' is not a Zenoh option — check its spelling in {ZENOH_OPTIONS}") from None
+        shown = text if len(text) <= 60 else text[:57] + "..."
+        raise ValueError(f"Zenoh refuses {key} = {shown}: {reason} — see {ZENOH_OPTIONS}") from None
+
+
+def zenoh_reason(exc: BaseException) -> str:
+    """Zenoh's message without the Rust wrapping and source paths, for one line."""
+    text = str(exc)
+    found = re.search(r'msg: "((?:[^"\\]|\\.)*)"', text) or re.search(r'Str\("((?:[^"\\]|\\.)*)"\)', text)
+    if found:
+        text = found[1].replace('\\"', '"')
+    return " ".join(_LIBRARY_SOURCE.sub("", text).split()).rstrip(".")
+
+
+def check_endpoint(endpoint: str, listen: bool = False) -> str:
+    """``endpoint`` if it is one Zenoh can use (``tcp/192.168.1.10:7447``,
+    ``tcp/[::1]:7447``); else ``ValueError`` saying what is wrong and the fix.
+    A ``listen`` port may be 0 (any free port), a connect port may not."""
+    protocol, slash, address = endpoint.partition("/")
+    example = "e.g. tcp/192.168.1.10:7447"
+    if not slash or not protocol or not address:
+        raise ValueError(f"'{endpoint}' is not an endpoint — write <protocol>/<host>:<port>, {example}")
+    if protocol not in PROTOCOLS:
+        raise ValueError(f"'{endpoint}': unknown protocol '{protocol}' — one of {', '.join(PROTOCOLS)}")
+    if protocol not in ADDRESSED:
+        return endpoint
+    address = re.split(r"[?#]", address, maxsplit=1)[0]  # ?metadata and #config are Zenoh's own
+    host, colon, port = address.rpartition(":")
+    if not colon or not host:
+        raise ValueError(f"'{endpoint}': no port — write {protocol}/<host>:<port>, {example}")
+    if not port.isdigit():
+        raise ValueError(f"'{endpoint}': port '{port}' is not a number — write {protocol}/<host>:<port>, {example}")
+    if not (0 if listen else 1) <= int(port) <= 65535:
+        ports = "0 (any free port) to 65535" if listen else "1 to 65535 (0, any free port, only suits listen)"
+        raise ValueError(f"'{endpoint}': port {int(port)} is out of range — give one from {ports}")
+    problem = _host_problem(host)
+    if problem:
+        raise ValueError(f"'{endpoint}': {problem}")
+    return endpoint
+
+
+def _host_problem(host: str) -> str:
+    """What is wrong with the host part of an endpoint ("" if nothing)."""
+    if host.startswith("[") or ":" in host:
+        if not (host.startswith("[") and host.endswith("]")):
+            return f"an IPv6 address goes in brackets, e.g. tcp/[{host.strip('[]')}]:7447"
+        try:
+            ipaddress.IPv6Address(host[1:-1])
+        except ValueError:
+            return f"'{host[1:-1]}' is not an IPv6 address"
+        return ""
+    if re.fullmatch(r"[0-9.]+", host):
+        try:
+            ipaddress.IPv4Address(host)
+        except ValueError:
+            return f"'{host}' is not an IPv4 address"
+        return ""
+    return "" if _HOST_NAME.match(host) else f"'{host}' is not a host name or an IP address"
 
 
 def open_session(config: BusConfig, wait: bool = False) -> zenoh.Session:
@@ -164,7 +259,7 @@ def open_session(config: BusConfig, wait: bool = False) -> zenoh.Session:
         except Exception as exc:
             if not (wait and config.mode == "client" and "Unable to connect" in str(exc)):
                 raise ConfigError(f"cannot open the bus ({config.mode}, listen={list(config.listen)}, "
-                                  f"connect={list(config.connect)}): {str(exc).split(' at /')[0]}") from exc
+                                  f"connect={list(config.connect)}): {zenoh_reason(exc)}") from exc
             if not warned:
                 log.warning("waiting for a router at %s", ", ".join(config.connect))
                 warned = True
