@@ -181,26 +181,34 @@ class OscGateway(Adapter):
             log.debug("%s: packet %r failed", self.name, packet[:64], exc_info=True)
 
     def _packet(self, packet: bytes, peer: Peer) -> None:
-        for item in wire.elements(packet):
+        try:
+            found = wire.messages(packet)
+        except wire.WireError as exc:  # nothing in a malformed packet runs
+            self._problem(exc, peer)
+            return
+        for dgram in found:
             try:
-                if isinstance(item, wire.WireError):
-                    raise item
-                address, args = wire.parse(item, self.config.max_args)
+                address, args = wire.parse(dgram, self.config.max_args)
             except wire.WireError as exc:
                 self._problem(exc, peer)
                 continue
             self._command(address, args, peer)
 
     def _problem(self, error: wire.WireError, peer: Peer | None = None) -> None:
-        kind = error.kind
-        if kind == "bad_args":  # well formed but too long: answer it if it is a command
-            target = command_target(error.address)
-            if target and peer:
-                self._command_failed(*target, peer, CommandError("bad_request", f"{target[1]}: {error}"))
-                return
-            kind = "unknown_address"
-        self._count(kind)
-        self._warn(kind, f"ignored OSC {error.address or 'packet'}: {error}")
+        """Answer each command of a refused packet with ``bad_request``; count and warn otherwise."""
+        targets = [t for t in map(command_target, error.addresses) if t] if peer else []
+        if error.kind == "malformed":
+            self._count("malformed")
+            where = f"{error.address or 'packet'} from {peer.address[0]}" if peer else "TCP stream"
+            self._warn("malformed", f"refused OSC {where[:120]}: {error}")
+            for robot, verb in targets:
+                self._answer(robot, verb, peer, CommandError("bad_request", f"{verb}: malformed OSC: {error}"))
+        elif targets:  # well formed but too long: answer it
+            robot, verb = targets[0]
+            self._command_failed(robot, verb, peer, CommandError("bad_request", f"{verb}: {error}"))
+        else:
+            self._count("unknown_address")
+            self._warn("unknown_address", f"ignored OSC {error.address[:80] or 'packet'}: {error}")
 
     def _command(self, address: str, args: list[Any], peer: Peer) -> None:
         target = command_target(address)

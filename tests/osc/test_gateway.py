@@ -164,13 +164,18 @@ def test_errors_are_answered_with_code_and_one_line(gate, client):
     assert gate.stats["bad_args"] == 8 and gate.stats["replies_error"] == len(ERRORS)
 
 
-def test_bundles_are_unpacked_and_a_bad_element_spares_the_others(gate, client):
+def test_bundles_are_unpacked_and_a_bad_element_refuses_the_whole_bundle(gate, client):
+    client.send(bundle(build("/pepper/cmd/say", "bundled"), bundle(build("/pepper/cmd/behavior/list"))))
+    replies = sorted([client.reply(), client.reply()])
+    assert [(a, p[0]) for a, p in replies] == [("/pepper/reply/behavior/list", 1), ("/pepper/reply/say", 1)]
     bad_tag = b"/pepper/cmd/say\0,c\0\0\0\0\0A"
     client.send(bundle(build("/pepper/cmd/say", "bundled"), bad_tag,
                        bundle(build("/pepper/cmd/behavior/list"), b"garbage!")))
-    replies = sorted([client.reply()[0], client.reply()[0]])
-    assert replies == ["/pepper/reply/behavior/list", "/pepper/reply/say"]
-    wait_for(lambda: gate.stats["malformed"] == 2, what="two bad elements counted")
+    replies = sorted([client.reply(), client.reply(), client.reply()])  # one per readable command address
+    assert [(a, p[:2]) for a, p in replies] == [("/pepper/reply/behavior/list", [0, "bad_request"])] + \
+        [("/pepper/reply/say", [0, "bad_request"])] * 2
+    assert all("element 2: type tag 'c' (argument 1) is not supported" in p[2] for _, p in replies)
+    wait_for(lambda: gate.stats["malformed"] == 1, what="the bad bundle counted")
     client.send(b"/not/a/command\0\0,\0\0\0")
     wait_for(lambda: gate.stats["unknown_address"] == 1, what="unknown address counted")
     assert gate.stats["commands"] == 2 and client.nothing_waiting()

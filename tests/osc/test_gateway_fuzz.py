@@ -117,14 +117,18 @@ OSC_VALUES = st.one_of(st.integers(-2**31, 2**31 - 1), st.floats(width=32), st.t
 @settings(max_examples=400, deadline=None)
 @given(st.binary(max_size=300))
 def test_any_bytes_are_messages_or_wire_errors(data):
-    for item in wire.elements(data):
-        if not isinstance(item, wire.WireError):
-            try:
-                address, args = wire.parse(item)
-            except wire.WireError as exc:
-                assert exc.kind in ("malformed", "bad_args")
-            else:
-                assert isinstance(address, str) and isinstance(args, list)
+    try:
+        found = wire.messages(data)
+    except wire.WireError as exc:
+        assert exc.kind == "malformed" and "\n" not in str(exc)
+        return
+    for item in found:
+        try:
+            address, args = wire.parse(item)
+        except wire.WireError as exc:
+            assert exc.kind == "bad_args"
+        else:
+            assert isinstance(address, str) and isinstance(args, list)
 
 
 @settings(max_examples=200, deadline=None)
