@@ -319,7 +319,9 @@ def cmd_nodes(args: argparse.Namespace, env: Environment) -> Exit:
             about = described.get((host, node), {})
             owns = f"  owns {', '.join(about['robots'])}" if about.get("robots") else ""
             since = f"  up {_duration(now - about['since'])}" if about.get("since") else ""
-            env.say(f"  node  {node:<16} on {host:<12} {about.get('adapter', '?'):<12}{since}{owns}")
+            state = about.get("state", "running")
+            failed = f"  {state.upper()}: {about.get('failure', '')}" if state != "running" else ""
+            env.say(f"  node  {node:<16} on {host:<12} {about.get('adapter', '?'):<12}{since}{owns}{failed}")
         env.say(f"{len(robots)} robot(s)")
         for key in robots:
             name = key[len(keys.ROBOTS) + 1:]

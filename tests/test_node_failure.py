@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import io
 import threading
 from dataclasses import dataclass
 
@@ -10,6 +11,7 @@ import msgpack
 from sonibus_testplugin import JsonLinesConfig, JsonLinesSink
 
 from sonibus.bus import Adapter, decode, keys
+from sonibus.bus.cli import Environment, main
 
 from .conftest import SONIBUS, wait_for
 
@@ -82,3 +84,12 @@ def test_a_worker_that_may_not_restart_fails_the_node(net):
     flaky = net.start(Flaky(Flaky.Config(restart=False), name="flaky"))
     wait_for(lambda: flaky.state == "failed", what="the node to fail")
     assert flaky.failure == "worker 'work' failed: RuntimeError: first run fails" and flaky.runs == 1
+
+
+def test_sonibus_nodes_shows_a_failed_node_and_why(net):
+    flaky = net.start(Flaky(Flaky.Config(restart=False), name="flaky"))
+    wait_for(lambda: flaky.state == "failed", what="the node to fail")
+    out = io.StringIO()
+    assert main(["nodes", *net.cli_args(), "--timeout", "2"], Environment(stdout=out, stderr=io.StringIO())) == 0
+    (line,) = [line for line in out.getvalue().splitlines() if "flaky" in line]
+    assert line.endswith("FAILED: worker 'work' failed: RuntimeError: first run fails"), line
