@@ -1,0 +1,128 @@
+"""One fuzzing campaign against a ``Show``: every family in turn (Hypothesis), the
+huge frames of issue 13, bursts at high rate, then every check of ``checks``.
+Shared by ``tests/fuzz/test_bus_fuzz.py`` (about a minute) and ``bench/soak.py``
+(minutes)."""
+
+from __future__ import annotations
+
+import json
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from hypothesis import HealthCheck, Phase, given, settings
+from hypothesis import strategies as st
+
+from . import checks
+from .families import FAMILIES, ROBOT, VALID, Input, bursts, huge_frame, pack, signature
+from .fuzzer import Fuzzer
+from .show import Show
+
+# Commands that undo what valid fuzz commands may have left (a posture, a joint held),
+# sent as valid input before the flow is measured.
+RESET = (("stiffness", {"names": ["Body"], "value": 1.0}), ("awareness", {"enabled": True}))
+
+
+@dataclass(frozen=True)
+class Plan:
+    examples: dict[str, int]      # family → Hypothesis examples
+    huge_frames: int = 10         # frames of 50,000 joints
+    bursts: int = 8               # bursts of 500-2000 inputs at up to 5000/s
+    derandomize: bool = True      # the same inputs every run (CI)
+    rounds: int = 1               # the whole sequence of families, again (soak)
+
+
+CI = Plan(examples={"frame": 300, "joint": 200, "derived": 150, "event": 150, "command": 150, "info": 60,
+                    "osc": 300})
+
+
+def _run(fuzzer: Fuzzer, strategy: st.SearchStrategy[Any], examples: int, derandomize: bool,
+         action: Any) -> None:
+    @settings(max_examples=examples, deadline=None, derandomize=derandomize, database=None,
+              phases=[Phase.explicit, Phase.generate], suppress_health_check=list(HealthCheck))
+    @given(strategy)
+    def each(value: Any) -> None:
+        action(value)
+
+    each()
+
+
+def campaign(show: Show, plan: Plan, out: Path) -> checks.Report:
+    """Fuzz ``show`` by ``plan``; every check; counts and figures written to ``out`` (JSON)."""
+    report = checks.Report()
+    fuzzer = Fuzzer(show)
+    started = time.monotonic()
+    try:
+        checks.alive(show, report, "start")
+        before = checks.baseline(show)
+        rss_before = show.rss.now() if show.rss else 0
+        fuzz_started = time.monotonic()
+        burst_rates: list[float] = []
+        for _ in range(plan.rounds):
+            for family, strategy in FAMILIES.items():
+                _run(fuzzer, strategy(), plan.examples[family], plan.derandomize, fuzzer.send)
+                checks.alive(show, report, f"after {family}")
+            for _ in range(plan.huge_frames):
+                fuzzer.send(huge_frame())
+            checks.alive(show, report, "after huge frames")
+            _run(fuzzer, bursts(), plan.bursts, plan.derandomize, lambda b: burst_rates.append(fuzzer.burst(*b)))
+            checks.alive(show, report, "after bursts")
+        for verb, args in RESET:
+            fuzzer.send(Input("command", VALID, "query", f"{ROBOT}/cmd/{verb}", pack(args), signature(verb, args),
+                              note="reset"))
+        report.figures["burst_rate_per_s"] = round(min(burst_rates, default=0.0))
+        fuzzer.settle()
+        ended = time.monotonic()
+        report.figures["fuzz_s"] = round(ended - fuzz_started, 1)
+        checks.alive(show, report, "end")
+        checks.flow(show, report, before, ended)
+        checks.commands(fuzzer.oracle, report)
+        checks.memory(show, report, rss_before, fuzz_started)
+    finally:
+        fuzzer.close()
+    checks.stopped(show, report)
+    checks.recording(show, report)
+    report.figures["total_s"] = round(time.monotonic() - started, 1)
+    write(report, fuzzer, out)
+    return report
+
+
+def counts(fuzzer: Fuzzer, report: checks.Report) -> dict[str, Any]:
+    """Per family: inputs tried by label, what came back, and what the nodes counted."""
+    node_counters = report.figures.get("node_counters", {})
+    refused = {node: {k: v for k, v in c.items() if k in ("bad", "malformed", "bad_args", "unknown_address",
+                                                          "stale", "late", "queue_dropped", "busy")}
+               for node, c in node_counters.items()}
+    return {
+        "tried": {family: dict(labels) | {"total": sum(labels.values())} for family, labels in fuzzer.tried.items()},
+        "outcomes": {family: dict(c) for family, c in fuzzer.outcomes.items()},
+        "osc_replies": dict(fuzzer.osc_replies),
+        "ghost_info_queries": sum(fuzzer.ghost_queries.values()),
+        "valid_commands_sent": dict(fuzzer.oracle.sent_valid),
+        "commands_executed": dict(fuzzer.oracle.executed),
+        "commands_from_invalid_input": len(fuzzer.oracle.unexpected),
+        "counted_bad_by_node": refused,
+        "recording_stats": (report.figures.get("recording") or {}).get("stats"),
+    }
+
+
+def write(report: checks.Report, fuzzer: Fuzzer, out: Path) -> None:
+    summary = {"ok": not report.problems, "problems": report.problems, "counts": counts(fuzzer, report),
+               "figures": report.figures,
+               "unexpected_commands": [json.loads(json.dumps(e, default=repr)) for e in fuzzer.oracle.unexpected],
+               "first_inputs": {k: v.describe() for k, v in sorted(fuzzer.first.items())}}
+    out.write_text(json.dumps(summary, indent=2, default=repr) + "\n")
+    tried = {family: t["total"] for family, t in summary["counts"]["tried"].items()}
+    per_family = ", ".join(f"{family} {n}" for family, n in tried.items())
+    print(f"\nbus fuzz: {sum(tried.values())} inputs ({per_family}); "
+          f"bad counted {_bad_total(summary['counts']['counted_bad_by_node'])}; "
+          f"commands executed {sum(fuzzer.oracle.executed.values())}, from invalid input "
+          f"{len(fuzzer.oracle.unexpected)}; RSS +{report.figures.get('rss_mb', {}).get('growth', '?')} MB; "
+          f"{len(report.problems)} problem(s); {out}")
+
+
+def _bad_total(by_node: dict[str, dict[str, int]]) -> str:
+    parts = [f"{node} {sum(v for k, v in c.items() if k in ('bad', 'malformed', 'bad_args'))}"
+             for node, c in sorted(by_node.items())]
+    return ", ".join(parts) or "nothing (no counters in the log)"
