@@ -1,0 +1,54 @@
+"""Hostile payloads on a live bus: every sink refuses them at the gate, counts them,
+and goes on — nothing stalls, nothing is dropped, nothing reaches a file.
+(Issue 13, items 4 and 5; the per-section rules are in test_messages.py.)"""
+
+from __future__ import annotations
+
+import time
+
+import msgpack
+
+from sonibus.adapters.osc import OscSink, OscSinkConfig
+from sonibus.adapters.recorder.reading import Recording
+from sonibus.adapters.recorder.recorder import Recorder, RecorderConfig
+from sonibus.bus import keys
+
+from .conftest import wait_for
+from .osc.pd import Datagrams
+
+
+def heard(receiver: Datagrams, address: bytes) -> int:
+    return sum(1 for d in receiver.data() if d.startswith(address))
+
+
+def test_huge_frames_and_future_times_are_refused_and_the_stream_goes_on(net, tmp_path):
+    receiver = Datagrams()
+    try:
+        net.sim("pepper", rate_hz=50)
+        sink = net.start(OscSink(OscSinkConfig(targets=(receiver.target,)), name="sound"))
+        recorder = net.start(Recorder(RecorderConfig(path=str(tmp_path / "show.mcap")), name="logger"))
+        script = net.bus("script").session.declare_publisher(keys.frame("pepper"))
+        wait_for(lambda: heard(receiver, b"/pepper/joints/HeadYaw") >= 5, what="the simulator's joints")
+        wait_for(lambda: recorder.stats.get("written", 0) > 0, what="the recorder writing")
+
+        made_up = [f"Made{i}" for i in range(50_000)]
+        huge = msgpack.packb({"t": time.time(), "seq": 1, "names": made_up, "v": [0.5] * len(made_up)})
+        future = msgpack.packb({"t": time.time() + 3600, "seq": 2, "names": ["HeadYaw"], "v": [0.1]})
+        for _ in range(20):
+            script.put(huge)
+            script.put(future)
+
+        wait_for(lambda: sink.stats["bad"] >= 40 and recorder.stats["bad"] >= 40, what="40 refusals in each",
+                 explain=lambda: f"sink {sink.stats}, recorder {recorder.stats}")
+        before = heard(receiver, b"/pepper/joints/HeadYaw")
+        wait_for(lambda: heard(receiver, b"/pepper/joints/HeadYaw") >= before + 10, what="joints flowing on")
+        assert sink.stats["bad"] == 40 and recorder.stats["bad"] == 40
+        assert sink.dropped == 0 and recorder.status()["dropped"] == 0
+        assert not any(d.startswith(b"/pepper/joints/Made") for d in receiver.data())
+        assert sink.state == recorder.state == "running"
+    finally:
+        receiver.close()
+    recorder.stop()
+    with Recording(str(tmp_path / "show.mcap")) as recording:
+        assert not [k for k in recording.counts if "Made" in k]
+        assert all(m.data["t"] < time.time() for m in recording.messages() if "t" in m.data)
