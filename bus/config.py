@@ -85,12 +85,18 @@ class Installation:
                 first = owners.setdefault((namespace, robot), spec)
                 if first is not spec:
                     raise ConfigError(
-                        f"{self.path}: robot '{robot}' has two owners, {_table(first)} and {_table(spec)} — "
-                        f"a robot has one owner on the bus: remove one node or give it another robot name")
+                        f"{self.path}: robot '{robot}' has two owners, {_naming(first, robot)} and "
+                        f"{_naming(spec, robot)} — a robot has one owner on the bus: remove one node "
+                        f"or give it another robot name")
 
 
-def _table(spec: NodeSpec) -> str:
-    return f"[nodes.{spec.name}] line {spec.line}" if spec.line else f"[nodes.{spec.name}]"
+def _naming(spec: NodeSpec, robot: str) -> str:
+    """A node's table and the line of the option that names ``robot`` (else of the table)."""
+    names = (key for key, value in spec.options.items()
+             if robot == value or (isinstance(value, dict) and robot in value.values()))
+    key = next(names, "")
+    line = spec.lines.get(key) or spec.line
+    return f"[nodes.{spec.name}]" + (f" line {line}" if line else "") + (f" (key '{key}')" if key else "")
 
 
 def load(path: str | Path) -> Installation:
@@ -128,21 +134,23 @@ def parse(text: str, path: str = "<string>") -> Installation:
     nodes = {}
     for name, table in nodes_table.items():
         where = f"{path} [nodes.{name}]"
+        line = _line(text, "nodes", name)
+        at_table = f"{where} line {line}" if line else where
         try:
             check_name("node", name)
         except ValueError as exc:
-            raise ConfigError(f"{where}: {exc}") from None
+            raise ConfigError(f"{at_table}: {exc}") from None
         if not isinstance(table, dict):
-            raise ConfigError(f"{where}: must be a table")
+            raise ConfigError(f"{at_table}: must be a table")
         options = dict(table)
         adapter = options.pop("adapter", None)
         host = options.pop("host", "")
         lines = _lines(text, f"nodes.{name}", table)
         if not isinstance(adapter, str):
-            raise ConfigError(f"{where}: missing key 'adapter' (a string: see `sonibus adapters`)")
+            raise ConfigError(f"{at_table}: missing key 'adapter' (a string: see `sonibus adapters`)")
         if not isinstance(host, str):
             raise ConfigError(f"{located(where, lines, 'host')}: key 'host': {host!r} is not a string")
-        nodes[name] = NodeSpec(name, adapter, options, where, lines, host, _line(text, "nodes", name))
+        nodes[name] = NodeSpec(name, adapter, options, where, lines, host, line)
     return Installation(bus, nodes, path)
 
 

@@ -211,7 +211,8 @@ def check_endpoint(endpoint: str, listen: bool = False) -> str:
     address = re.split(r"[?#]", address, maxsplit=1)[0]  # ?metadata and #config are Zenoh's own
     host, colon, port = address.rpartition(":")
     if not colon or not host:
-        raise ValueError(f"'{endpoint}': no port — write {protocol}/<host>:<port>, {example}")
+        raise ValueError(f"'{endpoint}': no {'port' if host or not colon else 'host'} — "
+                         f"write {protocol}/<host>:<port>, {example}")
     if not port.isdigit():
         raise ValueError(f"'{endpoint}': port '{port}' is not a number — write {protocol}/<host>:<port>, {example}")
     if not (0 if listen else 1) <= int(port) <= 65535:

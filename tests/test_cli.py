@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import io
 import json
+import os
+import re
 import signal
 import socket
 import subprocess
@@ -12,13 +14,15 @@ from pathlib import Path
 
 import pytest
 
+from sonibus.adapters.recorder.writer import RecordingWriter
 from sonibus.bus import ConfigError, keys
-from sonibus.bus.cli import Environment, command_args, main
+from sonibus.bus.cli import Environment, Exit, command_args, main
 
 from .conftest import SONIBUS, free_port, run_cli, wait_for
 
 CASES = Path(__file__).parent / "cases" / "config"
 STOP_WITHIN_S = 3.0
+LIBRARY_SOURCE = re.compile(r"\.rs:\d+|/\.cargo/|site-packages|Traceback")
 
 
 def one_error_line(err: str) -> str:
@@ -185,12 +189,64 @@ def test_run_missing_file(tmp_path):
     assert one_error_line(result.stderr) == "sonibus: error: missing.toml: no such file"
 
 
-@pytest.mark.parametrize("case", ["invalid-unknown-key", "invalid-syntax", "invalid-unknown-adapter"])
+@pytest.mark.parametrize("case", ["invalid-unknown-key", "invalid-syntax", "invalid-unknown-adapter",
+                                  "invalid-bus-connect-port-zero", "invalid-bus-listen-port",
+                                  "invalid-bus-options-unknown", "invalid-bus-options-type"])
 def test_run_invalid_file_is_one_error_line(case):
+    """At once (a client connecting to port 0 used to wait for ever), and without
+    Zenoh's source paths (a typo in [bus] options used to print one)."""
     path = CASES / f"{case}.toml"
     result = run_cli("run", str(path))
-    assert path.name in one_error_line(result.stderr)
+    line = one_error_line(result.stderr)
+    assert path.name in line, line
+    assert "[bus] line" in line or "-bus-" not in case, line
+    assert not LIBRARY_SOURCE.search(line), line
     assert result.returncode == 2, f"a bad installation file is a usage error: {result.stderr}"
+
+
+def test_run_two_owners_of_one_robot_is_refused_before_anything_starts(tmp_path):
+    """Not at run time, after the first owner started: when the file is loaded, naming both."""
+    show = tmp_path / "show.toml"
+    show.write_text('[nodes.robot]\nadapter = "sim"\n\n[nodes.view]\nadapter = "console"\n\n'
+                    '[nodes.spare]\nadapter = "sim"\nrobot = "pepper"\n')
+    env = environment()
+    status = main(["run", str(show), "--no-multicast", "--listen", f"tcp/127.0.0.1:{free_port()}"], env)
+    assert status == Exit.USAGE, env.stderr.getvalue()
+    line = one_error_line(env.stderr.getvalue())
+    assert "robot 'pepper' has two owners, [nodes.robot] line 1 and [nodes.spare] line 9 (key 'robot')" in line
+    assert env.stdout.getvalue() == "", "nothing may have started"
+
+
+@pytest.mark.parametrize(("flags", "expected"), [
+    (["--connect", "tcp/127.0.0.1:0"], "--connect 'tcp/127.0.0.1:0': port 0 is out of range — give one from 1"),
+    (["--listen", "tcp/127.0.0.1:70000"], "--listen 'tcp/127.0.0.1:70000': port 70000 is out of range"),
+    (["--connect", "tcp/::1:7447"], "an IPv6 address goes in brackets, e.g. tcp/[::1]:7447"),
+    (["--connect", "127.0.0.1:7447"], "--connect '127.0.0.1:7447' is not an endpoint — write <protocol>/<host>:<port>"),
+    (["--listen", "tpc/127.0.0.1:7447"], "--listen 'tpc/127.0.0.1:7447': unknown protocol 'tpc' — one of tcp, udp"),
+    (["--zenoh", "transport/link/tx/leese=2000"],
+     "--zenoh 'transport/link/tx/leese=2000': 'transport/link/tx/leese' is not a Zenoh option"),
+    (["--zenoh", "transport/link/tx/lease=soon"],
+     "--zenoh 'transport/link/tx/lease=soon': Zenoh refuses transport/link/tx/lease = \"soon\": error parsing number"),
+    (["--zenoh", "lease"], "--zenoh 'lease' is not KEY=JSON"),
+    (["--namespace", "museum/*"], "--namespace: 'museum/*' must be plain key chunks"),
+])
+def test_a_bad_bus_flag_is_one_line_naming_the_flag_and_nothing_opens(flags, expected):
+    env = environment()
+    assert main(["nodes", "--no-multicast", "--timeout", "0.2", *flags], env) == Exit.USAGE
+    line = one_error_line(env.stderr.getvalue())
+    assert expected in line
+    assert not LIBRARY_SOURCE.search(line), line
+    assert env.stdout.getvalue() == "", "the command ran: the flag was not checked before the bus opened"
+
+
+def test_good_endpoints_and_zenoh_options_pass(net):
+    """What the checks must let through: host names, IPv6 in brackets, Zenoh's #config,
+    a listen port 0, bare words and JSON for --zenoh."""
+    env = environment()
+    flags = ["--listen", "tcp/[::1]:0", "--listen", "tcp/localhost:0#iface=lo", "--zenoh", "mode=peer",
+             "--zenoh", "transport/link/tx/lease=2000", *net.cli_args()]
+    assert main(["nodes", "--timeout", "0.2", *flags], env) == Exit.OK, env.stderr.getvalue()
+    assert "node(s)" in env.stdout.getvalue()
 
 
 def test_run_only_unknown_node(tmp_path):
@@ -372,3 +428,45 @@ def test_command_args_bad_number(verb, words, name):
 
 def test_command_args_unknown_verb_is_left_to_the_robot():
     assert command_args("dance", ["wildly"]) == {}
+
+
+# -- a closed output ends a command quietly --------------------------------------------
+
+
+def a_recording(path: Path) -> Path:
+    with RecordingWriter(str(path)) as out:
+        for seq in range(3):
+            t = 1_700_000_000.0 + seq / 50
+            out.write("pepper/joints/HeadYaw", int(t * 1e9), {"t": t, "seq": seq, "v": 0.1 * seq})
+    return path
+
+
+def closed_pipe() -> int:
+    """The write end of a real pipe whose reader is gone (as after ``| head -1``)."""
+    read_end, write_end = os.pipe()
+    os.close(read_end)
+    return write_end
+
+
+def test_info_into_a_closed_pipe_ends_quietly_with_141(tmp_path):
+    """``sonibus info F | head -1``: no message, no traceback, no "Exception ignored" at
+    exit, status 141 like a Unix tool ended by SIGPIPE."""
+    recording = a_recording(tmp_path / "take.mcap")
+    assert run_cli("info", str(recording)).returncode == 0  # the file is fine
+    write_end = closed_pipe()
+    try:
+        buffered = {k: v for k, v in os.environ.items() if k != "PYTHONUNBUFFERED"}  # as in a user's shell
+        result = subprocess.run([SONIBUS, "info", str(recording)], stdout=write_end, stderr=subprocess.PIPE,
+                                text=True, timeout=20, env=buffered)
+    finally:
+        os.close(write_end)
+    assert (result.returncode, result.stderr) == (Exit.OUTPUT_CLOSED, "")
+
+
+def test_a_closed_stdout_in_process_is_141_without_an_error():
+    with os.fdopen(closed_pipe(), "w") as stdout:
+        env = Environment(stdout=stdout, stderr=io.StringIO())
+        assert main(["adapters"], env) == Exit.OUTPUT_CLOSED
+        assert "error" not in env.stderr.getvalue()
+        with pytest.raises(BrokenPipeError):  # what is left in its buffer is the caller's (console_main's) to drop
+            stdout.close()

@@ -166,3 +166,72 @@ def test_errors_come_before_anything_is_built():
     with pytest.raises(ConfigError):
         build(parse(text, "show.toml"))
     assert [a.name for a in build(parse(text, "show.toml"), ["view"])] == ["view"]
+
+
+@pytest.mark.parametrize("selection", [{"only": ["robot"]}, {"host": "spare-pc"}], ids=["only", "host"])
+def test_two_owners_are_found_among_all_nodes_not_only_the_selected(selection):
+    """Two machines each running one owner of 'pepper' would collide on the bus."""
+    path = CASES / "invalid-two-owners.toml"
+    with pytest.raises(ConfigError, match=r"robot 'pepper' has two owners, \[nodes.robot\].*\[nodes.spare\]"):
+        build(load_installation(path), **selection)
+
+
+def test_owner_check_skips_nodes_that_cannot_be_built_elsewhere():
+    """A node for another machine whose adapter is not installed here, or whose options are
+    wrong, is that machine's error: this one still runs its own nodes."""
+    text = ('[nodes.robot]\nadapter = "sim"\n\n[nodes.elsewhere]\nadapter = "not-installed-here"\n\n'
+            '[nodes.other]\nadapter = "sim"\nrate_hz = -5\n')
+    assert [a.name for a in build(parse(text, "show.toml"), ["robot"])] == ["robot"]
+
+
+def test_owned_robots_is_a_hook_of_the_adapter_class():
+    """The core knows no adapter by name: each class says which robots a config owns."""
+    from sonibus.adapters.recorder.replay import Replay, ReplayConfig
+    from sonibus.adapters.sim import SimConfig
+
+    assert Adapter.owned_robots(None) == ()
+    assert ConsoleView.owned_robots(ConsoleView.Config()) == ()
+    assert SimRobot.owned_robots(SimConfig(robot="nao2")) == ("nao2",)
+    assert Replay.owned_robots(ReplayConfig("take.mcap", rename={"pepper": "pepper_replay"})) == ("pepper_replay",)
+    assert Replay.owned_robots(ReplayConfig("take.mcap")) == ()  # its robots are in the file, known at start
+
+
+def test_a_bus_table_error_names_the_line_of_a_sub_table():
+    text = '[bus]\nmulticast = false\n\n[bus.options]\n"scouting/multicast/enabled" = "no"\n\n' \
+           '[nodes.view]\nadapter = "console"\n'
+    with pytest.raises(ConfigError) as caught:
+        parse(text, "show.toml")
+    message = str(caught.value)
+    assert message.startswith("show.toml [bus] line 4: key 'options': Zenoh refuses scouting/multicast/enabled")
+    assert "expected a boolean" in message and ".rs:" not in message
+
+
+@pytest.mark.parametrize(("role", "endpoint"), [
+    ("connect", "tcp/192.168.1.10:7447"), ("connect", "tcp/robot.local:7447"), ("connect", "tcp/[::1]:7447"),
+    ("connect", "tcp/[fe80::1%eth0]:7447"), ("connect", "tls/10.0.0.5:7447"), ("connect", "udp/224.0.0.224:7447"),
+    ("connect", "tcp/10.0.0.5:7447#iface=eth0"), ("connect", "quic/10.0.0.5:65535"), ("listen", "tcp/0.0.0.0:0"),
+    ("listen", "tcp/[::]:7447"), ("listen", "ws/0.0.0.0:8080"), ("listen", "unixsock-stream//tmp/sonibus.sock"),
+])
+def test_endpoints_zenoh_takes_are_accepted(role, endpoint):
+    BusConfig(**{role: (endpoint,)})
+
+
+@pytest.mark.parametrize(("role", "endpoint", "why"), [
+    ("connect", "tcp/127.0.0.1:0", "port 0 is out of range — give one from 1 to 65535"),
+    ("connect", "tcp/127.0.0.1:65536", "port 65536 is out of range"),
+    ("listen", "tcp/0.0.0.0:70000", "port 70000 is out of range — give one from 0 (any free port) to 65535"),
+    ("listen", "tcp/0.0.0.0:http", "port 'http' is not a number"),
+    ("connect", "tcp/10.0.0.5", "no port"),
+    ("connect", "tcp/:7447", "no host"),
+    ("connect", "tcp/::1:7447", "an IPv6 address goes in brackets, e.g. tcp/[::1]:7447"),
+    ("connect", "tcp/[::g]:7447", "'::g' is not an IPv6 address"),
+    ("connect", "tcp/300.1.1.1:7447", "'300.1.1.1' is not an IPv4 address"),
+    ("connect", "tcp/my robot:7447", "'my robot' is not a host name or an IP address"),
+    ("connect", "10.0.0.5:7447", "is not an endpoint — write <protocol>/<host>:<port>"),
+    ("listen", "tpc/0.0.0.0:7447", "unknown protocol 'tpc'"),
+])
+def test_impossible_endpoints_are_refused_naming_the_key(role, endpoint, why):
+    with pytest.raises(ConfigError) as caught:
+        BusConfig(**{role: (endpoint,)})
+    assert str(caught.value).startswith(f"key '{role}': '{endpoint}'")
+    assert why in str(caught.value)
