@@ -199,7 +199,14 @@ def zenoh_reason(exc: BaseException) -> str:
 def check_endpoint(endpoint: str, listen: bool = False) -> str:
     """``endpoint`` if it is one Zenoh can use (``tcp/192.168.1.10:7447``,
     ``tcp/[::1]:7447``); else ``ValueError`` saying what is wrong and the fix.
-    A ``listen`` port may be 0 (any free port), a connect port may not."""
+    A ``listen`` port may be 0 (any free port), a connect port may not.
+
+    >>> check_endpoint("tcp/[::1]:7447")
+    'tcp/[::1]:7447'
+    >>> check_endpoint("tcp/127.0.0.1:0")
+    Traceback (most recent call last):
+    ValueError: 'tcp/127.0.0.1:0': port 0 is out of range — give one from 1 to 65535 (0, any free port, ...)
+    """
     protocol, slash, address = endpoint.partition("/")
     example = "e.g. tcp/192.168.1.10:7447"
     if not slash or not protocol or not address:
