@@ -31,6 +31,11 @@ PROTOCOLS = (*ADDRESSED, "unixsock-stream", "unixpipe", "serial", "vsock")
 ZENOH_OPTIONS = "Zenoh's DEFAULT_CONFIG.json5 (github.com/eclipse-zenoh/zenoh)"
 _FIELDS = {"namespace": "namespace", "access_control": "access_control",
            "connect/endpoints": "connect", "listen/endpoints": "listen"}  # Zenoh key → ours, for errors
+_FIXES = {  # what Zenoh says when a session does not open → what to do
+    "Address already in use": "another process listens there: give this one another listen port",
+    "Unable to connect": "no router answers there: start `sonibus router` on that machine, or check connect",
+    "Cannot assign requested address": "no interface of this machine has that address: listen on 0.0.0.0",
+}
 _HOST_NAME = re.compile(r"[A-Za-z0-9]([A-Za-z0-9_.-]*[A-Za-z0-9])?\Z")
 _LIBRARY_SOURCE = re.compile(r"\s+at /\S+\.rs:\d+\.?")
 
@@ -266,8 +271,10 @@ def open_session(config: BusConfig, wait: bool = False) -> zenoh.Session:
             raise
         except Exception as exc:
             if not (wait and config.mode == "client" and "Unable to connect" in str(exc)):
+                reason = zenoh_reason(exc)
+                fix = next((f" — {fix}" for known, fix in _FIXES.items() if known in reason), "")
                 raise ConfigError(f"cannot open the bus ({config.mode}, listen={list(config.listen)}, "
-                                  f"connect={list(config.connect)}): {zenoh_reason(exc)}") from exc
+                                  f"connect={list(config.connect)}): {reason}{fix}") from exc
             if not warned:
                 log.warning("waiting for a router at %s", ", ".join(config.connect))
                 warned = True

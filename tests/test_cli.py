@@ -239,6 +239,15 @@ def test_a_bad_bus_flag_is_one_line_naming_the_flag_and_nothing_opens(flags, exp
     assert env.stdout.getvalue() == "", "the command ran: the flag was not checked before the bus opened"
 
 
+def test_a_port_in_use_is_one_line_with_the_fix(net):
+    net.cli_args()  # a session of the test network listens on net.endpoint
+    env = environment()
+    assert main(["nodes", "--no-multicast", "--listen", net.endpoint], env) == Exit.USAGE
+    line = one_error_line(env.stderr.getvalue())
+    assert "Address already in use" in line and "give this one another listen port" in line
+    assert not LIBRARY_SOURCE.search(line), line
+
+
 def test_good_endpoints_and_zenoh_options_pass(net):
     """What the checks must let through: host names, IPv6 in brackets, Zenoh's #config,
     a listen port 0, bare words and JSON for --zenoh."""
