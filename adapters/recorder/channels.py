@@ -30,8 +30,9 @@ def schema_for(key: str) -> str | None:
 
 
 def to_json(message: Any) -> bytes:
-    """A message as compact JSON bytes (what an MCAP ``json`` channel holds)."""
-    return json.dumps(message, separators=(",", ":"), ensure_ascii=False).encode()
+    """A message as compact, strict JSON bytes (what an MCAP ``json`` channel holds):
+    ``ValueError`` for NaN or infinity, ``TypeError`` for what JSON has no type for."""
+    return json.dumps(message, separators=(",", ":"), ensure_ascii=False, allow_nan=False).encode()
 
 
 def from_json(data: bytes) -> Any:

@@ -11,11 +11,16 @@ file is the same as if each joint key had been recorded; ``per_joint_keys =
 true`` records joint keys as published instead (publishers that put no frames).
 
 Messages wait in the recorder's own bounded queue; if the disk cannot keep up
-the oldest are dropped and counted (``stats["dropped"]``), never silently.
+the oldest are dropped and counted (``stats["dropped"]``), never silently. A
+message the gate or the writer refuses is counted in ``bad`` and skipped; a
+writer that fails (disk full) fails the node (``Adapter.fail``), and the file
+is closed as far as it got. A ``path`` that cannot be written is a
+``ConfigError`` when the node is configured or, at the latest, started.
 """
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import os
 import time
@@ -30,7 +35,7 @@ from sonibus.bus.options import bad
 from sonibus.bus.queue import SampleQueue
 from sonibus.bus.streams import Incoming, Streams
 
-from .writer import RecordingWriter
+from .writer import BadRecord, RecordingWriter, WriteError, unwritable
 
 log = logging.getLogger(__name__)
 
@@ -55,6 +60,9 @@ class RecorderConfig:
             raise bad("queue", f"{self.queue} must be at least 1")
         if not self.flush_s > 0:
             raise bad("flush_s", f"{self.flush_s} must be more than 0")
+        problem = unwritable(self.resolved_path())
+        if problem:
+            raise bad("path", f"{problem} — choose a folder you can write to")
 
     def resolved_path(self, now: float | None = None) -> str:
         return self.path.replace("{time}", time.strftime("%Y%m%d-%H%M%S", time.localtime(now)))
@@ -70,15 +78,10 @@ class Recorder(Adapter):
         self.path = cfg.resolved_path()
         if os.path.exists(self.path) and not cfg.overwrite:
             raise ConfigError(f"{self.path} exists — choose another name, or overwrite it (--force, overwrite = true)")
-        directory = os.path.dirname(self.path)
-        if directory:
-            os.makedirs(directory, exist_ok=True)
         self.stats = dict.fromkeys(("received", "written", "bad"), 0)
         self._wall0, self._mono0 = time.time_ns(), time.monotonic_ns()
-        self._writer = RecordingWriter(self.path, {"host": self.bus.host, "node": self.name,
-                                                    "subscribe": " ".join(cfg.subscribe),
-                                                    "started": time.strftime("%Y-%m-%dT%H:%M:%S%z")},
-                                       flush_s=cfg.flush_s)
+        self._writer = self._open({"host": self.bus.host, "node": self.name, "subscribe": " ".join(cfg.subscribe),
+                                   "started": time.strftime("%Y-%m-%dT%H:%M:%S%z")})
         self._queue = self.own(SampleQueue(cfg.queue))
         self._info_seen: set[str] = set()
         self._info = InfoRequests(self.bus, self._take_info, lambda robot, text: log.warning("%s", text))
@@ -91,6 +94,19 @@ class Recorder(Adapter):
         self._last_status = time.monotonic()
         self.spawn(self._write, "write")
 
+    def _open(self, metadata: dict[str, str]) -> RecordingWriter:
+        """The writer of ``self.path`` (its folders created); a path that cannot be
+        written is a configuration error, found here at start rather than at the first chunk."""
+        try:
+            directory = os.path.dirname(self.path)
+            if directory:
+                os.makedirs(directory, exist_ok=True)
+            return RecordingWriter(self.path, metadata, flush_s=self.config.flush_s)
+        except (OSError, WriteError) as exc:
+            reason = exc if isinstance(exc, WriteError) else f"cannot write {self.path}: {exc.strerror or exc}"
+            raise ConfigError(f"node '{self.name}': key 'path': {reason} — "
+                              "choose a folder that exists or can be created, and that you can write to") from None
+
     def _stop(self) -> None:
         if hasattr(self, "_streams"):  # first, so the writer drains all that came
             self._streams.undeclare()
@@ -100,7 +116,8 @@ class Recorder(Adapter):
         elapsed = (time.monotonic_ns() - self._mono0) / 1e9
         return {"path": self.path, "duration_s": elapsed, "messages": self.stats["written"],
                 "rate": self.stats["written"] / elapsed if elapsed > 0 else 0.0,
-                "bytes": self._writer.size, "dropped": self._queue.dropped, "bad": self.stats["bad"]}
+                "bytes": self._writer.size, "dropped": self._queue.dropped, "bad": self.stats["bad"],
+                "failure": self.failure}
 
     def _take_info(self, robot: str, info: dict[str, Any]) -> None:  # on a Zenoh thread
         self._queue.put((keys.info(robot), codec.encode(info), time.monotonic_ns()))
@@ -113,9 +130,14 @@ class Recorder(Adapter):
                 self._report()
             while (item := self._queue.get(timeout=0)) is not None:  # what arrived before stop
                 self._record(*item)
-        finally:
-            self._writer.close({**self.stats, "dropped": self._queue.dropped})
-            log.info("%s: %s", self.name, describe(self.status()))
+        except BaseException:
+            # Raised again for the base class to fail the node loudly. The file is finished if it
+            # is sound, else only closed: recover then keeps its complete chunks.
+            with contextlib.suppress(WriteError):
+                self._writer.close({**self.stats, "dropped": self._queue.dropped})
+            raise
+        self._writer.close({**self.stats, "dropped": self._queue.dropped})
+        log.info("%s: %s", self.name, describe(self.status()))
 
     def _record(self, key: str, payload: bytes, arrived_ns: int) -> None:
         incoming = self._streams.take(key, payload, self.stats, self.warn)  # checked by the gate, counted
@@ -131,8 +153,13 @@ class Recorder(Adapter):
             self._info.ask(robot)
         log_ns = self._wall0 + arrived_ns - self._mono0
         for sample_key, sample in samples:
-            self._writer.write(sample_key, log_ns, sample)
-        self.stats["written"] += len(samples)
+            try:
+                self._writer.write(sample_key, log_ns, sample)
+            except BadRecord as exc:  # (past the gate, rare): skipped whole, the file stays readable
+                self.stats["bad"] += 1
+                self.warn("unwritable", f"message on '{sample_key}' not recorded: {exc}")
+                continue
+            self.stats["written"] += 1
 
     def _joints(self, frame: Incoming) -> list[tuple[str, dict[str, Any]]]:
         """The samples of a frame's joints that ``subscribe`` selects, each on its joint's key."""
@@ -148,6 +175,9 @@ class Recorder(Adapter):
 
 
 def describe(status: dict[str, Any]) -> str:
-    """A status as one line: ``12.0 s, 20400 messages (1700/s), 1.2 MB, 0 dropped``."""
+    """A status as one line: ``12.0 s, 20400 messages (1700/s), 1.2 MB, 0 dropped, 0 bad``
+    (and ``FAILED: why`` once the recorder has failed)."""
+    failure = f" — FAILED: {status['failure']}" if status.get("failure") else ""
     return (f"{status['path']}: {status['duration_s']:.1f} s, {status['messages']} messages "
-            f"({status['rate']:.0f}/s), {status['bytes'] / 1e6:.1f} MB, {status['dropped']} dropped")
+            f"({status['rate']:.0f}/s), {status['bytes'] / 1e6:.1f} MB, {status['dropped']} dropped, "
+            f"{status.get('bad', 0)} bad{failure}")

@@ -5,16 +5,30 @@ through and fsync'ed, so a recorder killed without warning leaves a file that
 holds everything up to the last closed chunk; ``close()`` adds the summary and
 index that make a file seekable.
 
+Each message is checked whole before any byte of it reaches the file: one
+that cannot be written (not strict JSON: bytes, NaN; a log time MCAP cannot
+hold) raises ``BadRecord`` and leaves nothing behind. A failing disk raises
+``WriteError`` naming the file; the file is then closed as it is (readable up
+to its last complete chunk with ``sonibus recover``), never finished over a
+torn chunk.
+
 >>> import os, tempfile
 >>> path = os.path.join(tempfile.mkdtemp(), "doc.mcap")
 >>> with RecordingWriter(path) as out:
 ...     out.write("pepper/joints/HeadYaw", 1_700_000_000_000_000_000, {"t": 1.7e9, "seq": 0, "v": 0.1})
 >>> out.messages
 1
+>>> with RecordingWriter(path) as out:
+...     try:
+...         out.write("pepper/events/behavior", 1_700_000_000_000_000_000, {"t": 1.7e9, "kind": "x", "name": b"x"})
+...     except BadRecord as exc:
+...         print(exc)
+not strict JSON: Object of type bytes is not JSON serializable
 """
 
 from __future__ import annotations
 
+import contextlib
 import os
 import time
 from importlib.metadata import version
@@ -23,11 +37,23 @@ from typing import Any, BinaryIO
 from mcap.writer import CompressionType, Writer
 
 from sonibus import schemas
+from sonibus.bus.errors import SonibusError
 
 from .channels import MESSAGE_ENCODING, PROFILE, SCHEMA_ENCODING, SCHEMA_PREFIX, schema_for, to_json
 
 METADATA_RECORDING = "sonibus.recording"
 METADATA_STATS = "sonibus.stats"
+TIME_LIMIT_NS = 1 << 64        # MCAP times are uint64 ns since the epoch
+MAX_CLOCK_OFFSET_S = 60.0      # a t further than this from the log time is not a publish time (a clock gone wrong)
+MAX_CHANNELS = (1 << 16) - 1   # MCAP channel ids are uint16 (0 is none)
+
+
+class BadRecord(ValueError):
+    """A message the writer will not write; nothing of it reached the file."""
+
+
+class WriteError(SonibusError):
+    """The file cannot be written (disk full, I/O error); the message names it."""
 
 
 class RecordingWriter:
@@ -37,54 +63,85 @@ class RecordingWriter:
                  chunk_bytes: int = 1 << 20) -> None:
         self.path = path
         self.flush_s = flush_s
-        self._file: BinaryIO = open(path, "wb")  # noqa: SIM115 — closed by close()
+        self.messages = 0
+        self.closed = False
+        self.failed = False  # a WriteError happened: the file is only closed, never finished
+        self._file: BinaryIO = self._do(open, path, "wb")
         self._writer = Writer(self._file, chunk_size=chunk_bytes, compression=CompressionType.ZSTD)
-        self._writer.start(profile=PROFILE, library=f"sonibus {version('sonibus')}")
+        self._do(self._writer.start, profile=PROFILE, library=f"sonibus {version('sonibus')}")
         if metadata is not None:
-            self._writer.add_metadata(METADATA_RECORDING, metadata)
+            self.add_metadata(METADATA_RECORDING, metadata)
         self._schemas: dict[str | None, int] = {None: 0}
         self._channels: dict[str, int] = {}
         self._sequence: dict[int, int] = {}
         self._last_flush = time.monotonic()
-        self.messages = 0
-        self.closed = False
 
     def write(self, key: str, log_ns: int, message: dict[str, Any]) -> None:
-        """One message received at ``log_ns`` (ns since the epoch); its ``t``, if any, is the publish time."""
+        """One message received at ``log_ns`` (ns since the epoch); its ``t`` is the
+        publish time when it is within ``MAX_CLOCK_OFFSET_S`` of ``log_ns``, else
+        ``log_ns`` is. ``BadRecord`` if it cannot be written (nothing is), ``WriteError``
+        if the file cannot."""
+        if self.closed or self.failed:
+            raise WriteError(f"cannot write {self.path}: it is {'closed' if self.closed else 'failed'}")
+        data = _json(message)
+        if log_ns.__class__ is not int or not 0 <= log_ns < TIME_LIMIT_NS:
+            raise BadRecord(f"log time {log_ns!r} is not in 0..2^64 ns")
         channel = self._channels.get(key)
         if channel is None:
-            channel = self._channels[key] = self._channel(key)
-        t = message.get("t")
-        publish_ns = int(t * 1e9) if isinstance(t, int | float) and not isinstance(t, bool) and t >= 0 else log_ns
-        sequence = self._sequence[channel] = self._sequence.get(channel, -1) + 1
-        self._writer.add_message(channel, log_time=log_ns, data=to_json(message), publish_time=publish_ns,
-                                 sequence=sequence)
+            if len(self._channels) >= MAX_CHANNELS:
+                raise BadRecord(f"a file holds at most {MAX_CHANNELS} keys; '{key}' would be one more")
+            channel = self._channels[key] = self._do(self._channel, key)
+        sequence = self._sequence[channel] = (self._sequence.get(channel, -1) + 1) & 0xFFFFFFFF  # uint32: wraps
+        self._do(self._writer.add_message, channel, log_time=log_ns, data=data,
+                 publish_time=_publish_ns(message.get("t"), log_ns), sequence=sequence)
         self.messages += 1
         if time.monotonic() - self._last_flush >= self.flush_s:
             self.flush()
 
     def add_metadata(self, name: str, data: dict[str, str]) -> None:
-        self._writer.add_metadata(name, data)
+        self._do(self._writer.add_metadata, name, data)
 
     def flush(self) -> None:
         """Close the chunk in progress and put it on disk."""
-        self._writer.flush()
-        os.fsync(self._file.fileno())
+        self._do(self._writer.flush)
+        self._do(os.fsync, self._file.fileno())
         self._last_flush = time.monotonic()
 
     def close(self, stats: dict[str, Any] | None = None) -> None:
-        """Write ``stats`` as metadata, the summary and the index; safe to call twice."""
+        """Write ``stats`` as metadata, the summary and the index; safe to call twice.
+        After a ``WriteError`` it only closes the file (see ``abandon``)."""
         if self.closed:
+            return
+        if self.failed:
+            self.abandon()
             return
         self.closed = True
         try:
             if stats:
-                self._writer.add_metadata(METADATA_STATS, {k: str(v) for k, v in stats.items()})
-            self._writer.finish()
-            self._file.flush()
-            os.fsync(self._file.fileno())
-        finally:
-            self._file.close()
+                self._do(self._writer.add_metadata, METADATA_STATS, {k: str(v) for k, v in stats.items()})
+            self._do(self._writer.finish)
+            self._do(self._file.flush)
+            self._do(os.fsync, self._file.fileno())
+        except BaseException:
+            self.abandon()
+            raise
+        self._file.close()
+
+    def abandon(self) -> None:
+        """Close the file as it is, after a failure: what reached the disk stays a
+        prefix of the recording (``sonibus recover`` keeps its complete chunks);
+        never raises."""
+        self.closed = True
+        with contextlib.suppress(OSError, ValueError):
+            self._file.close()  # (it may still write what it buffers: the next bytes, in order)
+
+    def _do(self, action: Any, *args: Any, **kwargs: Any) -> Any:
+        """``action`` on the file; an ``OSError`` becomes a ``WriteError`` naming it."""
+        try:
+            return action(*args, **kwargs)
+        except OSError as exc:
+            self.failed = True
+            raise WriteError(f"cannot write {self.path}: {exc.strerror or exc}") from exc
 
     @property
     def size(self) -> int:
@@ -104,3 +161,41 @@ class RecordingWriter:
 
     def __exit__(self, *exc: object) -> None:
         self.close()
+
+
+def _json(message: Any) -> bytes:
+    """``message`` as strict JSON (no bytes, NaN or infinity), else ``BadRecord``."""
+    if message.__class__ is not dict:
+        raise BadRecord(f"not a map but {type(message).__name__}")
+    try:
+        return to_json(message)
+    except (TypeError, ValueError, RecursionError) as exc:
+        raise BadRecord(f"not strict JSON: {exc}") from None
+
+
+def _publish_ns(t: Any, log_ns: int) -> int:
+    """``t`` (s since the epoch) in ns when it is a plausible publish time, else ``log_ns``."""
+    if t.__class__ not in (int, float):
+        return log_ns
+    try:
+        plausible = abs(t - log_ns / 1e9) <= MAX_CLOCK_OFFSET_S  # (False for NaN and infinity)
+    except OverflowError:  # an int no float can hold
+        return log_ns
+    return max(0, min(int(t * 1e9), TIME_LIMIT_NS - 1)) if plausible else log_ns
+
+
+def unwritable(path: str) -> str | None:
+    """Why a recording cannot be written at ``path``, found without writing
+    anything; None if it looks writable (opening it is the last word)."""
+    if os.path.isdir(path):
+        return f"{path} is a folder — name a file in it"
+    folder = os.path.dirname(os.path.abspath(path))
+    while not os.path.exists(folder):  # the folders the recorder would create
+        folder = os.path.dirname(folder)
+    if not os.path.isdir(folder):
+        return f"{path} cannot be created: {folder} is a file, not a folder"
+    if os.statvfs(folder).f_flag & os.ST_RDONLY:
+        return f"{path} cannot be created: {folder} is on a read-only file system"
+    if not os.access(folder, os.W_OK | os.X_OK):
+        return f"{path} cannot be created: no permission to write in {folder}"
+    return None
