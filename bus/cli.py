@@ -396,8 +396,6 @@ def main(argv: Sequence[str] | None = None, env: Environment | None = None) -> i
                 args = parser(extra).parse_args(argv)
         except SystemExit as exc:  # argparse has printed its message
             return int(exc.code or 0)
-        except BrokenPipeError:  # --help into a closed pipe
-            return int(Exit.OUTPUT_CLOSED)
         logger.setLevel((logging.WARNING, logging.INFO, logging.DEBUG)[min(args.verbose, 2)])
         return _run(args, env, COMMANDS.get(args.command) or extra[args.command].run)
     finally:
@@ -447,6 +445,10 @@ def console_main() -> None:
     signal.signal(signal.SIGTERM, terminate)
     signal.signal(signal.SIGINT, terminate)  # also when started in the background, where SIGINT is ignored
     status = main(sys.argv[1:], env)
-    if status == Exit.OUTPUT_CLOSED:  # what stdout still buffers goes nowhere, not into an error at exit
+    try:
+        sys.stdout.flush()  # what is still buffered (argparse's --help) meets a closed pipe here, not at exit
+    except BrokenPipeError:
+        status = Exit.OUTPUT_CLOSED
+    if status == Exit.OUTPUT_CLOSED:  # the rest goes nowhere, not into "Exception ignored" at exit
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())  # as the Python docs on SIGPIPE say
     sys.exit(status)

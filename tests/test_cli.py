@@ -457,7 +457,8 @@ def closed_pipe() -> int:
     return write_end
 
 
-def test_info_into_a_closed_pipe_ends_quietly_with_141(tmp_path):
+@pytest.mark.parametrize("command", [["info", "take.mcap"], ["send", "--help"]], ids=["info", "help"])
+def test_output_into_a_closed_pipe_ends_quietly_with_141(tmp_path, command):
     """``sonibus info F | head -1``: no message, no traceback, no "Exception ignored" at
     exit, status 141 like a Unix tool ended by SIGPIPE."""
     recording = a_recording(tmp_path / "take.mcap")
@@ -465,8 +466,8 @@ def test_info_into_a_closed_pipe_ends_quietly_with_141(tmp_path):
     write_end = closed_pipe()
     try:
         buffered = {k: v for k, v in os.environ.items() if k != "PYTHONUNBUFFERED"}  # as in a user's shell
-        result = subprocess.run([SONIBUS, "info", str(recording)], stdout=write_end, stderr=subprocess.PIPE,
-                                text=True, timeout=20, env=buffered)
+        result = subprocess.run([SONIBUS, *command], stdout=write_end, stderr=subprocess.PIPE, text=True,
+                                timeout=20, env=buffered, cwd=tmp_path)
     finally:
         os.close(write_end)
     assert (result.returncode, result.stderr) == (Exit.OUTPUT_CLOSED, "")
