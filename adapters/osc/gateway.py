@@ -195,17 +195,17 @@ class OscGateway(Adapter):
             self._command(address, args, peer)
 
     def _problem(self, error: wire.WireError, peer: Peer | None = None) -> None:
-        """Answer each command of a refused packet with ``bad_request``; count and warn otherwise."""
-        targets = [t for t in map(command_target, error.addresses) if t] if peer else []
+        """Answer each command address of a refused packet with ``bad_request``; count and warn."""
+        targets = [t for t in map(command_target, error.addresses) if t]
         if error.kind == "malformed":
             self._count("malformed")
-            where = f"{error.address or 'packet'} from {peer.address[0]}" if peer else "TCP stream"
-            self._warn("malformed", f"refused OSC {where[:120]}: {error}")
-            for robot, verb in targets:
-                self._answer(robot, verb, peer, CommandError("bad_request", f"{verb}: malformed OSC: {error}"))
-        elif targets:  # well formed but too long: answer it
-            robot, verb = targets[0]
-            self._command_failed(robot, verb, peer, CommandError("bad_request", f"{verb}: {error}"))
+            source = f" from {peer.address[0]}" if peer else " on a TCP connection"
+            self._warn("malformed", f"refused OSC {error.address[:80] or 'packet'}{source}: {error}")
+            for robot, verb in targets:  # nothing in the packet ran
+                if peer:
+                    self._answer(robot, verb, peer, CommandError("bad_request", f"{verb}: malformed OSC: {error}"))
+        elif targets and peer:  # well formed but too long: answer it
+            self._command_failed(*targets[0], peer, CommandError("bad_request", f"{targets[0][1]}: {error}"))
         else:
             self._count("unknown_address")
             self._warn("unknown_address", f"ignored OSC {error.address[:80] or 'packet'}: {error}")

@@ -4,10 +4,12 @@ sent byte for byte over UDP to a gateway in front of a simulated Pepper."""
 from __future__ import annotations
 
 import socket
+import struct
 from dataclasses import dataclass
 from typing import Any
 
 import pytest
+from pythonosc.osc_message import OscMessage
 
 from sonibus.adapters.osc.gateway import OscGateway, OscGatewayConfig
 from sonibus.adapters.sim import SimRobot
@@ -114,3 +116,26 @@ def test_unreadable_addresses_are_counted_and_warned_once(rig, caplog):
     assert all("\n" not in r.getMessage() for r in caplog.records)
     assert rig.client.ask("/pepper/cmd/behavior/list")[1][0] == 1 and rig.client.nothing_waiting()
     assert rig.gate.stats["commands"] == 1 and rig.gate.state == "running"
+
+
+def test_over_tcp_a_malformed_frame_is_answered_on_its_connection(net):
+    net.sim("pepper", rate_hz=50)
+    gate = net.start(OscGateway(OscGatewayConfig(listen="127.0.0.1:0", tcp="127.0.0.1:0"), name="gate"))
+    with socket.create_connection(gate.tcp_address[:2], timeout=5) as conn:
+        for packet in (STIFFNESS_NO_FLOAT, build("/pepper/cmd/behavior/list")):  # liblo's size-prefixed frames
+            conn.sendall(struct.pack(">i", len(packet)) + packet)
+        replies = [OscMessage(frame).params for frame in frames(conn, 2)]
+    assert replies[0][:2] == [0, "bad_request"] and "argument 2 (f) needs 4 bytes, 0 left" in replies[0][2]
+    assert replies[1][0] == 1 and gate.stats["malformed"] == 1 and gate.stats["commands"] == 1
+
+
+def frames(conn: socket.socket, count: int) -> list[bytes]:
+    """``count`` size-prefixed frames read from ``conn``."""
+    data = b""
+    out: list[bytes] = []
+    while len(out) < count:
+        data += conn.recv(65536)
+        while len(data) >= 4 and len(data) >= 4 + (size := struct.unpack(">i", data[:4])[0]):
+            out.append(data[4:4 + size])
+            data = data[4 + size:]
+    return out
