@@ -16,6 +16,7 @@ message by message (never whole into memory).
 
 from __future__ import annotations
 
+import io
 import os
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
@@ -23,18 +24,21 @@ from typing import Any, BinaryIO
 
 import zenoh
 from mcap.exceptions import McapError
+from mcap.opcode import Opcode
 from mcap.reader import SeekingReader
-from mcap.records import Channel, Metadata
+from mcap.records import Channel, Chunk, Metadata, Schema
 from mcap.records import Message as McapMessage
-from mcap.stream_reader import StreamReader
+from mcap.stream_reader import StreamReader, get_chunk_data_stream
 
 from sonibus.bus import keys
 from sonibus.bus.errors import SonibusError
 
 from .channels import MESSAGE_ENCODING, from_json
-from .writer import METADATA_RECORDING, RecordingWriter
+from .writer import METADATA_RECORDING, BadRecord, RecordingWriter
 
 MAGIC = b"\x89MCAP0\r\n"
+MESSAGE_HEADER = 22  # channel id, sequence, log time, publish time: the bytes of a message record before its data
+DAMAGE = (McapError, ValueError, EOFError, MemoryError, OverflowError)  # what a damaged file raises in the reader
 
 
 class RecordingError(SonibusError):
@@ -60,11 +64,16 @@ class Recording:
         _check_file(path)
         self._file: BinaryIO = open(path, "rb")  # noqa: SIM115 — closed by close()
         try:
-            self._reader = SeekingReader(self._file)
+            self._reader = SeekingReader(self._file, validate_crcs=True)
             summary = self._reader.get_summary()
-        except (McapError, ValueError, EOFError) as exc:
+            if summary is not None and summary.chunk_indexes:  # where a writer that failed would have left damage
+                last = max(summary.chunk_indexes, key=lambda index: index.chunk_start_offset)
+                self._file.seek(last.chunk_start_offset)
+                for _ in _chunk_records(_read_chunk(self._file.read(last.chunk_length))):
+                    pass
+        except DAMAGE as exc:
             self._file.close()
-            raise RecordingError(f"{path} is damaged: {type(exc).__name__}: {exc}") from None
+            raise RecordingError(f"{path} is damaged ({_why(exc)}); {_RECOVER.format(path=path)}") from None
         if summary is None or summary.statistics is None:
             self._file.close()
             raise RecordingError(f"{path} has no summary; {_RECOVER.format(path=path)}")
@@ -109,9 +118,16 @@ class Recording:
         only between ``start_s`` and ``end_s`` seconds from the start."""
         start = self.start_ns + int(start_s * 1e9) if start_s is not None else None
         end = self.start_ns + int(end_s * 1e9) if end_s is not None else None
-        for _, channel, message in self._reader.iter_messages(topics=keys, starting_at=start, ending_at=end,
-                                                                log_time_order=False):
-            yield _message(channel, message)
+        found = self._reader.iter_messages(topics=keys, starting_at=start, ending_at=end, log_time_order=False)
+        while True:
+            try:
+                _, channel, message = next(found)
+                yield _message(channel, message)
+            except StopIteration:
+                return
+            except DAMAGE as exc:
+                raise RecordingError(f"{self.path} is damaged ({_why(exc)}); {_RECOVER.format(path=self.path)}") \
+                    from None
 
     def infos(self) -> dict[str, dict[str, Any]]:
         """The last recorded ``<robot>/info`` of each robot."""
@@ -132,7 +148,7 @@ class Recording:
         self.close()
 
 
-_RECOVER = ("it was not closed cleanly (a killed recorder, an unfinished copy); "
+_RECOVER = ("it was not closed cleanly (a killed recorder, a full disk, an unfinished copy); "
             "'sonibus recover {path}' keeps what it holds up to its last complete chunk")
 
 
@@ -147,7 +163,7 @@ def _check_file(path: str) -> None:
         raise RecordingError(f"cannot read {path}: {exc.strerror}") from None
     if size == 0:
         raise RecordingError(f"{path} is empty (0 bytes), not a recording")
-    if head != MAGIC:
+    if not MAGIC.startswith(head):  # (a file cut inside its magic is truncated, not foreign)
         raise RecordingError(f"{path} is not an MCAP file (it starts with {head[:8]!r})")
     if tail != MAGIC or size < 2 * len(MAGIC):
         raise RecordingError(f"{path} is truncated: " + _RECOVER.format(path=path))
@@ -160,6 +176,44 @@ def _message(channel: Channel, message: McapMessage) -> Message:
     return Message(channel.topic, message.log_time, message.publish_time, from_json(message.data))
 
 
+def _why(exc: BaseException) -> str:
+    text = " ".join(str(exc).split())
+    return f"{type(exc).__name__}: {text[:100]}" if text else type(exc).__name__
+
+
+def _read_chunk(data: bytes) -> Chunk:
+    """The chunk record held whole in ``data``."""
+    record = next(StreamReader(io.BytesIO(data), skip_magic=True, emit_chunks=True).records)
+    if not isinstance(record, Chunk):
+        raise ValueError(f"a {type(record).__name__} record where a chunk should be")
+    return record
+
+
+def _chunk_records(chunk: Chunk) -> Iterator[Channel | Schema | McapMessage]:
+    """The records of ``chunk``, each checked to fill its stated length exactly (the
+    library's reader lets a torn record swallow the rest of its chunk); ``ValueError``
+    at the first that does not."""
+    stream, size = get_chunk_data_stream(chunk, validate_crc=True)
+    while stream.count < size:
+        opcode, length = stream.read1(), stream.read8()
+        end = stream.count + length
+        if end > size or (opcode == Opcode.MESSAGE and length < MESSAGE_HEADER):
+            raise ValueError(f"a torn record at byte {stream.count} of a chunk")
+        record: Channel | Schema | McapMessage | None = None
+        if opcode == Opcode.MESSAGE:
+            record = McapMessage.read(stream, length)
+        elif opcode == Opcode.CHANNEL:
+            record = Channel.read(stream)
+        elif opcode == Opcode.SCHEMA:
+            record = Schema.read(stream)
+        else:
+            stream.read(length)
+        if stream.count != end:
+            raise ValueError(f"a torn record at byte {stream.count} of a chunk")
+        if record is not None:
+            yield record
+
+
 def recover(path: str, out: str) -> int:
     """Copy every message of the damaged recording ``path`` that can be read into a
     new, complete recording ``out``; returns how many."""
@@ -168,24 +222,37 @@ def recover(path: str, out: str) -> int:
             head = f.read(len(MAGIC))
     except OSError as exc:
         raise RecordingError(f"cannot read {path}: {exc.strerror}") from None
-    if head != MAGIC:
+    if not MAGIC.startswith(head):
         raise RecordingError(f"{path} is not an MCAP file (it starts with {head[:8]!r})")
     channels: dict[int, Channel] = {}
     kept = 0
     with open(path, "rb") as f, RecordingWriter(out) as writer:
         try:
-            for record in StreamReader(f, skip_magic=False).records:
+            for record in _records(f):
                 if isinstance(record, Channel):
                     channels[record.id] = record
                 elif isinstance(record, McapMessage) and record.channel_id in channels:
                     found = _message(channels[record.channel_id], record)
-                    writer.write(found.key, found.log_ns, found.data)
+                    try:
+                        writer.write(found.key, found.log_ns, found.data)
+                    except BadRecord:  # (from an older recorder): the rest is kept
+                        continue
                     kept += 1
                 elif isinstance(record, Metadata) and record.name == METADATA_RECORDING:
                     writer.add_metadata(record.name, dict(record.metadata))
-        except (McapError, ValueError, EOFError, MemoryError):
+        except DAMAGE:
             pass  # the damaged end: everything before it is kept
     if kept == 0:
         os.unlink(out)
         raise RecordingError(f"{path} holds no complete chunk: nothing to recover")
     return kept
+
+
+def _records(f: BinaryIO) -> Iterator[Any]:
+    """The records of an MCAP stream in order, a chunk's one by one, up to the first
+    damaged record (raised: a ``DAMAGE`` exception)."""
+    for record in StreamReader(f, skip_magic=False, emit_chunks=True).records:
+        if isinstance(record, Chunk):
+            yield from _chunk_records(record)
+        else:
+            yield record
