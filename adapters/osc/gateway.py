@@ -2,6 +2,9 @@
 UDP (and TCP) becomes a command on the bus; the answer goes back to the sender as
 ``/<robot>/reply/<verb> 1 "<result JSON>"`` or ``... 0 "<code>" "<message>"``.
 
+Packets are read as strictly as liblo reads them (``wire.messages``): nothing in a
+malformed packet runs, and each command in it is answered ``bad_request``.
+
 Queries are asynchronous (a Zenoh callback handler), so a slow or missing robot
 never stalls the receive loop, and commands reach a robot in the order they came.
 """

@@ -41,36 +41,38 @@ class WireError(ValueError):
         self.addresses = addresses or ((address,) if address else ())
 
 
-class _Layout(NamedTuple):
+class Layout(NamedTuple):
+    """What ``layout`` found in one message."""
+
     address: str   # "" when it cannot be read
     tags: str      # "" when they cannot be read
     fault: str     # "" when the message is well formed
 
 
-def layout(dgram: bytes) -> _Layout:
+def layout(dgram: bytes) -> Layout:
     """Check one message by liblo's rules: address and type tags NUL-terminated and
     NUL-padded to 4 bytes, each argument's bytes all there (strings NUL-padded, a
     blob's size within the message and its data padded), nothing after the last
     argument (so the length is a multiple of 4); and the tags in ``TAGS``, brackets
     balanced, strings UTF-8."""
     if dgram[:1] != b"/":
-        return _Layout("", "", "neither an OSC message (address starting with '/') nor a bundle ('#bundle')")
+        return Layout("", "", "neither an OSC message (address starting with '/') nor a bundle ('#bundle')")
     address, index, fault = _string(dgram, 0, "the address")
     if fault:
-        return _Layout("", "", fault)
+        return Layout("", "", fault)
     if index == len(dgram):
-        return _Layout(address, "", "no type tag string (',' and one letter per argument) after the address")
+        return Layout(address, "", "no type tag string (',' and one letter per argument) after the address")
     tags, index, fault = _string(dgram, index, "the type tag string")
     if fault:
-        return _Layout(address, "", fault)
+        return Layout(address, "", fault)
     if not tags.startswith(","):
-        return _Layout(address, "", f"the type tag string {tags[:20]!r} does not start with ','")
+        return Layout(address, "", f"the type tag string {tags[:20]!r} does not start with ','")
     depth = number = 0
     for tag in tags[1:]:
         if tag in "[]":
             depth += 1 if tag == "[" else -1
             if depth < 0:
-                return _Layout(address, tags, f"type tags {tags[:40]!r} close an array that is not open")
+                return Layout(address, tags, f"type tags {tags[:40]!r} close an array that is not open")
             continue
         number += 1
         if tag == "s":
@@ -84,12 +86,12 @@ def layout(dgram: bytes) -> _Layout:
         else:
             fault = f"type tag {tag!r} (argument {number}) is not supported (supported: {TAGS})"
         if fault:
-            return _Layout(address, tags, fault)
+            return Layout(address, tags, fault)
     if depth:
-        return _Layout(address, tags, f"type tags {tags[:40]!r} leave an array open")
+        return Layout(address, tags, f"type tags {tags[:40]!r} leave an array open")
     if index != len(dgram):
-        return _Layout(address, tags, f"{len(dgram) - index} bytes after the last argument")
-    return _Layout(address, tags, "")
+        return Layout(address, tags, f"{len(dgram) - index} bytes after the last argument")
+    return Layout(address, tags, "")
 
 
 def _string(data: bytes, start: int, what: str) -> tuple[str, int, str]:
@@ -133,7 +135,8 @@ def messages(packet: bytes) -> list[bytes]:
     faults: list[str] = []
     _walk(packet, 0, "", found, addresses, faults)
     if faults:
-        raise WireError("malformed", faults[0], addresses[0] if len(addresses) == 1 else "", tuple(addresses))
+        single = addresses[0] if addresses and not packet.startswith(BUNDLE) else ""
+        raise WireError("malformed", faults[0], single, tuple(addresses))
     return found
 
 
