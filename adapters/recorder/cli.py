@@ -76,8 +76,12 @@ def _record_arguments(p: argparse.ArgumentParser) -> None:
 
 def _record(args: argparse.Namespace, env: Environment) -> Exit:
     options = {"subscribe": tuple(args.keyexpr)} if args.keyexpr else {}
-    recorder = Recorder(RecorderConfig(path=args.file, overwrite=args.force, status_every_s=0,
-                                       per_joint_keys=args.per_joint_keys, **options), name="record")
+    try:
+        config = RecorderConfig(path=args.file, overwrite=args.force, status_every_s=0,
+                                per_joint_keys=args.per_joint_keys, **options)
+    except ConfigError as exc:  # named as the node would be at start
+        raise ConfigError(f"node 'record': {exc}") from None
+    recorder = Recorder(config, name="record")
     deadline = time.monotonic() + args.duration if args.duration else None
     _run(recorder, args, env, lambda: "recording " + describe(recorder.status()),
          lambda: deadline is not None and time.monotonic() >= deadline, args.status_every)
@@ -100,6 +104,9 @@ def _replay_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--as", dest="rename", action="append", default=[], metavar="NAME|ROBOT=NAME",
                    help="replay the robot under another name (ROBOT=NAME when it holds several)")
     p.add_argument("--keys", nargs="+", default=(), metavar="KEYEXPR", help="replay only these keys")
+    p.add_argument("--max-gap", type=float, default=ReplayConfig.max_gap_s, metavar="S",
+                   help="never wait longer than S seconds of the recording between two messages: a longer gap "
+                        "is shortened, with a warning (default: %(default)g)")
     p.add_argument("--status-every", type=float, default=5.0, metavar="S",
                    help="seconds between progress lines when not on a terminal (default: 5)")
 
@@ -121,7 +128,7 @@ def _renames(words: list[str], path: str) -> dict[str, str]:
 
 def _replay(args: argparse.Namespace, env: Environment) -> Exit:
     cfg = ReplayConfig(path=args.file, speed=args.speed, loop=args.loop, start=args.start, end=args.end,
-                       rename=_renames(args.rename, args.file), keys=tuple(args.keys))
+                       rename=_renames(args.rename, args.file), keys=tuple(args.keys), max_gap_s=args.max_gap)
     replay = Replay(cfg, name="replay")
 
     def progress() -> str:
@@ -131,8 +138,9 @@ def _replay(args: argparse.Namespace, env: Environment) -> Exit:
         return f"replay [{bar:<30}] {replay.position_s - cfg.start:6.1f}/{replay.window_s:.1f} s  x{cfg.speed:g}{loop}"
 
     _run(replay, args, env, progress, replay.finished.is_set, args.status_every)
+    gaps = f", {replay.stats['gaps']} gaps shortened" if replay.stats["gaps"] else ""
     env.say(f"replayed {os.path.basename(args.file)}: {replay.stats['published']} messages, "
-            f"{replay.stats['late']} skipped as late")
+            f"{replay.stats['late']} skipped as late{gaps}")
     return Exit.OK
 
 

@@ -62,7 +62,7 @@ class RecorderConfig:
             raise bad("flush_s", f"{self.flush_s} must be more than 0")
         problem = unwritable(self.resolved_path())
         if problem:
-            raise bad("path", f"{problem} — choose a folder you can write to")
+            raise bad("path", problem)
 
     def resolved_path(self, now: float | None = None) -> str:
         return self.path.replace("{time}", time.strftime("%Y%m%d-%H%M%S", time.localtime(now)))

@@ -12,7 +12,8 @@ messages), so timing does not drift: each at the time the robot took it (its
 ``t``, the MCAP publish time), so a frame leaves whole, without the jitter the
 live bus added; ``t`` is moved to now and ``seq`` keeps
 counting across loops, so sinks' stale-sample checks and frame reassembly work
-unchanged. The joint samples of one frame go out like a robot owner's: the
+unchanged. No wait is longer than ``max_gap_s`` (``timeline.py``): a longer gap
+is shortened to it, with a warning. The joint samples of one frame go out like a robot owner's: the
 frame whole on ``<robot>/frame`` (what sinks listen to), then each joint's
 sample on its key. The replayed robots are owned like real ones (liveliness, ``<robot>/info``
 from the recording) but take no commands: they answer ``failed``, and ``stop`` ok.
@@ -38,6 +39,7 @@ from sonibus.bus.keys import Key
 from sonibus.bus.options import bad
 
 from .reading import Message, Recording, RecordingError
+from .timeline import Timeline
 
 log = logging.getLogger(__name__)
 
@@ -55,10 +57,13 @@ class ReplayConfig:
     end: float | None = None            # s from the recording's start; None: to its end
     rename: dict[str, str] = field(default_factory=dict)   # recorded robot → name on the bus
     keys: tuple[str, ...] = ()          # key expressions of what to replay; empty: everything
+    max_gap_s: float = 5.0              # the longest wait between two messages (recording time); longer gaps shrink
 
     def __post_init__(self) -> None:
         if not 0 < self.speed <= 100:
             raise bad("speed", f"{self.speed} must be more than 0 and at most 100")
+        if not 0 < self.max_gap_s < float("inf"):
+            raise bad("max_gap_s", f"{self.max_gap_s} must be more than 0 (seconds)")
         if self.start < 0:
             raise bad("start", f"{self.start} must be 0 or more")
         if self.end is not None and self.end <= self.start:
@@ -79,7 +84,7 @@ class Replay(Adapter):
     def __init__(self, config: ReplayConfig, *, name: str = "") -> None:
         super().__init__(config, name=name)
         self.position_s, self.window_s, self.loops = 0.0, 0.0, 0   # progress: seconds into the window, passes
-        self.stats = {"published": 0, "frames": 0, "late": 0}
+        self.stats = {"published": 0, "frames": 0, "late": 0, "gaps": 0}
         self.finished = threading.Event()                          # set at the end of a replay without loop
 
     @classmethod
@@ -144,13 +149,17 @@ class Replay(Adapter):
         last_seq: dict[str, int] = {}
         while not self.stopping.is_set():
             seq_shift = {robot: last_seq[robot] + 1 - first for robot, first in first_seq.items()}
+            timeline = Timeline(cfg.max_gap_s)
             for framed, moment in _moments(self.recording.messages(self.keys, cfg.start, cfg.end)):
                 message = moment[0]
-                offset_s = (message.publish_ns - origin_ns) / 1e9  # the robot's timeline: a frame leaves whole
+                at_s = (message.publish_ns - origin_ns) / 1e9  # the robot's timeline: a frame leaves whole
+                offset_s, gap_s = timeline.place(at_s)
+                if gap_s:
+                    self._gap(gap_s, at_s, message)
                 due = start + offset_s / cfg.speed
                 if self.stopping.wait(max(0.0, due - time.monotonic())):
                     return
-                self.position_s = offset_s
+                self.position_s = at_s
                 if message.key.endswith("/info"):
                     continue
                 seq = message.data.get("seq")
@@ -158,7 +167,7 @@ class Replay(Adapter):
                     robot = message.key.partition("/")[0]
                     first_seq.setdefault(robot, seq)
                     seq = last_seq[robot] = seq + seq_shift.get(robot, 0)
-                t_origin = start + wall - origin_ns / 1e9 / cfg.speed
+                t_origin = start + wall - (origin_ns / 1e9 + timeline.shift_s) / cfg.speed
                 late = time.monotonic() - due > MAX_LATE_S
                 if framed:
                     self._publish_frame(moment, t_origin, seq, late)
@@ -167,9 +176,18 @@ class Replay(Adapter):
             self.loops += 1
             if not cfg.loop:
                 break
-            start += (self.window_s + self._gap_s) / cfg.speed
+            start += (self.window_s - timeline.shift_s + self._gap_s) / cfg.speed
         self.finished.set()
         log.info("%s: replay of %s finished", self.name, cfg.path)
+
+    def _gap(self, gap_s: float, at_s: float, message: Message) -> None:
+        self.stats["gaps"] += 1
+        where = f"{at_s - self.config.start:.1f} s into {os.path.basename(self.config.path)} ({message.key})"
+        if gap_s > 0:
+            self.warn("gap", f"a gap of {gap_s:.1f} s before {where} replayed as {self.config.max_gap_s:g} s "
+                             "(max_gap_s, --max-gap)")
+        else:
+            self.warn("gap", f"time goes back {-gap_s:.1f} s at {where}: replayed on from where it was")
 
     def _renamed(self, key: str) -> str:
         robot, _, rest = key.partition("/")

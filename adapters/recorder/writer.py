@@ -185,17 +185,17 @@ def _publish_ns(t: Any, log_ns: int) -> int:
 
 
 def unwritable(path: str) -> str | None:
-    """Why a recording cannot be written at ``path``, found without writing
-    anything; None if it looks writable (opening it is the last word)."""
+    """Why a recording cannot be written at ``path`` and what to do, found without
+    writing anything; None if it looks writable (opening it is the last word)."""
     if os.path.isdir(path):
-        return f"{path} is a folder — name a file in it"
+        return f"{path} is a folder — name a file in it, e.g. {os.path.join(path, 'show-{time}.mcap')}"
     folder = os.path.dirname(os.path.abspath(path))
     while not os.path.exists(folder):  # the folders the recorder would create
         folder = os.path.dirname(folder)
     if not os.path.isdir(folder):
-        return f"{path} cannot be created: {folder} is a file, not a folder"
+        return f"{path} cannot be created: {folder} is a file, not a folder — choose another folder"
     if os.statvfs(folder).f_flag & os.ST_RDONLY:
-        return f"{path} cannot be created: {folder} is on a read-only file system"
+        return f"{path} cannot be created: {folder} is on a read-only file system — choose a folder you can write to"
     if not os.access(folder, os.W_OK | os.X_OK):
-        return f"{path} cannot be created: no permission to write in {folder}"
+        return f"{path} cannot be created: no permission to write in {folder} — choose a folder you can write to"
     return None
