@@ -154,8 +154,9 @@ class Oscdump:
             wait_for(lambda last=last: any(x.endswith(last) for x in self.process.lines), what="oscdump's output")
             taken, printed = True, []
             for line in list(self.process.lines):
-                if "/sentinel i " in line:
-                    out.append((taken, printed))
+                if "/sentinel i " in line:  # the end of a packet's lines (or a mark left over from the start)
+                    if int(line.rsplit(" ", 1)[1]) in marks:
+                        out.append((taken, printed))
                     taken, printed = True, []
                 elif line.startswith("liblo server error"):
                     taken = False
