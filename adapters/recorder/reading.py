@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import io
 import os
+import struct
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from typing import Any, BinaryIO
@@ -38,7 +39,7 @@ from .writer import METADATA_RECORDING, BadRecord, RecordingWriter
 
 MAGIC = b"\x89MCAP0\r\n"
 MESSAGE_HEADER = 22  # channel id, sequence, log time, publish time: the bytes of a message record before its data
-DAMAGE = (McapError, ValueError, EOFError, MemoryError, OverflowError)  # what a damaged file raises in the reader
+DAMAGE = (McapError, ValueError, EOFError, MemoryError, OverflowError, struct.error)  # a damaged file, in the reader
 
 
 class RecordingError(SonibusError):
