@@ -16,8 +16,6 @@ import ipaddress
 import json
 import logging
 import socket
-import threading
-import time
 from dataclasses import dataclass
 from typing import Any
 
@@ -39,7 +37,6 @@ log = logging.getLogger(__name__)
 COUNTERS = ("received", "commands", "replies_ok", "replies_error", "malformed", "unknown_address",
             "refused_source", "bad_args", "busy", "replies_lost", "internal")
 POLL_S = 0.2          # socket timeouts: how soon stop() is noticed
-WARN_EVERY_S = 10.0   # at most one warning per kind in this time
 UDP_BUFFER = 1 << 20  # bytes of receive buffer asked for
 
 
@@ -95,9 +92,7 @@ class OscGateway(Adapter):
         self.stats: dict[str, int] = dict.fromkeys(COUNTERS, 0)
         self.udp_address: tuple[Any, ...] = ()
         self.tcp_address: tuple[Any, ...] = ()
-        self._lock = threading.Lock()
-        self._warned: dict[str, float] = {}
-        self._pending = 0
+        self._pending = 0  # commands awaiting an answer (guarded by the base class's lock)
 
     def _start(self) -> None:
         cfg: OscGatewayConfig = self.config
@@ -151,12 +146,12 @@ class OscGateway(Adapter):
             except TimeoutError:
                 continue
             except OSError as exc:
-                self._warn("internal", f"UDP receive failed: {exc}")
+                self.warn("internal", f"UDP receive failed: {exc}")
                 continue
             if self._allowed(source[0]):
                 self._guarded(data, Peer(source))
             else:
-                self._count("received")
+                self.count("received")
 
     def _allowed(self, host: str) -> bool:
         ip = ipaddress.ip_address(host.split("%")[0])
@@ -164,23 +159,23 @@ class OscGateway(Adapter):
             ip = ip.ipv4_mapped
         if any(ip in network for network in self._allow):
             return True
-        self._count("refused_source")
-        self._warn("refused_source", f"ignored OSC from {host}: not in allow = {list(self.config.allow)}")
+        self.count("refused_source")
+        self.warn("refused_source", f"ignored OSC from {host}: not in allow = {list(self.config.allow)}")
         return False
 
     def _refused(self, message: str) -> None:
-        self._count("busy")
-        self._warn("busy", message)
+        self.count("busy")
+        self.warn("busy", message)
 
     # -- from packets to commands -----------------------------------------------------
 
     def _guarded(self, packet: bytes, peer: Peer) -> None:
-        self._count("received")
+        self.count("received")
         try:
             self._packet(packet, peer)
         except Exception as exc:  # a bug must not end the receive loop
-            self._count("internal")
-            self._warn("internal", f"packet from {peer.address[0]} failed: {type(exc).__name__}: {exc}")
+            self.count("internal")
+            self.warn("internal", f"packet from {peer.address[0]} failed: {type(exc).__name__}: {exc}")
             log.debug("%s: packet %r failed", self.name, packet[:64], exc_info=True)
 
     def _packet(self, packet: bytes, peer: Peer) -> None:
@@ -201,23 +196,23 @@ class OscGateway(Adapter):
         """Answer each command address of a refused packet with ``bad_request``; count and warn."""
         targets = [t for t in map(command_target, error.addresses) if t]
         if error.kind == "malformed":
-            self._count("malformed")
+            self.count("malformed")
             source = f" from {peer.address[0]}" if peer else " on a TCP connection"
-            self._warn("malformed", f"refused OSC {error.address[:80] or 'packet'}{source}: {error}")
+            self.warn("malformed", f"refused OSC {error.address[:80] or 'packet'}{source}: {error}")
             for robot, verb in targets:  # nothing in the packet ran
                 if peer:
                     self._answer(robot, verb, peer, CommandError("bad_request", f"{verb}: malformed OSC: {error}"))
         elif targets and peer:  # well formed but too long: answer it
             self._command_failed(*targets[0], peer, CommandError("bad_request", f"{targets[0][1]}: {error}"))
         else:
-            self._count("unknown_address")
-            self._warn("unknown_address", f"ignored OSC {error.address[:80] or 'packet'}: {error}")
+            self.count("unknown_address")
+            self.warn("unknown_address", f"ignored OSC {error.address[:80] or 'packet'}: {error}")
 
     def _command(self, address: str, args: list[Any], peer: Peer) -> None:
         target = command_target(address)
         if target is None:
-            self._count("unknown_address")
-            self._warn("unknown_address", f"ignored OSC {address[:80]}: not /<robot>/cmd/<verb>")
+            self.count("unknown_address")
+            self.warn("unknown_address", f"ignored OSC {address[:80]}: not /<robot>/cmd/<verb>")
             return
         robot, verb = target
         try:
@@ -228,7 +223,7 @@ class OscGateway(Adapter):
         with self._lock:
             busy = self._pending >= self.config.max_pending
             self._pending += not busy
-            self.stats["busy" if busy else "commands"] += 1
+        self.count("busy" if busy else "commands")
         if busy:
             self._answer(robot, verb, peer, CommandError(
                 "busy", f"{self._pending} commands are waiting for robots; try again when they are answered"))
@@ -242,8 +237,8 @@ class OscGateway(Adapter):
         ask(self.bus, robot, verb, request, done, self.config.timeout)
 
     def _command_failed(self, robot: str, verb: str, peer: Peer, error: CommandError) -> None:
-        self._count("bad_args")
-        self._warn("bad_args", f"{robot} {verb} from {peer.address[0]}: {error}")
+        self.count("bad_args")
+        self.warn("bad_args", f"{robot} {verb} from {peer.address[0]}: {error}")
         self._answer(robot, verb, peer, error)
 
     # -- replies ---------------------------------------------------------------------------
@@ -251,7 +246,7 @@ class OscGateway(Adapter):
     def _answer(self, robot: str, verb: str, peer: Peer, outcome: Outcome) -> None:
         """Count an outcome and queue its reply (called from Zenoh's threads too: only enqueues)."""
         ok = not isinstance(outcome, CommandError)
-        self._count("replies_ok" if ok else "replies_error")
+        self.count("replies_ok" if ok else "replies_error")
         if not self.config.reply:
             return
         if isinstance(outcome, CommandError):
@@ -273,23 +268,8 @@ class OscGateway(Adapter):
                 else:
                     self._udp.sendto(packet, peer.address)
             except Exception as exc:  # OSError, or python-osc's BuildError
-                self._count("replies_lost")
-                self._warn("replies_lost", f"reply {address} to {peer.address[0]} not sent: {exc}")
-
-    # -- bookkeeping ------------------------------------------------------------------------
-
-    def _count(self, kind: str) -> None:
-        with self._lock:
-            self.stats[kind] += 1
-
-    def _warn(self, kind: str, message: str) -> None:
-        now = time.monotonic()
-        with self._lock:
-            if now - self._warned.get(kind, float("-inf")) < WARN_EVERY_S:
-                return
-            self._warned[kind] = now
-            count = self.stats.get(kind, 0)
-        log.warning("%s: %s (%s: %d so far)", self.name, message, kind, count)
+                self.count("replies_lost")
+                self.warn("replies_lost", f"reply {address} to {peer.address[0]} not sent: {exc}")
 
 
 def command_target(address: str) -> tuple[str, str] | None:
