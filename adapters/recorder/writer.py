@@ -190,8 +190,15 @@ def unwritable(path: str) -> str | None:
     if os.path.isdir(path):
         return f"{path} is a folder — name a file in it, e.g. {os.path.join(path, 'show-{time}.mcap')}"
     folder = os.path.dirname(os.path.abspath(path))
-    while not os.path.exists(folder):  # the folders the recorder would create
-        folder = os.path.dirname(folder)
+    while True:  # up to the first folder that is there: the recorder would create the others
+        try:
+            os.stat(folder)
+            break
+        except PermissionError:
+            return f"{path} cannot be created: no permission to enter {os.path.dirname(folder)} — " \
+                   "choose a folder you can write to"
+        except OSError:  # not there, or under a file
+            folder = os.path.dirname(folder)
     if not os.path.isdir(folder):
         return f"{path} cannot be created: {folder} is a file, not a folder — choose another folder"
     if os.statvfs(folder).f_flag & os.ST_RDONLY:
