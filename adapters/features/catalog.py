@@ -24,7 +24,7 @@ from typing import Any
 
 import numpy as np
 
-from sonibus.bus import keys
+from sonibus.bus import keys, messages
 
 from .config import FeaturesConfig
 from .kinematics import load_arms
@@ -69,6 +69,18 @@ def derived(robot: Robot, config: FeaturesConfig, processor: dict[str, str]) -> 
     if robot.arms is None and hands:
         reply["unavailable"] = dict.fromkeys(hands, robot.unavailable)
     return reply
+
+
+def bounds(reply: dict[str, Any]) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+    """Each derived key of a ``derived`` reply with the range it declares, ``(low, high)``
+    (a hand's: its box, per axis); ±the bus's physical bound where none is declared."""
+    out = {}
+    for entry in reply["derived"]:
+        box = entry.get("box")
+        low, high = (box["min"], box["max"]) if box else (entry.get("min", -messages.MAX_VALUE),
+                                                         entry.get("max", messages.MAX_VALUE))
+        out[entry["key"]] = (np.asarray(low, dtype=float), np.asarray(high, dtype=float))
+    return out
 
 
 def _hands(robot: Robot, config: FeaturesConfig) -> list[dict[str, Any]]:

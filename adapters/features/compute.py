@@ -23,41 +23,71 @@ from typing import Any
 
 import numpy as np
 
-from sonibus.bus import keys
+from sonibus.bus import keys, messages
 
+from . import catalog
 from .config import FeaturesConfig
 from .filters import VelocityFilter
 from .motion import OnsetDetector, weights
 from .table import Robot
 
 Message = dict[str, Any]
+Range = tuple[np.ndarray, np.ndarray]
+
+JUMP = 10.0  # a step faster than this × a joint's max velocity is a glitch, not motion: refused
 
 
 @dataclass
 class Output:
-    """What one frame gave: derived samples and events as ``(key, message)``, and
-    how many of the robot's joints the frame lacked or had as NaN."""
+    """What one frame gave: derived samples and events as ``(key, message)``; how many
+    of the robot's joints the frame lacked or had as NaN; how many joint values the
+    velocity filter refused (``rejected``, first of them ``refused``); how many derived
+    values were pulled into their declared range (``clamped``) or were not finite and
+    left out (``dropped``)."""
 
     samples: list[tuple[str, Message]] = field(default_factory=list)
     events: list[tuple[str, Message]] = field(default_factory=list)
     missing: int = 0
     nan: int = 0
+    rejected: int = 0
+    refused: str = ""
+    clamped: int = 0
+    dropped: int = 0
+
+    def bounded(self, values: np.ndarray, span: Range, publish: np.ndarray | bool = True) -> tuple[np.ndarray,
+                                                                                                    np.ndarray]:
+        """``values`` clamped into ``span``, and which of them are finite; counts what is
+        clamped or dropped among those to ``publish``."""
+        finite = np.isfinite(values)
+        clamped = np.clip(values, *span)
+        counted = np.broadcast_to(publish, values.shape)
+        self.clamped += int(np.count_nonzero((clamped != values) & finite & counted))
+        self.dropped += int(np.count_nonzero(~finite & counted))
+        return clamped, finite
 
 
 class RobotFeatures:
     """``step(t, seq, values)`` per frame, ``values`` mapping joint keys to positions."""
 
-    def __init__(self, robot: Robot, config: FeaturesConfig) -> None:
+    def __init__(self, robot: Robot, config: FeaturesConfig, ranges: dict[str, Range] | None = None) -> None:
+        """``ranges``: each derived key's declared range (``catalog.bounds``); what is
+        published is clamped into it."""
         self.robot, self.config = robot, config
         self.frames = 0
+        if ranges is None:
+            ranges = catalog.bounds(catalog.derived(robot, config, {}))
         name, names = robot.name, robot.names
         self._index = {keys.joint(name, j): i for i, j in enumerate(names)}
         self._positions = np.full(len(names), np.nan)  # the last finite position of each joint
-        self._velocity = VelocityFilter(len(names), config.cutoff_hz, config.max_gap_s)
+        vmax = np.array([j.max_velocity or messages.MAX_VALUE for j in robot.joints])
+        self._velocity = VelocityFilter(len(names), config.cutoff_hz, config.max_gap_s,
+                                        np.minimum(JUMP * vmax, messages.MAX_VALUE))
         self._velocity_keys = [keys.derived(name, "velocity", j) for j in names]
+        self._velocity_range = _spans(ranges, self._velocity_keys, (-vmax, vmax))
         self._weights = weights([j.unit for j in robot.joints], names, config.weights)
         groups = robot.groups
         self._groups = [(keys.derived(name, "qom", g), g) for g in groups]
+        self._qom_range = _spans(ranges, [key for key, _ in self._groups], (0.0, messages.MAX_VALUE))
         self._members = np.zeros((len(groups), len(names)))  # group × joint: 1 if the joint is in the group
         for row, members in enumerate(groups.values()):
             self._members[row, members] = 1.0
@@ -69,7 +99,12 @@ class RobotFeatures:
             sides = robot.arms.sides
             self._hand_keys = [keys.derived(name, "hand", s) for s in sides]
             self._speed_keys = [keys.derived(name, "hand_speed", s) for s in sides]
-            self._hand_velocity = VelocityFilter(3 * len(sides), config.cutoff_hz, config.max_gap_s)
+            unbounded = np.full((len(sides), 3), messages.MAX_VALUE)
+            self._hand_range = _spans(ranges, self._hand_keys, (-unbounded, unbounded))
+            self._speed_range = _spans(ranges, self._speed_keys, (0.0, messages.MAX_VALUE))
+            self._hand_velocity = VelocityFilter(3 * len(sides), config.cutoff_hz, config.max_gap_s,
+                                                 np.repeat(np.minimum(JUMP * self._speed_range[1],
+                                                                      messages.MAX_VALUE), 3))
 
     def step(self, t: float, seq: int, values: Mapping[str, Any]) -> Output:
         """The features of the frame ``seq`` taken at ``t``."""
@@ -83,18 +118,25 @@ class RobotFeatures:
         finite = np.isfinite(q)
         out.missing = len(q) - len(values.keys() & self._index.keys())
         out.nan = len(q) - out.missing - int(np.count_nonzero(finite))
-        np.copyto(self._positions, q, where=finite)
         fresh = self._velocity.update(t, q)
-        v = self._velocity.velocity
+        refused = self._velocity.refused
+        if refused.any():
+            out.rejected = int(np.count_nonzero(refused))
+            out.refused = self.robot.names[int(np.argmax(refused))]
+            finite &= ~refused  # a glitch moves no hand
+        np.copyto(self._positions, q, where=finite)
+        v, usable = out.bounded(self._velocity.velocity, self._velocity_range, fresh)
+        v = np.where(usable, v, 0.0)
+        fresh &= usable
         if self.config.publishes("velocity"):
             out.samples += [(key, {"t": t, "seq": seq, "v": value})
                             for key, value, now in zip(self._velocity_keys, v.tolist(), fresh.tolist(), strict=True)
                             if now]
         if self._hands:
             self._hand_features(t, seq, out)
-        qoms = (self._members @ (np.abs(v) * self._weights)).tolist()
-        updated = (self._members @ fresh > 0).tolist()
-        for (key, group), qom, now in zip(self._groups, qoms, updated, strict=True):
+        updated = self._members @ fresh > 0
+        qoms, usable = out.bounded(self._members @ (np.abs(v) * self._weights), self._qom_range, updated)
+        for (key, group), qom, now in zip(self._groups, qoms.tolist(), (updated & usable).tolist(), strict=True):
             if not now:
                 continue
             if self.config.publishes("qom"):
@@ -111,12 +153,26 @@ class RobotFeatures:
         angles = self._positions[self.robot.arm_joints]
         if not np.isfinite(angles).all():
             return  # an arm joint never seen yet
-        hands = self.robot.arms.points(angles)
+        points = self.robot.arms.points(angles)
+        hands, usable = out.bounded(points, self._hand_range, self.config.publishes("hand"))
+        if not usable.all():
+            return
         if self.config.publishes("hand"):
             out.samples += [(key, {"t": t, "seq": seq, "v": hand.tolist()})
                             for key, hand in zip(self._hand_keys, hands, strict=True)]
-        fresh = self._hand_velocity.update(t, hands.ravel())
+        fresh = self._hand_velocity.update(t, points.ravel())
         if self.config.publishes("hand_speed") and fresh.all():
-            speeds = np.linalg.norm(self._hand_velocity.velocity.reshape(hands.shape), axis=1)
-            out.samples += [(key, {"t": t, "seq": seq, "v": float(s)})
-                            for key, s in zip(self._speed_keys, speeds, strict=True)]
+            speeds, usable = out.bounded(np.linalg.norm(self._hand_velocity.velocity.reshape(hands.shape), axis=1),
+                                         self._speed_range)
+            out.samples += [(key, {"t": t, "seq": seq, "v": s})
+                            for key, s, ok in zip(self._speed_keys, speeds.tolist(), usable.tolist(), strict=True)
+                            if ok]
+
+
+def _spans(ranges: dict[str, Range], keys_: list[str], default: tuple[Any, Any]) -> Range:
+    """The declared ranges of ``keys_`` stacked, ``(low, high)``; ``default`` (per key) where none is."""
+    low = np.broadcast_to(np.asarray(default[0], dtype=float), (len(keys_), *np.shape(default[0])[1:]))
+    high = np.broadcast_to(np.asarray(default[1], dtype=float), (len(keys_), *np.shape(default[1])[1:]))
+    found = [ranges.get(key) for key in keys_]
+    return (np.array([f[0] if f is not None else lo for f, lo in zip(found, low, strict=True)]),
+            np.array([f[1] if f is not None else hi for f, hi in zip(found, high, strict=True)]))

@@ -13,15 +13,26 @@ slope ``s_k`` taken from the previous step):
 
 Every step uses its real ``Δt``, so a dropped frame is a longer step, not a
 wrong velocity. A signal's first sample (and the first after a gap longer than
-``max_gap_s``, or after its time went backwards) starts it over from rest
-(``v = 0``, no slope), so a start makes no burst from noise. A NaN sample is
-skipped: that signal keeps its state.
+``max_gap_s``) starts it over from rest (``v = 0``, no slope), so a start makes
+no burst from noise. A NaN sample is no sample: that signal keeps its state.
+
+Poison never stays in the state. A sample the filter refuses (``rejected``,
+counted) resets its signal instead: one whose time went backwards, or that
+jumped faster than ``max_rate`` allows (a glitch far beyond what the joint can
+do), starts the signal over from itself; an infinite one starts it over from
+the next sample; a velocity that would not be finite is never kept. So after
+one bad sample the next good ones give normal velocities again.
 
 >>> f = VelocityFilter(1, cutoff_hz=5.0)
 >>> f.update(0.00, np.array([0.0])).tolist(), f.update(0.01, np.array([0.01])).tolist()
 ([False], [True])
 >>> f.velocity.round(3).tolist()          # 1 rad/s from rest: 1 − exp(−0.01 / τ)
 [0.27]
+>>> g = VelocityFilter(1, cutoff_hz=5.0, max_rate=np.array([70.0]))
+>>> [g.update(t, np.array([q])).tolist() for t, q in [(0.00, 0.0), (0.01, 1e5), (0.02, 0.0), (0.03, 0.01)]]
+[[False], [False], [False], [True]]
+>>> g.rejected, g.velocity.round(3).tolist()   # two jumps refused; then 1 rad/s from rest again
+(2, [0.27])
 """
 
 from __future__ import annotations
@@ -32,15 +43,24 @@ import numpy as np
 
 
 class VelocityFilter:
-    """``update(t, q)`` with ``n`` values at time ``t`` (s); ``velocity`` holds the estimates."""
+    """``update(t, q)`` with ``n`` values at time ``t`` (s); ``velocity`` holds the estimates.
 
-    def __init__(self, n: int, cutoff_hz: float, max_gap_s: float = 0.5) -> None:
+    ``max_rate`` (per signal, units/s; ``inf`` where unknown): a step implying a
+    faster rate is refused. ``rejected`` counts the samples refused, ``refused``
+    marks those of the last ``update``."""
+
+    def __init__(self, n: int, cutoff_hz: float, max_gap_s: float = 0.5, max_rate: np.ndarray | None = None) -> None:
         if not cutoff_hz > 0 or not max_gap_s > 0:
             raise ValueError(f"cut-off ({cutoff_hz} Hz) and max gap ({max_gap_s} s) must be more than 0")
         self.cutoff_hz, self.max_gap_s = cutoff_hz, max_gap_s
         self.tau = 1.0 / (2.0 * math.pi * cutoff_hz)
+        self.max_rate = np.full(n, np.inf) if max_rate is None else np.asarray(max_rate, dtype=float)
+        if self.max_rate.shape != (n,) or not (self.max_rate > 0).all():
+            raise ValueError(f"max_rate must be {n} values more than 0")
         self.velocity = np.zeros(n)
         self.known = np.zeros(n, dtype=bool)  # has a velocity (and a step to take the slope from)
+        self.rejected = 0
+        self.refused = np.zeros(n, dtype=bool)
         self._last_q = np.full(n, np.nan)
         self._last_t = np.full(n, np.nan)
         self._last_r = np.zeros(n)
@@ -50,26 +70,41 @@ class VelocityFilter:
         """Take the values ``q`` sampled at ``t``; returns which signals have a velocity for ``t``."""
         dt = t - self._last_t
         finite = np.isfinite(q)
-        with np.errstate(invalid="ignore"):
+        with np.errstate(invalid="ignore", over="ignore"):
             step = finite & (dt > 0) & (dt <= self.max_gap_s)
+            jumped = step & ~(np.abs(q - self._last_q) <= self.max_rate * dt)
+            backwards = finite & (dt < 0)
+        refused = jumped | backwards | np.isinf(q)
+        if refused.any():
+            step &= ~refused
         if step.all():  # the usual frame: no boolean indexing
             self._step(slice(None), dt, q)
         elif step.any():
             self._step(step, dt[step], q[step])
-        start = finite & ~step
+        spoiled = step & ~np.isfinite(self.velocity)  # (a rate beyond float, where max_rate is unknown)
+        if spoiled.any():
+            step &= ~spoiled
+            refused |= spoiled
+        start = (finite | refused) & ~step
         if start.any():
             self.velocity[start] = 0.0
             self.known[start] = False
         np.copyto(self._last_q, q, where=finite)
         np.copyto(self._last_t, t, where=finite)
+        if refused.any():
+            gone = refused & ~(finite & ~spoiled)  # nothing usable to start over from
+            self._last_q[gone] = self._last_t[gone] = np.nan
+            self.rejected += int(np.count_nonzero(refused))
+        self.refused = refused
         return step
 
     def _step(self, step: np.ndarray | slice, dt: np.ndarray, q: np.ndarray) -> None:
-        r = (q - self._last_q[step]) / dt
-        e = np.exp(-dt / self.tau)
-        delta = dt / 2 - self.tau + dt * e / (1.0 - e)
-        slope = np.where(self.known[step], (r - self._last_r[step]) / ((dt + self._last_dt[step]) / 2), 0.0)
-        self.velocity[step] = e * self.velocity[step] + (1.0 - e) * (r + slope * delta)
+        with np.errstate(over="ignore", invalid="ignore"):  # (what overflows is caught by update)
+            r = (q - self._last_q[step]) / dt
+            e = np.exp(-dt / self.tau)
+            delta = dt / 2 - self.tau + dt * e / (1.0 - e)
+            slope = np.where(self.known[step], (r - self._last_r[step]) / ((dt + self._last_dt[step]) / 2), 0.0)
+            self.velocity[step] = e * self.velocity[step] + (1.0 - e) * (r + slope * delta)
         self.known[step] = True
         self._last_r[step], self._last_dt[step] = r, dt
 

@@ -38,8 +38,9 @@ class Features(Adapter):
     def _start(self) -> None:
         cfg: FeaturesConfig = self.config
         self.stats = dict.fromkeys(("received", "frames", "published", "events", "bad", "late", "missing", "nan",
-                                    "waiting_info"), 0)
+                                    "rejected", "clamped", "dropped", "waiting_info"), 0)
         self.robot_features: dict[str, RobotFeatures] = {}  # robot → its features, once its info came
+        self._learning: set[str] = set()                    # robots whose info is being worked out
         self._publishers: dict[str, zenoh.Publisher] = {}
         self._frames = FrameAssembler(cfg.max_wait_ms / 1000.0)  # with per_joint_keys
         self._queue = self.own(SampleQueue(cfg.queue))
@@ -97,6 +98,16 @@ class Features(Adapter):
             self.stats["nan"] += out.nan
             self.warn("incomplete", f"{frame.robot}: frame {frame.seq} lacks {out.missing} joint(s) and has "
                                      f"{out.nan} NaN; their velocities are held")
+        if out.rejected:
+            self.stats["rejected"] += out.rejected
+            self.warn("rejected", f"{frame.robot}: frame {frame.seq}: {out.rejected} joint value(s) refused by the "
+                                  f"velocity filter, first {out.refused} (a jump faster than the joint can move, time "
+                                  "going back, or not finite); their velocities start over")
+        if out.clamped or out.dropped:
+            self.stats["clamped"] += out.clamped
+            self.stats["dropped"] += out.dropped
+            self.warn("clamped", f"{frame.robot}: frame {frame.seq}: {out.clamped} derived value(s) clamped into "
+                                 f"their declared ranges, {out.dropped} not finite and left out")
         for key, message in out.samples:
             publisher = self._publishers.get(key)
             if publisher is None:
@@ -110,20 +121,29 @@ class Features(Adapter):
     # -- robots -----------------------------------------------------------------------
 
     def _learn(self, robot: str, info: dict[str, Any]) -> None:
-        if robot in self.robot_features:
+        """Work out ``robot``'s features on a thread of their own: the reach boxes take
+        ~0.1 s, and frames queued meanwhile would come out late (and be dropped as stale
+        by every sink); until then its frames are skipped as ``waiting_info``."""
+        if robot in self.robot_features or robot in self._learning:
             return
+        self._learning.add(robot)
+        self.spawn(lambda: self._describe(robot, info), f"learn-{robot}")
+
+    def _describe(self, robot: str, info: dict[str, Any]) -> None:
         cfg: FeaturesConfig = self.config
         try:
             described = table.describe(robot, info)
         except ValueError as exc:
             self.warn("info", f"{robot}: no features: {exc}")
+            self._learning.discard(robot)
             return
         if described.arms is None and (cfg.publishes("hand") or cfg.publishes("hand_speed")):
             log.warning("%s: %s: hand positions unavailable: %s", self.name, robot, described.unavailable)
         reply = catalog.derived(described, cfg, {"host": self.bus.host, "node": self.name})
+        features = RobotFeatures(described, cfg, catalog.bounds(reply))
         payload, where = codec.encode(reply), keys.derived_info(robot)
         self.own(self.bus.serve(where, lambda query: query.reply(where, payload, encoding=codec.ENCODING)))
-        self.robot_features[robot] = RobotFeatures(described, cfg)
+        self.robot_features[robot] = features  # (the worker takes its frames from now on)
         log.info("%s: %s (model '%s'): %d joints, %d derived keys", self.name, robot, described.model,
                  len(described.joints), len(reply["derived"]))
 

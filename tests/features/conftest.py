@@ -9,6 +9,7 @@ from typing import Any
 import numpy as np
 import pytest
 
+from sonibus import schemas
 from sonibus.bus import codec, keys, load_model, messages
 
 T0 = 1_700_000_000.0  # frames carry UNIX times
@@ -21,11 +22,14 @@ def model_info(model: str, robot: str | None = None) -> dict[str, Any]:
 
 
 class FakeOwner:
-    """Serves ``<robot>/info`` and publishes joint frames as a test writes them: whole on
-    ``<robot>/frame`` and then per joint, as a robot owner does."""
+    """Serves ``<robot>/info`` (a full robot info: what ``info`` leaves out filled in) and
+    publishes joint frames as a test writes them: whole on ``<robot>/frame`` and then per
+    joint, as a robot owner does."""
 
     def __init__(self, bus: Any, robot: str, info: dict[str, Any]) -> None:
         self.bus, self.robot, self.seq = bus, robot, 0
+        info = {"robot": robot, "rate_hz": 100.0, "behaviors": [], "postures": [], "adapter": "FakeOwner",
+                "schema_version": schemas.VERSION, "owner": {"host": bus.host, "node": f"owner-{robot}"}, **info}
         payload = codec.encode(info)
         self.queryable = bus.serve(keys.info(robot), lambda q: q.reply(keys.info(robot), payload,
                                                                        encoding=codec.ENCODING))
