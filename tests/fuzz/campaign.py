@@ -15,7 +15,7 @@ from hypothesis import HealthCheck, Phase, given, settings
 from hypothesis import strategies as st
 
 from . import checks
-from .families import FAMILIES, ROBOT, VALID, Input, bursts, huge_frame, pack, signature
+from .families import FAMILIES, ROBOT, VALID, Input, bursts, huge_frame, issue_inputs, pack, signature
 from .fuzzer import Fuzzer
 from .show import Show
 
@@ -48,6 +48,20 @@ def _run(fuzzer: Fuzzer, strategy: st.SearchStrategy[Any], examples: int, derand
     each()
 
 
+def _reset(fuzzer: Fuzzer) -> None:
+    for verb, args in RESET:
+        fuzzer.send(Input("command", VALID, "query", f"{ROBOT}/cmd/{verb}", pack(args), signature(verb, args),
+                          note="reset"))
+
+
+def _after(fuzzer: Fuzzer, report: checks.Report, before: dict[str, float], family: str) -> None:
+    """After a family: alive, every node running, data flowing again to the OSC targets and MIDI."""
+    _reset(fuzzer)
+    ended = time.monotonic()
+    checks.alive(fuzzer.show, report, f"after {family}")
+    checks.flowing(fuzzer.show, report, before, ended, f"after {family}")
+
+
 def campaign(show: Show, plan: Plan, out: Path) -> checks.Report:
     """Fuzz ``show`` by ``plan``; every check; counts and figures written to ``out`` (JSON)."""
     report = checks.Report()
@@ -61,16 +75,16 @@ def campaign(show: Show, plan: Plan, out: Path) -> checks.Report:
         burst_rates: list[float] = []
         for _ in range(plan.rounds):
             for family, strategy in FAMILIES.items():
+                for item in issue_inputs(family):
+                    fuzzer.send(item)
                 _run(fuzzer, strategy(), plan.examples[family], plan.derandomize, fuzzer.send)
-                checks.alive(show, report, f"after {family}")
+                _after(fuzzer, report, before, family)
             for _ in range(plan.huge_frames):
                 fuzzer.send(huge_frame())
-            checks.alive(show, report, "after huge frames")
+            _after(fuzzer, report, before, "huge frames")
             _run(fuzzer, bursts(), plan.bursts, plan.derandomize, lambda b: burst_rates.append(fuzzer.burst(*b)))
-            checks.alive(show, report, "after bursts")
-        for verb, args in RESET:
-            fuzzer.send(Input("command", VALID, "query", f"{ROBOT}/cmd/{verb}", pack(args), signature(verb, args),
-                              note="reset"))
+            _after(fuzzer, report, before, "bursts")
+        _reset(fuzzer)
         report.figures["burst_rate_per_s"] = round(min(burst_rates, default=0.0))
         fuzzer.settle()
         ended = time.monotonic()

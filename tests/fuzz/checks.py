@@ -119,6 +119,23 @@ def flow(show: Show, report: Report, before: dict[str, float], ended: float) -> 
                      f"normal {normal:.0f}/s (needs {FLOW_FRACTION:.0%})")
 
 
+STREAMS = ("osc_plain_joints", "osc_bundle_joints", "osc_plain_derived", "midi")
+
+
+def flowing(show: Show, report: Report, before: dict[str, float], ended: float, when: str) -> None:
+    """The OSC targets and the MIDI port, in [ended + 1 s, ended + 2 s], at ``FLOW_FRACTION`` of ``before``
+    (the quick check between families; ``flow`` checks every sink at the end)."""
+    wait = ended + 2.0 - time.monotonic()
+    if wait > 0:
+        time.sleep(wait)  # the window must have passed
+    after = rates(show, ended + 1.0, ended + 2.0)
+    report.figures.setdefault("rates_between_families", {})[when] = {k: round(after[k]) for k in STREAMS}
+    for sink in STREAMS:
+        report.check(after[sink] >= FLOW_FRACTION * before[sink],
+                     f"{when}: {sink} {after[sink]:.0f}/s in the second starting 1 s later, normal "
+                     f"{before[sink]:.0f}/s")
+
+
 def recovery(show: Show, ended: float) -> dict[str, float | None]:
     """Seconds after the fuzzing ended until each OSC/MIDI sink got its first sample of
     a 100 ms window at half the rate (None: not within the measurement)."""

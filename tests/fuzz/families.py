@@ -602,6 +602,29 @@ def osc_packets(draw: st.DrawFn) -> Input:
     return Input("osc", label, "osc", key, data, note=how)
 
 
+def issue_inputs(family: str) -> list[Input]:
+    """Issue 13's reproductions, sent as given before each family's generated inputs."""
+    now, key = time.time(), f"{ROBOT}/frame"
+
+    def frame(note: str, **changes: Any) -> Input:
+        return Input("frame", MALFORMED, "put", key, pack({"t": now, "seq": 1, "names": ["HeadYaw"], "v": [0.1],
+                                                          **changes}), note=note)
+    fixed = {
+        "frame": [frame("issue 5: t an hour ahead", t=now + 3600), frame("issue 3: 1e300", v=[1e300]),
+                  frame("issue 2: t 1e12", t=1e12)],
+        "event": [Input("event", HOSTILE, "put", f"{ROBOT}/events/behavior",
+                        pack({"t": now, "kind": "behavior", "name": b"x"}), note="issue 2: bytes field")],
+        "osc": [Input("osc", MALFORMED, "osc", "osc", bytes.fromhex(
+                    "2f7065707065722f636d642f6a6f696e74732f73657400002c7366004865616459617700bd"),
+                      note="issue 1: one byte of a float"),
+                Input("osc", MALFORMED, "osc", "osc", osc_string(f"/{ROBOT}/cmd/stiffness") + osc_string(",sf") +
+                      osc_string("Body"), note="issue 1: no float bytes"),
+                Input("osc", MALFORMED, "osc", "osc", osc_string(f"/{ROBOT}/cmd/awareness") + osc_string(",F") +
+                      b"\x01" * 12, note="issue 1: trailing junk")],
+    }
+    return fixed.get(family, [])
+
+
 FAMILIES = {
     "frame": frames,
     "joint": joints,

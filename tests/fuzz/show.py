@@ -282,6 +282,7 @@ class Show:
         self.config = tmp / "show.toml"
         self.jack_name = f"fuzz-{uuid.uuid4().hex[:8]}"
         self.children: list[Child] = []
+        self.jackd: Child | None = None
         self.run: Child | None = None
         self.session: Any = None
         self.midi: MidiReader | None = None
@@ -305,7 +306,7 @@ class Show:
     def _start(self) -> None:
         os.environ["JACK_DEFAULT_SERVER"] = self.jack_name
         os.environ["JACK_NO_START_SERVER"] = "1"
-        jackd = self._child(["jackd", "--no-realtime", "-n", self.jack_name, "-d", "dummy", "-r", "48000",
+        self.jackd = jackd = self._child(["jackd", "--no-realtime", "-n", self.jack_name, "-d", "dummy", "-r", "48000",
                              "-p", "256"])
         until(lambda: not jackd.alive or _jack_up(), 10, f"jackd -n {self.jack_name}", 0.1)
         if not jackd.alive:
@@ -380,6 +381,8 @@ class Show:
         if self.rss is not None:
             self.rss.close()
         for child in reversed(self.children):
+            if child is self.jackd:  # a killed jackd keeps its slot in JACK's registry (8 servers at most)
+                child.stop(signal.SIGINT, 5.0)
             child.kill()
         for leftover in Path("/dev/shm").glob(f"jack_sem.*_{self.jack_name}_*"):
             leftover.unlink(missing_ok=True)
