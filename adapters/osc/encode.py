@@ -11,12 +11,18 @@ that they produce the same bytes as python-osc.
 
 from __future__ import annotations
 
+import math
 import struct
 from collections.abc import Iterable, Sequence
 from functools import lru_cache
 
 NTP_OFFSET = 2208988800  # seconds from 1900-01-01 (NTP) to 1970-01-01 (UNIX)
 IMMEDIATELY = 1          # the OSC timetag meaning "now"
+
+
+class EncodeError(ValueError):
+    """What OSC cannot carry — a float beyond float32, an int beyond int32, a string
+    with NUL, another type — naming the address; a caller leaves that one element out."""
 
 
 class Double(float):
@@ -55,38 +61,52 @@ def _tag(arg: Arg) -> str:
     raise TypeError(f"cannot send {type(arg).__name__} {arg!r} in OSC (float, int, str or bool)")
 
 
+_REFUSED = (struct.error, OverflowError, ValueError, TypeError)
+
+
 def message(address: str, *args: Arg) -> bytes:
     """One OSC message: floats as float32, ``Double`` as float64, ints as int32,
-    strings, True/False as T/F."""
-    tags = "".join(_tag(a) for a in args)
-    parts = [_prefix(address, tags)]
-    for arg, tag in zip(args, tags, strict=True):
-        if tag == "f":
-            parts.append(struct.pack(">f", arg))
-        elif tag == "i":
-            parts.append(struct.pack(">i", arg))
-        elif tag == "d":
-            parts.append(struct.pack(">d", arg))
-        elif tag == "s":
-            parts.append(padded(arg))  # type: ignore[arg-type]
+    strings, True/False as T/F; ``EncodeError`` if OSC cannot carry it."""
+    try:
+        tags = "".join(_tag(a) for a in args)
+        parts = [_prefix(address, tags)]
+        for arg, tag in zip(args, tags, strict=True):
+            if tag == "f":
+                parts.append(struct.pack(">f", arg))
+            elif tag == "i":
+                parts.append(struct.pack(">i", arg))
+            elif tag == "d":
+                parts.append(struct.pack(">d", arg))
+            elif tag == "s":
+                parts.append(padded(arg))  # type: ignore[arg-type]
+    except _REFUSED as exc:
+        raise EncodeError(f"{address!r}: {exc}") from None
     return b"".join(parts)
 
 
 def floats(address: str, values: Sequence[float]) -> bytes:
     """A message of float32 arguments only (the common case, fastest path)."""
-    return _prefix(address, "f" * len(values)) + struct.pack(f">{len(values)}f", *values)
+    try:
+        return _prefix(address, "f" * len(values)) + struct.pack(f">{len(values)}f", *values)
+    except _REFUSED as exc:
+        raise EncodeError(f"{address!r}: {exc}") from None
 
 
 def timetag(t: float) -> int:
     """UNIX time ``t`` as a 64-bit NTP timetag (32.32 fixed point)."""
     seconds = t + NTP_OFFSET
+    if not math.isfinite(seconds):
+        raise EncodeError(f"no timetag for t = {t!r}")
     whole = int(seconds)
     return (whole << 32) | int((seconds - whole) * 2**32)
 
 
 def bundle(tag: int, elements: Iterable[bytes]) -> bytes:
     """An OSC bundle with timetag ``tag`` (see ``timetag``) holding encoded messages."""
-    parts = [b"#bundle\0", struct.pack(">Q", tag)]
+    try:
+        parts = [b"#bundle\0", struct.pack(">Q", tag)]
+    except _REFUSED as exc:
+        raise EncodeError(f"bundle timetag {tag!r}: {exc}") from None
     for element in elements:
         parts.append(struct.pack(">i", len(element)))
         parts.append(element)

@@ -1,13 +1,16 @@
 """What a target receives: the ``sonibus`` address scheme or PepperOSC's.
 
 A profile turns samples, frames and events into encoded OSC datagrams for one
-target; it holds no sockets and no timing, so it is easy to test.
+target; it holds no sockets and no timing, so it is easy to test. What OSC
+cannot carry raises ``encode.EncodeError``; a frame leaves out just the
+messages that cannot be encoded and returns them beside the rest, so one bad
+value never costs a target its whole bundle.
 """
 
 from __future__ import annotations
 
-from collections.abc import Sequence
-from typing import Any
+from collections.abc import Callable, Iterable, Sequence
+from typing import Any, TypeVar
 
 from sonibus.bus.keys import Key
 
@@ -19,6 +22,22 @@ EVENT_ARGS: dict[str, tuple[str, ...]] = {
     "behavior": ("name", "state"), "speech": ("text", "state"), "posture": ("name", "state"),
     "connection": ("state",), "command": ("verb", "ok"),
 }
+
+
+T = TypeVar("T")
+Rendered = tuple[list[bytes], list[encode.EncodeError]]  # datagrams, and what was left out
+
+
+def each(items: Iterable[T], build: Callable[[T], bytes]) -> Rendered:
+    """``build(item)`` of every item; what cannot be encoded is left out, and returned beside."""
+    out: list[bytes] = []
+    dropped: list[encode.EncodeError] = []
+    for item in items:
+        try:
+            out.append(build(item))
+        except encode.EncodeError as exc:
+            dropped.append(exc)
+    return out, dropped
 
 
 def event_args(kind: str, fields: dict[str, Any]) -> list[encode.Arg]:
@@ -56,11 +75,11 @@ class SonibusProfile:
         return encode.message(self.address(source), *map(float, values), *extra)
 
     def frame(self, robot: str, t: float, seq: int, samples: list[tuple[Key, Sequence[float]]],
-              interval: float) -> list[bytes]:
-        messages = [self.sample(source, values, t, seq) for source, values in samples]
-        if not self.target.bundle:
-            return messages
-        return [encode.bundle(encode.timetag(t + self.target.latency_ms / 1000.0), messages)]
+              interval: float) -> Rendered:
+        messages, dropped = each(samples, lambda sample: self.sample(sample[0], sample[1], t, seq))
+        if not self.target.bundle or not messages:
+            return messages, dropped
+        return [encode.bundle(encode.timetag(t + self.target.latency_ms / 1000.0), messages)], dropped
 
     def event(self, robot: str, kind: str, fields: dict[str, Any]) -> bytes | None:
         address = self.target.event_address.format(robot=robot, section="events", kind=kind, name=kind,
@@ -82,12 +101,12 @@ class PepperOscProfile:
         return None  # PepperOSC sent whole loops only
 
     def frame(self, robot: str, t: float, seq: int, samples: list[tuple[Key, Sequence[float]]],
-              interval: float) -> list[bytes]:
-        out = [encode.message("/pepperdata", f"/{source.name}", "/PositionSensor", float(values[0]))
-               for source, values in samples if source.section == "joints"]
+              interval: float) -> Rendered:
+        out, dropped = each((s for s in samples if s[0].section == "joints"), lambda sample: encode.message(
+            "/pepperdata", f"/{sample[0].name}", "/PositionSensor", float(sample[1][0])))
         if out:
             out.append(encode.message("/pepperdata", "/latency", float(interval)))
-        return out
+        return out, dropped
 
     def event(self, robot: str, kind: str, fields: dict[str, Any]) -> bytes | None:
         if kind == "behavior" and fields.get("state") == "started":

@@ -5,7 +5,6 @@ from __future__ import annotations
 import logging
 import math
 import socket
-import struct
 import time
 from collections.abc import Callable, Sequence
 from typing import Any
@@ -20,7 +19,8 @@ from sonibus.bus.queue import SampleQueue
 from sonibus.bus.streams import Streams
 
 from .config import OscSinkConfig, Target, parse_target
-from .profiles import PROFILES
+from .encode import EncodeError
+from .profiles import PROFILES, Rendered
 
 log = logging.getLogger(__name__)
 
@@ -63,7 +63,8 @@ class OscSink(Adapter):
 
     def _start(self) -> None:
         cfg: OscSinkConfig = self.config
-        self.stats = dict.fromkeys(("received", "sent", "stale", "bad", "late", "waiting_info", "send_errors"), 0)
+        self.stats = dict.fromkeys(("received", "sent", "stale", "bad", "unencodable", "late", "waiting_info",
+                                    "send_errors"), 0)
         self._ranges: dict[str, dict[str, tuple[float, float]]] = {}
         self._info = InfoRequests(self.bus, self._take_info, lambda robot, text: self.warn("info", text),
                                   INFO_RETRY_S)
@@ -73,9 +74,10 @@ class OscSink(Adapter):
         self._frames = FrameAssembler()
         self._socket = self.own(socket.socket(socket.AF_INET, socket.SOCK_DGRAM))
         self._queue = self.own(SampleQueue(cfg.queue))
-        self._streams = self.own(Streams(self.bus, cfg.subscribe, self._queue, per_joint_keys=cfg.per_joint_keys))
+        self._streams = Streams(self.bus, cfg.subscribe, self._queue, per_joint_keys=cfg.per_joint_keys)
+        self.spawn(self._forward, "forward")  # before anything else is declared: nothing waits in the queue
+        self.own(self._streams)
         self.own(presence.connection_events(self.bus, self._queue, cfg.subscribe))  # a robot's loss and return
-        self.spawn(self._forward, "forward")
 
     def _stop(self) -> None:
         log.info("%s: stopping; %s, queue_dropped %d", self.name,
@@ -126,9 +128,11 @@ class OscSink(Adapter):
             self._event(message.source, message.event)
             return
         max_age = self.config.max_age_ms / 1000.0
-        if max_age and time.time() - message.t > max_age:
+        age = time.time() - message.t
+        if max_age and age > max_age:
             self.stats["stale"] += 1
-            self.warn("stale", f"samples older than {self.config.max_age_ms:g} ms dropped (clocks in step?)")
+            self.warn("stale", f"samples older than max_age_ms = {self.config.max_age_ms:g} dropped ('{key}' was "
+                               f"{age * 1000:.0f} ms old: a stalled publisher or link, or clocks not in step)")
             return
         samples = message.joints
         for link in self._sample_links:
@@ -185,14 +189,18 @@ class OscSink(Adapter):
             if link.target.events:
                 self._send(link, link.profile.event, source.robot, kind, message)
 
-    def _send(self, link: _Link, render: Callable[..., bytes | list[bytes] | None], *args: Any) -> None:
-        """Encode with ``render(*args)`` and send; what OSC cannot carry is counted, not fatal."""
+    def _send(self, link: _Link, render: Callable[..., bytes | Rendered | None], *args: Any) -> None:
+        """Encode with ``render(*args)`` and send; what OSC cannot carry is left out
+        (just that message: the rest of a frame or bundle goes), counted and warned about."""
         try:
             rendered = render(*args)
-        except (struct.error, OverflowError, ValueError, TypeError) as exc:
-            self.stats["bad"] += 1
-            self.warn("encode", f"not sent to {link.target.to}, OSC cannot carry it: {exc}")
+        except EncodeError as exc:
+            self._unencodable(link, [exc])
             return
+        if isinstance(rendered, tuple):
+            rendered, dropped = rendered
+            if dropped:
+                self._unencodable(link, dropped)
         for datagram in [rendered] if isinstance(rendered, bytes) else rendered or ():
             try:
                 self._socket.sendto(datagram, link.destination)
@@ -200,6 +208,11 @@ class OscSink(Adapter):
             except OSError as exc:
                 self.stats["send_errors"] += 1
                 self.warn("send", f"cannot send to {link.target.to}: {exc.strerror or exc}")
+
+    def _unencodable(self, link: _Link, dropped: list[EncodeError]) -> None:
+        self.stats["unencodable"] += len(dropped)
+        self.warn("encode", f"left out of what goes to {link.target.to}, OSC cannot carry it: {dropped[0]}"
+                  + (f" (and {len(dropped) - 1} more)" if len(dropped) > 1 else ""))
 
     # -- normalization ----------------------------------------------------------------
 

@@ -102,20 +102,20 @@ def test_a_float_beyond_float32_is_infinite_or_refused(value):
     for build in (lambda: encode.message("/x", value), lambda: encode.floats("/x", [value])):
         try:
             dgram = build()
-        except (OverflowError, ValueError, struct.error):
+        except encode.EncodeError:
             continue
         assert OscMessage(dgram).params == [math.copysign(math.inf, value)]
 
 
 @given(st.one_of(st.integers(max_value=-(2**31) - 1), st.integers(min_value=2**31)))
 def test_an_int_beyond_int32_is_refused(value):
-    with pytest.raises((OverflowError, ValueError, struct.error)):
+    with pytest.raises(encode.EncodeError, match="'/x': "):
         encode.message("/x", value)
 
 
 @pytest.mark.parametrize("arg", [None, b"blob", [1.0], {"v": 1}])
 def test_other_types_are_refused(arg):
-    with pytest.raises(TypeError, match="cannot send"):
+    with pytest.raises(encode.EncodeError, match="cannot send"):
         encode.message("/x", arg)
 
 
@@ -124,7 +124,7 @@ def test_a_string_with_nul_is_refused_or_read_back_whole():
     "a", then "defg" as the next argument. Refuse it, or send something that reads back aligned."""
     try:
         dgram = encode.message("/pepper/events/speech", "a\0bcdefg", "started")
-    except ValueError:
+    except encode.EncodeError:
         return
     params = OscMessage(dgram).params
     assert len(params) == 2 and params[1] == "started", f"misaligned: {params}"
