@@ -41,6 +41,7 @@ SCRIPTS: dict[str, tuple[str, list[str], float]] = {
     "zenoh_hop": ("zenoh_hop", [], 90),
     "receive_cpu": ("receive_cpu", [], 60),
     "gate": ("gate", [], 60),
+    "soak": ("soak", ["--minutes", "3"], 330),  # the fuzz suite of tests/fuzz for minutes
 }
 
 
