@@ -3,7 +3,12 @@
 ``almemory``: one ``ALMemory.getListData(keys)`` holds every position, every
 extra quantity and any polled event key. ``motion``: ``ALMotion.getAngles(names,
 True)`` (and ``getAngles(names, False)`` for ``cmd``) sent together with the
-``getListData`` of the rest, so a frame costs one round trip either way."""
+``getListData`` of the rest, so a frame costs one round trip either way.
+
+A polled key that ALMemory does not hold yet (``ALTextToSpeech/TextDone`` on a
+robot that has not spoken since it booted) is "not raised yet": its value is
+None, the frame is read without it, and it is asked for again every
+``PROBE_EVERY_S`` (beside a frame's read) until it exists."""
 
 from __future__ import annotations
 
@@ -15,10 +20,11 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
-from .connection import Link
+from .connection import Link, RemoteError
 
 MEMORY = "Device/SubDeviceList/{}/{}"
 POSITION = "Position/Sensor/Value"
+PROBE_EVERY_S = 0.2  # how often polled keys that do not exist yet are looked for (a text lasts longer)
 QUANTITIES = {"cmd": "Position/Actuator/Value", "cur": "ElectricCurrent/Sensor/Value",
               "temp": "Temperature/Sensor/Value"}
 
@@ -26,7 +32,7 @@ QUANTITIES = {"cmd": "Position/Actuator/Value", "cur": "ElectricCurrent/Sensor/V
 @dataclass(frozen=True)
 class Frame:
     """One read: ``t`` (wall clock, middle of the round trip), positions and extra
-    quantities in the reader's joint order, polled ALMemory keys, read time."""
+    quantities in the reader's joint order, polled ALMemory keys (None: not raised yet), read time."""
 
     t: float
     positions: list[float]
@@ -50,7 +56,8 @@ class Reader:
         for quantity in self.extra:
             if not (source == "motion" and quantity == "cmd"):
                 self._add(quantity, [MEMORY.format(n, QUANTITIES[quantity]) for n in self.names])
-        self._add("polled", list(self.polled))
+        self.polling = False         # the polled keys exist and are read with every frame
+        self._next_probe = 0.0       # until then: when to look for them again
 
     def _add(self, part: str, keys: list[str]) -> None:
         self._slices[part] = slice(len(self.keys), len(self.keys) + len(keys))
@@ -63,8 +70,12 @@ class Reader:
             calls["v"] = ("ALMotion.getAngles", self.link.start("ALMotion", "getAngles", self.names, True))
             if "cmd" in self.extra:
                 calls["cmd"] = ("ALMotion.getAngles", self.link.start("ALMotion", "getAngles", self.names, False))
-        if self.keys:
-            calls["memory"] = ("ALMemory.getListData", self.link.start("ALMemory", "getListData", self.keys))
+        keys = [*self.keys, *self.polled] if self.polling else self.keys
+        if keys:
+            calls["memory"] = ("ALMemory.getListData", self.link.start("ALMemory", "getListData", keys))
+        probe = None
+        if self.polled and not self.polling and started >= self._next_probe:
+            probe = self.link.start("ALMemory", "getListData", list(self.polled))
         results = {part: list(self.link.wait(future, what)) for part, (what, future) in calls.items()}
         read_s = time.monotonic() - started
         memory = results.pop("memory", [])
@@ -72,8 +83,22 @@ class Reader:
         positions = [float(v) for v in parts["v"]]
         if len(positions) != len(self.names):
             raise ValueError(f"asked for {len(self.names)} joints, got {len(positions)} values")
+        polled = dict(zip(self.polled, memory[len(self.keys):], strict=True)) if self.polling else \
+            dict.fromkeys(self.polled)
+        if probe is not None:
+            polled = self._probed(probe, polled)
         return Frame(wall + read_s / 2, positions, {q: [float(v) for v in parts[q]] for q in self.extra},
-                     dict(zip(self.polled, parts["polled"], strict=True)), read_s)
+                     polled, read_s)
+
+    def _probed(self, probe: Any, polled: dict[str, Any]) -> dict[str, Any]:
+        """The polled keys' values once they all exist (from now on read with every frame)."""
+        try:
+            values = list(self.link.wait(probe, "ALMemory.getListData"))
+        except RemoteError:  # not raised yet
+            self._next_probe = time.monotonic() + PROBE_EVERY_S
+            return polled
+        self.polling = True
+        return dict(zip(self.polled, values, strict=True))
 
 
 class Stats:

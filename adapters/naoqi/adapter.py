@@ -28,6 +28,8 @@ from .discover import Robot, discover
 from .events import RobotEvents
 
 log = logging.getLogger(__name__)
+announce = logging.getLogger(f"{__name__}.connected")  # "connected to Pepper 'x' at ...": said at the default level
+announce.setLevel(logging.INFO)
 
 BACKOFF_START_S = 0.25
 CONNECT_ERRORS = (LinkDown, RemoteError, ValueError, TypeError)  # TypeError/ValueError: an odd answer
@@ -43,7 +45,7 @@ class NaoqiRobot(RobotAdapter):
         self.rate_hz = self.config.rate_hz
         self.read_times = Stats()
         self.events = RobotEvents(self.publish_event)
-        self.link = Link(self.config, self._lost)
+        self.link = Link(self.config, self._lost, self.stopping)
         self.commands = NaoqiCommands(self.link, self.events, lambda: self.model, self._down)
         self.facts: Robot | None = None
         self.frames_skipped = 0
@@ -96,13 +98,11 @@ class NaoqiRobot(RobotAdapter):
 
     def _connect(self) -> Reader:
         self._halt.clear()
-        self.link.connect(self.stopping)
+        self.link.connect()
         robot = discover(self.link, self.config)
         polled = self.events.attach(self.link)
         reader = self._reader(robot, polled)
         robot = dataclasses.replace(robot, source=reader.source)
-        if polled and not reader.polled:
-            self.events.mode = "none"  # the speech keys could not be read either
         self.commands.connected()
         if self.config.pause_awareness:
             try:
@@ -112,25 +112,26 @@ class NaoqiRobot(RobotAdapter):
         self.model, self.facts, self._behaviors, self._error = robot.model, robot, robot.behaviors, ""
         for difference in robot.differences:
             log.info("%s: limits from the robot differ: %s", self.name, difference)
-        log.info("%s: connected to %s at %s (NAOqi %s): %d joints from %s, speech events by %s",
-                 self.name, robot.body_type or robot.model.name, self.link.url, robot.version or "version unknown",
-                 len(reader.names), reader.source, self.events.mode)
+        announce.info("%s: connected to %s at %s (NAOqi %s): %d joints from %s, speech events by %s%s",
+                      self.name, robot.title, self.link.url, robot.version or "version unknown", len(reader.names),
+                      reader.source, self.events.mode,
+                      "" if reader.polling or not reader.polled else " (its keys are not raised yet)")
         self._announce("connected")
         return reader
 
     def _reader(self, robot: Robot, polled: Sequence[str]) -> Reader:
-        """A reader that works here: without extras, then from ALMotion, if it must."""
+        """A reader that works here: without extras, then from ALMotion, if it must. Polled event
+        keys never decide it (one that does not exist yet is read once it does)."""
         names, extra = robot.model.joint_names, self.config.extra
-        tries = [(robot.source, extra, polled), (robot.source, (), polled), ("motion", (), polled),
-                 ("motion", (), ())]
+        tries = [(robot.source, extra), (robot.source, ()), ("motion", ())]
         error: Exception | None = None
-        for source, quantities, keys_ in dict.fromkeys(tries):
-            reader = Reader(self.link, names, source, quantities, keys_)
+        for source, quantities in dict.fromkeys(tries):
+            reader = Reader(self.link, names, source, quantities, polled)
             try:
                 reader.read()
             except (RemoteError, ValueError, TypeError) as exc:
                 log.warning("%s: reading joints from %s with %s failed: %s", self.name, source,
-                            ", ".join([*quantities, *keys_]) or "positions only", exc)
+                            ", ".join(quantities) or "positions only", exc)
                 error = exc
                 continue
             return reader

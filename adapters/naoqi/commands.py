@@ -194,5 +194,6 @@ class NaoqiCommands:
 
     def restore_awareness(self) -> None:
         if self._awareness_paused and not self._paused_before and self.link.connected:
-            self.link.call("ALBasicAwareness", "resumeAwareness", timeout_ms=RESTORE_TIMEOUT_MS)
+            self.link.call("ALBasicAwareness", "resumeAwareness", timeout_ms=RESTORE_TIMEOUT_MS,
+                           interruptible=False)  # called while stopping: bounded by its own timeout
         self._awareness_paused = False

@@ -1,8 +1,10 @@
 """One libqi session to a robot: connect with a deadline, call with a deadline,
 notice the loss, connect again on the same session.
 
-Every call goes out with ``_async=True`` and is waited for with a timeout, so
-nothing the adapter does can hang on a robot that stopped answering."""
+Every call goes out with ``_async=True`` — also connecting and disconnecting
+signals, unsubscribing and closing — and is waited for with a bound, so nothing
+the adapter does can hang on a robot that stopped answering (frozen, or a link
+that vanished without closing)."""
 
 from __future__ import annotations
 
@@ -16,6 +18,8 @@ from .config import NaoqiConfig
 
 log = logging.getLogger(__name__)
 
+DROP_MS = 500  # a drop waits this long at most for the robot to hear goodbye
+POLL_S = 0.05  # a wait on the robot looks at ``stopping`` this often
 LINK_ERRORS = ("Session closed", "Socket is not connected", "no answer within", "disconnected", "not connected")
 
 
@@ -57,83 +61,104 @@ class AuthenticatorFactory:
 
 
 class Link:
-    """A qi session to ``config.endpoint``; ``on_lost(reason)`` runs when it breaks."""
+    """A qi session to ``config.endpoint``; ``on_lost(reason)`` runs when it breaks.
 
-    def __init__(self, config: NaoqiConfig, on_lost: Callable[[str], None]) -> None:
+    Every wait on the robot is bounded, and ends early once ``stopping`` is set:
+    calls by their timeout, a drop (unsubscribing, closing) by ``DROP_MS``. Each
+    connection gets a session of its own, so nothing left of a dead link (a
+    connect or a goodbye the robot never answered) stands in the next one's way."""
+
+    def __init__(self, config: NaoqiConfig, on_lost: Callable[[str], None],
+                 stopping: threading.Event | None = None) -> None:
         try:
             import qi
         except ImportError:
             raise ImportError("the naoqi adapter needs libqi: pip install 'sonibus[naoqi]' (PyPI qi 3.1.5)") from None
+        self._qi = qi
         self.url = config.endpoint
         self.timeout_ms = int(config.connect_timeout_s * 1000)
         self.on_lost = on_lost
+        self.stopping = stopping if stopping is not None else threading.Event()
         qi.logging.setLevel(qi.logging.ERROR)  # libqi's chatter on stderr; our own log says what matters
-        self.session = qi.Session()
-        if config.password:
-            self.session.setClientAuthenticatorFactory(AuthenticatorFactory(config.user, config.password))
+        self._factory = AuthenticatorFactory(config.user, config.password) if config.password else None
+        self.session: Any = None
         self.connected = False
+        self._generation = 0  # which session is current: signals of older ones are ignored
         self._lock = threading.Lock()
         self._services: dict[str, Any] = {}
         self._signals: list[tuple[Any, int]] = []
         self._kept: list[Any] = []
-        self._watch = self.session.disconnected.connect(self._disconnected)
 
     # -- connecting ---------------------------------------------------------------
 
-    def connect(self, stopping: threading.Event) -> None:
-        """Connect (again), or raise ``LinkDown``; gives up at once when ``stopping`` is set."""
+    def connect(self) -> None:
+        """Connect (again) on a new session, or raise ``LinkDown``; gives up at once when stopping."""
         self.drop()
-        future = self.session.connect(self.url, _async=True)
-        deadline = time.monotonic() + self.timeout_ms / 1000.0
-        while not future.isFinished():
-            if stopping.is_set():
-                raise LinkDown("stopping")
-            if time.monotonic() > deadline:
-                raise LinkDown(f"no answer within {self.timeout_ms / 1000.0:g} s")
-            future.wait(50)
-        if future.hasError():
-            raise LinkDown(one_line(future.error()))
-        self.connected = True
+        session = self._qi.Session()
+        if self._factory is not None:
+            session.setClientAuthenticatorFactory(self._factory)
+        with self._lock:
+            self._generation += 1
+            generation, self.session = self._generation, session
+        session.disconnected.connect(lambda reason="": self._disconnected(reason, generation))
+        self.wait(session.connect(self.url, _async=True), "connect")
+        with self._lock:
+            if self._generation == generation:
+                self.connected = True
 
     def drop(self) -> None:
-        """Forget the current connection (signals, services) and close the socket."""
+        """Forget the current connection (signals, services) and close it, waiting at most
+        ``DROP_MS`` in all: a robot that stopped answering holds up neither a stop nor the
+        next connection. A link already lost is closed without a word to the robot."""
         with self._lock:
-            self.connected = False
+            live, self.connected = self.connected, False
+            session, self.session = self.session, None
             signals, self._signals, self._kept, self._services = self._signals, [], [], {}
-        for signal, link_id in signals:
+            self._generation += 1
+        if session is None:
+            return
+        deadline = time.monotonic() + DROP_MS / 1000.0
+        goodbyes = []
+        for signal, link_id in signals if live else ():
             try:
-                signal.disconnect(link_id)
+                goodbyes.append(signal.disconnect(link_id, _async=True))
             except Exception as exc:  # the link is gone already
                 log.debug("disconnect signal: %s", exc)
         try:
-            self.session.close()
+            goodbyes.append(session.close(_async=True))  # fails whatever still waits on this session
         except Exception as exc:
             log.debug("close session: %s", exc)
+        for future in goodbyes:
+            if not future.isFinished():
+                future.wait(max(0, int((deadline - time.monotonic()) * 1000)))
 
     def close(self) -> None:
         """Drop the connection for good (the adapter stops)."""
         self.drop()
-        try:
-            self.session.disconnected.disconnect(self._watch)
-        except Exception as exc:
-            log.debug("disconnect watch: %s", exc)
 
-    def _disconnected(self, reason: Any = "") -> None:
+    def _disconnected(self, reason: Any, generation: int) -> None:
         with self._lock:
+            if generation != self._generation:  # a close of our own, or an earlier session's signal
+                return
             was, self.connected = self.connected, False
-        if was:  # a close of our own, or a stale signal of an earlier connection, is not a loss
+        if was:
             self.on_lost(one_line(reason) if reason else "disconnected")
 
     def lost(self, reason: str) -> None:
         """Mark the link broken after a failed call (the signal may come later, or never)."""
-        self._disconnected(reason)
+        with self._lock:
+            generation = self._generation
+        self._disconnected(reason, generation)
 
     # -- calling --------------------------------------------------------------------
 
     def service(self, name: str) -> Any:
         proxy = self._services.get(name)
         if proxy is None:
-            proxy = self.wait(self.session.service(name, _async=True), f"service {name}")
+            session = self.session
+            if session is None:
+                raise LinkDown("not connected")
+            proxy = self.wait(session.service(name, _async=True), f"service {name}")
             self._services[name] = proxy
         return proxy
 
@@ -146,21 +171,30 @@ class Link:
         except AttributeError:
             raise RemoteError(f"{service} has no method {method}") from None
 
-    def call(self, service: str, method: str, *args: Any, timeout_ms: int | None = None) -> Any:
+    def call(self, service: str, method: str, *args: Any, timeout_ms: int | None = None,
+             interruptible: bool = True) -> Any:
         """Call and wait (at most the connect timeout); ``RemoteError`` or ``LinkDown``."""
-        return self.wait(self.start(service, method, *args), f"{service}.{method}", timeout_ms)
+        return self.wait(self.start(service, method, *args), f"{service}.{method}", timeout_ms, interruptible)
 
-    def wait(self, future: Any, what: str, timeout_ms: int | None = None) -> Any:
+    def wait(self, future: Any, what: str, timeout_ms: int | None = None, interruptible: bool = True) -> Any:
+        """The value of ``future``; ``LinkDown`` after ``timeout_ms`` (default: the connect timeout)
+        or once stopping (unless not ``interruptible``: a last call on the way out)."""
         timeout_ms = timeout_ms or self.timeout_ms
-        try:
-            return future.value(timeout_ms)
-        except RuntimeError as exc:
-            message = one_line(exc)
-            if message.startswith("Future timeout"):
-                message = f"no answer within {timeout_ms / 1000:g} s"
-            if any(m in message for m in LINK_ERRORS) or not self.session.isConnected():
-                raise LinkDown(f"{what}: {message}") from None
-            raise RemoteError(f"{what}: {message}") from None
+        deadline = time.monotonic() + timeout_ms / 1000.0
+        while not future.isFinished():
+            if interruptible and self.stopping.is_set():
+                raise LinkDown(f"{what}: stopping")
+            left = deadline - time.monotonic()
+            if left <= 0:
+                raise LinkDown(f"{what}: no answer within {timeout_ms / 1000:g} s")
+            future.wait(max(1, int(min(left, POLL_S) * 1000)))
+        if not future.hasError():
+            return future.value()
+        message = one_line(future.error())
+        session = self.session
+        if any(m in message for m in LINK_ERRORS) or session is None or not session.isConnected():
+            raise LinkDown(f"{what}: {message}")
+        raise RemoteError(f"{what}: {message}")
 
     def try_call(self, service: str, method: str, *args: Any) -> Any:
         """A call whose failure only means "not available here" (None)."""
@@ -175,10 +209,11 @@ class Link:
             proxy = getattr(self.service(service), signal)
         except AttributeError:
             raise RemoteError(f"{service} has no signal {signal}") from None
-        self._signals.append((proxy, proxy.connect(callback)))
+        self._signals.append((proxy, self.wait(proxy.connect(callback, _async=True), f"{service}.{signal}")))
 
     def subscribe(self, key: str, callback: Callable[[Any], None]) -> None:
         """``ALMemory.subscriber(key).signal``; ``RemoteError`` where NAOqi refuses it."""
         subscriber = self.call("ALMemory", "subscriber", key)
         self._kept.append(subscriber)  # the subscription lives as long as this object
-        self._signals.append((subscriber.signal, subscriber.signal.connect(callback)))
+        link_id = self.wait(subscriber.signal.connect(callback, _async=True), f"subscriber({key}).signal")
+        self._signals.append((subscriber.signal, link_id))

@@ -33,12 +33,20 @@ class Robot:
     behaviors: tuple[str, ...]
     source: str                    # almemory | motion: where joint positions are read
     body_type: str = ""            # RobotConfig/Body/Type, e.g. "Pepper"
+    name: str = ""                 # the robot's own name (ALSystem.robotName), e.g. "Juliette"
     version: str = ""              # NAOqi version, when the robot tells it
     cycle_ms: float | None = None  # DCM/CycleTime
     differences: tuple[str, ...] = ()  # limits that differ from the reference model
 
+    @property
+    def title(self) -> str:
+        """Model and name, as a log line names the robot: ``Pepper 'Juliette'``."""
+        model = self.body_type or self.model.name
+        return f"{model} '{self.name}'" if self.name else model
+
     def info(self) -> dict[str, Any]:
-        return {"body_type": self.body_type, "version": self.version, "cycle_ms": self.cycle_ms,
+        return {"body_type": self.body_type, "robot_name": self.name, "version": self.version,
+                "cycle_ms": self.cycle_ms,
                 "source": self.source, "limits_differ": list(self.differences)}
 
 
@@ -53,7 +61,8 @@ def discover(link: Link, config: NaoqiConfig) -> Robot:
     source = config.source if config.source != "auto" else choose_source(name, version, base)
     cycle = _memory(link, "DCM/CycleTime")
     behaviors = tuple(sorted(link.call("ALBehaviorManager", "getInstalledBehaviors")))
-    return Robot(model, behaviors, source, str(body_type), version,
+    robot_name = link.try_call("ALSystem", "robotName")
+    return Robot(model, behaviors, source, str(body_type), str(robot_name or ""), version,
                  float(cycle) if isinstance(cycle, int | float) else None, tuple(differences))
 
 

@@ -108,12 +108,14 @@ class RobotEvents:
             self._changed(key, value)
 
     def poll(self, values: dict[str, Any]) -> None:
-        """The polled keys of one frame: an event for each that turned on (the first frame sets the baseline).
-        Two texts back to back can look like one; a silent robot ends whatever was counted as spoken."""
+        """The polled keys of one frame: an event for each that turned on (the first frame sets the baseline;
+        None is a key not raised yet). Two texts back to back can look like one; a silent robot ends whatever
+        was counted as spoken."""
         previous, self._last = self._last, dict(values)
         if previous:
             for key in (DONE, STARTED):  # a done before the next start when both flipped
-                if values.get(key) != previous.get(key):
+                appeared = previous.get(key) is None  # raised for the first time: a done then ends
+                if values.get(key) != previous.get(key) and not (appeared and key == DONE):  # what we missed
                     self._changed(key, values.get(key))
             if values.get(DONE) and not values.get(STARTED):
                 for text in self.speech.idle():

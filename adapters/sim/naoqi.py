@@ -48,13 +48,16 @@ class FakeNaoqiConfig:
     delay_ms: float = 0.0                  # added to every call, like a network
     almemory_period_ms: float = 0.0        # ALMemory refreshed this often (NAO V6: 500); 0: every cycle
     naoqi_version: str = "2.5.10.7"        # what ALSystem.systemVersion() answers (NAO V6: 2.8.x)
+    robot_name: str = "sonibus-sim"        # what ALSystem.robotName() answers
+    speech_keys: Literal["at-start", "after-first-say"] = "at-start"  # when ALTextToSpeech/Text* exist in ALMemory
+    freeze_after_s: float = 0.0            # stop answering calls this long after start (socket kept open); 0: never
 
     def __post_init__(self) -> None:
         if self.model not in models():
             raise bad("model", f"'{self.model}' is unknown — known models: {', '.join(models())}")
         if not self.listen.startswith(("tcp://", "tcps://")):
             raise bad("listen", f"'{self.listen}' is not a URL like tcp://127.0.0.1:9559")
-        for key in ("delay_ms", "almemory_period_ms"):
+        for key in ("delay_ms", "almemory_period_ms", "freeze_after_s"):
             if getattr(self, key) < 0:
                 raise bad(key, "must be 0 or more")
 
@@ -73,6 +76,8 @@ class FakeNaoqi:
             random.Random(9559).shuffle(names)
         self.body_names = tuple(names)
         self._stop = threading.Event()
+        self.answering = threading.Event()   # cleared: every call waits (a frozen robot)
+        self.answering.set()
         self._thread: threading.Thread | None = None
         self._session: Any = None
         self.services: dict[str, Any] = {}
@@ -84,8 +89,9 @@ class FakeNaoqi:
     def start(self) -> FakeNaoqi:
         import qi
         self._refresh()
-        self.memory.update({"RobotConfig/Body/Type": BODY_TYPES[self.config.model], "DCM/CycleTime": 10,
-                            "ALTextToSpeech/TextStarted": 0, "ALTextToSpeech/TextDone": 1})
+        self.memory.update({"RobotConfig/Body/Type": BODY_TYPES[self.config.model], "DCM/CycleTime": 10})
+        if self.config.speech_keys == "at-start":  # else the first speech event creates them, as on a robot
+            self.memory.update({"ALTextToSpeech/TextStarted": 0, "ALTextToSpeech/TextDone": 1})
         qi.logging.setLevel(qi.logging.ERROR)  # libqi's chatter on stderr; our own log says what matters
         self._session = qi.Session()
         self._session.listenStandalone(self.config.listen)
@@ -96,8 +102,22 @@ class FakeNaoqi:
         self._thread.start()
         return self
 
+    def freeze(self) -> None:
+        """Stop answering: every call (and every call to come) waits, the connection stays open."""
+        log.info("fake NAOqi at %s: frozen", self.url)
+        self.answering.clear()
+
+    def resume(self) -> None:
+        self.answering.set()
+
+    def wait_answering(self) -> None:
+        """Hold a call while the robot is frozen (until it resumes or stops)."""
+        while not self.answering.wait(0.1) and not self._stop.is_set():
+            pass
+
     def stop(self) -> None:
         self._stop.set()
+        self.answering.set()
         if self._thread is not None:
             self._thread.join(2.0)
         if self._session is not None:
@@ -121,15 +141,19 @@ class FakeNaoqi:
     def _run(self) -> None:
         last = last_refresh = time.monotonic()
         period = self.config.almemory_period_ms / 1000.0
+        freeze_at = last + self.config.freeze_after_s if self.config.freeze_after_s else None
 
         def cycle(frame: int) -> None:
-            nonlocal last, last_refresh
+            nonlocal last, last_refresh, freeze_at
             tick = time.monotonic()
             self.engine.advance(time.time(), tick - last)
             last = tick
             if tick - last_refresh >= period:
                 last_refresh = tick
                 self._refresh()
+            if freeze_at is not None and tick >= freeze_at:
+                freeze_at = None
+                self.freeze()
 
         Pacer(self.config.rate_hz).run(cycle, self._stop)
 

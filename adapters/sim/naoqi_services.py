@@ -26,9 +26,11 @@ def f32(value: float) -> float:
 
 
 def delayed(method: Callable[..., Any]) -> Callable[..., Any]:
-    """Every call costs the endpoint's simulated network delay; engine refusals become remote errors."""
+    """Every call costs the endpoint's simulated network delay (and waits while it is frozen);
+    engine refusals become remote errors."""
     @functools.wraps(method)
     def call(self: Any, *args: Any) -> Any:
+        self.fake.wait_answering()
         if self.fake.delay_s:
             time.sleep(self.fake.delay_s)
         try:
@@ -243,6 +245,10 @@ class ALSystem(_Service):
     @delayed
     def systemVersion(self) -> str:
         return self.fake.config.naoqi_version
+
+    @delayed
+    def robotName(self) -> str:
+        return self.fake.config.robot_name
 
 
 @qi.multiThreaded()
