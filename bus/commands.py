@@ -24,6 +24,7 @@ from .errors import CommandError
 from .robot import RobotModel
 
 _RANGE_CHECKS = {"minimum", "maximum", "exclusiveMinimum", "exclusiveMaximum"}
+LIMIT_TOLERANCE = 1e-5  # a limit as published (2.08567, 5 decimals) passes against the robot's float32 one
 
 
 @dataclass(frozen=True)
@@ -90,9 +91,10 @@ def _check_against_model(verb: str, args: dict[str, Any], model: RobotModel,
         for name, angle in zip(names, angles, strict=True):
             _known("joint", name, model.joint_names, "unknown_joint")
             spec = model.joint(name)
-            if not spec.min <= angle <= spec.max:
-                raise CommandError("out_of_range", f"joints/set: {name} = {angle} is outside its limits "
-                                   f"[{spec.min}, {spec.max}] {spec.unit}")
+            if not spec.min - LIMIT_TOLERANCE <= angle <= spec.max + LIMIT_TOLERANCE:
+                raise CommandError("out_of_range", f"joints/set: {name} = {angle:.6g} is outside its limits "
+                                   f"[{spec.min:.6g}, {spec.max:.6g}] {spec.unit}")
+        args["angles"] = [model.joint(n).clamp(a) for n, a in zip(names, angles, strict=True)]
     elif verb == "stiffness":
         groups = {"Body", *(j.chain for j in model.joints), *model.joint_names}
         for name in args["names"]:

@@ -5,9 +5,10 @@ from __future__ import annotations
 
 import pytest
 
-from sonibus.bus import CommandError, load_model, send_command
+from sonibus.bus import CommandError, load_model, robot_info, send_command
 
 from ..conftest import wait_for
+from .test_stream import f32
 
 NOD = "animations/Stand/Gestures/Yes_1"
 SKY = "animations/Stand/Gestures/ShowSky_1"
@@ -145,3 +146,35 @@ def test_a_robot_error_is_a_failed_reply_on_one_line(rig, monkeypatch):
         send_command(r.bus, "pepper", "behavior/run", {"name": NOD})
     assert failed.value.code == "failed" and "\n" not in failed.value.message
     assert "Behavior not found" in failed.value.message and NOD in failed.value.message
+
+
+@pytest.mark.parametrize(("subscriber", "mode"), [("ok", "subscriber"), ("invalid-signature", "polling")])
+def test_speech_keys_raised_only_by_the_first_say(rig, subscriber, mode):
+    """A robot that has not spoken since it booted has no ALTextToSpeech/Text* keys yet: speech
+    events still come once it speaks, and joints keep coming from ALMemory throughout."""
+    r = rig(fake={"speech_keys": "after-first-say", "subscriber": subscriber})
+    assert "ALTextToSpeech/TextDone" not in r.fake.memory
+    naoqi = robot_info(r.bus, "pepper")["naoqi"]
+    assert (naoqi["source"], naoqi["speech_events"]) == ("almemory", mode)
+    for text in ("first words", "second words"):
+        send_command(r.bus, "pepper", "say", {"text": text, "speed": 300})
+        r.events.wait("speech", timeout=5.0, text=text, state="started")
+        r.events.wait("speech", timeout=5.0, text=text, state="done")
+    naoqi = robot_info(r.bus, "pepper")["naoqi"]
+    assert (naoqi["source"], naoqi["speech_events"]) == ("almemory", mode)
+    r.fake.engine.joints_set(["HeadYaw"], [0.25], 1.0)
+    r.joints.wait_pose({"HeadYaw": f32(0.25)})
+
+
+def test_the_published_limit_is_accepted_and_errors_show_rounded_numbers(rig):
+    """docs give HeadYaw's limit as 2.08567; the robot's getLimits says 2.085669994354248 (float32)."""
+    r = rig()
+    for limit in (2.08567, -2.08567):
+        assert send_command(r.bus, "pepper", "joints/set", {"names": ["HeadYaw"], "angles": [limit],
+                                                             "speed": 1.0}) == {}
+        wait_for(lambda: not r.fake.engine.body.moving(), what="the head to get there")
+        assert abs(r.fake.engine.body.pose()["HeadYaw"]) <= f32(2.08567)  # clamped to the robot's own limit
+    with pytest.raises(CommandError) as refused:
+        send_command(r.bus, "pepper", "joints/set", {"names": ["HeadYaw"], "angles": [2.09]})
+    assert refused.value.code == "out_of_range"
+    assert "HeadYaw = 2.09 is outside its limits [-2.08567, 2.08567] rad" in refused.value.message
