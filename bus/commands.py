@@ -92,8 +92,8 @@ def _check_against_model(verb: str, args: dict[str, Any], model: RobotModel,
             _known("joint", name, model.joint_names, "unknown_joint")
             spec = model.joint(name)
             if not spec.min - LIMIT_TOLERANCE <= angle <= spec.max + LIMIT_TOLERANCE:
-                raise CommandError("out_of_range", f"joints/set: {name} = {angle:.6g} is outside its limits "
-                                   f"[{spec.min:.6g}, {spec.max:.6g}] {spec.unit}")
+                raise CommandError("out_of_range", f"joints/set: {name} = {round(angle, 6)} is outside its limits "
+                                   f"[{round(spec.min, 6)}, {round(spec.max, 6)}] {spec.unit}")
         args["angles"] = [model.joint(n).clamp(a) for n, a in zip(names, angles, strict=True)]
     elif verb == "stiffness":
         groups = {"Body", *(j.chain for j in model.joints), *model.joint_names}
