@@ -11,8 +11,8 @@ import pytest
 from sonibus import schemas
 from sonibus.bus import CommandError, robot_info, send_command
 
-from ..conftest import free_port, wait_for
-from .conftest import attach
+from ..conftest import SONIBUS, free_port, wait_for
+from .conftest import attach, toml_node
 
 NOD = "animations/Stand/Gestures/Yes_1"
 
@@ -86,3 +86,15 @@ def test_stop_is_prompt_connected_retrying_and_mid_connect(net, fakes):
                 rig.adapter.stop()
                 assert time.monotonic() - started < 1.0, rig.name
                 assert rig.adapter.state == "stopped"
+
+
+def test_the_connection_line_names_the_robot_at_the_default_level(net, fakes, spawn, tmp_path):
+    fake = fakes(robot_name="Juliette")
+    show = tmp_path / "show.toml"
+    show.write_text(toml_node("pepper", adapter="naoqi", url=fake.url))
+    robot = spawn(SONIBUS, "run", str(show), *net.cli_args(), collect=True, merge=True)  # no -v
+    lines = wait_for(lambda: [line for line in robot.lines if "connected to" in line], timeout=20.0,
+                     what="the connection line", explain=lambda: "\n".join(robot.lines))
+    assert lines[0].startswith(f"sonibus: INFO: pepper: connected to Pepper 'Juliette' at {fake.url} "
+                               "(NAOqi 2.5.10.7): 17 joints from almemory"), lines
+    assert robot.stop()[0] == 130

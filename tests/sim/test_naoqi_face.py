@@ -104,3 +104,28 @@ def test_as_a_node_and_bad_options(net):
         FakeNaoqiConfig(listen="127.0.0.1:9559")
     with pytest.raises(ConfigError, match="model"):
         FakeNaoqiConfig(model="asimo")
+
+
+def test_speech_keys_can_appear_only_with_the_first_speech(endpoint):
+    _fake, session = endpoint(speech_keys="after-first-say")
+    memory = session.service("ALMemory")
+    with pytest.raises(RuntimeError, match="key not found"):
+        memory.getListData(["ALTextToSpeech/TextStarted", "ALTextToSpeech/TextDone"])
+    session.service("ALTextToSpeech").say("hi")  # returns once spoken
+    assert memory.getListData(["ALTextToSpeech/TextStarted", "ALTextToSpeech/TextDone"]) == [0, 1]
+
+
+def test_a_frozen_robot_keeps_its_socket_and_answers_nothing_until_resumed(endpoint):
+    fake, session = endpoint(freeze_after_s=0.3)
+    memory = session.service("ALMemory")
+    assert memory.getData("DCM/CycleTime") == 10
+    wait_for(lambda: not fake.answering.is_set(), what="the robot to freeze by itself")
+    pending = memory.getData("DCM/CycleTime", _async=True)
+    assert pending.wait(300) == qi.FutureState.Running and session.isConnected()
+    fake.resume()
+    assert pending.value(2000) == 10
+    fake.freeze()
+    assert not memory.getData("DCM/CycleTime", _async=True).isFinished()
+    assert FakeNaoqiConfig(freeze_after_s=0).freeze_after_s == 0
+    with pytest.raises(ConfigError, match="freeze_after_s"):
+        FakeNaoqiConfig(freeze_after_s=-1)
