@@ -41,8 +41,8 @@ def test_a_truncated_file_points_to_recover(tmp_path, recorded, command):
     path = tmp_path / "cut.mcap"
     data = recorded[0].read_bytes()
     path.write_bytes(data[: len(data) // 2])
-    fails(tmp_path, command, path, why=f"is truncated: it was not closed cleanly (a killed recorder, an unfinished "
-                                       f"copy); 'sonibus recover {path}'")
+    fails(tmp_path, command, path, why=f"is truncated: it was not closed cleanly (a killed recorder, a full disk, "
+                                       f"an unfinished copy); 'sonibus recover {path}'")
 
 
 @pytest.mark.parametrize("command", sorted(READERS))
