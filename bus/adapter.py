@@ -26,8 +26,9 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any, ClassVar
 
-from . import codec, keys, presence
+from . import codec, keys
 from .node import Bus
+from .ownership import Ownership
 
 log = logging.getLogger(__name__)
 
@@ -122,10 +123,14 @@ class Adapter:
             described["failure"] = self.failure
         return described
 
-    def claim_robot(self, robot: str, hint: str = "stop that node or give this robot another name") -> None:
-        """Become the owner of ``robot`` until stopped; ``OwnershipError`` if it has one."""
-        self.own(presence.claim(self.bus, robot, hint))
+    def claim_robot(self, robot: str, hint: str = "stop that node or give this robot another name") -> Ownership:
+        """Become the owner of ``robot`` until stopped; ``OwnershipError`` if it has one.
+        The ``Ownership`` says whether this node may act (it stands by while an earlier
+        claim of the robot is on the bus) and publishes its frames."""
+        ownership = self.own(Ownership(self.bus, robot, hint))
+        ownership.take()
         self.robots.append(robot)
+        return ownership
 
     def count(self, kind: str, n: int = 1) -> None:
         """Add ``n`` to counter ``kind`` of ``stats`` (safe from any thread)."""

@@ -22,11 +22,12 @@ from importlib.metadata import entry_points
 from typing import Any, TextIO
 
 from .. import schemas
-from . import codec, config, keys, registry, runner
+from . import codec, config, keys, ownership, registry, runner
 from .client import robot_info, send_command, wait_for_robot
 from .errors import CommandError, ConfigError, RobotNotFound, SonibusError
 from .node import Bus
-from .session import MODES, BusConfig, check_endpoint, check_option, open_session
+from .presence import SILENCE_S
+from .session import MODES, BusConfig, check_endpoint, check_option, discover, open_session
 
 log = logging.getLogger(__name__)
 
@@ -307,10 +308,12 @@ def cmd_adapters(args: argparse.Namespace, env: Environment) -> Exit:
 
 
 def cmd_nodes(args: argparse.Namespace, env: Environment) -> Exit:
-    with open_session(bus_config(args)) as session:
+    cfg = bus_config(args)
+    with open_session(cfg) as session:
         bus = Bus(session)
+        reached = discover(session)
         nodes = bus.alive(f"{keys.NODES}/**", timeout=args.timeout)
-        robots = bus.alive(f"{keys.ROBOTS}/*", timeout=args.timeout)
+        robots = ownership.claims(bus.alive(keys.robot_token(), timeout=args.timeout))
         described = {(d.get("host"), d.get("node")): d for d in bus.query(f"{keys.NODES}/**", timeout=args.timeout)}
         now = time.time()
         env.say(f"{len(nodes)} node(s)")
@@ -323,13 +326,32 @@ def cmd_nodes(args: argparse.Namespace, env: Environment) -> Exit:
             failed = f"  {state.upper()}: {about.get('failure', '')}" if state != "running" else ""
             env.say(f"  node  {node:<16} on {host:<12} {about.get('adapter', '?'):<12}{since}{owns}{failed}")
         env.say(f"{len(robots)} robot(s)")
-        for key in robots:
-            name = key[len(keys.ROBOTS) + 1:]
+        for name, claims in robots.items():
             info = robot_info(bus, name, timeout=args.timeout) or {}
-            owner = info.get("owner", {})
+            owner, standing_by = claims[0], claims[1:]
+            conflict = "".join(f"  CONFLICT: {c.node} on {c.host} stands by" for c in standing_by)
             env.say(f"  robot {name:<16} {info.get('model', '?'):<8} {info.get('rate_hz', 0):g} frames/s  "
-                    f"owned by {owner.get('node', '?')} on {owner.get('host', '?')}")
+                    f"owned by {owner.node} on {owner.host}{conflict}")
+        if not nodes:
+            _hint(env, reach_hint(cfg, reached, "no node answered"))
     return Exit.OK
+
+
+def reach_hint(cfg: BusConfig, reached: Sequence[str], what: str) -> str:
+    """Why a one-shot command may have found nothing: whom it reached, and what to check."""
+    where = (f"mode {cfg.mode}, multicast {'on' if cfg.multicast else 'off'}, "
+             f"connect {', '.join(cfg.connect) or 'none'}, namespace '{cfg.namespace}'")
+    if not reached:
+        return (f"{what}: this command reached no peer or router ({where}) — is sonibus running on another "
+                f"machine of this network? Give --connect tcp/<its address>:<port>, or --config FILE --host NAME "
+                f"to join as a machine of the installation")
+    return (f"{what}, though this command reached {len(reached)} peer(s)/router(s) ({where}) — check the "
+            f"namespace (--namespace, or --config FILE --host NAME) and whether access control on the robot's "
+            f"machine lets this machine's user see it")
+
+
+def _hint(env: Environment, text: str) -> None:
+    print(f"sonibus: hint: {text}", file=env.stderr, flush=True)
 
 
 def _duration(seconds: float) -> str:
@@ -343,12 +365,18 @@ def _duration(seconds: float) -> str:
 def cmd_echo(args: argparse.Namespace, env: Environment) -> Exit:
     deadline = time.monotonic() + args.duration if args.duration else None
     seen = 0
-    with open_session(bus_config(args)) as session:
-        subscriber, queue = Bus(session).subscribe(args.keyexpr, 65536)
+    cfg = bus_config(args)
+    with open_session(cfg) as session:
+        bus = Bus(session)
+        subscriber, queue = bus.subscribe(args.keyexpr, 65536)
+        hint_at = time.monotonic() + SILENCE_S
         try:
             while not env.stop.is_set() and (args.count is None or seen < args.count):
                 if deadline is not None and time.monotonic() >= deadline:
                     break
+                if not seen and time.monotonic() >= hint_at:  # said once, while it goes on waiting
+                    _hint(env, _echo_hint(bus, cfg, args.keyexpr))
+                    hint_at = float("inf")
                 item = queue.get(timeout=0.2)
                 if item is None:
                     continue
@@ -359,17 +387,44 @@ def cmd_echo(args: argparse.Namespace, env: Environment) -> Exit:
                     shown = repr(payload)
                 env.say(f"{key} {shown}")
                 seen += 1
+            if not seen and hint_at < float("inf"):  # ended before the hint was due
+                _hint(env, _echo_hint(bus, cfg, args.keyexpr))
         finally:
             subscriber.undeclare()
     return Exit.OK
 
 
+def _echo_hint(bus: Bus, cfg: BusConfig, pattern: str) -> str:
+    robots = list(ownership.claims(bus.alive(keys.robot_token(), timeout=0.5)))
+    what = f"nothing matched '{pattern}'"
+    if not robots:
+        return reach_hint(cfg, discover(bus.session), f"{what} and no robot is on the bus")
+    shown = ", ".join(robots[:8])
+    example = robots[0]
+    return (f"{what} — robots on the bus: {shown}; their keys: {example}/frame, {example}/joints/<Joint> "
+            f"(HeadYaw, ...), {example}/events/<kind>, {example}/derived/<feature>/<name>: check the spelling, "
+            f"or whether access control on the robot's machine lets this machine's user see them")
+
+
 def cmd_send(args: argparse.Namespace, env: Environment) -> Exit:
     request = command_args(args.verb, args.args)
-    with open_session(bus_config(args)) as session:
+    cfg = bus_config(args)
+    with open_session(cfg) as session:
         bus = Bus(session)
-        wait_for_robot(bus, args.robot, min(2.0, args.timeout))  # not found after this: the command says so
-        result = send_command(bus, args.robot, args.verb, request, timeout=args.timeout)
+        reached = discover(session)
+        present = wait_for_robot(bus, args.robot, min(2.0, args.timeout))  # not found after this: the command says so
+        try:
+            result = send_command(bus, args.robot, args.verb, request, timeout=args.timeout)
+        except RobotNotFound as exc:
+            if present:  # its token is here, its commands are not: refused on the way
+                user = f" (user '{cfg.user}')" if cfg.user else ""
+                raise CommandError("refused", f"robot '{args.robot}' is on the bus but nothing answered "
+                                              f"'{args.verb}': access control on the robot's machine refuses "
+                                              f"commands from this machine{user}") from None
+            if not reached:
+                exc.message = f"{exc.message} — {reach_hint(cfg, reached, 'nothing found')}"
+                exc.args = (exc.message,)
+            raise
     env.say(json.dumps(result))
     return Exit.OK
 

@@ -30,21 +30,26 @@ def ask(bus: Bus, robot: str, verb: str, args: dict[str, Any], done: Callable[[O
     (``robot_not_found``, ``timeout``, or the robot's refusal), exactly once."""
     pending = _Pending(robot, verb, done, timeout)
     try:
+        # Every answer, not one per key: a node standing by for the robot's owner answers too (``conflict``).
         bus.session.get(keys.command(robot, verb), zenoh.handlers.Callback(pending.on_reply, pending.on_end),
-                        payload=codec.encode(args), encoding=codec.ENCODING, timeout=timeout)
+                        payload=codec.encode(args), encoding=codec.ENCODING, timeout=timeout,
+                        consolidation=zenoh.ConsolidationMode.NONE)
     except Exception as exc:  # a closed session, a key Zenoh refuses
         pending.finish(CommandError("internal", f"{verb}: the bus refused the query: {exc}"))
 
 
 class _Pending:
-    """The first answer wins; a query that ends unanswered is ``timeout`` when it
-    lasted about ``timeout`` (Zenoh then reports "Timeout" as an error reply), else
-    ``robot_not_found`` (nobody serves the key: it ends at once)."""
+    """The first answer wins, except a ``conflict`` refusal (a node standing by for the
+    robot's owner), which counts only if nothing else answers; a query that ends
+    unanswered is ``timeout`` when it lasted about ``timeout`` (Zenoh then reports
+    "Timeout" as an error reply), else ``robot_not_found`` (nobody serves the key: it
+    ends at once)."""
 
     def __init__(self, robot: str, verb: str, done: Callable[[Outcome], None], timeout: float) -> None:
         self.robot, self.verb, self.done, self.timeout = robot, verb, done, timeout
         self.started = time.monotonic()
         self.error = ""
+        self.standing_by: CommandError | None = None
         self._finished = False
         self._lock = threading.Lock()
 
@@ -60,11 +65,17 @@ class _Pending:
             self.finish(message.get("result") or {})
             return
         error = message.get("error") or {}
-        self.finish(CommandError(str(error.get("code", "internal")),
-                                 str(error.get("message", f"robot '{self.robot}' refused '{self.verb}'"))))
+        refusal = CommandError(str(error.get("code", "internal")),
+                               str(error.get("message", f"robot '{self.robot}' refused '{self.verb}'")))
+        if refusal.code == "conflict":
+            self.standing_by = refusal
+        else:
+            self.finish(refusal)
 
     def on_end(self) -> None:
-        if time.monotonic() - self.started >= self.timeout * 0.9:
+        if self.standing_by is not None:
+            self.finish(self.standing_by)
+        elif time.monotonic() - self.started >= self.timeout * 0.9:
             self.finish(CommandError("timeout", f"robot '{self.robot}' did not answer '{self.verb}' "
                                                 f"within {self.timeout:g} s"))
         elif self.error:

@@ -56,8 +56,10 @@ def node_token(host: str, node: str) -> str:
     return f"{NODES}/{host}/{node}"
 
 
-def robot_token(robot: str) -> str:
-    return f"{ROBOTS}/{robot}"
+def robot_token(robot: str = "*") -> str:
+    """The key expression of every owner's token of ``robot`` (``sonibus/robots/<robot>/<since>/<host>/<node>``,
+    ``bus/ownership.py``)."""
+    return f"{ROBOTS}/{robot}/**"
 
 
 @dataclass(frozen=True)

@@ -50,20 +50,13 @@ class RobotAdapter(Adapter):
         self._claim()
         self._open()
         self._gate = messages.Gate()
-        self._streams: dict[str, zenoh.Publisher] = {}
-        self._frames = self.own(self.bus.stream_publisher(keys.frame(self.robot)))
-        # Per-joint keys cost an encode and a put per joint: made only while someone subscribes to one.
-        interest = self.own(self.bus.session.declare_publisher(keys.joints(self.robot)))
-        self._joints_wanted = interest.matching_status.matching
-        self.own(interest.declare_matching_listener(lambda status: setattr(self, "_joints_wanted", status.matching)))
-        for name in self.model.joint_names:
-            self._joint_publisher(name)
+        self.ownership.declare_streams(self.model.joint_names)
         self.own(self.bus.serve(keys.info(self.robot), self._serve_info))
         self.own(self.bus.serve(keys.command(self.robot), self._serve_command))
         self.spawn(self._acquire, "acquire")
 
     def _claim(self) -> None:
-        self.claim_robot(self.robot)
+        self.ownership = self.claim_robot(self.robot)
 
     def _open(self) -> None:
         """Hook: connect to the robot and set ``self.model`` (and ``self.rate_hz``)."""
@@ -89,18 +82,11 @@ class RobotAdapter(Adapter):
             self.count("joints_left_out", len(left_out))
             self.warn("values", f"{self.robot}: {', '.join(left_out)} left out of frame {seq}: "
                                 f"not a finite value within ±{messages.MAX_VALUE:g}")
-        self._frames.put(codec.encode(message))
-        if self._joints_wanted:
-            for name, sample in messages.frame_samples(message):
-                self._joint_publisher(name).put(codec.encode(sample))
-
-    def _joint_publisher(self, joint: str) -> zenoh.Publisher:
-        publisher = self._streams.get(joint)
-        if publisher is None:  # also a joint the robot reports beyond its reference model
-            publisher = self._streams[joint] = self.own(self.bus.stream_publisher(keys.joint(self.robot, joint)))
-        return publisher
+        self.ownership.publish_frame(message)  # nothing while another owner keeps the robot
 
     def publish_event(self, kind: str, **fields: Any) -> None:
+        if not self.ownership.active:  # standing by for another owner: it speaks for the robot
+            return
         self.bus.put(keys.event(self.robot, kind), {"t": time.time(), "kind": kind, **fields})
 
     def behaviors(self) -> Sequence[str]:
@@ -147,7 +133,9 @@ class RobotAdapter(Adapter):
             self.publish_event("command", **event)
 
     def execute(self, verb: str, args: Any) -> dict[str, Any]:
-        """Validate and run one command; ``stop`` runs whatever its arguments."""
+        """Validate and run one command; ``stop`` runs whatever its arguments. A node that
+        stands by for another owner runs none (``conflict``)."""
+        self.ownership.check(verb)
         if verb == "stop":
             return self._cmd_stop() or {}
         command = commands.validate(verb, args, self.model, self.behaviors())

@@ -1,57 +1,148 @@
-"""Presence on the bus, from liveliness: who owns a robot, and knowing when a
-robot leaves or comes back.
+"""Presence on the bus, from liveliness: knowing when a robot leaves or comes
+back, and saying so when a robot is there but nothing of it arrives.
 
-A robot's owner holds the token ``sonibus/robots/<robot>`` for as long as it
-runs; Zenoh withdraws it when the process ends or its link is lost for longer
-than the transport lease, so watchers learn of a loss within that time.
+A robot's owner holds a token under ``sonibus/robots/<robot>/`` for as long as it
+runs (``bus/ownership.py``); Zenoh withdraws it when the process ends or its link
+is lost for longer than the transport lease, so watchers learn of a loss within
+that time. A robot is on the bus while any claim of it is.
 """
 
 from __future__ import annotations
 
+import logging
+import threading
 import time
 from collections.abc import Callable, Sequence
 
 import zenoh
 
 from . import codec, keys
-from .errors import OwnershipError
 from .node import Bus
+from .ownership import Claim
 from .queue import SampleQueue
 
+log = logging.getLogger(__name__)
 
-def claim(bus: Bus, robot: str, hint: str = "stop that node or give this robot another name") -> zenoh.LivelinessToken:
-    """The liveliness token that makes ``bus``'s node the owner of ``robot``;
-    ``OwnershipError`` naming the owner (and ``hint``) if it is taken."""
-    if bus.alive(keys.robot_token(robot)):
-        replies = bus.query(keys.info(robot), timeout=1.0)
-        owner = replies[0].get("owner", {}) if replies else {}
-        who = f"node '{owner.get('node')}' on host '{owner.get('host')}'" if owner else "another node"
-        raise OwnershipError(f"robot '{robot}' is already owned by {who}; {hint}")
-    return bus.token(keys.robot_token(robot))
+SILENCE_S = 3.0  # a robot on the bus whose frames do not arrive for this long is worth a warning
 
 
 def watch_robots(bus: Bus, on_change: Callable[[str, bool], None]) -> zenoh.Subscriber:
     """Call ``on_change(robot, alive)`` (on a Zenoh thread) for every robot already
-    on the bus and whenever one leaves or comes back."""
-    prefix = len(keys.ROBOTS) + 1
+    on the bus and whenever one leaves or comes back (its first claim appears, its
+    last one goes)."""
+    held: dict[str, set[str]] = {}
+    lock = threading.Lock()
 
     def changed(sample: zenoh.Sample) -> None:
-        on_change(str(sample.key_expr)[prefix:], sample.kind == zenoh.SampleKind.PUT)
+        claim = Claim.parse(str(sample.key_expr))
+        if claim is None:
+            return
+        with lock:
+            claims = held.setdefault(claim.robot, set())
+            before = bool(claims)
+            if sample.kind == zenoh.SampleKind.PUT:
+                claims.add(claim.key)
+            else:
+                claims.discard(claim.key)
+            after = bool(claims)
+        if before != after:
+            on_change(claim.robot, after)
 
-    return bus.session.liveliness().declare_subscriber(f"{keys.ROBOTS}/*", changed, history=True)
+    return bus.session.liveliness().declare_subscriber(keys.robot_token(), changed, history=True)
 
 
-def connection_events(bus: Bus, queue: SampleQueue, patterns: Sequence[str]) -> zenoh.Subscriber:
+class Presence:
+    """What ``connection_events`` declares, undeclared together by a sink's ``stop``."""
+
+    def __init__(self, bus: Bus, queue: SampleQueue, patterns: Sequence[str]) -> None:
+        self.bus, self.queue = bus, queue
+        self.wanted = [zenoh.KeyExpr(keys.expr(p)) for p in patterns]
+        self.frames = sorted({frame for p in patterns if (frame := _frame_key(p))})
+        self.on_bus: dict[str, float] = {}   # robot → since when (monotonic)
+        self.heard: dict[str, float] = {}    # robot → its last frame (monotonic)
+        self.warned: set[str] = set()
+        self._stop = threading.Event()
+        self._lock = threading.Lock()
+        self._entities = [bus.session.declare_subscriber(f, self._frame) for f in self.frames]
+        self._entities.append(watch_robots(bus, self._changed))
+        if self.frames:
+            self._thread = threading.Thread(target=self._watch, name=f"{bus.node}:silence", daemon=True)
+            self._thread.start()
+
+    def _changed(self, robot: str, alive: bool) -> None:
+        with self._lock:
+            if alive:
+                self.on_bus[robot] = time.monotonic()
+            else:
+                self.on_bus.pop(robot, None)
+                self.warned.discard(robot)
+        if any(w.intersects(zenoh.KeyExpr(keys.event(robot, "connection"))) for w in self.wanted):
+            event = {"t": time.time(), "kind": "connection", "state": "connected" if alive else "lost",
+                     "source": "presence"}
+            self.queue.put((keys.event(robot, "connection"), codec.encode(event)))
+
+    def _frame(self, sample: zenoh.Sample) -> None:
+        robot = str(sample.key_expr).partition("/")[0]
+        self.heard[robot] = time.monotonic()
+        if robot in self.warned:
+            with self._lock:
+                self.warned.discard(robot)
+            log.warning("%s: robot '%s': its data arrives now", self.bus.node, robot)
+
+    def silent(self, now: float | None = None) -> list[str]:
+        """Robots on the bus, selected by the patterns, of which no frame arrived for ``SILENCE_S``."""
+        now = time.monotonic() if now is None else now
+        with self._lock:
+            on_bus = dict(self.on_bus)
+        return sorted(robot for robot, since in on_bus.items()
+                      if now - max(since, self.heard.get(robot, since)) >= SILENCE_S
+                      and any(zenoh.KeyExpr(f).intersects(zenoh.KeyExpr(keys.frame(robot))) for f in self.frames))
+
+    def _watch(self) -> None:
+        while not self._stop.wait(0.5):
+            for robot in self.silent():
+                with self._lock:
+                    if robot in self.warned:
+                        continue
+                    self.warned.add(robot)
+                log.warning(silence_hint(self.bus.node, robot))
+
+    def undeclare(self) -> None:
+        self._stop.set()
+        for entity in self._entities:
+            try:
+                entity.undeclare()
+            except Exception as exc:  # a session closed underneath
+                log.debug("undeclare %r: %s", entity, exc)
+
+
+def silence_hint(node: str, robot: str) -> str:
+    """One line: a robot is on the bus but its data does not arrive — the likely causes, in order."""
+    return (f"{node}: robot '{robot}' is on the bus but none of its data arrived in {SILENCE_S:g} s — likely, in "
+            f"order: (1) access control on the robot's machine refuses this machine's user the keys "
+            f"'{robot}/frame' or '{robot}/joints/*' (check its access_control rules and this machine's user; "
+            f"`sonibus echo '{robot}/frame' --count 1` here shows whether anything passes); (2) another "
+            f"namespace: both machines' [bus] namespace must be the same (`sonibus nodes` on each lists the "
+            f"same nodes); (3) a script that puts joint keys only, no frames: set per_joint_keys = true in "
+            f"this sink's table (`sonibus echo '{robot}/joints/*' --count 1` shows them)")
+
+
+def _frame_key(pattern: str) -> str:
+    """The frame key expression of the robots whose joints ``pattern`` selects ("" if none)."""
+    expr = keys.expr(pattern)
+    robot = expr.split("/")[0]
+    robot = "*" if robot == "**" else robot
+    selected = zenoh.KeyExpr(expr)
+    if selected.intersects(zenoh.KeyExpr(keys.joints(robot))) or selected.intersects(zenoh.KeyExpr(keys.frame(robot))):
+        return keys.frame(robot)
+    return ""
+
+
+def connection_events(bus: Bus, queue: SampleQueue, patterns: Sequence[str]) -> Presence:
     """Feed ``queue`` (a sink's) a ``connection`` event, as if the robot's owner had
     sent it, when a robot leaves (``lost``) or comes back (``connected``) — for the
     robots whose events ``patterns`` select. A sink then reacts to a vanished robot
-    the same way whatever the cause (a killed process, a cut link, a robot's fall)."""
-    wanted = [zenoh.KeyExpr(keys.expr(p)) for p in patterns]
-
-    def changed(robot: str, alive: bool) -> None:
-        if any(w.intersects(zenoh.KeyExpr(keys.event(robot, "connection"))) for w in wanted):
-            event = {"t": time.time(), "kind": "connection", "state": "connected" if alive else "lost",
-                     "source": "presence"}
-            queue.put((keys.event(robot, "connection"), codec.encode(event)))
-
-    return watch_robots(bus, changed)
+    the same way whatever the cause (a killed process, a cut link, a robot's fall).
+    It also warns once (``silence_hint``) when a robot whose joints ``patterns``
+    select is on the bus but none of its frames arrives for ``SILENCE_S``."""
+    return Presence(bus, queue, patterns)

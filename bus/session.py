@@ -12,6 +12,7 @@ import ipaddress
 import json
 import logging
 import re
+import time
 from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
 from typing import Any
@@ -35,7 +36,11 @@ _FIXES = {  # what Zenoh says when a session does not open → what to do
     "Address already in use": "another process listens there: give this one another listen port",
     "Unable to connect": "no router answers there: start `sonibus router` on that machine, or check connect",
     "Cannot assign requested address": "no interface of this machine has that address: listen on 0.0.0.0",
+    "timeout": "no router answered multicast scouting: start the installation's router machine first, "
+               "or give connect",
 }
+DISCOVERY_S = 2.0  # the longest wait for a first link, when there is someone to find
+SETTLE_S = 0.25    # after the first link found by multicast: the others found in the same round
 _HOST_NAME = re.compile(r"[A-Za-z0-9]([A-Za-z0-9_.-]*[A-Za-z0-9])?\Z")
 _LIBRARY_SOURCE = re.compile(r"\s+at /\S+\.rs:\d+\.?")
 
@@ -255,29 +260,77 @@ def _host_problem(host: str) -> str:
     return "" if _HOST_NAME.match(host) else f"'{host}' is not a host name or an IP address"
 
 
+@dataclass(frozen=True)
+class _Joined:
+    """What ``discover`` needs to know of an open session's configuration."""
+
+    window_s: float
+    settle_s: float
+    lease_s: float
+
+
+_JOINED: dict[str, _Joined] = {}  # by session id
+
+
+def discover(session: zenoh.Session) -> list[str]:
+    """Wait until ``session`` is really on the bus — its first link up (and, with
+    multicast, ``SETTLE_S`` more for the others found in the same round) — for at most
+    ``DISCOVERY_S``, and not at all when there is nobody to find (no multicast, no
+    connect: whoever comes connects to it). The ids of the peers and routers it reached."""
+    joined = _JOINED.get(str(session.zid()), _Joined(DISCOVERY_S, SETTLE_S, 10.0))
+    deadline = time.monotonic() + joined.window_s
+    while not links(session):
+        if time.monotonic() >= deadline:
+            return []
+        time.sleep(0.02)
+    time.sleep(joined.settle_s)
+    return links(session)
+
+
+def links(session: zenoh.Session) -> list[str]:
+    """The ids of the routers and peers ``session`` has a link with now."""
+    return [str(z) for z in (*session.info.routers_zid(), *session.info.peers_zid())]
+
+
+def lease_s(session: zenoh.Session) -> float:
+    """The transport lease of ``session`` (how long a vanished peer's tokens last), in s."""
+    return _JOINED.get(str(session.zid()), _Joined(0, 0, 10.0)).lease_s
+
+
 def open_session(config: BusConfig, wait: bool = False) -> zenoh.Session:
     """Open a Zenoh session; the caller closes it (it is a context manager).
 
-    A client needs its router. With ``wait`` (nodes that run for days) it waits
-    for one, trying every ``reconnect_ms`` — Ctrl-C still ends it between tries;
-    without, no router is an error at once."""
+    A client needs its router (at ``connect``, or found by multicast). With ``wait``
+    (nodes that run for days) it waits for one, trying every ``reconnect_ms`` —
+    Ctrl-C still ends it between tries; without, no router is an error at once."""
     if config.mode == "client" and config.connect:
         config = replace(config, options={"connect/timeout_ms": config.reconnect_ms, **config.options})
+    elif config.mode == "client" and config.multicast:  # each try (and each re-try after a loss) scouts this long
+        scouting = config.reconnect_ms if wait else max(config.reconnect_ms, int(DISCOVERY_S * 1000))
+        config = replace(config, options={"scouting/timeout": scouting, **config.options})
     warned = False
     while True:
         try:
-            return zenoh.open(config.to_zenoh())
+            session = zenoh.open(config.to_zenoh())
         except ConfigError:
             raise
         except Exception as exc:
-            if not (wait and config.mode == "client" and "Unable to connect" in str(exc)):
+            unreachable = "Unable to connect" in str(exc) or zenoh_reason(exc) == "timeout"
+            if not (wait and config.mode == "client" and unreachable):
                 reason = zenoh_reason(exc)
                 fix = next((f" — {fix}" for known, fix in _FIXES.items() if known in reason), "")
                 raise ConfigError(f"cannot open the bus ({config.mode}, listen={list(config.listen)}, "
                                   f"connect={list(config.connect)}): {reason}{fix}") from exc
             if not warned:
-                log.warning("waiting for a router at %s", ", ".join(config.connect))
+                log.warning("waiting for a router at %s",
+                            ", ".join(config.connect) or "any address (multicast scouting)")
                 warned = True
+            continue
+        searched = config.mode != "client" and (config.multicast or config.connect)
+        _JOINED[str(session.zid())] = _Joined(DISCOVERY_S if searched else 0.0,
+                                              SETTLE_S if config.multicast and config.mode != "client" else 0.0,
+                                              config.options.get("transport/link/tx/lease", config.lease_ms) / 1000)
+        return session
 
 
 def _under(folder: Path, name: Any) -> Any:

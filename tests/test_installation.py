@@ -187,7 +187,8 @@ def test_the_three_machine_example_lets_only_the_control_machine_command(spawn):
         control = send("control-pc", "stop")
     assert control.returncode == 0, control.stderr
     refused = send("sound-pc", "joints/set", "names=HeadYaw", "angles=0.5")
-    assert refused.returncode == 3 and "not found" in refused.stderr  # the ACL hides the robot's commands
+    assert refused.returncode == 4, refused.stderr  # the ACL hides the robot's commands, not the robot
+    assert "access control on the robot's machine refuses commands from this machine (user 'sound')" in refused.stderr
     seen = run_cli("nodes", "--config", show, "--host", "sound-pc", "--connect", endpoint, "--no-multicast")
     assert "owns pepper" in seen.stdout, "the sound machine still sees the robot and its data"
     stranger = run_cli("nodes", "--config", show, "--host", "visitor", "--connect", endpoint, "--no-multicast")

@@ -15,7 +15,8 @@ counting across loops, so sinks' stale-sample checks and frame reassembly work
 unchanged. No wait is longer than ``max_gap_s`` (``timeline.py``): a longer gap
 is shortened to it, with a warning. The joint samples of one frame go out like a robot owner's: the
 frame whole on ``<robot>/frame`` (what sinks listen to), then each joint's
-sample on its key. The replayed robots are owned like real ones (liveliness, ``<robot>/info``
+sample on its key while anyone subscribes there (``bus/ownership.py``, shared with
+live owners). The replayed robots are owned like real ones (liveliness, ``<robot>/info``
 from the recording) but take no commands: they answer ``failed``, and ``stop`` ok.
 """
 
@@ -106,8 +107,9 @@ class Replay(Adapter):
         if self.window_s < 0:
             raise RecordingError(f"--start {cfg.start:g}: {cfg.path} lasts only {self.recording.duration_s:.1f} s")
         infos = self.recording.infos()
+        self._owners = {}  # bus name → its Ownership: the frames go out as a live owner's
         for robot, name in self.names.items():
-            self.claim_robot(name, f"replay it under another name: --as {robot}={name}_replay")
+            self._owners[name] = self.claim_robot(name, f"replay it under another name: --as {robot}={name}_replay")
             if robot in infos:
                 self.own(self.bus.serve(keys.info(name), self._info_server(self._info(infos[robot], name))))
             self.own(self.bus.serve(keys.command(name), self._refuse))
@@ -115,8 +117,8 @@ class Replay(Adapter):
         self._gap_s = 1.0 / max(rates) if rates and max(rates) > 0 else 0.01
         self._publishers = {self._renamed(key): self.own(self.bus.stream_publisher(self._renamed(key)))
                             for key in self.keys if Key.parse(key).section in ("joints", "derived")}
-        self._frames = {robot: self.own(self.bus.stream_publisher(keys.frame(self.names[robot])))
-                        for robot in {k.partition("/")[0] for k in self.keys if Key.parse(k).section == "joints"}}
+        for robot in {k.partition("/")[0] for k in self.keys if Key.parse(k).section == "joints"}:
+            self._owners[self.names[robot]].declare_streams()
         self.spawn(self._play, "play")
 
     def _info(self, info: dict[str, Any], name: str) -> dict[str, Any]:
@@ -201,13 +203,15 @@ class Replay(Adapter):
         values, extra = _join([m.data for m in samples])
         names = [Key.parse(m.key).name for m in samples]
         t = self._moved(samples[0].data["t"], t_origin)
-        self._frames[samples[0].key.partition("/")[0]].put(codec.encode(messages.frame(t, seq, names, values, extra)))
-        self.stats["frames"] += 1
-        for message in samples:
-            self._publish(message, t_origin, seq, False)
+        owner = self._owners[self.names[samples[0].key.partition("/")[0]]]
+        if owner.publish_frame(messages.frame(t, seq, names, values, extra)):  # per joint too, while wanted
+            self.stats["frames"] += 1
+            self.stats["published"] += len(samples)
 
     def _publish(self, message: Message, t_origin: float, seq: Any, late: bool) -> None:
         key = self._renamed(message.key)
+        if not self._owners[key.partition("/")[0]].active:  # another owner keeps this robot name
+            return
         data = dict(message.data)
         if isinstance(data.get("t"), int | float):
             data["t"] = self._moved(data["t"], t_origin)

@@ -1,0 +1,237 @@
+"""One owner per robot: the claim, its checks, and the rule that keeps one owner
+when two meet (a race, or the halves of a healed network partition).
+
+An owner holds the liveliness token ``sonibus/robots/<robot>/<since>/<host>/<node>``
+(``since``: when it claimed, in ms since the epoch), so every node sees who owns
+a robot and since when. A node claims a robot only once it is really on the bus
+(``session.discover``), refuses to start if it already has an owner, checks again
+after declaring its token and watches the robot's claims for the rest of its
+life. Of the claims that see each other, the earliest (then host, then node
+name) keeps the robot; any other stands by: it publishes nothing, refuses
+commands with code ``conflict``, and owns the robot again once the earlier claim
+is gone. Both log one line naming the other; the one standing by tells sinks
+with a ``conflict`` event.
+
+>>> Claim.parse("sonibus/robots/pepper/1700000000000/laptop/sim")
+Claim(robot='pepper', since_ms=1700000000000, host='laptop', node='sim')
+>>> Claim("pepper", 1, "b", "x").rank < Claim("pepper", 2, "a", "x").rank
+True
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from collections.abc import Iterable
+from dataclasses import dataclass
+from typing import Any
+
+import zenoh
+
+from . import codec, keys, messages
+from .errors import CommandError, OwnershipError
+from .node import Bus
+from .session import discover, lease_s
+
+log = logging.getLogger(__name__)
+
+CHECK_TIMEOUT_S = 1.0  # a liveliness query for the robot's claims
+
+
+@dataclass(frozen=True)
+class Claim:
+    """One owner's claim of a robot, as its liveliness token names it."""
+
+    robot: str
+    since_ms: int
+    host: str
+    node: str
+
+    @property
+    def key(self) -> str:
+        return f"{keys.ROBOTS}/{self.robot}/{self.since_ms}/{self.host}/{self.node}"
+
+    @property
+    def rank(self) -> tuple[int, str, str]:
+        """The order of the rule: the earliest claim keeps the robot, then host, then node."""
+        return (self.since_ms, self.host, self.node)
+
+    @classmethod
+    def parse(cls, key: str) -> Claim | None:
+        """The claim a token key stands for; None for any other key."""
+        chunks = str(key).split("/")
+        if len(chunks) != 6 or "/".join(chunks[:2]) != keys.ROBOTS or not chunks[3].isdigit():
+            return None
+        return cls(chunks[2], int(chunks[3]), chunks[4], chunks[5])
+
+    def who(self) -> dict[str, Any]:
+        return {"host": self.host, "node": self.node, "since": self.since_ms / 1000}
+
+    def __str__(self) -> str:
+        return f"node '{self.node}' on host '{self.host}'"
+
+
+def claims(keys_: Iterable[str]) -> dict[str, list[Claim]]:
+    """Token keys → each robot's claims, earliest (the owner) first."""
+    found: dict[str, list[Claim]] = {}
+    for key in keys_:
+        claim = Claim.parse(key)
+        if claim is not None:
+            found.setdefault(claim.robot, []).append(claim)
+    return {robot: sorted(cs, key=lambda c: c.rank) for robot, cs in sorted(found.items())}
+
+
+class Ownership:
+    """``bus``'s node owning ``robot``: its token, its watch on the robot's other
+    claims, and whether it may act (``active``). Made by ``Adapter.claim_robot``;
+    ``undeclare`` gives the robot up. Owners publish frames through ``publish_frame``,
+    which also puts the per-joint keys while anyone subscribes to them."""
+
+    def __init__(self, bus: Bus, robot: str, hint: str) -> None:
+        self.bus, self.robot, self.hint = bus, robot, hint
+        self.claim = Claim(robot, 0, bus.host, bus.node)
+        self.active = False
+        self.owner: Claim | None = None       # the claim this node stands by for
+        self._rivals: dict[str, Claim] = {}
+        self._told: set[str] = set()           # later claims this owner has logged
+        self._lock = threading.Lock()
+        self._entities: list[Any] = []
+        self._frames: zenoh.Publisher | None = None
+        self._joints: dict[str, zenoh.Publisher] = {}
+        self._joints_wanted = False
+
+    # -- claiming -----------------------------------------------------------------
+
+    def take(self) -> None:
+        """Claim the robot: ``OwnershipError`` naming the owner if it has one already."""
+        liveliness = self.bus.session.liveliness()
+        pattern = keys.robot_token(self.robot)
+        self._entities.append(liveliness.declare_subscriber(pattern, self._changed, history=True))
+        discover(self.bus.session)
+        self._seen(self.bus.alive(pattern, timeout=CHECK_TIMEOUT_S))
+        rivals = self._rivals_now()
+        if rivals and all(self._earlier_self(c) for c in rivals):
+            # This node's previous run, killed: its claim lasts until the transport lease ends.
+            deadline = time.monotonic() + lease_s(self.bus.session) + 0.5
+            while rivals and time.monotonic() < deadline:
+                time.sleep(0.1)
+                rivals = self._rivals_now()
+        if rivals:
+            raise OwnershipError(f"robot '{self.robot}' is already owned by {rivals[0]}; {self.hint}")
+        self.claim = Claim(self.robot, time.time_ns() // 1_000_000, self.bus.host, self.bus.node)
+        self._entities.append(self.bus.token(self.claim.key))
+        self.active = True
+        self._seen(self.bus.alive(pattern, timeout=CHECK_TIMEOUT_S))  # a claim made meanwhile
+        self._decide()
+
+    def _rivals_now(self) -> list[Claim]:
+        with self._lock:
+            return sorted(self._rivals.values(), key=lambda c: c.rank)
+
+    def _earlier_self(self, claim: Claim) -> bool:
+        return (claim.host, claim.node) == (self.bus.host, self.bus.node)
+
+    def _changed(self, sample: zenoh.Sample) -> None:
+        claim = Claim.parse(str(sample.key_expr))
+        if claim is None or claim == self.claim:
+            return
+        with self._lock:
+            if sample.kind == zenoh.SampleKind.PUT:
+                self._rivals[claim.key] = claim
+            else:
+                self._rivals.pop(claim.key, None)
+                self._told.discard(claim.key)
+        if self.claim.since_ms:
+            self._decide()
+
+    def _seen(self, found: Iterable[str]) -> None:
+        with self._lock:
+            for key in found:
+                claim = Claim.parse(key)
+                if claim is not None and claim != self.claim:
+                    self._rivals[claim.key] = claim
+
+    def _decide(self) -> None:
+        """Apply the rule; log (and tell sinks) what changed."""
+        with self._lock:
+            rivals = sorted(self._rivals.values(), key=lambda c: c.rank)
+            first = rivals[0] if rivals and rivals[0].rank < self.claim.rank else None
+            was, self.active, self.owner = self.active, first is None, first
+            new = [c for c in rivals if c.rank > self.claim.rank and c.key not in self._told]
+            self._told.update(c.key for c in new)
+        name = f"{self.bus.node}: robot '{self.robot}'"
+        if was and first is not None:
+            log.warning("%s is also owned by %s, which claimed it first: this node stands by (streams nothing, "
+                        "refuses commands) until that one leaves", name, first)
+            self._event("standby", first)
+        elif not was and first is None:
+            log.warning("%s: its owner left; this node owns it again", name)
+            self._event("owner", self.claim)
+        if first is None:
+            for claim in new:
+                log.warning("%s is also claimed by %s, which claimed it later and stands by: this node keeps it",
+                            name, claim)
+
+    def _event(self, state: str, owner: Claim) -> None:
+        event = {"t": time.time(), "kind": "conflict", "state": state, "owner": owner.who(),
+                 "node": self.claim.who()}
+        try:
+            self.bus.put(keys.event(self.robot, "conflict"), event)
+        except Exception as exc:  # a closing session: the log line remains
+            log.debug("%s: conflict event not sent: %s", self.bus.node, exc)
+
+    def check(self, verb: str) -> None:
+        """``CommandError`` (``conflict``) while this node stands by for another owner."""
+        owner = self.owner
+        if not self.active and owner is not None:
+            raise CommandError("conflict", f"{verb}: robot '{self.robot}' is owned by {owner}; node "
+                                           f"'{self.bus.node}' on host '{self.bus.host}' stands by")
+
+    # -- an owner's streams ----------------------------------------------------------
+
+    def publish_frame(self, message: dict[str, Any]) -> bool:
+        """Put a frame (checked by the caller) whole on ``<robot>/frame``, then per joint
+        while anyone subscribes to ``<robot>/joints/*``; False (nothing sent) while standing by."""
+        if not self.active:
+            return False
+        if self._frames is None:
+            self.declare_streams()
+        self._frames.put(codec.encode(message))
+        if self._joints_wanted:
+            for name, sample in messages.frame_samples(message):
+                self.joint_publisher(name).put(codec.encode(sample))
+        return True
+
+    def declare_streams(self, joints: Iterable[str] = ()) -> None:
+        """Declare the robot's frame publisher and those of ``joints`` ahead of the first frame."""
+        self._frames = self._own(self.bus.stream_publisher(keys.frame(self.robot)))
+        # Per-joint keys cost an encode and a put per joint: made only while someone subscribes to one.
+        interest = self._own(self.bus.session.declare_publisher(keys.joints(self.robot)))
+        self._joints_wanted = interest.matching_status.matching
+        self._own(interest.declare_matching_listener(lambda status: setattr(self, "_joints_wanted", status.matching)))
+        for joint in joints:
+            self.joint_publisher(joint)
+
+    def joint_publisher(self, joint: str) -> zenoh.Publisher:
+        publisher = self._joints.get(joint)
+        if publisher is None:  # also a joint the robot reports beyond its reference model
+            publisher = self._joints[joint] = self._own(self.bus.stream_publisher(keys.joint(self.robot, joint)))
+        return publisher
+
+    def _own(self, entity: Any) -> Any:
+        self._entities.append(entity)
+        return entity
+
+    def undeclare(self) -> None:
+        """Give the robot up: the token, the watch and the publishers."""
+        self.active = False
+        for entity in reversed(self._entities):
+            try:
+                entity.undeclare()
+            except Exception as exc:  # a session closed underneath
+                log.debug("undeclare %r: %s", entity, exc)
+        self._entities.clear()
+
+    def __repr__(self) -> str:
+        return f"<Ownership {self.claim.key} {'active' if self.active else 'standby'}>"

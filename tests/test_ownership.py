@@ -1,0 +1,172 @@
+"""One owner per robot (issue 14, item 1), on loopback with real Zenoh sessions:
+a second owner joining right after it connects is never silent, the rule that
+keeps one owner when two claims meet, a standby owner streams nothing and
+refuses commands, and it owns the robot again when the first leaves.
+
+(Partition and heal across network namespaces: tests/net/test_ownership_net.py.)"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from collections.abc import Iterator
+
+import pytest
+
+from sonibus import schemas
+from sonibus.adapters.sim import SimConfig, SimRobot
+from sonibus.bus import Bus, BusConfig, CommandError, OwnershipError, decode, keys, open_session, send_command
+from sonibus.bus.ownership import Claim, claims
+
+from .conftest import free_port, run_cli, wait_for
+
+RACE_TRIES = 20
+
+
+@pytest.fixture
+def router() -> Iterator[str]:
+    """A Zenoh router on loopback (as `sonibus router`); its endpoint."""
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    with open_session(BusConfig(mode="router", multicast=False, listen=(endpoint,))):
+        yield endpoint
+
+
+def sim(bus: Bus, name: str, robot: str = "pepper") -> SimRobot:
+    adapter = SimRobot(SimConfig(robot=robot, rate_hz=50), name=name)
+    adapter.start(bus)
+    return adapter
+
+
+def test_a_second_owner_joining_right_after_it_connects_is_never_silent(router, caplog, capsys):
+    """The issue's race: a second peer owner of `pepper` started right after its session
+    opens (no wait for its links), 20 times. Each must be refused at start, or stand by
+    loudly; none may stream beside the first."""
+    caplog.set_level(logging.WARNING, logger="sonibus")
+    peer = BusConfig(multicast=False, connect=(router,))
+    with open_session(peer) as first_session:
+        first = sim(Bus(first_session, host="robot-laptop"), "pepper")
+        refused = standing_by = silent = 0
+        try:
+            for attempt in range(RACE_TRIES):
+                caplog.clear()
+                with open_session(peer) as session:
+                    second = SimRobot(SimConfig(robot="pepper", rate_hz=50), name=f"again{attempt}")
+                    try:
+                        second.start(Bus(session, host="other-pc"))
+                    except OwnershipError as exc:
+                        assert "already owned by node 'pepper' on host 'robot-laptop'" in str(exc)
+                        refused += 1
+                        continue
+                    try:
+                        wait_for(lambda s=second: not s.ownership.active, 3.0, "the second owner to stand by")
+                        assert "node 'pepper' on host 'robot-laptop', which claimed it first" in caplog.text
+                        standing_by += 1
+                    except BaseException:
+                        silent += 1
+                    finally:
+                        second.stop()
+                assert first.ownership.active, "the first owner gave way to a later one"
+        finally:
+            first.stop()
+    with capsys.disabled():
+        print(f"\nrace, {RACE_TRIES} tries: refused {refused}, stood by {standing_by}, silent {silent}")
+    assert silent == 0
+    assert refused + standing_by == RACE_TRIES
+
+
+@pytest.fixture
+def pepper(net) -> SimRobot:
+    return net.sim("pepper", rate_hz=50)
+
+
+def earlier(owner: SimRobot, host: str = "elsewhere", node: str = "ghost") -> Claim:
+    """A claim of the owner's robot made a second before the owner's."""
+    mine = owner.ownership.claim
+    return Claim(mine.robot, mine.since_ms - 1000, host, node)
+
+
+def test_an_earlier_claim_makes_the_owner_stand_by_and_its_leaving_gives_the_robot_back(net, pepper, caplog):
+    caplog.set_level(logging.WARNING, logger="sonibus")
+    watcher = net.bus("watcher")
+    _, frames = watcher.subscribe(keys.frame("pepper"))
+    _, conflicts = watcher.subscribe(keys.event("pepper", "conflict"))
+    wait_for(lambda: frames.get(0.1), what="pepper's frames")
+
+    rival = earlier(pepper)
+    token = watcher.token(rival.key)
+    wait_for(lambda: not pepper.ownership.active, what="the owner to stand by")
+    assert "robot 'pepper' is also owned by node 'ghost' on host 'elsewhere', which claimed it first" in caplog.text
+    _, payload = wait_for(lambda: conflicts.get(0.1), what="a conflict event")
+    event = decode(payload)
+    schemas.validate("event", event)
+    assert event["state"] == "standby"
+    assert event["owner"] == {"host": "elsewhere", "node": "ghost", "since": rival.since_ms / 1000}
+    assert event["node"]["node"] == "sim-pepper"
+
+    time.sleep(0.3)  # frames in flight when it stood by
+    frames.drain(0)
+    time.sleep(0.5)
+    assert not frames.drain(0), "a standby owner still streams"
+    with pytest.raises(CommandError) as refused:
+        send_command(watcher, "pepper", "joints/set", {"names": ["HeadYaw"], "angles": [0.5]}, timeout=2.0)
+    assert refused.value.code == "conflict"
+    assert "owned by node 'ghost' on host 'elsewhere'" in refused.value.message
+    assert "stands by" in refused.value.message
+
+    token.undeclare()
+    wait_for(lambda: pepper.ownership.active, what="the owner to take the robot back")
+    wait_for(lambda: frames.get(0.1), what="frames again")
+    assert decode(wait_for(lambda: conflicts.get(0.1), what="the 'owner' event")[1])["state"] == "owner"
+    assert send_command(watcher, "pepper", "joints/set", {"names": ["HeadYaw"], "angles": [0.2]}, timeout=2.0) == {}
+
+
+def test_a_later_claim_leaves_the_owner_in_charge_and_is_named_once(net, pepper, caplog):
+    caplog.set_level(logging.WARNING, logger="sonibus")
+    watcher = net.bus("watcher")
+    mine = pepper.ownership.claim
+    later = Claim("pepper", mine.since_ms + 1000, "latecomer-pc", "spare")
+    token = watcher.token(later.key)  # noqa: F841 (held: a dropped token is undeclared)
+    wait_for(lambda: "also claimed by node 'spare' on host 'latecomer-pc'" in caplog.text,
+             what="the owner to name the later claim")
+    time.sleep(0.3)
+    assert pepper.ownership.active
+    assert caplog.text.count("also claimed by node 'spare'") == 1
+
+
+def test_nodes_shows_the_owner_and_who_stands_by(net, pepper):
+    watcher = net.bus("watcher")
+    rival = earlier(pepper, "elsewhere", "ghost")
+    token = watcher.token(rival.key)  # noqa: F841 (held: a dropped token is undeclared)
+    wait_for(lambda: not pepper.ownership.active, what="the owner to stand by")
+    result = run_cli("nodes", *net.cli_args())
+    assert result.returncode == 0, result.stderr
+    line = next(line for line in result.stdout.splitlines() if line.strip().startswith("robot "))
+    assert "owned by ghost on elsewhere" in line
+    assert "CONFLICT: sim-pepper on" in line and "stands by" in line
+
+
+def test_a_restarted_owner_waits_out_its_own_previous_claim(net, pepper):
+    """A node killed and started again at once finds its previous claim still on the bus
+    (until the transport lease ends): it waits for it instead of refusing itself."""
+    watcher = net.bus("watcher")
+    stale = Claim("nao", int(time.time() * 1000) - 5000, watcher.host, "sim-nao")
+    token = watcher.token(stale.key)
+    bus = net.bus("restarted")
+    started = time.monotonic()
+    leaves = threading.Timer(0.5, token.undeclare)
+    leaves.start()
+    try:
+        nao = net.sim("nao", bus=bus)
+    finally:
+        leaves.cancel()
+    assert nao.ownership.active
+    assert 0.4 < time.monotonic() - started < 5.0
+
+
+def test_claims_name_robots_owners_first():
+    found = claims(["sonibus/robots/pepper/20/b/late", "sonibus/robots/pepper/10/a/early",
+                    "sonibus/robots/nao/5/c/one", "sonibus/nodes/a/early", "sonibus/robots/old"])
+    assert [c.node for c in found["pepper"]] == ["early", "late"]
+    assert list(found) == ["nao", "pepper"]
+    assert Claim.parse(found["nao"][0].key) == found["nao"][0]
