@@ -30,7 +30,8 @@ class Plan:
     huge_frames: int = 10         # frames of 50,000 joints
     bursts: int = 8               # bursts of 500-2000 inputs at up to 5000/s
     derandomize: bool = True      # the same inputs every run (CI)
-    rounds: int = 1               # the whole sequence of families, again (soak)
+    rounds: int = 1               # the whole sequence of families, at least this often
+    seconds: float = 0.0          # and again until this long has been fuzzed (soak)
 
 
 CI = Plan(examples={"frame": 300, "joint": 200, "derived": 150, "event": 150, "command": 150, "info": 60,
@@ -73,10 +74,13 @@ def campaign(show: Show, plan: Plan, out: Path) -> checks.Report:
         rss_before = show.rss.now() if show.rss else 0
         fuzz_started = time.monotonic()
         burst_rates: list[float] = []
-        for _ in range(plan.rounds):
+        rounds = 0
+        while rounds < plan.rounds or time.monotonic() - fuzz_started < plan.seconds:
+            rounds += 1
             for family, strategy in FAMILIES.items():
-                for item in issue_inputs(family):
+                for item in issue_inputs(family):  # each on its own: a later input must not mask an earlier one
                     fuzzer.send(item)
+                    _after(fuzzer, report, before, f"{family} input of {item.note}")
                 _run(fuzzer, strategy(), plan.examples[family], plan.derandomize, fuzzer.send)
                 _after(fuzzer, report, before, family)
             for _ in range(plan.huge_frames):
@@ -85,6 +89,7 @@ def campaign(show: Show, plan: Plan, out: Path) -> checks.Report:
             _run(fuzzer, bursts(), plan.bursts, plan.derandomize, lambda b: burst_rates.append(fuzzer.burst(*b)))
             _after(fuzzer, report, before, "bursts")
         _reset(fuzzer)
+        report.figures["rounds"] = rounds
         report.figures["burst_rate_per_s"] = round(min(burst_rates, default=0.0))
         fuzzer.settle()
         ended = time.monotonic()

@@ -606,12 +606,12 @@ def issue_inputs(family: str) -> list[Input]:
     """Issue 13's reproductions, sent as given before each family's generated inputs."""
     now, key = time.time(), f"{ROBOT}/frame"
 
-    def frame(note: str, **changes: Any) -> Input:
-        return Input("frame", MALFORMED, "put", key, pack({"t": now, "seq": 1, "names": ["HeadYaw"], "v": [0.1],
+    def frame(note: str, seq: int, **changes: Any) -> Input:  # each its own seq: no sink takes it for a repeat
+        return Input("frame", MALFORMED, "put", key, pack({"t": now, "seq": seq, "names": ["HeadYaw"], "v": [0.1],
                                                           **changes}), note=note)
     fixed = {
-        "frame": [frame("issue 5: t an hour ahead", t=now + 3600), frame("issue 3: 1e300", v=[1e300]),
-                  frame("issue 2: t 1e12", t=1e12)],
+        "frame": [frame("issue 3: 1e300", 1, v=[1e300]), frame("issue 5: t an hour ahead", 2, t=now + 3600),
+                  frame("issue 2: t 1e12", 3, t=1e12)],
         "event": [Input("event", HOSTILE, "put", f"{ROBOT}/events/behavior",
                         pack({"t": now, "kind": "behavior", "name": b"x"}), note="issue 2: bytes field")],
         "osc": [Input("osc", MALFORMED, "osc", "osc", bytes.fromhex(
