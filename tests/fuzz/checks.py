@@ -123,16 +123,16 @@ STREAMS = ("osc_plain_joints", "osc_bundle_joints", "osc_plain_derived", "midi")
 
 
 def flowing(show: Show, report: Report, before: dict[str, float], ended: float, when: str) -> None:
-    """The OSC targets and the MIDI port, in [ended + 1 s, ended + 2 s], at ``FLOW_FRACTION`` of ``before``
-    (the quick check between families; ``flow`` checks every sink at the end)."""
-    wait = ended + 2.0 - time.monotonic()
+    """The OSC targets and the MIDI port, in [ended + 1 s, ended + 1.5 s], at ``FLOW_FRACTION`` of ``before``
+    (the quick check between families; ``flow`` checks every sink at the end, over a whole second)."""
+    wait = ended + 1.5 - time.monotonic()
     if wait > 0:
         time.sleep(wait)  # the window must have passed
-    after = rates(show, ended + 1.0, ended + 2.0)
+    after = rates(show, ended + 1.0, ended + 1.5)
     report.figures.setdefault("rates_between_families", {})[when] = {k: round(after[k]) for k in STREAMS}
     for sink in STREAMS:
         report.check(after[sink] >= FLOW_FRACTION * before[sink],
-                     f"{when}: {sink} {after[sink]:.0f}/s in the second starting 1 s later, normal "
+                     f"{when}: {sink} {after[sink]:.0f}/s in the half second starting 1 s later, normal "
                      f"{before[sink]:.0f}/s")
 
 
