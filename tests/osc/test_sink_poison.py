@@ -1,0 +1,113 @@
+"""Poison on the bus (issue 13, item 3): a frame holding 1e300, NaN, inf, a finite
+but absurd 1e5, or a ``t`` gone back, put on ``pepper/frame`` beside a simulated
+Pepper, with a ``features`` node and one OSC sink serving a bundle target and a
+plain target. Afterwards both targets get joints and derived values again at
+once, and nothing either target ever received is out of its declared range."""
+
+from __future__ import annotations
+
+import math
+import time
+
+import numpy as np
+from pythonosc.osc_packet import OscPacket
+
+from sonibus.adapters.features import Features, FeaturesConfig
+from sonibus.adapters.osc import OscSink, OscSinkConfig
+from sonibus.bus import encode, keys, load_model
+
+from ..conftest import wait_for
+from .pd import Datagrams
+
+JOINTS = load_model("pepper").joint_names
+WATCHED = ("/pepper/derived/velocity/HeadYaw", "/pepper/derived/qom/Head", "/pepper/derived/qom/Body")
+RECOVERY_S = 2.0  # "about a second": a good frame or two after the bad one, on a busy machine
+
+
+def poison(name: str, now: float) -> dict:
+    """The frame ``name`` taken at ``now``: the issue's frame and its kin."""
+    head = {"t": now, "seq": 1, "names": ["HeadYaw"]}
+    return {
+        "1e300": {**head, "v": [1e300]},
+        "nan": {**head, "v": [math.nan]},
+        "inf": {**head, "v": [math.inf]},
+        "1e5": {**head, "v": [1e5]},                                            # finite, within the gate's bound
+        "all-1e5": {**head, "names": list(JOINTS), "v": [1e5] * len(JOINTS)},  # arms and hands too
+        "t-back": {**head, "t": now - 2.0, "v": [0.5]},                        # time going back
+    }[name]
+
+
+POISONS = {"1e300": "gate", "nan": "gate", "inf": "gate", "1e5": "filter", "all-1e5": "filter", "t-back": "filter"}
+"""Each poison and what stops it: the bus's gate (counted bad), or the velocity filter (counted rejected)."""
+
+
+def received(receiver: Datagrams, since: float = 0.0) -> list[tuple[bool, str, list]]:
+    """(in a bundle, address, args) of every message that arrived after ``since`` (monotonic)."""
+    out = []
+    for arrived, dgram in list(receiver.items):
+        if arrived >= since:
+            bundled = dgram.startswith(b"#bundle")
+            out += [(bundled, m.message.address, m.message.params) for m in OscPacket(dgram).messages]
+    return out
+
+
+def out_of_range(messages: list[tuple[bool, str, list]], ranges: dict[str, tuple[np.ndarray, np.ndarray]]) -> list:
+    """Derived values that are not finite or not inside the range ``<robot>/info/derived`` declares
+    (compared as float32, as OSC carries them)."""
+    bad = []
+    for _, address, params in messages:
+        span = ranges.get(address[1:])
+        if span is None:
+            continue
+        values = np.asarray(params, dtype=np.float32)
+        low, high = (np.float32(b) for b in span)
+        if not (np.isfinite(values).all() and (values >= low).all() and (values <= high).all()):
+            bad.append((address, params))
+    return bad
+
+
+def declared(bus) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+    """Each derived key's range as the features node serves it (a hand's: its box)."""
+    reply = bus.query(keys.derived_info("pepper"))[0]
+    return {e["key"]: (e["box"]["min"], e["box"]["max"]) if "box" in e else (e["min"], e["max"])
+            for e in reply["derived"] if "min" in e}
+
+
+def test_poison_frames_cost_at_most_a_frame_or_two(net, receivers):
+    plain, bundled = receivers(), receivers()
+    sink = net.start(OscSink(OscSinkConfig(targets=(plain.target, {"to": bundled.target, "bundle": True})),
+                             name="sound"))
+    features = net.start(Features(FeaturesConfig(robots="pepper"), name="features"))
+    robot = net.sim("pepper", rate_hz=50)
+    watch = net.bus("watch")
+    wait_for(lambda: all(any(a == w for _, a, _ in received(plain)) for w in WATCHED), timeout=10,
+             what="derived values at the plain target")
+    ranges = declared(watch)
+    # Put from the robot's session: it is known to reach both nodes (their frames come from it).
+    stranger = robot.bus.session.declare_publisher(keys.frame("pepper"))
+
+    for name, stopped_by in POISONS.items():
+        before = dict(features.stats), dict(sink.stats)
+        mark = time.monotonic()
+        stranger.put(encode(poison(name, time.time())))
+
+        def recovered(since: float = mark) -> bool:
+            derived = {a for _, a, _ in received(plain, since)}
+            joints = sum(1 for inside, a, _ in received(bundled, since) if inside and a.startswith("/pepper/joints/"))
+            return all(w in derived for w in WATCHED) and joints >= 2 * len(JOINTS)  # two frames' worth
+
+        wait_for(recovered, timeout=RECOVERY_S, what=f"joints and derived values again after the {name} frame",
+                 explain=lambda: f"features {features.stats}\nsink {sink.stats}")
+        if stopped_by == "gate":
+            wait_for(lambda b=before: features.stats["bad"] > b[0]["bad"] and sink.stats["bad"] > b[1]["bad"],
+                     what=f"the {name} frame refused by both nodes' gates")
+        elif stopped_by == "filter":
+            assert features.stats["rejected"] > before[0]["rejected"], features.stats
+        wrong = out_of_range(received(plain, mark) + received(bundled, mark), ranges)
+        assert not wrong, f"after the {name} frame: {wrong[:5]}"
+
+    assert sink.state == features.state == "running"
+    everything = received(plain) + received(bundled)
+    assert not out_of_range(everything, ranges)
+    assert sum(1 for _, a, _ in everything if a.startswith("/pepper/derived/")) > 100
+    assert sink.stats["unencodable"] == 0
