@@ -65,9 +65,10 @@ def test_garbage_on_the_bus_is_counted_and_recording_goes_on(net, tmp_path, spaw
     wait_for(lambda: status(recording) >= (before + 1, len(garbage)), timeout=10,
              what="the event after the garbage recorded and the garbage counted",
              explain=lambda: "\n".join(recording.lines[-5:]))
-    code, _, _ = recording.stop(signal.SIGINT)
-    assert code == 0, "\n".join(recording.lines)
-    assert any(line.startswith(f"recorded {path}") for line in recording.lines)
+    code, rest, _ = recording.stop(signal.SIGINT)
+    said = [*recording.lines, *rest.splitlines()]  # (the last lines may come with the process's end)
+    assert code == 0, "\n".join(said)
+    assert any(line.startswith(f"recorded {path}") and line.endswith(f"{len(garbage)} bad") for line in said), said
     found = passes_every_reader(path, tmp_path)
     assert [d["name"] for k, _, d in found if k == "pepper/events/behavior"] == ["after the garbage"]
     assert not any(k == "pepper/joints/HeadYaw" for k, _, _ in found)
