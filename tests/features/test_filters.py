@@ -14,6 +14,8 @@ A·ω, after the first second:
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 
@@ -85,3 +87,58 @@ def test_nan_is_skipped_and_a_gap_restarts_the_signal():
 def test_bad_settings_are_refused():
     with pytest.raises(ValueError, match="must be more than 0"):
         VelocityFilter(1, cutoff_hz=0.0)
+
+
+def ramp(f: VelocityFilter, times, glitch: dict[int, float] | None = None) -> list[tuple[bool, float]]:
+    """A 1 rad/s ramp through ``f``, with the sample at index ``i`` replaced by ``glitch[i]``:
+    (velocity known for that t, velocity) per sample."""
+    out = []
+    for i, ti in enumerate(times):
+        q = (glitch or {}).get(i, ti)
+        fresh = f.update(T0 + ti, np.array([q]))
+        out.append((bool(fresh[0]), float(f.velocity[0])))
+    return out
+
+
+@pytest.mark.parametrize("glitch", [1e5, -3.0, np.inf, -np.inf], ids=["1e5", "3-rad-jump", "inf", "-inf"])
+def test_a_glitch_resets_its_signal_and_the_next_good_samples_are_normal(glitch):
+    """At 100 Hz, HeadYaw-like (max 7.34 rad/s): the glitch never reaches the velocity; two
+    samples after it the filter gives what a filter started afresh there gives."""
+    times = np.arange(30) / 100.0
+    f = VelocityFilter(1, CUTOFF_HZ, max_rate=np.array([73.4]))
+    got = ramp(f, times, {10: glitch})
+    assert all(math.isfinite(v) and abs(v) <= 1.0 for _, v in got), got
+    assert f.rejected == (2 if math.isfinite(glitch) else 1)  # a jump there, and back
+    assert not got[10][0] and not got[11][0]   # no velocity for the glitch, nor the start after it
+    expected = ramp(VelocityFilter(1, CUTOFF_HZ), times[11:])  # a filter started at the next good sample
+    assert got[12:] == [(known, pytest.approx(v, abs=1e-9)) for known, v in expected[1:]]
+    assert all(known for known, _ in got[12:])
+
+
+def test_time_going_back_is_refused_and_starts_the_signal_over():
+    f = VelocityFilter(1, CUTOFF_HZ)
+    for ti in (0.00, 0.01, 0.02):
+        f.update(T0 + ti, np.array([ti]))
+    assert f.update(T0 - 5.0, np.array([0.03])).tolist() == [False]
+    assert f.rejected == 1 and f.refused.tolist() == [True] and f.velocity.tolist() == [0.0]
+    assert f.update(T0 - 4.99, np.array([0.04])).tolist() == [True]   # on from the refused sample
+    assert f.velocity[0] == pytest.approx(1.0 - np.exp(-0.01 / f.tau))
+    assert f.refused.tolist() == [False]
+
+
+def test_without_a_max_rate_a_velocity_beyond_float_is_never_kept():
+    f = VelocityFilter(2, CUTOFF_HZ)
+    f.update(T0, np.array([0.0, 0.0]))
+    f.update(T0 + 1e-6, np.array([1.7e308, 0.0]))   # a rate of 1.7e314: not a float
+    assert np.isfinite(f.velocity).all() and f.velocity[0] == 0.0
+    assert f.refused.tolist() == [True, False]
+    f.update(T0 + 0.01, np.array([0.0, 0.01]))      # nothing left to start over from but this sample
+    f.update(T0 + 0.02, np.array([0.01, 0.02]))
+    assert f.velocity.tolist() == pytest.approx([1.0 - np.exp(-0.01 / f.tau), f.velocity[1]])
+
+
+def test_a_max_rate_is_one_positive_number_per_signal():
+    with pytest.raises(ValueError, match="max_rate must be 2 values more than 0"):
+        VelocityFilter(2, CUTOFF_HZ, max_rate=np.array([1.0]))
+    with pytest.raises(ValueError, match="max_rate"):
+        VelocityFilter(1, CUTOFF_HZ, max_rate=np.array([0.0]))

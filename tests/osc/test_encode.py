@@ -17,7 +17,10 @@ from pythonosc.osc_message_builder import OscMessageBuilder
 from pythonosc.parsing import osc_types
 
 from sonibus.adapters.osc import encode
+from sonibus.adapters.osc.config import Target
 from sonibus.adapters.osc.encode import Double
+from sonibus.adapters.osc.profiles import PepperOscProfile, SonibusProfile
+from sonibus.bus.keys import Key
 
 settings.register_profile("osc", deadline=None)
 settings.load_profile("osc")
@@ -183,3 +186,48 @@ def test_bundle_layout():
     assert parsed.content(0).params == [0.5]
     assert isinstance(parsed.content(1), OscBundle) and parsed.content(1).content(0).params == ["x", "started"]
     assert encode.bundle(tag, []) == dgram[:16]
+
+
+# -- one element OSC cannot carry: left out, the rest sent ---------------------------------
+
+T = 1_700_000_000.25
+GOOD = [(Key.parse("pepper/joints/HeadYaw"), (0.25,)), (Key.parse("pepper/derived/hand/R"), (0.1, 0.2, 0.3))]
+BAD = (Key.parse("pepper/joints/HeadPitch"), (1e300,))
+
+
+@pytest.mark.parametrize("bundle", [False, True], ids=["messages", "bundle"])
+def test_a_frame_leaves_out_just_the_message_osc_cannot_carry(bundle):
+    profile = SonibusProfile(Target(to="127.0.0.1:9", bundle=bundle))
+    datagrams, dropped = profile.frame("pepper", T, 7, [GOOD[0], BAD, GOOD[1]], 0.01)
+    [error] = dropped
+    assert isinstance(error, encode.EncodeError) and "'/pepper/joints/HeadPitch'" in str(error)
+    messages = [reference("/pepper/joints/HeadYaw", [0.25]), reference("/pepper/derived/hand/R", [0.1, 0.2, 0.3])]
+    if not bundle:
+        assert datagrams == messages
+        return
+    builder = OscBundleBuilder(T)
+    for message in messages:
+        builder.add_content(OscMessage(message))
+    assert datagrams == [builder.build().dgram]
+
+
+def test_pepperosc_leaves_out_just_the_joint_osc_cannot_carry():
+    profile = PepperOscProfile(Target(to="127.0.0.1:9", profile="pepperosc"))
+    datagrams, dropped = profile.frame("pepper", T, 7, [BAD, GOOD[0]], 0.02)
+    assert len(dropped) == 1
+    assert datagrams == [reference("/pepperdata", ["/HeadYaw", "/PositionSensor", 0.25]),
+                         reference("/pepperdata", ["/latency", 0.02])]
+
+
+def test_a_frame_of_nothing_but_bad_values_sends_nothing():
+    profile = SonibusProfile(Target(to="127.0.0.1:9", bundle=True))
+    datagrams, dropped = profile.frame("pepper", T, 7, [BAD, BAD], 0.01)
+    assert datagrams == [] and len(dropped) == 2
+
+
+@pytest.mark.parametrize("fields", [{"text": "a\0b", "state": "started"}, {"text": "\ud800", "state": "done"}],
+                         ids=["nul", "lone-surrogate"])
+def test_an_event_osc_cannot_carry_is_refused_with_its_address(fields):
+    profile = SonibusProfile(Target(to="127.0.0.1:9"))
+    with pytest.raises(encode.EncodeError, match="'/pepper/events/speech'"):
+        profile.event("pepper", "speech", {"t": T, "kind": "speech", **fields})

@@ -6,6 +6,7 @@ once, and nothing either target ever received is out of its declared range."""
 
 from __future__ import annotations
 
+import logging
 import math
 import time
 
@@ -18,6 +19,7 @@ from sonibus.bus import encode, keys, load_model
 
 from ..conftest import wait_for
 from .pd import Datagrams
+from .test_sink_delivery import handshake, messages
 
 JOINTS = load_model("pepper").joint_names
 WATCHED = ("/pepper/derived/velocity/HeadYaw", "/pepper/derived/qom/Head", "/pepper/derived/qom/Body")
@@ -111,3 +113,20 @@ def test_poison_frames_cost_at_most_a_frame_or_two(net, receivers):
     assert not out_of_range(everything, ranges)
     assert sum(1 for _, a, _ in everything if a.startswith("/pepper/derived/")) > 100
     assert sink.stats["unencodable"] == 0
+
+
+def test_an_event_osc_cannot_carry_is_left_out_counted_and_warned_about_once(net, receivers, caplog):
+    """A string holding NUL is JSON and passes the gate, but no OSC string holds it."""
+    caplog.set_level(logging.WARNING)
+    raw = receivers()
+    sink = net.start(OscSink(OscSinkConfig(subscribe="toy/events/*", targets=(raw.target,)), name="sound"))
+    src = net.bus("toy")
+    handshake(src, "toy/events/hello", raw, {"t": time.time(), "kind": "hello"})
+    for _ in range(3):
+        src.put("toy/events/speech", {"t": time.time(), "kind": "speech", "text": "a\0b", "state": "started"})
+    src.put("toy/events/speech", {"t": time.time(), "kind": "speech", "text": "ab", "state": "done"})
+    wait_for(lambda: ("/toy/events/speech", ["ab", "done"]) in messages(raw), what="the good event after them")
+    assert [m for m in messages(raw) if m[0] != "/toy/events/hello"] == [("/toy/events/speech", ["ab", "done"])]
+    assert sink.stats["unencodable"] == 3 and sink.stats["bad"] == 0
+    [warning] = [r.getMessage() for r in caplog.records if "OSC cannot carry" in r.getMessage()]
+    assert f"to {raw.target}" in warning and "'/toy/events/speech'" in warning and "\n" not in warning
