@@ -1,6 +1,12 @@
 """``Recording``: an MCAP file made by the recorder, checked on open and read
 message by message (never whole into memory).
 
+A file that is cut short, or whose last chunk is torn (the place a writer that
+failed would leave damage), is refused on open with one line that says to run
+``sonibus recover``; damage met later while reading is a ``RecordingError`` too.
+``recover`` keeps every complete chunk, and of a damaged chunk the records
+before the damage.
+
 >>> import os, tempfile
 >>> from sonibus.adapters.recorder.writer import RecordingWriter
 >>> path = os.path.join(tempfile.mkdtemp(), "doc.mcap")
