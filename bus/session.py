@@ -11,6 +11,7 @@ from __future__ import annotations
 import ipaddress
 import json
 import logging
+import queue
 import re
 import time
 from dataclasses import dataclass, field, fields, replace
@@ -36,8 +37,6 @@ _FIXES = {  # what Zenoh says when a session does not open → what to do
     "Address already in use": "another process listens there: give this one another listen port",
     "Unable to connect": "no router answers there: start `sonibus router` on that machine, or check connect",
     "Cannot assign requested address": "no interface of this machine has that address: listen on 0.0.0.0",
-    "timeout": "no router answered multicast scouting: start the installation's router machine first, "
-               "or give connect",
 }
 DISCOVERY_S = 2.0  # the longest wait for a first link, when there is someone to find
 SETTLE_S = 0.25    # after the first link found by multicast: the others found in the same round
@@ -292,6 +291,28 @@ def links(session: zenoh.Session) -> list[str]:
     return [str(z) for z in (*session.info.routers_zid(), *session.info.peers_zid())]
 
 
+def find_router(config: BusConfig, timeout_s: float) -> tuple[str, ...]:
+    """The endpoints of the first Zenoh router that answers multicast scouting within
+    ``timeout_s`` (``()`` if none did)."""
+    found: queue.Queue[Any] = queue.Queue()
+    scout = zenoh.scout(found.put, what="router", config=replace(config, mode="peer").to_zenoh())
+    try:
+        hello = found.get(timeout=timeout_s)
+    except queue.Empty:
+        return ()
+    finally:
+        scout.stop()
+    endpoints = []
+    for locator in hello.locators:
+        try:
+            endpoint = check_endpoint(str(locator))
+        except ValueError:  # an address form our checks do not know: Zenoh has the others
+            continue
+        if not re.match(r"\w+/\[fe80:", endpoint, re.IGNORECASE):  # link-local, and no interface to dial it on
+            endpoints.append(endpoint)
+    return tuple(sorted(endpoints, key=lambda e: "[" in e))  # IPv4 first
+
+
 def lease_s(session: zenoh.Session) -> float:
     """The transport lease of ``session`` (how long a vanished peer's tokens last), in s."""
     return _JOINED.get(str(session.zid()), _Joined(0, 0, 10.0)).lease_s
@@ -303,34 +324,49 @@ def open_session(config: BusConfig, wait: bool = False) -> zenoh.Session:
     A client needs its router (at ``connect``, or found by multicast). With ``wait``
     (nodes that run for days) it waits for one, trying every ``reconnect_ms`` —
     Ctrl-C still ends it between tries; without, no router is an error at once."""
-    if config.mode == "client" and config.connect:
-        config = replace(config, options={"connect/timeout_ms": config.reconnect_ms, **config.options})
-    elif config.mode == "client" and config.multicast:  # each try (and each re-try after a loss) scouts this long
-        scouting = config.reconnect_ms if wait else max(config.reconnect_ms, int(DISCOVERY_S * 1000))
-        config = replace(config, options={"scouting/timeout": scouting, **config.options})
     warned = False
     while True:
-        try:
-            session = zenoh.open(config.to_zenoh())
-        except ConfigError:
-            raise
-        except Exception as exc:
-            unreachable = "Unable to connect" in str(exc) or zenoh_reason(exc) == "timeout"
-            if not (wait and config.mode == "client" and unreachable):
-                reason = zenoh_reason(exc)
-                fix = next((f" — {fix}" for known, fix in _FIXES.items() if known in reason), "")
-                raise ConfigError(f"cannot open the bus ({config.mode}, listen={list(config.listen)}, "
-                                  f"connect={list(config.connect)}): {reason}{fix}") from exc
-            if not warned:
-                log.warning("waiting for a router at %s",
-                            ", ".join(config.connect) or "any address (multicast scouting)")
-                warned = True
-            continue
-        searched = config.mode != "client" and (config.multicast or config.connect)
-        _JOINED[str(session.zid())] = _Joined(DISCOVERY_S if searched else 0.0,
-                                              SETTLE_S if config.multicast and config.mode != "client" else 0.0,
-                                              config.options.get("transport/link/tx/lease", config.lease_ms) / 1000)
-        return session
+        joined = _router_found(config, wait)
+        if joined is not None:
+            try:
+                session = zenoh.open(joined.to_zenoh())
+                break
+            except ConfigError:
+                raise
+            except Exception as exc:
+                if not (wait and config.mode == "client" and "Unable to connect" in str(exc)):
+                    reason = zenoh_reason(exc)
+                    fix = next((f" — {fix}" for known, fix in _FIXES.items() if known in reason), "")
+                    raise ConfigError(f"cannot open the bus ({config.mode}, listen={list(config.listen)}, "
+                                      f"connect={list(joined.connect)}): {reason}{fix}") from exc
+        elif not wait:
+            raise ConfigError(f"cannot open the bus (client, multicast, namespace '{config.namespace}'): no router "
+                              f"answered multicast scouting within {DISCOVERY_S:g} s — start the installation's "
+                              f"router machine first, or give connect")
+        if not warned:
+            log.warning("waiting for a router at %s", ", ".join(config.connect) or "any address (multicast scouting)")
+            warned = True
+    searched = config.mode != "client" and (config.multicast or config.connect)
+    _JOINED[str(session.zid())] = _Joined(DISCOVERY_S if searched else 0.0,
+                                          SETTLE_S if config.multicast and config.mode != "client" else 0.0,
+                                          config.options.get("transport/link/tx/lease", config.lease_ms) / 1000)
+    return session
+
+
+def _router_found(config: BusConfig, wait: bool) -> BusConfig | None:
+    """``config`` as Zenoh should open it; None while a client finds no router by multicast.
+
+    Zenoh retries a lost router only at configured endpoints (not at one it scouted),
+    so a client that looks for its router by multicast finds it first and then
+    connects there: when the router restarts, Zenoh reconnects by itself."""
+    if config.mode != "client":
+        return config
+    if config.multicast and not config.connect:
+        found = find_router(config, config.reconnect_ms / 1000 if wait else DISCOVERY_S)
+        if not found:
+            return None
+        config = replace(config, connect=found)
+    return replace(config, options={"connect/timeout_ms": config.reconnect_ms, **config.options})
 
 
 def _under(folder: Path, name: Any) -> Any:

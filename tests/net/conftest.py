@@ -20,8 +20,7 @@ def _stale_removed() -> None:
         remove_stale()
 
 
-@pytest.fixture
-def topology(_stale_removed: None) -> Iterator[Topology]:
+def _topology() -> Iterator[Topology]:
     reason = root_reason()
     if reason is not None:
         if os.environ.get("CI"):  # CI runs as root: there, a missing capability is a failure
@@ -32,6 +31,17 @@ def topology(_stale_removed: None) -> Iterator[Topology]:
         yield topo
     finally:
         topo.close()
+
+
+@pytest.fixture
+def topology(_stale_removed: None) -> Iterator[Topology]:
+    yield from _topology()
+
+
+@pytest.fixture(scope="module")
+def shared_topology(_stale_removed: None) -> Iterator[Topology]:
+    """One topology for the tests of a module that build on each other's set-up."""
+    yield from _topology()
 
 
 @pytest.fixture
