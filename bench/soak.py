@@ -19,6 +19,7 @@ from __future__ import annotations
 import argparse
 import json
 import platform
+import shutil
 import sys
 import tempfile
 from pathlib import Path
@@ -37,10 +38,14 @@ def main() -> None:
     args = parser.parse_args()
     plan = Plan(examples=CI.examples, huge_frames=CI.huge_frames, bursts=CI.bursts, derandomize=False,
                 seconds=args.minutes * 60)
-    with tempfile.TemporaryDirectory(prefix="soak-") as tmp:
-        with Show(Path(tmp)) as show:
-            report = campaign(show, plan, Path(tmp) / "fuzz.json")
-        found = json.loads((Path(tmp) / "fuzz.json").read_text())
+    tmp = Path(tempfile.mkdtemp(prefix="soak-"))
+    with Show(tmp) as show:
+        report = campaign(show, plan, tmp / "fuzz.json")
+    found = json.loads((tmp / "fuzz.json").read_text())
+    if report.problems:
+        print(f"the recording and the log are kept in {tmp}")
+    else:
+        shutil.rmtree(tmp)
     tried = sum(t["total"] for t in found["counts"]["tried"].values())
     executed = found["counts"]["commands_from_invalid_input"]
     rss = found["figures"].get("rss_mb", {})

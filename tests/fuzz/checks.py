@@ -192,7 +192,8 @@ def recording(show: Show, report: Report) -> None:
     if facts is not None:
         report.figures["recording"] = {"messages": facts["messages"], "duration_s": round(facts["duration_s"], 1),
                                        "stats": facts.get("stats"), "keys": len(facts["keys"])}
-    _cli(report, "export", path, "--csv", str(show.tmp / "csv"))
+    messages = facts["messages"] if facts else 0
+    _cli(report, "export", path, "--csv", str(show.tmp / "csv"), timeout=max(60.0, messages / 2000))
     _read_all(path, report, facts)
     duration = facts["duration_s"] if facts else 60.0
     speed = max(1.0, duration / 5)  # about five seconds of replay
