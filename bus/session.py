@@ -35,7 +35,8 @@ _FIELDS = {"namespace": "namespace", "access_control": "access_control",
            "connect/endpoints": "connect", "listen/endpoints": "listen"}  # Zenoh key → ours, for errors
 _FIXES = {  # what Zenoh says when a session does not open → what to do
     "Address already in use": "another process listens there: give this one another listen port",
-    "Unable to connect": "no router answers there: start `sonibus router` on that machine, or check connect",
+    "Unable to connect": "no router answers there, or it refuses this machine's login: start `sonibus router` "
+                         "on that machine, check connect, and user/password or certificates",
     "Cannot assign requested address": "no interface of this machine has that address: listen on 0.0.0.0",
 }
 DISCOVERY_S = 2.0  # the longest wait for a first link, when there is someone to find

@@ -192,7 +192,8 @@ def test_the_three_machine_example_lets_only_the_control_machine_command(spawn):
     seen = run_cli("nodes", "--config", show, "--host", "sound-pc", "--connect", endpoint, "--no-multicast")
     assert "owns pepper" in seen.stdout, "the sound machine still sees the robot and its data"
     stranger = run_cli("nodes", "--config", show, "--host", "visitor", "--connect", endpoint, "--no-multicast")
-    assert "0 robot(s)" in stranger.stdout, "a machine without a user of users.txt does not join"
+    assert stranger.returncode == 2, "a machine without a user of users.txt does not join"
+    assert "cannot open the bus" in stranger.stderr and "refuses this machine's login" in stranger.stderr
 
 
 def test_when_one_robot_leaves_the_other_keeps_playing(net):
