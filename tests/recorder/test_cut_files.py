@@ -11,6 +11,7 @@ import json
 import struct
 
 import pytest
+from mcap.reader import make_reader
 from mcap.records import Chunk
 from mcap.records import Message as McapMessage
 from mcap.stream_reader import StreamReader, breakup_chunk
@@ -61,9 +62,8 @@ def passes_every_reader(path, tmp_path):
 def chunk_ends(path):
     """(end offset, messages) of each chunk of ``path``, in file order."""
     ends = []
-    with Recording(str(path)) as recording:
-        indexes = sorted(recording._reader.get_summary().chunk_indexes, key=lambda i: i.chunk_start_offset)
     with open(path, "rb") as f:
+        indexes = sorted(make_reader(f).get_summary().chunk_indexes, key=lambda i: i.chunk_start_offset)
         for index in indexes:
             f.seek(index.chunk_start_offset)
             chunk = next(StreamReader(io.BytesIO(f.read(index.chunk_length)), skip_magic=True,
