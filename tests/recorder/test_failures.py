@@ -105,7 +105,9 @@ def test_a_full_disk_ends_the_recorder_loudly_and_leaves_a_recoverable_file(net,
     flooder = threading.Thread(target=flood, daemon=True)
     flooder.start()
     try:
-        wait_for(lambda: recording.popen.poll() is not None, timeout=60, what="the recorder to end on a full disk")
+        wait_for(lambda: recording.popen.poll() is not None or shutil.disk_usage(small_disk).free < 64 * 1024,
+                 timeout=60, what="the disk to fill")
+        wait_for(lambda: recording.popen.poll() is not None, timeout=5, what="the recorder to end on a full disk")
     finally:
         stop.set()
         flooder.join(5)
