@@ -23,7 +23,7 @@ from typing import Any, TextIO
 
 from .. import schemas
 from . import codec, config, keys, ownership, registry, runner
-from .client import robot_info, send_command, wait_for_robot
+from .client import owner_of, robot_info, send_command
 from .errors import CommandError, ConfigError, RobotNotFound, SonibusError
 from .node import Bus
 from .presence import SILENCE_S
@@ -412,11 +412,11 @@ def cmd_send(args: argparse.Namespace, env: Environment) -> Exit:
     with open_session(cfg) as session:
         bus = Bus(session)
         reached = discover(session)
-        present = wait_for_robot(bus, args.robot, min(2.0, args.timeout))  # not found after this: the command says so
+        owner = owner_of(bus, args.robot, min(2.0, args.timeout))  # not found after this: the command says so
         try:
-            result = send_command(bus, args.robot, args.verb, request, timeout=args.timeout)
+            result = send_command(bus, args.robot, args.verb, request, timeout=args.timeout, owner=owner)
         except RobotNotFound as exc:
-            if present:  # its token is here, its commands are not: refused on the way
+            if owner is not None:  # its token is here, its commands are not: refused on the way
                 user = f" (user '{cfg.user}')" if cfg.user else ""
                 raise CommandError("refused", f"robot '{args.robot}' is on the bus but nothing answered "
                                               f"'{args.verb}': access control on the robot's machine refuses "

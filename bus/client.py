@@ -20,18 +20,21 @@ import zenoh
 from . import codec, keys
 from .errors import CommandError, RobotNotFound
 from .node import Bus
+from .ownership import Claim, claims
 
 Outcome = dict[str, Any] | CommandError
 
 
 def ask(bus: Bus, robot: str, verb: str, args: dict[str, Any], done: Callable[[Outcome], None],
-        timeout: float = 5.0) -> None:
-    """Send ``verb`` to ``robot``; ``done`` gets the result or a ``CommandError``
-    (``robot_not_found``, ``timeout``, or the robot's refusal), exactly once."""
+        timeout: float = 5.0, owner: Claim | None = None) -> None:
+    """Send ``verb`` to ``robot`` (to its ``owner`` alone, if given: see ``owner_of``);
+    ``done`` gets the result or a ``CommandError`` (``robot_not_found``, ``timeout``, or
+    the robot's refusal), exactly once."""
     pending = _Pending(robot, verb, done, timeout)
+    selector = keys.command(robot, verb) + (f"?owner={owner.address}" if owner is not None else "")
     try:
         # Every answer, not one per key: a node standing by for the robot's owner answers too (``conflict``).
-        bus.session.get(keys.command(robot, verb), zenoh.handlers.Callback(pending.on_reply, pending.on_end),
+        bus.session.get(selector, zenoh.handlers.Callback(pending.on_reply, pending.on_end),
                         payload=codec.encode(args), encoding=codec.ENCODING, timeout=timeout,
                         consolidation=zenoh.ConsolidationMode.NONE)
     except Exception as exc:  # a closed session, a key Zenoh refuses
@@ -92,9 +95,10 @@ class _Pending:
 
 
 def send_command(bus: Bus, robot: str, verb: str, args: dict[str, Any] | None = None,
-                 timeout: float = 5.0) -> dict[str, Any]:
-    """The result of ``verb`` on ``robot``, or ``CommandError`` (``RobotNotFound``
-    when no node owns the robot, code ``timeout`` when it did not answer)."""
+                 timeout: float = 5.0, owner: Claim | None = None) -> dict[str, Any]:
+    """The result of ``verb`` on ``robot`` (run by its ``owner`` alone, if given), or
+    ``CommandError`` (``RobotNotFound`` when no node owns the robot, code ``timeout``
+    when it did not answer)."""
     answered = threading.Event()
     outcomes: list[Outcome] = []
 
@@ -102,7 +106,7 @@ def send_command(bus: Bus, robot: str, verb: str, args: dict[str, Any] | None = 
         outcomes.append(outcome)
         answered.set()
 
-    ask(bus, robot, verb, args or {}, done, timeout)
+    ask(bus, robot, verb, args or {}, done, timeout, owner)
     if not answered.wait(timeout + 1.0):
         raise CommandError("timeout", f"robot '{robot}' did not answer '{verb}' within {timeout:g} s")
     if isinstance(outcomes[0], CommandError):
@@ -110,15 +114,18 @@ def send_command(bus: Bus, robot: str, verb: str, args: dict[str, Any] | None = 
     return outcomes[0]
 
 
-def wait_for_robot(bus: Bus, robot: str, timeout: float = 2.0) -> bool:
-    """Whether ``robot`` is on the bus, waiting up to ``timeout`` for it: a process
-    that has just joined may not have found its peers yet (multicast discovery)."""
+def owner_of(bus: Bus, robot: str, timeout: float = 2.0) -> Claim | None:
+    """The owner of ``robot`` as this node sees it (the earliest claim), waiting up to
+    ``timeout`` for one (a process that has just joined may not have found its peers
+    yet); None if none came. A command sent to it alone runs once even
+    while two owners of the robot have not yet seen each other."""
     deadline = time.monotonic() + timeout
     while True:
-        if bus.alive(keys.robot_token(robot), timeout=0.25):
-            return True
+        found = claims(bus.alive(keys.robot_token(robot), timeout=0.25)).get(robot)
+        if found:
+            return found[0]
         if time.monotonic() >= deadline:
-            return False
+            return None
 
 
 def robot_info(bus: Bus, robot: str, timeout: float = 2.0) -> dict[str, Any] | None:

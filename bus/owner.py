@@ -119,6 +119,7 @@ class RobotAdapter(Adapter):
                 args = {}
                 if verb != "stop":  # stop must always work
                     raise CommandError("bad_request", f"{verb}: {exc}") from None
+            self.ownership.check(verb, query.parameters.get("owner"))  # sent to another owner of the robot?
             reply = commands.ok_reply(verb, self.execute(verb, args))
         except CommandError as exc:
             reply = commands.error_reply(verb, exc)

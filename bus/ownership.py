@@ -65,6 +65,11 @@ class Claim:
             return None
         return cls(chunks[2], int(chunks[3]), chunks[4], chunks[5])
 
+    @property
+    def address(self) -> str:
+        """What a command names to reach this owner alone (``<robot>/cmd/<verb>?owner=<address>``)."""
+        return f"{self.since_ms}/{self.host}/{self.node}"
+
     def who(self) -> dict[str, Any]:
         return {"host": self.host, "node": self.node, "since": self.since_ms / 1000}
 
@@ -181,12 +186,18 @@ class Ownership:
         except Exception as exc:  # a closing session: the log line remains
             log.debug("%s: conflict event not sent: %s", self.bus.node, exc)
 
-    def check(self, verb: str) -> None:
-        """``CommandError`` (``conflict``) while this node stands by for another owner."""
+    def check(self, verb: str, addressed: str | None = None) -> None:
+        """``CommandError`` (``conflict``) while this node stands by for another owner, or
+        when the command is ``addressed`` to another owner (the one its sender sees first:
+        while two owners have not yet seen each other, only that one runs it)."""
         owner = self.owner
         if not self.active and owner is not None:
             raise CommandError("conflict", f"{verb}: robot '{self.robot}' is owned by {owner}; node "
                                            f"'{self.bus.node}' on host '{self.bus.host}' stands by")
+        if addressed and addressed != self.claim.address:
+            host, _, node = addressed.partition("/")[2].partition("/")
+            raise CommandError("conflict", f"{verb}: sent to node '{node}' on host '{host}' as the owner of robot "
+                                           f"'{self.robot}', not to node '{self.bus.node}' on host '{self.bus.host}'")
 
     # -- an owner's streams ----------------------------------------------------------
 

@@ -17,6 +17,7 @@ import pytest
 from sonibus import schemas
 from sonibus.adapters.sim import SimConfig, SimRobot
 from sonibus.bus import Bus, BusConfig, CommandError, OwnershipError, decode, keys, open_session, send_command
+from sonibus.bus.client import owner_of
 from sonibus.bus.ownership import Claim, claims
 
 from .conftest import free_port, run_cli, wait_for
@@ -134,10 +135,28 @@ def test_a_later_claim_leaves_the_owner_in_charge_and_is_named_once(net, pepper,
     assert caplog.text.count("also claimed by node 'spare'") == 1
 
 
-def test_nodes_shows_the_owner_and_who_stands_by(net, pepper):
+def test_a_command_sent_to_another_owner_does_not_run_here(net, pepper):
+    """While two owners have not yet seen each other, a sender that sees both sends to
+    the earlier one alone (``owner_of``): the other refuses."""
     watcher = net.bus("watcher")
+    assert owner_of(watcher, "pepper") == pepper.ownership.claim
+    before = pepper.body.pose()["HeadYaw"]
+    other = Claim("pepper", 1, "elsewhere", "ghost")
+    with pytest.raises(CommandError) as refused:
+        send_command(watcher, "pepper", "joints/set", {"names": ["HeadYaw"], "angles": [0.5], "speed": 1.0},
+                     timeout=2.0, owner=other)
+    assert refused.value.code == "conflict"
+    assert "sent to node 'ghost' on host 'elsewhere' as the owner of robot 'pepper'" in refused.value.message
+    time.sleep(0.3)
+    assert pepper.body.pose()["HeadYaw"] == before
+    assert send_command(watcher, "pepper", "joints/set", {"names": ["HeadYaw"], "angles": [0.5], "speed": 1.0},
+                        timeout=2.0, owner=pepper.ownership.claim) == {}
+
+
+def test_nodes_shows_the_owner_and_who_stands_by(net, pepper):
     rival = earlier(pepper, "elsewhere", "ghost")
-    token = watcher.token(rival.key)  # noqa: F841 (held: a dropped token is undeclared)
+    # On the session the CLI connects to: peers forward nothing between two others.
+    token = pepper.bus.session.liveliness().declare_token(rival.key)  # noqa: F841 (a dropped token is undeclared)
     wait_for(lambda: not pepper.ownership.active, what="the owner to stand by")
     result = run_cli("nodes", *net.cli_args())
     assert result.returncode == 0, result.stderr
