@@ -27,6 +27,7 @@ from dataclasses import dataclass
 from typing import Any, ClassVar
 
 from . import codec, keys
+from .errors import SonibusError
 from .node import Bus
 from .ownership import Ownership
 
@@ -57,6 +58,7 @@ class Adapter:
         self.state = "new"
         self.stopping = threading.Event()
         self.robots: list[str] = []       # robots this node owns (see claim_robot)
+        self.where: Callable[[str], str] | None = None  # key → "file [nodes.x] line N", when built from a file
         self.since = 0.0                  # when it started (epoch seconds)
         self.stats: dict[str, int] = {}   # counters a subclass keeps (received, sent, bad, ...)
         self.failure = ""                 # why the node failed (a worker died), once it has
@@ -167,7 +169,10 @@ class Adapter:
             return
         self.failure = reason
         self.state = "failed"
-        log.error("%s: %s", self.name, reason, exc_info=exc)
+        expected = isinstance(exc, SonibusError)  # a failure the code foresaw (a full disk): its line says it all
+        log.error("%s: %s", self.name, reason, exc_info=None if expected else exc)
+        if expected:
+            log.debug("%s: %s", self.name, reason, exc_info=exc)
         if self._bus is not None:
             event = {"t": time.time(), "kind": "node", "host": self._bus.host, "node": self.name,
                      "adapter": self.kind, "state": "failed", "error": reason}

@@ -42,6 +42,7 @@ class NodeSpec:
         """The adapter, with its options checked against ``cls.Config``."""
         adapter = cls(self.config(cls), name=self.name)
         adapter.kind = self.adapter
+        adapter.where = self.at
         return adapter
 
     def at(self, key: str) -> str:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import logging
+import re
 import threading
 from collections.abc import Callable
 
@@ -54,7 +55,10 @@ def run(adapters: list[Adapter], bus_config: BusConfig, stop: threading.Event,
         started: list[Adapter] = []
         try:
             for adapter in adapters:
-                adapter.start(bus)
+                try:
+                    adapter.start(bus)
+                except ConfigError as exc:
+                    raise _located(adapter, exc) from None
                 started.append(adapter)
                 log.info("started %r", adapter)
             if on_started is not None:
@@ -66,3 +70,12 @@ def run(adapters: list[Adapter], bus_config: BusConfig, stop: threading.Event,
         finally:
             for adapter in reversed(started):
                 adapter.stop()
+
+
+def _located(adapter: Adapter, error: ConfigError) -> ConfigError:
+    """A configuration error an adapter found only at start (``node 'x': key 'path': ...``),
+    placed in its installation file (``show.toml [nodes.x] line 12: key 'path': ...``)."""
+    found = re.search(r"key '([^']+)': (.*)", str(error))
+    if adapter.where is None or found is None:
+        return error
+    return ConfigError(f"{adapter.where(found[1])}: key '{found[1]}': {found[2]}")
