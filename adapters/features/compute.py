@@ -55,11 +55,14 @@ class Output:
     dropped: int = 0
 
     def bounded(self, values: np.ndarray, span: Range, publish: np.ndarray | bool = True) -> tuple[np.ndarray,
-                                                                                                    np.ndarray]:
-        """``values`` clamped into ``span``, and which of them are finite; counts what is
-        clamped or dropped among those to ``publish``."""
+                                                                                                    np.ndarray | None]:
+        """``values`` clamped into ``span``, and which of them are finite (None: all); counts
+        what is clamped or dropped among those to ``publish``."""
+        low, high = span
+        if (values >= low).all() and (values <= high).all():  # the usual: in range (NaN is not)
+            return values, None
         finite = np.isfinite(values)
-        clamped = np.clip(values, *span)
+        clamped = np.clip(values, low, high)
         counted = np.broadcast_to(publish, values.shape)
         self.clamped += int(np.count_nonzero((clamped != values) & finite & counted))
         self.dropped += int(np.count_nonzero(~finite & counted))
@@ -126,8 +129,9 @@ class RobotFeatures:
             finite &= ~refused  # a glitch moves no hand
         np.copyto(self._positions, q, where=finite)
         v, usable = out.bounded(self._velocity.velocity, self._velocity_range, fresh)
-        v = np.where(usable, v, 0.0)
-        fresh &= usable
+        if usable is not None:
+            v = np.where(usable, v, 0.0)
+            fresh &= usable
         if self.config.publishes("velocity"):
             out.samples += [(key, {"t": t, "seq": seq, "v": value})
                             for key, value, now in zip(self._velocity_keys, v.tolist(), fresh.tolist(), strict=True)
@@ -136,7 +140,9 @@ class RobotFeatures:
             self._hand_features(t, seq, out)
         updated = self._members @ fresh > 0
         qoms, usable = out.bounded(self._members @ (np.abs(v) * self._weights), self._qom_range, updated)
-        for (key, group), qom, now in zip(self._groups, qoms.tolist(), (updated & usable).tolist(), strict=True):
+        if usable is not None:
+            updated &= usable
+        for (key, group), qom, now in zip(self._groups, qoms.tolist(), updated.tolist(), strict=True):
             if not now:
                 continue
             if self.config.publishes("qom"):
@@ -155,7 +161,7 @@ class RobotFeatures:
             return  # an arm joint never seen yet
         points = self.robot.arms.points(angles)
         hands, usable = out.bounded(points, self._hand_range, self.config.publishes("hand"))
-        if not usable.all():
+        if usable is not None and not usable.all():
             return
         if self.config.publishes("hand"):
             out.samples += [(key, {"t": t, "seq": seq, "v": hand.tolist()})
@@ -164,9 +170,9 @@ class RobotFeatures:
         if self.config.publishes("hand_speed") and fresh.all():
             speeds, usable = out.bounded(np.linalg.norm(self._hand_velocity.velocity.reshape(hands.shape), axis=1),
                                          self._speed_range)
+            ok = [True] * len(speeds) if usable is None else usable.tolist()
             out.samples += [(key, {"t": t, "seq": seq, "v": s})
-                            for key, s, ok in zip(self._speed_keys, speeds.tolist(), usable.tolist(), strict=True)
-                            if ok]
+                            for key, s, good in zip(self._speed_keys, speeds.tolist(), ok, strict=True) if good]
 
 
 def _spans(ranges: dict[str, Range], keys_: list[str], default: tuple[Any, Any]) -> Range:

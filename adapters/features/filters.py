@@ -60,7 +60,9 @@ class VelocityFilter:
         self.velocity = np.zeros(n)
         self.known = np.zeros(n, dtype=bool)  # has a velocity (and a step to take the slope from)
         self.rejected = 0
-        self.refused = np.zeros(n, dtype=bool)
+        self._none = np.zeros(n, dtype=bool)
+        self._none.flags.writeable = False
+        self.refused = self._none
         self._last_q = np.full(n, np.nan)
         self._last_t = np.full(n, np.nan)
         self._last_r = np.zeros(n)
@@ -71,28 +73,29 @@ class VelocityFilter:
         dt = t - self._last_t
         finite = np.isfinite(q)
         with np.errstate(invalid="ignore", over="ignore"):
-            step = finite & (dt > 0) & (dt <= self.max_gap_s)
-            jumped = step & ~(np.abs(q - self._last_q) <= self.max_rate * dt)
-            backwards = finite & (dt < 0)
-        refused = jumped | backwards | np.isinf(q)
-        if refused.any():
-            step &= ~refused
-        if step.all():  # the usual frame: no boolean indexing
+            due = finite & (dt > 0) & (dt <= self.max_gap_s)
+            step = due & (np.abs(q - self._last_q) <= self.max_rate * dt)
+        refused = self._none
+        if step.all():  # the usual frame: no boolean indexing, nothing refused
             self._step(slice(None), dt, q)
-        elif step.any():
-            self._step(step, dt[step], q[step])
-        spoiled = step & ~np.isfinite(self.velocity)  # (a rate beyond float, where max_rate is unknown)
-        if spoiled.any():
-            step &= ~spoiled
-            refused |= spoiled
-        start = (finite | refused) & ~step
-        if start.any():
+        else:
+            with np.errstate(invalid="ignore"):
+                refused = (due & ~step) | (finite & (dt < 0)) | np.isinf(q)  # a jump, time going back, inf
+            if step.any():
+                self._step(step, dt[step], q[step])
+        spoiled = None
+        if not math.isfinite(self.velocity.sum()):  # a rate beyond float, where max_rate is unknown
+            spoiled = ~np.isfinite(self.velocity)
+            step = step & ~spoiled
+            refused = refused | spoiled
+        if refused is not self._none or not step.all():
+            start = (finite | refused) & ~step
             self.velocity[start] = 0.0
             self.known[start] = False
         np.copyto(self._last_q, q, where=finite)
         np.copyto(self._last_t, t, where=finite)
-        if refused.any():
-            gone = refused & ~(finite & ~spoiled)  # nothing usable to start over from
+        if refused is not self._none and refused.any():
+            gone = refused & (~finite if spoiled is None else ~finite | spoiled)  # nothing to start over from
             self._last_q[gone] = self._last_t[gone] = np.nan
             self.rejected += int(np.count_nonzero(refused))
         self.refused = refused
