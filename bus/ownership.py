@@ -9,8 +9,9 @@ after declaring its token and watches the robot's claims for the rest of its
 life. Of the claims that see each other, the earliest (then host, then node
 name) keeps the robot; any other stands by: it publishes nothing, refuses
 commands with code ``conflict``, and owns the robot again once the earlier claim
-is gone. Both log one line naming the other; the one standing by tells sinks
-with a ``conflict`` event.
+is gone. Both log one line naming the other and tell sinks with a ``conflict``
+event (``state`` "standby", ``owner``, ``standby``); a node that owns the robot
+again after the owner left says so (``state`` "owner").
 
 >>> Claim.parse("sonibus/robots/pepper/1700000000000/laptop/sim")
 Claim(robot='pepper', since_ms=1700000000000, host='laptop', node='sim')
@@ -169,7 +170,7 @@ class Ownership:
         if was and first is not None:
             log.warning("%s is also owned by %s, which claimed it first: this node stands by (streams nothing, "
                         "refuses commands) until that one leaves", name, first)
-            self._event("standby", first)
+            self._event("standby", first, self.claim)
         elif not was and first is None:
             log.warning("%s: its owner left; this node owns it again", name)
             self._event("owner", self.claim)
@@ -177,10 +178,12 @@ class Ownership:
             for claim in new:
                 log.warning("%s is also claimed by %s, which claimed it later and stands by: this node keeps it",
                             name, claim)
+                self._event("standby", self.claim, claim)  # said by both: either may be out of a sink's reach
 
-    def _event(self, state: str, owner: Claim) -> None:
-        event = {"t": time.time(), "kind": "conflict", "state": state, "owner": owner.who(),
-                 "node": self.claim.who()}
+    def _event(self, state: str, owner: Claim, standby: Claim | None = None) -> None:
+        event = {"t": time.time(), "kind": "conflict", "state": state, "owner": owner.who()}
+        if standby is not None:
+            event["standby"] = standby.who()
         try:
             self.bus.put(keys.event(self.robot, "conflict"), event)
         except Exception as exc:  # a closing session: the log line remains

@@ -103,7 +103,7 @@ def test_an_earlier_claim_makes_the_owner_stand_by_and_its_leaving_gives_the_rob
     schemas.validate("event", event)
     assert event["state"] == "standby"
     assert event["owner"] == {"host": "elsewhere", "node": "ghost", "since": rival.since_ms / 1000}
-    assert event["node"]["node"] == "sim-pepper"
+    assert event["standby"]["node"] == "sim-pepper"
 
     time.sleep(0.3)  # frames in flight when it stood by
     frames.drain(0)
