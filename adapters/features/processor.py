@@ -141,6 +141,8 @@ class Features(Adapter):
             log.warning("%s: %s: hand positions unavailable: %s", self.name, robot, described.unavailable)
         reply = catalog.derived(described, cfg, {"host": self.bus.host, "node": self.name})
         features = RobotFeatures(described, cfg, catalog.bounds(reply))
+        if self.stopping.is_set():
+            return
         payload, where = codec.encode(reply), keys.derived_info(robot)
         self.own(self.bus.serve(where, lambda query: query.reply(where, payload, encoding=codec.ENCODING)))
         self.robot_features[robot] = features  # (the worker takes its frames from now on)
