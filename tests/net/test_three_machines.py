@@ -23,6 +23,7 @@ import pytest
 
 from .netns import Host, NsProcess, OscDump, Topology
 from .test_multihost import joint, until
+from .test_silence import SILENCE
 
 pytestmark = pytest.mark.external
 
@@ -118,6 +119,7 @@ def test_any_start_order(museum, order, figure):
     check_commands(museum, 0.25)
     for process in museum.runs.values():
         assert process.running, process.describe()
+    assert not [line for line in museum.runs["sound"].errors if SILENCE in line], "a healthy installation warned"
 
 
 @pytest.mark.parametrize("role", ROLES)
@@ -135,3 +137,4 @@ def test_each_machine_restarts(museum, role, figure):
     figure(f"first data at sound after {role} restarted", first, "s")
     assert first <= FIRST_DATA_S, f"data reached the sound machine {first:.2f} s after {role} restarted"
     check_commands(museum, -0.2)
+    assert not [line for line in museum.runs["sound"].errors if SILENCE in line], "a healthy installation warned"
