@@ -180,6 +180,38 @@ def test_nodes_lists_the_robot_and_its_node(net):
     assert "owned by sim-pepper" in robot_line
 
 
+def test_nodes_that_reach_nobody_say_so_and_what_to_check():
+    """Issue 14, item 3: `sonibus nodes` with an endpoint where nothing answers."""
+    result = run_cli("nodes", "--no-multicast", "--connect", f"tcp/127.0.0.1:{free_port()}", "--timeout", "0.2")
+    assert result.returncode == 0, result.stderr
+    assert "0 node(s)" in result.stdout and "0 robot(s)" in result.stdout
+    [hint] = [line for line in result.stderr.splitlines() if line.startswith("sonibus: hint: ")]
+    assert "reached no peer or router" in hint and "connect tcp/127.0.0.1:" in hint and "--config" in hint
+
+
+def test_echo_of_a_misspelt_key_names_the_robots_there(net):
+    """`sonibus echo 'pepper/jionts/*'` used to print nothing and exit 0, saying nothing."""
+    net.sim("pepper", rate_hz=20)
+    result = run_cli("echo", "pepper/jionts/*", "--duration", "1", *net.cli_args())
+    assert result.returncode == 0, result.stderr
+    assert result.stdout == ""
+    [hint] = [line for line in result.stderr.splitlines() if line.startswith("sonibus: hint: ")]
+    assert "nothing matched 'pepper/jionts/*'" in hint
+    assert "robots on the bus: pepper" in hint and "pepper/joints/<Joint>" in hint
+
+
+def test_echo_that_goes_on_hints_once_while_it_waits(net, spawn):
+    net.sim("pepper", rate_hz=20)
+    process = spawn(SONIBUS, "echo", "pepper/jionts/*", *net.cli_args(), collect=True, merge=True)
+    hint = "sonibus: hint: nothing matched 'pepper/jionts/*'"
+    wait_for(lambda: any(line.startswith(hint) for line in process.lines), timeout=10, what="the hint")
+    rc, rest, _ = process.stop(signal.SIGINT, timeout=STOP_WITHIN_S)
+    assert rc in (130, -signal.SIGINT), (rc, rest)
+    lines = process.lines + rest.splitlines()
+    assert [line for line in lines if line.startswith("sonibus: hint: ")] == [next(
+        line for line in lines if line.startswith(hint))], lines
+
+
 # -- run: configuration errors ----------------------------------------------------------
 
 
