@@ -15,8 +15,8 @@ from hypothesis import HealthCheck, Phase, given, settings
 from hypothesis import strategies as st
 
 from . import checks
-from .families import FAMILIES, ROBOT, VALID, Input, bursts, huge_frame, issue_inputs, pack, signature
-from .fuzzer import Fuzzer
+from .families import FAMILIES, ROBOT, VALID, Input, bursts, flood, huge_frame, issue_inputs, pack, signature
+from .fuzzer import BURST_RATE, Fuzzer
 from .show import Show
 
 # Commands that undo what valid fuzz commands may have left (a posture, a joint held),
@@ -86,6 +86,9 @@ def campaign(show: Show, plan: Plan, out: Path) -> checks.Report:
             for _ in range(plan.huge_frames):
                 fuzzer.send(huge_frame())
             _after(fuzzer, report, before, "huge frames")
+            frames = flood()
+            burst_rates.append(fuzzer.burst(frames, len(frames)))
+            _after(fuzzer, report, before, f"a {frames[0].note} at {BURST_RATE}/s")
             _run(fuzzer, bursts(), plan.bursts, plan.derandomize, lambda b: burst_rates.append(fuzzer.burst(*b)))
             _after(fuzzer, report, before, "bursts")
         _reset(fuzzer)

@@ -644,6 +644,15 @@ def bursts(draw: st.DrawFn) -> tuple[Input, int]:
     return item, draw(st.sampled_from([500, 1000, 2000]))
 
 
+def flood(count: int = 2000) -> list[Input]:
+    """Valid frames of five joints with seqs all over the range, to send as fast as bursts go:
+    a robot adapter gone mad, or a script in a loop."""
+    names = NAMES[:5]
+    return [Input("frame", VALID, "put", f"{ROBOT}/frame",
+                  pack({"t": time.time(), "seq": n * 7919 % 2 ** 31, "names": names, "v": [0.1] * 5}),
+                  note="flood of valid frames") for n in range(count)]
+
+
 class Oracle:
     """Which commands could run: each valid command sent adds its signature; each
     ``command`` event with ``ok = true`` takes one away, or is executed from invalid input."""

@@ -86,11 +86,13 @@ class Fuzzer:
         else:
             self.osc.sendto(item.payload, ("127.0.0.1", self.show.ports.gateway))
 
-    def burst(self, item: Input, count: int) -> float:
-        """``item`` ``count`` times at up to ``BURST_RATE`` a second; the rate reached."""
+    def burst(self, item: Input | list[Input], count: int) -> float:
+        """``item`` ``count`` times (or each of a list in turn) at up to ``BURST_RATE`` a second;
+        the rate reached."""
+        items = item if isinstance(item, list) else [item]
         started = time.perf_counter()
         for n in range(count):
-            self.send(item)
+            self.send(items[n % len(items)])
             ahead = n / BURST_RATE - (time.perf_counter() - started)
             if ahead > 0.002:
                 time.sleep(ahead)

@@ -378,6 +378,8 @@ class Show:
             self.session = None
         if self.run is not None and self.exit_code is None and self.run.alive:
             self.exit_code = self.run.stop(signal.SIGINT, 10.0)
+        if self.run is not None:  # the log, for a report
+            (self.tmp / "run.log").write_text("\n".join(self.log()) + "\n")
         if self.rss is not None:
             self.rss.close()
         for child in reversed(self.children):
