@@ -19,9 +19,10 @@ from .families import FAMILIES, ROBOT, VALID, Input, bursts, flood, huge_frame, 
 from .fuzzer import BURST_RATE, Fuzzer
 from .show import Show
 
-# Commands that undo what valid fuzz commands may have left (a posture, a joint held),
-# sent as valid input before the flow is measured.
-RESET = (("stiffness", {"names": ["Body"], "value": 1.0}), ("awareness", {"enabled": True}))
+# Commands that undo what valid fuzz commands may have left (a posture or a joint held, a
+# behavior), sent as valid input before the flow is measured: the idle robot breathes again,
+# so its joints change every frame and the MIDI sink (which sends changes only) has something to send.
+RESET = (("stop", {}), ("stiffness", {"names": ["Body"], "value": 1.0}), ("awareness", {"enabled": True}))
 
 
 @dataclass(frozen=True)
