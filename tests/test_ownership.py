@@ -15,12 +15,14 @@ from collections.abc import Iterator
 import pytest
 
 from sonibus import schemas
+from sonibus.adapters.recorder.replay import Replay, ReplayConfig
 from sonibus.adapters.sim import SimConfig, SimRobot
 from sonibus.bus import Bus, BusConfig, CommandError, OwnershipError, decode, keys, open_session, send_command
 from sonibus.bus.client import owner_of
-from sonibus.bus.ownership import Claim, claims
+from sonibus.bus.ownership import Claim, Ownership, claims
 
 from .conftest import free_port, run_cli, wait_for
+from .recorder.conftest import record_sim
 
 RACE_TRIES = 20
 
@@ -81,9 +83,9 @@ def pepper(net) -> SimRobot:
     return net.sim("pepper", rate_hz=50)
 
 
-def earlier(owner: SimRobot, host: str = "elsewhere", node: str = "ghost") -> Claim:
+def earlier(owner: SimRobot | Ownership, host: str = "elsewhere", node: str = "ghost") -> Claim:
     """A claim of the owner's robot made a second before the owner's."""
-    mine = owner.ownership.claim
+    mine = (owner if isinstance(owner, Ownership) else owner.ownership).claim
     return Claim(mine.robot, mine.since_ms - 1000, host, node)
 
 
@@ -189,3 +191,26 @@ def test_claims_name_robots_owners_first():
     assert [c.node for c in found["pepper"]] == ["early", "late"]
     assert list(found) == ["nao", "pepper"]
     assert Claim.parse(found["nao"][0].key) == found["nao"][0]
+
+
+def test_a_replay_owns_its_robot_as_a_live_owner_does(net, tmp_path):
+    """Replay shares the owner's helper: joint keys only while someone subscribes to them,
+    and it stands by (streams nothing) while an earlier claim of its robot is on the bus."""
+    path = tmp_path / "take.mcap"
+    record_sim(net, path, frames=50)
+    replay = net.start(Replay(ReplayConfig(path=str(path), loop=True, rename={"pepper": "take1"}), name="replay"))
+    owner = replay._owners["take1"]
+    watcher = net.bus("watcher")
+    _, frames = watcher.subscribe(keys.frame("take1"))
+    wait_for(lambda: frames.get(0.1), what="the replay's frames")
+    time.sleep(0.3)
+    assert not owner._joints_wanted, "joint keys put with nobody subscribed to them"
+    _, joints = watcher.subscribe("take1/joints/*")
+    wait_for(lambda: joints.get(0.1), what="joint keys once someone subscribes")
+
+    token = replay.bus.session.liveliness().declare_token(earlier(owner).key)  # noqa: F841 (held)
+    wait_for(lambda: not owner.active, what="the replay to stand by")
+    time.sleep(0.3)
+    frames.drain(0)
+    time.sleep(0.5)
+    assert not frames.drain(0), "a replay standing by still streams"
