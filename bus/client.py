@@ -20,17 +20,18 @@ import zenoh
 from . import codec, keys
 from .errors import CommandError, RobotNotFound
 from .node import Bus
-from .ownership import Claim, claims
+from .ownership import Claim, claims, owners
 
 Outcome = dict[str, Any] | CommandError
 
 
 def ask(bus: Bus, robot: str, verb: str, args: dict[str, Any], done: Callable[[Outcome], None],
         timeout: float = 5.0, owner: Claim | None = None) -> None:
-    """Send ``verb`` to ``robot`` (to its ``owner`` alone, if given: see ``owner_of``);
-    ``done`` gets the result or a ``CommandError`` (``robot_not_found``, ``timeout``, or
-    the robot's refusal), exactly once."""
+    """Send ``verb`` to ``robot``'s ``owner`` alone (default: the earliest claim this
+    session has seen, if any; see ``owner_of``); ``done`` gets the result or a
+    ``CommandError`` (``robot_not_found``, ``timeout``, or the robot's refusal), exactly once."""
     pending = _Pending(robot, verb, done, timeout)
+    owner = owner if owner is not None else owners(bus.session).owner(robot)
     selector = keys.command(robot, verb) + (f"?owner={owner.address}" if owner is not None else "")
     try:
         # Every answer, not one per key: a node standing by for the robot's owner answers too (``conflict``).

@@ -88,6 +88,49 @@ def claims(keys_: Iterable[str]) -> dict[str, list[Claim]]:
     return {robot: sorted(cs, key=lambda c: c.rank) for robot, cs in sorted(found.items())}
 
 
+class Owners:
+    """The claims of every robot as one session sees them, kept by a liveliness
+    subscriber: what a sender needs to name a robot's owner (``owner``) without a query."""
+
+    def __init__(self, session: zenoh.Session) -> None:
+        self.session = session
+        self._claims: dict[str, dict[str, Claim]] = {}
+        self._lock = threading.Lock()
+        self._subscriber = session.liveliness().declare_subscriber(keys.robot_token(), self._changed, history=True)
+
+    def _changed(self, sample: zenoh.Sample) -> None:
+        claim = Claim.parse(str(sample.key_expr))
+        if claim is None:
+            return
+        with self._lock:
+            held = self._claims.setdefault(claim.robot, {})
+            if sample.kind == zenoh.SampleKind.PUT:
+                held[claim.key] = claim
+            else:
+                held.pop(claim.key, None)
+
+    def owner(self, robot: str) -> Claim | None:
+        """The earliest claim of ``robot`` seen so far (None: none yet)."""
+        with self._lock:
+            held = list(self._claims.get(robot, {}).values())
+        return min(held, key=lambda c: c.rank) if held else None
+
+
+_OWNERS: dict[str, Owners] = {}
+_OWNERS_LOCK = threading.Lock()
+
+
+def owners(session: zenoh.Session) -> Owners:
+    """The ``Owners`` view of ``session``, made on first use (one per session)."""
+    with _OWNERS_LOCK:
+        for zid in [z for z, view in _OWNERS.items() if view.session.is_closed()]:
+            del _OWNERS[zid]
+        view = _OWNERS.get(str(session.zid()))
+        if view is None:
+            view = _OWNERS[str(session.zid())] = Owners(session)
+        return view
+
+
 class Ownership:
     """``bus``'s node owning ``robot``: its token, its watch on the robot's other
     claims, and whether it may act (``active``). Made by ``Adapter.claim_robot``;
