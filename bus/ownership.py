@@ -143,6 +143,7 @@ class Ownership:
         self.active = False
         self.owner: Claim | None = None       # the claim this node stands by for
         self._rivals: dict[str, Claim] = {}
+        self._gone: set[str] = set()           # claims withdrawn: a query's late answer must not revive one
         self._told: set[str] = set()           # later claims this owner has logged
         self._lock = threading.Lock()
         self._entities: list[Any] = []
@@ -188,9 +189,11 @@ class Ownership:
         with self._lock:
             if sample.kind == zenoh.SampleKind.PUT:
                 self._rivals[claim.key] = claim
+                self._gone.discard(claim.key)
             else:
                 self._rivals.pop(claim.key, None)
                 self._told.discard(claim.key)
+                self._gone.add(claim.key)
         if self.claim.since_ms:
             self._decide()
 
@@ -198,7 +201,7 @@ class Ownership:
         with self._lock:
             for key in found:
                 claim = Claim.parse(key)
-                if claim is not None and claim != self.claim:
+                if claim is not None and claim != self.claim and claim.key not in self._gone:
                     self._rivals[claim.key] = claim
 
     def _decide(self) -> None:
