@@ -104,8 +104,19 @@ class Presence:
                 with self._lock:
                     if robot in self.warned:
                         continue
+                if not self._serving(robot):  # its owner is still connecting to the robot (NAOqi can take a while)
+                    continue
+                with self._lock:
                     self.warned.add(robot)
                 log.warning(silence_hint(self.bus.node, robot))
+
+    def _serving(self, robot: str) -> bool:
+        """Whether ``robot``'s owner is up: it serves ``<robot>/info`` once it streams."""
+        try:
+            return bool(self.bus.query(keys.info(robot), timeout=1.0))
+        except Exception as exc:  # a closing session
+            log.debug("%s: info of %s: %s", self.bus.node, robot, exc)
+            return False
 
     def undeclare(self) -> None:
         self._stop.set()
@@ -144,5 +155,6 @@ def connection_events(bus: Bus, queue: SampleQueue, patterns: Sequence[str]) -> 
     robots whose events ``patterns`` select. A sink then reacts to a vanished robot
     the same way whatever the cause (a killed process, a cut link, a robot's fall).
     It also warns once (``silence_hint``) when a robot whose joints ``patterns``
-    select is on the bus but none of its frames arrives for ``SILENCE_S``."""
+    select is on the bus and its owner up (it answers ``<robot>/info``) but none of
+    its frames arrives for ``SILENCE_S``."""
     return Presence(bus, queue, patterns)
