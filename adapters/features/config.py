@@ -30,6 +30,7 @@ class FeaturesConfig:
     weights: dict[str, float] | None = None   # QoM weight per joint (default: 1 per rad joint, 0 for hands)
     max_wait_ms: float = 50.0                 # per_joint_keys: a frame missing joints is processed after this
     queue: int = 8192                         # messages buffered before the oldest are dropped
+    max_age_ms: float = 100.0                 # an older frame is skipped, not computed late (0: never skip)
     per_joint_keys: bool = False              # joints from <robot>/joints/* instead of <robot>/frame
 
     def __post_init__(self) -> None:
@@ -55,6 +56,8 @@ class FeaturesConfig:
                 raise bad("weights", f"{joint} = {weight!r} must be a number, 0 or more")
         if self.queue < 1:
             raise bad("queue", f"{self.queue} must be at least 1")
+        if not self.max_age_ms >= 0:
+            raise bad("max_age_ms", f"{self.max_age_ms:g} must be 0 (never skip) or more")
 
     def publishes(self, feature: str) -> bool:
         return feature in self.features

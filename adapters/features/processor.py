@@ -37,7 +37,8 @@ class Features(Adapter):
 
     def _start(self) -> None:
         cfg: FeaturesConfig = self.config
-        self.stats = dict.fromkeys(("received", "frames", "published", "events", "bad", "late", "missing", "nan",
+        self.stats = dict.fromkeys(("received", "frames", "stale", "published", "events", "bad", "late", "missing",
+                                    "nan",
                                     "rejected", "clamped", "dropped", "waiting_info"), 0)
         self.robot_features: dict[str, RobotFeatures] = {}  # robot → its features, once its info came
         self._learning: set[str] = set()                    # robots whose info is being worked out
@@ -91,6 +92,12 @@ class Features(Adapter):
     def process(self, frame: Frame) -> None:
         """Compute and publish the features of one frame."""
         features = self.robot_features[frame.robot]
+        max_age = self.config.max_age_ms / 1000.0
+        if max_age and time.time() - frame.t > max_age:  # a backlog: what it would give, sinks drop as stale
+            self.stats["stale"] += 1
+            self.warn("stale", f"{frame.robot}: frames older than {self.config.max_age_ms:g} ms skipped "
+                               f"(frame {frame.seq} was {time.time() - frame.t:.2f} s old; clocks in step?)")
+            return
         out = features.step(frame.t, frame.seq, frame.values)
         self.stats["frames"] += 1
         if (out.missing or out.nan) and features.frames > 1:  # the first frame began before the robot's info came

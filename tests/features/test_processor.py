@@ -7,6 +7,7 @@ from __future__ import annotations
 import logging
 import math
 import threading
+import time
 
 import pytest
 
@@ -23,7 +24,8 @@ PEPPER = load_model("pepper")
 
 
 def start(net, **options) -> Features:
-    return net.start(Features(FeaturesConfig(**options), name="features"))
+    """A features node; frames here carry made-up times (T0), so none is too old to compute."""
+    return net.start(Features(FeaturesConfig(**{"max_age_ms": 0, **options}), name="features"))
 
 
 def collect(bus, pattern: str) -> tuple[object, list[tuple[str, dict]]]:
@@ -199,6 +201,22 @@ def test_frames_are_taken_or_with_per_joint_keys_the_joint_keys(net, owner, per_
     subscriber.undeclare()
     assert features.stats["frames"] == frames + 1
     assert unheard not in {m["seq"] for _, m in derived}
+
+
+def test_frames_too_old_to_matter_are_skipped_not_computed_late(net, owner):
+    """After a backlog (a flood, a stalled machine) what is left is old: sinks would drop what
+    it gives as stale, so it is skipped and counted, and the next fresh frame is computed."""
+    fake = owner("pepper", model_info("pepper"))
+    features = start(net, robots="pepper", max_age_ms=100)
+    subscriber, derived = collect(net.bus("watch"), "pepper/derived/velocity/HeadYaw")
+    pose = PEPPER.posture("StandInit")
+    last = pump(fake, lambda k: pose, lambda: features.stats["stale"] >= 20 and features.stats["frames"] == 0,
+                "old frames skipped")  # pump stamps them T0 + ..., years old
+    now = time.time()
+    fresh = [fake.frame(now + 0.01 * k, pose, seq=last + k) for k in (1, 2)]
+    wait_for(lambda: any(m["seq"] == fresh[1] for _, m in list(derived)), what="the fresh frames computed")
+    subscriber.undeclare()
+    assert features.stats["frames"] == 2 and {m["seq"] for _, m in derived} <= set(fresh)
 
 
 @pytest.mark.parametrize(("options", "fragment"), [

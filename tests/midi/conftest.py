@@ -95,8 +95,10 @@ class FakeRobot:
             ("A", -2.0, 2.0), ("B", 0.0, 1.0)), behaviors: tuple[str, ...] = ("wave", "nod"),
             rate_hz: float = 50.0) -> None:
         self.bus, self.robot, self.seq = bus, robot, 0
-        info = {"robot": robot, "rate_hz": rate_hz, "behaviors": list(behaviors),
-                "joints": [{"name": n, "min": lo, "max": hi} for n, lo, hi in joints]}
+        info = {"robot": robot, "model": "toy", "rate_hz": rate_hz, "behaviors": list(behaviors), "postures": [],
+                "adapter": "test", "schema_version": 1, "owner": {"host": bus.host, "node": "fake"},
+                "joints": [{"name": n, "unit": "rad", "min": lo, "max": hi, "max_velocity": 1.0}
+                           for n, lo, hi in joints]}  # a full robot info: the sinks' gate checks it
         self.queryable = bus.serve(keys.info(robot), lambda q: q.reply(q.key_expr, codec.encode(info),
                                                                        encoding=codec.ENCODING))
 

@@ -39,7 +39,7 @@ def poison(name: str, now: float) -> dict:
     }[name]
 
 
-POISONS = {"1e300": "gate", "nan": "gate", "inf": "gate", "1e5": "filter", "all-1e5": "filter", "t-back": "filter"}
+POISONS = {"1e300": "gate", "nan": "gate", "inf": "gate", "1e5": "filter", "all-1e5": "filter", "t-back": "age"}
 """Each poison and what stops it: the bus's gate (counted bad), or the velocity filter (counted rejected)."""
 
 
@@ -105,6 +105,8 @@ def test_poison_frames_cost_at_most_a_frame_or_two(net, receivers):
                      what=f"the {name} frame refused by both nodes' gates")
         elif stopped_by == "filter":
             assert features.stats["rejected"] > before[0]["rejected"], features.stats
+        else:  # 2 s old: skipped as stale (max_age_ms), never computed
+            assert features.stats["stale"] > before[0]["stale"], features.stats
         wrong = out_of_range(received(plain, mark) + received(bundled, mark), ranges)
         assert not wrong, f"after the {name} frame: {wrong[:5]}"
 
