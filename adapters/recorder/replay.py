@@ -22,6 +22,7 @@ from the recording) but take no commands: they answer ``failed``, and ``stop`` o
 
 from __future__ import annotations
 
+import itertools
 import logging
 import os
 import threading
@@ -40,7 +41,7 @@ from sonibus.bus.keys import Key
 from sonibus.bus.options import bad
 
 from .reading import Message, Recording, RecordingError
-from .timeline import Timeline
+from .timeline import OFFSETS, Timeline
 
 log = logging.getLogger(__name__)
 
@@ -152,9 +153,13 @@ class Replay(Adapter):
         while not self.stopping.is_set():
             seq_shift = {robot: last_seq[robot] + 1 - first for robot, first in first_seq.items()}
             timeline = Timeline(cfg.max_gap_s)
+            ahead = itertools.islice(self.recording.messages(self.keys, cfg.start, cfg.end), OFFSETS)
+            timeline.prime((m.publish_ns - m.log_ns) / 1e9 for m in ahead)
             for framed, moment in _moments(self.recording.messages(self.keys, cfg.start, cfg.end)):
                 message = moment[0]
-                at_s = (message.publish_ns - origin_ns) / 1e9  # the robot's timeline: a frame leaves whole
+                # the robot's timeline (a frame leaves whole), as far as it agrees with the recorder's
+                published_s = (message.publish_ns - origin_ns) / 1e9
+                at_s = timeline.when(published_s, (message.log_ns - origin_ns) / 1e9)
                 offset_s, gap_s = timeline.place(at_s)
                 if gap_s:
                     self._gap(gap_s, at_s, message)
@@ -169,7 +174,8 @@ class Replay(Adapter):
                     robot = message.key.partition("/")[0]
                     first_seq.setdefault(robot, seq)
                     seq = last_seq[robot] = seq + seq_shift.get(robot, 0)
-                t_origin = start + wall - (origin_ns / 1e9 + timeline.shift_s) / cfg.speed
+                # (a t that strayed is moved with its message: at_s − published_s)
+                t_origin = start + wall - (origin_ns / 1e9 + timeline.shift_s - at_s + published_s) / cfg.speed
                 late = time.monotonic() - due > MAX_LATE_S
                 if framed:
                     self._publish_frame(moment, t_origin, seq, late)
