@@ -562,11 +562,11 @@ def osc_packets(draw: st.DrawFn) -> Input:
     if how == "valid":
         packet, sig = draw(valid_osc())
         return Input("osc", VALID, "osc", key, packet, sig)
-    if how == "bundle_ok":  # a well-formed bundle: its valid element runs, the broken one does not
+    if how == "bundle_ok":  # a bundle with one broken element: taken whole or not at all, so nothing runs
         packet, sig = draw(valid_osc())
         broken = packet[:-1] if len(packet) % 4 == 0 and len(packet) > 8 else packet + b"\0\0\0\0"
-        return Input("osc", VALID, "osc", key, osc_bundle(packet, broken, osc_message("/nobody/cmd/x")), sig,
-                     note="bundle with one valid element")
+        return Input("osc", MALFORMED, "osc", key, osc_bundle(packet, broken, osc_message("/nobody/cmd/x")), sig,
+                     note="bundle with one valid element and one broken")
     packet, _ = draw(valid_osc().filter(lambda p: not p[0].startswith(f"/{ROBOT}/cmd/stop".encode())))
     if how == "truncated":
         data = draw(st.integers(1, len(packet) - 1).map(lambda k: packet[:k]).filter(lambda d: not well_formed(d)))
