@@ -165,9 +165,10 @@ class Adapter:
         """Mark the node failed, loudly: its state (``sonibus nodes``), a log line (with
         the traceback of ``exc``), and a ``node`` event on ``sonibus/events/node``;
         ``sonibus run`` then stops every node and ends with an error."""
-        if self.failure:
-            return
-        self.failure = reason
+        with self._lock:
+            if self.failure:
+                return
+            self.failure = reason
         self.state = "failed"
         expected = isinstance(exc, SonibusError)  # a failure the code foresaw (a full disk): its line says it all
         log.error("%s: %s", self.name, reason, exc_info=None if expected else exc)

@@ -23,6 +23,8 @@ import zenoh
 from . import keys, messages
 from .node import Bus
 
+MAX_ROBOTS = 1024  # robots asked about and remembered (their retry time)
+
 
 class InfoRequests:
     """``ask(robot)``; answers arrive as ``on_info(robot, info)``, bad ones as ``on_error(robot, text)``."""
@@ -37,6 +39,8 @@ class InfoRequests:
         now = time.monotonic()
         if now - self._asked.get(robot, -math.inf) < self.retry_s:
             return
+        if len(self._asked) >= MAX_ROBOTS:  # robot names made up on the fly must not grow it for ever
+            self._asked = {r: at for r, at in self._asked.items() if now - at < self.retry_s}
         self._asked[robot] = now
         merge = _Merge(robot, self.on_info, self.on_error, self._gate)
         self.bus.session.get(keys.info(robot) + "/**", zenoh.handlers.Callback(merge.take, merge.finish),

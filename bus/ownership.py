@@ -169,10 +169,13 @@ class Ownership:
                 rivals = self._rivals_now()
         if rivals:
             raise OwnershipError(f"robot '{self.robot}' is already owned by {rivals[0]}; {self.hint}")
-        self.claim = Claim(self.robot, time.time_ns() // 1_000_000, self.bus.host, self.bus.node)
+        with self._lock:  # (together: a rival's change seen meanwhile must not find a claim yet inactive)
+            self.claim = Claim(self.robot, time.time_ns() // 1_000_000, self.bus.host, self.bus.node)
+            self.active = True
         self._entities.append(self.bus.token(self.claim.key))
-        self.active = True
         self._seen(self.bus.alive(pattern, timeout=CHECK_TIMEOUT_S))  # a claim made meanwhile
+        with self._lock:
+            self._gone.clear()  # (only a query's late answer needed them)
         self._decide()
 
     def _rivals_now(self) -> list[Claim]:

@@ -52,22 +52,19 @@ def watch_robots(bus: Bus, on_change: Callable[[str, bool], None]) -> zenoh.Subs
 
 
 class Presence:
-    """What ``connection_events`` declares, undeclared together by a sink's ``stop``."""
+    """What ``connection_events`` declares, undeclared by a sink's ``stop``. The sink
+    tells it of each robot's data that passed its gate (``heard_from``) and runs
+    ``watch`` on a worker of its own (``Adapter.spawn``)."""
 
     def __init__(self, bus: Bus, queue: SampleQueue, patterns: Sequence[str]) -> None:
         self.bus, self.queue = bus, queue
         self.wanted = [zenoh.KeyExpr(keys.expr(p)) for p in patterns]
         self.frames = sorted({frame for p in patterns if (frame := _frame_key(p))})
         self.on_bus: dict[str, float] = {}   # robot → since when (monotonic)
-        self.heard: dict[str, float] = {}    # robot → its last frame (monotonic)
+        self.heard: dict[str, float] = {}    # robot on the bus → its last data (monotonic)
         self.warned: set[str] = set()
-        self._stop = threading.Event()
         self._lock = threading.Lock()
-        self._entities = [bus.session.declare_subscriber(f, self._frame) for f in self.frames]
-        self._entities.append(watch_robots(bus, self._changed))
-        if self.frames:
-            self._thread = threading.Thread(target=self._watch, name=f"{bus.node}:silence", daemon=True)
-            self._thread.start()
+        self._entities = [watch_robots(bus, self._changed)]
 
     def _changed(self, robot: str, alive: bool) -> None:
         with self._lock:
@@ -75,31 +72,38 @@ class Presence:
                 self.on_bus[robot] = time.monotonic()
             else:
                 self.on_bus.pop(robot, None)
+                self.heard.pop(robot, None)
                 self.warned.discard(robot)
         if any(w.intersects(zenoh.KeyExpr(keys.event(robot, "connection"))) for w in self.wanted):
             event = {"t": time.time(), "kind": "connection", "state": "connected" if alive else "lost",
                      "source": "presence"}
             self.queue.put((keys.event(robot, "connection"), codec.encode(event)))
 
-    def _frame(self, sample: zenoh.Sample) -> None:
-        robot = str(sample.key_expr).partition("/")[0]
-        self.heard[robot] = time.monotonic()
-        if robot in self.warned:
-            with self._lock:
-                self.warned.discard(robot)
+    def heard_from(self, robot: str) -> None:
+        """A frame or joint sample of ``robot`` passed the sink's gate."""
+        with self._lock:
+            if robot not in self.on_bus:  # (only robots on the bus are remembered: names can be made up)
+                return
+            self.heard[robot] = time.monotonic()
+            told = robot in self.warned
+            self.warned.discard(robot)
+        if told:
             log.warning("%s: robot '%s': its data arrives now", self.bus.node, robot)
 
     def silent(self, now: float | None = None) -> list[str]:
         """Robots on the bus, selected by the patterns, of which no frame arrived for ``SILENCE_S``."""
         now = time.monotonic() if now is None else now
         with self._lock:
-            on_bus = dict(self.on_bus)
+            on_bus, heard = dict(self.on_bus), dict(self.heard)
         return sorted(robot for robot, since in on_bus.items()
-                      if now - max(since, self.heard.get(robot, since)) >= SILENCE_S
+                      if now - max(since, heard.get(robot, since)) >= SILENCE_S
                       and any(zenoh.KeyExpr(f).intersects(zenoh.KeyExpr(keys.frame(robot))) for f in self.frames))
 
-    def _watch(self) -> None:
-        while not self._stop.wait(0.5):
+    def watch(self, stopping: threading.Event) -> None:
+        """Warn once of each robot that is silent (``silence_hint``) until ``stopping`` is set."""
+        if not self.frames:
+            return
+        while not stopping.wait(0.5):
             for robot in self.silent():
                 with self._lock:
                     if robot in self.warned:
@@ -119,7 +123,6 @@ class Presence:
             return False
 
     def undeclare(self) -> None:
-        self._stop.set()
         for entity in self._entities:
             try:
                 entity.undeclare()
@@ -156,5 +159,6 @@ def connection_events(bus: Bus, queue: SampleQueue, patterns: Sequence[str]) -> 
     the same way whatever the cause (a killed process, a cut link, a robot's fall).
     It also warns once (``silence_hint``) when a robot whose joints ``patterns``
     select is on the bus and its owner up (it answers ``<robot>/info``) but none of
-    its frames arrives for ``SILENCE_S``."""
+    its data reaches the sink for ``SILENCE_S``: the sink calls ``heard_from`` for
+    what passes its gate and spawns ``watch``."""
     return Presence(bus, queue, patterns)

@@ -8,6 +8,7 @@ import time
 
 import msgpack
 
+from sonibus.adapters.features import Features, FeaturesConfig
 from sonibus.adapters.osc import OscSink, OscSinkConfig
 from sonibus.adapters.recorder.reading import Recording
 from sonibus.adapters.recorder.recorder import Recorder, RecorderConfig
@@ -52,3 +53,17 @@ def test_huge_frames_and_future_times_are_refused_and_the_stream_goes_on(net, tm
     with Recording(str(tmp_path / "show.mcap")) as recording:
         assert not [k for k in recording.counts if "Made" in k]
         assert all(m.data["t"] < time.time() for m in recording.messages() if "t" in m.data)
+
+
+def test_garbage_from_made_up_robots_is_refused_before_anyone_asks_about_them(net):
+    """A features node asks a robot for its info only once the robot's data passed the gate."""
+    features = net.start(Features(FeaturesConfig(), name="features"))
+    script = net.bus("script")
+    publishers = [script.session.declare_publisher(keys.frame(f"made{i}")) for i in range(200)]
+    wait_for(lambda: publishers[-1].matching_status.matching, what="the features node's frame subscription")
+    for publisher in publishers:
+        publisher.put(b"\xc1 not msgpack")
+    wait_for(lambda: features.stats["bad"] >= 200, what="200 refusals", explain=lambda: str(features.stats))
+    assert features.stats["bad"] == 200 and features.stats["waiting_info"] == 0
+    for publisher in publishers:
+        publisher.undeclare()

@@ -71,16 +71,16 @@ class Features(Adapter):
             self._learn(*payload)
             return
         self.stats["received"] += 1
-        robot = key.partition("/")[0]
-        if robot not in self.robot_features:
-            self.stats["waiting_info"] += 1
-            self._info.ask(robot)
-            return
         try:
             message = self._streams.incoming(key, payload)
         except ValueError as exc:  # messages.BadMessage: refused by the gate
             self.stats["bad"] += 1
             self.warn("bad", f"message on '{key}' refused: {exc}")
+            return
+        robot = message.source.robot
+        if robot not in self.robot_features:  # (asked only of robots whose data passed the gate)
+            self.stats["waiting_info"] += 1
+            self._info.ask(robot)
             return
         if message.source.section == "frame":
             self.process(whole(message))

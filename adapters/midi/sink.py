@@ -81,7 +81,8 @@ class MidiSink(Adapter):
         self._info = InfoRequests(self.bus, lambda robot, info: self._queue.put((INFO, (robot, info))),
                                   lambda robot, text: self.warn("info", text), INFO_RETRY_S)
         self._streams = self.own(Streams(self.bus, cfg.subscribe, self._queue, per_joint_keys=cfg.per_joint_keys))
-        self.own(presence.connection_events(self.bus, self._queue, cfg.subscribe))  # a robot's loss and return
+        self._presence = self.own(presence.connection_events(self.bus, self._queue, cfg.subscribe))  # loss, return
+        self.spawn(lambda: self._presence.watch(self.stopping), "silence")
         self.spawn(self._forward, "forward")
         log.info("%s: MIDI out on %s", self.name, f"'{cfg.connect}'" if cfg.connect else f"virtual port '{cfg.port}'")
 
@@ -131,6 +132,8 @@ class MidiSink(Adapter):
         message = self._streams.take(key, payload, self.stats, self.warn)
         if message is None:
             return
+        if message.source.section in ("frame", "joints"):
+            self._presence.heard_from(message.source.robot)
         if message.event is not None:
             self._event(message.source, message.event)
             return

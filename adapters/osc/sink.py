@@ -75,9 +75,11 @@ class OscSink(Adapter):
         self._socket = self.own(socket.socket(socket.AF_INET, socket.SOCK_DGRAM))
         self._queue = self.own(SampleQueue(cfg.queue))
         self._streams = Streams(self.bus, cfg.subscribe, self._queue, per_joint_keys=cfg.per_joint_keys)
+        self._presence = presence.connection_events(self.bus, self._queue, cfg.subscribe)  # a robot's loss, return
         self.spawn(self._forward, "forward")  # before anything else is declared: nothing waits in the queue
         self.own(self._streams)
-        self.own(presence.connection_events(self.bus, self._queue, cfg.subscribe))  # a robot's loss and return
+        self.own(self._presence)
+        self.spawn(lambda: self._presence.watch(self.stopping), "silence")
 
     def _stop(self) -> None:
         log.info("%s: stopping; %s, queue_dropped %d", self.name,
@@ -124,6 +126,8 @@ class OscSink(Adapter):
         message = self._streams.take(key, payload, self.stats, self.warn)
         if message is None:
             return
+        if message.source.section in ("frame", "joints"):
+            self._presence.heard_from(message.source.robot)
         if message.event is not None:
             self._event(message.source, message.event)
             return
