@@ -33,7 +33,7 @@ class InfoRequests:
                  on_error: Callable[[str, str], None], retry_s: float = 2.0) -> None:
         self.bus, self.on_info, self.on_error, self.retry_s = bus, on_info, on_error, retry_s
         self._asked: dict[str, float] = {}
-        self._gate = messages.Gate()
+        self._gate = messages.Gate(bus.limits)
 
     def ask(self, robot: str) -> None:
         now = time.monotonic()

@@ -16,19 +16,22 @@ from typing import Any
 import zenoh
 
 from . import codec, keys
+from .messages import Limits
 from .queue import SampleQueue
 
 
 class Bus:
     """Publish, subscribe, serve and ask on the bus, as node ``node`` of ``host``."""
 
-    def __init__(self, session: zenoh.Session, node: str = "", host: str | None = None) -> None:
+    def __init__(self, session: zenoh.Session, node: str = "", host: str | None = None,
+                 limits: Limits | None = None) -> None:
         self.session = session
         self.node = node
         self.host = host or socket.gethostname()
+        self.limits = limits or Limits()  # what the gate of each node on this bus lets through
 
     def for_node(self, node: str) -> Bus:
-        return Bus(self.session, node, self.host)
+        return Bus(self.session, node, self.host, self.limits)
 
     def stream_publisher(self, key: str) -> zenoh.Publisher:
         """A publisher for high-rate data (joint samples, frames): drops under congestion,

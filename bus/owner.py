@@ -49,7 +49,7 @@ class RobotAdapter(Adapter):
     def _start(self) -> None:
         self._claim()
         self._open()
-        self._gate = messages.Gate()
+        self._gate = messages.Gate(self.bus.limits)
         self.ownership.declare_streams(self.model.joint_names)
         self.own(self.bus.serve(keys.info(self.robot), self._serve_info))
         self.own(self.bus.serve(keys.command(self.robot), self._serve_command))

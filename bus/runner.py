@@ -11,6 +11,7 @@ from . import registry
 from .adapter import Adapter
 from .config import Installation
 from .errors import AdapterError, ConfigError, NodeFailed
+from .messages import Limits
 from .node import Bus
 from .session import BusConfig, open_session
 
@@ -51,7 +52,7 @@ def run(adapters: list[Adapter], bus_config: BusConfig, stop: threading.Event,
     this machine on the bus (default: its hostname). A node that fails (a worker
     died) stops them all too, and ``NodeFailed`` says which and why."""
     with open_session(bus_config, wait=True) as session:
-        bus = Bus(session, host=host)
+        bus = Bus(session, host=host, limits=Limits(max_future_s=bus_config.max_future_s))
         started: list[Adapter] = []
         try:
             for adapter in adapters:

@@ -65,6 +65,7 @@ class BusConfig:
     namespace: str = ""
     lease_ms: int = 1500
     reconnect_ms: int = 1000
+    max_future_s: float = 5.0          # clock-skew tolerance: data stamped further ahead of this machine is refused
     user: str = ""
     password: str = ""
     users_file: str = ""
@@ -81,6 +82,9 @@ class BusConfig:
                       "4 messages per lease, so under 500 ms a busy machine loses links")
         if self.reconnect_ms < 100:
             raise bad("reconnect_ms", f"{self.reconnect_ms} must be at least 100")
+        if not 0 < self.max_future_s <= 86400:
+            raise bad("max_future_s", f"{self.max_future_s:g} must be more than 0 s and at most a day "
+                      "(put the machines' clocks in step: NTP)")
         if bool(self.user) != bool(self.password):
             raise bad("password" if self.user else "user", "user and password go together")
         unknown = sorted(set(self.tls) - set(TLS_KEYS))

@@ -158,7 +158,7 @@ class Streams(Selection):
 
     def __init__(self, bus: Bus, patterns: Iterable[str], queue: SampleQueue, *,
                  per_joint_keys: bool = False, stamped: bool = False, limits: messages.Limits | None = None) -> None:
-        super().__init__(patterns := tuple(patterns), limits)
+        super().__init__(patterns := tuple(patterns), limits or bus.limits)
         self.plan = plan(patterns, per_joint_keys)
         self.subscribers = [bus.subscribe(k, queue=queue, stamped=stamped)[0] for k in self.plan.frames]
         self.subscribers += [bus.subscribe(k, queue=queue, stamped=stamped, skip=keys.is_frame)[0]

@@ -7,12 +7,14 @@ from __future__ import annotations
 import time
 
 import msgpack
+import pytest
 
 from sonibus.adapters.features import Features, FeaturesConfig
 from sonibus.adapters.osc import OscSink, OscSinkConfig
 from sonibus.adapters.recorder.reading import Recording
 from sonibus.adapters.recorder.recorder import Recorder, RecorderConfig
-from sonibus.bus import keys
+from sonibus.bus import ConfigError, config, keys
+from sonibus.bus.messages import Limits
 
 from .conftest import wait_for
 from .osc.pd import Datagrams
@@ -67,3 +69,21 @@ def test_garbage_from_made_up_robots_is_refused_before_anyone_asks_about_them(ne
     assert features.stats["bad"] == 200 and features.stats["waiting_info"] == 0
     for publisher in publishers:
         publisher.undeclare()
+
+
+def test_the_clock_skew_tolerance_is_a_bus_setting(net, tmp_path):
+    """[bus] max_future_s: a robot whose clock runs 30 s ahead is refused by default, heard with 60."""
+    ahead = msgpack.packb({"t": time.time() + 30, "seq": 1, "names": ["HeadYaw"], "v": [0.25]})
+    tolerant = net.bus("tolerant")
+    tolerant.limits = Limits(max_future_s=60)
+    strict = OscSink(OscSinkConfig(targets=("127.0.0.1:9",), max_age_ms=0), name="strict")
+    lenient = OscSink(OscSinkConfig(targets=("127.0.0.1:9",), max_age_ms=0), name="lenient")
+    net.start(strict)
+    net.start(lenient, tolerant)
+    script = net.bus("script").session.declare_publisher(keys.frame("pepper"))
+    wait_for(lambda: script.matching_status.matching, what="the sinks' subscriptions")
+    wait_for(lambda: script.put(ahead) or (strict.stats["received"] and lenient.stats["received"]), what="both")
+    assert strict.stats["bad"] == strict.stats["received"] and lenient.stats["bad"] == 0
+    with pytest.raises(ConfigError, match=r"key 'max_future_s': 0 must be more than 0 s"):
+        config.parse("[bus]\nmax_future_s = 0\n[nodes.a]\nadapter = \"sim\"\n")
+    assert config.parse("[bus]\nmax_future_s = 60\n[nodes.a]\nadapter = \"sim\"\n").bus.max_future_s == 60
