@@ -37,6 +37,8 @@ MAX_VALUE: float = _FRAME["v"]["items"]["maximum"]     # |v| of any joint or der
 MAX_SEQ: int = _FRAME["seq"]["maximum"]
 MAX_DERIVED_SIZE: int = schemas.load("derived_sample")["properties"]["v"]["oneOf"][1]["maxItems"]
 MAX_DEPTH = 8                                          # nesting of lists and maps in an event
+EVENT_KINDS = frozenset(rule["if"]["properties"]["kind"]["const"]  # kinds whose fields the schema defines
+                        for rule in schemas.load("event")["allOf"])
 FRAME_FIELDS = ("t", "seq", "names", "v")  # a frame's own fields; every other one is a quantity per joint
 _NAME = re.compile(_FRAME["names"]["items"]["pattern"].removesuffix("$") + r"\Z").match  # one plain key chunk
 
@@ -134,18 +136,21 @@ class Gate:
         self._time(t)
         if kind.__class__ is not str or not kind:
             raise BadMessage(f"kind = {_short(kind)} is not a non-empty string")
+        if kind != key.name:
+            raise BadMessage(f"kind '{_cut(kind, 40)}' on {key.key}: an event's kind is the last chunk of its key")
         json_like(message, "event")
+        if kind in EVENT_KINDS:  # its fields as the schema says (events are few: the full check is affordable)
+            _schema_check("event", message)
 
     def info(self, key: Key, message: dict[str, Any]) -> None:
         json_like(message, "info")
-        name = "derived_info" if key.name == "derived" else "robot_info"
-        error = next(schemas.validator(name).iter_errors(message), None)
-        if error is not None:
-            where = "/".join(str(p) for p in error.absolute_path)
-            raise BadMessage(f"not a {name.replace('_', ' ')}: {where + ': ' if where else ''}{_cut(error.message)}")
+        _schema_check("derived_info" if key.name == "derived" else "robot_info", message)
         for joint in message.get("joints", ()):
             if not joint["min"] <= joint["max"]:
                 raise BadMessage(f"joint {joint['name']}: min {joint['min']} is above max {joint['max']}")
+        names = [joint["name"] for joint in message.get("joints", ())]
+        if len(set(names)) != len(names):
+            raise BadMessage("joint names are not unique")
 
     def command(self, key: Key, message: dict[str, Any]) -> None:
         json_like(message, "arguments")
@@ -225,6 +230,13 @@ def json_like(value: Any, what: str, depth: int = 0) -> None:
             json_like(v, what, depth + 1)
         return
     raise BadMessage(f"{what}: {type(value).__name__} {_short(value)} cannot be carried (only JSON values)")
+
+
+def _schema_check(name: str, message: dict[str, Any]) -> None:
+    error = next(schemas.validator(name).iter_errors(message), None)
+    if error is not None:
+        where = "/".join(str(p) for p in error.absolute_path)
+        raise BadMessage(f"not a valid {name.replace('_', ' ')}: {where + ': ' if where else ''}{_cut(error.message)}")
 
 
 def number(value: Any) -> bool:

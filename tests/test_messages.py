@@ -88,12 +88,12 @@ def test_the_clock_skew_tolerance_is_configurable():
 @pytest.mark.parametrize(("message", "reason"), [
     ({"t": 1.0, "kind": "behavior", "name": b"x"}, "event.name: bytes b'x' cannot be carried"),
     ({"t": 1.0, "kind": "behavior", "name": msgpack.ExtType(5, b"ab")}, "ExtType"),
-    ({"t": 1.0, "kind": "x", "v": float("nan")}, "event.v: nan is not a finite number"),
-    ({"t": 1.0, "kind": "x", 3: "a"}, "event: key 3 is not a string"),
-    ({"t": 1.0, "kind": "x", "deep": [[[[[[[[["too deep"]]]]]]]]]}, "nested deeper than 8"),
+    ({"t": 1.0, "kind": "behavior", "v": float("nan")}, "event.v: nan is not a finite number"),
+    ({"t": 1.0, "kind": "behavior", 3: "a"}, "event: key 3 is not a string"),
+    ({"t": 1.0, "kind": "behavior", "deep": [[[[[[[[["too deep"]]]]]]]]]}, "nested deeper than 8"),
     ({"t": 1.0, "kind": ""}, "kind = '' is not a non-empty string"),
     ({"t": 1.0}, "no 'kind'"),
-    ({"t": 1.0, "kind": "x", "text": "a" * 70_000}, "over the limit of 65536"),
+    ({"t": 1.0, "kind": "behavior", "text": "a" * 70_000}, "over the limit of 65536"),
 ])
 def test_bad_events_are_refused_saying_why(message, reason):
     assert reason in refused(EVENT, message)
@@ -111,8 +111,8 @@ def test_samples_and_derived_values_are_checked_like_frames():
 
 def test_robot_info_is_checked_against_its_schema_and_its_limits():
     info_key, derived_key = Key.parse("pepper/info"), Key.parse("pepper/info/derived")
-    assert "not a robot info: 'model' is a required property" in refused(info_key, {"robot": "pepper"})
-    assert "not a derived info" in refused(derived_key, {"robot": "pepper", "derived": "no"})
+    assert "not a valid robot info: 'model' is a required property" in refused(info_key, {"robot": "pepper"})
+    assert "not a valid derived info" in refused(derived_key, {"robot": "pepper", "derived": "no"})
     assert "bytes" in refused(info_key, {"robot": b"pepper"})
 
 
@@ -187,3 +187,27 @@ def test_an_owner_leaves_out_the_joints_a_glitching_sensor_reports_and_keeps_the
     assert Gate().check(FRAME, pack(kept)) == kept
     good = now_frame()
     assert messages.valid_part(good) == (good, [])
+
+
+def test_an_event_of_a_kind_the_schema_knows_must_fit_it_and_its_key():
+    assert "not a valid event: name: 7 is not of type 'string'" in refused(
+        EVENT, {"t": 1.0, "kind": "behavior", "name": 7, "state": "started"})
+    assert "not a valid event" in refused(EVENT, {"t": 1.0, "kind": "behavior", "name": "x", "state": {"x": [1]}})
+    assert "kind 'conflict' on pepper/events/behavior" in refused(
+        EVENT, {"t": 1.0, "kind": "conflict", "state": "owner"})
+    unknown = {"t": 1.0, "kind": "status", "anything": [1, "two"]}
+    assert Gate().check(Key.parse("pepper/events/status"), pack(unknown)) == unknown
+
+
+def test_a_robots_joint_names_and_chains_are_plain_unique_chunks():
+    info_key = Key.parse("pepper/info")
+    good = {"robot": "pepper", "model": "pepper", "rate_hz": 50.0, "behaviors": [], "postures": [],
+            "adapter": "x", "schema_version": 1, "owner": {"host": "h", "node": "n"},
+            "joints": [{"name": "HeadYaw", "unit": "rad", "min": -2.0, "max": 2.0, "max_velocity": 7.0,
+                        "chain": "Head"}]}
+    assert Gate().check(info_key, pack(good)) == good
+    joint = good["joints"][0]
+    assert "chain" in refused(info_key, {**good, "joints": [{**joint, "chain": "**"}]})
+    assert "name" in refused(info_key, {**good, "joints": [{**joint, "name": "a/b"}]})
+    assert "joint names are not unique" in refused(info_key, {**good, "joints": [joint, joint]})
+    assert "max_velocity" in refused(info_key, {**good, "joints": [{**joint, "max_velocity": 1e308}]})
