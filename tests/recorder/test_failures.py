@@ -61,7 +61,8 @@ def test_garbage_on_the_bus_is_counted_and_recording_goes_on(net, tmp_path, spaw
     for key, message in garbage:
         put(bus, key, message)
     before = status(recording)[0]
-    put(bus, "pepper/events/behavior", {"t": time.time(), "kind": "behavior", "name": "after the garbage"})
+    put(bus, "pepper/events/behavior", {"t": time.time(), "kind": "behavior", "name": "after the garbage",
+                                         "state": "started"})
     wait_for(lambda: status(recording) >= (before + 1, len(garbage)), timeout=10,
              what="the event after the garbage recorded and the garbage counted",
              explain=lambda: "\n".join(recording.lines[-5:]))
