@@ -25,6 +25,8 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
+import jsonschema
+
 from .. import schemas
 from .codec import DecodeError, decode, encode
 from .keys import Key
@@ -37,8 +39,8 @@ MAX_VALUE: float = _FRAME["v"]["items"]["maximum"]     # |v| of any joint or der
 MAX_SEQ: int = _FRAME["seq"]["maximum"]
 MAX_DERIVED_SIZE: int = schemas.load("derived_sample")["properties"]["v"]["oneOf"][1]["maxItems"]
 MAX_DEPTH = 8                                          # nesting of lists and maps in an event
-EVENT_KINDS = frozenset(rule["if"]["properties"]["kind"]["const"]  # kinds whose fields the schema defines
-                        for rule in schemas.load("event")["allOf"])
+EVENT_KINDS = {rule["if"]["properties"]["kind"]["const"]: jsonschema.Draft202012Validator(rule["then"])
+               for rule in schemas.load("event")["allOf"]}  # kind → its fields' rules, as the schema defines them
 FRAME_FIELDS = ("t", "seq", "names", "v")  # a frame's own fields; every other one is a quantity per joint
 _NAME = re.compile(_FRAME["names"]["items"]["pattern"].removesuffix("$") + r"\Z").match  # one plain key chunk
 
@@ -139,8 +141,12 @@ class Gate:
         if kind != key.name:
             raise BadMessage(f"kind '{_cut(kind, 40)}' on {key.key}: an event's kind is the last chunk of its key")
         json_like(message, "event")
-        if kind in EVENT_KINDS:  # its fields as the schema says (events are few: the full check is affordable)
-            _schema_check("event", message)
+        fields = EVENT_KINDS.get(kind)
+        if fields is not None:  # (only its kind's rules: the whole schema would cost 100 µs an event)
+            error = next(fields.iter_errors(message), None)
+            if error is not None:
+                where = "/".join(str(p) for p in error.absolute_path)
+                raise BadMessage(f"not a valid {kind} event: {where + ': ' if where else ''}{_cut(error.message)}")
 
     def info(self, key: Key, message: dict[str, Any]) -> None:
         json_like(message, "info")

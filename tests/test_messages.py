@@ -190,9 +190,10 @@ def test_an_owner_leaves_out_the_joints_a_glitching_sensor_reports_and_keeps_the
 
 
 def test_an_event_of_a_kind_the_schema_knows_must_fit_it_and_its_key():
-    assert "not a valid event: name: 7 is not of type 'string'" in refused(
+    assert "not a valid behavior event: name: 7 is not of type 'string'" in refused(
         EVENT, {"t": 1.0, "kind": "behavior", "name": 7, "state": "started"})
-    assert "not a valid event" in refused(EVENT, {"t": 1.0, "kind": "behavior", "name": "x", "state": {"x": [1]}})
+    assert "not a valid behavior event: state" in refused(
+        EVENT, {"t": 1.0, "kind": "behavior", "name": "x", "state": {"x": [1]}})
     assert "kind 'conflict' on pepper/events/behavior" in refused(
         EVENT, {"t": 1.0, "kind": "conflict", "state": "owner"})
     unknown = {"t": 1.0, "kind": "status", "anything": [1, "two"]}
