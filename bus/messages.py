@@ -2,6 +2,7 @@
 checked here — the one gate every payload from the bus passes before a filter,
 an encoder or a file sees it.
 
+>>> from sonibus.bus.codec import encode
 >>> gate = Gate()
 >>> gate.check(Key.parse("pepper/frame"), encode(frame(1.5, 7, ["HeadYaw"], [0.1])))
 {'t': 1.5, 'seq': 7, 'names': ['HeadYaw'], 'v': [0.1]}
@@ -28,7 +29,7 @@ from typing import Any
 import jsonschema
 
 from .. import schemas
-from .codec import DecodeError, decode, encode
+from .codec import DecodeError, decode
 from .keys import Key
 
 __all__ = ["FRAME_FIELDS", "SECTIONS", "BadMessage", "Gate", "Limits", "frame", "frame_samples", "valid_part"]
@@ -143,14 +144,12 @@ class Gate:
         json_like(message, "event")
         fields = EVENT_KINDS.get(kind)
         if fields is not None:  # (only its kind's rules: the whole schema would cost 100 µs an event)
-            error = next(fields.iter_errors(message), None)
-            if error is not None:
-                where = "/".join(str(p) for p in error.absolute_path)
-                raise BadMessage(f"not a valid {kind} event: {where + ': ' if where else ''}{_cut(error.message)}")
+            _schema_check(fields, f"{kind} event", message)
 
     def info(self, key: Key, message: dict[str, Any]) -> None:
         json_like(message, "info")
-        _schema_check("derived_info" if key.name == "derived" else "robot_info", message)
+        name = "derived_info" if key.name == "derived" else "robot_info"
+        _schema_check(schemas.validator(name), name.replace("_", " "), message)
         for joint in message.get("joints", ()):
             if not joint["min"] <= joint["max"]:
                 raise BadMessage(f"joint {joint['name']}: min {joint['min']} is above max {joint['max']}")
@@ -238,11 +237,11 @@ def json_like(value: Any, what: str, depth: int = 0) -> None:
     raise BadMessage(f"{what}: {type(value).__name__} {_short(value)} cannot be carried (only JSON values)")
 
 
-def _schema_check(name: str, message: dict[str, Any]) -> None:
-    error = next(schemas.validator(name).iter_errors(message), None)
+def _schema_check(validator: jsonschema.Validator, what: str, message: dict[str, Any]) -> None:
+    error = next(validator.iter_errors(message), None)
     if error is not None:
         where = "/".join(str(p) for p in error.absolute_path)
-        raise BadMessage(f"not a valid {name.replace('_', ' ')}: {where + ': ' if where else ''}{_cut(error.message)}")
+        raise BadMessage(f"not a valid {what}: {where + ': ' if where else ''}{_cut(error.message)}")
 
 
 def number(value: Any) -> bool:
@@ -308,5 +307,3 @@ def _reason(exc: Exception) -> str:
         return f"no {exc.args[0]!r}" if exc.args else "a field is missing"
     return _cut(str(exc))
 
-
-_ = encode  # re-exported for the doctest above
