@@ -8,6 +8,7 @@ import time
 
 import msgpack
 import pytest
+import zenoh
 
 from sonibus.adapters.features import Features, FeaturesConfig
 from sonibus.adapters.osc import OscSink, OscSinkConfig
@@ -30,7 +31,9 @@ def test_huge_frames_and_future_times_are_refused_and_the_stream_goes_on(net, tm
         net.sim("pepper", rate_hz=50)
         sink = net.start(OscSink(OscSinkConfig(targets=(receiver.target,)), name="sound"))
         recorder = net.start(Recorder(RecorderConfig(path=str(tmp_path / "show.mcap")), name="logger"))
-        script = net.bus("script").session.declare_publisher(keys.frame("pepper"))
+        # blocking, so the router drops none of these big frames on a busy machine: each must be refused
+        script = net.bus("script").session.declare_publisher(keys.frame("pepper"),
+                                                             congestion_control=zenoh.CongestionControl.BLOCK)
         wait_for(lambda: heard(receiver, b"/pepper/joints/HeadYaw") >= 5, what="the simulator's joints")
         wait_for(lambda: recorder.stats.get("written", 0) > 0, what="the recorder writing")
 
@@ -41,7 +44,8 @@ def test_huge_frames_and_future_times_are_refused_and_the_stream_goes_on(net, tm
             script.put(huge)
             script.put(future)
 
-        wait_for(lambda: sink.stats["bad"] >= 40 and recorder.stats["bad"] >= 40, what="40 refusals in each",
+        wait_for(lambda: sink.stats["bad"] >= 40 and recorder.stats["bad"] >= 40, timeout=30,
+                 what="40 refusals in each",
                  explain=lambda: f"sink {sink.stats}, recorder {recorder.stats}")
         before = heard(receiver, b"/pepper/joints/HeadYaw")
         wait_for(lambda: heard(receiver, b"/pepper/joints/HeadYaw") >= before + 10, what="joints flowing on")

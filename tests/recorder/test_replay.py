@@ -141,10 +141,16 @@ def test_loop_window_and_speed(net, recorded):
     seqs = [d["seq"] for _, d in got]
     assert seqs == sorted(set(seqs)), "seq keeps counting up across passes"
     with Recording(str(path)) as recording:
-        window = [m.data["v"] for m in recording.messages(["pepper/joints/HeadYaw"], 0.5, 1.5)]
+        window = [m.data for m in recording.messages(["pepper/joints/HeadYaw"], 0.5, 1.5)]
     assert 40 <= len(window) <= 52  # one second of 50 frames/s
-    values = [d["v"] for _, d in got]
-    assert values[: 2 * len(window)] == window * 2, "each pass plays the window from its start"
+    # each pass plays the window from its start, seq counting on; a sample the replay
+    # was too late for on a busy machine is skipped (counted late), never sent out of place
+    first, span = window[0]["seq"], window[-1]["seq"] + 1 - window[0]["seq"]
+    by_seq = {w["seq"] - first: w["v"] for w in window}
+    passes = {(d["seq"] - first) // span for _, d in got}
+    assert {0, 1, 2} <= passes
+    assert [d["v"] for _, d in got] == [by_seq[(d["seq"] - first) % span] for _, d in got]
+    assert len(got) >= 3 * len(window) or replay.stats["late"] > 0
     steps = np.diff([d["t"] for _, d in got[: len(window)]])
     assert statistics.median(steps) == pytest.approx(0.02 / 4, rel=0.05), "t advances at 4x"
 
