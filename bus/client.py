@@ -15,11 +15,9 @@ import time
 from collections.abc import Callable
 from typing import Any
 
-import zenoh
-
 from . import codec, keys
 from .errors import CommandError, RobotNotFound
-from .node import Bus
+from .node import Bus, Reply
 from .ownership import Claim, claims, owners
 
 Outcome = dict[str, Any] | CommandError
@@ -31,13 +29,11 @@ def ask(bus: Bus, robot: str, verb: str, args: dict[str, Any], done: Callable[[O
     session has seen, if any; see ``owner_of``); ``done`` gets the result or a
     ``CommandError`` (``robot_not_found``, ``timeout``, or the robot's refusal), exactly once."""
     pending = _Pending(robot, verb, done, timeout)
-    owner = owner if owner is not None else owners(bus.session).owner(robot)
+    owner = owner if owner is not None else owners(bus).owner(robot)
     selector = keys.command(robot, verb) + (f"?owner={owner.address}" if owner is not None else "")
     try:
         # Every answer, not one per key: a node standing by for the robot's owner answers too (``conflict``).
-        bus.session.get(selector, zenoh.handlers.Callback(pending.on_reply, pending.on_end),
-                        payload=codec.encode(args), encoding=codec.ENCODING, timeout=timeout,
-                        consolidation=zenoh.ConsolidationMode.NONE)
+        bus.ask(selector, pending.on_reply, pending.on_end, message=args, timeout=timeout, every_answer=True)
     except Exception as exc:  # a closed session, a key Zenoh refuses
         pending.finish(CommandError("internal", f"{verb}: the bus refused the query: {exc}"))
 
@@ -57,12 +53,12 @@ class _Pending:
         self._finished = False
         self._lock = threading.Lock()
 
-    def on_reply(self, reply: zenoh.Reply) -> None:
-        if reply.ok is None:
-            self.error = reply.err.payload.to_string()
+    def on_reply(self, reply: Reply) -> None:
+        if reply.payload is None:
+            self.error = reply.error
             return
         try:
-            message = codec.decode(reply.ok.payload)
+            message = codec.decode(reply.payload)
         except codec.DecodeError as exc:
             message = {"ok": False, "error": {"code": "internal", "message": f"{self.verb}: bad reply: {exc}"}}
         if message.get("ok") is True:

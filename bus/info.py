@@ -18,10 +18,8 @@ import time
 from collections.abc import Callable
 from typing import Any
 
-import zenoh
-
 from . import keys, messages
-from .node import Bus
+from .node import Bus, Reply
 
 MAX_ROBOTS = 1024  # robots asked about and remembered (their retry time)
 
@@ -43,8 +41,7 @@ class InfoRequests:
             self._asked = {r: at for r, at in self._asked.items() if now - at < self.retry_s}
         self._asked[robot] = now
         merge = _Merge(robot, self.on_info, self.on_error, self._gate)
-        self.bus.session.get(keys.info(robot) + "/**", zenoh.handlers.Callback(merge.take, merge.finish),
-                             timeout=self.retry_s)
+        self.bus.ask(keys.info(robot) + "/**", merge.take, merge.finish, timeout=self.retry_s)
 
 
 class _Merge:
@@ -58,17 +55,17 @@ class _Merge:
         self.unavailable: dict[str, Any] = {}
         self._lock = threading.Lock()
 
-    def take(self, reply: zenoh.Reply) -> None:
-        if reply.ok is None:
+    def take(self, reply: Reply) -> None:
+        if reply.payload is None:
             return
-        key = str(reply.ok.key_expr)
+        key = reply.key
         # an owner answers on its own key, or (a common Zenoh idiom) on the query's
         main = key in (keys.info(self.robot), keys.info(self.robot) + "/**")
         if not main and key != keys.derived_info(self.robot):
             return
         where = keys.info(self.robot) if main else key
         try:
-            message = self.gate.check(keys.Key.parse(where), reply.ok.payload.to_bytes())
+            message = self.gate.check(keys.Key.parse(where), reply.payload)
         except ValueError as exc:  # messages.BadMessage
             self.on_error(self.robot, f"{where} unusable: {exc}")
             return

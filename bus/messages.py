@@ -32,7 +32,8 @@ from .. import schemas
 from .codec import DecodeError, decode
 from .keys import Key
 
-__all__ = ["FRAME_FIELDS", "SECTIONS", "BadMessage", "Gate", "Limits", "frame", "frame_samples", "valid_part"]
+__all__ = ["FRAME_FIELDS", "SECTIONS", "BadMessage", "Gate", "Limits", "Section", "frame", "frame_samples",
+           "schema_of", "valid_part"]
 
 _FRAME = schemas.load("frame")["properties"]
 MAX_JOINTS: int = _FRAME["names"]["maxItems"]          # joints in one frame
@@ -83,7 +84,7 @@ class Gate:
         except DecodeError as exc:
             raise BadMessage(_cut(str(exc))) from None
         try:
-            section(self, key, message)
+            section.check(self, key, message)
         except BadMessage:
             raise
         except (KeyError, TypeError, ValueError) as exc:  # a field missing or of the wrong type
@@ -186,15 +187,34 @@ class Gate:
             raise BadMessage("joint names are not unique")
 
 
-SECTIONS: dict[str, Callable[[Gate, Key, dict[str, Any]], None]] = {
-    "frame": Gate.frame,
-    "joints": Gate.joint_sample,
-    "derived": Gate.derived_sample,
-    "events": Gate.event,
-    "info": Gate.info,
-    "cmd": Gate.command,
-}
-"""Each section of the key space (``<robot>/<section>/...``) and its check."""
+@dataclass(frozen=True)
+class Section:
+    """One section of the key space (``<robot>/<section>/...``): the schema of its
+    messages in ``schemas/v1/`` and the gate's check of them."""
+
+    name: str
+    schema: str | None                                   # None: no one schema (a command's is its verb's)
+    check: Callable[[Gate, Key, dict[str, Any]], None]
+    stream: bool = False                                 # high-rate data (``Bus.stream_publisher``), else events
+
+
+SECTIONS: dict[str, Section] = {section.name: section for section in (
+    Section("frame", "frame", Gate.frame, stream=True),
+    Section("joints", "joint_sample", Gate.joint_sample, stream=True),
+    Section("derived", "derived_sample", Gate.derived_sample, stream=True),
+    Section("events", "event", Gate.event),
+    Section("info", "robot_info", Gate.info),            # <robot>/info/derived: derived_info
+    Section("cmd", None, Gate.command),
+)}
+"""Every section of the key space, the one table decoding, ``Streams`` and the recorder dispatch on."""
+
+
+def schema_of(key: Key) -> str | None:
+    """The name of the schema of messages on ``key`` (None: not a section's key, or a command)."""
+    section = SECTIONS.get(key.section)
+    if section is None:
+        return None
+    return "derived_info" if key.section == "info" and key.name == "derived" else section.schema
 
 
 def numbers(values: Sequence[Any], field: str) -> None:

@@ -1,4 +1,5 @@
-"""``Bus``: one node's handle on a Zenoh session, the only way adapters talk.
+"""``Bus``: one node's handle on a Zenoh session, the only way adapters and the
+core talk (``tests/test_bus_only.py`` fails if another module touches a session).
 
 >>> from sonibus.bus import BusConfig, open_session
 >>> with open_session(BusConfig(multicast=False)) as session:
@@ -9,15 +10,64 @@
 from __future__ import annotations
 
 import socket
+import threading
 import time
 from collections.abc import Callable
-from typing import Any
+from dataclasses import dataclass
+from typing import Any, NamedTuple, TypeVar
 
 import zenoh
 
 from . import codec, keys
 from .messages import Limits
 from .queue import SampleQueue
+from .session import discover, lease_s
+
+T = TypeVar("T")
+
+
+@dataclass(frozen=True)
+class Qos:
+    """How a publisher's samples travel: Zenoh's reliability, priority, congestion
+    control (drop under congestion, or block the publisher) and express (no batching)."""
+
+    reliable: bool = True
+    priority: str = "DATA"  # a zenoh.Priority by name: REAL_TIME, INTERACTIVE_HIGH, ..., DATA_HIGH, DATA, ...
+    drop: bool = False
+    express: bool = False
+
+    def options(self, publisher: bool = True) -> dict[str, Any]:
+        """Keyword arguments of Zenoh's ``declare_publisher`` (``put``: no reliability, a publisher's)."""
+        options = {"priority": getattr(zenoh.Priority, self.priority), "express": self.express,
+                   "congestion_control": zenoh.CongestionControl.DROP if self.drop else zenoh.CongestionControl.BLOCK}
+        if publisher:
+            options["reliability"] = zenoh.Reliability.RELIABLE if self.reliable else zenoh.Reliability.BEST_EFFORT
+        return options
+
+
+# High-rate data (joint samples, frames): drops under congestion, never back-pressures. Not
+# express: batching measured lossless where express lost samples on a busy 2-core machine,
+# at no cost in latency (docs/performance.md).
+STREAM = Qos(priority="DATA_HIGH", drop=True)
+EVENTS = Qos()  # low rate, must not be dropped: blocks rather than drop
+
+
+class Reply(NamedTuple):
+    """One answer to ``Bus.ask``: its key and payload, or the ``error`` Zenoh reported."""
+
+    key: str
+    payload: bytes | None
+    error: str = ""
+
+
+class Watch(NamedTuple):
+    """Zenoh entities that together watch something; ``undeclare`` ends the watch."""
+
+    entities: tuple[Any, ...]
+
+    def undeclare(self) -> None:
+        for entity in self.entities:
+            entity.undeclare()
 
 
 class Bus:
@@ -25,26 +75,44 @@ class Bus:
 
     def __init__(self, session: zenoh.Session, node: str = "", host: str | None = None,
                  limits: Limits | None = None) -> None:
-        self.session = session
+        self.session = session  # for tests and the few tools that open one; nodes use the methods
         self.node = node
         self.host = host or socket.gethostname()
         self.limits = limits or Limits()  # what the gate of each node on this bus lets through
+        self._shared: dict[str, Any] = {}  # per session, for every node's Bus on it (see ``shared``)
+        self._lock = threading.Lock()
 
     def for_node(self, node: str) -> Bus:
-        return Bus(self.session, node, self.host, self.limits)
+        bus = Bus(self.session, node, self.host, self.limits)
+        bus._shared, bus._lock = self._shared, self._lock
+        return bus
 
-    def stream_publisher(self, key: str) -> zenoh.Publisher:
-        """A publisher for high-rate data (joint samples, frames): drops under congestion,
-        never back-pressures. Not ``express``: batching measured lossless where express
-        lost samples on a busy 2-core machine, at no cost in latency (docs/performance.md)."""
-        return self.session.declare_publisher(
-            key, encoding=codec.ENCODING, congestion_control=zenoh.CongestionControl.DROP,
-            priority=zenoh.Priority.DATA_HIGH, express=False)
+    def shared(self, name: str, make: Callable[[Bus], T]) -> T:
+        """The one ``make(self)`` of this session (a view every node on it shares), made on first use."""
+        with self._lock:
+            if name not in self._shared:
+                self._shared[name] = make(self)
+            return self._shared[name]
 
-    def put(self, key: str, message: dict[str, Any]) -> None:
-        """Send one message reliably (events: low rate, must not be dropped)."""
-        self.session.put(key, codec.encode(message), encoding=codec.ENCODING,
-                         congestion_control=zenoh.CongestionControl.BLOCK)
+    # -- publishing -------------------------------------------------------------------
+
+    def stream_publisher(self, key: str, qos: Qos = STREAM) -> zenoh.Publisher:
+        """A publisher of msgpack payloads on ``key`` (default: high-rate data, ``STREAM``)."""
+        return self.session.declare_publisher(key, encoding=codec.ENCODING, **qos.options())
+
+    def put(self, key: str, message: dict[str, Any], qos: Qos = EVENTS) -> None:
+        """Send one message (default: reliably, ``EVENTS``: events are few and must not be lost)."""
+        self.session.put(key, codec.encode(message), encoding=codec.ENCODING, **qos.options(publisher=False))
+
+    def watch_subscribers(self, keyexpr: str, changed: Callable[[bool], None]) -> Watch:
+        """Call ``changed(True/False)`` now and whenever anyone starts or stops
+        subscribing to ``keyexpr``; undeclare the returned ``Watch`` to stop."""
+        interest = self.session.declare_publisher(keyexpr)
+        listener = interest.declare_matching_listener(lambda status: changed(status.matching))
+        changed(interest.matching_status.matching)
+        return Watch((listener, interest))
+
+    # -- subscribing ------------------------------------------------------------------
 
     def subscribe(self, keyexpr: str, maxlen: int = 1024, queue: SampleQueue | None = None,
                   stamped: bool = False, skip: Callable[[str], bool] | None = None,
@@ -66,16 +134,52 @@ class Bus:
 
         return self.session.declare_subscriber(keyexpr, enqueue), queue
 
-    def serve(self, keyexpr: str, handler: Callable[[zenoh.Query], None]) -> zenoh.Queryable:
-        return self.session.declare_queryable(keyexpr, handler)
+    # -- presence (liveliness tokens) ---------------------------------------------------
 
     def token(self, key: str) -> zenoh.LivelinessToken:
+        """Be seen under ``key`` for as long as the token is declared (and the link is up)."""
         return self.session.liveliness().declare_token(key)
 
     def alive(self, keyexpr: str, timeout: float = 1.0) -> list[str]:
         """Keys of the liveliness tokens alive under ``keyexpr``."""
         replies = self.session.liveliness().get(keyexpr, timeout=timeout)
         return sorted(str(r.ok.key_expr) for r in replies if r.ok is not None)
+
+    def watch_tokens(self, keyexpr: str, changed: Callable[[str, bool], None]) -> zenoh.Subscriber:
+        """Call ``changed(key, alive)`` for every token under ``keyexpr`` alive now and
+        whenever one appears or goes (on a Zenoh thread)."""
+        return self.session.liveliness().declare_subscriber(
+            keyexpr, lambda s: changed(str(s.key_expr), s.kind == zenoh.SampleKind.PUT), history=True)
+
+    def discover(self) -> list[str]:
+        """Wait until this session is really on the bus (``session.discover``); the ids it reached."""
+        return discover(self.session)
+
+    @property
+    def lease_s(self) -> float:
+        """How long a vanished peer's tokens last (the transport lease), in s."""
+        return lease_s(self.session)
+
+    # -- serving and asking -------------------------------------------------------------
+
+    def serve(self, keyexpr: str, handler: Callable[[zenoh.Query], None]) -> zenoh.Queryable:
+        return self.session.declare_queryable(keyexpr, handler)
+
+    def ask(self, selector: str, on_reply: Callable[[Reply], None], on_end: Callable[[], None], *,
+            message: dict[str, Any] | None = None, timeout: float = 5.0, every_answer: bool = False) -> None:
+        """Send a query without waiting: each answer goes to ``on_reply`` and the end of
+        the query (all answered, or ``timeout``) to ``on_end``, on Zenoh threads.
+        ``every_answer``: no consolidation (several nodes may answer one key)."""
+        def reply(answer: zenoh.Reply) -> None:
+            if answer.ok is not None:
+                on_reply(Reply(str(answer.ok.key_expr), answer.ok.payload.to_bytes()))
+            else:
+                on_reply(Reply(selector, None, answer.err.payload.to_string()))
+
+        options: dict[str, Any] = {"consolidation": zenoh.ConsolidationMode.NONE} if every_answer else {}
+        if message is not None:
+            options.update(payload=codec.encode(message), encoding=codec.ENCODING)
+        self.session.get(selector, zenoh.handlers.Callback(reply, on_end), timeout=timeout, **options)
 
     def query(self, selector: str, message: dict[str, Any] | None = None,
               timeout: float = 5.0) -> list[dict[str, Any]]:

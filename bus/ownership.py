@@ -28,12 +28,10 @@ from collections.abc import Iterable
 from dataclasses import dataclass
 from typing import Any
 
-import zenoh
-
-from . import codec, keys, messages
+from . import keys
 from .errors import CommandError, OwnershipError
 from .node import Bus
-from .session import discover, lease_s
+from .publishers import FramePublishers
 
 log = logging.getLogger(__name__)
 
@@ -92,19 +90,18 @@ class Owners:
     """The claims of every robot as one session sees them, kept by a liveliness
     subscriber: what a sender needs to name a robot's owner (``owner``) without a query."""
 
-    def __init__(self, session: zenoh.Session) -> None:
-        self.session = session
+    def __init__(self, bus: Bus) -> None:
         self._claims: dict[str, dict[str, Claim]] = {}
         self._lock = threading.Lock()
-        self._subscriber = session.liveliness().declare_subscriber(keys.robot_token(), self._changed, history=True)
+        self._subscriber = bus.watch_tokens(keys.robot_token(), self._changed)
 
-    def _changed(self, sample: zenoh.Sample) -> None:
-        claim = Claim.parse(str(sample.key_expr))
+    def _changed(self, key: str, alive: bool) -> None:
+        claim = Claim.parse(key)
         if claim is None:
             return
         with self._lock:
             held = self._claims.setdefault(claim.robot, {})
-            if sample.kind == zenoh.SampleKind.PUT:
+            if alive:
                 held[claim.key] = claim
             else:
                 held.pop(claim.key, None)
@@ -116,26 +113,16 @@ class Owners:
         return min(held, key=lambda c: c.rank) if held else None
 
 
-_OWNERS: dict[str, Owners] = {}
-_OWNERS_LOCK = threading.Lock()
-
-
-def owners(session: zenoh.Session) -> Owners:
-    """The ``Owners`` view of ``session``, made on first use (one per session)."""
-    with _OWNERS_LOCK:
-        for zid in [z for z, view in _OWNERS.items() if view.session.is_closed()]:
-            del _OWNERS[zid]
-        view = _OWNERS.get(str(session.zid()))
-        if view is None:
-            view = _OWNERS[str(session.zid())] = Owners(session)
-        return view
+def owners(bus: Bus) -> Owners:
+    """The ``Owners`` view of ``bus``'s session, made on first use (one per session)."""
+    return bus.shared("owners", Owners)
 
 
 class Ownership:
     """``bus``'s node owning ``robot``: its token, its watch on the robot's other
     claims, and whether it may act (``active``). Made by ``Adapter.claim_robot``;
-    ``undeclare`` gives the robot up. Owners publish frames through ``publish_frame``,
-    which also puts the per-joint keys while anyone subscribes to them."""
+    ``undeclare`` gives the robot up. Owners publish frames through ``publish_frame``
+    (``FramePublishers``: also the per-joint keys while anyone subscribes to them)."""
 
     def __init__(self, bus: Bus, robot: str, hint: str) -> None:
         self.bus, self.robot, self.hint = bus, robot, hint
@@ -147,23 +134,20 @@ class Ownership:
         self._told: set[str] = set()           # later claims this owner has logged
         self._lock = threading.Lock()
         self._entities: list[Any] = []
-        self._frames: zenoh.Publisher | None = None
-        self._joints: dict[str, zenoh.Publisher] = {}
-        self._joints_wanted = False
+        self._publishers: FramePublishers | None = None
 
     # -- claiming -----------------------------------------------------------------
 
     def take(self) -> None:
         """Claim the robot: ``OwnershipError`` naming the owner if it has one already."""
-        liveliness = self.bus.session.liveliness()
         pattern = keys.robot_token(self.robot)
-        self._entities.append(liveliness.declare_subscriber(pattern, self._changed, history=True))
-        discover(self.bus.session)
+        self._entities.append(self.bus.watch_tokens(pattern, self._changed))
+        self.bus.discover()
         self._seen(self.bus.alive(pattern, timeout=CHECK_TIMEOUT_S))
         rivals = self._rivals_now()
         if rivals and all(self._earlier_self(c) for c in rivals):
             # This node's previous run, killed: its claim lasts until the transport lease ends.
-            deadline = time.monotonic() + lease_s(self.bus.session) + 0.5
+            deadline = time.monotonic() + self.bus.lease_s + 0.5
             while rivals and time.monotonic() < deadline:
                 time.sleep(0.1)
                 rivals = self._rivals_now()
@@ -185,12 +169,12 @@ class Ownership:
     def _earlier_self(self, claim: Claim) -> bool:
         return (claim.host, claim.node) == (self.bus.host, self.bus.node)
 
-    def _changed(self, sample: zenoh.Sample) -> None:
-        claim = Claim.parse(str(sample.key_expr))
+    def _changed(self, key: str, alive: bool) -> None:
+        claim = Claim.parse(key)
         if claim is None or claim == self.claim:
             return
         with self._lock:
-            if sample.kind == zenoh.SampleKind.PUT:
+            if alive:
                 self._rivals[claim.key] = claim
                 self._gone.discard(claim.key)
             else:
@@ -251,36 +235,21 @@ class Ownership:
             raise CommandError("conflict", f"{verb}: sent to node '{node}' on host '{host}' as the owner of robot "
                                            f"'{self.robot}', not to node '{self.bus.node}' on host '{self.bus.host}'")
 
-    # -- an owner's streams ----------------------------------------------------------
+    # -- an owner's frames ------------------------------------------------------------
 
     def publish_frame(self, message: dict[str, Any]) -> bool:
-        """Put a frame (checked by the caller) whole on ``<robot>/frame``, then per joint
-        while anyone subscribes to ``<robot>/joints/*``; False (nothing sent) while standing by."""
+        """Put a frame (checked by the caller) through the robot's ``FramePublishers``;
+        False (nothing sent) while standing by."""
         if not self.active:
             return False
-        if self._frames is None:
-            self.declare_streams()
-        self._frames.put(codec.encode(message))
-        if self._joints_wanted:
-            for name, sample in messages.frame_samples(message):
-                self.joint_publisher(name).put(codec.encode(sample))
+        if self._publishers is None:
+            self.declare_publishers()
+        self._publishers.put(message)
         return True
 
-    def declare_streams(self, joints: Iterable[str] = ()) -> None:
+    def declare_publishers(self, joints: Iterable[str] = ()) -> None:
         """Declare the robot's frame publisher and those of ``joints`` ahead of the first frame."""
-        self._frames = self._own(self.bus.stream_publisher(keys.frame(self.robot)))
-        # Per-joint keys cost an encode and a put per joint: made only while someone subscribes to one.
-        interest = self._own(self.bus.session.declare_publisher(keys.joints(self.robot)))
-        self._joints_wanted = interest.matching_status.matching
-        self._own(interest.declare_matching_listener(lambda status: setattr(self, "_joints_wanted", status.matching)))
-        for joint in joints:
-            self.joint_publisher(joint)
-
-    def joint_publisher(self, joint: str) -> zenoh.Publisher:
-        publisher = self._joints.get(joint)
-        if publisher is None:  # also a joint the robot reports beyond its reference model
-            publisher = self._joints[joint] = self._own(self.bus.stream_publisher(keys.joint(self.robot, joint)))
-        return publisher
+        self._publishers = self._own(FramePublishers(self.bus, self.robot, joints))
 
     def _own(self, entity: Any) -> Any:
         self._entities.append(entity)

@@ -33,14 +33,14 @@ def watch_robots(bus: Bus, on_change: Callable[[str, bool], None]) -> zenoh.Subs
     held: dict[str, set[str]] = {}
     lock = threading.Lock()
 
-    def changed(sample: zenoh.Sample) -> None:
-        claim = Claim.parse(str(sample.key_expr))
+    def changed(key: str, alive: bool) -> None:
+        claim = Claim.parse(key)
         if claim is None:
             return
         with lock:
             claims = held.setdefault(claim.robot, set())
             before = bool(claims)
-            if sample.kind == zenoh.SampleKind.PUT:
+            if alive:
                 claims.add(claim.key)
             else:
                 claims.discard(claim.key)
@@ -48,7 +48,7 @@ def watch_robots(bus: Bus, on_change: Callable[[str, bool], None]) -> zenoh.Subs
         if before != after:
             on_change(claim.robot, after)
 
-    return bus.session.liveliness().declare_subscriber(keys.robot_token(), changed, history=True)
+    return bus.watch_tokens(keys.robot_token(), changed)
 
 
 class Presence:

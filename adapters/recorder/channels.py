@@ -14,7 +14,9 @@ from __future__ import annotations
 import json
 from typing import Any
 
-SECTION_SCHEMAS = {"joints": "joint_sample", "derived": "derived_sample", "events": "event", "info": "robot_info"}
+from sonibus.bus import messages
+from sonibus.bus.keys import Key
+
 MESSAGE_ENCODING = "json"
 SCHEMA_ENCODING = "jsonschema"
 SCHEMA_PREFIX = "sonibus.v1."
@@ -22,11 +24,12 @@ PROFILE = ""  # no MCAP well-known profile fits; channels carry plain JSON
 
 
 def schema_for(key: str) -> str | None:
-    """The name of the schema in ``sonibus.schemas`` for messages on ``key``, if any."""
-    parts = key.split("/")
-    if len(parts) == 2 and parts[1] == "info":
-        return "robot_info"
-    return SECTION_SCHEMAS.get(parts[1]) if len(parts) >= 3 and parts[1] != "info" else None
+    """The name of the schema in ``sonibus.schemas`` for messages on ``key``, if any
+    (``messages.SECTIONS``)."""
+    try:
+        return messages.schema_of(Key.parse(key))
+    except ValueError:  # not a data key
+        return None
 
 
 def to_json(message: Any) -> bytes:

@@ -119,7 +119,7 @@ class Replay(Adapter):
         self._publishers = {self._renamed(key): self.own(self.bus.stream_publisher(self._renamed(key)))
                             for key in self.keys if Key.parse(key).section in ("joints", "derived")}
         for robot in {k.partition("/")[0] for k in self.keys if Key.parse(k).section == "joints"}:
-            self._owners[self.names[robot]].declare_streams()
+            self._owners[self.names[robot]].declare_publishers()
         self.spawn(self._play, "play")
 
     def _info(self, info: dict[str, Any], name: str) -> dict[str, Any]:

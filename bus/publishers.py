@@ -1,0 +1,49 @@
+"""A robot owner's publishers: the whole frame on ``<robot>/frame`` (what sinks
+subscribe to), then each joint's sample on ``<robot>/joints/<Joint>`` — only while
+anyone subscribes there, since per-joint keys cost an encode and a put per joint.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+from typing import Any
+
+import zenoh
+
+from . import codec, keys, messages
+from .node import Bus
+
+
+class FramePublishers:
+    """``put(frame)`` for one robot, with the publishers it needs declared ahead
+    (``joints``: those known before the first frame)."""
+
+    def __init__(self, bus: Bus, robot: str, joints: Iterable[str] = ()) -> None:
+        self.bus, self.robot = bus, robot
+        self._frame = bus.stream_publisher(keys.frame(robot))
+        self._joints: dict[str, zenoh.Publisher] = {}
+        self._joints_wanted = False
+        self._watch = bus.watch_subscribers(keys.joints(robot), self._wanted)
+        for joint in joints:
+            self._joint(joint)
+
+    def _wanted(self, matching: bool) -> None:
+        self._joints_wanted = matching
+
+    def put(self, frame: dict[str, Any]) -> None:
+        """Publish ``frame`` (checked by the caller: ``messages.frame``, ``valid_part``)."""
+        self._frame.put(codec.encode(frame))
+        if self._joints_wanted:
+            for name, sample in messages.frame_samples(frame):
+                self._joint(name).put(codec.encode(sample))
+
+    def _joint(self, name: str) -> zenoh.Publisher:
+        publisher = self._joints.get(name)
+        if publisher is None:  # also a joint the robot reports beyond its reference model
+            publisher = self._joints[name] = self.bus.stream_publisher(keys.joint(self.robot, name))
+        return publisher
+
+    def undeclare(self) -> None:
+        for entity in (self._watch, *self._joints.values(), self._frame):
+            entity.undeclare()
+        self._joints.clear()
