@@ -11,6 +11,7 @@ from .errors import ConfigError
 NODES = "sonibus/nodes"
 ROBOTS = "sonibus/robots"
 NODE_EVENTS = "sonibus/events/node"  # a node's state changes (a worker failed): an event like a robot's
+NODE_STATS = "sonibus/stats/*/*"  # every node's stats (bus/stats.py, bus/health.py)
 
 
 def joint(robot: str, name: str) -> str:
@@ -54,6 +55,11 @@ def derived_info(robot: str) -> str:
 
 def node_token(host: str, node: str) -> str:
     return f"{NODES}/{host}/{node}"
+
+
+def node_stats(host: str, node: str) -> str:
+    """Where a node publishes its stats once a second, and serves the latest."""
+    return f"sonibus/stats/{host}/{node}"
 
 
 def robot_token(robot: str = "*") -> str:
