@@ -22,18 +22,18 @@ class FramePublishers:
         self.bus, self.robot = bus, robot
         self._frame = bus.stream_publisher(keys.frame(robot))
         self._joints: dict[str, zenoh.Publisher] = {}
-        self._joints_wanted = False
+        self.per_joint = False  # whether anyone subscribes to the robot's joint keys now
         self._watch = bus.watch_subscribers(keys.joints(robot), self._wanted)
         for joint in joints:
             self._joint(joint)
 
     def _wanted(self, matching: bool) -> None:
-        self._joints_wanted = matching
+        self.per_joint = matching
 
     def put(self, frame: dict[str, Any]) -> None:
         """Publish ``frame`` (checked by the caller: ``messages.frame``, ``valid_part``)."""
         self._frame.put(codec.encode(frame))
-        if self._joints_wanted:
+        if self.per_joint:
             for name, sample in messages.frame_samples(frame):
                 self._joint(name).put(codec.encode(sample))
 

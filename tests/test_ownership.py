@@ -204,7 +204,7 @@ def test_a_replay_owns_its_robot_as_a_live_owner_does(net, tmp_path):
     _, frames = watcher.subscribe(keys.frame("take1"))
     wait_for(lambda: frames.get(0.1), what="the replay's frames")
     time.sleep(0.3)
-    assert not owner._joints_wanted, "joint keys put with nobody subscribed to them"
+    assert not owner._publishers.per_joint, "joint keys put with nobody subscribed to them"
     _, joints = watcher.subscribe("take1/joints/*")
     wait_for(lambda: joints.get(0.1), what="joint keys once someone subscribes")
 

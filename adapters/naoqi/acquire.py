@@ -30,7 +30,7 @@ QUANTITIES = {"cmd": "Position/Actuator/Value", "cur": "ElectricCurrent/Sensor/V
 
 
 @dataclass(frozen=True)
-class Frame:
+class Reading:
     """One read: ``t`` (wall clock, middle of the round trip), positions and extra
     quantities in the reader's joint order, polled ALMemory keys (None: not raised yet), read time."""
 
@@ -63,7 +63,7 @@ class Reader:
         self._slices[part] = slice(len(self.keys), len(self.keys) + len(keys))
         self.keys.extend(keys)
 
-    def read(self) -> Frame:
+    def read(self) -> Reading:
         wall, started = time.time(), time.monotonic()
         calls = {}
         if self.source == "motion":
@@ -87,7 +87,7 @@ class Reader:
             dict.fromkeys(self.polled)
         if probe is not None:
             polled = self._probed(probe, polled)
-        return Frame(wall + read_s / 2, positions, {q: [float(v) for v in parts[q]] for q in self.extra},
+        return Reading(wall + read_s / 2, positions, {q: [float(v) for v in parts[q]] for q in self.extra},
                      polled, read_s)
 
     def _probed(self, probe: Any, polled: dict[str, Any]) -> dict[str, Any]:
@@ -106,29 +106,29 @@ class Stats:
 
     def __init__(self, window_s: float = 5.0) -> None:
         self.window_s = window_s
-        self._frames: deque[tuple[float, float]] = deque()  # (monotonic time, read seconds)
+        self._reads: deque[tuple[float, float]] = deque()  # (monotonic time, read seconds)
         self._lock = threading.Lock()
 
     def add(self, read_s: float) -> None:
         now = time.monotonic()
         with self._lock:
-            self._frames.append((now, read_s))
-            while self._frames and self._frames[0][0] < now - self.window_s:
-                self._frames.popleft()
+            self._reads.append((now, read_s))
+            while self._reads and self._reads[0][0] < now - self.window_s:
+                self._reads.popleft()
 
     def reads(self) -> list[float]:
         """Read times (s) of the frames in the window."""
         with self._lock:
-            return [r for _, r in self._frames]
+            return [r for _, r in self._reads]
 
     def clear(self) -> None:
         with self._lock:
-            self._frames.clear()
+            self._reads.clear()
 
     def summary(self) -> dict[str, float]:
         """``rate_hz`` achieved, ``read_ms`` median and ``read_ms_max`` (0 without frames)."""
         with self._lock:
-            frames = list(self._frames)
+            frames = list(self._reads)
         if len(frames) < 2:
             return {"rate_hz": 0.0, "read_ms": 0.0, "read_ms_max": 0.0}
         span = frames[-1][0] - frames[0][0]

@@ -53,25 +53,25 @@ class Playback:
         self.behavior = behavior
         joints = behavior.joints
         home = {j: start[j] for j in joints if j in start}
-        frames: list[tuple[float, Pose]] = [(0.0, dict(home))]
+        keyframes: list[tuple[float, Pose]] = [(0.0, dict(home))]
         for t, pose in behavior.keyframes:
-            merged = dict(frames[-1][1])
+            merged = dict(keyframes[-1][1])
             merged.update({j: v for j, v in pose.items() if j in home})
-            frames.append((t, merged))
-        frames.append((behavior.duration, dict(home)))
-        self._frames = frames
+            keyframes.append((t, merged))
+        keyframes.append((behavior.duration, dict(home)))
+        self._keyframes = keyframes
 
     def targets(self, elapsed: float) -> tuple[Pose, bool]:
         """Targets at ``elapsed`` seconds, and whether the behavior is over."""
-        frames = self._frames
-        if elapsed >= frames[-1][0]:
-            return dict(frames[-1][1]), True
-        for (t0, a), (t1, b) in itertools.pairwise(frames):
+        keyframes = self._keyframes
+        if elapsed >= keyframes[-1][0]:
+            return dict(keyframes[-1][1]), True
+        for (t0, a), (t1, b) in itertools.pairwise(keyframes):
             if elapsed < t1:
                 x = (elapsed - t0) / (t1 - t0)
                 ease = 0.5 - 0.5 * math.cos(math.pi * x)
                 return {j: a[j] + (b[j] - a[j]) * ease for j in a}, False
-        return dict(frames[-1][1]), True  # unreachable: the last frame ends the loop
+        return dict(keyframes[-1][1]), True  # unreachable: the last keyframe ends the loop
 
 
 def _wave() -> tuple[tuple[float, Pose], ...]:
