@@ -1,0 +1,214 @@
+"""An asyncio HTTP/WebSocket server (aiohttp) inside an adapter's lifecycle.
+
+The adapter adds routes to ``app``, calls ``start()`` from its ``_start`` (the
+port is bound when it returns), and the node's ``stop()`` ends the server: open
+WebSocket connections are closed (a bounded wait for each client's answer),
+handlers still running are cancelled, and the loop's thread is joined. The loop
+runs on a worker made with ``adapter.spawn``, so an exception escaping the
+server — from a task or a callback on its loop, not a single request's 500 —
+fails the node like any dying worker. ``broadcast`` sends a value to every
+WebSocket client from any thread (a bus worker, a Zenoh callback).
+
+    self.web = WebServer(self, self.config.host, self.config.port)
+    self.web.app.router.add_get("/ws", self.web.websocket)
+    self.web.start()
+    self.web.broadcast({"v": 0.5})      # from any thread
+"""
+
+from __future__ import annotations
+
+import asyncio
+import concurrent.futures
+import contextlib
+import json
+import logging
+import os
+import socket
+import threading
+from collections import deque
+from collections.abc import Awaitable, Callable, Coroutine
+from typing import TYPE_CHECKING, Any
+
+from aiohttp import WSCloseCode, web
+
+from .options import bad
+
+if TYPE_CHECKING:
+    from .adapter import Adapter
+
+log = logging.getLogger(__name__)
+
+START_TIMEOUT_S = 5.0   # binding the port takes milliseconds; this only guards a wedged loop
+CLOSE_WAIT_S = 0.5      # how long a WebSocket client has to answer the server's close
+SHUTDOWN_S = 0.5        # how long running handlers have to finish before they are cancelled
+STOP_POLL_S = 0.05      # ``adapter.stopping`` is a threading.Event: the loop looks at it this often
+CLIENT_BACKLOG = 256    # messages waiting for a slow client; past this its oldest are dropped
+
+Handler = Callable[[web.Request], Awaitable[web.StreamResponse]]
+
+
+class WebServer:
+    """An aiohttp ``app`` served on ``host:port`` (0: any free port) while ``adapter`` runs."""
+
+    def __init__(self, adapter: Adapter, host: str = "127.0.0.1", port: int = 0) -> None:
+        self.adapter = adapter
+        self.host = host
+        self.port = port                   # the bound port once started
+        self.app = web.Application(middlewares=[self._errors])
+        self.latest: Any = None            # the last value broadcast (a new WebSocket client gets it first)
+        self.dropped = 0                   # messages a slow client missed
+        self._latest_text: str | None = None
+        self._clients: set[_Client] = set()
+        self._loop: asyncio.AbstractEventLoop | None = None
+        self._ready = threading.Event()
+        self._start_error: BaseException | None = None
+        self._crash: BaseException | None = None
+
+    @property
+    def url(self) -> str:
+        return f"http://{self.host}:{self.port}"
+
+    @property
+    def clients(self) -> int:
+        """How many clients a ``websocket`` route has connected now."""
+        return len(self._clients)
+
+    def start(self) -> None:
+        """Serve ``app`` on a worker thread of the adapter; return once listening.
+        A port that cannot be bound is a ``ConfigError`` naming key 'port'."""
+        self.adapter.spawn(self._serve, "web")
+        if not self._ready.wait(START_TIMEOUT_S):
+            raise RuntimeError(f"the web server on {self.host}:{self.port} did not start within {START_TIMEOUT_S} s")
+        error = self._start_error
+        if isinstance(error, socket.gaierror):
+            raise bad("host", f"cannot listen on {self.host!r}: {error.strerror} — "
+                              "give an address of this machine (127.0.0.1: this machine only, 0.0.0.0: all)")
+        if isinstance(error, OSError):
+            reason = os.strerror(error.errno) if error.errno else str(error)
+            raise bad("port", f"cannot listen on {self.host}:{self.port}: {reason} — "
+                              "choose a free port (0: any)")
+        if error is not None:
+            raise error
+
+    def broadcast(self, value: Any) -> None:
+        """Send ``value`` as JSON to every WebSocket client (from any thread); a client
+        that falls ``CLIENT_BACKLOG`` messages behind loses the oldest."""
+        text = json.dumps(value)
+        self.latest, self._latest_text = value, text
+        loop = self._loop
+        if loop is None:
+            return
+        with contextlib.suppress(RuntimeError):  # the loop has closed: the node is stopping, nobody listens
+            loop.call_soon_threadsafe(self._push, text)
+
+    def submit(self, coro: Coroutine[Any, Any, Any]) -> concurrent.futures.Future[Any]:
+        """Run ``coro`` on the server's loop (from another thread); its result or
+        exception comes back in the returned future."""
+        if self._loop is None:
+            coro.close()
+            raise RuntimeError(f"the web server of {self.adapter.name!r} is not running")
+        return asyncio.run_coroutine_threadsafe(coro, self._loop)
+
+    async def websocket(self, request: web.Request) -> web.WebSocketResponse:
+        """A route handler: the client gets the latest value, then every broadcast;
+        what it sends is ignored."""
+        ws = web.WebSocketResponse(timeout=CLOSE_WAIT_S)
+        await ws.prepare(request)
+        client = _Client(ws, self)
+        self._clients.add(client)
+        if self._latest_text is not None:
+            client.push(self._latest_text)
+        sender = asyncio.create_task(client.send_all())
+        try:
+            async for _ in ws:
+                pass
+        finally:
+            self._clients.discard(client)
+            sender.cancel()
+            await asyncio.gather(sender, return_exceptions=True)
+        return ws
+
+    # -- on the loop's thread ---------------------------------------------------------
+
+    def _serve(self) -> None:
+        asyncio.run(self._main())
+        if self._crash is not None:
+            raise self._crash
+
+    async def _main(self) -> None:
+        loop = asyncio.get_running_loop()
+        loop.set_exception_handler(self._on_loop_error)
+        runner = web.AppRunner(self.app, handle_signals=False, access_log=None, shutdown_timeout=SHUTDOWN_S)
+        try:
+            await runner.setup()
+            site = web.TCPSite(runner, self.host, self.port)
+            await site.start()
+        except Exception as exc:  # start() raises it in the adapter's thread
+            self._start_error = exc
+            await runner.cleanup()
+            self._ready.set()
+            return
+        self.port = runner.addresses[0][1]
+        self._loop = loop
+        self._ready.set()
+        try:
+            while self._crash is None and not self.adapter.stopping.is_set():
+                await asyncio.sleep(STOP_POLL_S)
+        finally:
+            self._loop = None
+            await self._close_clients()
+            await runner.cleanup()
+
+    async def _close_clients(self) -> None:
+        closing = [asyncio.create_task(c.ws.close(code=WSCloseCode.GOING_AWAY, message=b"node stopping"))
+                   for c in self._clients]
+        if closing:
+            await asyncio.wait(closing, timeout=2 * CLOSE_WAIT_S)
+
+    def _push(self, text: str) -> None:
+        for client in self._clients:
+            client.push(text)
+
+    def _on_loop_error(self, loop: asyncio.AbstractEventLoop, context: dict[str, Any]) -> None:
+        exc = context.get("exception")
+        if self._crash is None:  # the worker raises it: fail() logs it with its traceback
+            self._crash = exc if isinstance(exc, Exception) else RuntimeError(context.get("message", "loop error"))
+
+    @web.middleware
+    async def _errors(self, request: web.Request, handler: Handler) -> web.StreamResponse:
+        """A request whose handler raises gets a 500, counted in ``errors`` and warned
+        about (one line, at most every few seconds); the server goes on."""
+        try:
+            return await handler(request)
+        except web.HTTPException:
+            raise
+        except Exception as exc:
+            self.adapter.count("errors")
+            self.adapter.warn("http", f"{request.method} {request.path} failed: {type(exc).__name__}: {exc}")
+            raise web.HTTPInternalServerError() from None
+
+
+class _Client:
+    """One WebSocket client: messages wait in a bounded backlog, sent in order by one task."""
+
+    def __init__(self, ws: web.WebSocketResponse, server: WebServer) -> None:
+        self.ws = ws
+        self.server = server
+        self.backlog: deque[str] = deque(maxlen=CLIENT_BACKLOG)
+        self.waiting = asyncio.Event()
+
+    def push(self, text: str) -> None:
+        if len(self.backlog) == self.backlog.maxlen:
+            self.server.dropped += 1
+        self.backlog.append(text)
+        self.waiting.set()
+
+    async def send_all(self) -> None:
+        while not self.ws.closed:
+            await self.waiting.wait()
+            self.waiting.clear()
+            while self.backlog and not self.ws.closed:
+                try:
+                    await self.ws.send_str(self.backlog.popleft())
+                except ConnectionError:  # the client went away; its handler ends the connection
+                    return
