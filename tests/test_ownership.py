@@ -181,8 +181,8 @@ def test_a_restarted_owner_waits_out_its_own_previous_claim(net, pepper):
         nao = net.sim("nao", bus=bus)
     finally:
         leaves.cancel()
-    assert nao.ownership.active
-    assert 0.4 < time.monotonic() - started < 5.0
+    assert nao.ownership.active  # (so it took the robot before its wait ran out: the lease)
+    assert time.monotonic() - started > 0.4  # after its previous claim left (0.5 s), not at once
 
 
 def test_claims_name_robots_owners_first():

@@ -1,5 +1,6 @@
 """MIDI ports through python-rtmidi: open a virtual port of our own, or connect
-to an existing one by name or substring.
+to an existing one by name or substring (mido's rtmidi backend does neither the
+substring nor a client named after the node when connecting: docs/midi.md).
 
 >>> API_NAMES["jack"] == rtmidi.API_UNIX_JACK
 True

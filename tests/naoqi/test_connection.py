@@ -25,9 +25,8 @@ def refused(rig, verb, args):
 
 def test_unreachable_at_start_then_the_robot_appears(net, fakes):
     port = free_port()
-    started = time.monotonic()
     r = attach(net, f"tcp://127.0.0.1:{port}", wait=False)
-    assert time.monotonic() - started < 1.0, "start() waited for the robot"
+    assert r.adapter.state == "running", "start() waited for the robot"  # nothing listens on the port yet
     lost = r.events.wait("connection", state="lost")
     assert str(port) in lost["url"] and lost["error"]
     info = robot_info(r.bus, "pepper")
@@ -68,7 +67,7 @@ def test_robot_lost_mid_stream_and_back_on_the_same_port(net, fakes):
     assert [e["state"] for e in r.events.find("connection")] == ["connected", "lost", "connected"]
 
 
-def test_stop_is_prompt_connected_retrying_and_mid_connect(net, fakes):
+def test_stop_is_prompt_connected_retrying_and_mid_connect(net, fakes, caplog):
     fake = fakes()
     connected = attach(net, fake.url)
     retrying = attach(net, f"tcp://127.0.0.1:{free_port()}", robot="pepper2", wait=False)
@@ -84,8 +83,10 @@ def test_stop_is_prompt_connected_retrying_and_mid_connect(net, fakes):
             for rig in (connected, retrying, hanging):
                 started = time.monotonic()
                 rig.adapter.stop()
-                assert time.monotonic() - started < 1.0, rig.name
+                # within the node's 3 s (not the 30 s connect), every worker ending by itself (none left behind)
+                assert time.monotonic() - started < 3.0, rig.name
                 assert rig.adapter.state == "stopped"
+    assert "did not stop within" not in caplog.text
 
 
 def test_the_connection_line_names_the_robot_at_the_default_level(net, fakes, spawn, tmp_path):
