@@ -129,7 +129,7 @@ def test_a_client_without_router_fails_at_once_for_one_shot_commands():
     result = run_cli("send", "pepper", "stop", "--mode", "client", "--connect", f"tcp/127.0.0.1:{free_port()}",
                      "--no-multicast")
     assert result.returncode == 2 and "cannot open the bus" in result.stderr
-    assert time.monotonic() - started < 5
+    assert time.monotonic() - started < 10  # start-up included; one waiting for a router would never end
 
 
 def test_nodes_lists_adapter_robots_and_uptime(net):

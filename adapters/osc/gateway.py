@@ -24,11 +24,12 @@ import zenoh
 from sonibus.bus import keys
 from sonibus.bus.adapter import Adapter
 from sonibus.bus.client import Outcome, ask
+from sonibus.bus.commands import from_osc
 from sonibus.bus.errors import CommandError, ConfigError
 from sonibus.bus.options import bad
 from sonibus.bus.queue import SampleQueue
 
-from . import shape, tcp, wire
+from . import tcp, wire
 from .config import parse_target
 from .tcp import Peer
 
@@ -86,10 +87,10 @@ class OscGateway(Adapter):
     """Commands from OSC (TouchOSC, Pure Data, SuperCollider) to robots, answered by OSC."""
 
     Config = OscGatewayConfig
+    counters = COUNTERS
 
     def __init__(self, config: OscGatewayConfig | None = None, *, name: str = "") -> None:
         super().__init__(config, name=name)
-        self.stats: dict[str, int] = dict.fromkeys(COUNTERS, 0)
         self.udp_address: tuple[Any, ...] = ()
         self.tcp_address: tuple[Any, ...] = ()
         self._pending = 0  # commands awaiting an answer (guarded by the base class's lock)
@@ -216,7 +217,7 @@ class OscGateway(Adapter):
             return
         robot, verb = target
         try:
-            request = shape.request(verb, args)
+            request = from_osc(verb, args)
         except CommandError as exc:
             self._command_failed(robot, verb, peer, exc)
             return
@@ -267,6 +268,7 @@ class OscGateway(Adapter):
                     peer.connection.send(packet)
                 else:
                     self._udp.sendto(packet, peer.address)
+                self.count("sent")
             except Exception as exc:  # OSError, or python-osc's BuildError
                 self.count("replies_lost")
                 self.warn("replies_lost", f"reply {address} to {peer.address[0]} not sent: {exc}")

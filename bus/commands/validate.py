@@ -1,4 +1,4 @@
-"""Command requests: the verb table and validation against a robot's model.
+"""Command requests validated against a robot's model, and the replies to them.
 
 Structure (types, required fields, ranges that do not depend on the robot) comes
 from the request schemas in ``schemas/v1/cmd/``; this module adds what the
@@ -19,9 +19,9 @@ from typing import Any
 
 import jsonschema
 
-from .. import schemas
-from .errors import CommandError
-from .robot import RobotModel
+from ... import schemas
+from ..errors import CommandError
+from ..robot import RobotModel
 
 _RANGE_CHECKS = {"minimum", "maximum", "exclusiveMinimum", "exclusiveMaximum"}
 LIMIT_TOLERANCE = 1e-5  # a limit as published (2.08567, 5 decimals) passes against the robot's float32 one

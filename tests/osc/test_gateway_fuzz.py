@@ -18,9 +18,10 @@ from pythonosc.osc_message import OscMessage
 from pythonosc.osc_message_builder import OscMessageBuilder
 
 from sonibus import schemas
-from sonibus.adapters.osc import shape, wire
+from sonibus.adapters.osc import wire
 from sonibus.adapters.osc.gateway import OscGateway, OscGatewayConfig
 from sonibus.bus import CommandError
+from sonibus.bus.commands import from_osc
 
 from ..conftest import free_port, wait_for
 from .test_gateway import Client, Watch, build, bundle
@@ -153,7 +154,7 @@ def test_any_tcp_stream_is_frames_or_a_wire_error(chunks):
 @example("joints/set", ["\n"])  # a joint name with a line break: the error is still one line
 def test_arguments_are_shaped_or_refused_as_bad_request(verb, args):
     try:
-        request = shape.request(verb, args)
+        request = from_osc(verb, args)
     except CommandError as exc:
         assert exc.code == "bad_request" and "\n" not in exc.message
     else:
