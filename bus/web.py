@@ -21,7 +21,6 @@ import asyncio
 import concurrent.futures
 import contextlib
 import json
-import logging
 import os
 import socket
 import threading
@@ -35,8 +34,6 @@ from .options import bad
 
 if TYPE_CHECKING:
     from .adapter import Adapter
-
-log = logging.getLogger(__name__)
 
 START_TIMEOUT_S = 5.0   # binding the port takes milliseconds; this only guards a wedged loop
 CLOSE_WAIT_S = 0.5      # how long a WebSocket client has to answer the server's close
@@ -125,7 +122,8 @@ class WebServer:
         finally:
             self._clients.discard(client)
             sender.cancel()
-            await asyncio.gather(sender, return_exceptions=True)
+            with contextlib.suppress(asyncio.CancelledError):
+                await sender  # a bug of send_all raises here, not lost in a task nobody reads
         return ws
 
     # -- on the loop's thread ---------------------------------------------------------
@@ -145,8 +143,8 @@ class WebServer:
             await site.start()
         except Exception as exc:  # start() raises it in the adapter's thread
             self._start_error = exc
-            await runner.cleanup()
             self._ready.set()
+            await runner.cleanup()
             return
         self.port = runner.addresses[0][1]
         self._loop = loop
@@ -184,6 +182,8 @@ class WebServer:
             raise
         except Exception as exc:
             self.adapter.count("errors")
+            if request.writer.output_size > 0:  # a response under way (a WebSocket) cannot become a 500:
+                raise                           # aiohttp logs it and cuts the connection
             self.adapter.warn("http", f"{request.method} {request.path} failed: {type(exc).__name__}: {exc}")
             raise web.HTTPInternalServerError() from None
 

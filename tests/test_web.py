@@ -196,6 +196,7 @@ class Fragile(Adapter):
         self.web.app.router.add_get("/bad", self.bad_request)
         self.web.app.router.add_get("/crash", self.crash)
         self.web.app.router.add_get("/stuck", self.stuck)
+        self.web.app.router.add_get("/ws-bad", self.bad_websocket)
         self.web.start()
 
     async def bad_request(self, request: web.Request) -> web.Response:
@@ -204,6 +205,12 @@ class Fragile(Adapter):
     async def crash(self, request: web.Request) -> web.Response:
         asyncio.get_running_loop().call_soon(self.explode)  # server code outside any request
         return web.Response(text="ok")
+
+    async def bad_websocket(self, request: web.Request) -> web.WebSocketResponse:
+        ws = web.WebSocketResponse()
+        await ws.prepare(request)
+        await ws.send_str("hello")
+        raise ValueError("this connection only")
 
     def explode(self) -> None:
         raise RuntimeError("the server's own code broke")
@@ -233,6 +240,7 @@ def test_a_handler_that_never_returns_is_cancelled_within_the_stop(net, caplog):
 
 
 def test_a_failing_request_is_a_500_and_the_server_goes_on(net, caplog):
+    caplog.set_level(logging.WARNING)
     node = net.start(Fragile(name="fragile"))
 
     async def scenario() -> list[int]:
@@ -243,9 +251,15 @@ def test_a_failing_request_is_a_500_and_the_server_goes_on(net, caplog):
                     statuses.append(response.status)
             return statuses
 
+    async def websocket() -> list[aiohttp.WSMsgType]:
+        async with aiohttp.ClientSession(node.web.url) as http, http.ws_connect("/ws-bad") as ws:
+            return [(await ws.receive(timeout=RECEIVE_S)).type for _ in range(2)]
+
     assert asyncio.run(scenario()) == [500, 500, 404]
+    # an open WebSocket cannot become a 500: its connection ends, cleanly (no bytes of an HTTP answer in it)
+    assert asyncio.run(websocket()) == [aiohttp.WSMsgType.TEXT, aiohttp.WSMsgType.CLOSED]
     assert node.state == "running" and not node.failure
-    assert node.stats["errors"] == 2
+    assert node.stats["errors"] == 3
     warned = [r.getMessage() for r in caplog.records if r.name == "sonibus.bus.adapter"]
     assert len(warned) == 1, warned  # one line, not one per request
     assert warned[0].startswith("fragile: GET /bad failed: ValueError: this request only"), warned

@@ -173,6 +173,12 @@ class Datagrams:
     def data(self) -> list[bytes]:
         return [d for _, d in list(self.items)]
 
+    def stamped(self) -> list[tuple[float, bytes]]:
+        """Each datagram with the kernel's receive time: when it was sent, however late this
+        process read it (on a busy machine reads come in bunches)."""
+        items = list(self.items)
+        return [(stamp, data) for stamp, (_, data) in zip(self.stamps[:len(items)], items, strict=True)]
+
     def _receive(self) -> None:
         while not self._closed.is_set():
             try:
