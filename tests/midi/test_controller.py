@@ -42,6 +42,7 @@ def test_a_fader_sweep_moves_the_joint_within_its_limits(net, writer):
             seen.append(sample["v"])
         return sample
 
+    started = time.monotonic()
     for value in range(128):  # a sweep up at 500 messages/s, as a fast fader (JACK drops bigger bursts)
         writer.send_message([0xB1, 7, value])
         time.sleep(0.002)
@@ -50,11 +51,13 @@ def test_a_fader_sweep_moves_the_joint_within_its_limits(net, writer):
         writer.send_message([0xB1, 7, value])
         time.sleep(0.002)
     wait_for(lambda: watched() and seen[-1] < limits.min + 0.01, timeout=10, what="HeadYaw at its minimum")
+    elapsed = time.monotonic() - started
     assert all(limits.min - 1e-6 <= v <= limits.max + 1e-6 for v in seen)
     assert surface.stats["errors"] == 0
     # JACK's dummy driver may drop a message or two of a burst on a loaded machine, so count loosely
     assert 100 < surface.stats["received"] <= 128 + 17
-    assert surface.stats["commands"] < 40, "fader moves are coalesced"
+    # fader moves are coalesced: at most rate_hz commands a second, however long the sweeps took
+    assert surface.stats["commands"] <= 20 * elapsed + 2, (surface.stats["commands"], f"{elapsed:.2f} s")
 
 
 def test_a_key_runs_a_behavior_and_its_release_stops_it(net, writer):

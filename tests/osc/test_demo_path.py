@@ -44,5 +44,7 @@ def test_demo_reaches_oscdump_at_the_configured_rate(spawn):
     # Rate seen by the receiver: HeadYaw arrivals over the middle of the capture.
     arrivals = [t for t, _ in by_address["/pepper/joints/HeadYaw"]][5:-5]
     rate = (len(arrivals) - 1) / (arrivals[-1] - arrivals[0])
-    assert 45 <= rate <= 55, f"{rate:.1f} messages/s for HeadYaw at rate 50"
+    # the configured 50, not the default 100 (a busy machine skips frames, a starved oscdump reads
+    # in bunches: the rate itself is bench/sim_to_oscdump.py's and bench/pacing.py's figure)
+    assert 25 <= rate <= 70, f"{rate:.1f} messages/s for HeadYaw at rate 50"
     assert time.time() - arrivals[-1] < 30  # timetags are wall-clock receive times

@@ -116,8 +116,8 @@ def test_pepperosc_pd_patch_gets_joints_latency_and_sound_cues(net, spawn, tmp_p
     # One /latency per frame (0 for the first, and for the rest of a frame the sink had to split).
     assert abs(len(heads) - sum(x > 0 for x in latencies)) <= 2, "one /latency per frame, one HeadYaw per frame"
     assert len(latencies) >= 100
-    assert statistics.median(latencies[1:]) == pytest.approx(0.02, abs=0.002)
-    assert all(0 <= x < 0.2 for x in latencies), max(latencies)
+    assert statistics.median(latencies[1:]) == pytest.approx(0.02, abs=0.002)  # the frame interval, in s
+    assert all(0 <= x < 1.0 for x in latencies), max(latencies)  # (a stalled machine skips a frame or more)
     assert sink.stats["bad"] == sink.stats["send_errors"] == 0
 
 

@@ -365,7 +365,7 @@ def test_rate_cap_sends_the_newest_of_a_burst_when_its_turn_comes(net, receivers
         src.put("toy/joints/Ramp", sample(seq, value))
 
     def ramp() -> list[tuple[float, float]]:
-        parsed = [(at, OscMessage(d)) for at, d in list(raw.items)]
+        parsed = [(at, OscMessage(d)) for at, d in raw.stamped()]
         return [(at, m.params[0]) for at, m in parsed if m.address == "/toy/joints/Ramp"]
 
     wait_for(lambda: ramp() and ramp()[-1][1] == f32(1.0), timeout=2, what="the newest value, 1.0")
