@@ -3,13 +3,14 @@
 It owns the invariants every robot shares, whatever drives it (simulator,
 NAOqi): one owner per robot, the robot's liveliness token, ``<robot>/info``,
 the joint streams and events, and the command path — every request validated
-against the robot's model before a subclass's ``_cmd_<verb>`` hook sees it,
-one reply each, and a ``command`` event for each executed command.
+against the robot's model before the robot's verbs object sees it, one reply
+each, and a ``command`` event for each executed command.
 
-A subclass connects and sets ``self.model`` in ``_open()``, runs its frame loop
-in ``_acquire()`` (calling ``publish_frame`` per frame until ``self.stopping``
-is set) and implements one ``_cmd_*`` hook per verb
-(``_cmd_joints_set(names, angles, speed)``, ``_cmd_say(text, ...)``, ...).
+A subclass names the class that carries out its commands (``Verbs``, a
+``verbs.RobotVerbs``: the registry checks it has every verb when it loads the
+adapter), connects and sets ``self.model`` and ``self.verbs`` (an instance of
+``Verbs``) in ``_open()``, and runs its frame loop in ``_acquire()`` (calling
+``publish_frame`` per frame until ``self.stopping`` is set).
 """
 
 from __future__ import annotations
@@ -17,7 +18,7 @@ from __future__ import annotations
 import logging
 import time
 from collections.abc import Sequence
-from typing import Any
+from typing import Any, ClassVar
 
 import zenoh
 
@@ -26,6 +27,7 @@ from . import codec, commands, keys, messages
 from .adapter import Adapter
 from .errors import CommandError
 from .robot import RobotModel
+from .verbs import RobotVerbs, bind
 
 log = logging.getLogger(__name__)
 
@@ -33,7 +35,10 @@ log = logging.getLogger(__name__)
 class RobotAdapter(Adapter):
     """Owns one robot: streams its joints and events, serves its commands."""
 
+    Verbs: ClassVar[type[RobotVerbs]]
+    """The class of ``self.verbs``; checked by the registry for every verb."""
     model: RobotModel
+    verbs: RobotVerbs
     rate_hz: float = 100.0
 
     @property
@@ -49,8 +54,11 @@ class RobotAdapter(Adapter):
     def _start(self) -> None:
         self._claim()
         self._open()
+        if not isinstance(getattr(self, "verbs", None), self.Verbs):
+            raise TypeError(f"{type(self).__name__}._open() must set self.verbs to a {self.Verbs.__name__}")
+        self._run = bind(self.verbs)
         self._gate = messages.Gate(self.bus.limits)
-        self.ownership.declare_streams(self.model.joint_names)
+        self.ownership.declare_publishers(self.model.joint_names)
         self.own(self.bus.serve(keys.info(self.robot), self._serve_info))
         self.own(self.bus.serve(keys.command(self.robot), self._serve_command))
         self.spawn(self._acquire, "acquire")
@@ -59,7 +67,7 @@ class RobotAdapter(Adapter):
         self.ownership = self.claim_robot(self.robot)
 
     def _open(self) -> None:
-        """Hook: connect to the robot and set ``self.model`` (and ``self.rate_hz``)."""
+        """Hook: connect to the robot and set ``self.model``, ``self.verbs`` (and ``self.rate_hz``)."""
         raise NotImplementedError
 
     def _acquire(self) -> None:
@@ -138,15 +146,6 @@ class RobotAdapter(Adapter):
         stands by for another owner runs none (``conflict``)."""
         self.ownership.check(verb)
         if verb == "stop":
-            return self._cmd_stop() or {}
+            return self._run["stop"]()
         command = commands.validate(verb, args, self.model, self.behaviors())
-        hook = getattr(self, "_cmd_" + verb.replace("/", "_"))
-        return hook(**command.args) or {}
-
-    # -- command hooks (subclasses implement every verb) ------------------------
-
-    def _cmd_stop(self) -> dict[str, Any] | None:
-        raise NotImplementedError
-
-    def _cmd_behavior_list(self) -> dict[str, Any]:
-        return {"behaviors": list(self.behaviors())}
+        return self._run[verb](**command.args)

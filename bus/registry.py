@@ -1,7 +1,9 @@
 """Adapters by short name, from the ``sonibus.adapters`` entry-point group.
 
 Built-in adapters are registered exactly like third-party ones (see
-``pyproject.toml``); the core knows none of them by name.
+``pyproject.toml``); the core knows none of them by name. Each is checked when
+it loads, before any node starts: a robot adapter's ``Verbs`` must implement
+every verb (``verbs.RobotVerbs``), and a name two packages register is refused.
 
 >>> sorted(available())[:2]  # doctest: +SKIP
 ['console', 'osc']
@@ -15,29 +17,51 @@ from importlib.metadata import EntryPoint, entry_points
 
 from .adapter import Adapter
 from .errors import AdapterError
+from .owner import RobotAdapter
+from .verbs import missing
 
 GROUP = "sonibus.adapters"
+KINDS = {GROUP: "adapter", "sonibus.commands": "command"}
 
 log = logging.getLogger(__name__)
 
 
+def entries(group: str = GROUP) -> tuple[dict[str, EntryPoint], dict[str, str]]:
+    """The entry points of ``group`` by name, and the names that more than one
+    package registers, each with the one line that refuses it."""
+    by_name: dict[str, list[EntryPoint]] = {}
+    for ep in entry_points(group=group):
+        by_name.setdefault(ep.name, []).append(ep)
+    kind = KINDS.get(group, f"entry point in {group}")
+    unique = {name: eps[0] for name, eps in by_name.items() if len(eps) == 1}
+    clashes = {name: f"{kind} '{name}' is registered by more than one package: "
+                     f"{' and '.join(f'{_package(ep)} ({ep.value})' for ep in eps)} — uninstall all but one"
+               for name, eps in by_name.items() if len(eps) > 1}
+    return unique, clashes
+
+
 def available() -> dict[str, EntryPoint]:
-    """Installed adapters by name (not yet imported)."""
-    return {ep.name: ep for ep in entry_points(group=GROUP)}
+    """Installed adapters by name (not yet imported); a name two packages register is left out."""
+    return entries()[0]
 
 
 def load(name: str) -> type[Adapter]:
     """The adapter class called ``name``, checked; ``AdapterError`` says what is wrong."""
-    found = available()
+    found, clashes = entries()
+    if name in clashes:
+        raise AdapterError(clashes[name])
     if name not in found:
         raise AdapterError(f"unknown adapter '{name}' — installed adapters: {', '.join(sorted(found)) or 'none'}")
     return _checked(found[name])
 
 
 def load_all() -> dict[str, type[Adapter]]:
-    """Every adapter that loads; a broken plug-in is logged and skipped."""
+    """Every adapter that loads; a broken plug-in, or a name two packages register, is logged and skipped."""
+    found, clashes = entries()
+    for message in clashes.values():
+        log.warning("%s (skipped)", message)
     loaded = {}
-    for name, ep in sorted(available().items()):
+    for name, ep in sorted(found.items()):
         try:
             loaded[name] = _checked(ep)
         except AdapterError as exc:
@@ -50,8 +74,12 @@ def summary(cls: type[Adapter]) -> str:
     return (cls.__doc__ or "").strip().splitlines()[0] if cls.__doc__ else ""
 
 
+def _package(ep: EntryPoint) -> str:
+    return f"package '{ep.dist.name}'" if ep.dist is not None else "an unknown package"
+
+
 def _checked(ep: EntryPoint) -> type[Adapter]:
-    where = f"adapter '{ep.name}' ({ep.value})"
+    where = f"adapter '{ep.name}' ({ep.value}, {_package(ep)})"
     try:
         cls = ep.load()
     except Exception as exc:
@@ -60,4 +88,16 @@ def _checked(ep: EntryPoint) -> type[Adapter]:
         raise AdapterError(f"{where} is not a subclass of sonibus.bus.Adapter")
     if not dataclasses.is_dataclass(cls.Config):
         raise AdapterError(f"{where}: its Config is not a dataclass")
+    if issubclass(cls, RobotAdapter):
+        _check_verbs(cls, where)
     return cls
+
+
+def _check_verbs(cls: type[RobotAdapter], where: str) -> None:
+    verbs = getattr(cls, "Verbs", None)
+    if not isinstance(verbs, type):
+        raise AdapterError(f"{where} names no Verbs class — set Verbs to the class of what its _open() sets "
+                           f"as self.verbs (docs/adapters.md)")
+    if lacking := missing(verbs):
+        raise AdapterError(f"{where}: its Verbs class {verbs.__name__} does not implement {', '.join(lacking)} "
+                           f"— implement every verb of sonibus.bus.verbs.RobotVerbs (docs/adapters.md)")

@@ -19,7 +19,7 @@ from sonibus import schemas
 from sonibus.adapters.sim import SimRobot
 from sonibus.adapters.sim.behaviors import LIBRARY
 from sonibus.bus import Bus, CommandError, RobotNotFound, decode, load_model, robot_info, send_command
-from sonibus.bus.owner import RobotAdapter
+from sonibus.bus.verbs import METHODS, RobotVerbs, missing
 
 from .conftest import wait_for
 
@@ -593,11 +593,11 @@ def test_every_verb_has_a_hook_and_every_hook_a_verb():
     verbs = schemas.command_verbs()
     assert set(verbs) == {"behavior/run", "behavior/stop", "behavior/list", "joints/set", "posture", "say",
                           "stiffness", "awareness", "stop"}
-    hooks = {name for name in dir(SimRobot) if name.startswith("_cmd_")}
-    assert hooks == {"_cmd_" + verb.replace("/", "_") for verb in verbs}
+    hooks = set(METHODS.values())  # the verbs a robot's Verbs class implements (bus/verbs.py)
+    assert hooks == {verb.replace("/", "_") for verb in verbs}
+    assert missing(SimRobot.Verbs) == []
     for verb in verbs:
-        hook = getattr(SimRobot, "_cmd_" + verb.replace("/", "_"))
+        hook = getattr(SimRobot.Verbs, METHODS[verb])
         assert callable(hook)
-        if verb != "behavior/list":  # served by RobotAdapter from behaviors()
-            assert hook is not getattr(RobotAdapter, hook.__name__, None), f"{verb}: no simulator hook"
+        assert hook is not getattr(RobotVerbs, hook.__name__, None), f"{verb}: no simulator hook"
     assert {v for v, _ in R.values()} == set(verbs), "a verb is never exercised with a valid request"

@@ -1,9 +1,13 @@
-"""The adapter registry (entry-point group ``sonibus.adapters``) and the adapter lifecycle."""
+"""The adapter registry (entry-point group ``sonibus.adapters``) and the adapter lifecycle;
+robot adapters checked for every verb, and names two packages register refused."""
 
 from __future__ import annotations
 
+import importlib
 import json
 import logging
+from dataclasses import dataclass
+from typing import Any
 
 import pytest
 from sonibus_testplugin import JsonLinesConfig, JsonLinesSink
@@ -11,7 +15,20 @@ from sonibus_testplugin import JsonLinesConfig, JsonLinesSink
 from sonibus.adapters.console import ConsoleView
 from sonibus.adapters.osc import OscSink
 from sonibus.adapters.sim import SimRobot
-from sonibus.bus import Adapter, AdapterError, keys, registry
+from sonibus.bus import (
+    Adapter,
+    AdapterError,
+    CommandError,
+    ConfigError,
+    RobotAdapter,
+    config,
+    keys,
+    load_model,
+    registry,
+    runner,
+    send_command,
+)
+from sonibus.bus.verbs import missing
 
 from .conftest import wait_for
 
@@ -110,3 +127,169 @@ def test_stop_before_start_is_fine():
 def test_adapter_takes_only_its_own_config(tmp_path):
     with pytest.raises(TypeError, match="JsonLinesConfig"):
         JsonLinesSink(ConsoleView.Config())
+
+
+# -- robot adapters: every verb, checked when the registry loads them ----------------------------
+
+
+@dataclass(frozen=True)
+class TapeConfig:
+    robot: str = "tape"
+
+
+class Tape:
+    """Every verb of ``RobotVerbs``; remembers what it was asked."""
+
+    def __init__(self) -> None:
+        self.calls: list[tuple[str, dict[str, Any]]] = []
+
+    def _did(self, verb: str, **args: Any) -> dict[str, Any]:
+        self.calls.append((verb, args))
+        return {"done": verb}
+
+    def awareness(self, enabled: bool) -> dict[str, Any]:
+        return self._did("awareness", enabled=enabled)
+
+    def behavior_list(self) -> dict[str, Any]:
+        return {"behaviors": ["wave"]}
+
+    def behavior_run(self, name: str) -> dict[str, Any]:
+        return self._did("behavior/run", name=name)
+
+    def behavior_stop(self, name: str | None = None) -> dict[str, Any]:
+        return self._did("behavior/stop", name=name)
+
+    def joints_set(self, names: list[str], angles: list[float], speed: float) -> dict[str, Any]:
+        return self._did("joints/set", names=names, angles=angles, speed=speed)
+
+    def posture(self, name: str, speed: float) -> dict[str, Any]:
+        return self._did("posture", name=name, speed=speed)
+
+    def say(self, text: str, volume: float | None = None, speed: float | None = None) -> dict[str, Any]:
+        return self._did("say", text=text, volume=volume, speed=speed)
+
+    def stiffness(self, names: list[str], value: float) -> dict[str, Any]:
+        return self._did("stiffness", names=names, value=value)
+
+    def stop(self) -> dict[str, Any]:
+        return self._did("stop")
+
+
+class TapeRobot(RobotAdapter):
+    """A robot of tape: a Pepper model that never moves, and verbs that remember."""
+
+    Config = TapeConfig
+    Verbs = Tape
+
+    def _open(self) -> None:
+        self.model = load_model("pepper")
+        self.verbs = Tape()
+
+    def behaviors(self) -> list[str]:
+        return ["wave"]
+
+    def _acquire(self) -> None:
+        self.stopping.wait()
+
+
+class Mute(Tape):
+    """Tape without ``say``, and an ``awareness`` that does not take the request's ``enabled``."""
+
+    say = None  # type: ignore[assignment]
+
+    def awareness(self, on: bool) -> dict[str, Any]:  # type: ignore[override]
+        return self._did("awareness", enabled=on)
+
+
+class MuteRobot(TapeRobot):
+    """A robot whose verbs miss one and get one wrong."""
+
+    Verbs = Mute
+
+
+class NamelessRobot(RobotAdapter):
+    """A robot that names no class for its verbs."""
+
+    Config = TapeConfig
+
+
+@pytest.fixture
+def install(tmp_path, monkeypatch):
+    """Installs distributions for real: a ``<name>-1.0.dist-info`` folder with its
+    entry points, on ``sys.path`` for the test only."""
+    monkeypatch.syspath_prepend(str(tmp_path))
+
+    def installed(package: str, adapters: dict[str, str]) -> None:
+        info = tmp_path / f"{package.replace('-', '_')}-1.0.dist-info"
+        info.mkdir()
+        (info / "METADATA").write_text(f"Metadata-Version: 2.1\nName: {package}\nVersion: 1.0\n")
+        (info / "entry_points.txt").write_text(
+            "[sonibus.adapters]\n" + "".join(f"{name} = {value}\n" for name, value in adapters.items()))
+        importlib.invalidate_caches()
+
+    return installed
+
+
+def here(cls: type) -> str:
+    return f"{__name__}:{cls.__name__}"
+
+
+def test_a_robot_adapter_with_every_verb_loads_and_its_verbs_get_the_validated_requests(install, net):
+    install("tape-robots", {"tape": here(TapeRobot)})
+    assert registry.load("tape") is TapeRobot
+    assert missing(Tape) == []
+    robot = net.start(TapeRobot(name="tape"))
+    client = net.bus("client")
+    move = {"names": ["HeadYaw"], "angles": [0.25]}  # speed defaults to 0.3
+    assert send_command(client, "tape", "joints/set", move) == {"done": "joints/set"}
+    assert send_command(client, "tape", "say", {"text": "hello"}) == {"done": "say"}
+    assert send_command(client, "tape", "behavior/list", {}) == {"behaviors": ["wave"]}
+    assert send_command(client, "tape", "stop", ["whatever"]) == {"done": "stop"}  # stop runs whatever came
+    with pytest.raises(CommandError) as refused:
+        send_command(client, "tape", "posture", {"name": "Nowhere"})
+    assert refused.value.code == "unknown_posture"
+    assert robot.verbs.calls == [("joints/set", {"names": ["HeadYaw"], "angles": [0.25], "speed": 0.3}),
+                                 ("say", {"text": "hello", "volume": None, "speed": None}), ("stop", {})]
+
+
+def test_a_robot_adapter_that_lacks_a_verb_is_refused_when_loaded(install, tmp_path, caplog):
+    install("mute-robots", {"mute": here(MuteRobot), "nameless": here(NamelessRobot)})
+    with pytest.raises(AdapterError) as caught:
+        registry.load("mute")
+    message = str(caught.value)
+    assert "adapter 'mute'" in message and "package 'mute-robots'" in message and "Mute" in message
+    assert "say" in message and "awareness (takes no 'enabled')" in message and "\n" not in message
+    assert "stop" not in message.partition("implement")[2]  # only what is missing
+    with pytest.raises(AdapterError, match=r"adapter 'nameless'.*names no Verbs class"):
+        registry.load("nameless")
+
+    show = tmp_path / "show.toml"
+    show.write_text('[nodes.pepper]\nadapter = "mute"\n')
+    with pytest.raises(ConfigError) as refused:  # before any node starts
+        runner.build(config.load(show))
+    assert "show.toml" in str(refused.value) and "package 'mute-robots'" in str(refused.value)
+
+    caplog.set_level(logging.WARNING, logger="sonibus")
+    loaded = registry.load_all()
+    assert "mute" not in loaded and "nameless" not in loaded and loaded["sim"] is SimRobot
+    skipped = [r.getMessage() for r in caplog.records if "(skipped)" in r.getMessage()]
+    assert any("'mute'" in m and "awareness" in m for m in skipped), skipped
+
+
+def test_a_name_two_packages_register_is_refused_naming_both(install, caplog):
+    install("tape-robots", {"sim": here(TapeRobot)})  # the built-in sim is package sonibus's
+    install("more-robots", {"twin": here(TapeRobot)})
+    install("twin-robots", {"twin": here(TapeRobot)})
+    for name, packages in (("sim", ("'sonibus'", "'tape-robots'")), ("twin", ("'more-robots'", "'twin-robots'"))):
+        with pytest.raises(AdapterError) as caught:
+            registry.load(name)
+        message = str(caught.value)
+        assert f"adapter '{name}'" in message and all(p in message for p in packages), message
+        assert "\n" not in message
+        assert name not in registry.available()
+    assert registry.entries()[1].keys() == {"sim", "twin"}
+    caplog.set_level(logging.WARNING, logger="sonibus")
+    loaded = registry.load_all()
+    assert "sim" not in loaded and "twin" not in loaded and loaded["osc"] is OscSink
+    skipped = [r.getMessage() for r in caplog.records if "more than one package" in r.getMessage()]
+    assert len(skipped) == 2 and all(m.endswith("(skipped)") for m in skipped), skipped

@@ -39,6 +39,8 @@ class NaoqiRobot(RobotAdapter):
     """A Pepper or NAO over NAOqi: joints, behaviors, speech, postures."""
 
     Config = NaoqiConfig
+    Verbs = NaoqiCommands
+    verbs: NaoqiCommands
 
     def _open(self) -> None:
         self.model = load_model(self.config.model_name)  # until the robot tells its own
@@ -46,10 +48,9 @@ class NaoqiRobot(RobotAdapter):
         self.read_times = Stats()
         self.events = RobotEvents(self.publish_event)
         self.link = Link(self.config, self._lost, self.stopping)
-        self.commands = NaoqiCommands(self.link, self.events, lambda: self.model, self._down)
+        self.verbs = NaoqiCommands(self.link, self.events, lambda: self.model, self._down)
         self.facts: Robot | None = None
         self.frames_skipped = 0
-        self._behaviors: tuple[str, ...] = ()
         self._halt = threading.Event()       # ends the current streaming run
         self._error = "not connected yet"
         self._announced = ""                 # connection state last published
@@ -60,7 +61,7 @@ class NaoqiRobot(RobotAdapter):
             return
         self._halt.set()
         try:
-            self.commands.restore_awareness()
+            self.verbs.restore_awareness()
         except (LinkDown, RemoteError) as exc:
             log.warning("%s: could not restore basic awareness: %s", self.name, exc)
         self.link.close()
@@ -103,13 +104,13 @@ class NaoqiRobot(RobotAdapter):
         polled = self.events.attach(self.link)
         reader = self._reader(robot, polled)
         robot = dataclasses.replace(robot, source=reader.source)
-        self.commands.connected()
+        self.verbs.connected(robot.behaviors)
         if self.config.pause_awareness:
             try:
-                self.commands.pause_awareness()
+                self.verbs.pause_awareness()
             except RemoteError as exc:
                 log.warning("%s: could not pause basic awareness: %s", self.name, exc)
-        self.model, self.facts, self._behaviors, self._error = robot.model, robot, robot.behaviors, ""
+        self.model, self.facts, self._error = robot.model, robot, ""
         for difference in robot.differences:
             log.info("%s: limits from the robot differ: %s", self.name, difference)
         announce.info("%s: connected to %s at %s (NAOqi %s): %d joints from %s, speech events by %s%s",
@@ -190,7 +191,7 @@ class NaoqiRobot(RobotAdapter):
     # -- what the bus sees --------------------------------------------------------------
 
     def behaviors(self) -> Sequence[str]:
-        return self._behaviors
+        return self.verbs.installed
 
     def robot_info(self) -> dict[str, Any]:
         info = super().robot_info()
@@ -206,37 +207,3 @@ class NaoqiRobot(RobotAdapter):
             if exc.code == "unknown_behavior" and self.facts is None:  # no list yet to know it by
                 raise self._down(verb) from None
             raise
-
-    # -- commands: validated by RobotAdapter, carried out by NaoqiCommands ----------------
-
-    def _cmd_behavior_list(self) -> dict[str, Any]:
-        if self.link.connected:
-            try:
-                self._behaviors = tuple(sorted(self.link.call("ALBehaviorManager", "getInstalledBehaviors")))
-            except (LinkDown, RemoteError) as exc:
-                log.debug("%s: behavior list: %s", self.name, exc)
-        return super()._cmd_behavior_list()
-
-    def _cmd_behavior_run(self, name: str) -> dict[str, Any]:
-        return self.commands.behavior_run(name)
-
-    def _cmd_behavior_stop(self, name: str | None = None) -> dict[str, Any]:
-        return self.commands.behavior_stop(name)
-
-    def _cmd_joints_set(self, names: list[str], angles: list[float], speed: float) -> dict[str, Any]:
-        return self.commands.joints_set(names, angles, speed)
-
-    def _cmd_posture(self, name: str, speed: float) -> dict[str, Any]:
-        return self.commands.posture(name, speed)
-
-    def _cmd_say(self, text: str, volume: float | None = None, speed: float | None = None) -> dict[str, Any]:
-        return self.commands.say(text, volume, speed)
-
-    def _cmd_stiffness(self, names: list[str], value: float) -> dict[str, Any]:
-        return self.commands.stiffness(names, value)
-
-    def _cmd_awareness(self, enabled: bool) -> dict[str, Any]:
-        return self.commands.awareness(enabled)
-
-    def _cmd_stop(self) -> dict[str, Any]:
-        return self.commands.stop()

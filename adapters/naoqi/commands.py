@@ -1,6 +1,7 @@
-"""The command verbs as NAOqi calls. Requests arrive validated (``RobotAdapter``);
-what can block on the robot (``say``, ``goToPosture``) is sent and not waited
-for, everything else is waited for at most the connect timeout.
+"""The command verbs as NAOqi calls (``sonibus.bus.verbs.RobotVerbs``). Requests
+arrive validated (``RobotAdapter``); what can block on the robot (``say``,
+``goToPosture``) is sent and not waited for, everything else is waited for at
+most the connect timeout.
 
 Errors: a robot that refuses → ``failed`` with its message on one line; no
 robot → ``failed`` saying so."""
@@ -9,7 +10,7 @@ from __future__ import annotations
 
 import logging
 import threading
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from typing import Any
 
 from sonibus.bus.commands import expand_stiffness_names
@@ -64,13 +65,15 @@ class NaoqiCommands:
                  down: Callable[[str], CommandError]) -> None:
         self.link, self.events, self.model, self.down = link, events, model, down
         self.postures = Postures(events.publish)
+        self.installed: tuple[str, ...] = ()  # behaviors, as the robot last listed them
         self.voice_defaults: dict[str, float] = {}
         self._voice: dict[str, float] = {}
         self._awareness_paused = False   # by this adapter, to be resumed on stop
         self._paused_before: bool | None = None
 
-    def connected(self) -> None:
-        """A (new) connection: learn the voice settings it has now (the first ones are the defaults)."""
+    def connected(self, behaviors: Sequence[str]) -> None:
+        """A (new) connection: its behaviors, and the voice settings it has now (the first ones are the defaults)."""
+        self.installed = tuple(behaviors)
         current = {"volume": self.link.try_call("ALTextToSpeech", "getVolume"),
                    "speed": self.link.try_call("ALTextToSpeech", "getParameter", "speed")}
         self._voice = {k: float(v) for k, v in current.items() if isinstance(v, int | float)}
@@ -96,6 +99,15 @@ class NaoqiCommands:
             raise CommandError("failed", f"{verb}: {exc}") from None
 
     # -- verbs ------------------------------------------------------------------------
+
+    def behavior_list(self) -> dict[str, Any]:
+        """Asks the robot again: behaviors installed since it connected show up."""
+        if self.link.connected:
+            try:
+                self.installed = tuple(sorted(self.link.call("ALBehaviorManager", "getInstalledBehaviors")))
+            except (LinkDown, RemoteError) as exc:
+                log.debug("behavior list: %s", exc)
+        return {"behaviors": list(self.installed)}
 
     def behavior_run(self, name: str) -> dict[str, Any]:
         if self._call("behavior/run", "ALBehaviorManager", "isBehaviorRunning", name):

@@ -50,9 +50,12 @@ class SimRobot(RobotAdapter):
     """Simulated Pepper or NAO: joints, behaviors, speech and postures, no robot needed."""
 
     Config = SimConfig
+    Verbs = SimEngine  # the engine carries out the commands
+    verbs: SimEngine
 
     def _open(self) -> None:
         self.engine = self.config.engine(lambda kind, fields: self.publish_event(kind, **fields))
+        self.verbs = self.engine
         self.model = self.engine.model
         self.rate_hz = self.config.rate_hz
         self.body = self.engine.body
@@ -76,30 +79,3 @@ class SimRobot(RobotAdapter):
     @property
     def frames_skipped(self) -> int:
         return self.pacer.skipped if hasattr(self, "pacer") else 0
-
-    # -- commands: validated by RobotAdapter, carried out by the engine ---------------
-
-    def _cmd_behavior_run(self, name: str) -> dict[str, Any]:
-        return self.engine.behavior_run(name)
-
-    def _cmd_behavior_stop(self, name: str | None = None) -> dict[str, Any]:
-        return self.engine.behavior_stop(name)
-
-    def _cmd_joints_set(self, names: list[str], angles: list[float], speed: float) -> dict[str, Any]:
-        return self.engine.joints_set(names, angles, speed)
-
-    def _cmd_posture(self, name: str, speed: float) -> dict[str, Any]:
-        return self.engine.posture(name, speed)
-
-    def _cmd_say(self, text: str, volume: float | None = None, speed: float | None = None) -> dict[str, Any]:
-        utterance = self.engine.say(text, volume, speed)
-        return {"duration": round(utterance.duration, 3), "queued": utterance.queued}
-
-    def _cmd_stiffness(self, names: list[str], value: float) -> dict[str, Any]:
-        return self.engine.stiffness(names, value)
-
-    def _cmd_awareness(self, enabled: bool) -> dict[str, Any]:
-        return self.engine.set_awareness(enabled)
-
-    def _cmd_stop(self) -> dict[str, Any]:
-        return self.engine.stop()

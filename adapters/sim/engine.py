@@ -1,6 +1,7 @@
 """The simulated robot itself, with no bus: motion, behaviors, postures and
-speech, advanced frame by frame. ``SimRobot`` puts it on the bus; the NAOqi
-face serves it as fake NAOqi services. Events go to ``emit(kind, fields)``,
+speech, advanced frame by frame. It carries out the robot verbs
+(``sonibus.bus.verbs.RobotVerbs``) for ``SimRobot``, which puts it on the bus;
+the NAOqi face serves it as fake NAOqi services. Events go to ``emit(kind, fields)``,
 called under the engine's lock so they keep the order of what happened."""
 
 from __future__ import annotations
@@ -52,7 +53,7 @@ class SimEngine:
         self._last_posture: tuple[str, str] | None = None
         self._speech: deque[Utterance] = deque()
         self._speaking_until = 0.0
-        self.awareness = idle
+        self.aware = idle  # basic awareness: idle looking around
         self._idle_home = self.body.pose()
         self._next_autoplay = time.monotonic() + autoplay_s
 
@@ -108,7 +109,7 @@ class SimEngine:
     def _idle(self, now: float) -> None:
         targets = {}
         for joint, (amplitude, period) in IDLE_JOINTS.items():
-            if self.model.has_joint(joint) and (joint != "HeadYaw" or self.awareness):
+            if self.model.has_joint(joint) and (joint != "HeadYaw" or self.aware):
                 targets[joint] = self._idle_home[joint] + amplitude * math.sin(2 * math.pi * now / period)
         self.body.set_targets(targets, 0.2)
 
@@ -139,7 +140,10 @@ class SimEngine:
         for kind, fields in events:
             self._emit_one(kind, fields)
 
-    # -- commands (validated before they get here) ------------------------------------
+    # -- the verbs (validated before they get here) -----------------------------------
+
+    def behavior_list(self) -> dict[str, Any]:
+        return {"behaviors": self.behaviors()}
 
     def behavior_run(self, name: str) -> dict[str, Any]:
         with self.lock:
@@ -180,7 +184,12 @@ class SimEngine:
                 return None
             return self._last_posture == (name, "reached")
 
-    def say(self, text: str, volume: float | None = None, speed: float | None = None) -> Utterance:
+    def say(self, text: str, volume: float | None = None, speed: float | None = None) -> dict[str, Any]:
+        utterance = self.speak(text, volume, speed)
+        return {"duration": round(utterance.duration, 3), "queued": utterance.queued}
+
+    def speak(self, text: str, volume: float | None = None, speed: float | None = None) -> Utterance:
+        """Queue ``text``; the utterance, to wait for with ``still_to_say``."""
         words = max(len(text.split()), len(text) / 6.0)  # long unbroken text still takes time
         duration = 0.2 + words * 60.0 / (self.words_per_minute * (speed or 100.0) / 100.0)
         with self.lock:
@@ -194,9 +203,9 @@ class SimEngine:
             self.body.set_stiffness(joints, float(value))
         return {"joints": joints}
 
-    def set_awareness(self, enabled: bool) -> dict[str, Any]:
+    def awareness(self, enabled: bool) -> dict[str, Any]:
         with self.lock:
-            previous, self.awareness = self.awareness, enabled
+            previous, self.aware = self.aware, enabled
         return {"enabled": enabled, "previous": previous}
 
     def stop(self, speech: bool = True, motion: bool = True) -> dict[str, Any]:

@@ -215,7 +215,7 @@ class ALTextToSpeech(_Service):
 
     @delayed
     def say(self, text: str) -> None:
-        utterance = self.engine.say(text, self.volume, self.parameters["speed"])
+        utterance = self.engine.speak(text, self.volume, self.parameters["speed"])
         while self.engine.still_to_say(utterance):  # returns when this text is spoken, as NAOqi does
             time.sleep(0.01)
 
@@ -259,11 +259,11 @@ class ALBasicAwareness(_Service):
 
     @delayed
     def setEnabled(self, enabled: bool) -> None:
-        self.engine.set_awareness(bool(enabled))
+        self.engine.awareness(bool(enabled))
 
     @delayed
     def isEnabled(self) -> bool:
-        return self.engine.awareness
+        return self.engine.aware
 
     @delayed
     def pauseAwareness(self) -> None:

@@ -87,9 +87,9 @@ def test_stiffness_and_awareness(rig):
     stiffness = dict(zip(model.joint_names, r.fake.engine.body.stiffness, strict=True))
     assert {j for j, v in stiffness.items() if v == 0.5} == set(model.chain("RArm"))
     assert send_command(r.bus, "pepper", "awareness", {"enabled": True}) == {"enabled": True, "previous": False}
-    assert r.fake.engine.awareness is True
+    assert r.fake.engine.aware is True
     assert send_command(r.bus, "pepper", "awareness", {"enabled": False}) == {"enabled": False, "previous": True}
-    assert r.fake.engine.awareness is False
+    assert r.fake.engine.aware is False
 
 
 def test_stop_halts_behavior_motion_and_speech(rig):

@@ -17,6 +17,7 @@ from sonibus.adapters.naoqi import NaoqiRobot
 from sonibus.adapters.sim import SimRobot
 from sonibus.adapters.sim.behaviors import LIBRARY
 from sonibus.bus import CommandError, load_model, send_command
+from sonibus.bus.verbs import missing
 
 from ..test_commands import assert_still, connect
 from .conftest import attach
@@ -103,6 +104,7 @@ def test_bad_requests_get_the_same_error_and_move_nothing(robot, verb, args, cod
 
 
 def test_both_robots_have_a_hook_for_every_verb():
-    hooks = {"_cmd_" + verb.replace("/", "_") for verb in schemas.command_verbs()}
-    for adapter in (SimRobot, NaoqiRobot):
-        assert {name for name in dir(adapter) if name.startswith("_cmd_")} == hooks, adapter.__name__
+    hooks = {verb.replace("/", "_") for verb in schemas.command_verbs()}
+    for adapter in (SimRobot, NaoqiRobot):  # the verbs are methods of its Verbs class (bus/verbs.py)
+        assert {name for name in hooks if callable(getattr(adapter.Verbs, name, None))} == hooks, adapter.__name__
+        assert missing(adapter.Verbs) == [], adapter.__name__

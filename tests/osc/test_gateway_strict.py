@@ -86,7 +86,7 @@ def test_trailing_bytes_after_the_arguments_leave_awareness_on(rig):
         ("/pepper/reply/awareness", [1, '{"enabled":true,"previous":false}'])
     rig.client.send(AWARENESS_JUNK)
     refused(rig.client, "awareness", "12 bytes after the last argument")
-    assert rig.sim.engine.awareness is True
+    assert rig.sim.engine.aware is True
     assert rig.client.ask("/pepper/cmd/awareness", True) == \
         ("/pepper/reply/awareness", [1, '{"enabled":true,"previous":true}'])  # the bad F never ran
     wait_for(lambda: len(ran(rig.commands, "awareness")) == 2, what="both valid awareness events")
