@@ -107,6 +107,19 @@ def test_a_broadcast_from_another_thread_reaches_every_client_in_order(net):
     assert server.web.dropped == 0
 
 
+def test_submit_runs_a_coroutine_on_the_servers_loop_from_another_thread(net):
+    server = value_server(net, robot="nobody")
+
+    async def where() -> str:
+        await asyncio.sleep(0)
+        return threading.current_thread().name
+
+    assert server.web.submit(where()).result(timeout=RECEIVE_S) == "web:web"  # the node's worker "web"
+    server.stop()
+    with pytest.raises(RuntimeError, match="not running"):
+        server.web.submit(where())
+
+
 def test_the_node_stops_within_3_s_with_a_client_connected_and_leaves_nothing_running(net):
     net.sim("pepper", rate_hz=50)
     server = value_server(net)
