@@ -5,7 +5,7 @@ port is bound when it returns), and the node's ``stop()`` ends the server: open
 WebSocket connections are closed (a bounded wait for each client's answer),
 handlers still running are cancelled, and the loop's thread is joined. The loop
 runs on a worker made with ``adapter.spawn``, so an exception escaping the
-server — from a task or a callback on its loop, not a single request's 500 —
+server — a callback on its loop, a task nobody awaits; not a single request's 500 —
 fails the node like any dying worker. ``broadcast`` sends a value to every
 WebSocket client from any thread (a bus worker, a Zenoh callback).
 

@@ -208,6 +208,7 @@ class Fragile(Adapter):
         self.web = WebServer(self, port=self.config.port)
         self.web.app.router.add_get("/bad", self.bad_request)
         self.web.app.router.add_get("/crash", self.crash)
+        self.web.app.router.add_get("/crash-task", self.crash_task)
         self.web.app.router.add_get("/stuck", self.stuck)
         self.web.app.router.add_get("/ws-bad", self.bad_websocket)
         self.web.start()
@@ -225,8 +226,16 @@ class Fragile(Adapter):
         await ws.send_str("hello")
         raise ValueError("this connection only")
 
+    async def crash_task(self, request: web.Request) -> web.Response:
+        asyncio.get_running_loop().create_task(self.explode_later())  # a task nobody awaits
+        return web.Response(text="ok")
+
     def explode(self) -> None:
         raise RuntimeError("the server's own code broke")
+
+    async def explode_later(self) -> None:
+        await asyncio.sleep(0)
+        self.explode()
 
     async def stuck(self, request: web.Request) -> web.WebSocketResponse:
         ws = web.WebSocketResponse()
@@ -278,14 +287,15 @@ def test_a_failing_request_is_a_500_and_the_server_goes_on(net, caplog):
     assert warned[0].startswith("fragile: GET /bad failed: ValueError: this request only"), warned
 
 
-def test_an_exception_escaping_the_server_fails_the_node_with_an_event(net):
+@pytest.mark.parametrize("path", ["/crash", "/crash-task"])
+def test_an_exception_escaping_the_server_fails_the_node_with_an_event(net, path):
     watcher = net.bus("watcher")
     subscriber, events = watcher.subscribe(keys.NODE_EVENTS)
     node = net.start(Fragile(name="fragile"))
     wait_for(lambda: watcher.alive(keys.node_token(node.bus.host, "fragile")), what="the node on the bus")
 
     async def crash() -> int:
-        async with aiohttp.ClientSession(node.web.url) as http, http.get("/crash") as response:
+        async with aiohttp.ClientSession(node.web.url) as http, http.get(path) as response:
             return response.status
 
     assert asyncio.run(crash()) == 200
