@@ -6,7 +6,9 @@ from __future__ import annotations
 import importlib
 import json
 import logging
+import sys
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 import pytest
@@ -22,6 +24,7 @@ from sonibus.bus import (
     ConfigError,
     RobotAdapter,
     config,
+    decode,
     keys,
     load_model,
     registry,
@@ -293,3 +296,27 @@ def test_a_name_two_packages_register_is_refused_naming_both(install, caplog):
     assert "sim" not in loaded and "twin" not in loaded and loaded["osc"] is OscSink
     skipped = [r.getMessage() for r in caplog.records if "more than one package" in r.getMessage()]
     assert len(skipped) == 2 and all(m.endswith("(skipped)") for m in skipped), skipped
+
+
+def test_the_robot_adapter_example_of_the_docs_implements_every_verb_and_serves_them(install, net, tmp_path):
+    docs = (Path(__file__).resolve().parent.parent / "docs" / "adapters.md").read_text()
+    code = docs.partition("### Robot adapters")[2].partition("```python\n")[2].partition("```")[0]
+    (tmp_path / "puppet.py").write_text(code)
+    install("puppet", {"puppet": "puppet:Puppet"})
+    cls = registry.load("puppet")
+    del sys.modules["puppet"]  # imported from this test's folder only
+    assert missing(cls.Verbs) == []
+    robot = net.start(cls(name="puppet"))
+    client = net.bus("client")
+    _subscriber, frames = client.subscribe("puppet/frame")
+    assert send_command(client, "puppet", "joints/set", {"names": ["HeadYaw"], "angles": [0.5]}) == {}
+    head = robot.model.joint_names.index("HeadYaw")
+
+    def turned() -> bool:
+        item = frames.get(timeout=0.2)
+        return item is not None and decode(item[1])["v"][head] == pytest.approx(0.5)
+
+    wait_for(turned, what="a frame with the head turned")
+    with pytest.raises(CommandError) as refused:
+        send_command(client, "puppet", "say", {"text": "hello"})
+    assert refused.value.code == "failed" and "speak" in refused.value.message
