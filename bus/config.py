@@ -19,7 +19,7 @@ from .keys import check_name
 from .options import from_mapping, located
 from .session import BusConfig
 
-TOP_LEVEL = ("bus", "nodes")
+TOP_LEVEL = ("bus", "nodes", "demo")  # [demo]: what the flags of `sonibus demo` set (bus/cli/demo.py)
 
 
 @dataclass(frozen=True)

@@ -16,7 +16,8 @@ import pytest
 
 from sonibus.adapters.recorder.writer import RecordingWriter
 from sonibus.bus import ConfigError, keys
-from sonibus.bus.cli import Environment, Exit, command_args, main
+from sonibus.bus.cli import Environment, Exit, main
+from sonibus.bus.cli.send import command_args
 
 from .conftest import SONIBUS, free_port, run_cli, wait_for
 

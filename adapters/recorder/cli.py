@@ -11,7 +11,7 @@ import time
 from collections.abc import Callable
 
 from sonibus.bus import runner
-from sonibus.bus.cli import Command, Environment, Exit, bus_config
+from sonibus.bus.cli.api import Command, Environment, Exit, bus_config
 from sonibus.bus.errors import ConfigError
 
 from .export import export_csv
@@ -139,7 +139,7 @@ def _replay(args: argparse.Namespace, env: Environment) -> Exit:
 
     _run(replay, args, env, progress, replay.finished.is_set, args.status_every)
     gaps = f", {replay.stats['gaps']} gaps shortened" if replay.stats["gaps"] else ""
-    env.say(f"replayed {os.path.basename(args.file)}: {replay.stats['published']} messages, "
+    env.say(f"replayed {os.path.basename(args.file)}: {replay.stats['sent']} messages, "
             f"{replay.stats['late']} skipped as late{gaps}")
     return Exit.OK
 

@@ -1,0 +1,152 @@
+"""What a subcommand is made of — the one module a plug-in's subcommand imports.
+
+A package adds ``sonibus NAME`` by registering a ``Command`` in the
+``sonibus.commands`` entry-point group, as the built-in commands are registered::
+
+    [project.entry-points."sonibus.commands"]
+    count = "my_package.cli:COUNT"
+
+    COUNT = Command("count", "count lines", arguments, run)   # run(args, env) -> Exit
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import enum
+import json
+import re
+import socket
+import sys
+import threading
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass, field, replace
+from typing import Any, TextIO
+
+from .. import config
+from ..errors import ConfigError
+from ..node import Bus
+from ..session import MODES, BusConfig, check_endpoint, check_option, open_session
+
+COMMAND_GROUP = "sonibus.commands"
+
+
+class Exit(enum.IntEnum):
+    """Exit statuses: 1 error, 2 usage or configuration (a bad flag, file, table or
+    key), 3 robot not found, 4 command refused, 5 timeout, 130 interrupted (Ctrl-C,
+    SIGTERM), 141 the output was closed (``sonibus info F | head -1``: quiet, as a Unix
+    tool killed by SIGPIPE)."""
+
+    OK = 0
+    ERROR = 1
+    USAGE = 2
+    NOT_FOUND = 3
+    REFUSED = 4
+    TIMEOUT = 5
+    INTERRUPTED = 130
+    OUTPUT_CLOSED = 141
+
+
+@dataclass
+class Environment:
+    """Where the CLI reads and writes; tests pass their own."""
+
+    stdout: TextIO = field(default_factory=lambda: sys.stdout)
+    stderr: TextIO = field(default_factory=lambda: sys.stderr)
+    stop: threading.Event = field(default_factory=threading.Event)
+
+    def say(self, text: str) -> None:
+        """A line on stdout; ``BrokenPipeError`` once its reader went away (the CLI ends quietly)."""
+        print(text, file=self.stdout, flush=True)
+
+    def hint(self, text: str) -> None:
+        """A ``sonibus: hint: ...`` line on stderr."""
+        print(f"sonibus: hint: {text}", file=self.stderr, flush=True)
+
+
+@dataclass(frozen=True)
+class Command:
+    """A subcommand, registered in the ``sonibus.commands`` entry-point group under its
+    name (``record = "sonibus.adapters.recorder.cli:RECORD"``): the core knows none by name.
+
+    ``arguments`` adds its options to the subparser; ``run`` returns an exit status.
+    With ``bus=True`` it also takes the bus options and ``--config``/``--host`` (read
+    them with ``bus_config(args)``); a command whose own options clash with those
+    adds the bus options itself with ``add_bus_arguments(parser, installation=False)``."""
+
+    name: str
+    help: str
+    arguments: Callable[[argparse.ArgumentParser], None]
+    run: Callable[[argparse.Namespace, Environment], int]
+    bus: bool = False
+
+
+def add_bus_arguments(parser: argparse.ArgumentParser, installation: bool = True) -> None:
+    """The options that say how to join the bus; with ``installation``, also
+    ``--config FILE`` and ``--host NAME`` (join as that machine of an installation file)."""
+    group = parser.add_argument_group("bus")
+    group.add_argument("--mode", choices=MODES, help="Zenoh mode (default: peer)")
+    group.add_argument("--connect", action="append", metavar="ENDPOINT", help="e.g. tcp/192.168.1.10:7447")
+    group.add_argument("--listen", action="append", metavar="ENDPOINT", help="e.g. tcp/0.0.0.0:7447")
+    group.add_argument("--no-multicast", action="store_true", help="do not discover peers by multicast")
+    group.add_argument("--namespace", help="prefix that keeps this installation apart from others")
+    group.add_argument("--zenoh", action="append", metavar="KEY=JSON", default=[],
+                       help="raw Zenoh option, e.g. transport/link/tx/lease=2000")
+    if installation:
+        group = parser.add_argument_group("installation")
+        group.add_argument("--config", dest="bus_file", metavar="CONFIG.toml",
+                           help="join the bus as the [bus] table of this installation file says")
+        group.add_argument("--host", help="with --config: use its [bus.hosts.HOST] settings (default: this machine)")
+
+
+def bus_config(args: argparse.Namespace, base: BusConfig | None = None) -> BusConfig:
+    """``base`` (or the ``--config`` file's, or defaults) with the command-line bus options applied."""
+    if base is None and getattr(args, "bus_file", None):
+        base = config.load(args.bus_file).bus.for_host(args.host or socket.gethostname())
+    cfg = base or BusConfig()
+    changes: dict[str, Any] = {}
+    if args.mode:
+        changes["mode"] = args.mode
+    for flag in ("connect", "listen"):
+        for endpoint in getattr(args, flag) or ():
+            try:
+                check_endpoint(endpoint, listen=flag == "listen")
+            except ValueError as exc:
+                raise ConfigError(f"--{flag} {exc}") from None
+        if getattr(args, flag):
+            changes[flag] = tuple(getattr(args, flag))
+    if args.no_multicast:
+        changes["multicast"] = False
+    if args.namespace is not None:
+        changes["namespace"] = args.namespace
+    if args.zenoh:
+        changes["options"] = _zenoh_options(args.zenoh, dict(cfg.options))
+    try:
+        return replace(cfg, **changes) if changes else cfg
+    except ConfigError as exc:  # "key 'namespace': ..." from BusConfig: name the flag instead
+        flags = {"namespace": "--namespace", "options": "--zenoh", "mode": "--mode"}
+        raise ConfigError(re.sub(r"^key '(\w+)'", lambda m: flags.get(m[1], m[0]), str(exc))) from None
+
+
+def _zenoh_options(items: list[str], options: dict[str, Any]) -> dict[str, Any]:
+    """``options`` with each ``--zenoh KEY=JSON`` set, every one checked."""
+    for item in items:
+        key, sep, value = item.partition("=")
+        if not sep or not key:
+            raise ConfigError(f"--zenoh '{item}' is not KEY=JSON, e.g. --zenoh transport/link/tx/lease=2000")
+        try:
+            options[key] = json.loads(value)
+        except json.JSONDecodeError:
+            options[key] = value  # a bare word: --zenoh mode=client
+        try:
+            check_option(key, options[key])
+        except ValueError as exc:
+            raise ConfigError(f"--zenoh '{item}': {exc}") from None
+    return options
+
+
+@contextlib.contextmanager
+def joined(cfg: BusConfig, node: str = "") -> Iterator[Bus]:
+    """A ``Bus`` on a session of its own for one command, closed at the end."""
+    with open_session(cfg) as session:
+        yield Bus(session, node=node)

@@ -1,0 +1,111 @@
+"""``sonibus demo``: the installation in ``adapters/demo.toml``, whose ``[demo]`` tables
+say what the demo's flags are and which node options they set — the core knows none
+of its adapters.
+
+>>> sorted(wiring().flags), wiring().sets["sound.targets"]
+(['host', 'port', 'rate', 'robot'], ['{host}:{port}'])
+>>> filled(["{host}:{port}"], {"host": "127.0.0.1", "port": 9000}), filled("{rate}", {"rate": 50.0})
+(['127.0.0.1:9000'], 50.0)
+"""
+
+from __future__ import annotations
+
+import argparse
+import tomllib
+from dataclasses import dataclass
+from functools import cache
+from importlib import resources
+from typing import Any
+
+from .. import config, runner
+from ..errors import ConfigError
+from .api import Command, Environment, Exit, add_bus_arguments, bus_config
+
+WHERE = "demo.toml [demo]"
+
+
+@dataclass(frozen=True)
+class Flag:
+    """``--NAME``: its default (whose type is the flag's) and its help."""
+
+    default: str | int | float
+    help: str
+
+
+@dataclass(frozen=True)
+class Wiring:
+    """The ``[demo]`` tables: the flags, the options they set (``"node.option"`` →
+    a template), the nodes ``--quiet`` leaves out and the lines said at start."""
+
+    flags: dict[str, Flag]
+    sets: dict[str, Any]
+    quiet_help: str
+    leaves_out: tuple[str, ...]
+    banner: tuple[str, ...]
+
+
+def _text() -> str:
+    return resources.files("sonibus.adapters").joinpath("demo.toml").read_text(encoding="utf-8")
+
+
+@cache
+def wiring() -> Wiring:
+    """What ``[demo]`` of demo.toml says, or ``ConfigError`` naming what is wrong there."""
+    table = tomllib.loads(_text()).get("demo", {})
+    try:
+        flags = {name: Flag(spec["default"], spec["help"]) for name, spec in table["flags"].items()}
+        quiet = table["quiet"]
+        found = Wiring(flags, dict(table["sets"]), quiet["help"], tuple(quiet["leaves_out"]), tuple(table["banner"]))
+    except (KeyError, TypeError, AttributeError) as exc:
+        raise ConfigError(f"{WHERE}: {type(exc).__name__}: {exc} — it needs flags, sets, quiet and banner, "
+                          f"as the shipped demo.toml has them") from None
+    for name, flag in flags.items():
+        if not isinstance(flag.default, str | int | float) or isinstance(flag.default, bool):
+            raise ConfigError(f"{WHERE}: flag '{name}': default {flag.default!r} must be a string or a number")
+    return found
+
+
+def filled(template: Any, values: dict[str, Any]) -> Any:
+    """``template`` with ``{flag}`` replaced by the flags' values: a bare ``"{flag}"`` is
+    the value itself (a number stays a number); lists are filled item by item."""
+    if isinstance(template, list):
+        return [filled(item, values) for item in template]
+    if not isinstance(template, str):
+        return template
+    if template.startswith("{") and template.endswith("}") and template[1:-1] in values:
+        return values[template[1:-1]]
+    try:
+        return template.format(**values)
+    except (KeyError, IndexError, ValueError) as exc:
+        raise ConfigError(f"{WHERE}: {template!r}: {type(exc).__name__} {exc} — known flags: "
+                          f"{', '.join(values)}") from None
+
+
+def _arguments(p: argparse.ArgumentParser) -> None:
+    for name, flag in wiring().flags.items():
+        shown = f"{flag.default:g}" if isinstance(flag.default, float) else flag.default
+        p.add_argument(f"--{name}", dest=name, type=type(flag.default), default=flag.default,
+                       help=f"{flag.help} (default: {shown})")
+    p.add_argument("--quiet", action="store_true", help=wiring().quiet_help)
+    add_bus_arguments(p, installation=False)
+
+
+def _demo(args: argparse.Namespace, env: Environment) -> Exit:
+    wired = wiring()
+    installation = config.parse(_text(), "demo.toml")
+    values = {name: getattr(args, name) for name in wired.flags}
+    for target, template in wired.sets.items():
+        node, _, option = target.partition(".")
+        if node not in installation.nodes or not option:
+            raise ConfigError(f"{WHERE}: sets '{target}': not NODE.OPTION of a node — nodes: "
+                              f"{', '.join(installation.nodes)}")
+        installation.nodes[node].options[option] = filled(template, values)
+    only = [name for name in installation.nodes if name not in wired.leaves_out] if args.quiet else None
+    adapters = runner.build(installation, only)
+    for line in wired.banner:
+        env.say(filled(line, values))
+    runner.run(adapters, bus_config(args, installation.bus), env.stop)
+    return Exit.OK
+
+
+DEMO = Command("demo", "simulated robot → OSC, with a live view", _arguments, _demo)

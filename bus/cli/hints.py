@@ -1,0 +1,20 @@
+"""Why a one-shot command may have found nothing, and what to check."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+from ..session import BusConfig
+
+
+def reach_hint(cfg: BusConfig, reached: Sequence[str], what: str) -> str:
+    """``what`` was found wanting: whom this command reached, and what to check."""
+    where = (f"mode {cfg.mode}, multicast {'on' if cfg.multicast else 'off'}, "
+             f"connect {', '.join(cfg.connect) or 'none'}, namespace '{cfg.namespace}'")
+    if not reached:
+        return (f"{what}: this command reached no peer or router ({where}) — is sonibus running on another "
+                f"machine of this network? Give --connect tcp/<its address>:<port>, or --config FILE --host NAME "
+                f"to join as a machine of the installation")
+    return (f"{what}, though this command reached {len(reached)} peer(s)/router(s) ({where}) — check the "
+            f"namespace (--namespace, or --config FILE --host NAME) and whether access control on the robot's "
+            f"machine lets this machine's user see it")

@@ -1,0 +1,45 @@
+"""Running nodes: ``sonibus run`` (the nodes of an installation file) and ``router``."""
+
+from __future__ import annotations
+
+import argparse
+import socket
+from dataclasses import replace
+
+from .. import config, runner
+from ..session import open_session
+from .api import Command, Environment, Exit, add_bus_arguments, bus_config
+
+
+def _run_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("config", metavar="CONFIG.toml")
+    p.add_argument("--only", nargs="+", metavar="NODE", help="run only these nodes")
+    p.add_argument("--host", help="run the nodes of this host (default: this machine's name)")
+    add_bus_arguments(p, installation=False)
+
+
+def _run(args: argparse.Namespace, env: Environment) -> Exit:
+    installation = config.load(args.config)
+    host = args.host or socket.gethostname()
+    adapters = runner.build(installation, args.only, host)
+    names = ", ".join(f"{a.name} ({type(a).__name__})" for a in adapters)
+    runner.run(adapters, bus_config(args, installation.bus.for_host(host)), env.stop,
+               on_started=lambda bus: env.say(f"sonibus: running {names} on {bus.host}"), host=host)
+    return Exit.OK
+
+
+RUN = Command("run", "run the nodes of an installation file", _run_arguments, _run)
+
+
+def _router(args: argparse.Namespace, env: Environment) -> Exit:
+    cfg = replace(bus_config(args), mode="router")
+    if not cfg.listen:
+        cfg = replace(cfg, listen=("tcp/0.0.0.0:7447",))
+    with open_session(cfg) as session:
+        env.say(f"sonibus router {session.zid()} listening on {', '.join(cfg.listen)}")
+        while not env.stop.wait(0.25):
+            pass
+    return Exit.OK
+
+
+ROUTER = Command("router", "run a Zenoh router (joins subnets)", lambda p: None, _router, bus=True)

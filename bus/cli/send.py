@@ -1,0 +1,56 @@
+"""``sonibus send ROBOT VERB [ARG...]``: one command, its reply printed as JSON."""
+
+from __future__ import annotations
+
+import argparse
+import json
+from collections.abc import Sequence
+from typing import Any
+
+from ... import schemas
+from ..client import owner_of, send_command
+from ..commands import from_words
+from ..errors import CommandError, ConfigError, RobotNotFound
+from .api import Command, Environment, Exit, bus_config, joined
+from .hints import reach_hint
+
+
+def _arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("robot", metavar="ROBOT")
+    p.add_argument("verb", metavar="VERB", help=", ".join(schemas.command_verbs()))
+    p.add_argument("args", nargs="*", metavar="ARG", help="NAME=VALUE, or the verb's main value")
+    p.add_argument("--timeout", type=float, default=5.0, help="seconds to wait for the reply")
+
+
+def command_args(verb: str, words: Sequence[str]) -> dict[str, Any]:
+    """The request of ``NAME=VALUE`` words (and the verb's main value); a mistake is
+    a usage error here, with the message OSC and JSON give for it."""
+    try:
+        return from_words(verb, words)
+    except CommandError as exc:
+        raise ConfigError(exc.message) from None
+
+
+def _send(args: argparse.Namespace, env: Environment) -> Exit:
+    request = command_args(args.verb, args.args)
+    cfg = bus_config(args)
+    with joined(cfg) as bus:
+        reached = bus.discover()
+        owner = owner_of(bus, args.robot, min(2.0, args.timeout))  # not found after this: the command says so
+        try:
+            result = send_command(bus, args.robot, args.verb, request, timeout=args.timeout, owner=owner)
+        except RobotNotFound as exc:
+            if owner is not None:  # its token is here, its commands are not: refused on the way
+                user = f" (user '{cfg.user}')" if cfg.user else ""
+                raise CommandError("refused", f"robot '{args.robot}' is on the bus but nothing answered "
+                                              f"'{args.verb}': access control on the robot's machine refuses "
+                                              f"commands from this machine{user}") from None
+            if not reached:
+                exc.message = f"{exc.message} — {reach_hint(cfg, reached, 'nothing found')}"
+                exc.args = (exc.message,)
+            raise
+    env.say(json.dumps(result))
+    return Exit.OK
+
+
+SEND = Command("send", "send a command to a robot, print the reply", _arguments, _send, bus=True)

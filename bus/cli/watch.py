@@ -1,0 +1,137 @@
+"""What is there: ``sonibus adapters`` (installed), ``nodes`` (live nodes and
+robots) and ``echo`` (samples as they arrive)."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+from typing import Any
+
+from .. import codec, keys, ownership, registry
+from ..client import robot_info
+from ..node import Bus
+from ..presence import SILENCE_S
+from ..session import BusConfig
+from .api import Command, Environment, Exit, bus_config, joined
+from .hints import reach_hint
+
+
+def _adapters(args: argparse.Namespace, env: Environment) -> Exit:
+    for name, cls in registry.load_all().items():
+        env.say(f"{name:<12} {registry.summary(cls)}")
+    return Exit.OK
+
+
+ADAPTERS = Command("adapters", "list installed adapters", lambda p: None, _adapters)
+
+
+# -- nodes ----------------------------------------------------------------------------
+
+
+def _nodes_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--timeout", type=float, default=1.0, help="seconds to wait for answers")
+
+
+def _nodes(args: argparse.Namespace, env: Environment) -> Exit:
+    cfg = bus_config(args)
+    with joined(cfg) as bus:
+        reached = bus.discover()
+        nodes = bus.alive(f"{keys.NODES}/**", timeout=args.timeout)
+        robots = ownership.claims(bus.alive(keys.robot_token(), timeout=args.timeout))
+        described = {(d.get("host"), d.get("node")): d for d in bus.query(f"{keys.NODES}/**", timeout=args.timeout)}
+        now = time.time()
+        env.say(f"{len(nodes)} node(s)")
+        for key in nodes:
+            host, _, node = key[len(keys.NODES) + 1:].partition("/")
+            env.say(node_line(host, node, described.get((host, node), {}), now))
+        env.say(f"{len(robots)} robot(s)")
+        for name, claims in robots.items():
+            info = robot_info(bus, name, timeout=args.timeout) or {}
+            owner, standing_by = claims[0], claims[1:]
+            conflict = "".join(f"  CONFLICT: {c.node} on {c.host} stands by" for c in standing_by)
+            env.say(f"  robot {name:<16} {info.get('model', '?'):<8} {info.get('rate_hz', 0):g} frames/s  "
+                    f"owned by {owner.node} on {owner.host}{conflict}")
+        if not nodes:
+            env.hint(reach_hint(cfg, reached, "no node answered"))
+    return Exit.OK
+
+
+def node_line(host: str, node: str, about: dict[str, Any], now: float) -> str:
+    """One node of ``sonibus nodes``, from what it says of itself (``about``); columns
+    go at the end of the line."""
+    owns = f"  owns {', '.join(about['robots'])}" if about.get("robots") else ""
+    since = f"  up {_duration(now - about['since'])}" if about.get("since") else ""
+    state = about.get("state", "running")
+    failed = f"  {state.upper()}: {about.get('failure', '')}" if state != "running" else ""
+    return f"  node  {node:<16} on {host:<12} {about.get('adapter', '?'):<12}{since}{owns}{failed}"
+
+
+def _duration(seconds: float) -> str:
+    """``3h02m``, ``4m10s``, ``12s``.
+
+    >>> _duration(10920), _duration(250), _duration(12)
+    ('3h02m', '4m10s', '12s')
+    """
+    seconds = max(0, int(seconds))
+    if seconds >= 3600:
+        return f"{seconds // 3600}h{seconds % 3600 // 60:02d}m"
+    return f"{seconds // 60}m{seconds % 60:02d}s" if seconds >= 60 else f"{seconds}s"
+
+
+NODES = Command("nodes", "list live nodes and robots", _nodes_arguments, _nodes, bus=True)
+
+
+# -- echo -----------------------------------------------------------------------------
+
+
+def _echo_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("keyexpr", metavar="KEYEXPR", help="e.g. 'pepper/joints/*' or '*/events/**'")
+    p.add_argument("--count", type=int, help="exit after this many samples")
+    p.add_argument("--duration", type=float, help="exit after this many seconds")
+
+
+def _echo(args: argparse.Namespace, env: Environment) -> Exit:
+    deadline = time.monotonic() + args.duration if args.duration else None
+    seen = 0
+    cfg = bus_config(args)
+    with joined(cfg) as bus:
+        subscriber, queue = bus.subscribe(args.keyexpr, 65536)
+        hint_at = time.monotonic() + SILENCE_S
+        try:
+            while not env.stop.is_set() and (args.count is None or seen < args.count):
+                if deadline is not None and time.monotonic() >= deadline:
+                    break
+                if not seen and time.monotonic() >= hint_at:  # said once, while it goes on waiting
+                    env.hint(_echo_hint(bus, cfg, args.keyexpr))
+                    hint_at = float("inf")
+                item = queue.get(timeout=0.2)
+                if item is None:
+                    continue
+                key, payload = item
+                try:
+                    shown = json.dumps(codec.decode(payload), separators=(", ", ": "))
+                except codec.DecodeError:
+                    shown = repr(payload)
+                env.say(f"{key} {shown}")
+                seen += 1
+            if not seen and hint_at < float("inf"):  # ended before the hint was due
+                env.hint(_echo_hint(bus, cfg, args.keyexpr))
+        finally:
+            subscriber.undeclare()
+    return Exit.OK
+
+
+def _echo_hint(bus: Bus, cfg: BusConfig, pattern: str) -> str:
+    robots = list(ownership.claims(bus.alive(keys.robot_token(), timeout=0.5)))
+    what = f"nothing matched '{pattern}'"
+    if not robots:
+        return reach_hint(cfg, bus.discover(), f"{what} and no robot is on the bus")
+    shown = ", ".join(robots[:8])
+    example = robots[0]
+    return (f"{what} — robots on the bus: {shown}; their keys: {example}/frame, {example}/joints/<Joint> "
+            f"(HeadYaw, ...), {example}/events/<kind>, {example}/derived/<feature>/<name>: check the spelling, "
+            f"or whether access control on the robot's machine lets this machine's user see them")
+
+
+ECHO = Command("echo", "print samples as they arrive", _echo_arguments, _echo, bus=True)
