@@ -54,8 +54,10 @@ class RobotAdapter(Adapter):
     def _start(self) -> None:
         self._claim()
         self._open()
-        if not isinstance(getattr(self, "verbs", None), self.Verbs):
-            raise TypeError(f"{type(self).__name__}._open() must set self.verbs to a {self.Verbs.__name__}")
+        declared = getattr(self, "Verbs", None)
+        if declared is None or not isinstance(getattr(self, "verbs", None), declared):
+            raise TypeError(f"{type(self).__name__}: _open() must set self.verbs to an instance of its Verbs class "
+                            f"({getattr(declared, '__name__', 'none declared')})")
         self._run = bind(self.verbs)
         self._gate = messages.Gate(self.bus.limits)
         self.ownership.declare_publishers(self.model.joint_names)

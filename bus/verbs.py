@@ -91,7 +91,9 @@ def missing(cls: type) -> list[str]:
 
 
 def bind(verbs: object) -> dict[str, Callable[..., Result]]:
-    """``verbs``'s method for each verb."""
+    """``verbs``'s method for each verb; ``TypeError`` if it lacks one."""
+    if lacking := missing(type(verbs)):
+        raise TypeError(f"{type(verbs).__name__} does not implement {', '.join(lacking)} (see RobotVerbs)")
     return {verb: getattr(verbs, method) for verb, method in METHODS.items()}
 
 

@@ -209,11 +209,18 @@ class MuteRobot(TapeRobot):
 
     Verbs = Mute
 
+    def _open(self) -> None:
+        super()._open()
+        self.verbs = Mute()
+
 
 class NamelessRobot(RobotAdapter):
     """A robot that names no class for its verbs."""
 
     Config = TapeConfig
+
+    def _open(self) -> None:
+        self.model, self.verbs = load_model("pepper"), Tape()
 
 
 @pytest.fixture
@@ -277,6 +284,17 @@ def test_a_robot_adapter_that_lacks_a_verb_is_refused_when_loaded(install, tmp_p
     assert "mute" not in loaded and "nameless" not in loaded and loaded["sim"] is SimRobot
     skipped = [r.getMessage() for r in caplog.records if "(skipped)" in r.getMessage()]
     assert any("'mute'" in m and "awareness" in m for m in skipped), skipped
+
+
+def test_a_robot_adapter_built_without_the_registry_is_checked_when_it_starts(net):
+    bus = net.bus("robots")
+    with pytest.raises(TypeError, match=r"Mute does not implement awareness \(takes no 'enabled'\), say"):
+        MuteRobot(name="mute").start(bus)
+    with pytest.raises(TypeError, match=r"NamelessRobot: _open\(\) must set self.verbs .*\(none declared\)"):
+        NamelessRobot(name="nameless").start(bus)  # the claim is given back: the next start claims the robot
+    robot = net.start(TapeRobot(name="tape"), bus)
+    assert send_command(net.bus("client"), "tape", "stop", {}) == {"done": "stop"}
+    assert robot.state == "running"
 
 
 def test_a_name_two_packages_register_is_refused_naming_both(install, caplog):
