@@ -21,20 +21,18 @@ from .owner import RobotAdapter
 from .verbs import missing
 
 GROUP = "sonibus.adapters"
-KINDS = {GROUP: "adapter", "sonibus.commands": "command"}
 
 log = logging.getLogger(__name__)
 
 
-def entries(group: str = GROUP) -> tuple[dict[str, EntryPoint], dict[str, str]]:
-    """The entry points of ``group`` by name, and the names that more than one
-    package registers, each with the one line that refuses it."""
+def entries() -> tuple[dict[str, EntryPoint], dict[str, str]]:
+    """Installed adapters by name, and the names that more than one package
+    registers, each with the one line that refuses it."""
     by_name: dict[str, list[EntryPoint]] = {}
-    for ep in entry_points(group=group):
+    for ep in entry_points(group=GROUP):
         by_name.setdefault(ep.name, []).append(ep)
-    kind = KINDS.get(group, f"entry point in {group}")
     unique = {name: eps[0] for name, eps in by_name.items() if len(eps) == 1}
-    clashes = {name: f"{kind} '{name}' is registered by more than one package: "
+    clashes = {name: f"adapter '{name}' is registered by more than one package: "
                      f"{' and '.join(f'{_package(ep)} ({ep.value})' for ep in eps)} — uninstall all but one"
                for name, eps in by_name.items() if len(eps) > 1}
     return unique, clashes
