@@ -294,7 +294,8 @@ def test_cut_longer_than_the_lease_is_lost_then_connected_again(topology, tmp_pa
     lost = until(topology, lambda: connection(dump, "lost", since=cut), 6.0, '"lost" after the cut')[0]
     figure("lost detected after the cut (read by the test)", lost.read - cut, "s")
     figure("lost detected after the cut (oscdump's stamp)", lost.received - cut, "s")
-    assert lost.read - cut <= 2.5, f'"lost" took {lost.read - cut:.2f} s (lease 1.5 s)'
+    # (spans by oscdump's own stamps: how late this busy test process reads its output is not the product's)
+    assert lost.received - cut <= 2.5, f'"lost" took {lost.received - cut:.2f} s (lease 1.5 s)'
 
     restored = topology.restore(robot)
     again = until(topology, lambda: connection(dump, "connected", since=restored), 6.0,
@@ -302,8 +303,9 @@ def test_cut_longer_than_the_lease_is_lost_then_connected_again(topology, tmp_pa
     data = streaming(topology, dump, since=restored, count=1, timeout=6.0)[0]
     figure('"connected" after restore', again.read - restored, "s")
     figure("joint data after restore", data.read - restored, "s")
-    assert again.read - restored <= 2.0, f'"connected" took {again.read - restored:.2f} s after the link came back'
-    assert data.read - restored <= 2.0, f"joint data took {data.read - restored:.2f} s after the link came back"
+    assert again.received - restored <= 2.0, \
+        f'"connected" took {again.received - restored:.2f} s after the link came back'
+    assert data.received - restored <= 2.0, f"joint data took {data.received - restored:.2f} s after the link came back"
 
 
 def test_killed_robot_is_lost_at_once_and_found_again(topology, tmp_path, figure):
@@ -316,7 +318,7 @@ def test_killed_robot_is_lost_at_once_and_found_again(topology, tmp_path, figure
     robot_run.kill()  # SIGKILL to its process group: no goodbye on the bus
     lost = until(topology, lambda: connection(dump, "lost", since=killed), 5.0, '"lost" after SIGKILL')[0]
     figure("lost after SIGKILL", lost.read - killed, "s")
-    assert lost.read - killed <= 1.0, f'"lost" took {lost.read - killed:.2f} s after the robot was killed'
+    assert lost.received - killed <= 1.0, f'"lost" took {lost.received - killed:.2f} s after the robot was killed'
 
     restarted = time.time()
     started(topology, robot.sonibus("run", path, "--host", "robot"))
