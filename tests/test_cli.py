@@ -9,14 +9,16 @@ import re
 import signal
 import socket
 import subprocess
+import threading
 import time
+from importlib.metadata import entry_points
 from pathlib import Path
 
 import pytest
 
 from sonibus.adapters.recorder.writer import RecordingWriter
-from sonibus.bus import ConfigError, keys
-from sonibus.bus.cli import Environment, Exit, main
+from sonibus.bus import ConfigError, keys, runner
+from sonibus.bus.cli import COMMAND_GROUP, Command, Environment, Exit, demo, main
 from sonibus.bus.cli.send import command_args
 
 from .conftest import SONIBUS, free_port, run_cli, wait_for
@@ -513,3 +515,57 @@ def test_a_closed_stdout_in_process_is_141_without_an_error():
         assert "error" not in env.stderr.getvalue()
         with pytest.raises(BrokenPipeError):  # what is left in its buffer is the caller's (console_main's) to drop
             stdout.close()
+
+
+# -- built-in commands are entry points; the demo is wired by demo.toml ------------------
+
+BUILT_IN = ("demo", "run", "router", "adapters", "nodes", "echo", "send")
+
+
+def test_built_in_commands_are_registered_like_plugin_commands():
+    installed = {ep.name: ep for ep in entry_points(group=COMMAND_GROUP)}
+    for name in BUILT_IN:
+        command = installed[name].load()
+        assert isinstance(command, Command) and command.name == name
+    core = (Path(__file__).parents[1] / "bus" / "cli" / "main.py").read_text()
+    assert not re.search(r"from \.(demo|run|send|watch) import|cli\.(demo|run|send|watch)", core), \
+        "the core names no command"
+    env = environment()
+    assert main(["--help"], env) == Exit.OK
+    listed = re.findall(r"^    (\S+) ", env.stdout.getvalue(), re.MULTILINE)
+    assert set(listed) == {*BUILT_IN, "record", "replay", "info", "recover", "export", "plot", "jsonl-count"}
+    assert listed[-1] == "jsonl-count", "sonibus's own first, then the plug-ins'"
+
+
+def test_demo_flags_set_the_options_demo_toml_names():
+    values = {"robot": "nao", "rate": 50.0, "host": "127.0.0.1", "port": 9100}
+    installation, only = demo.installation(values, quiet=True)
+    assert installation.nodes["robot"].options["robot"] == "nao"
+    assert installation.nodes["robot"].options["rate_hz"] == 50.0
+    assert installation.nodes["sound"].options["targets"] == ["127.0.0.1:9100"]
+    assert only == ["robot", "sound"], "--quiet leaves the live view out"
+    assert [a.name for a in runner.build(installation, only)] == ["robot", "sound"]
+    assert demo.installation(values)[1] is None
+    defaults = {name: flag.default for name, flag in demo.wiring().flags.items()}
+    assert defaults == {"robot": "pepper", "rate": 100.0, "host": "127.0.0.1", "port": 9000}, "as documented"
+
+
+def test_demo_in_process_with_its_flags_sends_the_robot_it_was_given():
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as receiver:
+        receiver.bind(("127.0.0.1", 0))
+        receiver.settimeout(10)
+        port = receiver.getsockname()[1]
+        env = environment()
+        argv = ["demo", "--robot", "nao", "--rate", "50", "--port", str(port), "--quiet",
+                "--no-multicast", "--listen", f"tcp/127.0.0.1:{free_port()}"]
+        status: list[int] = []
+        thread = threading.Thread(target=lambda: status.append(main(argv, env)))
+        thread.start()
+        try:
+            datagram = receiver.recv(4096)  # the first OSC message, at most 10 s
+        finally:
+            env.stop.set()
+            thread.join(STOP_WITHIN_S + 5)
+    assert datagram.startswith(b"/nao/joints/")
+    assert status == [Exit.OK], env.stderr.getvalue()
+    assert f"simulated nao at 50 frames/s → OSC to 127.0.0.1:{port}" in env.stdout.getvalue()

@@ -90,21 +90,26 @@ def _arguments(p: argparse.ArgumentParser) -> None:
     add_bus_arguments(p, installation=False)
 
 
-def _demo(args: argparse.Namespace, env: Environment) -> Exit:
+def installation(values: dict[str, Any], quiet: bool = False) -> tuple[config.Installation, list[str] | None]:
+    """demo.toml with the flags' ``values`` set, and the nodes to run (None: all)."""
     wired = wiring()
-    installation = config.parse(_text(), "demo.toml")
-    values = {name: getattr(args, name) for name in wired.flags}
+    found = config.parse(_text(), "demo.toml")
     for target, template in wired.sets.items():
         node, _, option = target.partition(".")
-        if node not in installation.nodes or not option:
+        if node not in found.nodes or not option:
             raise ConfigError(f"{WHERE}: sets '{target}': not NODE.OPTION of a node — nodes: "
-                              f"{', '.join(installation.nodes)}")
-        installation.nodes[node].options[option] = filled(template, values)
-    only = [name for name in installation.nodes if name not in wired.leaves_out] if args.quiet else None
-    adapters = runner.build(installation, only)
-    for line in wired.banner:
+                              f"{', '.join(found.nodes)}")
+        found.nodes[node].options[option] = filled(template, values)
+    return found, [name for name in found.nodes if name not in wired.leaves_out] if quiet else None
+
+
+def _demo(args: argparse.Namespace, env: Environment) -> Exit:
+    values = {name: getattr(args, name) for name in wiring().flags}
+    wired, only = installation(values, args.quiet)
+    adapters = runner.build(wired, only)
+    for line in wiring().banner:
         env.say(filled(line, values))
-    runner.run(adapters, bus_config(args, installation.bus), env.stop)
+    runner.run(adapters, bus_config(args, wired.bus), env.stop)
     return Exit.OK
 
 
