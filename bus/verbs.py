@@ -111,5 +111,5 @@ def _wrong_arguments(cls: type, method: str, arguments: dict[str, Any]) -> str:
         return "takes no " + ", ".join(f"'{a}'" for a in absent)
     if extra := [p.name for p in parameters if p.default is p.empty and p.name not in arguments
                  and p.kind is not p.VAR_POSITIONAL]:
-        return "needs " + ", ".join(f"'{e}'" for e in extra) + ", which the request has not"
+        return "needs " + ", ".join(f"'{e}'" for e in extra) + ", not an argument of the request"
     return ""

@@ -14,6 +14,7 @@ from typing import Any
 import pytest
 from sonibus_testplugin import JsonLinesConfig, JsonLinesSink
 
+from sonibus import schemas
 from sonibus.adapters.console import ConsoleView
 from sonibus.adapters.osc import OscSink
 from sonibus.adapters.sim import SimRobot
@@ -31,7 +32,7 @@ from sonibus.bus import (
     runner,
     send_command,
 )
-from sonibus.bus.verbs import missing
+from sonibus.bus.verbs import METHODS, RobotVerbs, missing
 
 from .conftest import wait_for
 
@@ -242,6 +243,21 @@ def install(tmp_path, monkeypatch):
 
 def here(cls: type) -> str:
     return f"{__name__}:{cls.__name__}"
+
+
+def test_the_verbs_protocol_names_every_verb_with_the_arguments_of_its_request():
+    assert set(METHODS) == set(schemas.command_verbs())
+    assert missing(RobotVerbs) == [] and missing(Tape) == []
+
+    class Odd(Tape):
+        def posture(self, name: str, speed: float, style: str) -> dict[str, Any]:  # type: ignore[override]
+            return {}
+
+        @staticmethod
+        def stiffness(names: list[str], value: float) -> dict[str, Any]:
+            return {}
+
+    assert missing(Odd) == ["posture (needs 'style', not an argument of the request)"]
 
 
 def test_a_robot_adapter_with_every_verb_loads_and_its_verbs_get_the_validated_requests(install, net):
