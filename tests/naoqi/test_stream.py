@@ -80,5 +80,7 @@ def test_sources_on_a_nao_v6_mirror(rig, source, values):
     r = rig("nao", fake={"almemory_period_ms": 500}, source=source)
     assert robot_info(r.bus, "nao")["naoqi"]["source"] == source
     r.fake.engine.joints_set(["HeadYaw"], [1.0], 0.05)  # 0.41 rad/s: 2.4 s
-    seen = {f["HeadYaw"] for _, f in r.joints.next(40)}  # 0.8 s
-    assert len(seen) in values, f"{len(seen)} HeadYaw values in 0.8 s from {source}"
+    frames = r.joints.next(40)  # 0.8 s, and more if a busy machine made the adapter skip frames:
+    seen = {f["HeadYaw"] for _, f in frames}
+    more = (frames[-1][0] - frames[0][0] + 1 - len(frames)) // 25  # one more refresh each 0.5 s skipped
+    assert min(values) <= len(seen) <= max(values) + more, f"{len(seen)} HeadYaw values in 40 frames from {source}"
