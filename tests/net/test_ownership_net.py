@@ -26,11 +26,14 @@ APART_S = 6.0            # hosta's owner streams this long before hostb's starts
 
 
 def frames(echo: NsProcess, since: float) -> list[tuple[float, int]]:
-    """(read time, seq) of each frame echo printed at or after ``since``."""
+    """(t, seq) of each frame echo printed with a ``t`` at or after ``since``: when its owner took
+    it, not when this busy process got round to reading echo's output."""
     out = []
-    for line, read in zip(list(echo.lines), list(echo.stamps), strict=False):
-        if read >= since and line.startswith("pepper/frame "):
-            out.append((read, json.loads(line.partition(" ")[2])["seq"]))
+    for line in list(echo.lines):
+        if line.startswith("pepper/frame "):
+            frame = json.loads(line.partition(" ")[2])
+            if frame["t"] >= since:
+                out.append((frame["t"], frame["seq"]))
     return out
 
 

@@ -65,10 +65,11 @@ class Museum:
             self.stop(role)
 
     def first_data(self, since: float, timeout: float = FIRST_DATA_S + 5) -> float:
-        """Seconds from ``since`` to the first HeadYaw sample read at the sound machine."""
+        """Seconds from ``since`` to the first HeadYaw sample at the sound machine (oscdump's
+        stamp: when this busy process reads oscdump's output is not the installation's)."""
         found = until(self.topology, lambda: joint(self.dump, since=since), timeout,
                       "HeadYaw at the sound machine")
-        return found[0].read - since
+        return found[0].received - since
 
     def send(self, role: str, *command: str) -> subprocess.CompletedProcess[str]:
         return self.hosts[role].cli("send", "pepper", *command, "--config", self.path, "--host", HOSTS[role])
