@@ -19,6 +19,7 @@ import pytest
 from sonibus.adapters.recorder.writer import RecordingWriter
 from sonibus.bus import ConfigError, keys, runner
 from sonibus.bus.cli import COMMAND_GROUP, Command, Environment, Exit, demo, main
+from sonibus.bus.cli.main import parser
 from sonibus.bus.cli.send import command_args
 
 from .conftest import SONIBUS, free_port, run_cli, wait_for
@@ -569,3 +570,20 @@ def test_demo_in_process_with_its_flags_sends_the_robot_it_was_given():
     assert datagram.startswith(b"/nao/joints/")
     assert status == [Exit.OK], env.stderr.getvalue()
     assert f"simulated nao at 50 frames/s → OSC to 127.0.0.1:{port}" in env.stdout.getvalue()
+
+
+def test_a_command_that_cannot_add_its_options_is_skipped_and_named(caplog):
+    def clashing(p):
+        p.add_argument("--count")
+        p.add_argument("--count")  # argparse refuses a flag twice
+
+    def run(args, env):
+        return Exit.OK
+
+    found = {"fine": Command("fine", "works", lambda p: None, run), "clash": Command("clash", "broken", clashing, run)}
+    with caplog.at_level("WARNING", logger="sonibus"):
+        top = parser(found)
+    assert top.parse_args(["fine"]).command == "fine"
+    with pytest.raises(SystemExit):
+        top.parse_args(["clash"])
+    assert any("command 'clash' cannot add its options" in r.getMessage() for r in caplog.records), caplog.text

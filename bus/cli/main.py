@@ -77,6 +77,7 @@ def _command_word(argv: Sequence[str]) -> str | None:
 
 
 def parser(found: dict[str, Command]) -> argparse.ArgumentParser:
+    """The top-level parser, with a subparser for each command ``found``."""
     top = argparse.ArgumentParser(prog="sonibus", description="Robots on a Zenoh bus, for sound tools.")
     top.add_argument("--traceback", action="store_true", help="show the full traceback of an error")
     top.add_argument("-v", "--verbose", action="count", default=0, help="log more (-vv: debug)")
@@ -87,10 +88,10 @@ def parser(found: dict[str, Command]) -> argparse.ArgumentParser:
         except Exception as exc:
             log.warning("command '%s' cannot add its options: %s: %s (skipped)", name, type(exc).__name__, exc)
             continue
-        parser = sub.add_parser(name, help=command.help)
-        command.arguments(parser)
+        own = sub.add_parser(name, help=command.help)
+        command.arguments(own)
         if command.bus:
-            add_bus_arguments(parser)
+            add_bus_arguments(own)
     return top
 
 
