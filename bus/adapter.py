@@ -7,6 +7,10 @@ and a worker that dies is never silent — the node's state becomes "failed",
 a ``node`` event says so on ``sonibus/events/node``, and ``sonibus run`` ends
 with a non-zero exit (unless the worker was spawned with ``restart=True``).
 
+Every node counts what it does (``count``; ``stats`` reads like a dict) and
+publishes its health once a second on ``sonibus/stats/<host>/<node>``
+(``bus/stats.py``; read with ``bus/health.py``).
+
 >>> from dataclasses import dataclass
 >>> class Hello(Adapter):
 ...     @dataclass(frozen=True)
@@ -28,14 +32,18 @@ from typing import Any, ClassVar
 
 from . import codec, keys
 from .errors import SonibusError
-from .node import Bus
+from .node import Bus, Qos
 from .ownership import Ownership
+from .queue import SampleQueue
+from .stats import BASE, Counters, Report
 
 log = logging.getLogger(__name__)
 
 JOIN_TIMEOUT_S = 2.0
 WARN_EVERY_S = 10.0  # at most one warning of a kind in this time
 RESTART_AFTER_S = 1.0  # a restartable worker that failed runs again after this
+STATS_EVERY_S = 1.0    # how often a node publishes its stats
+STATS_QOS = Qos(priority="DATA_LOW", drop=True)  # never in the way of data; a lost second is only a gap
 
 
 @dataclass(frozen=True)
@@ -47,6 +55,7 @@ class Adapter:
     """Base class of every adapter (robot owners, sinks, processors)."""
 
     Config: ClassVar[type] = NoOptions
+    counters: ClassVar[tuple[str, ...]] = ()  # counters of this kind of node beside stats.BASE, shown from zero
 
     def __init__(self, config: Any = None, *, name: str = "") -> None:
         self.config = config if config is not None else self.Config()
@@ -60,9 +69,11 @@ class Adapter:
         self.robots: list[str] = []       # robots this node owns (see claim_robot)
         self.where: Callable[[str], str] | None = None  # key → "file [nodes.x] line N", when built from a file
         self.since = 0.0                  # when it started (epoch seconds)
-        self.stats: dict[str, int] = {}   # counters a subclass keeps (received, sent, bad, ...)
+        self.stats = Counters(BASE + self.counters)  # what it did (count() adds; dropped: its queues')
         self.failure = ""                 # why the node failed (a worker died), once it has
-        self._lock = threading.Lock()     # guards stats (through count) and warnings across threads
+        self._stats_report = Report(self.stats)
+        self._stats_last: dict[str, Any] | None = None
+        self._lock = threading.Lock()     # guards warnings and failing across threads
         self._last_warning: dict[str, float] = {}
         self._bus: Bus | None = None
         self._threads: list[threading.Thread] = []
@@ -87,6 +98,7 @@ class Adapter:
             self.own(self._bus.serve(node_key, lambda q: q.reply(node_key, codec.encode(self.describe()),
                                                                  encoding=codec.ENCODING)))
             self._start()
+            self._publish_stats()
         except BaseException:
             self.stop()
             raise
@@ -136,8 +148,17 @@ class Adapter:
 
     def count(self, kind: str, n: int = 1) -> None:
         """Add ``n`` to counter ``kind`` of ``stats`` (safe from any thread)."""
-        with self._lock:
-            self.stats[kind] = self.stats.get(kind, 0) + n
+        self.stats.add(kind, n)
+
+    def record_latency(self, seconds: float) -> None:
+        """Note one latency for the stats' p50/p99: a sink's now − the sample's ``t`` as it
+        sends it, a robot's acquisition to publish (safe from any thread)."""
+        self._stats_report.latencies.add(seconds)
+
+    def metrics(self) -> dict[str, Any]:
+        """Hook: figures of this kind of node for its stats (a file's size, per-target counts):
+        numbers, strings, or maps of numbers. Called from the stats worker: read, do not block."""
+        return {}
 
     def warn(self, kind: str, message: str) -> None:
         """Log a warning, at most one of each ``kind`` every ``WARN_EVERY_S`` (with the
@@ -170,6 +191,7 @@ class Adapter:
                 return
             self.failure = reason
         self.state = "failed"
+        self.count("errors")
         expected = isinstance(exc, SonibusError)  # a failure the code foresaw (a full disk): its line says it all
         log.error("%s: %s", self.name, reason, exc_info=None if expected else exc)
         if expected:
@@ -183,9 +205,37 @@ class Adapter:
                 log.debug("%s: node event not sent: %s", self.name, exc)
 
     def own(self, entity: Any) -> Any:
-        """Undeclare/close ``entity`` (publisher, subscriber, token, queue...) on stop."""
+        """Undeclare/close ``entity`` (publisher, subscriber, token, queue...) on stop; a
+        ``SampleQueue``'s drops count as the node's ``dropped``."""
+        if isinstance(entity, SampleQueue):
+            self.stats.follow("dropped", lambda: entity.dropped)
         self._entities.append(entity)
         return entity
+
+    def _publish_stats(self) -> None:
+        """Publish ``stats`` every ``STATS_EVERY_S`` and serve the latest on the same key
+        (``bus/health.py``). Dropped under congestion; a missed second is only logged."""
+        key = keys.node_stats(self.bus.host, self.name)
+        publisher = self.own(self.bus.stream_publisher(key, STATS_QOS))
+        self.own(self.bus.serve(key, lambda q: q.reply(key, codec.encode(self._stats_now()),
+                                                       encoding=codec.ENCODING)))
+
+        def report() -> None:
+            while not self.stopping.wait(STATS_EVERY_S):
+                try:
+                    self._stats_last = self._stats_report.next(self._stats_identity(), self.metrics())
+                    publisher.put(codec.encode(self._stats_last))
+                except Exception as exc:  # a closing session, a metrics() that raised: the next second
+                    log.debug("%s: stats not sent: %s", self.name, exc)
+        self.spawn(report, "stats", restart=True)
+
+    def _stats_now(self) -> dict[str, Any]:
+        """The stats last published (before the first: so far, without ending an interval)."""
+        return self._stats_last or self._stats_report.next(self._stats_identity(), self.metrics(), advance=False)
+
+    def _stats_identity(self) -> dict[str, Any]:
+        return {"host": self.bus.host, "node": self.name, "adapter": self.kind, "state": self.state,
+                "since": self.since}
 
     def _guard(self, target: Callable[[], None], name: str, restart: bool) -> Callable[[], None]:
         def run() -> None:
@@ -198,6 +248,7 @@ class Adapter:
                     if not restart:
                         self.fail(reason, exc)
                         return
+                    self.count("errors")
                     log.warning("%s: %s; restarting it in %g s", self.name, reason, RESTART_AFTER_S)
                     if self.stopping.wait(RESTART_AFTER_S):
                         return

@@ -53,9 +53,8 @@ class ConsoleView(Adapter):
                 next_line += self.config.every_s
 
     def _take(self, key: str, payload: bytes) -> None:
-        try:
-            message = self._streams.incoming(key, payload)
-        except ValueError:  # messages.BadMessage: refused by the gate
+        message = self._streams.take(key, payload, self.stats, self.warn)
+        if message is None:
             return
         source = message.source
         if source.section in ("joints", "frame"):
@@ -76,3 +75,4 @@ class ConsoleView(Adapter):
 
     def _print(self, line: str) -> None:
         print(line, file=self.out, flush=True)
+        self.count("sent")

@@ -34,16 +34,16 @@ class Features(Adapter):
     """Derived movement features: joint velocities, hand positions and speeds, quantity of motion, motion onsets."""
 
     Config = FeaturesConfig
+    counters = ("frames", "events", "late", "missing", "nan", "rejected", "clamped", "not_finite",
+                "waiting_info")
 
     def _start(self) -> None:
         cfg: FeaturesConfig = self.config
-        self.stats = dict.fromkeys(("received", "frames", "stale", "published", "events", "bad", "late", "missing",
-                                    "nan",
-                                    "rejected", "clamped", "dropped", "waiting_info"), 0)
         self.robot_features: dict[str, RobotFeatures] = {}  # robot → its features, once its info came
         self._learning: set[str] = set()                    # robots whose info is being worked out
         self._publishers: dict[str, zenoh.Publisher] = {}
         self._frames = FrameAssembler(cfg.max_wait_ms / 1000.0)  # with per_joint_keys
+        self.stats.follow("late", lambda: self._frames.late)
         self._queue = self.own(SampleQueue(cfg.queue))
         self._info = InfoRequests(self.bus, lambda robot, info: self._queue.put((INFO, (robot, info))),
                                   lambda robot, text: self.warn("info", text))
@@ -52,7 +52,7 @@ class Features(Adapter):
         self.spawn(self._run, "features")
 
     def _stop(self) -> None:
-        if hasattr(self, "stats"):
+        if hasattr(self, "_frames"):  # (started)
             log.info("%s: stopping; %s", self.name, ", ".join(f"{k} {v}" for k, v in self.stats.items()))
 
     # -- the loop ---------------------------------------------------------------------
@@ -70,16 +70,16 @@ class Features(Adapter):
         if key == INFO:
             self._learn(*payload)
             return
-        self.stats["received"] += 1
+        self.count("received")
         try:
             message = self._streams.incoming(key, payload)
         except ValueError as exc:  # messages.BadMessage: refused by the gate
-            self.stats["bad"] += 1
+            self.count("bad")
             self.warn("bad", f"message on '{key}' refused: {exc}")
             return
         robot = message.source.robot
         if robot not in self.robot_features:  # (asked only of robots whose data passed the gate)
-            self.stats["waiting_info"] += 1
+            self.count("waiting_info")
             self._info.ask(robot)
             return
         if message.source.section == "frame":
@@ -87,32 +87,31 @@ class Features(Adapter):
             return
         for frame in self._frames.add(robot, key, message.seq, message.t, message.values[0]):
             self.process(frame)
-        self.stats["late"] = self._frames.late
 
     def process(self, frame: Frame) -> None:
         """Compute and publish the features of one frame."""
         features = self.robot_features[frame.robot]
         max_age = self.config.max_age_ms / 1000.0
         if max_age and time.time() - frame.t > max_age:  # a backlog: what it would give, sinks drop as stale
-            self.stats["stale"] += 1
+            self.count("stale")
             self.warn("stale", f"{frame.robot}: frames older than {self.config.max_age_ms:g} ms skipped "
                                f"(frame {frame.seq} was {time.time() - frame.t:.2f} s old; clocks in step?)")
             return
         out = features.step(frame.t, frame.seq, frame.values)
-        self.stats["frames"] += 1
+        self.count("frames")
         if (out.missing or out.nan) and features.frames > 1:  # the first frame began before the robot's info came
-            self.stats["missing"] += out.missing
-            self.stats["nan"] += out.nan
+            self.count("missing", out.missing)
+            self.count("nan", out.nan)
             self.warn("incomplete", f"{frame.robot}: frame {frame.seq} lacks {out.missing} joint(s) and has "
                                      f"{out.nan} NaN; their velocities are held")
         if out.rejected:
-            self.stats["rejected"] += out.rejected
+            self.count("rejected", out.rejected)
             self.warn("rejected", f"{frame.robot}: frame {frame.seq}: {out.rejected} joint value(s) refused by the "
                                   f"velocity filter, first {out.refused} (a jump faster than the joint can move, time "
                                   "going back, or not finite); their velocities start over")
         if out.clamped or out.dropped:
-            self.stats["clamped"] += out.clamped
-            self.stats["dropped"] += out.dropped
+            self.count("clamped", out.clamped)
+            self.count("not_finite", out.dropped)
             self.warn("clamped", f"{frame.robot}: frame {frame.seq}: {out.clamped} derived value(s) clamped into "
                                  f"their declared ranges, {out.dropped} not finite and left out")
         for key, message in out.samples:
@@ -120,10 +119,11 @@ class Features(Adapter):
             if publisher is None:
                 publisher = self._publishers[key] = self.own(self.bus.stream_publisher(key))
             publisher.put(codec.encode(message))
-        self.stats["published"] += len(out.samples)
+        self.count("sent", len(out.samples))
+        self.record_latency(time.time() - frame.t)
         for key, message in out.events:
             self.bus.put(key, message)
-        self.stats["events"] += len(out.events)
+        self.count("events", len(out.events))
 
     # -- robots -----------------------------------------------------------------------
 

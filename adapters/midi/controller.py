@@ -32,11 +32,11 @@ class MidiController(Adapter):
     A panic note or CC sends stop."""
 
     Config = MidiControllerConfig
+    counters = ("commands", "ok", "unmapped", "waiting_info")
 
     def _start(self) -> None:
         cfg: MidiControllerConfig = self.config
-        self.stats = dict.fromkeys(("received", "commands", "ok", "errors", "unmapped", "waiting_info"), 0)
-        self._lock = threading.Lock()          # stats and the error log are touched by reply callbacks
+        self._lock = threading.Lock()          # the error log is touched by reply callbacks
         self._failed: set[str] = set()         # mappings whose error was logged once
         self._limits: dict[str, dict[str, tuple[float, float]]] = {}
         self._held: dict[tuple[str, str], tuple[int, CcMapping]] = {}   # (robot, joint) → newest value
@@ -79,7 +79,7 @@ class MidiController(Adapter):
         return max(0.0, min(0.2, soonest - time.monotonic()))
 
     def _midi(self, message: list[int]) -> None:
-        self.stats["received"] += 1
+        self.count("received")
         if len(message) < 2:
             return
         kind, channel = message[0] & 0xF0, (message[0] & 0x0F) + 1
@@ -111,7 +111,7 @@ class MidiController(Adapter):
         else:
             handled = False
         if not handled:
-            self.stats["unmapped"] += 1
+            self.count("unmapped")
 
     def _stop_robots(self, channel: int, note: int = -1, cc: int = -1) -> bool:
         hit = False
@@ -129,7 +129,7 @@ class MidiController(Adapter):
                 continue
             limits = self._limits.get(robot)
             if limits is None:
-                self.stats["waiting_info"] += 1
+                self.count("waiting_info")
                 self._info.ask(robot)
                 continue
             del self._held[(robot, joint)]
@@ -146,20 +146,19 @@ class MidiController(Adapter):
     # -- commands and info ------------------------------------------------------------
 
     def _command(self, what: str, robot: str, verb: str, args: dict[str, Any]) -> None:
-        self.stats["commands"] += 1
+        self.count("commands")
 
         def done(outcome: Outcome) -> None:
             if isinstance(outcome, CommandError):
                 self._fail(what, f"{robot} {verb}: {outcome}")
             else:
-                with self._lock:
-                    self.stats["ok"] += 1
+                self.count("ok")
 
         ask(self.bus, robot, verb, args, done, self.config.timeout)
 
     def _fail(self, what: str, message: str) -> None:
+        self.count("errors")
         with self._lock:
-            self.stats["errors"] += 1
             first = what not in self._failed
             self._failed.add(what)
         if first:

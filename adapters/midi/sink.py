@@ -64,11 +64,10 @@ class MidiSink(Adapter):
     """Robots as MIDI: joints on controllers, behaviors and speech as notes (for a DAW or a synth)."""
 
     Config = MidiSinkConfig
+    counters = ("notes", "held", "waiting_info", "unmapped", "send_errors")
 
     def _start(self) -> None:
         cfg: MidiSinkConfig = self.config
-        self.stats = dict.fromkeys(("received", "sent", "notes", "held", "bad", "waiting_info", "unmapped",
-                                    "send_errors"), 0)
         self.estimated_rate = 0.0   # 3-byte messages/s the mapping may produce at the robots' rates
         self._robots: dict[str, _Robot] = {}
         self._controllers: dict[str, _Controller | None] = {}
@@ -139,13 +138,14 @@ class MidiSink(Adapter):
             return
         for sample in message.joints:
             self._sample(sample.source, sample.values[0], now)
+        self.record_latency(time.time() - message.t)
 
     def _sample(self, source: Key, value: float, now: float) -> None:
         if source.section not in ("joints", "derived"):
             return
         robot = self._robot(source.robot)
         if not robot.known:
-            self.stats["waiting_info"] += 1
+            self.count("waiting_info")
             self._info.ask(source.robot)
             return
         controller = self._controller(source, robot)
@@ -155,7 +155,7 @@ class MidiSink(Adapter):
         if now - controller.last_sent < self._interval:
             controller.held = number     # the newest waits for its turn
             self._held.add(source.key)
-            self.stats["held"] += 1
+            self.count("held")
         elif number != controller.last:
             self._emit(controller, number, now)
 
@@ -167,9 +167,9 @@ class MidiSink(Adapter):
     def _send(self, message: list[int]) -> None:
         try:
             self._out.send_message(message)
-            self.stats["sent"] += 1
+            self.count("sent")
         except Exception as exc:  # rtmidi raises its own errors for a port gone away
-            self.stats["send_errors"] += 1
+            self.count("send_errors")
             self.warn("send", f"cannot send MIDI: {exc}")
 
     # -- mapping ----------------------------------------------------------------------
@@ -216,7 +216,7 @@ class MidiSink(Adapter):
             if cc <= 119:
                 controller = _Controller(robot.channel, cc, 7, *span)
         if controller is None:
-            self.stats["unmapped"] += 1
+            self.count("unmapped")
         self._controllers[source.key] = controller
         return controller
 
@@ -282,7 +282,7 @@ class MidiSink(Adapter):
             self._sounding.discard(slot)
         else:
             return  # no note off without its note on
-        self.stats["notes"] += 1
+        self.count("notes")
         self._send(mapping.note(robot.channel, number, on, cfg.velocity))
 
     def _behavior_note(self, robot: _Robot, name: str) -> int | None:

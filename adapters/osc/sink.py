@@ -40,6 +40,7 @@ class _Link:
         self.last_sent: dict[str, float] = {}     # slot (key, or robot for frames) → monotonic time
         self.held: dict[str, Any] = {}            # slot → the newest thing waiting for its turn
         self.last_frame_t: dict[str, float] = {}  # robot → t of the last frame sent
+        self.sent = 0                             # datagrams sent to it
 
     def changed(self, key: str, values: Sequence[float]) -> bool:
         """Whether ``values`` pass the on-change/deadband filter (and remember them if so)."""
@@ -60,11 +61,10 @@ class OscSink(Adapter):
     """Forwards joints, derived values and events to OSC receivers (Pd, Max, SuperCollider) over UDP."""
 
     Config = OscSinkConfig
+    counters = ("unencodable", "late", "waiting_info", "send_errors")
 
     def _start(self) -> None:
         cfg: OscSinkConfig = self.config
-        self.stats = dict.fromkeys(("received", "sent", "stale", "bad", "unencodable", "late", "waiting_info",
-                                    "send_errors"), 0)
         self._ranges: dict[str, dict[str, tuple[float, float]]] = {}
         self._info = InfoRequests(self.bus, self._take_info, lambda robot, text: self.warn("info", text),
                                   INFO_RETRY_S)
@@ -72,6 +72,7 @@ class OscSink(Adapter):
         self._sample_links = [link for link in self._links if not link.target.framed]
         self._frame_links = [link for link in self._links if link.target.framed]
         self._frames = FrameAssembler()
+        self.stats.follow("late", lambda: self._frames.late)
         self._socket = self.own(socket.socket(socket.AF_INET, socket.SOCK_DGRAM))
         self._queue = self.own(SampleQueue(cfg.queue))
         self._streams = Streams(self.bus, cfg.subscribe, self._queue, per_joint_keys=cfg.per_joint_keys)
@@ -89,6 +90,13 @@ class OscSink(Adapter):
     def dropped(self) -> int:
         """Samples dropped because the queue was full."""
         return self._queue.dropped
+
+    def metrics(self) -> dict[str, Any]:
+        """Datagrams sent per target."""
+        sent: dict[str, int] = {}
+        for link in getattr(self, "_links", ()):
+            sent[link.target.to] = sent.get(link.target.to, 0) + link.sent
+        return {"sent_to": sent}
 
     # -- the loop ---------------------------------------------------------------------
 
@@ -134,7 +142,7 @@ class OscSink(Adapter):
         max_age = self.config.max_age_ms / 1000.0
         age = time.time() - message.t
         if max_age and age > max_age:
-            self.stats["stale"] += 1
+            self.count("stale")
             self.warn("stale", f"samples older than max_age_ms = {self.config.max_age_ms:g} dropped ('{key}' was "
                                f"{age * 1000:.0f} ms old: a stalled publisher or link, or clocks not in step)")
             return
@@ -142,12 +150,13 @@ class OscSink(Adapter):
         for link in self._sample_links:
             for sample in samples:
                 self._sample_to(link, sample.source, sample.values, sample.t, sample.seq, now)
+        if self._sample_links and samples:
+            self.record_latency(time.time() - message.t)
         if not self._frame_links or not samples:
             return
         # Joints and derived values of one seq go out in one bundle, however they came.
         frames = self._frames.extend(message.source.robot, message.seq, message.t,
                                      {s.source.key: (s.source, s.values) for s in samples})
-        self.stats["late"] = self._frames.late
         for frame in frames:
             self._send_frame(frame, now)
 
@@ -186,6 +195,7 @@ class OscSink(Adapter):
         link.last_frame_t[frame.robot] = frame.t
         interval = frame.t - previous if previous is not None and frame.t > previous else 0.0
         self._send(link, link.profile.frame, frame.robot, frame.t, frame.seq, samples, interval)
+        self.record_latency(time.time() - frame.t)
 
     def _event(self, source: Key, message: dict[str, Any]) -> None:
         kind = str(message.get("kind") or source.name)
@@ -208,13 +218,14 @@ class OscSink(Adapter):
         for datagram in [rendered] if isinstance(rendered, bytes) else rendered or ():
             try:
                 self._socket.sendto(datagram, link.destination)
-                self.stats["sent"] += 1
+                link.sent += 1
+                self.count("sent")
             except OSError as exc:
-                self.stats["send_errors"] += 1
+                self.count("send_errors")
                 self.warn("send", f"cannot send to {link.target.to}: {exc.strerror or exc}")
 
     def _unencodable(self, link: _Link, dropped: list[EncodeError]) -> None:
-        self.stats["unencodable"] += len(dropped)
+        self.count("unencodable", len(dropped))
         self.warn("encode", f"left out of what goes to {link.target.to}, OSC cannot carry it: {dropped[0]}"
                   + (f" (and {len(dropped) - 1} more)" if len(dropped) > 1 else ""))
 
@@ -225,7 +236,7 @@ class OscSink(Adapter):
             return values
         ranges = self._ranges.get(source.robot)
         if ranges is None:
-            self.stats["waiting_info"] += 1
+            self.count("waiting_info")
             self._info.ask(source.robot)
             return None
         span = ranges.get(source.name if source.section == "joints" else f"{source.feature}/{source.name}")

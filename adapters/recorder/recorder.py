@@ -72,13 +72,13 @@ class Recorder(Adapter):
     """Records joints, derived values, events and robot info into an MCAP file."""
 
     Config = RecorderConfig
+    counters = ("written",)
 
     def _start(self) -> None:
         cfg: RecorderConfig = self.config
         self.path = cfg.resolved_path()
         if os.path.exists(self.path) and not cfg.overwrite:
             raise ConfigError(f"{self.path} exists — choose another name, or overwrite it (--force, overwrite = true)")
-        self.stats = dict.fromkeys(("received", "written", "bad"), 0)
         self._wall0, self._mono0 = time.time_ns(), time.monotonic_ns()
         self._writer = self._open({"host": self.bus.host, "node": self.name, "subscribe": " ".join(cfg.subscribe),
                                    "started": time.strftime("%Y-%m-%dT%H:%M:%S%z")})
@@ -119,6 +119,11 @@ class Recorder(Adapter):
                 "bytes": self._writer.size, "dropped": self._queue.dropped, "bad": self.stats["bad"],
                 "failure": self.failure}
 
+    def metrics(self) -> dict[str, Any]:
+        """The file and its size so far."""
+        writer = getattr(self, "_writer", None)
+        return {"path": self.path, "bytes": writer.size} if writer is not None else {}
+
     def _take_info(self, robot: str, info: dict[str, Any]) -> None:  # on a Zenoh thread
         self._queue.put((keys.info(robot), codec.encode(info), time.monotonic_ns()))
 
@@ -134,9 +139,9 @@ class Recorder(Adapter):
             # Raised again for the base class to fail the node loudly. The file is finished if it
             # is sound, else only closed: recover then keeps its complete chunks.
             with contextlib.suppress(WriteError):
-                self._writer.close({**self.stats, "dropped": self._queue.dropped})
+                self._writer.close(dict(self.stats))
             raise
-        self._writer.close({**self.stats, "dropped": self._queue.dropped})
+        self._writer.close(dict(self.stats))
         log.info("%s: %s", self.name, describe(self.status()))
 
     def _record(self, key: str, payload: bytes, arrived_ns: int) -> None:
@@ -156,10 +161,10 @@ class Recorder(Adapter):
             try:
                 self._writer.write(sample_key, log_ns, sample)
             except BadRecord as exc:  # (past the gate, rare): skipped whole, the file stays readable
-                self.stats["bad"] += 1
+                self.count("bad")
                 self.warn("unwritable", f"message on '{sample_key}' not recorded: {exc}")
                 continue
-            self.stats["written"] += 1
+            self.count("written")
 
     def _joints(self, frame: Incoming) -> list[tuple[str, dict[str, Any]]]:
         """The samples of a frame's joints that ``subscribe`` selects, each on its joint's key."""

@@ -82,11 +82,11 @@ class Replay(Adapter):
     """Replays an MCAP recording onto the bus with its original timing."""
 
     Config = ReplayConfig
+    counters = ("frames", "late", "gaps")
 
     def __init__(self, config: ReplayConfig, *, name: str = "") -> None:
         super().__init__(config, name=name)
         self.position_s, self.window_s, self.loops = 0.0, 0.0, 0   # progress: seconds into the window, passes
-        self.stats = {"published": 0, "frames": 0, "late": 0, "gaps": 0}
         self.finished = threading.Event()                          # set at the end of a replay without loop
 
     @classmethod
@@ -189,7 +189,7 @@ class Replay(Adapter):
         log.info("%s: replay of %s finished", self.name, cfg.path)
 
     def _gap(self, gap_s: float, at_s: float, message: Message) -> None:
-        self.stats["gaps"] += 1
+        self.count("gaps")
         where = f"{at_s - self.config.start:.1f} s into {os.path.basename(self.config.path)} ({message.key})"
         if gap_s > 0:
             self.warn("gap", f"a gap of {gap_s:.1f} s before {where} replayed as {self.config.max_gap_s:g} s "
@@ -204,15 +204,15 @@ class Replay(Adapter):
     def _publish_frame(self, samples: list[Message], t_origin: float, seq: int, late: bool) -> None:
         """One robot's joint samples of one frame: the frame whole, then each sample on its key."""
         if late:
-            self.stats["late"] += len(samples)
+            self.count("late", len(samples))
             return
         values, extra = _join([m.data for m in samples])
         names = [Key.parse(m.key).name for m in samples]
         t = self._moved(samples[0].data["t"], t_origin)
         owner = self._owners[self.names[samples[0].key.partition("/")[0]]]
         if owner.publish_frame(messages.frame(t, seq, names, values, extra)):  # per joint too, while wanted
-            self.stats["frames"] += 1
-            self.stats["published"] += len(samples)
+            self.count("frames")
+            self.count("sent", len(samples))
 
     def _publish(self, message: Message, t_origin: float, seq: Any, late: bool) -> None:
         key = self._renamed(message.key)
@@ -227,11 +227,11 @@ class Replay(Adapter):
         if publisher is None:  # events: few, and never dropped
             self.bus.put(key, data)
         elif late:
-            self.stats["late"] += 1
+            self.count("late")
             return
         else:
             publisher.put(codec.encode(data))
-        self.stats["published"] += 1
+        self.count("sent")
 
     def _moved(self, t: float, t_origin: float) -> float:
         """A recorded ``t`` on the replay's clock: now, at its speed."""

@@ -1,0 +1,42 @@
+"""Reading how nodes are doing: their stats (``bus/stats.py``) off the bus, in one line.
+
+Every node publishes its stats once a second on ``sonibus/stats/<host>/<node>``
+and serves the latest there, so ``latest`` asks once and needs no wait.
+
+>>> summary({"rates": {"received": 1234.4, "sent": 1230.0}, "counters": {"dropped": 0, "bad": 2},
+...          "latency_ms": {"p50": 0.8, "p99": 2.14}, "process": {"cpu_percent": 12.3, "rss_bytes": 58_000_000}})
+'rx 1,234/s tx 1,230/s drop 0 bad 2 p99 2.1 ms cpu 12% 58 MB'
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from . import keys
+from .node import Bus
+
+
+def latest(bus: Bus, timeout: float = 1.0) -> dict[tuple[str, str], dict[str, Any]]:
+    """The latest stats of every node that answers within ``timeout`` s, by ``(host, node)``."""
+    found: dict[tuple[str, str], dict[str, Any]] = {}
+    for stats in bus.query(keys.NODE_STATS, timeout=timeout):
+        if isinstance(stats, dict) and "host" in stats and "node" in stats:  # (not an error reply)
+            found[(str(stats["host"]), str(stats["node"]))] = stats
+    return found
+
+
+def summary(stats: dict[str, Any]) -> str:
+    """One line of a node's stats: receive and send rates, drops, bad input, p99 latency
+    (where the node measures it), errors (if any), the process's CPU and memory."""
+    rates, counters = stats.get("rates", {}), stats.get("counters", {})
+    parts = [f"rx {rates.get('received', 0):,.0f}/s", f"tx {rates.get('sent', 0):,.0f}/s",
+             f"drop {counters.get('dropped', 0):,}", f"bad {counters.get('bad', 0):,}"]
+    if counters.get("errors"):
+        parts.append(f"err {counters['errors']:,}")
+    latency = stats.get("latency_ms")
+    if latency:
+        parts.append(f"p99 {latency['p99']:.1f} ms")
+    process = stats.get("process", {})
+    if process:
+        parts.append(f"cpu {process['cpu_percent']:.0f}% {process['rss_bytes'] / 1e6:.0f} MB")
+    return " ".join(parts)

@@ -1,0 +1,162 @@
+"""A node's counters and figures, and the stats message built from them each second.
+
+``Counters`` are added to from any thread and read like a dict; a counter can
+also follow a number kept elsewhere (a queue's drops), read when it is read.
+``Latencies`` keeps a bounded sample of one interval's latencies (a reservoir,
+not every sample). ``Report`` turns both into the message a node publishes on
+``sonibus/stats/<host>/<node>`` (schema ``node_stats``).
+
+>>> counters = Counters(("received", "bad"))
+>>> counters.add("received", 3)
+>>> counters["received"], counters.get("written", 0), dict(counters)
+(3, 0, {'received': 3, 'bad': 0})
+>>> counters == {"received": 3}  # a counter at zero equals one not kept (as collections.Counter)
+True
+"""
+
+from __future__ import annotations
+
+import os
+import random
+import resource
+import threading
+import time
+from collections.abc import Callable, Iterable, Iterator, Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+BASE = ("received", "sent", "dropped", "stale", "bad", "errors")  # every node has these
+RESERVOIR = 256  # latencies kept per interval
+PAGE = os.sysconf("SC_PAGE_SIZE")
+
+
+class Counters(Mapping[str, int]):
+    """Named counters, thread-safe: ``add`` from any thread, read like a dict."""
+
+    def __init__(self, names: Iterable[str] = ()) -> None:
+        self._lock = threading.Lock()
+        self._counts: dict[str, int] = dict.fromkeys(names, 0)
+        self._sources: dict[str, list[Callable[[], int]]] = {}
+
+    def declare(self, names: Iterable[str]) -> None:
+        """Keep ``names`` from now on, at zero until counted (so zeros show)."""
+        with self._lock:
+            for name in names:
+                self._counts.setdefault(name, 0)
+
+    def add(self, name: str, n: int = 1) -> None:
+        with self._lock:
+            self._counts[name] = self._counts.get(name, 0) + n
+
+    def follow(self, name: str, source: Callable[[], int]) -> None:
+        """Add ``source()`` (a count kept elsewhere, e.g. a queue's drops) to ``name`` when read."""
+        with self._lock:
+            self._counts.setdefault(name, 0)
+            self._sources.setdefault(name, []).append(source)
+
+    def __setitem__(self, name: str, value: int) -> None:
+        # For callers that take a mapping (``stats["received"] += 1``): safe only from the one
+        # thread that counts ``name``; elsewhere use ``add``.
+        with self._lock:
+            self._counts[name] = value - sum(source() for source in self._sources.get(name, ()))
+
+    def __getitem__(self, name: str) -> int:
+        with self._lock:
+            count = self._counts[name]
+            sources = self._sources.get(name, ())
+        return count + sum(source() for source in sources)
+
+    def __iter__(self) -> Iterator[str]:
+        with self._lock:
+            return iter(list(self._counts))
+
+    def __len__(self) -> int:
+        return len(self._counts)
+
+    def __eq__(self, other: object) -> bool:
+        if not isinstance(other, Mapping):
+            return NotImplemented
+        return {k: v for k, v in self.items() if v} == {k: v for k, v in other.items() if v}
+
+    __hash__ = None  # type: ignore[assignment]  # mutable
+
+    def __repr__(self) -> str:
+        return f"Counters({dict(self)})"
+
+
+class Latencies:
+    """A uniform sample (at most ``size``) of the latencies seen since the last ``take``."""
+
+    def __init__(self, size: int = RESERVOIR) -> None:
+        self._size = size
+        self._lock = threading.Lock()
+        self._kept: list[float] = []
+        self._seen = 0
+
+    def add(self, seconds: float) -> None:
+        with self._lock:
+            self._seen += 1
+            if len(self._kept) < self._size:
+                self._kept.append(seconds)
+            else:  # reservoir sampling: each latency seen is kept with the same chance
+                slot = random.randrange(self._seen)
+                if slot < self._size:
+                    self._kept[slot] = seconds
+
+    def take(self) -> dict[str, float] | None:
+        """p50 and p99 in ms of the sample, and how many were seen; None if none; starts over."""
+        with self._lock:
+            kept, seen = sorted(self._kept), self._seen
+            self._kept, self._seen = [], 0
+        if not kept:
+            return None
+        return {"p50": round(_quantile(kept, 0.50) * 1000.0, 3), "p99": round(_quantile(kept, 0.99) * 1000.0, 3),
+                "samples": seen}
+
+
+def _quantile(ordered: list[float], q: float) -> float:
+    return ordered[min(len(ordered) - 1, int(q * len(ordered)))]
+
+
+def rss_bytes() -> int:
+    """The process's resident memory (``/proc/self/statm``; peak RSS where there is no /proc)."""
+    try:
+        with open("/proc/self/statm", encoding="ascii") as statm:
+            return int(statm.read().split()[1]) * PAGE
+    except OSError:
+        return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
+
+
+@dataclass
+class Report:
+    """Builds a node's stats messages: counters, their rates and the process's CPU
+    over the interval since the previous message, latencies, memory."""
+
+    counters: Counters
+    latencies: Latencies = field(default_factory=Latencies)
+    _wall: float = field(default_factory=time.monotonic, init=False)
+    _cpu: float = field(default_factory=time.process_time, init=False)
+    _last: dict[str, int] = field(default_factory=dict, init=False)
+
+    def next(self, node: dict[str, Any], metrics: dict[str, Any], advance: bool = True) -> dict[str, Any]:
+        """The message for the interval that ends now (with ``advance=False``: so far, and the
+        interval goes on); ``node`` gives host, node, adapter, state and since; ``metrics`` the
+        adapter's own figures."""
+        now, cpu, counts = time.monotonic(), time.process_time(), dict(self.counters)
+        interval = max(now - self._wall, 1e-9)
+        message: dict[str, Any] = {
+            "t": time.time(), "host": node["host"], "node": node["node"], "adapter": node["adapter"],
+            "state": node["state"], "uptime_s": round(max(0.0, time.time() - node["since"]), 3),
+            "interval_s": round(interval, 3), "counters": counts,
+            "rates": {k: round((v - self._last.get(k, 0)) / interval, 2) for k, v in counts.items()},
+            "process": {"pid": os.getpid(), "cpu_percent": round(100.0 * (cpu - self._cpu) / interval, 1),
+                        "rss_bytes": rss_bytes()},
+        }
+        latency = self.latencies.take() if advance else None
+        if latency is not None:
+            message["latency_ms"] = latency
+        if metrics:
+            message["metrics"] = metrics
+        if advance:
+            self._wall, self._cpu, self._last = now, cpu, counts
+        return message
