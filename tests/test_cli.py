@@ -19,7 +19,7 @@ import pytest
 from sonibus.adapters.recorder.writer import RecordingWriter
 from sonibus.bus import ConfigError, keys, runner
 from sonibus.bus.cli import COMMAND_GROUP, Command, Environment, Exit, demo, main
-from sonibus.bus.cli.main import parser
+from sonibus.bus.cli.app import parser
 from sonibus.bus.cli.send import command_args
 
 from .conftest import SONIBUS, free_port, run_cli, wait_for
@@ -528,7 +528,7 @@ def test_built_in_commands_are_registered_like_plugin_commands():
     for name in BUILT_IN:
         command = installed[name].load()
         assert isinstance(command, Command) and command.name == name
-    core = (Path(__file__).parents[1] / "bus" / "cli" / "main.py").read_text()
+    core = (Path(__file__).parents[1] / "bus" / "cli" / "app.py").read_text()
     assert not re.search(r"from \.(demo|run|send|watch) import|cli\.(demo|run|send|watch)", core), \
         "the core names no command"
     env = environment()

@@ -14,7 +14,7 @@ Every command, the built-in ones too (``sonibus.bus.cli.run``, ``.watch``, ``.se
 """
 
 from .api import COMMAND_GROUP, Command, Environment, Exit, add_bus_arguments, bus_config, joined
-from .main import console_main, main
+from .app import console_main, main
 
 __all__ = ["COMMAND_GROUP", "Command", "Environment", "Exit", "add_bus_arguments", "bus_config", "console_main",
            "joined", "main"]
