@@ -92,7 +92,9 @@ class RobotAdapter(Adapter):
             self.count("joints_left_out", len(left_out))
             self.warn("values", f"{self.robot}: {', '.join(left_out)} left out of frame {seq}: "
                                 f"not a finite value within ±{messages.MAX_VALUE:g}")
-        self.ownership.publish_frame(message)  # nothing while another owner keeps the robot
+        if self.ownership.publish_frame(message):  # nothing while another owner keeps the robot
+            self.count("sent")
+            self.record_latency(time.time() - t)  # acquisition to publish
 
     def publish_event(self, kind: str, **fields: Any) -> None:
         if not self.ownership.active:  # standing by for another owner: it speaks for the robot
@@ -121,12 +123,14 @@ class RobotAdapter(Adapter):
     def _serve_command(self, query: zenoh.Query) -> None:
         verb = str(query.key_expr)[len(keys.command(self.robot, "")):]
         args: Any = {}
+        self.count("received")
         try:
             try:
                 payload = query.payload.to_bytes() if query.payload is not None else b""
                 args = self._gate.check(keys.Key.parse(str(query.key_expr)), payload)
             except ValueError as exc:  # messages.BadMessage
                 args = {}
+                self.count("bad")
                 if verb != "stop":  # stop must always work
                     raise CommandError("bad_request", f"{verb}: {exc}") from None
             self.ownership.check(verb, query.parameters.get("owner"))  # sent to another owner of the robot?

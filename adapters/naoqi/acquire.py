@@ -101,7 +101,7 @@ class Reader:
         return dict(zip(self.polled, values, strict=True))
 
 
-class Stats:
+class ReadTimes:
     """Achieved frame rate and read latency over the last ``window_s`` seconds."""
 
     def __init__(self, window_s: float = 5.0) -> None:

@@ -20,7 +20,7 @@ from sonibus.bus.owner import RobotAdapter
 from sonibus.bus.pacing import Pacer
 from sonibus.bus.robot import load_model
 
-from .acquire import Reader, Stats
+from .acquire import Reader, ReadTimes
 from .commands import NaoqiCommands
 from .config import NaoqiConfig
 from .connection import Link, LinkDown, RemoteError
@@ -45,7 +45,7 @@ class NaoqiRobot(RobotAdapter):
     def _open(self) -> None:
         self.model = load_model(self.config.model_name)  # until the robot tells its own
         self.rate_hz = self.config.rate_hz
-        self.read_times = Stats()
+        self.read_times = ReadTimes()
         self.events = RobotEvents(self.publish_event)
         self.link = Link(self.config, self._lost, self.stopping)
         self.verbs = NaoqiCommands(self.link, self.events, lambda: self.model, self._down)
@@ -182,6 +182,9 @@ class NaoqiRobot(RobotAdapter):
 
         pacer.run(tick, self._halt)
         self.frames_skipped += pacer.skipped
+
+    def metrics(self) -> dict[str, Any]:
+        return self.status() if hasattr(self, "read_times") else {}
 
     def status(self, skipped: int = 0) -> dict[str, Any]:
         """Achieved rate, read latency, frames skipped."""

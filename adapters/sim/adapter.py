@@ -79,3 +79,6 @@ class SimRobot(RobotAdapter):
     @property
     def frames_skipped(self) -> int:
         return self.pacer.skipped if hasattr(self, "pacer") else 0
+
+    def metrics(self) -> dict[str, Any]:
+        return {"frames_skipped": self.frames_skipped}
