@@ -25,7 +25,7 @@ def test_demo_reaches_oscdump_at_the_configured_rate(spawn):
     receiver = spawn(oscdump, "-L", str(port), collect=True)
     demo = spawn(SONIBUS, "demo", "--no-multicast", "--listen", f"tcp/127.0.0.1:{free_port()}",
                  "--port", str(port), "--rate", "50", "--quiet")
-    wait_for(lambda: len(receiver.lines) >= 17 * 50 * 3, timeout=15, what="three seconds of OSC at oscdump")
+    wait_for(lambda: len(receiver.lines) >= 17 * 50 * 3, timeout=60, what="three seconds of OSC at oscdump")
     rc, _, err = demo.stop()
     lines = list(receiver.lines)
     assert rc == 130, err
