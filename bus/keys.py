@@ -11,7 +11,8 @@ from .errors import ConfigError
 NODES = "sonibus/nodes"
 ROBOTS = "sonibus/robots"
 NODE_EVENTS = "sonibus/events/node"  # a node's state changes (a worker failed): an event like a robot's
-NODE_STATS = "sonibus/stats/*/*"  # every node's stats (bus/stats.py, bus/health.py)
+STATS = "sonibus/stats"
+NODE_STATS = f"{STATS}/*/*"  # every node's stats (bus/stats.py, bus/health.py)
 
 
 def joint(robot: str, name: str) -> str:
@@ -59,7 +60,7 @@ def node_token(host: str, node: str) -> str:
 
 def node_stats(host: str, node: str) -> str:
     """Where a node publishes its stats once a second, and serves the latest."""
-    return f"sonibus/stats/{host}/{node}"
+    return f"{STATS}/{host}/{node}"
 
 
 def robot_token(robot: str = "*") -> str:

@@ -173,5 +173,7 @@ class Streams(Selection):
 
 
 def _from_frames(key: str) -> bool:
-    """Joint and frame keys, which a broad pattern's subscription leaves to the frames."""
-    return keys.is_frame(key) or (key.count("/") == 2 and key.split("/")[1] == "joints")
+    """Joint and frame keys, which a broad pattern's subscription leaves to the frames (and
+    nodes' stats, no robot's data: ``bus/health.py`` reads them)."""
+    return (keys.is_frame(key) or (key.count("/") == 2 and key.split("/")[1] == "joints")
+            or key.startswith(keys.STATS + "/"))

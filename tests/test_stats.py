@@ -108,6 +108,17 @@ def test_a_node_serves_its_stats_before_its_first_second(net):
     assert "latency_ms" not in stats and "metrics" not in stats
 
 
+def test_a_sink_subscribed_to_everything_leaves_the_stats_out(net):
+    watcher = net.bus("watcher")
+    collected = Collected(watcher)
+    everything = net.start(OscSink(OscSinkConfig(subscribe="**", targets=(f"127.0.0.1:{free_port()}",)),
+                                   name="everything"))
+    net.start(Adapter(name="other"))
+    wait_for(lambda: len(collected.of("other")) >= 2 and len(collected.of("everything")) >= 2, timeout=10,
+             what="stats of both nodes on the bus")
+    assert everything.stats["bad"] == 0 and everything.stats["received"] == 0  # not robot data
+
+
 def test_counters_are_exact_when_counted_from_many_threads():
     counters = Counters(["sent"])
     threads, per_thread = 8, 20_000
