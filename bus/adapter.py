@@ -217,8 +217,7 @@ class Adapter:
         (``bus/health.py``). Dropped under congestion; a missed second is only logged."""
         key = keys.node_stats(self.bus.host, self.name)
         publisher = self.own(self.bus.stream_publisher(key, STATS_QOS))
-        self.own(self.bus.serve(key, lambda q: q.reply(key, codec.encode(self._stats_now()),
-                                                       encoding=codec.ENCODING)))
+        self.own(self.bus.serve(key, lambda query: self._serve_stats(key, query)))
 
         def report() -> None:
             while not self.stopping.wait(STATS_EVERY_S):
@@ -229,9 +228,14 @@ class Adapter:
                     log.debug("%s: stats not sent: %s", self.name, exc)
         self.spawn(report, "stats", restart=True)
 
-    def _stats_now(self) -> dict[str, Any]:
-        """The stats last published (before the first: so far, without ending an interval)."""
-        return self._stats_last or self._stats_report.next(self._stats_identity(), self.metrics(), advance=False)
+    def _serve_stats(self, key: str, query: Any) -> None:
+        """Answer with the stats last published (before the first: so far, the interval going on)."""
+        try:
+            stats = self._stats_last or self._stats_report.next(self._stats_identity(), self.metrics(),
+                                                                advance=False)
+            query.reply(key, codec.encode(stats), encoding=codec.ENCODING)
+        except Exception as exc:  # (a metrics() that raised): the asker goes without this node's
+            log.debug("%s: stats not served: %s", self.name, exc)
 
     def _stats_identity(self) -> dict[str, Any]:
         return {"host": self.bus.host, "node": self.name, "adapter": self.kind, "state": self.state,
