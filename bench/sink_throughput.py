@@ -309,17 +309,17 @@ class Receiver:
 # -- one step -------------------------------------------------------------------------
 
 
-STATS = re.compile(r"stopping; (.*), queue_dropped (\d+)")
+STATS = re.compile(r"stopping; (.*)")
 
 
 def sink_stats(log: str) -> dict[str, int]:
-    """The sink's counters from its last log line (``received 1, sent 1, ..., queue_dropped 0``)."""
+    """The sink's counters from its last log line (``received 1, sent 1, dropped 0, ...``);
+    ``queue_dropped``: its queue's drops (``dropped``)."""
     found = STATS.findall(log)
     if not found:
         return {}
-    fields, dropped = found[-1]
-    stats = {k: int(v) for k, v in (item.rsplit(" ", 1) for item in fields.split(", "))}
-    return {**stats, "queue_dropped": int(dropped)}
+    stats = {k: int(v) for k, v in (item.rsplit(" ", 1) for item in found[-1].split(", "))}
+    return {**stats, "queue_dropped": stats["dropped"]}
 
 
 def step_sonibus(receiver: Receiver, rate: float, seconds: float, robots: int, publishers: int,

@@ -111,6 +111,7 @@ class Adapter:
             self.state = "stopped"
             return
         self.stopping.set()
+        log.info("%s: stopping; %s", self.name, ", ".join(f"{k} {v}" for k, v in self.stats.items()))
         try:
             self._stop()
         finally:

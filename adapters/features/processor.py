@@ -51,10 +51,6 @@ class Features(Adapter):
                                          per_joint_keys=cfg.per_joint_keys))
         self.spawn(self._run, "features")
 
-    def _stop(self) -> None:
-        if hasattr(self, "_frames"):  # (started)
-            log.info("%s: stopping; %s", self.name, ", ".join(f"{k} {v}" for k, v in self.stats.items()))
-
     # -- the loop ---------------------------------------------------------------------
 
     def _run(self) -> None:

@@ -52,9 +52,6 @@ class MidiController(Adapter):
         self.spawn(self._work, "commands")
         log.info("%s: MIDI in on %s", self.name, f"'{cfg.connect}'" if cfg.connect else f"virtual port '{cfg.port}'")
 
-    def _stop(self) -> None:
-        log.info("%s: stopping; %s", self.name, ", ".join(f"{k} {v}" for k, v in self.stats.items()))
-
     def _receive(self, event: tuple[list[int], float], data: Any = None) -> None:
         self._queue.put(("midi", event[0]))   # rtmidi's thread: only enqueue
 

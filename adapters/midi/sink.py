@@ -85,11 +85,6 @@ class MidiSink(Adapter):
         self.spawn(self._forward, "forward")
         log.info("%s: MIDI out on %s", self.name, f"'{cfg.connect}'" if cfg.connect else f"virtual port '{cfg.port}'")
 
-    def _stop(self) -> None:
-        queue = getattr(self, "_queue", None)
-        log.info("%s: stopping; %s, queue_dropped %d", self.name,
-                 ", ".join(f"{k} {v}" for k, v in self.stats.items()), queue.dropped if queue else 0)
-
     @property
     def channels(self) -> dict[str, int]:
         """Robot → the channel it plays on."""

@@ -112,9 +112,6 @@ class OscGateway(Adapter):
     def _serve_tcp(self) -> None:
         tcp.serve(self._tcp, self.stopping, self._allowed, self._guarded, self._problem, self._refused, POLL_S)
 
-    def _stop(self) -> None:
-        log.info("%s: stopping; %s", self.name, ", ".join(f"{k} {v}" for k, v in self.stats.items()))
-
     def _bind(self, kind: socket.SocketKind, key: str, value: str) -> socket.socket:
         host, port = parse_endpoint(key, value)
         try:

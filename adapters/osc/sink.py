@@ -82,10 +82,6 @@ class OscSink(Adapter):
         self.own(self._presence)
         self.spawn(lambda: self._presence.watch(self.stopping), "silence")
 
-    def _stop(self) -> None:
-        log.info("%s: stopping; %s, queue_dropped %d", self.name,
-                 ", ".join(f"{k} {v}" for k, v in self.stats.items()), self.dropped)
-
     @property
     def dropped(self) -> int:
         """Samples dropped because the queue was full."""

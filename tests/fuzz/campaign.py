@@ -115,7 +115,7 @@ def counts(fuzzer: Fuzzer, report: checks.Report) -> dict[str, Any]:
     """Per family: inputs tried by label, what came back, and what the nodes counted."""
     node_counters = report.figures.get("node_counters", {})
     refused = {node: {k: v for k, v in c.items() if k in ("bad", "malformed", "bad_args", "unknown_address",
-                                                          "stale", "late", "queue_dropped", "busy")}
+                                                          "stale", "late", "dropped", "busy")}
                for node, c in node_counters.items()}
     return {
         "tried": {family: dict(labels) | {"total": sum(labels.values())} for family, labels in fuzzer.tried.items()},
