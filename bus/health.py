@@ -10,18 +10,31 @@ and serves the latest there, so ``latest`` asks once and needs no wait.
 
 from __future__ import annotations
 
+import threading
 from typing import Any
 
-from . import keys
-from .node import Bus
+from . import keys, messages
+from .node import Bus, Reply
 
 
-def latest(bus: Bus, timeout: float = 1.0) -> dict[tuple[str, str], dict[str, Any]]:
-    """The latest stats of every node that answers within ``timeout`` s, by ``(host, node)``."""
-    found: dict[tuple[str, str], dict[str, Any]] = {}
-    for stats in bus.query(keys.NODE_STATS, timeout=timeout):
-        if isinstance(stats, dict) and "host" in stats and "node" in stats:  # (not an error reply)
-            found[(str(stats["host"]), str(stats["node"]))] = stats
+def latest(bus: Bus, timeout: float = 1.0) -> dict[tuple[str, str], dict[str, Any] | str]:
+    """The latest stats of every node that answers within ``timeout`` s, by ``(host, node)``;
+    stats the gate refuses (``messages``: the ``node_stats`` schema) as the reason, a string."""
+    gate, found = messages.Gate(bus.limits), {}
+    done = threading.Event()
+
+    def take(reply: Reply) -> None:
+        if reply.payload is None:
+            return
+        key = keys.Key.parse(reply.key)
+        host, _, node = key.name.partition("/")
+        try:
+            found[(host, node)] = gate.check(key, reply.payload)
+        except ValueError as exc:  # messages.BadMessage
+            found[(host, node)] = f"stats unusable: {exc}"
+
+    bus.ask(keys.NODE_STATS, take, done.set, timeout=timeout, every_answer=True)
+    done.wait(timeout + 1.0)
     return found
 
 

@@ -161,6 +161,10 @@ class Gate:
     def command(self, key: Key, message: dict[str, Any]) -> None:
         json_like(message, "arguments")
 
+    def node_stats(self, key: Key, message: dict[str, Any]) -> None:
+        json_like(message, "stats")
+        _schema_check(schemas.validator("node_stats"), "node stats", message)
+
     # -- shared -----------------------------------------------------------------------
 
     def stamp(self, message: dict[str, Any]) -> tuple[float, int]:
@@ -205,6 +209,7 @@ SECTIONS: dict[str, Section] = {section.name: section for section in (
     Section("events", "event", Gate.event),
     Section("info", "robot_info", Gate.info),            # <robot>/info/derived: derived_info
     Section("cmd", None, Gate.command),
+    Section("stats", "node_stats", Gate.node_stats),     # sonibus/stats/<host>/<node>: a node's health
 )}
 """Every section of the key space, the one table decoding, ``Streams`` and the recorder dispatch on."""
 

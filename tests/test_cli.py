@@ -17,7 +17,7 @@ from pathlib import Path
 import pytest
 
 from sonibus.adapters.recorder.writer import RecordingWriter
-from sonibus.bus import ConfigError, keys, runner
+from sonibus.bus import ConfigError, encode, keys, runner
 from sonibus.bus.cli import COMMAND_GROUP, Command, Environment, Exit, demo, main
 from sonibus.bus.cli.app import parser
 from sonibus.bus.cli.send import command_args
@@ -182,6 +182,24 @@ def test_nodes_lists_the_robot_and_its_node(net):
     robot_line = next(line for line in out.splitlines() if line.strip().startswith("robot "))
     assert robot_line.split()[1:3] == ["pepper", "pepper"]
     assert "owned by sim-pepper" in robot_line
+    lines = out.splitlines()
+    health = lines[next(i for i, line in enumerate(lines) if "sim-pepper" in line and "node" in line) + 1]
+    assert re.fullmatch(r"\s+rx \S+/s tx \S+/s drop 0 bad 0( p99 [\d.]+ ms)? cpu \d+% \d+ MB", health), health
+
+
+def test_nodes_shows_stats_the_gate_refuses_as_unusable(net):
+    """A node whose stats are not stats: its line says so, the others' are shown."""
+    net.sim("pepper")
+    liar = net.bus("liar")
+    token = liar.token(keys.node_token("stage-pc", "liar"))  # noqa: F841 (held: a dropped token is undeclared)
+    served = liar.serve(keys.node_stats("stage-pc", "liar"), lambda q: q.reply(  # noqa: F841 (held)
+        keys.node_stats("stage-pc", "liar"), encode({"t": time.time(), "counters": "lots"})))
+    result = run_cli("nodes", *net.cli_args())
+    assert result.returncode == 0, result.stderr
+    lines = result.stdout.splitlines()
+    liar_line = lines[next(i for i, line in enumerate(lines) if " liar " in line) + 1]
+    assert "stats unusable: not a valid node stats" in liar_line
+    assert any(re.match(r"\s+rx \S+/s tx", line) for line in lines)
 
 
 def test_nodes_that_reach_nobody_say_so_and_what_to_check():

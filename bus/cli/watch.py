@@ -8,7 +8,7 @@ import json
 import time
 from typing import Any
 
-from .. import codec, keys, ownership, registry
+from .. import codec, health, keys, ownership, registry
 from ..client import robot_info
 from ..node import Bus
 from ..presence import SILENCE_S
@@ -40,11 +40,15 @@ def _nodes(args: argparse.Namespace, env: Environment) -> Exit:
         nodes = bus.alive(f"{keys.NODES}/**", timeout=args.timeout)
         robots = ownership.claims(bus.alive(keys.robot_token(), timeout=args.timeout))
         described = {(d.get("host"), d.get("node")): d for d in bus.query(f"{keys.NODES}/**", timeout=args.timeout)}
+        stats = health.latest(bus, timeout=args.timeout)
         now = time.time()
         env.say(f"{len(nodes)} node(s)")
         for key in nodes:
             host, _, node = key[len(keys.NODES) + 1:].partition("/")
             env.say(node_line(host, node, described.get((host, node), {}), now))
+            if (host, node) in stats:
+                found = stats[(host, node)]
+                env.say(f"        {found if isinstance(found, str) else health.summary(found)}")
         env.say(f"{len(robots)} robot(s)")
         for name, claims in robots.items():
             info = robot_info(bus, name, timeout=args.timeout) or {}
