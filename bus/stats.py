@@ -54,12 +54,6 @@ class Counters(Mapping[str, int]):
             self._counts.setdefault(name, 0)
             self._sources.setdefault(name, []).append(source)
 
-    def __setitem__(self, name: str, value: int) -> None:
-        # For callers that take a mapping (``stats["received"] += 1``): safe only from the one
-        # thread that counts ``name``; elsewhere use ``add``.
-        with self._lock:
-            self._counts[name] = value - sum(source() for source in self._sources.get(name, ()))
-
     def __getitem__(self, name: str) -> int:
         with self._lock:
             count = self._counts[name]

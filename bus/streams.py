@@ -18,7 +18,7 @@ Plan(frames=('*/frame',), keys=('*/events/*',), broad=())
 from __future__ import annotations
 
 import itertools
-from collections.abc import Callable, Iterable, MutableMapping
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from typing import Any, NamedTuple
 
@@ -120,19 +120,19 @@ class Selection:
             return Incoming(source, message, None, message["t"], message["seq"], values)
         return Incoming(source, message, message)
 
-    def take(self, key: str, payload: bytes, stats: MutableMapping[str, int],
+    def take(self, key: str, payload: bytes, count: Callable[[str, int], None],
              warn: Callable[[str, str], None]) -> Incoming | None:
-        """``incoming``, counted in a sink's ``stats`` (``received``, a frame as its
-        samples; ``bad``); a bad message is ``warn``ed about (naming the key and the
-        reason) and gives None."""
+        """``incoming``, counted by a sink's ``count`` (``Adapter.count``: ``received``, a
+        frame as its samples; ``bad``); a bad message is ``warn``ed about (naming the key
+        and the reason) and gives None."""
         try:
             message = self.incoming(key, payload)
         except ValueError as exc:  # messages.BadMessage, or a key that is not a data key
-            stats["received"] += 1
-            stats["bad"] += 1
+            count("received", 1)
+            count("bad", 1)
             warn("bad", f"message on '{key}' refused: {exc}")
             return None
-        stats["received"] += len(message.samples) or 1
+        count("received", len(message.samples) or 1)
         return message
 
     def accepts(self, key: str) -> bool:

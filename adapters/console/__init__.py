@@ -53,7 +53,7 @@ class ConsoleView(Adapter):
                 next_line += self.config.every_s
 
     def _take(self, key: str, payload: bytes) -> None:
-        message = self._streams.take(key, payload, self.stats, self.warn)
+        message = self._streams.take(key, payload, self.count, self.warn)
         if message is None:
             return
         source = message.source

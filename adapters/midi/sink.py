@@ -123,7 +123,7 @@ class MidiSink(Adapter):
         if key == INFO:
             self._learn(*payload)
             return
-        message = self._streams.take(key, payload, self.stats, self.warn)
+        message = self._streams.take(key, payload, self.count, self.warn)
         if message is None:
             return
         if message.source.section in ("frame", "joints"):

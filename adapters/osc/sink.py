@@ -127,7 +127,7 @@ class OscSink(Adapter):
                     self._sample_to(link, *held, now)
 
     def _take(self, key: str, payload: bytes, now: float) -> None:
-        message = self._streams.take(key, payload, self.stats, self.warn)
+        message = self._streams.take(key, payload, self.count, self.warn)
         if message is None:
             return
         if message.source.section in ("frame", "joints"):

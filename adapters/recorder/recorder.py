@@ -145,7 +145,7 @@ class Recorder(Adapter):
         log.info("%s: %s", self.name, describe(self.status()))
 
     def _record(self, key: str, payload: bytes, arrived_ns: int) -> None:
-        incoming = self._streams.take(key, payload, self.stats, self.warn)  # checked by the gate, counted
+        incoming = self._streams.take(key, payload, self.count, self.warn)  # checked by the gate, counted
         if incoming is None:
             return
         samples = self._joints(incoming) if incoming.source.section == "frame" else [(key, incoming.message)]
