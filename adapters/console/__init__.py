@@ -39,7 +39,7 @@ class ConsoleView(Adapter):
         self._streams = self.own(Streams(self.bus, [keys.joints(cfg.robots), keys.event(cfg.robots, "*")],
                                          self._queue, per_joint_keys=cfg.per_joint_keys))
         self._values: dict[str, dict[str, float]] = {}
-        self._frames: dict[str, set[int]] = {}
+        self._seqs: dict[str, set[int]] = {}
         self.spawn(self._run, "view")
 
     def _run(self) -> None:
@@ -61,17 +61,17 @@ class ConsoleView(Adapter):
             values = self._values.setdefault(source.robot, {})
             for sample in message.joints:
                 values[sample.source.name] = sample.values[0]
-            self._frames.setdefault(source.robot, set()).add(message.seq)
+            self._seqs.setdefault(source.robot, set()).add(message.seq)
         elif message.event is not None and self.config.events and source.name != "command":
             details = " ".join(f"{k}={v}" for k, v in message.event.items() if k not in ("t", "kind"))
             self._print(f"{source.robot:<8} event {source.name}: {details}")
 
     def _print_rates(self) -> None:
         for robot, values in sorted(self._values.items()):
-            rate = len(self._frames.get(robot, ())) / self.config.every_s
+            rate = len(self._seqs.get(robot, ())) / self.config.every_s
             shown = "  ".join(f"{j} {values[j]:+.3f}" for j in self.config.joints if j in values)
             self._print(f"{robot:<8} {rate:6.1f} frames/s  {shown}")
-        self._frames = {}
+        self._seqs = {}
 
     def _print(self, line: str) -> None:
         print(line, file=self.out, flush=True)

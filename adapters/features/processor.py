@@ -42,8 +42,8 @@ class Features(Adapter):
         self.robot_features: dict[str, RobotFeatures] = {}  # robot → its features, once its info came
         self._learning: set[str] = set()                    # robots whose info is being worked out
         self._publishers: dict[str, zenoh.Publisher] = {}
-        self._frames = FrameAssembler(cfg.max_wait_ms / 1000.0)  # with per_joint_keys
-        self.stats.follow("late", lambda: self._frames.late)
+        self._assembler = FrameAssembler(cfg.max_wait_ms / 1000.0)  # with per_joint_keys
+        self.stats.follow("late", lambda: self._assembler.late)
         self._queue = self.own(SampleQueue(cfg.queue))
         self._info = InfoRequests(self.bus, lambda robot, info: self._queue.put((INFO, (robot, info))),
                                   lambda robot, text: self.warn("info", text))
@@ -55,11 +55,11 @@ class Features(Adapter):
 
     def _run(self) -> None:
         while not self.stopping.is_set():
-            expiry = self._frames.next_expiry()
+            expiry = self._assembler.next_expiry()
             item = self._queue.get(timeout=0.2 if expiry is None else max(0.0, min(0.2, expiry - time.monotonic())))
             if item is not None:
                 self._take(*item)
-            for frame in self._frames.expire():
+            for frame in self._assembler.expire():
                 self.process(frame)
 
     def _take(self, key: str, payload: Any) -> None:
@@ -81,7 +81,7 @@ class Features(Adapter):
         if message.source.section == "frame":
             self.process(whole(message))
             return
-        for frame in self._frames.add(robot, key, message.seq, message.t, message.values[0]):
+        for frame in self._assembler.add(robot, key, message.seq, message.t, message.values[0]):
             self.process(frame)
 
     def process(self, frame: Frame) -> None:

@@ -71,8 +71,8 @@ class OscSink(Adapter):
         self._links = [_Link(t, _resolve(t.to)) for t in cfg.resolved_targets()]
         self._sample_links = [link for link in self._links if not link.target.framed]
         self._frame_links = [link for link in self._links if link.target.framed]
-        self._frames = FrameAssembler()
-        self.stats.follow("late", lambda: self._frames.late)
+        self._assembler = FrameAssembler()
+        self.stats.follow("late", lambda: self._assembler.late)
         self._socket = self.own(socket.socket(socket.AF_INET, socket.SOCK_DGRAM))
         self._queue = self.own(SampleQueue(cfg.queue))
         self._streams = Streams(self.bus, cfg.subscribe, self._queue, per_joint_keys=cfg.per_joint_keys)
@@ -106,7 +106,7 @@ class OscSink(Adapter):
 
     def _wait(self) -> float:
         soonest = [0.2]
-        expiry = self._frames.next_expiry()
+        expiry = self._assembler.next_expiry()
         if expiry is not None:
             soonest.append(expiry - time.monotonic())
         for link in self._links:
@@ -116,7 +116,7 @@ class OscSink(Adapter):
         return max(0.0, min(soonest))
 
     def _tick(self, now: float) -> None:
-        for frame in self._frames.expire(now):
+        for frame in self._assembler.expire(now):
             self._send_frame(frame, now)
         for link in self._links:
             for slot in [s for s in link.held if link.turn(s, now)]:
@@ -151,7 +151,7 @@ class OscSink(Adapter):
         if not self._frame_links or not samples:
             return
         # Joints and derived values of one seq go out in one bundle, however they came.
-        frames = self._frames.extend(message.source.robot, message.seq, message.t,
+        frames = self._assembler.extend(message.source.robot, message.seq, message.t,
                                      {s.source.key: (s.source, s.values) for s in samples})
         for frame in frames:
             self._send_frame(frame, now)
