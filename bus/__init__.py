@@ -24,10 +24,11 @@ from .owner import RobotAdapter
 from .queue import SampleQueue
 from .robot import JointSpec, RobotModel, load_model
 from .session import BusConfig, open_session
+from .verbs import RobotVerbs
 
 __all__ = [
     "Adapter", "AdapterError", "Bus", "BusConfig", "CommandError", "ConfigError", "Installation",
-    "JointSpec", "NodeSpec", "OwnershipError", "RobotAdapter", "RobotModel", "RobotNotFound",
+    "JointSpec", "NodeSpec", "OwnershipError", "RobotAdapter", "RobotModel", "RobotNotFound", "RobotVerbs",
     "SampleQueue", "SonibusError", "decode", "encode", "load_installation", "load_model",
     "open_session", "robot_info", "send_command",
 ]

@@ -18,6 +18,7 @@ Plan(frames=('*/frame',), keys=('*/events/*',), broad=())
 from __future__ import annotations
 
 import itertools
+import logging
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from typing import Any, NamedTuple
@@ -27,6 +28,8 @@ import zenoh
 from . import keys, messages
 from .node import Bus
 from .queue import SampleQueue
+
+log = logging.getLogger(__name__)
 
 _JOINTS = zenoh.KeyExpr(keys.joints())
 MAX_KEYS = 10_000  # keys taken apart and remembered
@@ -160,6 +163,9 @@ class Streams(Selection):
                  per_joint_keys: bool = False, stamped: bool = False, limits: messages.Limits | None = None) -> None:
         super().__init__(patterns := tuple(patterns), limits or bus.limits)
         self.plan = plan(patterns, per_joint_keys)
+        if self.plan.frames:  # said once: what a user asked for is not the key subscribed to
+            log.info("%s: %s served from whole frames on %s (per_joint_keys = true for publishers of "
+                     "joint keys only)", bus.node, ", ".join(patterns), ", ".join(self.plan.frames))
         self.subscribers = [bus.subscribe(k, queue=queue, stamped=stamped)[0] for k in self.plan.frames]
         self.subscribers += [bus.subscribe(k, queue=queue, stamped=stamped, skip=keys.is_frame)[0]
                              for k in self.plan.keys]
