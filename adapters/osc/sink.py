@@ -152,7 +152,7 @@ class OscSink(Adapter):
             return
         # Joints and derived values of one seq go out in one bundle, however they came.
         frames = self._assembler.extend(message.source.robot, message.seq, message.t,
-                                     {s.source.key: (s.source, s.values) for s in samples})
+                                        {s.source.key: (s.source, s.values) for s in samples})
         for frame in frames:
             self._send_frame(frame, now)
 
