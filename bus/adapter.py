@@ -225,8 +225,9 @@ class Adapter:
                 try:
                     self._stats_last = self._stats_report.next(self._stats_identity(), self.metrics())
                     publisher.put(codec.encode(self._stats_last))
-                except Exception as exc:  # a closing session, a metrics() that raised: the next second
-                    log.debug("%s: stats not sent: %s", self.name, exc)
+                except Exception as exc:  # a metrics() that raised, a closing session: the next second
+                    if not self.stopping.is_set():
+                        self.warn("stats", f"stats not sent: {type(exc).__name__}: {_first_line(exc)}")
         self.spawn(report, "stats", restart=True)
 
     def _serve_stats(self, key: str, query: Any) -> None:
