@@ -45,6 +45,6 @@ def test_demo_reaches_oscdump_at_the_configured_rate(spawn):
     arrivals = [t for t, _ in by_address["/pepper/joints/HeadYaw"]][5:-5]
     rate = (len(arrivals) - 1) / (arrivals[-1] - arrivals[0])
     # the configured 50, not the default 100 (a busy machine skips frames, a starved oscdump reads
-    # in bunches: the rate itself is bench/sim_to_oscdump.py's and bench/pacing.py's figure)
+    # in bunches: the sim's rate itself is bench/pacing.py's figure)
     assert 25 <= rate <= 70, f"{rate:.1f} messages/s for HeadYaw at rate 50"
     assert time.time() - arrivals[-1] < 30  # timetags are wall-clock receive times
