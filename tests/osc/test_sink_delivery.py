@@ -375,7 +375,7 @@ def test_rate_cap_sends_the_newest_of_a_burst_when_its_turn_comes(net, receivers
     wait_for(lambda: ramp() and ramp()[-1][1] == f32(1.0), timeout=2, what="the newest value, 1.0")
     (first_at, first), (last_at, last) = ramp()
     assert (first, last) == (f32(0.1), f32(1.0))
-    assert last_at - first_at >= 0.095
+    assert last_at - first_at >= 0.05  # a turn (100 ms) later, less how long a busy machine held up the first
 
 
 def test_on_change_and_deadband_send_only_what_moved(net, receivers):
