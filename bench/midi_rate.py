@@ -287,6 +287,10 @@ def main() -> None:
             for leftover in Path("/dev/shm").glob(f"jack_sem.*_{os.environ['JACK_DEFAULT_SERVER']}_*"):
                 leftover.unlink(missing_ok=True)  # jackd 1.9 leaves its clients' semaphores
         xruns = (folder / "jackd.log").read_text(errors="replace").count("XRun")
+    refused = [s["offered_per_s"] for s in sink if s["sink"].get("bad") or not s["delivered"]]
+    if refused:  # a harness the gate refuses (it once served a partial robot info) must not read as a figure
+        sys.exit(f"midi_rate: the sink refused input or delivered nothing at {refused} messages/s: "
+                 f"{[s['sink'] for s in sink if s['offered_per_s'] == refused[0]]}")
     no_drop = [s for s in sink if s["sink"].get("queue_dropped", 1) == 0]
     result = {"joints": 17, "robots": args.robots, "seconds": args.seconds, "machine": machine,
               "jack": "dummy driver, 48000 Hz, 256 frames per period", "jack_xruns": xruns,

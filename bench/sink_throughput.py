@@ -124,6 +124,7 @@ def publish(endpoint: str, robots: list[int], frames_per_s: float, seconds: floa
     (joints J0..J16 in 0..1) and put a few warm-up frames first, so a sink that needs the
     ranges has them before the measured frames."""
     gc.disable()
+    from sonibus import schemas
     from sonibus.bus import Bus, BusConfig, codec, messages, open_session
 
     session = open_session(BusConfig(multicast=False, connect=(endpoint,)))
@@ -135,8 +136,12 @@ def publish(endpoint: str, robots: list[int], frames_per_s: float, seconds: floa
         watched = [p for row in streams for p in row] if per_joint_keys else frames_out
         queryables = []  # kept referenced for the life of the session
         for r in robots if info else ():
-            description = codec.encode({"robot": f"bot{r}", "rate_hz": frames_per_s, "behaviors": [],
-                                        "joints": [{"name": f"J{j}", "min": 0.0, "max": 1.0} for j in range(JOINTS)]})
+            description = codec.encode({  # a whole robot info (the sinks' gate checks it by its schema)
+                "robot": f"bot{r}", "model": "bench", "rate_hz": frames_per_s, "behaviors": [], "postures": [],
+                "adapter": "bench", "schema_version": schemas.VERSION,
+                "owner": {"host": bus.host, "node": bus.node},
+                "joints": [{"name": f"J{j}", "unit": "rad", "min": 0.0, "max": 1.0, "max_velocity": 1.0}
+                           for j in range(JOINTS)]})
             queryables.append(bus.serve(f"bot{r}/info", lambda q, d=description: q.reply(
                 q.key_expr, d, encoding=codec.ENCODING)))
         deadline = time.monotonic() + 30.0
@@ -158,7 +163,8 @@ def publish(endpoint: str, robots: list[int], frames_per_s: float, seconds: floa
             return JOINTS * len(streams)
 
         encode = codec.encode
-        for frame in range(-5, 0) if info else ():  # the sink asks for the info on its first sample
+        warm_up = 5 if info else 0  # frames 0..4: the sink asks for the info on its first sample
+        for frame in range(warm_up):
             put_frame(frame, time.time())
             time.sleep(0.1)
         ready.set()
@@ -171,7 +177,7 @@ def publish(endpoint: str, robots: list[int], frames_per_s: float, seconds: floa
         cpu0, start = time.process_time(), time.monotonic()
         sent = frame = 0
         while frame < frames and time.monotonic() - start < 2.0 * seconds:
-            sent += put_frame(frame, time.time())
+            sent += put_frame(warm_up + frame, time.time())
             frame += 1
             wait = start + frame * period - time.monotonic()
             if wait > 0:
