@@ -22,6 +22,7 @@ publishes its health once a second on ``sonibus/stats/<host>/<node>``
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import math
 import threading
@@ -92,6 +93,7 @@ class Adapter:
         self._bus = bus.for_node(self.name)
         self.state = "starting"
         self.since = time.time()
+        self._stats_report = Report(self.stats)  # (its first interval starts now)
         try:
             node_key = keys.node_token(self._bus.host, self.name)
             self.own(self._bus.token(node_key))
@@ -170,7 +172,7 @@ class Adapter:
             if now - self._last_warning.get(kind, -math.inf) < WARN_EVERY_S:
                 return
             self._last_warning[kind] = now
-            counters = ", ".join(f"{k} {v}" for k, v in self.stats.items() if v)
+        counters = ", ".join(f"{k} {v}" for k, v in self.stats.items() if v)  # (outside the lock: reads sources)
         log.warning("%s: %s%s", self.name, message, f" ({counters})" if counters else "")
 
     def spawn(self, target: Callable[[], None], name: str, restart: bool = False) -> threading.Thread:
@@ -236,8 +238,10 @@ class Adapter:
             stats = self._stats_last or self._stats_report.next(self._stats_identity(), self.metrics(),
                                                                 advance=False)
             query.reply(key, codec.encode(stats), encoding=codec.ENCODING)
-        except Exception as exc:  # (a metrics() that raised): the asker goes without this node's
-            log.debug("%s: stats not served: %s", self.name, exc)
+        except Exception as exc:  # (a metrics() that raised): the asker hears why at once, not a timeout
+            self.warn("stats", f"stats not served: {type(exc).__name__}: {_first_line(exc)}")
+            with contextlib.suppress(Exception):  # (a session closing underneath)
+                query.reply_err(codec.encode({"error": f"stats of {self.name} unavailable: {_first_line(exc)}"}))
 
     def _stats_identity(self) -> dict[str, Any]:
         return {"host": self.bus.host, "node": self.name, "adapter": self.kind, "state": self.state,

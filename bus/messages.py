@@ -194,22 +194,24 @@ class Gate:
 @dataclass(frozen=True)
 class Section:
     """One section of the key space (``<robot>/<section>/...``): the schema of its
-    messages in ``schemas/v1/`` and the gate's check of them."""
+    messages in ``schemas/v1/``, the gate's check of them, and how a sink takes them
+    (``streams.Selection``)."""
 
     name: str
     schema: str | None                                   # None: no one schema (a command's is its verb's)
     check: Callable[[Gate, Key, dict[str, Any]], None]
-    stream: bool = False                                 # high-rate data (``Bus.stream_publisher``), else events
+    taken_as: str = "message"                            # "frame", "sample" (t, seq, values) or "message"
+    robot_data: bool = True                              # False: about the bus, left out unless asked by name
 
 
 SECTIONS: dict[str, Section] = {section.name: section for section in (
-    Section("frame", "frame", Gate.frame, stream=True),
-    Section("joints", "joint_sample", Gate.joint_sample, stream=True),
-    Section("derived", "derived_sample", Gate.derived_sample, stream=True),
+    Section("frame", "frame", Gate.frame, taken_as="frame"),
+    Section("joints", "joint_sample", Gate.joint_sample, taken_as="sample"),
+    Section("derived", "derived_sample", Gate.derived_sample, taken_as="sample"),
     Section("events", "event", Gate.event),
     Section("info", "robot_info", Gate.info),            # <robot>/info/derived: derived_info
     Section("cmd", None, Gate.command),
-    Section("stats", "node_stats", Gate.node_stats),     # sonibus/stats/<host>/<node>: a node's health
+    Section("stats", "node_stats", Gate.node_stats, robot_data=False),  # sonibus/stats/<host>/<node>
 )}
 """Every section of the key space, the one table decoding, ``Streams`` and the recorder dispatch on."""
 

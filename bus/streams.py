@@ -108,16 +108,16 @@ class Selection:
         """What came on ``key``, checked by the gate (a frame keeps the selected joints);
         ``messages.BadMessage`` saying what is wrong otherwise."""
         source = self._key(key)
-        message = self.gate.check(source, payload)
-        section = source.section
-        if section == "frame":
+        message = self.gate.check(source, payload)  # (a key of no section is refused here)
+        taken_as = messages.SECTIONS[source.section].taken_as
+        if taken_as == "frame":
             t, seq = message["t"], message["seq"]
             prefix = f"{source.robot}/joints/"
             samples = tuple(Incoming(self._key(prefix + name), message, None, t, seq, (float(value),))
                             for name, value in zip(message["names"], message["v"], strict=True)
                             if self.accepts(prefix + name))
             return Incoming(source, message, None, t, seq, (), samples)
-        if section in ("joints", "derived"):
+        if taken_as == "sample":
             value = message["v"]
             values = tuple(map(float, value)) if isinstance(value, list) else (float(value),)
             return Incoming(source, message, None, message["t"], message["seq"], values)
@@ -167,9 +167,9 @@ class Streams(Selection):
             log.info("%s: %s served from whole frames on %s (per_joint_keys = true for publishers of "
                      "joint keys only)", bus.node, ", ".join(patterns), ", ".join(self.plan.frames))
         self.subscribers = [bus.subscribe(k, queue=queue, stamped=stamped)[0] for k in self.plan.frames]
-        self.subscribers += [bus.subscribe(k, queue=queue, stamped=stamped, skip=keys.is_frame)[0]
+        self.subscribers += [bus.subscribe(k, queue=queue, stamped=stamped, skip=_skip(k, keys.is_frame))[0]
                              for k in self.plan.keys]
-        self.subscribers += [bus.subscribe(k, queue=queue, stamped=stamped, skip=_from_frames)[0]
+        self.subscribers += [bus.subscribe(k, queue=queue, stamped=stamped, skip=_skip(k, _from_frames))[0]
                              for k in self.plan.broad]
 
     def undeclare(self) -> None:
@@ -179,7 +179,21 @@ class Streams(Selection):
 
 
 def _from_frames(key: str) -> bool:
-    """Joint and frame keys, which a broad pattern's subscription leaves to the frames (and
-    nodes' stats, no robot's data: ``bus/health.py`` reads them)."""
-    return (keys.is_frame(key) or (key.count("/") == 2 and key.split("/")[1] == "joints")
-            or key.startswith(keys.STATS + "/"))
+    """Joint and frame keys, which a broad pattern's subscription leaves to the frames."""
+    return keys.is_frame(key) or (key.count("/") == 2 and key.split("/")[1] == "joints")
+
+
+def _skip(pattern: str, also: Callable[[str], bool]) -> Callable[[str], bool]:
+    """What a subscription to ``pattern`` leaves out: keys ``also`` names, and keys of sections
+    that are no robot's data (nodes' stats) unless ``pattern`` names that section."""
+    chunks = pattern.split("/")
+    named = chunks[1] if len(chunks) > 1 and chunks[1] in messages.SECTIONS else ""
+
+    def skip(key: str) -> bool:
+        if also(key):
+            return True
+        chunks = key.split("/", 2)
+        section = messages.SECTIONS.get(chunks[1]) if len(chunks) > 1 else None
+        return section is not None and not section.robot_data and section.name != named
+
+    return skip

@@ -60,6 +60,7 @@ class WebServer:
         self._ready = threading.Event()
         self._start_error: BaseException | None = None
         self._crash: BaseException | None = None
+        adapter.stats.follow("dropped", lambda: self.dropped)  # the node's stats count them too
 
     @property
     def url(self) -> str:
@@ -90,7 +91,7 @@ class WebServer:
     def broadcast(self, value: Any) -> None:
         """Send ``value`` as JSON to every WebSocket client (from any thread); a client
         that falls ``CLIENT_BACKLOG`` messages behind loses the oldest."""
-        text = json.dumps(value)
+        text = json.dumps(value, allow_nan=False)  # (NaN is no JSON: a browser's JSON.parse refuses it)
         self.latest, self._latest_text = value, text
         loop = self._loop
         if loop is None:
@@ -169,8 +170,14 @@ class WebServer:
 
     def _on_loop_error(self, loop: asyncio.AbstractEventLoop, context: dict[str, Any]) -> None:
         exc = context.get("exception")
+        if not isinstance(exc, Exception) or self.adapter.stopping.is_set():
+            # a message without an exception ("Unclosed client session"), or noise of a stop: said, not fatal
+            self.adapter.count("errors")
+            self.adapter.warn("loop", f"web server: {context.get('message', 'loop error')}"
+                                      f"{f': {exc}' if exc is not None else ''}")
+            return
         if self._crash is None:  # the worker raises it: fail() logs it with its traceback
-            self._crash = exc if isinstance(exc, Exception) else RuntimeError(context.get("message", "loop error"))
+            self._crash = exc
 
     @web.middleware
     async def _errors(self, request: web.Request, handler: Handler) -> web.StreamResponse:

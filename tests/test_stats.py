@@ -23,6 +23,7 @@ from sonibus.adapters.sim.naoqi import FakeNaoqi, FakeNaoqiConfig
 from sonibus.bus import Adapter, decode, health, keys
 from sonibus.bus.queue import SampleQueue
 from sonibus.bus.stats import BASE, Counters
+from sonibus.bus.streams import Streams
 
 from .conftest import free_port, wait_for
 
@@ -108,15 +109,30 @@ def test_a_node_serves_its_stats_before_its_first_second(net):
     assert "latency_ms" not in stats and "metrics" not in stats
 
 
-def test_a_sink_subscribed_to_everything_leaves_the_stats_out(net):
+@pytest.mark.parametrize("per_joint_keys", [False, True])
+def test_a_sink_subscribed_to_everything_leaves_the_stats_out(net, per_joint_keys):
     watcher = net.bus("watcher")
     collected = Collected(watcher)
-    everything = net.start(OscSink(OscSinkConfig(subscribe="**", targets=(f"127.0.0.1:{free_port()}",)),
-                                   name="everything"))
+    everything = net.start(OscSink(OscSinkConfig(subscribe="**", targets=(f"127.0.0.1:{free_port()}",),
+                                                 per_joint_keys=per_joint_keys), name="everything"))
     net.start(Adapter(name="other"))
     wait_for(lambda: len(collected.of("other")) >= 2 and len(collected.of("everything")) >= 2, timeout=10,
              what="stats of both nodes on the bus")
     assert everything.stats["bad"] == 0 and everything.stats["received"] == 0  # not robot data
+
+
+def test_a_subscription_that_names_the_stats_gets_them(net):
+    """Left out of broad patterns, taken when asked for by name (a monitor of your own)."""
+    queue = SampleQueue(100)
+    streams = Streams(net.bus("monitor"), ["sonibus/stats/**"], queue)
+    try:
+        net.start(Adapter(name="other"))
+        key, payload = wait_for(lambda: queue.get(0.1), timeout=10, what="a node's stats")
+        stats = streams.incoming(key, payload).event
+        schemas.validate("node_stats", stats)
+        assert key == keys.node_stats(stats["host"], stats["node"])
+    finally:
+        streams.undeclare()
 
 
 def test_counters_are_exact_when_counted_from_many_threads():

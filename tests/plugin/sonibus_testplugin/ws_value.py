@@ -4,8 +4,9 @@ from dataclasses import dataclass
 
 from aiohttp import web
 
-from sonibus.bus import Adapter, decode
+from sonibus.bus import Adapter, SampleQueue
 from sonibus.bus.options import bad
+from sonibus.bus.streams import Streams
 from sonibus.bus.web import WebServer
 
 
@@ -30,8 +31,9 @@ class ValueServer(Adapter):
         self.web = WebServer(self, self.config.host, self.config.port)
         self.web.app.router.add_get("/value", self.value)
         self.web.app.router.add_get("/ws", self.web.websocket)  # every broadcast, to every client
-        subscriber, self.queue = self.bus.subscribe(f"{self.config.robot}/joints/{self.config.joint}")
-        self.own(subscriber)                  # undeclared by stop()
+        self.queue = self.own(SampleQueue(64))  # its drops count as the node's `dropped`
+        self.streams = self.own(Streams(self.bus, [f"{self.config.robot}/joints/{self.config.joint}"],
+                                        self.queue))  # the joint, out of the robot's frames
         self.web.start()                      # listening on self.web.port; stopped by stop()
         self.spawn(self.forward, "forward")   # joined by stop()
 
@@ -41,7 +43,8 @@ class ValueServer(Adapter):
     def forward(self) -> None:
         while not self.stopping.is_set():
             item = self.queue.get(timeout=0.2)
-            if item is not None:
-                sample = decode(item[1])
+            message = self.streams.take(*item, self.count, self.warn) if item else None  # checked, counted
+            for sample in message.joints if message else ():
                 self.web.broadcast({"robot": self.config.robot, "joint": self.config.joint,
-                                    "t": sample["t"], "v": sample["v"]})
+                                    "t": sample.t, "v": sample.values[0]})
+                self.count("sent")
