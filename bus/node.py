@@ -60,14 +60,20 @@ class Reply(NamedTuple):
     error: str = ""
 
 
-class Watch(NamedTuple):
-    """Zenoh entities that together watch something; ``undeclare`` ends the watch."""
+class Entities(NamedTuple):
+    """Zenoh entities declared together (a watch, a robot's publishers); ``undeclare`` ends them all."""
 
     entities: tuple[Any, ...]
 
     def undeclare(self) -> None:
-        for entity in self.entities:
-            entity.undeclare()
+        errors = []
+        for entity in self.entities:  # each, whatever the others do
+            try:
+                entity.undeclare()
+            except Exception as exc:  # a session closed underneath
+                errors.append(exc)
+        if errors:
+            raise errors[0]
 
 
 class Bus:
@@ -104,13 +110,13 @@ class Bus:
         """Send one message (default: reliably, ``EVENTS``: events are few and must not be lost)."""
         self.session.put(key, codec.encode(message), encoding=codec.ENCODING, **qos.options(publisher=False))
 
-    def watch_subscribers(self, keyexpr: str, changed: Callable[[bool], None]) -> Watch:
+    def watch_subscribers(self, keyexpr: str, changed: Callable[[bool], None]) -> Entities:
         """Call ``changed(True/False)`` now and whenever anyone starts or stops
-        subscribing to ``keyexpr``; undeclare the returned ``Watch`` to stop."""
+        subscribing to ``keyexpr``; undeclare what it returns to stop."""
         interest = self.session.declare_publisher(keyexpr)
         listener = interest.declare_matching_listener(lambda status: changed(status.matching))
         changed(interest.matching_status.matching)
-        return Watch((listener, interest))
+        return Entities((listener, interest))
 
     # -- subscribing ------------------------------------------------------------------
 

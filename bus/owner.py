@@ -2,7 +2,7 @@
 
 It owns the invariants every robot shares, whatever drives it (simulator,
 NAOqi): one owner per robot, the robot's liveliness token, ``<robot>/info``,
-the joint streams and events, and the command path — every request validated
+the publishing of its frames and events, and the command path — every request validated
 against the robot's model before the robot's verbs object sees it, one reply
 each, and a ``command`` event for each executed command.
 
@@ -33,7 +33,7 @@ log = logging.getLogger(__name__)
 
 
 class RobotAdapter(Adapter):
-    """Owns one robot: streams its joints and events, serves its commands."""
+    """Owns one robot: publishes its frames and events, serves its commands."""
 
     Verbs: ClassVar[type[RobotVerbs]]
     """The class of ``self.verbs``; checked by the registry for every verb."""

@@ -201,7 +201,7 @@ class Ownership:
             self._told.update(c.key for c in new)
         name = f"{self.bus.node}: robot '{self.robot}'"
         if was and first is not None:
-            log.warning("%s is also owned by %s, which claimed it first: this node stands by (streams nothing, "
+            log.warning("%s is also owned by %s, which claimed it first: this node stands by (publishes nothing, "
                         "refuses commands) until that one leaves", name, first)
             self._event("standby", first, self.claim)
         elif not was and first is None:

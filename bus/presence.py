@@ -115,7 +115,7 @@ class Presence:
                 log.warning(silence_hint(self.bus.node, robot))
 
     def _serving(self, robot: str) -> bool:
-        """Whether ``robot``'s owner is up: it serves ``<robot>/info`` once it streams."""
+        """Whether ``robot``'s owner is up: it serves ``<robot>/info`` once it publishes."""
         try:
             return bool(self.bus.query(keys.info(robot), timeout=1.0))
         except Exception as exc:  # a closing session

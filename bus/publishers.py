@@ -11,7 +11,7 @@ from typing import Any
 import zenoh
 
 from . import codec, keys, messages
-from .node import Bus
+from .node import Bus, Entities
 
 
 class FramePublishers:
@@ -44,6 +44,6 @@ class FramePublishers:
         return publisher
 
     def undeclare(self) -> None:
-        for entity in (self._watch, *self._joints.values(), self._frame):
-            entity.undeclare()
+        entities = Entities((self._watch, *self._joints.values(), self._frame))
         self._joints.clear()
+        entities.undeclare()

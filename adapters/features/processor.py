@@ -66,12 +66,8 @@ class Features(Adapter):
         if key == INFO:
             self._learn(*payload)
             return
-        self.count("received")
-        try:
-            message = self._streams.incoming(key, payload)
-        except ValueError as exc:  # messages.BadMessage: refused by the gate
-            self.count("bad")
-            self.warn("bad", f"message on '{key}' refused: {exc}")
+        message = self._streams.take(key, payload, self.count, self.warn)  # checked by the gate, counted
+        if message is None:
             return
         robot = message.source.robot
         if robot not in self.robot_features:  # (asked only of robots whose data passed the gate)
