@@ -51,6 +51,7 @@ class NaoqiRobot(RobotAdapter):
         self.verbs = NaoqiCommands(self.link, self.events, lambda: self.model, self._down)
         self.facts: Robot | None = None
         self.frames_skipped = 0
+        self._pacer: Pacer | None = None  # the streaming run going on
         self._halt = threading.Event()       # ends the current streaming run
         self._error = "not connected yet"
         self._announced = ""                 # connection state last published
@@ -157,7 +158,7 @@ class NaoqiRobot(RobotAdapter):
     def _stream(self, reader: Reader) -> None:
         gap = int((time.monotonic() - self._lost_at) * self.rate_hz) if self._lost_at else 0
         base = self._seq + 1 + gap  # seq goes on across reconnects; the outage shows as a gap
-        pacer = Pacer(self.rate_hz)
+        pacer = self._pacer = Pacer(self.rate_hz)
         self.read_times.clear()
         next_status = time.monotonic() + self.config.status_every_s
 
@@ -182,9 +183,13 @@ class NaoqiRobot(RobotAdapter):
 
         pacer.run(tick, self._halt)
         self.frames_skipped += pacer.skipped
+        self._pacer = None
 
     def metrics(self) -> dict[str, Any]:
-        return self.status() if hasattr(self, "read_times") else {}
+        if not hasattr(self, "read_times"):
+            return {}
+        pacer = self._pacer  # (the run going on: its skips are not added up yet)
+        return self.status(pacer.skipped if pacer is not None else 0)
 
     def status(self, skipped: int = 0) -> dict[str, Any]:
         """Achieved rate, read latency, frames skipped."""
