@@ -118,6 +118,8 @@ class Adapter:
             self._stop()
         finally:
             for thread in self._threads:
+                if thread.ident is None:  # Ctrl-C between spawn's append and start: it never ran
+                    continue
                 thread.join(JOIN_TIMEOUT_S)
                 if thread.is_alive():
                     log.warning("%s: thread %s did not stop within %.0f s", self.name, thread.name, JOIN_TIMEOUT_S)

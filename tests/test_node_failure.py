@@ -8,6 +8,7 @@ import threading
 from dataclasses import dataclass
 
 import msgpack
+import pytest
 from sonibus_testplugin import JsonLinesConfig, JsonLinesSink
 
 from sonibus.bus import Adapter, decode, keys
@@ -93,3 +94,28 @@ def test_sonibus_nodes_shows_a_failed_node_and_why(net):
     assert main(["nodes", *net.cli_args(), "--timeout", "2"], Environment(stdout=out, stderr=io.StringIO())) == 0
     (line,) = [line for line in out.getvalue().splitlines() if "flaky" in line]
     assert line.endswith("FAILED: worker 'work' failed: RuntimeError: first run fails"), line
+
+
+def test_ctrl_c_while_a_worker_is_being_spawned_stops_the_node_cleanly(net, monkeypatch):
+    """SIGINT can land in ``spawn`` between the worker's bookkeeping and its start (a
+    ``sonibus run`` interrupted as it starts): the node stops, and the Ctrl-C goes on up
+    (exit 130), not 'cannot join thread before it is started' (exit 1)."""
+    class Busy(Adapter):
+        def _start(self) -> None:
+            self.spawn(lambda: self.stopping.wait(), "work")
+
+    start = threading.Thread.start
+
+    def interrupted(thread: threading.Thread) -> None:
+        if thread.name == "busy:work":  # (Zenoh starts threads of its own meanwhile)
+            raise KeyboardInterrupt
+        start(thread)
+
+    bus = net.bus("busy")
+    node = Busy(name="busy")
+    with monkeypatch.context() as patched:
+        patched.setattr(threading.Thread, "start", interrupted)
+        with pytest.raises(KeyboardInterrupt):
+            node.start(bus)
+    assert node.state == "stopped" and [t.name for t in node._threads] == ["busy:work"]
+    assert not bus.alive(keys.node_token(bus.host, "busy"), timeout=0.5)
