@@ -72,8 +72,13 @@ def summary(cls: type[Adapter]) -> str:
     return (cls.__doc__ or "").strip().splitlines()[0] if cls.__doc__ else ""
 
 
+def package(ep: EntryPoint) -> str:
+    """The name of the distribution that registers ``ep`` ("?" if unknown)."""
+    return ep.dist.name if ep.dist is not None else "?"
+
+
 def _package(ep: EntryPoint) -> str:
-    return f"package '{ep.dist.name}'" if ep.dist is not None else "an unknown package"
+    return f"package '{package(ep)}'" if ep.dist is not None else "an unknown package"
 
 
 def _checked(ep: EntryPoint) -> type[Adapter]:

@@ -143,18 +143,18 @@ class OscSink(Adapter):
                                f"{age * 1000:.0f} ms old: a stalled publisher or link, or clocks not in step)")
             return
         samples = message.joints
+        if not samples:
+            return
         for link in self._sample_links:
             for sample in samples:
                 self._sample_to(link, sample.source, sample.values, sample.t, sample.seq, now)
-        if self._sample_links and samples:
-            self.record_latency(time.time() - message.t)
-        if not self._frame_links or not samples:
-            return
-        # Joints and derived values of one seq go out in one bundle, however they came.
-        frames = self._assembler.extend(message.source.robot, message.seq, message.t,
-                                        {s.source.key: (s.source, s.values) for s in samples})
-        for frame in frames:
-            self._send_frame(frame, now)
+        if self._frame_links:
+            # Joints and derived values of one seq go out in one bundle, however they came.
+            frames = self._assembler.extend(message.source.robot, message.seq, message.t,
+                                            {s.source.key: (s.source, s.values) for s in samples})
+            for frame in frames:
+                self._send_frame(frame, now)
+        self.record_latency(time.time() - message.t)  # once a message, however many targets
 
     # -- per target ------------------------------------------------------------------
 
@@ -191,7 +191,6 @@ class OscSink(Adapter):
         link.last_frame_t[frame.robot] = frame.t
         interval = frame.t - previous if previous is not None and frame.t > previous else 0.0
         self._send(link, link.profile.frame, frame.robot, frame.t, frame.seq, samples, interval)
-        self.record_latency(time.time() - frame.t)
 
     def _event(self, source: Key, message: dict[str, Any]) -> None:
         kind = str(message.get("kind") or source.name)

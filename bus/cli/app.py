@@ -13,6 +13,7 @@ import sys
 from collections.abc import Callable, Sequence
 from importlib.metadata import EntryPoint, entry_points
 
+from .. import registry
 from ..errors import CommandError, ConfigError, RobotNotFound, SonibusError
 from .api import COMMAND_GROUP, Command, Environment, Exit, add_bus_arguments
 
@@ -26,7 +27,7 @@ def commands(wanted: str | None = None) -> dict[str, Command]:
     it is one of them (and loads), else all; a broken one is logged and skipped, and of
     two with one name the first is kept (sonibus's own, if it is one of them) and the
     other named."""
-    installed = sorted(entry_points(group=COMMAND_GROUP), key=lambda ep: _package(ep) != OWN)
+    installed = sorted(entry_points(group=COMMAND_GROUP), key=lambda ep: registry.package(ep) != OWN)
     named = [ep for ep in installed if ep.name == wanted]
     found = _loaded(named)
     if not found:  # argparse's "invalid choice" lists the others
@@ -40,18 +41,14 @@ def _loaded(eps: list[EntryPoint]) -> dict[str, Command]:
     for ep in eps:
         if ep.name in found:
             log.warning("command '%s' of %s is also registered by %s, whose command is used (skipped)",
-                        ep.name, _package(ep), origin[ep.name])
+                        ep.name, registry.package(ep), origin[ep.name])
             continue
         command = _load(ep)
         if command is not None:
             found[ep.name] = command
-            origin[ep.name] = _package(ep)
+            origin[ep.name] = registry.package(ep)
     own = [name for name in found if origin[name] == OWN]
     return {name: found[name] for name in own + sorted(set(found) - set(own))}
-
-
-def _package(ep: EntryPoint) -> str:
-    return ep.dist.name if ep.dist is not None else "?"
 
 
 def _load(ep: EntryPoint) -> Command | None:
