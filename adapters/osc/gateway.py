@@ -5,6 +5,8 @@ UDP (and TCP) becomes a command on the bus; the answer goes back to the sender a
 Packets are read as strictly as liblo reads them (``wire.messages``): nothing in a
 malformed packet runs, and each command in it is answered ``bad_request``.
 
+The addresses taken are the table of ``routes`` (which OSCQuery serves too).
+
 Queries are asynchronous (a Zenoh callback handler), so a slow or missing robot
 never stalls the receive loop, and commands reach a robot in the order they came.
 """
@@ -19,17 +21,13 @@ import socket
 from dataclasses import dataclass
 from typing import Any
 
-import zenoh
-
-from sonibus.bus import keys
 from sonibus.bus.adapter import Adapter
 from sonibus.bus.client import Outcome, ask
-from sonibus.bus.commands import from_osc
 from sonibus.bus.errors import CommandError, ConfigError
 from sonibus.bus.options import bad
 from sonibus.bus.queue import SampleQueue
 
-from . import tcp, wire
+from . import routes, tcp, wire
 from .config import parse_target
 from .tcp import Peer
 
@@ -207,14 +205,14 @@ class OscGateway(Adapter):
             self.warn("unknown_address", f"ignored OSC {error.address[:80] or 'packet'}: {error}")
 
     def _command(self, address: str, args: list[Any], peer: Peer) -> None:
-        target = command_target(address)
-        if target is None:
+        found = routes.match(address)
+        if found is None:
             self.count("unknown_address")
             self.warn("unknown_address", f"ignored OSC {address[:80]}: not /<robot>/cmd/<verb>")
             return
-        robot, verb = target
+        robot, verb = found.robot, found.sent
         try:
-            request = from_osc(verb, args)
+            request = found.request(args)
         except CommandError as exc:
             self._command_failed(robot, verb, peer, exc)
             return
@@ -232,7 +230,7 @@ class OscGateway(Adapter):
                 self._pending -= 1
             self._answer(robot, verb, peer, outcome)
 
-        ask(self.bus, robot, verb, request, done, self.config.timeout)
+        ask(self.bus, robot, found.route.verb, request, done, self.config.timeout)
 
     def _command_failed(self, robot: str, verb: str, peer: Peer, error: CommandError) -> None:
         self.count("bad_args")
@@ -271,15 +269,8 @@ class OscGateway(Adapter):
                 self.warn("replies_lost", f"reply {address} to {peer.address[0]} not sent: {exc}")
 
 
+
 def command_target(address: str) -> tuple[str, str] | None:
-    """``/<robot>/cmd/<verb...>`` → ``(robot, verb)``; None for any other address."""
-    robot, sep, verb = address[1:].partition("/cmd/")
-    if not address.startswith("/") or not sep:
-        return None
-    try:
-        for chunk in (robot, *verb.split("/")):
-            keys.check_name("address chunk", chunk)
-        zenoh.KeyExpr(keys.command(robot, verb))
-    except Exception:  # ValueError, or zenoh's ZError
-        return None
-    return robot, verb
+    """``/<robot>/cmd/<verb...>`` → ``(robot, verb as sent)``; None for any other address."""
+    found = routes.match(address)
+    return (found.robot, found.sent) if found else None

@@ -17,6 +17,7 @@ from pythonosc.osc_message import OscMessage
 from pythonosc.osc_message_builder import OscMessageBuilder
 
 from sonibus import schemas
+from sonibus.adapters.osc import routes
 from sonibus.adapters.osc.gateway import OscGateway, OscGatewayConfig
 from sonibus.bus import ConfigError, codec
 from sonibus.bus.commands import ok_reply
@@ -139,6 +140,20 @@ def test_joints_set_moves_the_joint_and_an_invalid_angle_moves_nothing(net, clie
     assert (address, ok, code) == ("/pepper/reply/joints/set", 0, "out_of_range")
     assert "HeadYaw = 3.0" in message and "\n" not in message
     assert head.steady() == pytest.approx(0.5, abs=1e-3)
+
+
+def test_one_joint_per_address_for_a_fader(net, client):
+    """``/pepper/cmd/joints/set/<Joint> angle [speed]``: one float moves one joint; the
+    reply goes to the address as sent; a wrong joint or angle moves nothing."""
+    head = Watch(net, "pepper/joints/HeadYaw")
+    assert client.ask("/pepper/cmd/joints/set/HeadYaw", -0.4, 1.0) == ("/pepper/reply/joints/set/HeadYaw", [1, "{}"])
+    wait_for(lambda: head.all() and abs(head.seen[-1]["v"] + 0.4) < 1e-6, what="HeadYaw at -0.4")
+    for args, code in (([3.0], "out_of_range"), (["far"], "bad_request"), ([], "bad_request")):
+        address, (ok, got, message) = client.ask("/pepper/cmd/joints/set/HeadYaw", *args)
+        assert (address, ok, got) == ("/pepper/reply/joints/set/HeadYaw", 0, code), message
+    address, (ok, code, message) = client.ask("/pepper/cmd/joints/set/Tail", 0.1)
+    assert (ok, code) == (0, "unknown_joint") and "Tail" in message
+    assert head.steady() == pytest.approx(-0.4, abs=1e-3)
 
 
 ERRORS = [
@@ -305,6 +320,12 @@ def test_a_port_in_use_is_a_clear_error(net):
     assert gate.state == "stopped"
 
 
-def test_the_doc_covers_every_verb():
+def test_the_doc_and_the_routes_cover_every_verb():
     text = (DOCS / "osc-gateway.md").read_text(encoding="utf-8")
     assert all(f"/cmd/{verb}" in text for verb in schemas.command_verbs())
+    assert {r.verb for r in routes.ROUTES} == set(schemas.command_verbs())
+    for route in routes.ROUTES:  # what OSCQuery declares is what the gateway takes
+        schema = schemas.command_schema(route.verb)
+        assert {s.name for s in route.slots} <= set(schema.get("properties", {})), route.path
+        given_by_address = {"names"} if route is routes.PER_JOINT else set()
+        assert {s.name for s in route.slots} | given_by_address >= set(schema.get("required", ())), route.path
