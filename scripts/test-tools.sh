@@ -9,6 +9,7 @@ tools=(
   "oscdump liblo-tools"
   "oscsend liblo-tools"
   "pd puredata-core"
+  "sclang supercollider-language"
   "jackd jackd2"
   "ip iproute2"
   "sysctl procps"
