@@ -126,16 +126,24 @@ def _renames(words: list[str], path: str) -> dict[str, str]:
     return renames
 
 
+FLAGS = {"speed": "--speed", "start": "--start", "end": "--end", "max_gap_s": "--max-gap", "keys": "--keys",
+         "rename": "--as"}  # ReplayConfig's keys as the command line names them
+
+
 def _replay(args: argparse.Namespace, env: Environment) -> Exit:
-    cfg = ReplayConfig(path=args.file, speed=args.speed, loop=args.loop, start=args.start, end=args.end,
-                       rename=_renames(args.rename, args.file), keys=tuple(args.keys), max_gap_s=args.max_gap)
+    try:
+        cfg = ReplayConfig(path=args.file, speed=args.speed, loop=args.loop, start=args.start, end=args.end,
+                           rename=_renames(args.rename, args.file), keys=tuple(args.keys), max_gap_s=args.max_gap)
+    except ConfigError as exc:  # "key 'speed': 0 must be ..." → "--speed 0 must be ..."
+        key, _, problem = str(exc).removeprefix("key '").partition("': ")
+        raise ConfigError(f"{FLAGS[key]} {problem}" if key in FLAGS else str(exc)) from None
     replay = Replay(cfg, name="replay")
 
-    def progress() -> str:
+    def progress() -> str:  # position_s counts from the window's start (--start)
         done = replay.position_s / replay.window_s if replay.window_s > 0 else 1.0
         bar = "#" * int(30 * min(done, 1.0))
         loop = f"  loop {replay.loops + 1}" if cfg.loop else ""
-        return f"replay [{bar:<30}] {replay.position_s - cfg.start:6.1f}/{replay.window_s:.1f} s  x{cfg.speed:g}{loop}"
+        return f"replay [{bar:<30}] {replay.position_s:6.1f}/{replay.window_s:.1f} s  x{cfg.speed:g}{loop}"
 
     _run(replay, args, env, progress, replay.finished.is_set, args.status_every)
     gaps = f", {replay.stats['gaps']} gaps shortened" if replay.stats["gaps"] else ""

@@ -181,3 +181,21 @@ def test_a_robot_already_on_the_bus_is_not_replayed_over(net, recorded):
     result = run_cli("replay", str(path), *net.cli_args())
     assert result.returncode == 1
     assert "--as pepper=" in result.stderr and len(result.stderr.splitlines()) == 1
+
+
+def test_progress_counts_from_start_and_flags_are_named_as_typed(net, recorded):
+    """Issue 19, item 4: with --start the progress line showed -2.0/4.0 s (start taken off
+    twice); a bad --speed was blamed on a configuration file's key 'speed'."""
+    path, _ = recorded
+    result = run_cli("replay", str(path), "--start", "0.5", "--end", "1.5", "--speed", "0.5",
+                     "--status-every", "0.25", *net.cli_args(), timeout=30)
+    assert result.returncode == 0, result.stderr
+    shown = [float(m) for m in re.findall(r"replay \[[# ]*\]\s+(-?[\d.]+)/1\.0 s", result.stderr)]
+    assert shown, result.stderr
+    assert all(0.0 <= s <= 1.0 for s in shown), shown
+    assert max(shown) >= 0.5, shown  # it advanced through the window
+    for flags, fragment in ((["--speed", "0"], "--speed 0.0 must be more than 0"),
+                            (["--start", "2", "--end", "1"], "--end 1.0 must be after start")):
+        result = run_cli("replay", str(path), *flags, *net.cli_args())
+        assert result.returncode != 0 and fragment in result.stderr, result.stderr
+        assert "key '" not in result.stderr and len(result.stderr.strip().splitlines()) == 1
