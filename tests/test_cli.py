@@ -17,7 +17,7 @@ from pathlib import Path
 import pytest
 
 from sonibus.adapters.recorder.writer import RecordingWriter
-from sonibus.bus import ConfigError, encode, keys, runner
+from sonibus.bus import ConfigError, codec, encode, keys, runner
 from sonibus.bus.cli import COMMAND_GROUP, Command, Environment, Exit, demo, main
 from sonibus.bus.cli.app import parser
 from sonibus.bus.cli.send import command_args
@@ -121,6 +121,26 @@ def test_send_to_unknown_robot_exits_3_promptly(net):
     assert result.returncode == 3, result.stderr  # not 5: an unanswered query ends at once, a timeout after 30 s
     assert "'nobody'" in one_error_line(result.stderr)
     assert elapsed < 30, f"took {elapsed:.1f} s"  # (process start-up and discovery included)
+
+
+def test_send_rough_edges(net):
+    """Issue 19, item 3: no verb names the verbs (stop takes no ARG); text with '=' is
+    spoken; a robot name with a typo lists the robots on the bus."""
+    net.sim("pepper")
+    args = net.cli_args()
+    result = run_cli("send", "pepper", *args)
+    assert result.returncode == 2 and "ARG" not in result.stderr
+    assert "which command" in one_error_line(result.stderr) and "sonibus send pepper stop" in result.stderr
+    _subscriber, queue = net.bus("watch").subscribe("pepper/events/speech")
+    result = run_cli("send", "pepper", "say", "1+1=2", *args)
+    assert result.returncode == 0, result.stderr
+    said = wait_for(lambda: queue.get(timeout=0.1), what="a speech event")
+    assert codec.decode(said[1])["text"] == "1+1=2"
+    result = run_cli("send", "pepper", "say", "hi", "volum=0.5", *args)
+    assert result.returncode == 2 and "no argument 'volum'" in one_error_line(result.stderr)
+    result = run_cli("send", "peper", "say", "hi", *args)
+    assert result.returncode == 3
+    assert "robots on the bus: pepper (did you mean 'pepper'?)" in one_error_line(result.stderr)
 
 
 def test_send_unknown_argument_is_a_usage_error(net):

@@ -34,8 +34,8 @@ SHAPING = [
     ("joints/set", ["names=HeadYaw", "angles=0.3,zero"], None, {"names": ["HeadYaw"], "angles": [0.3, "zero"]},
      "joints/set: argument 2 (angles) item 2 must be a number, got string 'zero' — give a list of numbers, "
      "e.g. angles=[0.3,-0.1]"),
-    ("say", ["hi", "loudness=3"], None, {"text": "hi", "loudness": 3},
-     "say has no argument 'loudness' — arguments: text, volume, speed"),
+    ("say", ["hi", "volumes=3"], None, {"text": "hi", "volumes": 3},  # (a word with '=' and a name unlike
+     "say has no argument 'volumes' — arguments: text, volume, speed"),  # any argument's is text: say 1+1=2)
     ("say", None, [3], {"text": 3}, "say: argument 1 (text) must be a string, got int 3"),
     ("stiffness", None, [True], {"names": True}, "stiffness: argument 1 (names) must be a list of strings, "
                                                    "got boolean true"),

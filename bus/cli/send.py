@@ -3,21 +3,25 @@
 from __future__ import annotations
 
 import argparse
+import difflib
 import json
 from collections.abc import Sequence
 from typing import Any
 
 from ... import schemas
+from .. import keys
 from ..client import owner_of, send_command
 from ..commands import from_words
 from ..errors import CommandError, ConfigError, RobotNotFound
+from ..node import Bus
+from ..ownership import claims
 from .api import Command, Environment, Exit, bus_config, joined
 from .hints import reach_hint
 
 
 def _arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("robot", metavar="ROBOT")
-    p.add_argument("verb", metavar="VERB", help=", ".join(schemas.command_verbs()))
+    p.add_argument("verb", metavar="VERB", nargs="?", help=", ".join(schemas.command_verbs()))
     p.add_argument("args", nargs="*", metavar="ARG", help="NAME=VALUE, or the verb's main value")
     p.add_argument("--timeout", type=float, default=5.0, help="seconds to wait for the reply")
 
@@ -32,6 +36,9 @@ def command_args(verb: str, words: Sequence[str]) -> dict[str, Any]:
 
 
 def _send(args: argparse.Namespace, env: Environment) -> Exit:
+    if args.verb is None:  # argparse would ask for "VERB, ARG", though stop takes no ARG
+        raise ConfigError(f"send {args.robot}: which command? One of {', '.join(schemas.command_verbs())}, "
+                          f"e.g. sonibus send {args.robot} stop")
     request = command_args(args.verb, args.args)
     cfg = bus_config(args)
     with joined(cfg) as bus:
@@ -45,12 +52,21 @@ def _send(args: argparse.Namespace, env: Environment) -> Exit:
                 raise CommandError("refused", f"robot '{args.robot}' is on the bus but nothing answered "
                                               f"'{args.verb}': access control on the robot's machine refuses "
                                               f"commands from this machine{user}") from None
-            if not reached:
-                exc.message = f"{exc.message} — {reach_hint(cfg, reached, 'nothing found')}"
-                exc.args = (exc.message,)
+            exc.message = f"{exc.message} — " + (_robots_hint(bus, args.robot) if reached
+                                                  else reach_hint(cfg, reached, "nothing found"))
+            exc.args = (exc.message,)
             raise
     env.say(json.dumps(result))
     return Exit.OK
+
+
+def _robots_hint(bus: Bus, robot: str) -> str:
+    """The robots this session sees, and the likely one if ``robot`` is a typo."""
+    seen = sorted(claims(bus.alive(keys.robot_token(), timeout=1.0)))
+    if not seen:
+        return "no robot is on the bus: start one (sonibus demo, or sonibus run with a robot node)"
+    close = difflib.get_close_matches(robot, seen, n=1)
+    return f"robots on the bus: {', '.join(seen)}" + (f" (did you mean '{close[0]}'?)" if close else "")
 
 
 SEND = Command("send", "send a command to a robot, print the reply", _arguments, _send, bus=True)

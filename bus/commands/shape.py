@@ -13,6 +13,8 @@ joints, behaviors and postures are the robot owner's (``commands.validate``).
 
 >>> from_words("say", ["hello", "there", "volume=0.5"])
 {'text': 'hello there', 'volume': 0.5}
+>>> from_words("say", ["1+1=2"])
+{'text': '1+1=2'}
 >>> from_osc("say", ["hello", "there", 0.5])
 {'text': 'hello there', 'volume': 0.5}
 >>> from_json("say", {"volume": 0.5, "text": "hello there"})
@@ -34,6 +36,7 @@ say: argument 3 (speed) must be a number, got string 'fast' — give a number, e
 
 from __future__ import annotations
 
+import difflib
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from functools import cache
@@ -126,7 +129,7 @@ def from_words(verb: str, words: Sequence[str]) -> dict[str, Any]:
     sig = signature(verb)
     if sig is None or sig.takes_any:
         return {}
-    named = [w for w in words if "=" in w.split(" ", 1)[0]]
+    named = [w for w in words if _is_named(sig, w)]
     loose = [w for w in words if w not in named]
     texts: dict[str, str] = {}
     if loose:
@@ -141,6 +144,18 @@ def from_words(verb: str, words: Sequence[str]) -> dict[str, Any]:
         name, _, text = word.partition("=")
         texts[_known(sig, name).name] = text
     return _request(sig, texts, _from_text)
+
+
+def _is_named(sig: Signature, word: str) -> bool:
+    """``NAME=VALUE``, unless NAME is no argument and the verb's main value is text
+    (``say a=b`` says "a=b"); a NAME close to an argument's is refused as a typo."""
+    name, sep, _ = word.split(" ", 1)[0].partition("=")
+    main = sig.positional
+    if not sep or sig.get(name) or main is None or main.kind != "string":
+        return bool(sep)
+    if difflib.get_close_matches(name, [a.name for a in sig.arguments], n=1):
+        _known(sig, name)  # raises, as from every surface
+    return False
 
 
 def from_osc(verb: str, args: Sequence[Any]) -> dict[str, Any]:
