@@ -64,7 +64,8 @@ class Adapter:
             raise TypeError(f"{type(self).__name__} takes a {self.Config.__name__}, "
                             f"got {type(self.config).__name__}")
         self.name = name or type(self).__name__.lower()
-        self.kind = type(self).__name__   # the adapter's registered name, once built from a configuration
+        from .registry import name_of  # (the registry checks adapters: it imports this module)
+        self.kind = name_of(type(self))  # "sim", not "SimRobot", in logs, stats and `sonibus nodes`
         self.state = "new"
         self.stopping = threading.Event()
         self.robots: list[str] = []       # robots this node owns (see claim_robot)

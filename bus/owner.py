@@ -110,7 +110,7 @@ class RobotAdapter(Adapter):
             "robot": self.robot, "model": self.model.name,
             "joints": [j.to_info() for j in self.model.joints],
             "rate_hz": self.rate_hz, "behaviors": list(self.behaviors()),
-            "postures": sorted(self.model.postures), "adapter": type(self).__name__,
+            "postures": sorted(self.model.postures), "adapter": self.kind,
             "schema_version": schemas.VERSION,
             "owner": {"host": self.bus.host, "node": self.name},
         }

@@ -43,6 +43,15 @@ def available() -> dict[str, EntryPoint]:
     return entries()[0]
 
 
+def name_of(cls: type) -> str:
+    """The name ``cls`` is registered under (found without importing any plug-in);
+    its class name when it is not registered."""
+    for name, ep in available().items():
+        if ep.attr == cls.__name__ and (cls.__module__ + ".").startswith(ep.module + "."):
+            return name
+    return cls.__name__
+
+
 def load(name: str) -> type[Adapter]:
     """The adapter class called ``name``, checked; ``AdapterError`` says what is wrong."""
     found, clashes = entries()

@@ -385,7 +385,7 @@ def test_run_plugin_and_sim_then_sigint(net, spawn, tmp_path):
     assert rc == 130, (rc, err)
     assert time.monotonic() - started < STOP_WITHIN_S
     assert "Traceback" not in err, err
-    assert "running pepper (SimRobot), recorder (JsonLinesSink)" in out
+    assert "running pepper (sim), recorder (jsonl)" in out  # adapter names, not class names (issue 19, item 5)
     wait_for(lambda: not watcher.alive(keys.robot_token("pepper")), what="the robot to leave the bus")
 
 
@@ -489,6 +489,11 @@ def test_command_args_unknown_argument():
         command_args("say", ["text=hi", "loudness=3"])
     assert "'loudness'" in str(caught.value)
     assert "volume" in str(caught.value)  # the arguments there are
+
+
+def test_command_args_text_given_twice_is_refused_not_dropped():
+    with pytest.raises(ConfigError, match="text given twice"):
+        command_args("say", ["hello", "text=bye"])  # it used to say "bye" and drop "hello"
 
 
 def test_command_args_positional_where_none_is_taken():

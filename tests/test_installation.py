@@ -136,7 +136,8 @@ def test_nodes_lists_adapter_robots_and_uptime(net):
     net.sim("pepper")
     result = run_cli("nodes", *net.cli_args())
     line = next(line for line in result.stdout.splitlines() if "sim-pepper" in line and "node" in line)
-    assert "SimRobot" in line and "owns pepper" in line and " up " in line
+    assert " sim " in line and "SimRobot" not in line  # the adapter's name, as in the installation file
+    assert "owns pepper" in line and " up " in line
 
 
 def test_osc_sink_sends_connection_lost_and_connected_with_the_robot(net):

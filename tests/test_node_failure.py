@@ -31,7 +31,7 @@ def test_a_dying_worker_fails_its_node_with_an_event_and_its_state(net, tmp_path
     assert sink.failure.startswith("worker 'write' failed: DecodeError: payload is not msgpack"), sink.failure
     wait_for(lambda: events, what="the node event")
     assert events[0] | {"t": 0} == {"t": 0, "kind": "node", "host": watcher.host, "node": "lines",
-                                    "adapter": "JsonLinesSink", "state": "failed", "error": sink.failure}
+                                    "adapter": "jsonl", "state": "failed", "error": sink.failure}
     (described,) = watcher.query(keys.node_token(watcher.host, "lines"))
     assert described["state"] == "failed" and described["failure"] == sink.failure
 

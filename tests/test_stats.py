@@ -72,8 +72,8 @@ def test_the_stats_key_carries_a_running_sink_and_robot_about_once_a_second(net)
         assert receiver.recv(65536).startswith(b"/pepper/")  # the data really went out over UDP
 
         sound, robot = collected.of("sound"), collected.of("sim-pepper")
-        check_series(sound, "OscSink")
-        check_series(robot, "SimRobot")
+        check_series(sound, "osc")  # the registered names (issue 19, item 5)
+        check_series(robot, "sim")
         assert sound[-1]["counters"]["received"] > sound[0]["counters"]["received"] > 0
         assert sound[-1]["counters"]["sent"] > sound[0]["counters"]["sent"] > 0
         assert sound[-1]["rates"]["received"] > 0 and sound[-1]["rates"]["sent"] > 0
@@ -243,7 +243,7 @@ def test_naoqi_robot_counts_warns_and_publishes_its_stats(net, caplog):
 
         wait_for(lambda: len(collected.of("naoqi-pepper")) >= 2, timeout=10, what="the robot's stats")
         stats = collected.of("naoqi-pepper")[-1]
-        check_series(collected.of("naoqi-pepper"), "NaoqiRobot")
+        check_series(collected.of("naoqi-pepper"), "naoqi")
         assert stats["counters"]["sent"] > 0 and stats["latency_ms"]["samples"] >= 1
         assert stats["metrics"]["rate_hz"] >= 0 and "read_ms" in stats["metrics"]
     finally:

@@ -22,7 +22,7 @@ def _run(args: argparse.Namespace, env: Environment) -> Exit:
     installation = config.load(args.config)
     host = args.host or socket.gethostname()
     adapters = runner.build(installation, args.only, host)
-    names = ", ".join(f"{a.name} ({type(a).__name__})" for a in adapters)
+    names = ", ".join(f"{a.name} ({a.kind})" for a in adapters)
     runner.run(adapters, bus_config(args, installation.bus.for_host(host)), env.stop,
                on_started=lambda bus: env.say(f"sonibus: running {names} on {bus.host}"), host=host)
     return Exit.OK

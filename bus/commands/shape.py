@@ -129,11 +129,14 @@ def from_words(verb: str, words: Sequence[str]) -> dict[str, Any]:
     sig = signature(verb)
     if sig is None or sig.takes_any:
         return {}
-    named = [w for w in words if _is_named(sig, w)]
+    main = sig.positional
+    main_named = main is not None and any(w.startswith(main.name + "=") for w in words)
+    named = [w for w in words if ("=" in w.split(" ", 1)[0] if main_named else _is_named(sig, w))]
     loose = [w for w in words if w not in named]
     texts: dict[str, str] = {}
+    if loose and main_named:
+        raise _bad(f"{verb}: {main.name} given twice: {' '.join(loose)!r} and {main.name}=...")
     if loose:
-        main = sig.positional
         if main is None:
             takes = f"takes only NAME=VALUE arguments: {sig.names}" if sig.arguments else "takes no arguments"
             raise _bad(f"{verb} {takes}, got {' '.join(loose)!r}")
@@ -148,7 +151,7 @@ def from_words(verb: str, words: Sequence[str]) -> dict[str, Any]:
 
 def _is_named(sig: Signature, word: str) -> bool:
     """``NAME=VALUE``, unless NAME is no argument and the verb's main value is text
-    (``say a=b`` says "a=b"); a NAME close to an argument's is refused as a typo."""
+    (``say 1+1=2``); a NAME close to an argument's is refused as a typo."""
     name, sep, _ = word.split(" ", 1)[0].partition("=")
     main = sig.positional
     if not sep or sig.get(name) or main is None or main.kind != "string":

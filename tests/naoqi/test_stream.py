@@ -48,7 +48,7 @@ def test_robot_info_comes_from_the_robot(rig):
     info = robot_info(r.bus, "nao")
     schemas.validate("robot_info", info)
     model = load_model("nao")
-    assert info["model"] == "nao" and info["adapter"] == "NaoqiRobot"
+    assert info["model"] == "nao" and info["adapter"] == "naoqi"
     assert [j["name"] for j in info["joints"]] == list(model.joint_names)  # reference order, not the robot's
     for joint in info["joints"]:
         spec = model.joint(joint["name"])
