@@ -615,6 +615,21 @@ def test_demo_in_process_with_its_flags_sends_the_robot_it_was_given():
     assert f"simulated nao at 50 frames/s → OSC to 127.0.0.1:{port}" in env.stdout.getvalue()
 
 
+def test_demo_blames_its_flags_and_a_taken_name_gets_another(net):
+    """Issue 19, item 5: --robot robbie blamed demo.toml, a file the user never wrote; a
+    second demo said the robot was owned without saying how to run another."""
+    result = run_cli("demo", "--robot", "robbie", "--quiet", "--no-multicast")
+    assert result.returncode == 2
+    line = one_error_line(result.stderr)
+    assert line.startswith("sonibus: error: --robot robbie: model 'robbie' is unknown — known models:"), line
+    assert "demo.toml" not in result.stderr
+    net.sim("pepper")
+    result = run_cli("demo", "--quiet", "--port", str(free_port(socket.SOCK_DGRAM)), *net.cli_args())
+    assert result.returncode != 0
+    line = one_error_line(result.stderr)
+    assert "already owned" in line and line.endswith("or run another: sonibus demo --robot pepper2"), line
+
+
 def test_a_command_that_cannot_add_its_options_is_skipped_and_named(caplog):
     def clashing(p):
         p.add_argument("--count")

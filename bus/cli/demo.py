@@ -6,11 +6,14 @@ of its adapters.
 (['host', 'port', 'rate', 'robot'], ['{host}:{port}'])
 >>> filled(["{host}:{port}"], {"host": "127.0.0.1", "port": 9000}), filled("{rate}", {"rate": 50.0})
 (['127.0.0.1:9000'], 50.0)
+>>> blamed("demo.toml [nodes.robot]: key 'model': 'robbie' is unknown", {"robot": "robbie"})
+"--robot robbie: model 'robbie' is unknown"
 """
 
 from __future__ import annotations
 
 import argparse
+import re
 import tomllib
 from dataclasses import dataclass
 from functools import cache
@@ -18,7 +21,7 @@ from importlib import resources
 from typing import Any
 
 from .. import config, runner
-from ..errors import ConfigError
+from ..errors import ConfigError, OwnershipError
 from .api import Command, Environment, Exit, add_bus_arguments, bus_config
 
 WHERE = "demo.toml [demo]"
@@ -106,11 +109,31 @@ def installation(values: dict[str, Any], quiet: bool = False) -> tuple[config.In
 def _demo(args: argparse.Namespace, env: Environment) -> Exit:
     values = {name: getattr(args, name) for name in wiring().flags}
     wired, only = installation(values, args.quiet)
-    adapters = runner.build(wired, only)
+    try:
+        adapters = runner.build(wired, only)
+    except ConfigError as exc:  # a node option set by a flag: the flag is to blame, not demo.toml
+        raise ConfigError(blamed(str(exc), values)) from None
     for line in wiring().banner:
         env.say(filled(line, values))
-    runner.run(adapters, bus_config(args, wired.bus), env.stop)
+    try:
+        runner.run(adapters, bus_config(args, wired.bus), env.stop)
+    except OwnershipError as exc:
+        raise OwnershipError(blamed(str(exc), values, taken=True)) from None
     return Exit.OK
+
+
+def blamed(message: str, values: dict[str, Any], taken: bool = False) -> str:
+    """``message`` in the words of the flag whose value it names: ``--robot robbie:
+    model 'robbie' is unknown ...``; for a name already taken (``taken``), the flag
+    that gives another. Messages that name no flag's value are kept."""
+    for name, value in values.items():
+        if f"'{value}'" not in message or (value == wiring().flags[name].default and not taken):
+            continue
+        if taken:
+            return f"{message} — or run another: sonibus demo --{name} {value}2"
+        problem = re.sub(r"^[^:]*\[nodes\.[^]]*\]: key '([^']*)': ", r"\1 ", message)
+        return f"--{name} {value}: {problem}"
+    return message
 
 
 DEMO = Command("demo", "simulated robot → OSC, with a live view", _arguments, _demo)
