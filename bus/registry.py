@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import dataclasses
 import logging
+import re
 from importlib.metadata import EntryPoint, entry_points
 
 from .adapter import Adapter
@@ -62,8 +63,10 @@ def load(name: str) -> type[Adapter]:
     return _checked(found[name])
 
 
-def load_all() -> dict[str, type[Adapter]]:
-    """Every adapter that loads; a broken plug-in, or a name two packages register, is logged and skipped."""
+def load_all(lacking: dict[str, str] | None = None) -> dict[str, type[Adapter]]:
+    """Every adapter that loads; a broken plug-in, or a name two packages register, is
+    logged and skipped. One whose optional dependencies are not installed (the ``naoqi``
+    extra) is no fault: it goes into ``lacking``, name → what to install, unlogged."""
     found, clashes = entries()
     for message in clashes.values():
         log.warning("%s (skipped)", message)
@@ -71,6 +74,9 @@ def load_all() -> dict[str, type[Adapter]]:
     for name, ep in sorted(found.items()):
         try:
             loaded[name] = _checked(ep)
+        except MissingExtra as exc:
+            if lacking is not None:
+                lacking[name] = exc.install
         except AdapterError as exc:
             log.warning("%s (skipped)", exc)
     return loaded
@@ -90,10 +96,35 @@ def _package(ep: EntryPoint) -> str:
     return f"package '{package(ep)}'" if ep.dist is not None else "an unknown package"
 
 
+class MissingExtra(AdapterError):
+    """An adapter needs optional dependencies that are not installed; ``install`` says which."""
+
+    def __init__(self, message: str, install: str) -> None:
+        super().__init__(message)
+        self.install = install
+
+
+def extra_of(ep: EntryPoint, module: str) -> str | None:
+    """The extra of ``ep``'s distribution that installs ``module`` (``qi`` → ``naoqi``)."""
+    for requirement in (ep.dist.requires or ()) if ep.dist is not None else ():
+        name, _, marker = requirement.partition(";")
+        extra = re.search(r"extra\s*==\s*['\"]([^'\"]+)['\"]", marker)
+        if extra and re.split(r"[\s<>=!~\[(]", name.strip())[0].replace("-", "_").lower() == module.lower():
+            return extra.group(1)
+    return None
+
+
 def _checked(ep: EntryPoint) -> type[Adapter]:
     where = f"adapter '{ep.name}' ({ep.value}, {_package(ep)})"
     try:
         cls = ep.load()
+    except ModuleNotFoundError as exc:
+        extra = extra_of(ep, (exc.name or "").partition(".")[0])
+        if extra is None:
+            raise AdapterError(f"{where} cannot be imported: {type(exc).__name__}: {exc}") from exc
+        install = f"pip install '{package(ep)}[{extra}]'"
+        raise MissingExtra(f"adapter '{ep.name}' needs the optional '{extra}' dependencies ({exc.name}): "
+                           f"{install}", install) from None
     except Exception as exc:
         raise AdapterError(f"{where} cannot be imported: {type(exc).__name__}: {exc}") from exc
     if not (isinstance(cls, type) and issubclass(cls, Adapter)):

@@ -4,6 +4,7 @@ robot adapters checked for every verb, and names two packages register refused."
 from __future__ import annotations
 
 import importlib
+import io
 import json
 import logging
 import sys
@@ -32,6 +33,7 @@ from sonibus.bus import (
     runner,
     send_command,
 )
+from sonibus.bus.cli import Environment, Exit, main
 from sonibus.bus.verbs import METHODS, RobotVerbs, missing
 
 from .conftest import wait_for
@@ -230,10 +232,11 @@ def install(tmp_path, monkeypatch):
     entry points, on ``sys.path`` for the test only."""
     monkeypatch.syspath_prepend(str(tmp_path))
 
-    def installed(package: str, adapters: dict[str, str]) -> None:
+    def installed(package: str, adapters: dict[str, str], requires: tuple[str, ...] = ()) -> None:
         info = tmp_path / f"{package.replace('-', '_')}-1.0.dist-info"
         info.mkdir()
-        (info / "METADATA").write_text(f"Metadata-Version: 2.1\nName: {package}\nVersion: 1.0\n")
+        (info / "METADATA").write_text(f"Metadata-Version: 2.1\nName: {package}\nVersion: 1.0\n"
+                                       + "".join(f"Requires-Dist: {r}\n" for r in requires))
         (info / "entry_points.txt").write_text(
             "[sonibus.adapters]\n" + "".join(f"{name} = {value}\n" for name, value in adapters.items()))
         importlib.invalidate_caches()
@@ -311,6 +314,29 @@ def test_a_robot_adapter_built_without_the_registry_is_checked_when_it_starts(ne
     robot = net.start(TapeRobot(name="tape"), bus)
     assert send_command(net.bus("client"), "tape", "stop", {}) == {"done": "stop"}
     assert robot.state == "running"
+
+
+def test_an_adapter_whose_extra_is_missing_is_listed_with_the_extra_and_warns_only_when_used(
+        install, tmp_path, caplog):
+    """Issue 19, item 9: a wheel without the naoqi extra warned on every command that
+    naoqi-sim cannot be imported."""
+    (tmp_path / "needy_robots.py").write_text("import nosuch_robot_sdk\n")
+    install("needy-robots", {"needy": "needy_robots:Needy"},
+            requires=("msgpack>=1", 'nosuch-robot-sdk==3.1; extra == "robot"'))
+    install("broken-robots", {"flawed": "needy_robots:Needy"}, requires=("other-sdk>=1",))  # no extra: a fault
+    caplog.set_level(logging.WARNING, logger="sonibus")
+    lacking: dict[str, str] = {}
+    loaded = registry.load_all(lacking)
+    assert "needy" not in loaded and lacking == {"needy": "pip install 'needy-robots[robot]'"}
+    warned = [r.getMessage() for r in caplog.records]
+    assert not any("'needy'" in m for m in warned), warned
+    assert any("'flawed'" in m and "nosuch_robot_sdk" in m for m in warned), warned
+    with pytest.raises(AdapterError, match=r"adapter 'needy' needs the optional 'robot' dependencies "
+                                           r"\(nosuch_robot_sdk\): pip install 'needy-robots\[robot\]'$"):
+        registry.load("needy")  # what an installation file that uses it gets
+    env = Environment(stdout=io.StringIO(), stderr=io.StringIO())
+    assert main(["adapters"], env) == Exit.OK
+    assert "needy        (not installed: pip install 'needy-robots[robot]')" in env.stdout.getvalue().splitlines()
 
 
 def test_a_name_two_packages_register_is_refused_naming_both(install, caplog):

@@ -18,8 +18,11 @@ from .hints import reach_hint
 
 
 def _adapters(args: argparse.Namespace, env: Environment) -> Exit:
-    for name, cls in registry.load_all().items():
-        env.say(f"{name:<12} {registry.summary(cls)}")
+    lacking: dict[str, str] = {}
+    listed = {name: registry.summary(cls) for name, cls in registry.load_all(lacking).items()}
+    listed.update({name: f"(not installed: {install})" for name, install in lacking.items()})
+    for name, summary in sorted(listed.items()):
+        env.say(f"{name:<12} {summary}")
     return Exit.OK
 
 
