@@ -18,6 +18,7 @@ from sonibus.bus.keys import Key
 from sonibus.bus.queue import SampleQueue
 from sonibus.bus.streams import Streams
 
+from . import scale
 from .config import OscSinkConfig, Target, parse_target
 from .encode import EncodeError
 from .profiles import PROFILES, Rendered
@@ -239,14 +240,11 @@ class OscSink(Adapter):
             if source.section == "derived":  # its processor may have started after the info came: ask again
                 self._info.ask(source.robot)
             return values
-        low, high = span
-        return tuple(min(1.0, max(0.0, (v - low) / (high - low))) if high > low else 0.0 for v in values)
+        return scale.normalized(values, span)
 
     def _take_info(self, robot: str, info: dict[str, Any]) -> None:
         try:
-            ranges = {j["name"]: (float(j["min"]), float(j["max"])) for j in info.get("joints", [])}
-            ranges.update({d["name"]: (float(d["min"]), float(d["max"])) for d in info.get("derived", [])
-                           if "min" in d and "max" in d})
+            ranges = scale.ranges(info)
         except (KeyError, TypeError, ValueError) as exc:
             self.warn("info", f"{robot}/info unusable: {exc}")
             return

@@ -1,0 +1,169 @@
+"""OSCQuery server (adapter ``oscquery``): the live namespace of every robot on the bus,
+for sound tools that discover OSC services (ossia score, Chataigne, TouchDesigner, Max).
+
+    [nodes.oscquery]
+    adapter = "oscquery"
+    listen = "127.0.0.1:5678"
+    gateway = "127.0.0.1:9001"   # the osc-gateway: where clients send commands
+
+``curl http://127.0.0.1:5678/?HOST_INFO`` describes the host; ``/pepper/joints/HeadYaw``
+a joint (type, range, unit, current value); a WebSocket on the same port streams what a
+client LISTENs to as binary OSC, and says PATH_ADDED / PATH_REMOVED / PATH_CHANGED as
+robots come, go or change. docs/oscquery.md has it all.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from typing import Any
+
+from sonibus.adapters.osc import encode
+from sonibus.adapters.osc.gateway import parse_endpoint
+from sonibus.adapters.osc.profiles import event_args
+from sonibus.bus.adapter import Adapter
+from sonibus.bus.info import InfoRequests
+from sonibus.bus.presence import watch_robots
+from sonibus.bus.queue import SampleQueue
+from sonibus.bus.streams import Incoming, Streams
+from sonibus.bus.web import WebServer
+
+from . import mdns
+from .config import OscQueryConfig
+from .live import Live
+from .server import QueryServer
+
+__all__ = ["OscQuery", "OscQueryConfig"]
+
+log = logging.getLogger(__name__)
+
+SUBSCRIBE = ("*/joints/*", "*/derived/**", "*/events/*")
+INFO_EVERY_S = 2.0  # how often the info of each robot on the bus is asked again (behaviors installed...)
+# The spec's optional attributes and notifications, and whether this server gives them.
+EXTENSIONS = {"ACCESS": True, "VALUE": True, "RANGE": True, "DESCRIPTION": True, "UNIT": True,
+              "LISTEN": True, "PATH_ADDED": True, "PATH_REMOVED": True, "PATH_CHANGED": True,
+              "TAGS": False, "CLIPMODE": False, "CRITICAL": False, "EXTENDED_TYPE": False,
+              "OVERLOADS": False, "PATH_RENAMED": False, "HTML": False}
+
+
+class OscQuery(Adapter):
+    """Serves every robot on the bus as an OSCQuery namespace over HTTP and WebSocket."""
+
+    Config = OscQueryConfig
+    counters = ("http_requests", "ws_clients", "values_sent", "robots_left_out")
+
+    def _start(self) -> None:
+        cfg: OscQueryConfig = self.config
+        self.live = Live(normalized=cfg.values == "normalized")
+        self.web = WebServer(self, cfg.host, cfg.port)
+        self.server = QueryServer(self, self.web, self.live, self._host_info())
+        self._present: set[str] = set()
+        self._present_lock = threading.Lock()
+        self._info = InfoRequests(self.bus, self._take_info, lambda robot, text: self.warn("info", text),
+                                  INFO_EVERY_S)
+        self.web.start()
+        self.url = self.web.url  # the bound one (port 0: any free port)
+        log.info("%s: OSCQuery on %s (WebSocket on the same port)", self.name, self.url)
+        self._queue = self.own(SampleQueue(cfg.queue))
+        self._streams = Streams(self.bus, SUBSCRIBE, self._queue)
+        self.spawn(self._forward, "forward")  # before anything else is declared: nothing waits in the queue
+        self.own(self._streams)
+        self.own(watch_robots(self.bus, self._robot_changed))
+        self.spawn(self._refresh, "info")
+        if cfg.mdns:
+            self._advertise(cfg)
+
+    def _host_info(self) -> dict[str, Any]:
+        cfg: OscQueryConfig = self.config
+        osc_host, osc_port = parse_endpoint("gateway", cfg.gateway)
+        info: dict[str, Any] = {"NAME": cfg.name, "EXTENSIONS": EXTENSIONS, "OSC_PORT": osc_port,
+                                "OSC_TRANSPORT": "UDP"}
+        if osc_host not in ("0.0.0.0", "::"):  # (else a client takes this server's address)
+            info["OSC_IP"] = osc_host
+        return info
+
+    def _advertise(self, cfg: OscQueryConfig) -> None:
+        osc_host, osc_port = parse_endpoint("gateway", cfg.gateway)
+        bind = mdns.addresses(cfg.host, cfg.interfaces)
+        advertiser = self._advertiser = self.own(mdns.Advertiser(cfg.name, bind, self.web.port, osc_host, osc_port))
+
+        def run() -> None:
+            try:
+                advertiser.run(self.stopping)
+            except Exception as exc:  # no multicast on these interfaces: served, but not advertised
+                self.count("errors")
+                log.warning("%s: not advertised by mDNS on %s: %s — clients can still connect to %s "
+                            "(mdns = false silences this)", self.name, ", ".join(bind), exc, self.url)
+        self.spawn(run, "mdns")
+
+    @property
+    def advertised(self) -> list[str]:
+        """The mDNS service names registered so far (for tests)."""
+        advertiser = getattr(self, "_advertiser", None)
+        return [info.name for info in advertiser.registered] if advertiser else []
+
+    # -- robots ------------------------------------------------------------------------
+
+    def _robot_changed(self, robot: str, alive: bool) -> None:
+        with self._present_lock:
+            (self._present.add if alive else self._present.discard)(robot)
+        if alive:
+            self._info.ask(robot)
+        elif self.live.drop_robot(robot):
+            self.server.announce("PATH_REMOVED", f"/{robot}")
+
+    def _refresh(self) -> None:
+        while not self.stopping.wait(INFO_EVERY_S / 2):
+            with self._present_lock:
+                present = list(self._present)
+            for robot in present:
+                self._info.ask(robot)
+
+    def _take_info(self, robot: str, info: dict[str, Any]) -> None:
+        with self._present_lock:
+            if robot not in self._present:  # it left while its info was on the way
+                return
+        try:
+            change = self.live.set_robot(robot, info)
+        except (KeyError, TypeError, ValueError) as exc:
+            self.count("robots_left_out")
+            self.warn(f"info:{robot}", f"robot '{robot}' left out of the namespace: its info is unusable "
+                                       f"({type(exc).__name__}: {exc})")
+            return
+        if change is not None:
+            log.info("%s: %s /%s", self.name, change, robot)
+            self.server.announce(change, f"/{robot}")
+
+    # -- values ------------------------------------------------------------------------
+
+    def _forward(self) -> None:
+        while not self.stopping.is_set():
+            item = self._queue.get(timeout=0.2)
+            message = self._streams.take(item[0], item[1], self.count, self.warn) if item else None
+            if message is not None:
+                self._serve(message)
+
+    def _serve(self, message: Incoming) -> None:
+        out: list[tuple[str, bytes]] = []
+        if message.event is not None:
+            kind = message.source.name
+            self._value(f"/{message.source.robot}/events/{kind}", event_args(kind, message.event), "", out)
+        else:
+            for sample in message.joints:
+                source = sample.source
+                span = source.name if source.section == "joints" else f"{source.feature}/{source.name}"
+                self._value(f"/{source.key}", sample.values, span, out)
+            if out:
+                self.record_latency(time.time() - message.t)
+        if out:
+            self.server.send_osc(out)
+
+    def _value(self, path: str, values: Any, span: str, out: list[tuple[str, bytes]]) -> None:
+        served = self.live.update(path, list(values), span)
+        if served is None or path not in self.server.listened:
+            return
+        try:
+            out.append((path, encode.message(path, *served)))
+        except encode.EncodeError as exc:
+            self.warn("encode", f"not streamed, OSC cannot carry it: {exc}")

@@ -1,0 +1,200 @@
+"""OSCQuery over HTTP and WebSocket on one port, on ``bus/web.py``'s ``WebServer``.
+
+``GET /path`` answers the node's JSON, ``GET /path?ATTR`` ``{"ATTR": ...}`` (204 when
+the node lacks it, 400 for an attribute the spec does not name), ``GET /?HOST_INFO``
+the host's description; 404 for a path that is not served. A WebSocket on the same
+port takes ``{"COMMAND": "LISTEN"|"IGNORE", "DATA": path}``: a listened path's values
+go to that client as binary OSC messages, and every client hears ``PATH_ADDED``,
+``PATH_REMOVED`` and ``PATH_CHANGED`` (``{"COMMAND": ..., "DATA": path}``).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import functools
+import json
+from collections import deque
+from collections.abc import Callable, Iterable
+from typing import TYPE_CHECKING, Any
+
+from aiohttp import WSCloseCode, WSMsgType, web
+
+from sonibus.bus.web import CLIENT_BACKLOG, CLOSE_WAIT_S, WebServer
+
+from .live import Live
+
+if TYPE_CHECKING:
+    from sonibus.bus.adapter import Adapter
+
+ATTRIBUTES = frozenset({"FULL_PATH", "CONTENTS", "TYPE", "ACCESS", "VALUE", "RANGE", "DESCRIPTION", "UNIT",
+                        "TAGS", "CLIPMODE", "EXTENDED_TYPE", "CRITICAL", "OVERLOADS", "HOST_INFO"})
+MAX_WS_TEXT = 4096        # characters of one client command; longer ones are refused (counted as bad)
+MAX_WS_MESSAGE = 1 << 20  # bytes; aiohttp closes a connection that sends more in one message (code 1009)
+MAX_LISTENS = 4096        # paths one client may listen to
+_dumps = functools.partial(json.dumps, allow_nan=False)  # (NaN is no JSON: a client's parser refuses it)
+
+
+class QueryServer:
+    """The OSCQuery routes of ``web`` (a started ``WebServer`` serves them), answering from
+    ``live``; ``host_info`` is the ``/?HOST_INFO`` object. ``send_osc`` and ``announce``
+    may be called from any thread."""
+
+    def __init__(self, adapter: Adapter, web_server: WebServer, live: Live, host_info: dict[str, Any]) -> None:
+        self.adapter, self.web, self.live, self.host_info = adapter, web_server, live, host_info
+        self.listened: dict[str, int] = {}  # path → how many clients listen (read from other threads)
+        self._clients: set[_Client] = set()
+        web_server.app.router.add_get("/{path:.*}", self.get)
+        web_server.app.on_shutdown.append(self._close_all)
+
+    @property
+    def clients(self) -> int:
+        return len(self._clients)
+
+    # -- from any thread -------------------------------------------------------------
+
+    def send_osc(self, messages: list[tuple[str, bytes]]) -> None:
+        """Send each ``(path, OSC message)`` to the clients that listen to ``path``."""
+        self._call(self._send_osc, messages)
+
+    def announce(self, command: str, path: str) -> None:
+        """Tell every client ``{"COMMAND": command, "DATA": path}``."""
+        self._call(self._push_all, _dumps({"COMMAND": command, "DATA": path}))
+
+    def _call(self, function: Callable[..., None], *args: Any) -> None:
+        async def call() -> None:
+            function(*args)
+        with contextlib.suppress(RuntimeError):  # the server is stopping: nobody listens any more
+            self.web.submit(call())
+
+    # -- on the loop -----------------------------------------------------------------
+
+    async def get(self, request: web.Request) -> web.StreamResponse:
+        if web.WebSocketResponse().can_prepare(request).ok:
+            return await self._websocket(request)
+        self.adapter.count("http_requests")
+        path = "/" + request.match_info["path"].strip("/")
+        attribute = request.query_string
+        if attribute == "HOST_INFO":
+            return web.json_response(self.host_info, dumps=_dumps)
+        node = self.live.node(path)
+        if node is None:
+            raise web.HTTPNotFound(text=f"no OSC node at {path}\n")
+        if not attribute:
+            return web.json_response(node, dumps=_dumps)
+        if attribute not in ATTRIBUTES:
+            raise web.HTTPBadRequest(text=f"unknown attribute {attribute!r}: OSCQuery names "
+                                          f"{', '.join(sorted(ATTRIBUTES))}\n")
+        if attribute not in node or (attribute == "VALUE" and node.get("ACCESS") != 1):
+            return web.Response(status=204)  # (a write-only method's VALUE is only a placeholder)
+        return web.json_response({attribute: node[attribute]}, dumps=_dumps)
+
+    async def _websocket(self, request: web.Request) -> web.WebSocketResponse:
+        ws = web.WebSocketResponse(timeout=CLOSE_WAIT_S, max_msg_size=MAX_WS_MESSAGE)
+        await ws.prepare(request)
+        client = _Client(ws, self.adapter)
+        self._clients.add(client)
+        self.adapter.count("ws_clients")
+        sender = asyncio.create_task(client.send_all())
+        try:
+            async for message in ws:
+                if message.type == WSMsgType.TEXT:
+                    self._command(client, message.data)
+                elif message.type == WSMsgType.BINARY:
+                    self._bad(f"a binary WebSocket message of {len(message.data)} bytes (values are set "
+                              "through the gateway's UDP port, OSC_PORT in HOST_INFO)")
+        finally:
+            self._clients.discard(client)
+            self._ignore(client, list(client.listens))
+            sender.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                await sender
+        return ws
+
+    def _command(self, client: _Client, text: str) -> None:
+        if len(text) > MAX_WS_TEXT:
+            self._bad(f"a WebSocket message of {len(text)} characters (at most {MAX_WS_TEXT})")
+            return
+        try:
+            command = json.loads(text)
+        except ValueError:
+            self._bad(f"a WebSocket message that is not JSON: {text[:60]!r}")
+            return
+        name = command.get("COMMAND") if isinstance(command, dict) else None
+        path = command.get("DATA") if isinstance(command, dict) else None
+        if name not in ("LISTEN", "IGNORE") or not isinstance(path, str) or not path.startswith("/"):
+            self._bad(f"a WebSocket command that is not {{\"COMMAND\": \"LISTEN\"|\"IGNORE\", \"DATA\": "
+                      f"\"/path\"}}: {text[:80]!r}")
+            return
+        if name == "IGNORE":
+            self._ignore(client, [path])
+        elif path not in client.listens:
+            if len(client.listens) >= MAX_LISTENS:
+                self._bad(f"LISTEN {path}: a client may listen to at most {MAX_LISTENS} paths")
+                return
+            if path not in self.live:  # kept: it streams once a robot serves it
+                self.adapter.warn("listen", f"LISTEN {path}: no such node (yet); its values come when it is served")
+            client.listens.add(path)
+            self.listened[path] = self.listened.get(path, 0) + 1
+
+    def _ignore(self, client: _Client, paths: Iterable[str]) -> None:
+        for path in paths:
+            if path in client.listens:
+                client.listens.discard(path)
+                left = self.listened.get(path, 1) - 1
+                if left:
+                    self.listened[path] = left
+                else:
+                    self.listened.pop(path, None)
+
+    def _bad(self, what: str) -> None:
+        self.adapter.count("bad")
+        self.adapter.warn("ws", f"WebSocket: refused {what}")
+
+    def _send_osc(self, messages: list[tuple[str, bytes]]) -> None:
+        for client in self._clients:
+            for path, data in messages:
+                if path in client.listens:
+                    client.push(data)
+                    self.adapter.count("values_sent")
+
+    def _push_all(self, text: str) -> None:
+        for client in self._clients:
+            client.push(text)
+
+    async def _close_all(self, app: web.Application) -> None:
+        closing = [asyncio.create_task(c.ws.close(code=WSCloseCode.GOING_AWAY, message=b"node stopping"))
+                   for c in self._clients]
+        if closing:
+            await asyncio.wait(closing, timeout=2 * CLOSE_WAIT_S)
+
+
+class _Client:
+    """One WebSocket client: what it listens to, and a bounded backlog sent in order by one
+    task (a client ``CLIENT_BACKLOG`` messages behind loses the oldest, counted as ``dropped``)."""
+
+    def __init__(self, ws: web.WebSocketResponse, adapter: Adapter) -> None:
+        self.ws, self.adapter = ws, adapter
+        self.listens: set[str] = set()
+        self.backlog: deque[str | bytes] = deque(maxlen=CLIENT_BACKLOG)
+        self.waiting = asyncio.Event()
+
+    def push(self, message: str | bytes) -> None:
+        if len(self.backlog) == self.backlog.maxlen:
+            self.adapter.count("dropped")
+        self.backlog.append(message)
+        self.waiting.set()
+
+    async def send_all(self) -> None:
+        while not self.ws.closed:
+            await self.waiting.wait()
+            self.waiting.clear()
+            while self.backlog and not self.ws.closed:
+                message = self.backlog.popleft()
+                try:
+                    if isinstance(message, bytes):
+                        await self.ws.send_bytes(message)
+                    else:
+                        await self.ws.send_str(message)
+                except ConnectionError:  # the client went away; its handler ends the connection
+                    return
