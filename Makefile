@@ -6,27 +6,37 @@ STAMP  := $(VENV)/.installed
 
 .PHONY: demo test bench lint setup clean
 
-setup: $(STAMP)
+TESTS  := $(VENV)/.installed-tests
 
-$(STAMP): pyproject.toml tests/plugin/pyproject.toml
+setup: $(TESTS)
+
+# what users need: sonibus itself
+$(STAMP): pyproject.toml
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
-	$(BIN)/python -m pip install --quiet -e '.[test]' -e tests/plugin
+	$(BIN)/python -m pip install --quiet -e .
 	touch $(STAMP)
 
-demo: $(STAMP)
-	$(BIN)/sonibus demo
+# what the tests need besides: the test extra and the test plug-in
+$(TESTS): $(STAMP) tests/plugin/pyproject.toml
+	$(BIN)/python -m pip install --quiet -e '.[test]' -e tests/plugin
+	touch $(TESTS)
 
-test: $(STAMP)
+# Ctrl-C is how a demo ends: no "Error 130" from make (the trap keeps the shell
+# alive to see sonibus's exit status; sonibus itself still gets the Ctrl-C)
+demo: $(STAMP)
+	trap true INT; $(BIN)/sonibus demo $(DEMO_ARGS) || test $$? -eq 130
+
+test: $(TESTS)
 	bash scripts/test-tools.sh
 	$(BIN)/ruff check .
 	$(BIN)/python -m pytest
 
-bench: $(STAMP)
+bench: $(TESTS)
 	bash scripts/test-tools.sh
 	$(BIN)/python bench/run.py
 
-lint: $(STAMP)
+lint: $(TESTS)
 	$(BIN)/ruff check .
 
 clean:
