@@ -170,7 +170,7 @@ def _info(args: argparse.Namespace, env: Environment) -> Exit:
             "file": args.file, "bytes": os.path.getsize(args.file),
             "start": recording.start_ns / 1e9, "duration_s": recording.duration_s,
             "messages": recording.message_count, "recorder": recording.metadata.get("sonibus.recording", {}),
-            "stats": recording.metadata.get("sonibus.stats", {}),
+            "stats": {k: _number(v) for k, v in recording.metadata.get("sonibus.stats", {}).items()},
             "robots": {r: {"model": infos.get(r, {}).get("model"), "rate_hz": infos.get(r, {}).get("rate_hz"),
                            "joints": sum(1 for k in recording.keys if k.startswith(f"{r}/joints/"))}
                        for r in recording.robots},
@@ -192,6 +192,16 @@ def _info(args: argparse.Namespace, env: Environment) -> Exit:
     for key, about in facts["keys"].items():
         env.say(f"    {key:<{width}}  {about['messages']:>8}  {about['rate_hz']:8.1f}/s")
     return Exit.OK
+
+
+def _number(text: str) -> int | float | str:
+    """An MCAP metadata value (always a string) as the number it holds, if it holds one."""
+    for kind in (int, float):
+        try:
+            return kind(text)
+        except ValueError:
+            pass
+    return text
 
 
 INFO = Command("info", "what a recording holds: duration, robots, keys, rates", _info_arguments, _info)

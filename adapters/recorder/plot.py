@@ -44,7 +44,8 @@ def figure(recording: Recording, keys: Sequence[str] | None = None, title: str |
     try:  # a bare Figure renders without pyplot, so no backend is chosen for the caller
         from matplotlib.figure import Figure
     except ImportError:
-        raise RecordingError("sonibus plot needs matplotlib: pip install 'sonibus[plot]'") from None
+        raise RecordingError("sonibus plot needs matplotlib: pip install matplotlib "
+                             "(in a clone of sonibus: .venv/bin/pip install -e '.[plot]')") from None
 
     chosen = recording.matching(keys) if keys else recording.keys
     joints = [k for k in chosen if _section(k) == "joints"]

@@ -180,3 +180,18 @@ def test_record_cli_rejects_a_bad_key_expression(tmp_path):
     assert result.returncode == 2
     assert "not a valid key expression" in result.stderr and len(result.stderr.splitlines()) == 1
     assert not (tmp_path / "x.mcap").exists()
+
+
+def test_info_json_gives_numbers_as_numbers(net, tmp_path, spawn):
+    """Issue 19, item 6: ``info --json`` gave the recorder's statistics as strings
+    (MCAP metadata holds strings only)."""
+    path = tmp_path / "numbers.mcap"
+    recording = spawn(SONIBUS, "record", str(path), *net.cli_args())
+    net.sim("pepper", rate_hz=50)
+    wait_for(lambda: path.exists() and path.stat().st_size > 5_000, timeout=20, what="data on disk")
+    code, _, err = recording.stop(signal.SIGINT, timeout=3)
+    assert code == 0, err
+    result = run_cli("info", str(path), "--json")
+    assert result.returncode == 0, result.stderr
+    stats = json.loads(result.stdout)["stats"]
+    assert stats["dropped"] == 0 and isinstance(stats["received"], int) and stats["received"] > 0, stats
