@@ -31,6 +31,9 @@ def test_demo_reaches_oscdump_at_the_configured_rate(spawn):
     assert rc == 130, err
     assert "Traceback" not in err
 
+    events = [line for line in lines if " /pepper/events/" in line]  # behaviors reach Pd too (issue 19)
+    assert any('/pepper/events/connection s "connected"' in line for line in events), events[:3]
+    lines = [line for line in lines if line not in events]
     parsed = [m for m in map(LINE.match, lines) if m]
     assert len(parsed) == len(lines), [line for line in lines if not LINE.match(line)][:3]
     by_address = collections.defaultdict(list)
