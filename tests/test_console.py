@@ -35,3 +35,19 @@ def test_the_view_shows_frames_or_with_per_joint_keys_the_joint_keys(net, per_jo
     lines = wait_for(shown, what=f"a line with {heard}")
     assert lines[0].startswith("bot ")
     assert unheard not in view.out.getvalue()
+
+
+def test_a_robot_that_leaves_the_bus_leaves_the_view(net):
+    """Issue 19, item 6: a replay that ended stayed in the view at 0.0 frames/s for ever."""
+    view = ConsoleView(ConsoleConfig(every_s=0.1), name="view")
+    view.out = io.StringIO()
+    net.start(view)
+    net.sim("pepper", rate_hz=20)  # stays: its lines show the view going on
+    robot = net.sim("nao", rate_hz=50)
+    wait_for(lambda: "\nnao " in view.out.getvalue(), what="a line for nao")
+    robot.stop()
+    wait_for(lambda: "nao      left the bus" in view.out.getvalue(), timeout=15, what="nao leaving the view")
+    wait_for(lambda: view.out.getvalue().partition("nao      left the bus")[2].count("pepper ") >= 3,
+             what="three more lines of the view")
+    after = view.out.getvalue().partition("nao      left the bus")[2]
+    assert "nao " not in after, after

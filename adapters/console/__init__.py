@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import collections
 import sys
 import time
 from dataclasses import dataclass
@@ -9,6 +10,7 @@ from typing import TextIO
 
 from sonibus.bus import keys
 from sonibus.bus.adapter import Adapter
+from sonibus.bus.presence import watch_robots
 from sonibus.bus.queue import SampleQueue
 from sonibus.bus.streams import Streams
 
@@ -40,6 +42,8 @@ class ConsoleView(Adapter):
                                          self._queue, per_joint_keys=cfg.per_joint_keys))
         self._values: dict[str, dict[str, float]] = {}
         self._seqs: dict[str, set[int]] = {}
+        self._left: collections.deque[str] = collections.deque()  # robots gone from the bus, from Zenoh's threads
+        self.own(watch_robots(self.bus, lambda robot, alive: alive or self._left.append(robot)))
         self.spawn(self._run, "view")
 
     def _run(self) -> None:
@@ -67,6 +71,10 @@ class ConsoleView(Adapter):
             self._print(f"{source.robot:<8} event {source.name}: {details}")
 
     def _print_rates(self) -> None:
+        while self._left:  # a replay that ended, a robot switched off: no line at 0.0 frames/s for ever
+            robot = self._left.popleft()
+            if self._values.pop(robot, None) is not None:
+                self._print(f"{robot:<8} left the bus")
         for robot, values in sorted(self._values.items()):
             rate = len(self._seqs.get(robot, ())) / self.config.every_s
             shown = "  ".join(f"{j} {values[j]:+.3f}" for j in self.config.joints if j in values)
