@@ -7,6 +7,7 @@ Registering probes the network for about a second and a half, so it runs on a wo
 
 from __future__ import annotations
 
+import asyncio
 import ipaddress
 import logging
 import socket
@@ -54,18 +55,24 @@ class Advertiser:
                            addresses=[socket.inet_aton(a) for a in where], properties={"txtvers": "1"})
 
     def run(self, stopping: threading.Event) -> None:
-        """Open zeroconf on the bound addresses and register both services (blocks while
-        probing); what is left once ``stopping`` is set is not registered."""
+        """Open zeroconf on the bound addresses and register both services at once (probing
+        takes about 1.7 s); returns early, registering no more, once ``stopping`` is set."""
         zc = Zeroconf(interfaces=list(self.bind), ip_version=IPVersion.V4Only)
         with self._lock:
             if self._closed:
                 zc.close()
                 return
             self._zeroconf = zc
-        for info in (self._info(OSCJSON, self.port, self.bind), self._info(OSC, self.osc_port, self.osc_addresses)):
-            if stopping.is_set():
-                return
-            zc.register_service(info, allow_name_change=True)
+        infos = [self._info(OSCJSON, self.port, self.bind), self._info(OSC, self.osc_port, self.osc_addresses)]
+        assert zc.loop is not None
+        pending = [asyncio.run_coroutine_threadsafe(_register(zc, info), zc.loop) for info in infos]
+        for info, future in zip(infos, pending, strict=True):
+            while not future.done():
+                if stopping.wait(0.05):
+                    for other in pending:
+                        other.cancel()
+                    return
+            future.result()
             self.registered.append(info)
             log.info("mdns: %s advertised on %s", info.name, ", ".join(self.bind))
 
@@ -80,3 +87,8 @@ class Advertiser:
             zc.unregister_all_services()
         finally:
             zc.close()
+
+
+async def _register(zc: Zeroconf, info: ServiceInfo) -> None:
+    announced = await zc.async_register_service(info, allow_name_change=True)
+    await announced

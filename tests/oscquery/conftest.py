@@ -6,6 +6,7 @@ from __future__ import annotations
 import asyncio
 import json
 import threading
+import time
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from typing import Any
@@ -71,6 +72,7 @@ class Socket:
     def __init__(self, url: str) -> None:
         self.url = url.replace("http://", "ws://") + "/"
         self.messages: list[str | bytes] = []
+        self.arrived: list[float] = []  # time.monotonic() of each message, as the reader took it
         self.loop = asyncio.new_event_loop()
         self.closed = False
         self._ws: aiohttp.ClientWebSocketResponse | None = None
@@ -92,6 +94,7 @@ class Socket:
         assert self._ws is not None
         async for message in self._ws:
             if message.type in (aiohttp.WSMsgType.TEXT, aiohttp.WSMsgType.BINARY):
+                self.arrived.append(time.monotonic())
                 self.messages.append(message.data)
         self.closed = True
 
@@ -108,6 +111,9 @@ class Socket:
         return [json.loads(m) for m in list(self.messages) if isinstance(m, str)]
 
     def close(self) -> None:
+        if self.loop.is_closed():
+            return
+
         async def close() -> None:
             if self._ws is not None:
                 await self._ws.close()

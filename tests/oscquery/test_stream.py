@@ -1,0 +1,126 @@
+"""Issue 16: the WebSocket of the OSCQuery server — LISTEN streams a joint as binary OSC
+at about the robot's rate, IGNORE ends it; PATH_ADDED, PATH_REMOVED and PATH_CHANGED as
+robots come, go and change; bad input is counted and leaves everything up; a value sent
+to a writable address at HOST_INFO's OSC port moves the simulated robot."""
+
+from __future__ import annotations
+
+import itertools
+import socket
+import statistics
+import time
+
+from pythonosc.osc_message import OscMessage
+from pythonosc.osc_message_builder import OscMessageBuilder
+
+from sonibus.adapters.sim import SimConfig, SimRobot
+
+from ..conftest import wait_for
+from .conftest import RATE, serve
+
+HEAD = "/pepper/joints/HeadYaw"
+
+
+def osc(socket_) -> list[OscMessage]:
+    return [OscMessage(m) for m in list(socket_.messages) if isinstance(m, bytes)]
+
+
+def test_listen_streams_a_joint_at_the_robots_rate_and_ignore_ends_it(served, websocket, figure):
+    client = websocket(served.url)
+    client.send({"COMMAND": "LISTEN", "DATA": HEAD})
+    first = wait_for(lambda: osc(client), what="a first value")[0]
+    begun, window = time.monotonic(), 2.0
+    wait_for(lambda: time.monotonic() - begun >= window, window + 1, "the window")
+    values = [m for m in osc(client) if m.address == HEAD]
+    assert first.address == HEAD and all(len(m.params) == 1 and isinstance(m.params[0], float) for m in values)
+    assert len(values) >= 0.5 * RATE * window, dict(served.node.stats.items())  # completeness, not timing
+    figure("HeadYaw values over WebSocket", len(values) / window, f"/s (robot {RATE} frames/s)")
+    # IGNORE, then LISTEN to another joint: once that one streams, HeadYaw no longer does
+    client.send({"COMMAND": "IGNORE", "DATA": HEAD})
+    client.send({"COMMAND": "LISTEN", "DATA": "/pepper/joints/HeadPitch"})
+    wait_for(lambda: sum(m.address == "/pepper/joints/HeadPitch" for m in osc(client)) >= 10, what="HeadPitch")
+    after = osc(client)
+    switched = next(i for i, m in enumerate(after) if m.address == "/pepper/joints/HeadPitch")
+    assert all(m.address == "/pepper/joints/HeadPitch" for m in after[switched:])
+    assert served.node.stats["values_sent"] >= len(values)
+
+
+def test_stream_rate_measured(served, websocket, figure):
+    """The gaps between values of one joint over the WebSocket, against the robot's period."""
+    client = websocket(served.url)
+    client.send({"COMMAND": "LISTEN", "DATA": HEAD})
+    wait_for(lambda: osc(client), what="a first value")
+    begun = time.monotonic()
+    wait_for(lambda: time.monotonic() - begun >= 3.0, 4.0, "the window")
+    stamps = [at for at, m in zip(list(client.arrived), list(client.messages), strict=False)
+              if isinstance(m, bytes) and at >= begun]
+    gaps = [b - a for a, b in itertools.pairwise(stamps)]
+    assert len(stamps) >= 0.5 * RATE * 3.0
+    figure("median gap between HeadYaw values", statistics.median(gaps) * 1000, f"ms (robot period {1000 / RATE:g} ms)")
+    figure("values per second", len(stamps) / 3.0, f"/s (robot {RATE} frames/s)")
+
+
+def test_robots_coming_going_and_changing_are_announced(served, websocket):
+    client = websocket(served.url)
+    nao = served.net.sim("nao2", rate_hz=RATE)
+    wait_for(lambda: {"COMMAND": "PATH_ADDED", "DATA": "/nao2"} in client.texts(), 10, "PATH_ADDED /nao2")
+    assert served.json("/nao2/joints/LKneePitch")["UNIT"] == ["rad"]
+    nao.stop()
+    wait_for(lambda: {"COMMAND": "PATH_REMOVED", "DATA": "/nao2"} in client.texts(), 10, "PATH_REMOVED /nao2")
+    assert served.get("/nao2").status_code == 404
+    assert "/pepper" not in [t["DATA"] for t in client.texts()]  # pepper stayed as it was
+
+
+class Installing(SimRobot):
+    """A simulated robot on which behaviors get installed while it runs."""
+
+    installed: tuple[str, ...] = ()
+
+    def behaviors(self) -> list[str]:  # (read at each info query)
+        return [*super().behaviors(), *self.installed]
+
+
+def test_behaviors_installed_are_announced_as_path_changed(net, websocket):
+    robot = net.start(Installing(SimConfig(robot="pepper3", rate_hz=RATE), name="pepper3"))
+    served = serve(net)
+    served.wait_node("/pepper3/cmd/behavior/run")
+    client = websocket(served.url)
+    robot.installed = ("my/new_behavior",)
+    wait_for(lambda: {"COMMAND": "PATH_CHANGED", "DATA": "/pepper3"} in client.texts(), 10, "PATH_CHANGED")
+    assert "my/new_behavior" in served.json("/pepper3/cmd/behavior/run")["RANGE"][0]["VALS"]
+
+
+def test_bad_websocket_input_is_counted_and_everything_stays_up(served, websocket):
+    client = websocket(served.url)
+    bad = ["junk", "[1, 2]", '{"COMMAND": "DANCE", "DATA": "/pepper"}', '{"COMMAND": "LISTEN", "DATA": 5}',
+           '{"COMMAND": "LISTEN"}', "x" * 100_000]
+    for text in bad:
+        client.send(text)
+    client.send(b"\x00\xff binary")
+    client.send({"COMMAND": "LISTEN", "DATA": "/pepper/joints/NoSuchJoint"})  # not bad: it may come
+    wait_for(lambda: served.node.stats["bad"] >= len(bad) + 1, what="every bad message counted")
+    assert served.node.stats["bad"] == len(bad) + 1
+    client.send({"COMMAND": "LISTEN", "DATA": HEAD})  # the same connection still works
+    wait_for(lambda: osc(client), what="values after bad input")
+    assert not client.closed and served.node.state == "running"
+    # a client that goes away mid-stream
+    leaving = websocket(served.url)
+    leaving.send({"COMMAND": "LISTEN", "DATA": HEAD})
+    wait_for(lambda: osc(leaving), what="values to the leaving client")
+    leaving.close()
+    wait_for(lambda: served.node.server.clients == 1, what="the leaving client gone")
+    before = len(osc(client))
+    wait_for(lambda: len(osc(client)) > before + 10, what="values still streaming to the other client")
+    assert served.get("/pepper").status_code == 200
+
+
+def test_a_value_sent_to_a_writable_address_moves_the_robot(served):
+    host = served.json("/?HOST_INFO")
+    target = served.json("/pepper/cmd/joints/set/HeadYaw")
+    assert target["ACCESS"] == 2 and target["TYPE"] == "f"
+    angle = 0.6 if served.json(HEAD)["VALUE"][0] < 0.3 else -0.6
+    builder = OscMessageBuilder(target["FULL_PATH"])
+    builder.add_arg(angle, "f")
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as udp:
+        udp.sendto(builder.build().dgram, (host["OSC_IP"], host["OSC_PORT"]))
+    wait_for(lambda: abs(served.json(HEAD)["VALUE"][0] - angle) < 0.05, 10, f"HeadYaw near {angle}")
