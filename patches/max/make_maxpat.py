@@ -224,7 +224,7 @@ Each command is answered at /{robot}/reply/<verb> on the port it came from, wher
         patch.connect(source, 0, send)
 
 
-def pepperosc_patch(model: RobotModel) -> Patcher:
+def pepperosc_patch(robot: str, model: RobotModel) -> Patcher:
     """PepperOSC's receivers: /pepperdata "/<Joint>" "/PositionSensor" value, /latency, /soundstart, /soundstop."""
     patch = Patcher(1400, 900)
     y = _header(patch, "\n".join((
@@ -233,7 +233,7 @@ def pepperosc_patch(model: RobotModel) -> Patcher:
         "",
         "[nodes.pepperosc]",
         'adapter = "osc"',
-        'subscribe = ["pepper/joints/*", "pepper/events/behavior"]',
+        f'subscribe = ["{robot}/joints/*", "{robot}/events/behavior"]',
         'targets = ["127.0.0.1:3005"]',
         'profile = "pepperosc"')), 30, 15)
     udp = patch.obj("udpreceive 3005", 30, y)
@@ -282,7 +282,7 @@ def main() -> None:
     args = parser.parse_args()
     model = load_model(args.robot.rstrip("0123456789"))
     write(sonibus_patch(args.robot, model), args.output / "max" / "sonibus.maxpat")
-    write(pepperosc_patch(model), args.output / "pepperosc" / "pepperosc.maxpat")
+    write(pepperosc_patch(args.robot, model), args.output / "pepperosc" / "pepperosc.maxpat")
 
 
 if __name__ == "__main__":

@@ -27,7 +27,7 @@ from sonibus.bus.robot import RobotModel
 HERE = Path(__file__).resolve().parent
 WIDTH, HEIGHT = 1024, 768
 FADER_JOINTS = ("HeadYaw", "HeadPitch", "LShoulderPitch", "RShoulderPitch", "LElbowRoll", "RElbowRoll")
-SAY = "Hello, I am Pepper"
+SAY = "Hello from TouchOSC"
 CONNECTION = "10000"  # connection 1 only (lexml 3 has five): set it to the gateway's host and port
 
 Color = tuple[float, float, float, float]
@@ -85,10 +85,12 @@ def controls(robot: str, model: RobotModel) -> list[Control]:
         frame = (20 + (i % 2) * 245, 84 + (i // 2) * 68, 235, 60)
         button(f"behavior_{i + 1}", frame, BLUE, "behavior/run", behavior, label=behavior.rpartition("/")[2])
     out.append(Control("LABEL", "postures", (20, 360, 480, 24), GREY, text="Postures"))
-    for i, posture in enumerate(model.postures):
-        button(f"posture_{posture}", (20 + i * 122, 388, 112, 60), GREEN, "posture", posture, label=posture)
-    button("say", (20, 470, 480, 60), BLUE, "say", SAY, label=f"say “{SAY}”")
-    button("behavior_stop", (20, 550, 480, 60), GREY, "behavior/stop", label="stop the behavior")
+    for i, posture in enumerate(model.postures):  # four a row (NAO has eight)
+        button(f"posture_{posture}", (20 + i % 4 * 122, 388 + i // 4 * 68, 112, 60), GREEN, "posture", posture,
+               label=posture)
+    y = 388 + (len(model.postures) + 3) // 4 * 68 + 14
+    button("say", (20, y, 480, 60), BLUE, "say", SAY, label=f"say “{SAY}”")
+    button("behavior_stop", (20, y + 80, 480, 60), GREY, "behavior/stop", label="stop the behavior")
 
     start = model.posture("StandInit")
     joints = [j for j in FADER_JOINTS if model.has_joint(j)]

@@ -22,6 +22,7 @@ from sonibus.adapters.osc import routes
 from sonibus.adapters.osc.config import OscSinkConfig, parse_target
 from sonibus.adapters.osc.gateway import OscGatewayConfig
 from sonibus.adapters.osc.profiles import PROFILES
+from sonibus.adapters.sim import SimConfig
 from sonibus.adapters.sim.behaviors import LIBRARY
 from sonibus.bus import commands, config, load_model
 from sonibus.bus.keys import Key
@@ -199,3 +200,14 @@ def test_the_committed_patches_are_what_make_maxpat_writes(tmp_path):
         fresh = tmp_path / path.parent.name / path.name
         assert json.loads(fresh.read_text()) == json.loads(path.read_text()), \
             f"{path.name} is out of date: run patches/max/make_maxpat.py and commit it"
+
+
+def test_the_readme_installations_load():
+    blocks = re.findall(r"```toml\n(.*?)```", (ROOT / "patches" / "max" / "README.md").read_text(), re.S)
+    configs = {"sim": SimConfig, "osc": OscSinkConfig, "osc-gateway": OscGatewayConfig}
+    nodes = [n for block in blocks for n in config.parse(block, "patches/max/README.md").nodes.values()]
+    checked = {n.adapter: from_mapping(configs[n.adapter], n.options, n.where) for n in nodes if n.name != "pepperosc"}
+    assert parse_target(checked["osc"].resolved_targets()[0].to)[1] == 9000
+    assert parse_target(checked["osc-gateway"].listen)[1] == 9001
+    (pepperosc,) = (n for n in nodes if n.name == "pepperosc")
+    assert from_mapping(OscSinkConfig, pepperosc.options, pepperosc.where).resolved_targets()[0].profile == "pepperosc"

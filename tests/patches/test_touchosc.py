@@ -4,6 +4,7 @@ running OSC gateway with a simulated Pepper behind it."""
 
 from __future__ import annotations
 
+import re
 import socket
 import subprocess
 import sys
@@ -11,6 +12,7 @@ import xml.etree.ElementTree as ET
 import zlib
 from collections.abc import Iterator
 from dataclasses import dataclass
+from ipaddress import ip_address
 from pathlib import Path
 from typing import Any
 
@@ -18,7 +20,8 @@ import pytest
 
 from sonibus.adapters.osc import routes
 from sonibus.adapters.osc.gateway import OscGateway, OscGatewayConfig
-from sonibus.bus import robot_info
+from sonibus.bus import config, robot_info
+from sonibus.bus.options import from_mapping
 
 from ..conftest import free_port, wait_for
 from ..osc.test_gateway import Client, Watch
@@ -175,3 +178,12 @@ def test_the_committed_surface_is_what_make_tosc_writes(tmp_path):
                    capture_output=True, timeout=60)
     assert zlib.decompress(out.read_bytes()) == zlib.decompress(TOSC.read_bytes()), \
         "sonibus.tosc is out of date: run patches/touchosc/make_tosc.py and commit it"
+
+
+def test_the_readme_gateway_takes_a_tablet_on_wifi():
+    (block,) = re.findall(r"```toml\n(.*?)```", (SURFACE / "README.md").read_text(), re.S)
+    (node,) = config.parse(block, "patches/touchosc/README.md").nodes.values()
+    gateway = from_mapping(OscGatewayConfig, node.options, node.where)
+    assert node.adapter == "osc-gateway" and gateway.listen == "0.0.0.0:9001"
+    assert any(ip_address("192.168.1.37") in network for network in gateway.networks())
+    assert not any(ip_address("10.0.0.5") in network for network in gateway.networks())
