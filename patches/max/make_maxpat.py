@@ -103,8 +103,8 @@ class Patcher:
 def ladder(patch: Patcher, source: str, outlet: int, x: float, y: float, groups: list[list[str]],
            step: float) -> tuple[dict[str, tuple[str, int, float]], float]:
     """One [route] per group of addresses, each fed by the previous one's last outlet
-    (what it did not match). Returns each address's (route, outlet, x of that outlet)
-    and the y of each route in turn, ``step`` apart across and ``ROW * 4`` down."""
+    (what it did not match), ``step`` wide per outlet and ``ROW * 4`` apart. Returns each
+    address's (route, outlet, x of that outlet) and the y below the last route."""
     found: dict[str, tuple[str, int, float]] = {}
     for group in groups:
         text = "route " + " ".join(group)

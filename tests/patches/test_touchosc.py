@@ -111,19 +111,16 @@ def fader_ranges(root: ET.Element) -> dict[str, tuple[float, float]]:
 
 
 @pytest.fixture
-def gate(net):
+def client(net):
+    """A UDP client of a running OSC gateway, a simulated Pepper behind it."""
     net.sim("pepper", rate_hz=50)
-    return net.start(OscGateway(OscGatewayConfig(listen=f"127.0.0.1:{free_port(socket.SOCK_DGRAM)}"), name="gate"))
-
-
-@pytest.fixture
-def client(gate):
-    client = Client(gate.udp_address)
+    gateway = net.start(OscGateway(OscGatewayConfig(listen=f"127.0.0.1:{free_port(socket.SOCK_DGRAM)}"), name="gate"))
+    client = Client(gateway.udp_address)
     yield client
     client.sock.close()
 
 
-def test_every_message_of_the_surface_is_accepted_by_the_gateway(net, gate, client):
+def test_every_message_of_the_surface_is_accepted_by_the_gateway(net, client):
     messages = list(sent(load()))
     info = robot_info(net.bus("info"), "pepper")
     assert {m.args[0] for m in messages if m.address == "/pepper/cmd/behavior/run"} == set(info["behaviors"])
@@ -137,7 +134,7 @@ def test_every_message_of_the_surface_is_accepted_by_the_gateway(net, gate, clie
     assert len(messages) >= len(info["behaviors"]) + 3 * len(FADERS) + 2
 
 
-def test_the_stop_button_stops_the_robot(net, gate, client):
+def test_the_stop_button_stops_the_robot(net, client):
     messages = list(sent(load()))
     (stop,) = (m for m in messages if m.address == "/pepper/cmd/stop")
     wave = next(m for m in messages if m.address == "/pepper/cmd/behavior/run")
@@ -164,7 +161,8 @@ def test_the_stop_button_stops_the_robot(net, gate, client):
     arm.steady()
 
 
-def test_faders_span_the_limits_the_robot_serves(net, gate):
+def test_faders_span_the_limits_the_robot_serves(net):
+    net.sim("pepper")
     info = robot_info(net.bus("info"), "pepper")
     limits = {j["name"]: (j["min"], j["max"]) for j in info["joints"]}
     ranges = fader_ranges(load())
