@@ -12,9 +12,11 @@ slope ``s_k`` taken from the previous step):
                                                      sits, after the step's middle)
 
 Every step uses its real ``Δt``, so a dropped frame is a longer step, not a
-wrong velocity. A signal's first sample (and the first after a gap longer than
-``max_gap_s``) starts it over from rest (``v = 0``, no slope), so a start makes
-no burst from noise. A NaN sample is no sample: that signal keeps its state.
+wrong velocity. A velocity below ``STILL`` (1e-9 units/s) is 0: a joint that
+stopped comes to rest, not through ever smaller numbers to 1e-300. A signal's
+first sample (and the first after a gap longer than ``max_gap_s``) starts it
+over from rest (``v = 0``, no slope), so a start makes no burst from noise. A
+NaN sample is no sample: that signal keeps its state.
 
 Poison never stays in the state. A sample the filter refuses (``rejected``,
 counted) resets its signal instead: one whose time went backwards, or that
@@ -40,6 +42,8 @@ from __future__ import annotations
 import math
 
 import numpy as np
+
+STILL = 1e-9  # units/s: a smaller velocity is rest (far below any sensor's resolution)
 
 
 class VelocityFilter:
@@ -107,7 +111,9 @@ class VelocityFilter:
             e = np.exp(-dt / self.tau)
             delta = dt / 2 - self.tau + dt * e / (1.0 - e)
             slope = np.where(self.known[step], (r - self._last_r[step]) / ((dt + self._last_dt[step]) / 2), 0.0)
-            self.velocity[step] = e * self.velocity[step] + (1.0 - e) * (r + slope * delta)
+            v = e * self.velocity[step] + (1.0 - e) * (r + slope * delta)
+            v[np.abs(v) < STILL] = 0.0  # a decay to rest ends at rest, not at 1.9e-228 in a CSV
+            self.velocity[step] = v
         self.known[step] = True
         self._last_r[step], self._last_dt[step] = r, dt
 

@@ -142,3 +142,18 @@ def test_a_max_rate_is_one_positive_number_per_signal():
         VelocityFilter(2, CUTOFF_HZ, max_rate=np.array([1.0]))
     with pytest.raises(ValueError, match="max_rate"):
         VelocityFilter(1, CUTOFF_HZ, max_rate=np.array([0.0]))
+
+
+def test_a_joint_that_stops_comes_to_rest_at_zero_not_at_tiny_numbers():
+    """Issue 19, item 6: the features CSV held velocities like 1.9e-228 long after a stop."""
+    f = VelocityFilter(2, cutoff_hz=5.0)
+    for k in range(100):  # moves at 1 rad/s, then holds still for 9 s
+        f.update(k * 0.01, np.array([min(k, 10) * 0.01, 0.0]))
+    held_a_second = f.velocity.copy()
+    for k in range(100, 1000):
+        f.update(k * 0.01, np.array([0.1, 0.0]))
+    assert held_a_second[0] == 0.0 and f.velocity.tolist() == [0.0, 0.0]
+    g = VelocityFilter(1, cutoff_hz=5.0)
+    for k in range(30):
+        g.update(k * 0.01, np.array([k * 0.01]))
+    assert 0.9 < g.velocity[0] < 1.1  # a real motion is untouched
