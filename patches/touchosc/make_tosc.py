@@ -103,7 +103,7 @@ def controls(robot: str, model: RobotModel) -> list[Control]:
         out.append(Control("FADER", f"fader_{joint}", frame, ORANGE, Osc(cmd + f"joints/set/{joint}", (value,), "ANY"),
                            x=round(x, 6)))
         out.append(Control("LABEL", f"fader_{joint}_label", (frame[0] - 6, 508, 82, 40), GREY,
-                           text=f"{joint}\n{spec.min:.2f} … {spec.max:.2f}", text_size=11))
+                           text=f"{joint}\n{spec.min:.2f} … {spec.max:.2f}", text_size=10))
     button("stop", (520, 580, 484, 168), RED, "stop", label="STOP", size=48)
     return out
 
