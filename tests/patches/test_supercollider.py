@@ -33,16 +33,21 @@ HEY = "animations/Stand/Gestures/Hey_1"
 YES = "animations/Stand/Gestures/Yes_1"
 
 
+def listen(spawn, patch: Path, port: int) -> Process:
+    """``sclang listen.scd PATCH PORT 60``, its output gathered. listen.scd quits by itself
+    after 60 s; the tests end it sooner (and spawn kills it on failure)."""
+    sclang = require_tool("sclang", "supercollider-language")
+    return spawn(sclang, str(LISTEN), str(patch), str(port), "60", collect=True, merge=True,
+                 env={**os.environ, **HEADLESS})
+
+
 class Listener:
     """sclang running ``listen.scd PATCH``: the lines the patch's handlers print, split in fields."""
 
     def __init__(self, spawn, patch: Path, prefix: str) -> None:
-        sclang = require_tool("sclang", "supercollider-language")
         self.prefix = prefix
         self.port = free_port(socket.SOCK_DGRAM)
-        # listen.scd quits by itself after 60 s; the test ends it sooner (and spawn kills it on failure).
-        self.process: Process = spawn(sclang, str(LISTEN), str(patch), str(self.port), "60", collect=True,
-                                      merge=True, env={**os.environ, **HEADLESS})
+        self.process = listen(spawn, patch, self.port)
         wait_for(lambda: self._check() and any(line.startswith(f"{prefix}: listening") for line in self.lines),
                  timeout=20, what=f"sclang to load {patch.name}", explain=self.tail)
 
@@ -189,3 +194,15 @@ def test_pepperosc_scd_gets_joints_latency_and_sound_cues_from_a_pepperosc_sink(
     assert cues == ["soundstart 1 -> saw gate 1", "soundstop 1 -> saw gate 0"]
     arm_sub.undeclare()
     sc.stop()
+
+
+@pytest.mark.parametrize("patch, says", [("broken.scd", "did not load"), ("missing.scd", "no patch at")])
+def test_listen_scd_ends_at_once_with_one_error_line_when_the_patch_does_not_load(spawn, tmp_path, patch, says):
+    (tmp_path / "broken.scd").write_text("(\n~broken = (quiet: true;\n)\n")  # a parenthesis left open
+    process = listen(spawn, tmp_path / patch, free_port(socket.SOCK_DGRAM))
+    wait_for(lambda: process.popen.poll() is not None, timeout=30, what="sclang to quit (it would after 60 s)",
+             explain=lambda: "\n".join(process.lines))
+    errors = wait_for(lambda: [line for line in process.lines if line.startswith("sonibus: error:")],
+                      what="the error line")
+    assert process.popen.returncode == 1
+    assert len(errors) == 1 and says in errors[0] and patch in errors[0], errors
