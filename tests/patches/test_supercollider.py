@@ -136,7 +136,7 @@ def check_wave(sc: Listener, watch, hands: list) -> None:
     assert pitches == sorted(pitches), "a higher hand gave a lower pitch"
 
 
-def test_sonibus_scd_plays_joints_hand_height_and_motion_onsets_of_a_running_robot(net, spawn, tmp_path):
+def test_sonibus_scd_plays_joints_hand_height_motion_onsets_and_events_of_a_running_robot(net, spawn, tmp_path):
     sc = Listener(spawn, PATCHES / "supercollider" / "sonibus.scd", "sonibus")
     # The sound part builds without a server (its SynthDefs' graphs), after the OSCdefs.
     assert sc.wait(lambda: sc.printed("synthdefs"), "SynthDefs") == [["sonibusDrone", "sonibusHand", "sonibusPing"]]
@@ -153,6 +153,11 @@ def test_sonibus_scd_plays_joints_hand_height_and_motion_onsets_of_a_running_rob
     sc.wait(lambda: len(sc.printed("joint")) >= 17 * 5, "joints in sclang")
     check_head_turn(sc, watch, heads)
     check_wave(sc, watch, hands)
+    send_command(watch, "pepper", "say", {"text": "hello there"})
+    sc.wait(lambda: sc.printed("speech")[-1:] == [["hello", "there", "done", "->", "drone", "duck", "1"]],
+            "the end of speech in sclang")
+    assert sc.printed("speech") == [["hello", "there", state, "->", "drone", "duck", duck]
+                                    for state, duck in (("started", "0.3"), ("done", "1"))]
     heads_sub.undeclare()
     hands_sub.undeclare()
     assert run.stop(signal.SIGINT, timeout=10)[0] in (0, 130)
