@@ -6,6 +6,7 @@ to a writable address at HOST_INFO's OSC port moves the simulated robot."""
 from __future__ import annotations
 
 import itertools
+import json
 import socket
 import statistics
 import time
@@ -14,6 +15,7 @@ from pythonosc.osc_message import OscMessage
 from pythonosc.osc_message_builder import OscMessageBuilder
 
 from sonibus.adapters.sim import SimConfig, SimRobot
+from sonibus.bus import load_model
 
 from ..conftest import wait_for
 from .conftest import RATE, serve
@@ -124,3 +126,69 @@ def test_a_value_sent_to_a_writable_address_moves_the_robot(served):
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as udp:
         udp.sendto(builder.build().dgram, (host["OSC_IP"], host["OSC_PORT"]))
     wait_for(lambda: abs(served.json(HEAD)["VALUE"][0] - angle) < 0.05, 10, f"HeadYaw near {angle}")
+
+
+def test_a_robot_whose_info_is_unusable_is_left_out_with_a_warning(served, caplog):
+    """A robot on the bus whose info the gate refuses, and one whose info the namespace
+    cannot use (a derived value of 65 numbers): both left out, the node and pepper served."""
+    from sonibus.bus import codec
+    bus = served.net.bus("liar")
+    info = {**served.net.bus("asker").query("pepper/info")[0], "robot": "liar2", "owner": {"host": "h", "node": "n"},
+            "derived": [{"name": "hand/L", "key": "liar2/derived/hand/L", "unit": "m", "size": 65}]}
+    entities = [bus.serve("liar/info", lambda q: q.reply("liar/info", b"\xc1 not msgpack")),
+                bus.token("sonibus/robots/liar/1/h/n"),
+                bus.serve("liar2/info", lambda q: q.reply("liar2/info", codec.encode(info))),
+                bus.token("sonibus/robots/liar2/1/h/n")]
+    try:
+        wait_for(lambda: served.node.stats["robots_left_out"] >= 1, 10, "liar2 left out")
+        wait_for(lambda: any("liar/info unusable" in r.getMessage() for r in caplog.records), 10, "liar warned")
+        assert any("'liar2' left out" in r.getMessage() for r in caplog.records)
+        assert served.get("/liar").status_code == 404 and served.get("/liar2").status_code == 404
+        assert served.node.state == "running" and served.get("/pepper/joints/HeadYaw").status_code == 200
+    finally:
+        for entity in entities:
+            entity.undeclare()
+
+
+def test_events_are_served_and_streamed(served, websocket):
+    client = websocket(served.url)
+    client.send({"COMMAND": "LISTEN", "DATA": "/pepper/events/behavior"})
+    host = served.json("/?HOST_INFO")
+    name = served.json("/pepper/cmd/behavior/run")["RANGE"][0]["VALS"][0]
+    builder = OscMessageBuilder("/pepper/cmd/behavior/run")
+    builder.add_arg(name, "s")
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as udp:
+        udp.sendto(builder.build().dgram, (host["OSC_IP"], host["OSC_PORT"]))
+    wait_for(lambda: any(m.params == [name, "started"] for m in osc(client)), 10, "the behavior's start, streamed")
+    assert served.json("/pepper/events/behavior?VALUE")["VALUE"][0] == name
+
+
+def test_a_client_that_does_not_read_loses_values_not_the_node(served, websocket):
+    """A client whose socket is never read: once the kernel's buffers are full its backlog
+    overflows (counted as dropped) while another client keeps getting values and HTTP
+    answers. A fast robot (a NAO at 500 frames/s) fills the buffers in seconds."""
+    served.net.sim("fast", model="nao", rate_hz=500)
+    served.wait_node("/fast/joints/HeadYaw")
+    port = int(served.url.rsplit(":", 1)[1])
+    stalled = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+    stalled.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 1024)
+    try:
+        stalled.connect(("127.0.0.1", port))
+        stalled.sendall(b"GET / HTTP/1.1\r\nHost: x\r\nUpgrade: websocket\r\nConnection: Upgrade\r\n"
+                        b"Sec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\nSec-WebSocket-Version: 13\r\n\r\n")
+        for joint in load_model("nao").joint_names:
+            stalled.sendall(_masked(json.dumps({"COMMAND": "LISTEN", "DATA": f"/fast/joints/{joint}"}).encode()))
+        wait_for(lambda: served.node.stats["dropped"] > 0, 60, "values dropped for the stalled client",
+                 lambda: str(dict(served.node.stats.items())))
+        client = websocket(served.url)
+        client.send({"COMMAND": "LISTEN", "DATA": HEAD})
+        wait_for(lambda: len(osc(client)) >= 10, what="values to a client that reads")
+        assert served.get("/pepper").status_code == 200
+    finally:
+        stalled.close()
+
+
+def _masked(payload: bytes) -> bytes:
+    """A client's WebSocket text frame (RFC 6455: masked), for a payload under 126 bytes."""
+    mask = b"\x01\x02\x03\x04"
+    return bytes([0x81, 0x80 | len(payload)]) + mask + bytes(b ^ mask[i % 4] for i, b in enumerate(payload))
