@@ -104,7 +104,8 @@ def _command(route: routes.Route, info: Mapping[str, Any], joint: Mapping[str, A
     ranges = [_slot_range(route, slot, info, joint) for slot in route.slots]
     description = route.description
     if joint is not None:
-        description = f"Move {joint['name']} to an angle ({joint['unit']}), at 0.3 of its maximum velocity."
+        description = (f"Move {joint['name']} to an angle ({joint['unit']}); a second float, if sent, is the speed "
+                       "(0, 1] of its maximum velocity (default 0.3).")
     node: Node = {"TYPE": route.types, "ACCESS": WRITE, "DESCRIPTION": description,
                   # write-only: a neutral VALUE, so that parsers which want one on every method take it
                   "VALUE": [_neutral(s.tag, r) for s, r in zip(route.slots, ranges, strict=True)] or [None]}
