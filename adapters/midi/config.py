@@ -16,7 +16,7 @@ from sonibus.bus.errors import ConfigError
 from sonibus.bus.options import bad, from_mapping
 from sonibus.bus.robot import load_model
 
-from .mapping import SPEECH_NOTE
+from .mapping import BEHAVIOR_NOTES, SPEECH_NOTE
 
 Api = Literal["auto", "jack", "alsa", "coreaudio", "windows"]
 T = TypeVar("T")
@@ -89,7 +89,9 @@ class MidiSinkConfig:
     auto_map: bool = True               # other joints: CC 20 + index in the robot's joint table
     max_rate_hz: float = 0.0            # at most this many messages per controller per second (0: all)
     notes: bool = True                  # behavior and speech events as notes
-    behavior_note: int = -1             # -1: one note per behavior, from 60 in the robot's list order
+    behavior_note: int = -1             # one fixed note for every behavior; -1: a note per behavior (below)
+    behavior_notes: dict[str, int] | None = None            # behavior name → its note
+    behavior_note_range: tuple[int, int] = BEHAVIOR_NOTES   # other behaviors: hashed onto these notes
     speech_note: int = SPEECH_NOTE
     velocity: int = 100
     queue: int = 8192
@@ -113,6 +115,12 @@ class MidiSinkConfig:
             raise bad("max_rate_hz", f"{self.max_rate_hz:g} must be 0 (no cap) or more")
         if self.behavior_note != -1:
             _range("behavior_note", self.behavior_note, 0, 127)
+        for behavior, number in (self.behavior_notes or {}).items():
+            if not isinstance(number, int) or isinstance(number, bool) or not 0 <= number <= 127:
+                raise bad("behavior_notes", f"'{behavior}' = {number!r} must be a note in 0..127")
+        low, high = self.behavior_note_range
+        if not 0 <= low <= high <= 127:
+            raise bad("behavior_note_range", f"[{low}, {high}] must be two notes in 0..127, the lowest first")
         _range("speech_note", self.speech_note, 0, 127)
         _range("velocity", self.velocity, 1, 127)
         if self.queue < 1:

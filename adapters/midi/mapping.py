@@ -8,12 +8,16 @@
 [[225, 127, 127]]
 >>> unscale(127, 127, -1.0, 1.0)
 1.0
+>>> behavior_note("animations/Stand/Gestures/Hey_1"), behavior_note("animations/Stand/Gestures/Yes_1")
+(94, 118)
 """
 
 from __future__ import annotations
 
+import zlib
+
 FIRST_CC = 20          # default controllers: joint i of the robot's table on CC 20 + i
-FIRST_BEHAVIOR_NOTE = 60
+BEHAVIOR_NOTES = (60, 127)  # the notes behaviors are hashed onto, by default
 SPEECH_NOTE = 48
 ALL_NOTES_OFF = 123
 MAX7, MAX14 = 127, 16383
@@ -43,6 +47,14 @@ def cc_messages(channel: int, cc: int, number: int, resolution: int) -> list[lis
 def pitch_bend(channel: int, number: int) -> list[list[int]]:
     """A 14-bit pitch bend (8192: centre)."""
     return [[0xE0 | (channel - 1), number & 0x7F, number >> 7]]
+
+
+def behavior_note(name: str, low: int = BEHAVIOR_NOTES[0], high: int = BEHAVIOR_NOTES[1]) -> int:
+    """The note of behavior ``name`` in ``low..high``: from a hash of its name (CRC-32,
+    the same on every machine and in every run), so installing another behavior on
+    the robot moves no note of a live set. Two names may share a note: the sink
+    says so, and ``behavior_notes`` gives one of them another."""
+    return low + zlib.crc32(name.encode("utf-8")) % (high - low + 1)
 
 
 def note(channel: int, number: int, on: bool, velocity: int = 100) -> list[int]:

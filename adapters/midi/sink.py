@@ -57,7 +57,7 @@ class _Robot:
     behaviors: list[str] = field(default_factory=list)
     rate_hz: float = 0.0
     known: bool = False     # info arrived
-    waiting: list[tuple[Key, dict[str, Any]]] = field(default_factory=list)  # events before info
+    notes: dict[int, str] = field(default_factory=dict)  # behavior note → the first behavior heard on it
 
 
 class MidiSink(Adapter):
@@ -229,9 +229,9 @@ class MidiSink(Adapter):
             return
         robot.known = True
         self._estimate()
-        waiting, robot.waiting = robot.waiting, []
-        for source, message in waiting:
-            self._event(source, message)
+        if self.config.notes and self.config.behavior_note == -1:
+            for behavior in robot.behaviors:  # a shared note is said at once, not at the show
+                self._behavior_note(name, robot, behavior)
 
     def _estimate(self) -> None:
         cfg: MidiSinkConfig = self.config
@@ -262,13 +262,10 @@ class MidiSink(Adapter):
             return
         if not cfg.notes or kind not in ("behavior", "speech"):
             return
-        if kind == "behavior" and cfg.behavior_note == -1 and not robot.known:
-            robot.waiting = [*robot.waiting[-63:], (source, message)]
-            self._info.ask(source.robot)
+        if state not in ("started", "stopped", "done"):
             return
-        number = cfg.speech_note if kind == "speech" else self._behavior_note(robot, str(message.get("name", "")))
-        if number is None or state not in ("started", "stopped", "done"):
-            return
+        number = (cfg.speech_note if kind == "speech"
+                  else self._behavior_note(source.robot, robot, str(message.get("name", ""))))
         on = state == "started"
         slot = (robot.channel, number)
         if on:
@@ -280,16 +277,19 @@ class MidiSink(Adapter):
         self.count("notes")
         self._send(mapping.note(robot.channel, number, on, cfg.velocity))
 
-    def _behavior_note(self, robot: _Robot, name: str) -> int | None:
-        if self.config.behavior_note != -1:
-            return int(self.config.behavior_note)
-        if name not in robot.behaviors:
-            robot.behaviors.append(name)  # started but not listed: the next free note
-        number = mapping.FIRST_BEHAVIOR_NOTE + robot.behaviors.index(name)
-        if number > 127:
-            self.warn("notes", f"behavior '{name}' has no note left (more than 68 behaviors); "
-                                f"set behavior_note for one fixed note")
-            return None
+    def _behavior_note(self, robot_name: str, robot: _Robot, behavior: str) -> int:
+        """The fixed note, the table's, or the name's hash (``mapping.behavior_note``);
+        a note two behaviors of a robot share is warned about, naming both."""
+        cfg: MidiSinkConfig = self.config
+        if cfg.behavior_note != -1:
+            return int(cfg.behavior_note)
+        table = cfg.behavior_notes or {}
+        number = table[behavior] if behavior in table else mapping.behavior_note(behavior, *cfg.behavior_note_range)
+        first = robot.notes.setdefault(number, behavior)
+        if first != behavior:
+            self.warn(f"shared {robot_name} {number}", f"{robot_name}: behaviors '{first}' and '{behavior}' share "
+                                                        f"note {number} — give one a note of its own: "
+                                                        f"behavior_notes = {{\"{behavior}\" = N}}")
         return number
 
     def _notes_off(self) -> None:

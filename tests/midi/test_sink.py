@@ -4,12 +4,16 @@ the rate cap, channels, events as notes, frames or joint keys, and bad frames.""
 from __future__ import annotations
 
 import logging
+import re
 import time
+from pathlib import Path
 
 import pytest
 import rtmidi
 
 from sonibus.adapters.midi import MidiSink, MidiSinkConfig
+from sonibus.adapters.midi.mapping import behavior_note
+from sonibus.adapters.sim.behaviors import LIBRARY
 from sonibus.bus import ConfigError, encode, keys
 
 from ..conftest import wait_for
@@ -124,14 +128,16 @@ def test_a_malformed_frame_is_counted_and_the_sink_goes_on(net, fake, reader):
     assert daw.state == "running"
 
 
-def test_events_as_notes_and_connection_lost_silences_every_channel(net, fake, reader):
+def test_events_as_notes_and_connection_lost_silences_every_channel(net, fake, reader, caplog):
     sink(net)
     midi = reader("daw:sonibus")
     bot, other = fake("bot"), fake("other")
     until_sent(other, "A", 0.0, midi, lambda r: r.cc(1, 20) == [64], "robot other on channel 1")
+    nod, unlisted = behavior_note("nod"), behavior_note("unlisted")
+    assert (nod, unlisted, behavior_note("wave")) == (105, 65, 65)  # CRC-32 of the names onto 60..127
     bot.event("behavior", name="wave", state="stopped")     # a note off without its note on: nothing
     bot.event("behavior", name="nod", state="started")
-    wait_for(lambda: [0x91, 61, 100] in midi.messages, what="note on 61 (second behavior) on channel 2")
+    wait_for(lambda: [0x91, nod, 100] in midi.messages, what="nod's note on, on channel 2")
     bot.event("behavior", name="nod", state="stopped")
     bot.event("behavior", name="unlisted", state="started")
     bot.event("speech", text="hello", state="started")
@@ -139,8 +145,28 @@ def test_events_as_notes_and_connection_lost_silences_every_channel(net, fake, r
     bot.event("connection", state="lost")
     wait_for(lambda: [0xB1, 123, 0] in midi.messages, what="all notes off")
     notes = [m for m in midi.messages if m[0] & 0xF0 in (0x80, 0x90) or m[1] == 123]
-    assert notes == [[0x91, 61, 100], [0x81, 61, 0], [0x91, 62, 100], [0x91, 48, 100], [0x81, 48, 0],
+    assert notes == [[0x91, nod, 100], [0x81, nod, 0], [0x91, unlisted, 100], [0x91, 48, 100], [0x81, 48, 0],
                      [0xB0, 123, 0], [0xB1, 123, 0]]
+    assert "bot: behaviors 'wave' and 'unlisted' share note 65 — give one a note of its own: " \
+           "behavior_notes = {\"unlisted\" = N}" in caplog.text
+
+
+def test_behavior_notes_stay_put_when_behaviors_are_installed(net, fake, reader):
+    """Issue 19, item 7: a behavior's note was its index in the robot's list, so one more
+    behavior installed renumbered every note of a live set."""
+    sink(net, behavior_notes={"jump": 70})
+    midi = reader("daw:sonibus")
+    before = fake("bot", behaviors=("wave", "nod"))
+    after = fake("bot2", behaviors=("aaa", "jump", "wave", "nod"))  # the same robot, more installed
+    until_sent(before, "A", 0.0, midi, lambda r: r.cc(1, 20) == [64], "bot on channel 1")
+    until_sent(after, "A", 0.0, midi, lambda r: r.cc(2, 20) == [64], "bot2 on channel 2")
+    for robot in (before, after, after):
+        robot.event("behavior", name="nod", state="started")
+        robot.event("behavior", name="nod", state="stopped")
+    after.event("behavior", name="jump", state="started")
+    wait_for(lambda: [0x91, 70, 100] in midi.messages, what="jump on the note behavior_notes gives it")
+    ons = sorted(m for m in midi.messages if m[0] in (0x90, 0x91))  # (the two robots' events interleave)
+    assert ons == [[0x90, 105, 100], [0x91, 70, 100], [0x91, 105, 100], [0x91, 105, 100]]
 
 
 def test_a_fixed_behavior_note(net, fake, reader):
@@ -178,6 +204,8 @@ def test_a_hardware_port_warns_of_too_many_messages(net, fake, jack, caplog):
     ({"channels": {"pepper": 17}}, r"key 'channels': pepper = 17 must be a channel in 1\.\.16"),
     ({"port": ""}, r"key 'port': is empty"),
     ({"max_rate_hz": -1.0}, r"key 'max_rate_hz'"),
+    ({"behavior_notes": {"Hey_1": 128}}, r"key 'behavior_notes': 'Hey_1' = 128 must be a note in 0\.\.127"),
+    ({"behavior_note_range": (100, 60)}, r"key 'behavior_note_range': \[100, 60\] must be two notes"),
 ])
 def test_bad_options_name_the_key(options, message):
     with pytest.raises(ConfigError, match=message):
@@ -199,3 +227,11 @@ def test_a_robot_that_leaves_the_bus_silences_its_notes(net, reader):
     wait_for(lambda: any(m[0] == 0x90 for m in midi.messages), what="the behavior's note on")
     robot.stop()
     wait_for(lambda: [0xB0, 123, 0] in midi.messages, what="all notes off when pepper leaves")
+
+
+def test_the_docs_give_the_simulators_behavior_notes():
+    """docs/midi.md's note table is what the sink plays for the simulator (it said 60 for
+    Hey_1, which played 64)."""
+    text = (Path(__file__).resolve().parents[2] / "docs" / "midi.md").read_text(encoding="utf-8")
+    documented = {name: int(note) for note, name in re.findall(r"^\| (\d+) \| `(animations/[^`]+)` \|$", text, re.M)}
+    assert documented == {name: behavior_note(name) for name in LIBRARY}
