@@ -23,7 +23,9 @@ from sonibus.adapters.osc import encode
 from sonibus.adapters.osc.gateway import parse_endpoint
 from sonibus.adapters.osc.profiles import event_args
 from sonibus.bus.adapter import Adapter
+from sonibus.bus.errors import ConfigError
 from sonibus.bus.info import InfoRequests
+from sonibus.bus.options import bad
 from sonibus.bus.presence import watch_robots
 from sonibus.bus.queue import SampleQueue
 from sonibus.bus.streams import Incoming, Streams
@@ -62,7 +64,10 @@ class OscQuery(Adapter):
         self._present_lock = threading.Lock()
         self._info = InfoRequests(self.bus, self._take_info, lambda robot, text: self.warn("info", text),
                                   INFO_EVERY_S)
-        self.web.start()
+        try:
+            self.web.start()
+        except ConfigError as exc:  # (the web server names its own key, 'port'; here it is 'listen')
+            raise bad("listen", str(exc).removeprefix("key 'port': ")) from None
         self.url = self.web.url  # the bound one (port 0: any free port)
         log.info("%s: OSCQuery on %s (WebSocket on the same port)", self.name, self.url)
         self._queue = self.own(SampleQueue(cfg.queue))
@@ -86,7 +91,7 @@ class OscQuery(Adapter):
     def _advertise(self, cfg: OscQueryConfig) -> None:
         osc_host, osc_port = parse_endpoint("gateway", cfg.gateway)
         bind = mdns.addresses(cfg.host, cfg.interfaces)
-        advertiser = self._advertiser = self.own(mdns.Advertiser(cfg.name, bind, self.web.port, osc_host, osc_port))
+        advertiser = self.own(mdns.Advertiser(cfg.name, bind, self.web.port, osc_host, osc_port))
 
         def run() -> None:
             try:
@@ -97,21 +102,25 @@ class OscQuery(Adapter):
                             "(mdns = false silences this)", self.name, ", ".join(bind), exc, self.url)
         self.spawn(run, "mdns")
 
-    @property
-    def advertised(self) -> list[str]:
-        """The mDNS service names registered so far (for tests)."""
-        advertiser = getattr(self, "_advertiser", None)
-        return [info.name for info in advertiser.registered] if advertiser else []
+    def metrics(self) -> dict[str, Any]:
+        """What is served now: robots, WebSocket clients connected, paths listened to."""
+        if not hasattr(self, "server"):
+            return {}
+        return {"robots": len(self.live.robots), "ws_connected": self.server.clients,
+                "listened": len(self.server.listened)}
 
     # -- robots ------------------------------------------------------------------------
 
     def _robot_changed(self, robot: str, alive: bool) -> None:
-        with self._present_lock:
-            (self._present.add if alive else self._present.discard)(robot)
+        with self._present_lock:  # (with _take_info's: a robot that left is never added back)
+            if alive:
+                self._present.add(robot)
+            else:
+                self._present.discard(robot)
+                if self.live.drop_robot(robot):
+                    self.server.announce("PATH_REMOVED", f"/{robot}")
         if alive:
             self._info.ask(robot)
-        elif self.live.drop_robot(robot):
-            self.server.announce("PATH_REMOVED", f"/{robot}")
 
     def _refresh(self) -> None:
         while not self.stopping.wait(INFO_EVERY_S / 2):
@@ -124,16 +133,16 @@ class OscQuery(Adapter):
         with self._present_lock:
             if robot not in self._present:  # it left while its info was on the way
                 return
-        try:
-            change = self.live.set_robot(robot, info)
-        except (KeyError, TypeError, ValueError) as exc:
-            self.count("robots_left_out")
-            self.warn(f"info:{robot}", f"robot '{robot}' left out of the namespace: its info is unusable "
-                                       f"({type(exc).__name__}: {exc})")
-            return
-        if change is not None:
-            log.info("%s: %s /%s", self.name, change, robot)
-            self.server.announce(change, f"/{robot}")
+            try:
+                change = self.live.set_robot(robot, info)
+            except (KeyError, TypeError, ValueError) as exc:
+                self.count("robots_left_out")
+                self.warn(f"info:{robot}", f"robot '{robot}' left out of the namespace: its info is unusable "
+                                           f"({type(exc).__name__}: {exc})")
+                return
+            if change is not None:
+                log.info("%s: %s /%s", self.name, change, robot)
+                self.server.announce(change, f"/{robot}")
 
     # -- values ------------------------------------------------------------------------
 

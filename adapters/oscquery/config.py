@@ -12,7 +12,9 @@ import ipaddress
 from dataclasses import dataclass
 from typing import Literal
 
+from sonibus.adapters.osc.config import parse_target
 from sonibus.adapters.osc.gateway import parse_endpoint
+from sonibus.bus.errors import ConfigError
 from sonibus.bus.options import bad
 
 
@@ -30,7 +32,10 @@ class OscQueryConfig:
 
     def __post_init__(self) -> None:
         parse_endpoint("listen", self.listen)
-        parse_endpoint("gateway", self.gateway)
+        try:
+            parse_target(self.gateway)  # (a port clients can send to: not 0)
+        except ConfigError as exc:
+            raise bad("gateway", f"{exc} — the osc-gateway's listen address") from None
         if not self.name.strip() or "." in self.name:
             raise bad("name", f"{self.name!r} must be a non-empty name without '.' (an mDNS instance name)")
         for address in self.interfaces:

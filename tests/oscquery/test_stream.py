@@ -117,15 +117,18 @@ def test_bad_websocket_input_is_counted_and_everything_stays_up(served, websocke
 
 
 def test_a_value_sent_to_a_writable_address_moves_the_robot(served):
+    """The elbow: the idle robot's looking around and breathing move the head and shoulders."""
     host = served.json("/?HOST_INFO")
-    target = served.json("/pepper/cmd/joints/set/HeadYaw")
+    target = served.json("/pepper/cmd/joints/set/RElbowRoll")
     assert target["ACCESS"] == 2 and target["TYPE"] == "f"
-    angle = 0.6 if served.json(HEAD)["VALUE"][0] < 0.3 else -0.6
+    elbow = "/pepper/joints/RElbowRoll"
+    now = wait_for(lambda: served.json(elbow)["VALUE"][0], what="the elbow's angle")
+    angle = 1.2 if now < 0.8 else 0.4
     builder = OscMessageBuilder(target["FULL_PATH"])
     builder.add_arg(angle, "f")
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as udp:
         udp.sendto(builder.build().dgram, (host["OSC_IP"], host["OSC_PORT"]))
-    wait_for(lambda: abs(served.json(HEAD)["VALUE"][0] - angle) < 0.05, 10, f"HeadYaw near {angle}")
+    wait_for(lambda: abs(served.json(elbow)["VALUE"][0] - angle) < 0.05, 10, f"RElbowRoll near {angle}")
 
 
 def test_a_robot_whose_info_is_unusable_is_left_out_with_a_warning(served, caplog):

@@ -1,0 +1,43 @@
+"""Issue 16: the oscquery node's options — wrong values are one-line errors naming the
+key, a port in use names 'listen', and mDNS that cannot start is a warning, not a failure."""
+
+from __future__ import annotations
+
+import socket
+
+import pytest
+
+from sonibus.adapters.oscquery import OscQuery, OscQueryConfig
+from sonibus.bus import ConfigError
+
+from ..conftest import wait_for
+from .conftest import serve
+
+
+@pytest.mark.parametrize(("options", "key"), [
+    ({"listen": "nowhere"}, "listen"), ({"gateway": "127.0.0.1:0"}, "gateway"), ({"name": "a.b"}, "name"),
+    ({"interfaces": ("eth0",)}, "interfaces"), ({"queue": 0}, "queue"),
+])
+def test_wrong_options_name_their_key(options, key):
+    with pytest.raises(ConfigError, match=f"key '{key}'"):
+        OscQueryConfig(**options)
+
+
+def test_a_port_in_use_names_listen(net):
+    with socket.socket() as taken:
+        taken.bind(("127.0.0.1", 0))
+        taken.listen()
+        port = taken.getsockname()[1]
+        node = OscQuery(OscQueryConfig(listen=f"127.0.0.1:{port}", mdns=False), name="oscquery")
+        with pytest.raises(ConfigError, match=f"key 'listen': cannot listen on 127.0.0.1:{port}"):
+            node.start(net.bus("oscquery"))
+        assert node.state == "stopped"
+
+
+def test_mdns_that_cannot_start_is_a_warning_and_the_server_serves(net, caplog):
+    net.sim("pepper", rate_hz=25)
+    served = serve(net, mdns=True, interfaces=("203.0.113.7",))  # (no interface has it: binding fails)
+    wait_for(lambda: any("not advertised by mDNS on 203.0.113.7" in r.getMessage() for r in caplog.records),
+             what="the warning")
+    served.wait_node("/pepper/joints/HeadYaw")
+    assert served.node.state == "running" and served.node.metrics()["robots"] == 1
