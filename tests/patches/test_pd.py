@@ -127,6 +127,46 @@ def test_joints_and_events_reach_the_abstractions_through_one_port(net, spawn, t
     assert problems(pd) == []
 
 
+def opener(patch: Patch, path: Path) -> None:
+    """At load, open the patch file ``path`` as a user would (``; pd open NAME DIR``)."""
+    message = patch.chain(patch.obj("loadbang"), patch.obj("list", "append", "open", path.name, path.parent))
+    patch.chain(message, patch.obj("list", "trim"), patch.obj("s", "pd"))
+
+
+def test_another_abstraction_takes_the_port_over_when_the_listening_one_closes(net, spawn, tmp_path):
+    """Two patches with a [sonibus-joint] each: the first opened listens for both; closed, the
+    other takes the port over (its once-a-second check) and its values keep coming."""
+    port, control = free_port(socket.SOCK_DGRAM), free_port(socket.SOCK_DGRAM)
+    for name in ("first", "second"):
+        patch = Declared(PD)
+        printer(patch, patch.obj("sonibus-joint", "HeadYaw", "pepper", port), name)
+        (tmp_path / f"{name}.pd").write_text(patch.text(), encoding="utf-8")
+    patch = Patch()
+    opener(patch, tmp_path / "first.pd")
+    opener(patch, tmp_path / "second.pd")
+    command = patch.chain(patch.obj("netreceive", "-u", control), patch.obj("t", "a", "a"))
+    patch.connect(command, 0, patch.obj("print", "control"))  # after the close has run
+    close = patch.obj("route", "close")
+    patch.connect(command, 1, close)
+    patch.chain(close, patch.obj("list", "append", "menuclose", 1), patch.obj("list", "trim"),
+                patch.obj("s", "pd-first.pd"))
+    pd = start_pd(spawn, tmp_path, patch)
+    sink(net, port, "pepper/joints/*")
+    net.sim("pepper", rate_hz=50)
+    bus = commander(net)
+    wait_for(lambda: printed(pd, "first") and printed(pd, "second"), what="HeadYaw in both patches")
+    assert bound(port) == 1
+
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as fudi:
+        fudi.sendto(b"close;\n", ("127.0.0.1", control))
+    wait_for(lambda: "control: close" in pd.lines, what="the first patch closed")
+    closed = len(printed(pd, "first"))
+    send_command(bus, "pepper", "joints/set", {"names": ["HeadYaw"], "angles": [0.5], "speed": 0.5})
+    wait_for(lambda: "0.5" in printed(pd, "second"), what="HeadYaw 0.5 in the second patch")
+    assert len(printed(pd, "first")) == closed and bound(port) == 1
+    assert problems(pd) == []
+
+
 def hand_heights(process) -> list[float]:
     """z of each right-hand position printed."""
     return [float(line.split()[-1]) for line in printed(process, "handR")]
@@ -198,8 +238,7 @@ def test_help_patches_and_the_pepperosc_receiver_open_and_work(net, spawn, tmp_p
     assert [h.name.removesuffix("-help.pd") for h in helps] == abstractions, "a help patch per abstraction"
     patch = Patch()
     for path in [*helps, PEPPEROSC / "pepperosc-receiver.pd"]:
-        opener = patch.chain(patch.obj("loadbang"), patch.obj("list", "append", "open", path.name, path.parent))
-        patch.chain(opener, patch.obj("list", "trim"), patch.obj("s", "pd"))
+        opener(patch, path)
     pd = start_pd(spawn, tmp_path, patch)  # fails on an error printed while they open (a port in use, say)
     sink(net, 9000, "pepper/events/*")
     net.sim("pepper", rate_hz=50)
