@@ -8,6 +8,7 @@ prints (``[print NAME]``, errors, objects it could not create) is read from its 
 from __future__ import annotations
 
 import itertools
+import re
 import socket
 from pathlib import Path
 
@@ -15,8 +16,10 @@ import pytest
 
 from sonibus.adapters.features import Features, FeaturesConfig
 from sonibus.adapters.osc import OscSink, OscSinkConfig
+from sonibus.adapters.osc.config import parse_target
 from sonibus.adapters.osc.gateway import OscGateway, OscGatewayConfig
-from sonibus.bus import load_model, robot_info, send_command
+from sonibus.bus import config, load_model, robot_info, send_command
+from sonibus.bus.runner import build
 
 from ..conftest import free_port, wait_for
 from ..osc.pd import Patch, errors, printed, start_pd
@@ -272,3 +275,18 @@ def test_pepperosc_receiver_ramps_joints_and_passes_the_sound_cues(net, spawn, t
     assert printed(pd, "soundstart") == ["1"] and printed(pd, "soundstop") == ["1"]
     assert lines.index("soundstart: 1") < lines.index("soundstop: 1")
     assert problems(pd) == []
+
+
+def test_the_readme_installations_build_and_send_where_the_patches_listen():
+    """Every TOML block of the two READMEs builds (each node's options valid); the sinks send
+    to 9000 (the abstractions' default) and 3005 with the pepperosc profile (the receiver's),
+    and the gateway listens on 9001 ([sonibus-send]'s default)."""
+    sends, listens = set(), set()
+    for readme in (PD / "README.md", PEPPEROSC / "README.md"):
+        for block in re.findall(r"```toml\n(.*?)```", readme.read_text(encoding="utf-8"), re.S):
+            for adapter in build(config.parse(block, str(readme))):
+                if isinstance(adapter, OscSink):
+                    sends |= {(parse_target(t.to)[1], t.profile) for t in adapter.config.resolved_targets()}
+                elif isinstance(adapter, OscGateway):
+                    listens.add(parse_target(adapter.config.listen)[1])
+    assert sends == {(9000, "sonibus"), (3005, "pepperosc")} and listens == {9001}
