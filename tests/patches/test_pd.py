@@ -18,12 +18,13 @@ from sonibus.adapters.features import Features, FeaturesConfig
 from sonibus.adapters.osc import OscSink, OscSinkConfig
 from sonibus.adapters.osc.config import parse_target
 from sonibus.adapters.osc.gateway import OscGateway, OscGatewayConfig
-from sonibus.bus import config, load_model, robot_info, send_command
+from sonibus.bus import config, load_model, send_command
 from sonibus.bus.runner import build
 
 from ..conftest import free_port, wait_for
 from ..osc.pd import Patch, errors, printed, start_pd
 from ..osc.test_gateway import Watch
+from ..osc.test_pepperosc import commander
 
 pytestmark = pytest.mark.external
 
@@ -65,13 +66,6 @@ def bound(port: int) -> int:
 
 def floats(process, name: str) -> list[float]:
     return [float(v) for v in printed(process, name)]
-
-
-def commander(net, robot: str = "pepper"):
-    """A bus to send commands from, once the robot's queryables have reached it."""
-    bus = net.bus("cmd")
-    wait_for(lambda: robot_info(bus, robot, timeout=0.5), what=f"{robot}/info")
-    return bus
 
 
 def sink(net, port: int, *subscribe: str, **settings) -> OscSink:
