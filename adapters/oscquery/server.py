@@ -3,7 +3,8 @@
 ``GET /path`` answers the node's JSON, ``GET /path?ATTR`` ``{"ATTR": ...}`` (204 when
 the node lacks it, 400 for an attribute the spec does not name), ``GET /?HOST_INFO``
 the host's description; 404 for a path that is not served. A WebSocket on the same
-port takes ``{"COMMAND": "LISTEN"|"IGNORE", "DATA": path}``: a listened path's values
+port takes the same queries as text (``/path?ATTR``, answered as text, as libossia's
+clients ask) and ``{"COMMAND": "LISTEN"|"IGNORE", "DATA": path}``: a listened path's values
 go to that client as binary OSC messages, and every client hears ``PATH_ADDED``,
 ``PATH_REMOVED`` and ``PATH_CHANGED`` (``{"COMMAND": ..., "DATA": path}``).
 """
@@ -73,21 +74,28 @@ class QueryServer:
         if web.WebSocketResponse().can_prepare(request).ok:
             return await self._websocket(request)
         self.adapter.count("http_requests")
-        path = "/" + request.match_info["path"].strip("/")
-        attribute = request.query_string
+        status, answer = self.answer("/" + request.match_info["path"], request.query_string)
+        if status != 200:
+            return web.Response(status=status, text=answer and f"{answer}\n")
+        return web.json_response(answer, dumps=_dumps)
+
+    def answer(self, path: str, attribute: str = "") -> tuple[int, Any]:
+        """``(200, JSON object)`` for ``path`` (and ``?attribute``), else ``(status, reason)``:
+        404 for a path not served, 400 for an attribute the spec does not name, 204 for one
+        the node lacks."""
+        path = "/" + path.strip("/")
         if attribute == "HOST_INFO":
-            return web.json_response(self.host_info, dumps=_dumps)
+            return 200, self.host_info
         node = self.live.node(path)
         if node is None:
-            raise web.HTTPNotFound(text=f"no OSC node at {path}\n")
+            return 404, f"no OSC node at {path}"
         if not attribute:
-            return web.json_response(node, dumps=_dumps)
+            return 200, node
         if attribute not in ATTRIBUTES:
-            raise web.HTTPBadRequest(text=f"unknown attribute {attribute!r}: OSCQuery names "
-                                          f"{', '.join(sorted(ATTRIBUTES))}\n")
+            return 400, f"unknown attribute {attribute!r}: OSCQuery names {', '.join(sorted(ATTRIBUTES))}"
         if attribute not in node or (attribute == "VALUE" and node.get("ACCESS") != 1):
-            return web.Response(status=204)  # (a write-only method's VALUE is only a placeholder)
-        return web.json_response({attribute: node[attribute]}, dumps=_dumps)
+            return 204, ""  # (a write-only method's VALUE is only a placeholder)
+        return 200, {attribute: node[attribute]}
 
     async def _websocket(self, request: web.Request) -> web.WebSocketResponse:
         ws = web.WebSocketResponse(timeout=CLOSE_WAIT_S, max_msg_size=MAX_WS_MESSAGE)
@@ -114,6 +122,14 @@ class QueryServer:
     def _command(self, client: _Client, text: str) -> None:
         if len(text) > MAX_WS_TEXT:
             self._bad(f"a WebSocket message of {len(text)} characters (at most {MAX_WS_TEXT})")
+            return
+        if text.startswith("/"):  # a query, as libossia's clients send them: the answer comes as text
+            path, _, attribute = text.partition("?")
+            status, answer = self.answer(path, attribute)
+            if status == 200:
+                client.push(_dumps(answer))
+            else:
+                self._bad(f"the query {text[:80]!r}: {answer or 'no such attribute on that node'}")
             return
         try:
             command = json.loads(text)

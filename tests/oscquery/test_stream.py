@@ -195,3 +195,17 @@ def _masked(payload: bytes) -> bytes:
     """A client's WebSocket text frame (RFC 6455: masked), for a payload under 126 bytes."""
     mask = b"\x01\x02\x03\x04"
     return bytes([0x81, 0x80 | len(payload)]) + mask + bytes(b ^ mask[i % 4] for i, b in enumerate(payload))
+
+
+def test_queries_over_the_websocket_are_answered_as_text(served, websocket):
+    """libossia's clients (ossia score) ask for nodes over the WebSocket, a path as text."""
+    client = websocket(served.url)
+    client.send("/pepper/joints/HeadYaw")
+    client.send("/pepper/joints/HeadYaw?UNIT")
+    client.send("/?HOST_INFO")
+    wait_for(lambda: len(client.texts()) >= 3, what="three answers")
+    node, unit, host = client.texts()[:3]
+    assert node["FULL_PATH"] == HEAD and node["RANGE"] == served.json(HEAD)["RANGE"]
+    assert unit == {"UNIT": ["rad"]} and host["OSC_PORT"] == served.gateway.udp_address[1]
+    client.send("/pepper/joints/Tail")
+    wait_for(lambda: served.node.stats["bad"] == 1, what="an unknown path counted")
