@@ -53,7 +53,7 @@ class OscQuery(Adapter):
     """Serves every robot on the bus as an OSCQuery namespace over HTTP and WebSocket."""
 
     Config = OscQueryConfig
-    counters = ("http_requests", "ws_clients", "values_sent", "robots_left_out")
+    counters = ("http_requests", "ws_clients", "robots_left_out")  # (values to WebSocket clients: `sent`)
 
     def _start(self) -> None:
         cfg: OscQueryConfig = self.config

@@ -172,7 +172,7 @@ class QueryServer:
             for path, data in messages:
                 if path in client.listens:
                     client.push(data)
-                    self.adapter.count("values_sent")
+                    self.adapter.count("sent")
 
     def _push_all(self, text: str) -> None:
         for client in self._clients:
