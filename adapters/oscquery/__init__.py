@@ -14,6 +14,7 @@ robots come, go or change. docs/oscquery.md has it all.
 
 from __future__ import annotations
 
+import ipaddress
 import logging
 import threading
 import time
@@ -78,6 +79,11 @@ class OscQuery(Adapter):
         self.spawn(self._refresh, "info")
         if cfg.mdns:
             self._advertise(cfg)
+        osc_host = parse_endpoint("gateway", cfg.gateway)[0]
+        if _loopback(osc_host) and not _loopback(cfg.host):
+            log.warning("%s: gateway = %r tells clients on other machines to send commands to themselves — give "
+                        "the gateway's address on the network (or \"0.0.0.0:<port>\": this server's address)",
+                        self.name, cfg.gateway)
 
     def _host_info(self) -> dict[str, Any]:
         cfg: OscQueryConfig = self.config
@@ -176,3 +182,10 @@ class OscQuery(Adapter):
             out.append((path, encode.message(path, *served)))
         except encode.EncodeError as exc:
             self.warn("encode", f"not streamed, OSC cannot carry it: {exc}")
+
+
+def _loopback(host: str) -> bool:
+    try:
+        return ipaddress.ip_address(host).is_loopback
+    except ValueError:  # a name
+        return host == "localhost"

@@ -41,3 +41,9 @@ def test_mdns_that_cannot_start_is_a_warning_and_the_server_serves(net, caplog):
              what="the warning")
     served.wait_node("/pepper/joints/HeadYaw")
     assert served.node.state == "running" and served.node.metrics()["robots"] == 1
+
+
+def test_a_loopback_gateway_told_to_other_machines_is_warned_about(net, caplog):
+    serve(net, listen="0.0.0.0:0")  # (served on every interface, gateway still 127.0.0.1)
+    assert any("tells clients on other machines to send commands to themselves" in r.getMessage()
+               for r in caplog.records)
