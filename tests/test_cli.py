@@ -16,6 +16,7 @@ from pathlib import Path
 
 import pytest
 
+from sonibus.adapters.features import Features, FeaturesConfig
 from sonibus.adapters.recorder.writer import RecordingWriter
 from sonibus.bus import ConfigError, codec, encode, keys, runner
 from sonibus.bus.cli import COMMAND_GROUP, Command, Environment, Exit, demo, main
@@ -149,6 +150,31 @@ def test_send_unknown_argument_is_a_usage_error(net):
     assert result.returncode == 2
     line = one_error_line(result.stderr)
     assert "'bogus'" in line and "names" in line
+
+
+# -- info ROBOT -------------------------------------------------------------------------
+
+
+def test_info_of_a_live_robot_prints_its_table(net):
+    """Issue 19, item 2: docs said `sonibus send pepper info` (unknown command) and
+    `echo pepper/info` printed nothing: no way to see a live robot's joint table."""
+    net.sim("pepper")
+    net.start(Features(FeaturesConfig(), name="features"))
+    args = net.cli_args()
+    result = wait_for(lambda: (r := run_cli("info", "pepper", *args)).returncode == 0
+                      and "derived values (" in r.stdout and r, timeout=15, what="pepper's table with derived values")
+    lines = result.stdout.splitlines()
+    assert lines[0].startswith("pepper: pepper, 100 frames/s, owned by sim-pepper on ")
+    head = next(line.split() for line in lines if line.split()[:1] == ["HeadYaw"])
+    assert head[:4] == ["HeadYaw", "rad", "-2.0857", "2.0857"] and head[-1] == "Head"
+    assert "    animations/Stand/Gestures/Hey_1" in lines
+    assert "  postures (4): Crouch, Stand, StandInit, StandZero" in lines
+    assert any("pepper/derived/velocity/HeadYaw" in line and "rad/s" in line for line in lines)
+    info = json.loads(run_cli("info", "pepper", "--json", *args).stdout)
+    assert info["robot"] == "pepper" and {j["name"] for j in info["joints"]} >= {"HeadYaw", "RHand"}
+    missing = run_cli("info", "peper", *args)
+    assert missing.returncode == 3
+    assert "robots on the bus: pepper (did you mean 'pepper'?)" in one_error_line(missing.stderr)
 
 
 # -- echo, nodes ------------------------------------------------------------------------

@@ -10,7 +10,8 @@ import threading
 import time
 from collections.abc import Callable
 
-from sonibus.bus import runner
+from sonibus.bus import keys, runner
+from sonibus.bus.cli import robot as live_robot
 from sonibus.bus.cli.api import Command, Environment, Exit, bus_config
 from sonibus.bus.errors import ConfigError
 
@@ -159,11 +160,14 @@ REPLAY = Command("replay", "play a recording back onto the bus", _replay_argumen
 
 
 def _info_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("file", metavar="FILE.mcap")
+    p.add_argument("file", metavar="FILE.mcap|ROBOT", help="a recording, or the name of a robot on the bus")
     p.add_argument("--json", action="store_true", help="print it as JSON")
+    p.add_argument("--timeout", type=float, default=2.0, help="ROBOT: seconds to wait for its answer")
 
 
 def _info(args: argparse.Namespace, env: Environment) -> Exit:
+    if _robot_name(args.file):
+        return live_robot.show(args.file, args, env, args.json, args.timeout)
     with Recording(args.file) as recording:
         infos = recording.infos()
         facts = {
@@ -204,7 +208,19 @@ def _number(text: str) -> int | float | str:
     return text
 
 
-INFO = Command("info", "what a recording holds: duration, robots, keys, rates", _info_arguments, _info)
+def _robot_name(word: str) -> bool:
+    """A robot's name rather than a file: no such file, no path or extension, a valid key chunk."""
+    if os.path.exists(word) or "." in word or "/" in word or os.sep in word:
+        return False
+    try:
+        keys.check_name("robot", word)
+    except ValueError:
+        return False
+    return True
+
+
+INFO = Command("info", "what a recording holds, or a live robot's joints, behaviors and postures",
+               _info_arguments, _info, bus=True)
 
 
 def _recover_arguments(p: argparse.ArgumentParser) -> None:

@@ -2,8 +2,12 @@
 
 from __future__ import annotations
 
+import difflib
 from collections.abc import Sequence
 
+from .. import keys
+from ..node import Bus
+from ..ownership import claims
 from ..session import BusConfig
 
 
@@ -18,3 +22,12 @@ def reach_hint(cfg: BusConfig, reached: Sequence[str], what: str) -> str:
     return (f"{what}, though this command reached {len(reached)} peer(s)/router(s) ({where}) — check the "
             f"namespace (--namespace, or --config FILE --host NAME) and whether access control on the robot's "
             f"machine lets this machine's user see it")
+
+
+def robots_hint(bus: Bus, robot: str) -> str:
+    """The robots this session sees, and the likely one if ``robot`` is a typo."""
+    seen = sorted(claims(bus.alive(keys.robot_token(), timeout=1.0)))
+    if not seen:
+        return "no robot is on the bus: start one (sonibus demo, or sonibus run with a robot node)"
+    close = difflib.get_close_matches(robot, seen, n=1)
+    return f"robots on the bus: {', '.join(seen)}" + (f" (did you mean '{close[0]}'?)" if close else "")

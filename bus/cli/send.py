@@ -3,20 +3,16 @@
 from __future__ import annotations
 
 import argparse
-import difflib
 import json
 from collections.abc import Sequence
 from typing import Any
 
 from ... import schemas
-from .. import keys
 from ..client import owner_of, send_command
 from ..commands import from_words
 from ..errors import CommandError, ConfigError, RobotNotFound
-from ..node import Bus
-from ..ownership import claims
 from .api import Command, Environment, Exit, bus_config, joined
-from .hints import reach_hint
+from .hints import reach_hint, robots_hint
 
 
 def _arguments(p: argparse.ArgumentParser) -> None:
@@ -52,21 +48,12 @@ def _send(args: argparse.Namespace, env: Environment) -> Exit:
                 raise CommandError("refused", f"robot '{args.robot}' is on the bus but nothing answered "
                                               f"'{args.verb}': access control on the robot's machine refuses "
                                               f"commands from this machine{user}") from None
-            exc.message = f"{exc.message} — " + (_robots_hint(bus, args.robot) if reached
+            exc.message = f"{exc.message} — " + (robots_hint(bus, args.robot) if reached
                                                   else reach_hint(cfg, reached, "nothing found"))
             exc.args = (exc.message,)
             raise
     env.say(json.dumps(result))
     return Exit.OK
-
-
-def _robots_hint(bus: Bus, robot: str) -> str:
-    """The robots this session sees, and the likely one if ``robot`` is a typo."""
-    seen = sorted(claims(bus.alive(keys.robot_token(), timeout=1.0)))
-    if not seen:
-        return "no robot is on the bus: start one (sonibus demo, or sonibus run with a robot node)"
-    close = difflib.get_close_matches(robot, seen, n=1)
-    return f"robots on the bus: {', '.join(seen)}" + (f" (did you mean '{close[0]}'?)" if close else "")
 
 
 SEND = Command("send", "send a command to a robot, print the reply", _arguments, _send, bus=True)
