@@ -25,7 +25,7 @@ import os
 import socket
 import threading
 from collections import deque
-from collections.abc import Awaitable, Callable, Coroutine
+from collections.abc import Awaitable, Callable, Coroutine, Iterable
 from typing import TYPE_CHECKING, Any
 
 from aiohttp import WSCloseCode, web
@@ -55,7 +55,7 @@ class WebServer:
         self.latest: Any = None            # the last value broadcast (a new WebSocket client gets it first)
         self.dropped = 0                   # messages a slow client missed
         self._latest_text: str | None = None
-        self._clients: set[_Client] = set()
+        self._clients: set[WebClient] = set()
         self._loop: asyncio.AbstractEventLoop | None = None
         self._ready = threading.Event()
         self._start_error: BaseException | None = None
@@ -112,7 +112,7 @@ class WebServer:
         what it sends is ignored."""
         ws = web.WebSocketResponse(timeout=CLOSE_WAIT_S)
         await ws.prepare(request)
-        client = _Client(ws, self)
+        client = WebClient(ws, self._dropped)
         self._clients.add(client)
         if self._latest_text is not None:
             client.push(self._latest_text)
@@ -155,14 +155,11 @@ class WebServer:
                 await asyncio.sleep(STOP_POLL_S)
         finally:
             self._loop = None
-            await self._close_clients()
+            await close_clients(self._clients)
             await runner.cleanup()
 
-    async def _close_clients(self) -> None:
-        closing = [asyncio.create_task(c.ws.close(code=WSCloseCode.GOING_AWAY, message=b"node stopping"))
-                   for c in self._clients]
-        if closing:
-            await asyncio.wait(closing, timeout=2 * CLOSE_WAIT_S)
+    def _dropped(self) -> None:
+        self.dropped += 1
 
     def _push(self, text: str) -> None:
         for client in self._clients:
@@ -195,19 +192,21 @@ class WebServer:
             raise web.HTTPInternalServerError() from None
 
 
-class _Client:
-    """One WebSocket client: messages wait in a bounded backlog, sent in order by one task."""
+class WebClient:
+    """One WebSocket client: text and binary messages wait in a bounded backlog, sent in
+    order by one task (``send_all``); a client ``CLIENT_BACKLOG`` behind loses the oldest,
+    each one told to ``on_drop``."""
 
-    def __init__(self, ws: web.WebSocketResponse, server: WebServer) -> None:
+    def __init__(self, ws: web.WebSocketResponse, on_drop: Callable[[], None]) -> None:
         self.ws = ws
-        self.server = server
-        self.backlog: deque[str] = deque(maxlen=CLIENT_BACKLOG)
+        self.on_drop = on_drop
+        self.backlog: deque[str | bytes] = deque(maxlen=CLIENT_BACKLOG)
         self.waiting = asyncio.Event()
 
-    def push(self, text: str) -> None:
+    def push(self, message: str | bytes) -> None:
         if len(self.backlog) == self.backlog.maxlen:
-            self.server.dropped += 1
-        self.backlog.append(text)
+            self.on_drop()
+        self.backlog.append(message)
         self.waiting.set()
 
     async def send_all(self) -> None:
@@ -215,7 +214,19 @@ class _Client:
             await self.waiting.wait()
             self.waiting.clear()
             while self.backlog and not self.ws.closed:
+                message = self.backlog.popleft()
                 try:
-                    await self.ws.send_str(self.backlog.popleft())
+                    if isinstance(message, bytes):
+                        await self.ws.send_bytes(message)
+                    else:
+                        await self.ws.send_str(message)
                 except ConnectionError:  # the client went away; its handler ends the connection
                     return
+
+
+async def close_clients(clients: Iterable[WebClient]) -> None:
+    """Close every client's WebSocket ("going away"), waiting a bounded time for them."""
+    closing = [asyncio.create_task(c.ws.close(code=WSCloseCode.GOING_AWAY, message=b"node stopping"))
+               for c in clients]
+    if closing:
+        await asyncio.wait(closing, timeout=2 * CLOSE_WAIT_S)

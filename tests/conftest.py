@@ -156,3 +156,22 @@ def spawn() -> Iterator[Callable[..., Process]]:
 def run_cli(*args: str, timeout: float = 20.0) -> subprocess.CompletedProcess[str]:
     """Run ``sonibus ARGS`` to completion."""
     return subprocess.run([SONIBUS, *args], capture_output=True, text=True, timeout=timeout)
+
+
+FIGURES: list[str] = []  # measured values, shown after the run (never asserted: these machines are noisy)
+
+
+@pytest.fixture
+def figure(request: pytest.FixtureRequest) -> Callable[..., None]:
+    """``figure("loss detected", 1.62, "s")``: a measured value, shown in the summary."""
+    def record(name: str, value: float, unit: str = "") -> None:
+        shown = f"{value:.3f}" if isinstance(value, float) else str(value)
+        FIGURES.append(f"{request.node.name}: {name}: {shown}{f' {unit}' if unit else ''}")
+    return record
+
+
+def pytest_terminal_summary(terminalreporter: pytest.TerminalReporter) -> None:
+    if FIGURES:
+        terminalreporter.section("figures")
+        for line in FIGURES:
+            terminalreporter.write_line(line)

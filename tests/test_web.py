@@ -189,7 +189,7 @@ def test_sonibus_run_with_the_ws_adapter_ends_on_sigint_with_a_client_connected(
     assert rc == 130, (rc, err)  # interrupted (Ctrl-C), as every `sonibus run`
     assert took < STOP_WITHIN_S
     assert close.type in (aiohttp.WSMsgType.CLOSE, aiohttp.WSMsgType.CLOSED), close
-    assert "running pepper (SimRobot), web (ValueServer)" in out
+    assert "running pepper (sim), web (ws-value)" in out  # adapter names, as in the file
     for noise in ("Traceback", "Task was destroyed", "Unclosed", "Exception ignored", "never retrieved"):
         assert noise not in err, err
 

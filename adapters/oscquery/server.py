@@ -15,13 +15,12 @@ import asyncio
 import contextlib
 import functools
 import json
-from collections import deque
 from collections.abc import Callable, Iterable
 from typing import TYPE_CHECKING, Any
 
-from aiohttp import WSCloseCode, WSMsgType, web
+from aiohttp import WSMsgType, web
 
-from sonibus.bus.web import CLIENT_BACKLOG, CLOSE_WAIT_S, WebServer
+from sonibus.bus.web import CLOSE_WAIT_S, WebClient, WebServer, close_clients
 
 from .live import Live
 
@@ -179,38 +178,12 @@ class QueryServer:
             client.push(text)
 
     async def _close_all(self, app: web.Application) -> None:
-        closing = [asyncio.create_task(c.ws.close(code=WSCloseCode.GOING_AWAY, message=b"node stopping"))
-                   for c in self._clients]
-        if closing:
-            await asyncio.wait(closing, timeout=2 * CLOSE_WAIT_S)
+        await close_clients(self._clients)
 
 
-class _Client:
-    """One WebSocket client: what it listens to, and a bounded backlog sent in order by one
-    task (a client ``CLIENT_BACKLOG`` messages behind loses the oldest, counted as ``dropped``)."""
+class _Client(WebClient):
+    """A WebSocket client and the paths it listens to (``LISTEN``)."""
 
     def __init__(self, ws: web.WebSocketResponse, adapter: Adapter) -> None:
-        self.ws, self.adapter = ws, adapter
+        super().__init__(ws, lambda: adapter.count("dropped"))
         self.listens: set[str] = set()
-        self.backlog: deque[str | bytes] = deque(maxlen=CLIENT_BACKLOG)
-        self.waiting = asyncio.Event()
-
-    def push(self, message: str | bytes) -> None:
-        if len(self.backlog) == self.backlog.maxlen:
-            self.adapter.count("dropped")
-        self.backlog.append(message)
-        self.waiting.set()
-
-    async def send_all(self) -> None:
-        while not self.ws.closed:
-            await self.waiting.wait()
-            self.waiting.clear()
-            while self.backlog and not self.ws.closed:
-                message = self.backlog.popleft()
-                try:
-                    if isinstance(message, bytes):
-                        await self.ws.send_bytes(message)
-                    else:
-                        await self.ws.send_str(message)
-                except ConnectionError:  # the client went away; its handler ends the connection
-                    return

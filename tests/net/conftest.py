@@ -11,8 +11,6 @@ import pytest
 
 from .netns import Topology, remove_stale, root_reason
 
-FIGURES: list[str] = []
-
 
 @pytest.fixture(scope="session")
 def _stale_removed() -> None:
@@ -42,19 +40,3 @@ def topology(_stale_removed: None) -> Iterator[Topology]:
 def shared_topology(_stale_removed: None) -> Iterator[Topology]:
     """One topology for the tests of a module that build on each other's set-up."""
     yield from _topology()
-
-
-@pytest.fixture
-def figure(request: pytest.FixtureRequest):
-    """``figure("loss detected", 1.62, "s")``: a measured value, shown in the summary."""
-    def record(name: str, value: float, unit: str = "") -> None:
-        shown = f"{value:.3f}" if isinstance(value, float) else str(value)
-        FIGURES.append(f"{request.node.name}: {name}: {shown}{f' {unit}' if unit else ''}")
-    return record
-
-
-def pytest_terminal_summary(terminalreporter: pytest.TerminalReporter) -> None:
-    if FIGURES:
-        terminalreporter.section("multi-host figures")
-        for line in FIGURES:
-            terminalreporter.write_line(line)

@@ -21,7 +21,6 @@ from sonibus.adapters.oscquery import OscQuery, OscQueryConfig
 from ..conftest import Network, wait_for
 from ..net.conftest import _stale_removed, topology  # noqa: F401  (the mDNS test's namespaces)
 
-FIGURES: list[str] = []
 RATE = 50  # frames/s of the simulated robots
 
 
@@ -141,19 +140,3 @@ def websocket() -> Iterator[Callable[[str], Socket]]:
     finally:
         for socket in opened:
             socket.close()
-
-
-@pytest.fixture
-def figure(request: pytest.FixtureRequest) -> Callable[..., None]:
-    """``figure("LISTEN rate", 49.8, "/s")``: a measured value, shown in the summary."""
-    def record(name: str, value: float, unit: str = "") -> None:
-        shown = f"{value:.3f}" if isinstance(value, float) else str(value)
-        FIGURES.append(f"{request.node.name}: {name}: {shown}{f' {unit}' if unit else ''}")
-    return record
-
-
-def pytest_terminal_summary(terminalreporter: pytest.TerminalReporter) -> None:
-    if FIGURES:
-        terminalreporter.section("OSCQuery figures")
-        for line in FIGURES:
-            terminalreporter.write_line(line)
