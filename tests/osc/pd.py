@@ -106,7 +106,7 @@ def start_pd(spawn: Callable[..., Any], tmp_path: Path, patch: Patch, name: str 
     lines = list(process.lines)
     if READY not in lines:
         pytest.fail(f"Pd ended before loading {path.name}: {lines}")
-    errors = [line for line in lines[:lines.index(READY)] if "error" in line]
+    errors = [line for line in lines[:lines.index(READY)] if "error" in line or "couldn't create" in line]
     if errors:
         pytest.fail(f"Pd could not load {path.name}: {errors}")
     return process
@@ -119,8 +119,9 @@ def printed(process: Any, name: str) -> list[str]:
 
 
 def errors(process: Any) -> list[str]:
-    """Error lines Pd printed (e.g. ``error: oscparse: unknown tag 'd' (100)``)."""
-    return [line for line in list(process.lines) if line.startswith("error")]
+    """Error lines Pd printed (e.g. ``error: oscparse: unknown tag 'd' (100)``), and objects it
+    could not create (Pd 0.53 prints ``... couldn't create`` without the word error)."""
+    return [line for line in list(process.lines) if line.startswith("error") or "couldn't create" in line]
 
 
 PROBE = "/sonibus/test/ready"

