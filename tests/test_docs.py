@@ -12,7 +12,7 @@ import pytest
 import sonibus.adapters
 import sonibus.bus
 import sonibus.schemas
-from sonibus.bus import config, runner
+from sonibus.bus import config, registry, runner
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -37,3 +37,14 @@ def test_docstring_examples_run(name):
 def test_shipped_installation_files_load_and_build(path):
     adapters = runner.build(config.load(path))
     assert adapters and all(a.state == "new" for a in adapters)
+
+
+def test_the_readme_lists_every_adapter_sonibus_ships_as_sonibus_adapters_does():
+    """Issue 19, item 5: the README's adapter list lacked features."""
+    text = (ROOT / "README.md").read_text(encoding="utf-8")
+    block = text.partition("    sonibus adapters\n")[2].partition("\n\n")[0]
+    listed = dict(line.strip().split(None, 1) for line in block.splitlines())
+    ours = {name for name, ep in registry.available().items() if registry.package(ep) == "sonibus"}
+    assert set(listed) == ours
+    for name, summary in listed.items():
+        assert summary == registry.summary(registry.load(name)), name
