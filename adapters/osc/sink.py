@@ -67,6 +67,7 @@ class OscSink(Adapter):
     def _start(self) -> None:
         cfg: OscSinkConfig = self.config
         self._ranges: dict[str, dict[str, tuple[float, float]]] = {}
+        self._described: dict[str, set[str]] = {}  # robot → derived values its info describes (ranged or not)
         self._info = InfoRequests(self.bus, self._take_info, lambda robot, text: self.warn("info", text),
                                   INFO_RETRY_S)
         self._links = [_Link(t, _resolve(t.to)) for t in cfg.resolved_targets()]
@@ -235,12 +236,15 @@ class OscSink(Adapter):
             self.count("waiting_info")
             self._info.ask(source.robot)
             return None
-        span = ranges.get(source.name if source.section == "joints" else f"{source.feature}/{source.name}")
-        if span is None:
-            if source.section == "derived":  # its processor may have started after the info came: ask again
-                self._info.ask(source.robot)
-            return values
-        return scale.normalized(values, span)
+        name = source.name if source.section == "joints" else f"{source.feature}/{source.name}"
+        span = ranges.get(name)
+        if span is None and source.section == "derived" and name not in self._described.get(source.robot, ()):
+            # its processor started after the info came: ask again, and send nothing raw meanwhile
+            # (a receiver of 0..1 cannot tell metres from fractions)
+            self.count("waiting_info")
+            self._info.ask(source.robot)
+            return None
+        return values if span is None else scale.normalized(values, span)
 
     def _take_info(self, robot: str, info: dict[str, Any]) -> None:
         try:
@@ -249,6 +253,7 @@ class OscSink(Adapter):
             self.warn("info", f"{robot}/info unusable: {exc}")
             return
         self._ranges[robot] = ranges
+        self._described[robot] = {str(d.get("name")) for d in info.get("derived", []) if isinstance(d, dict)}
 
 
 def _resolve(target: str) -> tuple[str, int]:

@@ -75,10 +75,9 @@ def test_osc_sends_derived_values_normalized_by_their_ranges(net, features_first
         subscriber.undeclare()
     finally:
         receiver.close()
-    derived_messages = check.messages()
-    first = 0 if features_first else next(i for i, (_, _, ok) in enumerate(derived_messages) if ok)
-    assert all(ok is not False for _, _, ok in derived_messages[first:]), derived_messages  # never raw after
-    assert all(0.0 <= x <= 1.0 for _, v, _ in derived_messages[first:] for x in v)
+    derived_messages = check.messages()  # never raw, not even while the sink learns the ranges (it was, ~2 s)
+    assert all(ok is not False for _, _, ok in derived_messages), derived_messages
+    assert all(0.0 <= x <= 1.0 for _, v, _ in derived_messages for x in v)
 
 
 def test_midi_maps_a_derived_value_to_a_controller(net, owner, reader):
