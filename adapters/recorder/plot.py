@@ -1,5 +1,8 @@
 """A picture of a recording: joint positions, one panel per chain and robot, under
-behaviors and speech (shaded spans) and postures (vertical lines). Needs matplotlib.
+behaviors and speech (shaded spans, each with an edge where it starts, and labels
+that step down when they would overprint), postures (vertical lines) and
+``joints/set`` commands (a tick on the panels of the joints they moved). Needs
+matplotlib.
 
 >>> import os, tempfile
 >>> from sonibus.adapters.recorder.reading import Recording
@@ -29,7 +32,9 @@ if TYPE_CHECKING:
 
 UNITS = {"rad": "rad", "fraction": "open 0..1"}
 SPANS = {"behavior": {"color": "tab:orange", "alpha": 0.15}, "speech": {"color": "tab:blue", "alpha": 0.12}}
-MARKED = ("behavior", "speech", "posture")
+MARKED = ("behavior", "speech", "posture", "command")
+LABEL_ROWS = 3       # label heights a run of close spans steps through
+CLOSE = 0.08         # spans starting within this fraction of the plot's width are close
 
 
 def plot(recording: Recording, out: str, keys: Sequence[str] | None = None, title: str | None = None) -> str:
@@ -83,8 +88,8 @@ def figure(recording: Recording, keys: Sequence[str] | None = None, title: str |
         else:
             ax.set_yticks([])
     for robot in robots:
-        mine = [ax for ax, panel in zip(axes, panels, strict=True) if panel[0] == robot]
-        _mark(mine, happened[robot], end)
+        mine = [(ax, panel[2]) for ax, panel in zip(axes, panels, strict=True) if panel[0] == robot]
+        _mark(mine, happened[robot], end, end - begin)
     axes[-1].set_xlim(begin, end)
     axes[-1].set_xlabel("s since the recording start")
     fig.suptitle(title or f"{os.path.basename(recording.path)} — {recording.duration_s:.1f} s — {', '.join(robots)}")
@@ -120,8 +125,11 @@ def _panels(keys: list[str], info: dict[str, Any] | None) -> list[tuple[str, lis
     return [(chain, group, ", ".join(units.get(chain, []))) for chain, group in chains.items()]
 
 
-def _mark(axes: list[Axes], events: list[tuple[float, dict[str, Any]]], end: float) -> None:
-    """Behaviors and speech as spans (an unclosed one lasts to ``end``), postures as lines; labels on the top panel."""
+def _mark(panels: list[tuple[Axes, list[str]]], events: list[tuple[float, dict[str, Any]]], end: float,
+          width: float) -> None:
+    """Behaviors and speech as spans (an unclosed one lasts to ``end``), postures as lines,
+    ``joints/set`` as ticks on the panels of its joints; labels on the top panel."""
+    axes = [ax for ax, _ in panels]
     spans: list[tuple[str, float, float, str]] = []
     running: dict[str, float] = {}
     speaking: tuple[float, str] | None = None
@@ -146,10 +154,23 @@ def _mark(axes: list[Axes], events: list[tuple[float, dict[str, Any]]], end: flo
             if state == "started":
                 axes[0].text(x, 0.5, name, transform=axes[0].get_xaxis_transform(), fontsize=7, rotation=90,
                              va="center", ha="left", color="tab:green", clip_on=True)
+        elif kind == "command" and data.get("verb") == "joints/set" and data.get("ok"):
+            moved = set((data.get("args") or {}).get("names") or ())
+            for ax, names in panels:
+                if moved & set(names):
+                    ax.plot([x], [1.0], marker="v", ms=4, color="tab:purple", transform=ax.get_xaxis_transform(),
+                            clip_on=False, gid="command")
     spans += [("behavior", x, end, name.rstrip("/").rsplit("/", 1)[-1]) for name, x in running.items()]
     spans += [("speech", speaking[0], end, speaking[1])] if speaking else []
-    for kind, start, stop, label in spans:
+    last: dict[str, tuple[float, int]] = {}  # kind → start and label row of its previous span
+    for kind, start, stop, label in sorted(spans, key=lambda span: span[1]):
+        before, row = last.get(kind, (-float("inf"), -1))
+        row = (row + 1) % LABEL_ROWS if start - before < CLOSE * width else 0
+        last[kind] = (start, row)
         for ax in axes:
             ax.axvspan(start, stop, gid=kind, lw=0, **SPANS[kind])
-        axes[0].text(start, 0.98 if kind == "behavior" else 0.02, label, transform=axes[0].get_xaxis_transform(),
-                     fontsize=7, va="top" if kind == "behavior" else "bottom", ha="left", clip_on=True)
+            ax.axvline(start, color=SPANS[kind]["color"], lw=0.6, alpha=0.8, gid=f"{kind}-edge")
+        step = 0.1 * row
+        axes[0].text(start, 0.98 - step if kind == "behavior" else 0.02 + step, label,
+                     transform=axes[0].get_xaxis_transform(), fontsize=7,
+                     va="top" if kind == "behavior" else "bottom", ha="left", clip_on=True)

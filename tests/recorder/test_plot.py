@@ -140,3 +140,28 @@ def test_without_matplotlib_a_clear_error(tmp_path, monkeypatch):
             pytest.raises(RecordingError, match=r"needs matplotlib: pip install matplotlib \(in a clone"):
         plot(recording, str(tmp_path / "r.png"))
     assert not (tmp_path / "r.png").exists()
+
+
+def test_back_to_back_behaviors_stay_apart_and_joint_commands_are_ticked(tmp_path):
+    """Issue 19, item 8: back-to-back behaviors merged into one block with overprinted
+    labels; joints/set commands were not marked."""
+    path = str(tmp_path / "r.mcap")
+    with RecordingWriter(path) as out:
+        write_info(out)
+        for seq in range(100):  # 2 s: the two labels would start 4 % of the width apart
+            write_frame(out, seq)
+        for seq, name, state in ((2, "a/Hey_1", "started"), (6, "a/Hey_1", "stopped"),
+                                 (6, "a/Yes_1", "started"), (10, "a/Yes_1", "stopped")):
+            write_event(out, seq, "behavior", name=name, state=state)
+        write_event(out, 12, "command", verb="joints/set", args={"names": ["HeadYaw"], "angles": [0.3]}, ok=True)
+        write_event(out, 14, "command", verb="joints/set", args={"names": ["HeadYaw"], "angles": [9.0]}, ok=False)
+    fig = draw(path)
+    head, *others = fig.axes
+    spans = marks(head, "behavior")
+    assert len(spans) == 2 and len(marks(head, "behavior-edge")) == 2  # each starts with an edge of its own
+    assert spans[0].get_x() + spans[0].get_width() == pytest.approx(spans[1].get_x())
+    texts = {t.get_text(): t.get_position()[1] for t in head.texts}
+    assert texts["Hey_1"] != texts["Yes_1"], "labels of close spans step down instead of overprinting"
+    ticks = marks(head, "command")
+    assert len(ticks) == 1 and ticks[0].get_xdata()[0] == pytest.approx(12 / 50, abs=0.002)  # the refused one: none
+    assert all(marks(ax, "command") == [] for ax in others)  # only where the moved joint is drawn
