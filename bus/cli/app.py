@@ -1,3 +1,4 @@
+# PYTHON_ARGCOMPLETE_OK  (argcomplete's marker: this module answers shell completion)
 """``sonibus COMMAND``: every command, built-in or a plug-in's, is found in the
 ``sonibus.commands`` entry-point group; parsing is separate from running, so the
 CLI can be tested in-process: ``main(["send", "pepper", "stop"], env)``."""
@@ -6,12 +7,13 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import io
 import logging
 import os
 import signal
 import sys
 from collections.abc import Callable, Sequence
-from importlib.metadata import EntryPoint, entry_points
+from importlib.metadata import EntryPoint, entry_points, version
 
 from .. import registry
 from ..errors import CommandError, ConfigError, RobotNotFound, SonibusError
@@ -76,6 +78,7 @@ def _command_word(argv: Sequence[str]) -> str | None:
 def parser(found: dict[str, Command]) -> argparse.ArgumentParser:
     """The top-level parser, with a subparser for each command ``found``."""
     top = argparse.ArgumentParser(prog="sonibus", description="Robots on a Zenoh bus, for sound tools.")
+    top.add_argument("--version", action="version", version=f"%(prog)s {version(OWN)}")
     top.add_argument("--traceback", action="store_true", help="show the full traceback of an error")
     top.add_argument("-v", "--verbose", action="count", default=0, help="log more (-vv: debug)")
     sub = top.add_subparsers(dest="command", required=True, metavar="COMMAND")
@@ -144,8 +147,21 @@ def _one_line(exc: Exception) -> str:
     return " ".join(text.split())
 
 
+def complete() -> None:
+    """Answer the shell's completion request and exit, when argcomplete's shell hook
+    (``eval "$(register-python-argcomplete sonibus)"``) asked for one; else do nothing."""
+    if "_ARGCOMPLETE" not in os.environ:
+        return  # argcomplete and every command are imported only on a TAB: a normal run stays as fast
+    import argcomplete
+
+    with contextlib.redirect_stderr(io.StringIO()):  # a broken plug-in's warning must not land on the prompt
+        top = parser(commands())
+    argcomplete.autocomplete(top)
+
+
 def console_main() -> None:
     """Entry point of the ``sonibus`` script: Ctrl-C and SIGTERM end it cleanly."""
+    complete()
     env = Environment()
 
     def terminate(signum: int, frame: object) -> None:
