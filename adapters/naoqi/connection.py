@@ -14,6 +14,8 @@ import time
 from collections.abc import Callable
 from typing import Any
 
+import qi  # here, not at connect: without the naoqi extra the registry lists this adapter with what to install
+
 from .config import NaoqiConfig
 
 log = logging.getLogger(__name__)
@@ -70,10 +72,6 @@ class Link:
 
     def __init__(self, config: NaoqiConfig, on_lost: Callable[[str], None],
                  stopping: threading.Event | None = None) -> None:
-        try:
-            import qi
-        except ImportError:
-            raise ImportError("the naoqi adapter needs libqi: pip install 'sonibus[naoqi]' (PyPI qi 3.1.5)") from None
         self._qi = qi
         self.url = config.endpoint
         self.timeout_ms = int(config.connect_timeout_s * 1000)
