@@ -71,6 +71,8 @@ def _record_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--duration", type=float, metavar="S", help="stop after S seconds")
     p.add_argument("--per-joint-keys", action="store_true",
                    help="record joint keys as published, not from frames (for publishers that put no frames)")
+    p.add_argument("--foxglove", action="store_true",
+                   help="also the channels Foxglove's panels read: frames whole, events as logs, arm transforms")
     p.add_argument("--status-every", type=float, default=5.0, metavar="S",
                    help="seconds between status lines when not on a terminal (default: 5)")
 
@@ -79,7 +81,7 @@ def _record(args: argparse.Namespace, env: Environment) -> Exit:
     options = {"subscribe": tuple(args.keyexpr)} if args.keyexpr else {}
     try:
         config = RecorderConfig(path=args.file, overwrite=args.force, status_every_s=0,
-                                per_joint_keys=args.per_joint_keys, **options)
+                                per_joint_keys=args.per_joint_keys, foxglove=args.foxglove, **options)
     except ConfigError as exc:  # named as the node would be at start
         raise ConfigError(f"node 'record': {exc}") from None
     recorder = Recorder(config, name="record")

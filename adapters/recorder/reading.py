@@ -40,7 +40,7 @@ from mcap.stream_reader import StreamReader, get_chunk_data_stream
 from sonibus.bus import keys
 from sonibus.bus.errors import SonibusError
 
-from .channels import MESSAGE_ENCODING, from_json
+from .channels import MESSAGE_ENCODING, from_json, is_view
 from .writer import METADATA_RECORDING, BadRecord, RecordingWriter
 
 MAGIC = b"\x89MCAP0\r\n"
@@ -96,7 +96,13 @@ class Recording:
 
     @property
     def keys(self) -> list[str]:
-        return sorted(k for k, n in self.counts.items() if n)
+        """The bus keys recorded (what replay, export and plot read); not the views."""
+        return sorted(k for k, n in self.counts.items() if n and not is_view(k))
+
+    @property
+    def views(self) -> list[str]:
+        """The channels the recorder added for Foxglove (``channels.VIEWS``)."""
+        return sorted(k for k, n in self.counts.items() if n and is_view(k))
 
     @property
     def robots(self) -> list[str]:

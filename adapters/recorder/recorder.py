@@ -10,6 +10,14 @@ Joints come as frames (``<robot>/frame``, one Zenoh sample per frame; see
 file is the same as if each joint key had been recorded; ``per_joint_keys =
 true`` records joint keys as published instead (publishers that put no frames).
 
+With ``foxglove = true`` it also writes the views Foxglove's panels read
+(``channels.VIEWS``): ``<robot>/frame`` (each frame whole), ``<robot>/log``
+(events as ``foxglove.Log``), ``<robot>/tf`` (the arms as
+``foxglove.FrameTransforms``, every frame, once the robot's info names a model
+with kinematics) and ``<robot>/info/derived`` (what feature processors answer
+there: the derived keys' units and ranges). They are counted in ``foxglove``,
+not ``written``; readers of bus data (replay, export, plot) leave them out.
+
 Messages wait in the recorder's own bounded queue; if the disk cannot keep up
 the oldest are dropped and counted (``stats["dropped"]``), never silently. A
 message the gate or the writer refuses is counted in ``bad`` and skipped; a
@@ -27,19 +35,23 @@ import time
 from dataclasses import dataclass
 from typing import Any
 
+from sonibus.adapters.foxglove.convert import ArmFrames, arm_frames, log_message
 from sonibus.bus import codec, keys, messages
 from sonibus.bus.adapter import Adapter
 from sonibus.bus.errors import ConfigError
 from sonibus.bus.info import InfoRequests
+from sonibus.bus.node import Reply
 from sonibus.bus.options import bad
 from sonibus.bus.queue import SampleQueue
 from sonibus.bus.streams import Incoming, Streams
 
+from .channels import DERIVED_INFO, FRAME, LOG_VIEW, TF, view
 from .writer import BadRecord, RecordingWriter, WriteError, unwritable
 
 log = logging.getLogger(__name__)
 
 EVERYTHING = ("*/joints/*", "*/derived/**", "*/events/*")
+DERIVED_RETRY_S = 2.0  # between questions to <robot>/info/derived while none answered
 
 
 @dataclass(frozen=True)
@@ -51,6 +63,7 @@ class RecorderConfig:
     flush_s: float = 1.0                      # at most this much is lost if the recorder is killed
     status_every_s: float = 10.0              # a log line with what has been recorded; 0: none
     per_joint_keys: bool = False              # joints from <robot>/joints/* instead of <robot>/frame (bus/streams.py)
+    foxglove: bool = False                    # also the views Foxglove reads: <robot>/frame, /log, /tf, /info/derived
 
     def __post_init__(self) -> None:
         if not self.path:
@@ -84,6 +97,9 @@ class Recorder(Adapter):
                                    "started": time.strftime("%Y-%m-%dT%H:%M:%S%z")})
         self._queue = self.own(SampleQueue(cfg.queue))
         self._info_seen: set[str] = set()
+        self._arms: dict[str, ArmFrames | None] = {}  # robot → its arm chains, once its info is recorded
+        self._derived_asked: dict[str, float] = {}      # robot → when its info/derived was last asked for
+        self._derived_seen: set[str] = set()            # robots whose info/derived is recorded
         self._info = InfoRequests(self.bus, self._take_info, lambda robot, text: log.warning("%s", text))
         try:
             self._streams = Streams(self.bus, cfg.subscribe, self._queue, per_joint_keys=cfg.per_joint_keys,
@@ -127,6 +143,10 @@ class Recorder(Adapter):
     def _take_info(self, robot: str, info: dict[str, Any]) -> None:  # on a Zenoh thread
         self._queue.put((keys.info(robot), codec.encode(info), time.monotonic_ns()))
 
+    def _take_derived_info(self, reply: Reply) -> None:  # on a Zenoh thread
+        if reply.payload is not None and reply.key == keys.derived_info(reply.key.partition("/")[0]):
+            self._queue.put((reply.key, reply.payload, time.monotonic_ns()))
+
     def _write(self) -> None:
         try:
             while not self.stopping.is_set():
@@ -145,6 +165,10 @@ class Recorder(Adapter):
         log.info("%s: %s", self.name, describe(self.status()))
 
     def _record(self, key: str, payload: bytes, arrived_ns: int) -> None:
+        log_ns = self._wall0 + arrived_ns - self._mono0
+        if key.endswith("/" + DERIVED_INFO):
+            self._derived_info(key, payload, log_ns)
+            return
         incoming = self._streams.take(key, payload, self.count, self.warn)  # checked by the gate, counted
         if incoming is None:
             return
@@ -156,15 +180,62 @@ class Recorder(Adapter):
             self._info_seen.add(robot)
         elif robot not in self._info_seen:
             self._info.ask(robot)
-        log_ns = self._wall0 + arrived_ns - self._mono0
         for sample_key, sample in samples:
-            try:
-                self._writer.write(sample_key, log_ns, sample)
-            except BadRecord as exc:  # (past the gate, rare): skipped whole, the file stays readable
-                self.count("bad")
-                self.warn("unwritable", f"message on '{sample_key}' not recorded: {exc}")
-                continue
-            self.count("written")
+            if self._put(sample_key, log_ns, sample):
+                self.count("written")
+        if not self.config.foxglove:
+            return
+        if key.endswith("/info"):
+            self._arms[robot] = arm_frames(incoming.message)
+        else:
+            self._views(incoming, log_ns)
+
+    def _put(self, key: str, log_ns: int, message: dict[str, Any]) -> bool:
+        """Write one message; one the writer refuses is counted ``bad`` and skipped."""
+        try:
+            self._writer.write(key, log_ns, message)
+        except BadRecord as exc:  # (past the gate, rare): skipped whole, the file stays readable
+            self.count("bad")
+            self.warn("unwritable", f"message on '{key}' not recorded: {exc}")
+            return False
+        return True
+
+    def _views(self, incoming: Incoming, log_ns: int) -> None:
+        """The views of a frame or an event."""
+        robot, section = incoming.source.robot, incoming.source.section
+        if section == "events":
+            written = [self._put(view(robot, LOG_VIEW), log_ns, log_message(robot, incoming.message))]
+        elif section == "frame" and incoming.samples:
+            frame = _selected(incoming)
+            arms = self._arms.get(robot)
+            written = [self._put(view(robot, FRAME), log_ns, frame),
+                       arms is not None and self._put(view(robot, TF), log_ns, arms.transforms(robot, frame))]
+        else:
+            if section == "derived" and robot not in self._derived_seen:
+                self._ask_derived_info(robot)
+            return
+        self.count("foxglove", sum(written))
+
+    def _ask_derived_info(self, robot: str) -> None:
+        """Ask the feature processors of ``robot`` (their derived values are coming) what
+        they publish, at most every 2 s until one answered."""
+        now = time.monotonic()
+        if now - self._derived_asked.get(robot, -DERIVED_RETRY_S) >= DERIVED_RETRY_S:
+            self._derived_asked[robot] = now
+            self.bus.ask(keys.derived_info(robot), self._take_derived_info, lambda: None, every_answer=True,
+                         timeout=DERIVED_RETRY_S)
+
+    def _derived_info(self, key: str, payload: bytes, log_ns: int) -> None:
+        """What a feature processor answered on ``<robot>/info/derived``, checked by the gate."""
+        try:
+            message = self._streams.gate.check(keys.Key.parse(key), payload)
+        except ValueError as exc:  # messages.BadMessage
+            self.count("bad")
+            self.warn("bad", f"message on '{key}' refused: {exc}")
+            return
+        if self._put(key, log_ns, message):
+            self.count("foxglove")
+            self._derived_seen.add(key.partition("/")[0])
 
     def _joints(self, frame: Incoming) -> list[tuple[str, dict[str, Any]]]:
         """The samples of a frame's joints that ``subscribe`` selects, each on its joint's key."""
@@ -177,6 +248,18 @@ class Recorder(Adapter):
         if every and time.monotonic() - self._last_status >= every:
             self._last_status = time.monotonic()
             log.info("%s: %s", self.name, describe(self.status()))
+
+
+def _selected(frame: Incoming) -> dict[str, Any]:
+    """A frame with only the joints ``subscribe`` selects (the frame itself when that is all of them)."""
+    message = frame.message
+    if len(frame.samples) == len(message["names"]):
+        return message
+    chosen = {sample.source.name for sample in frame.samples}
+    index = [i for i, name in enumerate(message["names"]) if name in chosen]
+    extra = {q: message[q] for q in message if q not in messages.FRAME_FIELDS}
+    return messages.frame(message["t"], message["seq"], [message["names"][i] for i in index],
+                          [message["v"][i] for i in index], {q: [v[i] for i in index] for q, v in extra.items()})
 
 
 def describe(status: dict[str, Any]) -> str:

@@ -36,10 +36,9 @@ from typing import Any, BinaryIO
 
 from mcap.writer import CompressionType, Writer
 
-from sonibus import schemas
 from sonibus.bus.errors import SonibusError
 
-from .channels import MESSAGE_ENCODING, PROFILE, SCHEMA_ENCODING, SCHEMA_PREFIX, schema_for, to_json
+from .channels import MESSAGE_ENCODING, PROFILE, SCHEMA_ENCODING, channel_schema, to_json
 
 METADATA_RECORDING = "sonibus.recording"
 METADATA_STATS = "sonibus.stats"
@@ -149,12 +148,12 @@ class RecordingWriter:
         return self._file.tell() if not self.closed else os.path.getsize(self.path)
 
     def _channel(self, key: str) -> int:
-        name = schema_for(key)
+        schema = channel_schema(key)
+        name = schema[0] if schema is not None else None
         schema_id = self._schemas.get(name)
-        if schema_id is None:
-            schema_id = self._schemas[name] = self._writer.register_schema(
-                SCHEMA_PREFIX + name, SCHEMA_ENCODING, to_json(schemas.load(name)))
-        return self._writer.register_channel(key, MESSAGE_ENCODING, schema_id)
+        if schema_id is None and schema is not None:
+            schema_id = self._schemas[name] = self._writer.register_schema(name, SCHEMA_ENCODING, schema[1])
+        return self._writer.register_channel(key, MESSAGE_ENCODING, schema_id or 0)
 
     def __enter__(self) -> RecordingWriter:
         return self

@@ -1,0 +1,146 @@
+"""Recordings that open well in Foxglove (``foxglove = true``): each robot's frames
+whole, its events as ``foxglove.Log``, its arms as ``foxglove.FrameTransforms``
+and its processors' ``info/derived``, each channel with its schema (Foxglove's
+published one, or sonibus's), read back with the ``mcap`` library; bus readers
+(replay, export) see the same keys as without them."""
+
+from __future__ import annotations
+
+import json
+from collections import defaultdict
+from typing import Any
+
+import jsonschema
+import numpy as np
+import pytest
+from mcap.reader import make_reader
+
+from sonibus import schemas
+from sonibus.adapters.features import Features
+from sonibus.adapters.features.config import FeaturesConfig
+from sonibus.adapters.features.kinematics import load_arms
+from sonibus.adapters.recorder import Recording
+from sonibus.adapters.recorder.export import export_csv
+from sonibus.adapters.recorder.replay import Replay, ReplayConfig
+from sonibus.schemas import foxglove
+
+from ..conftest import Network
+from ..foxglove.test_convert import origins
+from .conftest import HEY, record_sim
+
+
+@pytest.fixture(scope="module")
+def with_views(tmp_path_factory: pytest.TempPathFactory) -> tuple[Any, Any, dict[str, Any]]:
+    """A recording with the Foxglove views (a feature processor beside the robot), and the
+    recorder's stats."""
+    path = tmp_path_factory.mktemp("fox") / "pepper.mcap"
+    network = Network()
+    try:
+        network.start(Features(FeaturesConfig(robots="pepper"), name="features"))
+        recorder, _ = record_sim(network, path, frames=150, foxglove=True)
+    finally:
+        network.close()
+    return path, read(path), dict(recorder.stats)
+
+
+def read(path: Any) -> tuple[dict[str, Any], dict[str, list[tuple[int, dict[str, Any]]]]]:
+    """The file's channels (topic → (schema name, encoding, schema data, message encoding)) and messages."""
+    with open(path, "rb") as f:
+        reader = make_reader(f)
+        summary = reader.get_summary()
+        channels = {c.topic: (summary.schemas[c.schema_id].name, summary.schemas[c.schema_id].encoding,
+                              summary.schemas[c.schema_id].data, c.message_encoding)
+                    for c in summary.channels.values() if c.schema_id}
+        by_topic = defaultdict(list)
+        for _, channel, message in reader.iter_messages(log_time_order=False):
+            by_topic[channel.topic].append((message.log_time, json.loads(message.data)))
+    return channels, by_topic
+
+
+def test_every_view_has_its_schema_and_its_messages_fit_it(with_views):
+    _, (channels, messages), stats = with_views
+    assert {"pepper/frame", "pepper/log", "pepper/tf", "pepper/info/derived"} <= channels.keys()
+    expected = {"pepper/log": ("foxglove.Log", foxglove.load("foxglove.Log")),
+                "pepper/tf": ("foxglove.FrameTransforms", foxglove.load("foxglove.FrameTransforms")),
+                "pepper/frame": ("sonibus.v1.frame", schemas.load("frame")),
+                "pepper/info/derived": ("sonibus.v1.derived_info", schemas.load("derived_info"))}
+    for topic, (name, schema) in expected.items():
+        found_name, encoding, data, message_encoding = channels[topic]
+        assert (found_name, encoding, message_encoding) == (name, "jsonschema", "json"), topic
+        assert json.loads(data) == schema, f"{topic}: not the published schema"
+        assert messages[topic], f"nothing on {topic}"
+        for _, message in messages[topic][:5] + messages[topic][-5:]:
+            jsonschema.validate(message, json.loads(data))
+    assert stats["foxglove"] == sum(len(messages[t]) for t in expected)
+    assert stats["written"] == sum(len(m) for t, m in messages.items() if t not in expected)
+
+
+def test_frames_whole_and_transforms_at_the_fk_hand_positions(with_views):
+    _, (_, messages), _ = with_views
+    frames = messages["pepper/frame"]
+    joints = {seq: {} for _, f in frames for seq in [f["seq"]]}
+    for topic, found in messages.items():
+        if topic.startswith("pepper/joints/"):
+            for _, sample in found:
+                joints.get(sample["seq"], {})[topic.rpartition("/")[2]] = sample["v"]
+    assert len(frames) >= 140
+    for _, frame in frames:  # the frame whole: every joint, as its joint keys carried it
+        assert len(frame["names"]) == 17 and dict(zip(frame["names"], frame["v"], strict=True)) == joints[frame["seq"]]
+    # every frame after the robot's info has its transforms, logged with it
+    transforms = dict(messages["pepper/tf"])
+    info_at = messages["pepper/info"][0][0]
+    later = [(log_ns, frame) for log_ns, frame in frames if log_ns > info_at]
+    assert len(later) >= 140 - 10 and all(log_ns in transforms for log_ns, _ in later)
+    arms = load_arms("pepper")
+    moved = 0
+    for log_ns, frame in later[::10]:
+        angles = dict(zip(frame["names"], frame["v"], strict=True))
+        found = origins(transforms[log_ns], "pepper/Torso")
+        for side, hand in zip("LR", arms.hands(angles), strict=True):
+            assert np.allclose(found[f"pepper/{side}Hand"], hand, atol=1e-9)
+        moved += not np.allclose(arms.hands(angles), arms.hands({}))
+    assert moved, "the arms never left their zero pose: nothing was checked"
+
+
+def test_the_log_says_what_happened(with_views):
+    _, (_, messages), _ = with_views
+    lines = [(m["name"], m["message"], m["level"]) for _, m in messages["pepper/log"]]
+    assert ("pepper/behavior", f"behavior {HEY} started", 2) in lines
+    assert ("pepper/speech", 'speech "hello there" started', 2) in lines
+    assert ("pepper/command", "command behavior/run ok", 2) in lines
+    events = [e for topic, found in messages.items() if topic.startswith("pepper/events/") for _, e in found]
+    assert len(lines) == len(events)
+    stamps = sorted((m["timestamp"]["sec"], m["timestamp"]["nsec"]) for _, m in messages["pepper/log"])
+    assert stamps == sorted((int(e["t"]), round((e["t"] - int(e["t"])) * 1e9)) for e in events)
+
+
+def test_info_derived_holds_units_and_ranges(with_views):
+    _, (_, messages), _ = with_views
+    (_, derived), *_ = messages["pepper/info/derived"]
+    entries = {d["name"]: d for d in derived["derived"]}
+    assert entries["velocity/HeadYaw"]["unit"] == "rad/s" and entries["velocity/HeadYaw"]["max"] > 0
+    assert derived["processor"]["node"] == "features"
+
+
+def test_bus_readers_do_not_see_the_views(with_views, tmp_path, net):
+    path, _, _ = with_views
+    with Recording(str(path)) as recording:
+        assert recording.views == ["pepper/frame", "pepper/info/derived", "pepper/log", "pepper/tf"]
+        assert not set(recording.views) & set(recording.keys)
+        assert all(k.startswith(("pepper/joints/", "pepper/events/", "pepper/derived/")) or k == "pepper/info"
+                   for k in recording.keys)
+        written = export_csv(recording, str(tmp_path / "csv"))
+    assert sorted(p.rpartition("/")[2] for p in written) == ["events.csv", "pepper-derived.csv", "pepper.csv"]
+    replay = net.start(Replay(ReplayConfig(path=str(path), rename={"pepper": "take1"}), name="replay"))
+    assert replay.keys == recording.keys, "replay would put views on the bus as robot data"
+
+
+def test_without_foxglove_there_are_no_views(tmp_path):
+    network = Network()
+    try:
+        recorder, _ = record_sim(network, tmp_path / "plain.mcap", frames=20)
+    finally:
+        network.close()
+    channels, _ = read(tmp_path / "plain.mcap")
+    assert all(name.startswith("sonibus.v1.") for name, *_ in channels.values())
+    assert "foxglove" not in recorder.stats
