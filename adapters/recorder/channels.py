@@ -8,10 +8,10 @@ messages, and the JSON Schema of its section so Foxglove can plot it as is.
 >>> to_json({"t": 1.5, "seq": 3, "v": 0.25})
 b'{"t":1.5,"seq":3,"v":0.25}'
 
-Beside the bus's keys, a recording holds views of them for Foxglove's panels
-(``VIEWS``): each frame whole, events as ``foxglove.Log``, the arms as
-``foxglove.FrameTransforms``, and the derived keys' units and ranges. Readers
-of bus data (replay, export, plot) leave them out (``is_view``).
+Beside the bus's keys, a recording may hold views of them for Foxglove's panels
+(``adapters/foxglove/views.py``): each frame whole, events as ``foxglove.Log``,
+the arms as ``foxglove.FrameTransforms``, and the derived keys' units and
+ranges. Readers of bus data (replay, export, plot) leave them out (``is_view``).
 
 >>> is_view("pepper/tf"), is_view("pepper/frame"), is_view("pepper/joints/HeadYaw")
 (True, True, False)
@@ -25,7 +25,7 @@ import json
 from typing import Any
 
 from sonibus import schemas
-from sonibus.adapters.foxglove.convert import FRAME_TRANSFORMS, LOG
+from sonibus.adapters.foxglove.views import FOXGLOVE, is_view
 from sonibus.bus import messages
 from sonibus.bus.keys import Key
 from sonibus.schemas import foxglove
@@ -34,22 +34,7 @@ MESSAGE_ENCODING = "json"
 SCHEMA_ENCODING = "jsonschema"
 SCHEMA_PREFIX = "sonibus.v1."
 PROFILE = ""  # no MCAP well-known profile fits; channels carry plain JSON
-
-FRAME, LOG_VIEW, TF, DERIVED_INFO = "frame", "log", "tf", "info/derived"
-VIEWS = (FRAME, LOG_VIEW, TF, DERIVED_INFO)  # <robot>/<view>: what the recorder adds for Foxglove
-FOXGLOVE = {LOG_VIEW: LOG, TF: FRAME_TRANSFORMS}  # the views in Foxglove's own schemas
-
-
-def view(robot: str, what: str) -> str:
-    """The channel of view ``what`` (one of ``VIEWS``) of ``robot``."""
-    return f"{robot}/{what}"
-
-
-def is_view(key: str) -> bool:
-    """Whether ``key`` is a view the recorder wrote for Foxglove rather than a key it
-    recorded from the bus (a recorder takes frames apart into joint keys, the gate
-    refuses ``log`` and ``tf``, and ``info/derived`` is only ever asked for)."""
-    return key.partition("/")[2] in VIEWS
+__all__ = ["channel_schema", "from_json", "is_view", "schema_for", "to_json"]
 
 
 def channel_schema(key: str) -> tuple[str, bytes] | None:

@@ -11,7 +11,7 @@ file is the same as if each joint key had been recorded; ``per_joint_keys =
 true`` records joint keys as published instead (publishers that put no frames).
 
 With ``foxglove = true`` it also writes the views Foxglove's panels read
-(``channels.VIEWS``): ``<robot>/frame`` (each frame whole), ``<robot>/log``
+(``adapters/foxglove/views.py``): ``<robot>/frame`` (each frame whole), ``<robot>/log``
 (events as ``foxglove.Log``), ``<robot>/tf`` (the arms as
 ``foxglove.FrameTransforms``, every frame, once the robot's info names a model
 with kinematics) and ``<robot>/info/derived`` (what feature processors answer
@@ -35,23 +35,20 @@ import time
 from dataclasses import dataclass
 from typing import Any
 
-from sonibus.adapters.foxglove.convert import ArmFrames, arm_frames, log_message
+from sonibus.adapters.foxglove.views import DERIVED_INFO, Views
 from sonibus.bus import codec, keys, messages
 from sonibus.bus.adapter import Adapter
 from sonibus.bus.errors import ConfigError
 from sonibus.bus.info import InfoRequests
-from sonibus.bus.node import Reply
 from sonibus.bus.options import bad
 from sonibus.bus.queue import SampleQueue
 from sonibus.bus.streams import Incoming, Streams
 
-from .channels import DERIVED_INFO, FRAME, LOG_VIEW, TF, view
 from .writer import BadRecord, RecordingWriter, WriteError, unwritable
 
 log = logging.getLogger(__name__)
 
 EVERYTHING = ("*/joints/*", "*/derived/**", "*/events/*")
-DERIVED_RETRY_S = 2.0  # between questions to <robot>/info/derived while none answered
 
 
 @dataclass(frozen=True)
@@ -97,9 +94,7 @@ class Recorder(Adapter):
                                    "started": time.strftime("%Y-%m-%dT%H:%M:%S%z")})
         self._queue = self.own(SampleQueue(cfg.queue))
         self._info_seen: set[str] = set()
-        self._arms: dict[str, ArmFrames | None] = {}  # robot → its arm chains, once its info is recorded
-        self._derived_asked: dict[str, float] = {}      # robot → when its info/derived was last asked for
-        self._derived_seen: set[str] = set()            # robots whose info/derived is recorded
+        self._views = Views(self.bus, self._take_derived_info) if cfg.foxglove else None
         self._info = InfoRequests(self.bus, self._take_info, lambda robot, text: log.warning("%s", text))
         try:
             self._streams = Streams(self.bus, cfg.subscribe, self._queue, per_joint_keys=cfg.per_joint_keys,
@@ -143,9 +138,8 @@ class Recorder(Adapter):
     def _take_info(self, robot: str, info: dict[str, Any]) -> None:  # on a Zenoh thread
         self._queue.put((keys.info(robot), codec.encode(info), time.monotonic_ns()))
 
-    def _take_derived_info(self, reply: Reply) -> None:  # on a Zenoh thread
-        if reply.payload is not None and reply.key == keys.derived_info(reply.key.partition("/")[0]):
-            self._queue.put((reply.key, reply.payload, time.monotonic_ns()))
+    def _take_derived_info(self, key: str, payload: bytes) -> None:  # on a Zenoh thread
+        self._queue.put((key, payload, time.monotonic_ns()))
 
     def _write(self) -> None:
         try:
@@ -183,12 +177,9 @@ class Recorder(Adapter):
         for sample_key, sample in samples:
             if self._put(sample_key, log_ns, sample):
                 self.count("written")
-        if not self.config.foxglove:
-            return
-        if key.endswith("/info"):
-            self._arms[robot] = arm_frames(incoming.message)
-        else:
-            self._views(incoming, log_ns)
+        if self._views is not None:
+            views = self._views.of(incoming)
+            self.count("foxglove", sum(self._put(view, log_ns, message) for view, message in views))
 
     def _put(self, key: str, log_ns: int, message: dict[str, Any]) -> bool:
         """Write one message; one the writer refuses is counted ``bad`` and skipped."""
@@ -200,31 +191,6 @@ class Recorder(Adapter):
             return False
         return True
 
-    def _views(self, incoming: Incoming, log_ns: int) -> None:
-        """The views of a frame or an event."""
-        robot, section = incoming.source.robot, incoming.source.section
-        if section == "events":
-            written = [self._put(view(robot, LOG_VIEW), log_ns, log_message(robot, incoming.message))]
-        elif section == "frame" and incoming.samples:
-            frame = _selected(incoming)
-            arms = self._arms.get(robot)
-            written = [self._put(view(robot, FRAME), log_ns, frame),
-                       arms is not None and self._put(view(robot, TF), log_ns, arms.transforms(robot, frame))]
-        else:
-            if section == "derived" and robot not in self._derived_seen:
-                self._ask_derived_info(robot)
-            return
-        self.count("foxglove", sum(written))
-
-    def _ask_derived_info(self, robot: str) -> None:
-        """Ask the feature processors of ``robot`` (their derived values are coming) what
-        they publish, at most every 2 s until one answered."""
-        now = time.monotonic()
-        if now - self._derived_asked.get(robot, -DERIVED_RETRY_S) >= DERIVED_RETRY_S:
-            self._derived_asked[robot] = now
-            self.bus.ask(keys.derived_info(robot), self._take_derived_info, lambda: None, every_answer=True,
-                         timeout=DERIVED_RETRY_S)
-
     def _derived_info(self, key: str, payload: bytes, log_ns: int) -> None:
         """What a feature processor answered on ``<robot>/info/derived``, checked by the gate."""
         try:
@@ -235,7 +201,7 @@ class Recorder(Adapter):
             return
         if self._put(key, log_ns, message):
             self.count("foxglove")
-            self._derived_seen.add(key.partition("/")[0])
+            self._views.derived_seen.add(key.partition("/")[0])
 
     def _joints(self, frame: Incoming) -> list[tuple[str, dict[str, Any]]]:
         """The samples of a frame's joints that ``subscribe`` selects, each on its joint's key."""
@@ -248,18 +214,6 @@ class Recorder(Adapter):
         if every and time.monotonic() - self._last_status >= every:
             self._last_status = time.monotonic()
             log.info("%s: %s", self.name, describe(self.status()))
-
-
-def _selected(frame: Incoming) -> dict[str, Any]:
-    """A frame with only the joints ``subscribe`` selects (the frame itself when that is all of them)."""
-    message = frame.message
-    if len(frame.samples) == len(message["names"]):
-        return message
-    chosen = {sample.source.name for sample in frame.samples}
-    index = [i for i, name in enumerate(message["names"]) if name in chosen]
-    extra = {q: message[q] for q in message if q not in messages.FRAME_FIELDS}
-    return messages.frame(message["t"], message["seq"], [message["names"][i] for i in index],
-                          [message["v"][i] for i in index], {q: [v[i] for i in index] for q, v in extra.items()})
 
 
 def describe(status: dict[str, Any]) -> str:

@@ -1,0 +1,92 @@
+"""The views of the bus that Foxglove's panels read, beside the bus's own keys:
+per robot, each frame whole (``<robot>/frame``), its events as ``foxglove.Log``
+(``<robot>/log``), its arms as ``foxglove.FrameTransforms`` (``<robot>/tf``)
+and its processors' ``<robot>/info/derived``. The recorder writes them, the
+``foxglove`` adapter serves them; neither needs foxglove-sdk for this.
+
+>>> is_view("pepper/tf"), is_view("pepper/frame"), is_view("pepper/joints/HeadYaw")
+(True, True, False)
+>>> view("pepper", LOG)
+'pepper/log'
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from typing import Any
+
+from sonibus.bus import keys, messages
+from sonibus.bus.node import Bus, Reply
+from sonibus.bus.streams import Incoming
+
+from . import convert
+from .convert import ArmFrames, arm_frames, log_message
+
+FRAME, LOG, TF, DERIVED_INFO = "frame", "log", "tf", "info/derived"
+VIEWS = (FRAME, LOG, TF, DERIVED_INFO)
+FOXGLOVE = {LOG: convert.LOG, TF: convert.FRAME_TRANSFORMS}  # the views in Foxglove's own schemas
+DERIVED_RETRY_S = 2.0  # between questions to <robot>/info/derived while none answered
+
+
+def view(robot: str, what: str) -> str:
+    """The channel of view ``what`` (one of ``VIEWS``) of ``robot``."""
+    return f"{robot}/{what}"
+
+
+def is_view(key: str) -> bool:
+    """Whether ``key`` is a view rather than a key taken from the bus (a sink takes
+    frames apart into joint keys, the gate refuses ``log`` and ``tf``, and
+    ``info/derived`` is only ever asked for)."""
+    return key.partition("/")[2] in VIEWS
+
+
+class Views:
+    """The views of what a sink takes (``of``), with what it needs to know per robot:
+    its arm chains once its info came, and its processors' ``info/derived``, asked
+    for (``ask(robot, on_reply)``) once derived values of it arrive."""
+
+    def __init__(self, bus: Bus, on_derived_info: Callable[[str, bytes], None]) -> None:
+        self.bus, self.on_derived_info = bus, on_derived_info
+        self._arms: dict[str, ArmFrames | None] = {}
+        self._asked: dict[str, float] = {}
+        self.derived_seen: set[str] = set()  # robots whose info/derived has been taken
+
+    def of(self, incoming: Incoming) -> list[tuple[str, dict[str, Any]]]:
+        """The views of one message (a robot's info gives none: it tells its model)."""
+        robot, section = incoming.source.robot, incoming.source.section
+        if section == "info" and not incoming.source.name:
+            self._arms[robot] = arm_frames(incoming.message)
+        elif section == "events":
+            return [(view(robot, LOG), log_message(robot, incoming.message))]
+        elif section == "frame" and incoming.samples:
+            frame = selected(incoming)
+            arms = self._arms.get(robot)
+            out = [(view(robot, FRAME), frame)]
+            return out if arms is None else [*out, (view(robot, TF), arms.transforms(robot, frame))]
+        elif section == "derived" and robot not in self.derived_seen:
+            self._ask(robot)
+        return []
+
+    def _ask(self, robot: str) -> None:
+        now = time.monotonic()
+        if now - self._asked.get(robot, -DERIVED_RETRY_S) >= DERIVED_RETRY_S:
+            self._asked[robot] = now
+            self.bus.ask(keys.derived_info(robot), self._reply, lambda: None, every_answer=True,
+                         timeout=DERIVED_RETRY_S)
+
+    def _reply(self, reply: Reply) -> None:  # on a Zenoh thread
+        if reply.payload is not None and reply.key == keys.derived_info(reply.key.partition("/")[0]):
+            self.on_derived_info(reply.key, reply.payload)
+
+
+def selected(frame: Incoming) -> dict[str, Any]:
+    """A frame with only the joints a sink's patterns select (the frame itself when that is all of them)."""
+    message = frame.message
+    if len(frame.samples) == len(message["names"]):
+        return message
+    chosen = {sample.source.name for sample in frame.samples}
+    index = [i for i, name in enumerate(message["names"]) if name in chosen]
+    extra = {q: message[q] for q in message if q not in messages.FRAME_FIELDS}
+    return messages.frame(message["t"], message["seq"], [message["names"][i] for i in index],
+                          [message["v"][i] for i in index], {q: [v[i] for i in index] for q, v in extra.items()})
