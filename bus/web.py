@@ -21,6 +21,7 @@ import asyncio
 import concurrent.futures
 import contextlib
 import json
+import logging
 import os
 import socket
 import threading
@@ -29,6 +30,7 @@ from collections.abc import Awaitable, Callable, Coroutine, Iterable
 from typing import TYPE_CHECKING, Any
 
 from aiohttp import WSCloseCode, web
+from aiohttp.http_exceptions import HttpProcessingError
 
 from .options import bad
 
@@ -137,7 +139,8 @@ class WebServer:
     async def _main(self) -> None:
         loop = asyncio.get_running_loop()
         loop.set_exception_handler(self._on_loop_error)
-        runner = web.AppRunner(self.app, handle_signals=False, access_log=None, shutdown_timeout=SHUTDOWN_S)
+        runner = web.AppRunner(self.app, handle_signals=False, access_log=None, shutdown_timeout=SHUTDOWN_S,
+                               logger=self._request_log())
         try:
             await runner.setup()
             site = web.TCPSite(runner, self.host, self.port)
@@ -164,6 +167,27 @@ class WebServer:
     def _push(self, text: str) -> None:
         for client in self._clients:
             client.push(text)
+
+    def _request_log(self) -> logging.Logger:
+        """What aiohttp logs of a request it could not handle (a malformed request line, a
+        9,000-byte path: a port scanner on the LAN) as one rate-limited line instead of a
+        traceback, what the client sent wrong counted ``bad``."""
+        requests = logging.Logger(f"sonibus.web.{self.adapter.name}")  # (not registered: nothing else logs here)
+
+        def one_line(record: logging.LogRecord) -> bool:
+            exc = record.exc_info[1] if record.exc_info else None
+            if record.levelno < logging.WARNING and exc is None:
+                return False
+            refused = isinstance(exc, HttpProcessingError)
+            if refused:  # (a handler's own failure was counted by the _errors middleware on its way out)
+                self.adapter.count("bad")
+            what = f"{type(exc).__name__}: {str(exc).splitlines()[0][:120] if str(exc) else ''}" if exc else ""
+            self.adapter.warn("http-refused" if refused else "http",
+                              f"web server: {record.getMessage()}{f': {what}' if what else ''}")
+            return False
+
+        requests.addFilter(one_line)
+        return requests
 
     def _on_loop_error(self, loop: asyncio.AbstractEventLoop, context: dict[str, Any]) -> None:
         exc = context.get("exception")

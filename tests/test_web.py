@@ -331,3 +331,20 @@ def test_the_docs_example_is_the_plugins_ws_value_adapter():
     assert example, "no python example in the section"
     plugin = ROOT / "tests" / "plugin" / "sonibus_testplugin" / "ws_value.py"
     assert example[1] == plugin.read_text()
+
+
+def test_malformed_requests_are_one_counted_line_not_tracebacks(net, caplog):
+    """A 9,000-byte path (a port scanner on the LAN) was a 400 and a multi-line traceback
+    on the operator's terminal for each request, counted nowhere."""
+    caplog.set_level(logging.DEBUG)
+    node = value_server(net)
+    for _ in range(3):
+        with socket.create_connection(("127.0.0.1", node.web.port), timeout=5) as sock:
+            sock.sendall(b"GET /" + b"a" * 9000 + b" HTTP/1.1\r\nHost: x\r\n\r\n")
+            assert sock.recv(64).split(b" ")[1] == b"400"
+    wait_for(lambda: node.stats["bad"] == 3, what="three requests counted bad")
+    assert "Traceback" not in caplog.text and "Error handling request" not in "".join(
+        r.getMessage() for r in caplog.records if r.name.startswith("aiohttp"))
+    warned = [r.getMessage() for r in caplog.records if r.levelno == logging.WARNING]
+    assert len(warned) == 1 and "LineTooLong" in warned[0] and "\n" not in warned[0], warned
+    assert node.state == "running"
