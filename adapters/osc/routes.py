@@ -97,7 +97,10 @@ class Target(NamedTuple):
     joint: str = ""  # the per-joint route's joint
 
     def request(self, args: Sequence[Any]) -> dict[str, Any]:
-        """The command request of the message's arguments (``CommandError`` when they do not fit)."""
+        """The command request of the message's arguments (``CommandError`` when they do not fit).
+        A route that takes nothing declares ``N``: the nils a client sends for it are nothing."""
+        if not self.route.slots:
+            args = [a for a in args if a is not None]
         return from_osc(self.route.verb, [self.joint, *args] if self.route is PER_JOINT else args)
 
 

@@ -19,7 +19,7 @@ from pythonosc.osc_message_builder import OscMessageBuilder
 from sonibus import schemas
 from sonibus.adapters.osc import routes
 from sonibus.adapters.osc.gateway import OscGateway, OscGatewayConfig
-from sonibus.bus import ConfigError, codec
+from sonibus.bus import ConfigError, codec, robot_info
 from sonibus.bus.commands import ok_reply
 from sonibus.bus.options import from_mapping
 
@@ -154,6 +154,31 @@ def test_one_joint_per_address_for_a_fader(net, client):
     address, (ok, code, message) = client.ask("/pepper/cmd/joints/set/Tail", 0.1)
     assert (ok, code) == (0, "unknown_joint") and "Tail" in message
     assert head.steady() == pytest.approx(-0.4, abs=1e-3)
+
+
+def test_every_route_accepts_the_arguments_it_declares(net, client):
+    """What OSCQuery tells a client to send (each route's type tags, values in its ranges and
+    choices) the gateway takes: ``N`` (no argument) included, which behavior/list and
+    behavior/stop refused as 'nil has no place'."""
+    info = robot_info(net.bus("info"), "pepper")
+    limits = {j["name"]: (j["min"], j["max"]) for j in info["joints"]}
+    choices = {"behaviors": info["behaviors"][0], "postures": "Stand", "joints": "HeadYaw", "stiffness": "Head"}
+    for route in routes.ROUTES:
+        args: list[Any] = []
+        for slot in route.slots:
+            if slot.tag == "s":
+                args.append(choices.get(slot.choices, "hello"))
+            elif slot.tag == "T":
+                args.append(True)
+            else:  # f: the middle of the joint's limits, or of the schema's bounds
+                low, high = limits["HeadYaw"] if slot.choices in ("limits", "") and slot.name == "angles" \
+                    else route.bounds(slot)
+                args.append(((low or 0.0) + (high if high is not None else 1.0)) / 2)
+        if route.types == "N":
+            args = [None]  # a client that sends what TYPE "N" says: one nil
+        address = route.address("pepper", joint="HeadYaw")
+        reply, values = client.ask(address, *args)
+        assert (reply, values[0]) == (address.replace("/cmd/", "/reply/"), 1), (address, args, values)
 
 
 ERRORS = [
