@@ -233,6 +233,9 @@ def test_help_patches_and_the_pepperosc_receiver_open_and_work(net, spawn, tmp_p
     helps = sorted(PD.glob("*-help.pd"))
     abstractions = sorted(p.stem for p in PD.glob("*.pd") if not p.stem.endswith("-help"))
     assert [h.name.removesuffix("-help.pd") for h in helps] == abstractions, "a help patch per abstraction"
+    taken = [port for port in (9000, 3005) if bound(port)]
+    assert not taken, f"UDP port(s) {taken} in use on this machine (a Pd or an OSC receiver running?): the " \
+                      f"help patches listen on 9000 and 3005 as a user opens them — stop what holds them"
     patch = Patch()
     for path in [*helps, PEPPEROSC / "pepperosc-receiver.pd"]:
         opener(patch, path)
