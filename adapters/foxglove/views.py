@@ -48,6 +48,7 @@ class Views:
 
     def __init__(self, bus: Bus, on_derived_info: Callable[[str, bytes], None]) -> None:
         self.bus, self.on_derived_info = bus, on_derived_info
+        self._gate = messages.Gate(bus.limits)
         self._arms: dict[str, ArmFrames | None] = {}
         self._asked: dict[str, float] = {}
         self.derived_seen: set[str] = set()  # robots whose info/derived has been taken
@@ -68,6 +69,13 @@ class Views:
             self._ask(robot)
         return []
 
+    def derived_info(self, key: str, payload: bytes) -> dict[str, Any]:
+        """An answer handed to ``on_derived_info``, checked by the gate (``ValueError``
+        saying what is wrong); its robot is not asked again."""
+        message = self._gate.check(keys.Key.parse(key), payload)
+        self.derived_seen.add(key.partition("/")[0])
+        return message
+
     def _ask(self, robot: str) -> None:
         now = time.monotonic()
         if now - self._asked.get(robot, -DERIVED_RETRY_S) >= DERIVED_RETRY_S:
@@ -78,6 +86,14 @@ class Views:
     def _reply(self, reply: Reply) -> None:  # on a Zenoh thread
         if reply.payload is not None and reply.key == keys.derived_info(reply.key.partition("/")[0]):
             self.on_derived_info(reply.key, reply.payload)
+
+
+def joint_samples(frame: Incoming) -> list[tuple[str, dict[str, Any]]]:
+    """The samples of a frame's selected joints (``Incoming.samples``), each on its joint's key."""
+    robot = frame.source.robot
+    chosen = {sample.source.name for sample in frame.samples}
+    return [(keys.joint(robot, name), sample) for name, sample in messages.frame_samples(frame.message)
+            if name in chosen]
 
 
 def selected(frame: Incoming) -> dict[str, Any]:

@@ -35,14 +35,14 @@ import time
 from dataclasses import dataclass
 from typing import Any
 
-from sonibus.adapters.foxglove.views import DERIVED_INFO, Views
-from sonibus.bus import codec, keys, messages
+from sonibus.adapters.foxglove.views import DERIVED_INFO, Views, joint_samples
+from sonibus.bus import codec, keys
 from sonibus.bus.adapter import Adapter
 from sonibus.bus.errors import ConfigError
 from sonibus.bus.info import InfoRequests
 from sonibus.bus.options import bad
 from sonibus.bus.queue import SampleQueue
-from sonibus.bus.streams import Incoming, Streams
+from sonibus.bus.streams import Streams
 
 from .writer import BadRecord, RecordingWriter, WriteError, unwritable
 
@@ -166,7 +166,7 @@ class Recorder(Adapter):
         incoming = self._streams.take(key, payload, self.count, self.warn)  # checked by the gate, counted
         if incoming is None:
             return
-        samples = self._joints(incoming) if incoming.source.section == "frame" else [(key, incoming.message)]
+        samples = joint_samples(incoming) if incoming.source.section == "frame" else [(key, incoming.message)]
         robot = key.partition("/")[0]
         if key.endswith("/info"):
             if robot in self._info_seen:
@@ -194,20 +194,13 @@ class Recorder(Adapter):
     def _derived_info(self, key: str, payload: bytes, log_ns: int) -> None:
         """What a feature processor answered on ``<robot>/info/derived``, checked by the gate."""
         try:
-            message = self._streams.gate.check(keys.Key.parse(key), payload)
+            message = self._views.derived_info(key, payload)  # type: ignore[union-attr]  # (asked by views only)
         except ValueError as exc:  # messages.BadMessage
             self.count("bad")
             self.warn("bad", f"message on '{key}' refused: {exc}")
             return
         if self._put(key, log_ns, message):
             self.count("foxglove")
-            self._views.derived_seen.add(key.partition("/")[0])
-
-    def _joints(self, frame: Incoming) -> list[tuple[str, dict[str, Any]]]:
-        """The samples of a frame's joints that ``subscribe`` selects, each on its joint's key."""
-        robot = frame.source.robot
-        joints = ((keys.joint(robot, name), sample) for name, sample in messages.frame_samples(frame.message))
-        return [(joint, sample) for joint, sample in joints if self._streams.accepts(joint)]
 
     def _report(self) -> None:
         every = self.config.status_every_s
