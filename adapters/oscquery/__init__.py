@@ -54,7 +54,8 @@ class OscQuery(Adapter):
     """Serves every robot on the bus as an OSCQuery namespace over HTTP and WebSocket."""
 
     Config = OscQueryConfig
-    counters = ("http_requests", "ws_clients", "robots_left_out")  # (values to WebSocket clients: `sent`)
+    # (values to WebSocket clients: `sent`; ws_dropped: the oldest lost by a client that does not read)
+    counters = ("http_requests", "ws_clients", "ws_dropped", "robots_left_out")
 
     def _start(self) -> None:
         cfg: OscQueryConfig = self.config

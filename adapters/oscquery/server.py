@@ -32,6 +32,7 @@ ATTRIBUTES = frozenset({"FULL_PATH", "CONTENTS", "TYPE", "ACCESS", "VALUE", "RAN
 MAX_WS_TEXT = 4096        # characters of one client command; longer ones are refused (counted as bad)
 MAX_WS_MESSAGE = 1 << 20  # bytes; aiohttp closes a connection that sends more in one message (code 1009)
 MAX_LISTENS = 4096        # paths one client may listen to
+HEARTBEAT_S = 10.0        # a ping this often; a client that does not answer within half of it is dropped
 _dumps = functools.partial(json.dumps, allow_nan=False)  # (NaN is no JSON: a client's parser refuses it)
 
 
@@ -97,9 +98,9 @@ class QueryServer:
         return 200, {attribute: node[attribute]}
 
     async def _websocket(self, request: web.Request) -> web.WebSocketResponse:
-        ws = web.WebSocketResponse(timeout=CLOSE_WAIT_S, max_msg_size=MAX_WS_MESSAGE)
+        ws = web.WebSocketResponse(timeout=CLOSE_WAIT_S, max_msg_size=MAX_WS_MESSAGE, heartbeat=HEARTBEAT_S)
         await ws.prepare(request)
-        client = _Client(ws, self.adapter)
+        client = _Client(ws, request.transport, self.adapter)
         self._clients.add(client)
         self.adapter.count("ws_clients")
         sender = asyncio.create_task(client.send_all())
@@ -178,12 +179,17 @@ class QueryServer:
             client.push(text)
 
     async def _close_all(self, app: web.Application) -> None:
-        await close_clients(self._clients)
+        clients = list(self._clients)
+        await close_clients(clients)
+        for client in clients:  # a client that does not read never takes the close: cut, or the stop waits on it
+            if client.transport is not None and not client.transport.is_closing():
+                client.transport.abort()
 
 
 class _Client(WebClient):
     """A WebSocket client and the paths it listens to (``LISTEN``)."""
 
-    def __init__(self, ws: web.WebSocketResponse, adapter: Adapter) -> None:
-        super().__init__(ws, lambda: adapter.count("dropped"))
+    def __init__(self, ws: web.WebSocketResponse, transport: asyncio.Transport | None, adapter: Adapter) -> None:
+        super().__init__(ws, lambda: adapter.count("ws_dropped"))
+        self.transport = transport
         self.listens: set[str] = set()

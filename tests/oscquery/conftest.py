@@ -4,7 +4,9 @@ node on a loopback bus, each on a free port; the figures measured, printed at th
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import json
+import socket
 import threading
 import time
 from collections.abc import Callable, Iterator
@@ -140,3 +142,24 @@ def websocket() -> Iterator[Callable[[str], Socket]]:
     finally:
         for socket in opened:
             socket.close()
+
+
+@contextlib.contextmanager
+def stalled(url: str, paths: list[str]) -> Iterator[socket.socket]:
+    """A WebSocket client that LISTENs to ``paths`` and never reads its socket (a small
+    receive buffer: the server's sends block once the kernel's buffers are full)."""
+    port = int(url.rsplit(":", 1)[1])
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as sock:
+        sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 1024)
+        sock.connect(("127.0.0.1", port))
+        sock.sendall(b"GET / HTTP/1.1\r\nHost: x\r\nUpgrade: websocket\r\nConnection: Upgrade\r\n"
+                     b"Sec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\nSec-WebSocket-Version: 13\r\n\r\n")
+        for path in paths:
+            sock.sendall(masked(json.dumps({"COMMAND": "LISTEN", "DATA": path}).encode()))
+        yield sock
+
+
+def masked(payload: bytes) -> bytes:
+    """A client's WebSocket text frame (RFC 6455: masked), for a payload under 126 bytes."""
+    mask = b"\x01\x02\x03\x04"
+    return bytes([0x81, 0x80 | len(payload)]) + mask + bytes(b ^ mask[i % 4] for i, b in enumerate(payload))

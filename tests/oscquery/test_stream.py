@@ -6,7 +6,6 @@ to a writable address at HOST_INFO's OSC port moves the simulated robot."""
 from __future__ import annotations
 
 import itertools
-import json
 import socket
 import statistics
 import time
@@ -18,7 +17,7 @@ from sonibus.adapters.sim import SimConfig, SimRobot
 from sonibus.bus import load_model
 
 from ..conftest import wait_for
-from .conftest import RATE, serve
+from .conftest import RATE, serve, stalled
 
 HEAD = "/pepper/joints/HeadYaw"
 
@@ -168,33 +167,33 @@ def test_events_are_served_and_streamed(served, websocket):
 
 def test_a_client_that_does_not_read_loses_values_not_the_node(served, websocket):
     """A client whose socket is never read: once the kernel's buffers are full its backlog
-    overflows (counted as dropped) while another client keeps getting values and HTTP
-    answers. A fast robot (a NAO at 500 frames/s) fills the buffers in seconds."""
+    overflows (counted as ws_dropped, apart from the node's own queue) while another client
+    keeps getting values and HTTP answers. A fast robot (a NAO at 500 frames/s) fills the
+    buffers in seconds."""
     served.net.sim("fast", model="nao", rate_hz=500)
     served.wait_node("/fast/joints/HeadYaw")
-    port = int(served.url.rsplit(":", 1)[1])
-    stalled = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
-    stalled.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 1024)
-    try:
-        stalled.connect(("127.0.0.1", port))
-        stalled.sendall(b"GET / HTTP/1.1\r\nHost: x\r\nUpgrade: websocket\r\nConnection: Upgrade\r\n"
-                        b"Sec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\nSec-WebSocket-Version: 13\r\n\r\n")
-        for joint in load_model("nao").joint_names:
-            stalled.sendall(_masked(json.dumps({"COMMAND": "LISTEN", "DATA": f"/fast/joints/{joint}"}).encode()))
-        wait_for(lambda: served.node.stats["dropped"] > 0, 60, "values dropped for the stalled client",
+    with stalled(served.url, [f"/fast/joints/{joint}" for joint in load_model("nao").joint_names]):
+        wait_for(lambda: served.node.stats["ws_dropped"] > 0, 60, "values dropped for the stalled client",
                  lambda: str(dict(served.node.stats.items())))
         client = websocket(served.url)
         client.send({"COMMAND": "LISTEN", "DATA": HEAD})
         wait_for(lambda: len(osc(client)) >= 10, what="values to a client that reads")
         assert served.get("/pepper").status_code == 200
-    finally:
-        stalled.close()
 
 
-def _masked(payload: bytes) -> bytes:
-    """A client's WebSocket text frame (RFC 6455: masked), for a payload under 126 bytes."""
-    mask = b"\x01\x02\x03\x04"
-    return bytes([0x81, 0x80 | len(payload)]) + mask + bytes(b ^ mask[i % 4] for i, b in enumerate(payload))
+def test_stop_is_not_held_by_a_client_that_does_not_read(net, caplog):
+    """Closing a client whose socket is full would wait for ever: it is cut after the close's
+    wait, so the node stops within its time and no thread is left behind."""
+    net.sim("fast", model="nao", rate_hz=500)
+    served = serve(net)
+    served.wait_node("/fast/joints/HeadYaw")
+    with stalled(served.url, [f"/fast/joints/{joint}" for joint in load_model("nao").joint_names]):
+        wait_for(lambda: served.node.stats["ws_dropped"] > 0, 60, "the stalled client's buffers full")
+        begun = time.monotonic()
+        served.node.stop()
+        took = time.monotonic() - begun
+    assert not [r.getMessage() for r in caplog.records if "did not stop" in r.getMessage()]
+    assert took < 3.0  # (the node's time to stop; it hung 2 s per thread before)
 
 
 def test_queries_over_the_websocket_are_answered_as_text(served, websocket):
