@@ -15,6 +15,7 @@ import asyncio
 import contextlib
 import functools
 import json
+import re
 from collections.abc import Callable, Iterable
 from typing import TYPE_CHECKING, Any
 
@@ -32,7 +33,11 @@ ATTRIBUTES = frozenset({"FULL_PATH", "CONTENTS", "TYPE", "ACCESS", "VALUE", "RAN
 MAX_WS_TEXT = 4096        # characters of one client command; longer ones are refused (counted as bad)
 MAX_WS_MESSAGE = 1 << 20  # bytes; aiohttp closes a connection that sends more in one message (code 1009)
 MAX_LISTENS = 4096        # paths one client may listen to
+MAX_ADDRESS = 1024        # characters of a LISTENed path
 HEARTBEAT_S = 10.0        # a ping this often; a client that does not answer within half of it is dropped
+# A LISTENed path: printable ASCII without space or '#' (OSC reserves it for bundles); no control character
+# reaches the operator's terminal through a warning.
+_OSC_ADDRESS = re.compile(rf"/[!-\"$-~]{{0,{MAX_ADDRESS - 1}}}")
 _dumps = functools.partial(json.dumps, allow_nan=False)  # (NaN is no JSON: a client's parser refuses it)
 
 
@@ -131,25 +136,31 @@ class QueryServer:
             else:
                 self._bad(f"the query {text[:80]!r}: {answer or 'no such attribute on that node'}")
             return
-        try:
-            command = json.loads(text)
-        except ValueError:
-            self._bad(f"a WebSocket message that is not JSON: {text[:60]!r}")
+        command = None
+        if text.strip().startswith("{"):  # (a deep "[[[..." is no command: never handed to the parser)
+            with contextlib.suppress(ValueError, RecursionError):
+                command = json.loads(text)
+        if not isinstance(command, dict):
+            self._bad(f"a WebSocket message that is not a JSON object: {text[:60]!r}")
             return
-        name = command.get("COMMAND") if isinstance(command, dict) else None
-        path = command.get("DATA") if isinstance(command, dict) else None
-        if name not in ("LISTEN", "IGNORE") or not isinstance(path, str) or not path.startswith("/"):
+        name, path = command.get("COMMAND"), command.get("DATA")
+        if name not in ("LISTEN", "IGNORE") or not isinstance(path, str):
             self._bad(f"a WebSocket command that is not {{\"COMMAND\": \"LISTEN\"|\"IGNORE\", \"DATA\": "
                       f"\"/path\"}}: {text[:80]!r}")
+            return
+        if not _OSC_ADDRESS.fullmatch(path):
+            self._bad(f"{name} {path[:80]!r}: not an OSC address ('/' then printable ASCII without spaces or "
+                      f"'#', at most {MAX_ADDRESS} characters)")
             return
         if name == "IGNORE":
             self._ignore(client, [path])
         elif path not in client.listens:
             if len(client.listens) >= MAX_LISTENS:
-                self._bad(f"LISTEN {path}: a client may listen to at most {MAX_LISTENS} paths")
+                self._bad(f"LISTEN {path[:80]!r}: a client may listen to at most {MAX_LISTENS} paths")
                 return
             if path not in self.live:  # kept: it streams once a robot serves it
-                self.adapter.warn("listen", f"LISTEN {path}: no such node (yet); its values come when it is served")
+                self.adapter.warn("listen", f"LISTEN {path[:80]!r}: no such node (yet); its values come when "
+                                            "it is served")
             client.listens.add(path)
             self.listened[path] = self.listened.get(path, 0) + 1
 

@@ -6,6 +6,7 @@ to a writable address at HOST_INFO's OSC port moves the simulated robot."""
 from __future__ import annotations
 
 import itertools
+import json
 import socket
 import statistics
 import time
@@ -91,16 +92,23 @@ def test_behaviors_installed_are_announced_as_path_changed(net, websocket):
     assert "my/new_behavior" in served.json("/pepper3/cmd/behavior/run")["RANGE"][0]["VALS"]
 
 
-def test_bad_websocket_input_is_counted_and_everything_stays_up(served, websocket):
+def test_bad_websocket_input_is_counted_and_everything_stays_up(served, websocket, caplog):
     client = websocket(served.url)
-    bad = ["junk", "[1, 2]", '{"COMMAND": "DANCE", "DATA": "/pepper"}', '{"COMMAND": "LISTEN", "DATA": 5}',
-           '{"COMMAND": "LISTEN"}', "x" * 100_000]
+    fake = "/x\x1b[2J\nsonibus: error: fake"  # a fake error line and a terminal escape in a LISTENed path
+    bad = [json.dumps({"COMMAND": "LISTEN", "DATA": fake}), "junk", "[1, 2]",
+           '{"COMMAND": "DANCE", "DATA": "/pepper"}', '{"COMMAND": "LISTEN", "DATA": 5}',
+           '{"COMMAND": "LISTEN"}', "x" * 100_000, "[" * 3000, "{" * 3000,
+           *(json.dumps({"COMMAND": "LISTEN", "DATA": path}) for path in
+             ("/pepper/joints/Head Yaw", "/pepper/#bundle", "/" + "a" * 1024, "pepper/joints/HeadYaw"))]
     for text in bad:
         client.send(text)
     client.send(b"\x00\xff binary")
     client.send({"COMMAND": "LISTEN", "DATA": "/pepper/joints/NoSuchJoint"})  # not bad: it may come
     wait_for(lambda: served.node.stats["bad"] >= len(bad) + 1, what="every bad message counted")
-    assert served.node.stats["bad"] == len(bad) + 1
+    assert served.node.stats["bad"] == len(bad) + 1 and served.node.stats["errors"] == 0
+    assert served.node.server.listened == {"/pepper/joints/NoSuchJoint": 1}
+    said = "\n".join(r.getMessage() for r in caplog.records)
+    assert "\x1b" not in said and "\nsonibus: error: fake" not in said
     client.send({"COMMAND": "LISTEN", "DATA": HEAD})  # the same connection still works
     wait_for(lambda: osc(client), what="values after bad input")
     assert not client.closed and served.node.state == "running"
