@@ -1,0 +1,167 @@
+"""``foxglove``: the bus live in Foxglove, over its WebSocket protocol (foxglove-sdk).
+
+    [nodes.foxglove]
+    adapter = "foxglove"
+    listen = "127.0.0.1:8765"     # Foxglove → Open connection → ws://localhost:8765
+
+It serves what a recording with ``foxglove = true`` holds, as channels named by
+their keys: the joints, derived values and events ``subscribe`` selects, each
+robot's ``<robot>/info``, and the views of ``views.py`` (``<robot>/frame``,
+``<robot>/log``, ``<robot>/tf``, ``<robot>/info/derived``). A channel is
+advertised with its first message; a message is encoded only for channels a
+client subscribes to. Info and info/derived are sent again every
+``info_every_s``, so a client that connects later gets them.
+
+The only module of sonibus that imports foxglove-sdk (the ``foxglove`` extra).
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from dataclasses import dataclass
+from typing import Any
+
+import foxglove
+
+from sonibus.adapters.osc.gateway import parse_endpoint
+from sonibus.adapters.recorder.channels import MESSAGE_ENCODING, SCHEMA_ENCODING, channel_schema, to_json
+from sonibus.bus import codec, keys
+from sonibus.bus.adapter import Adapter
+from sonibus.bus.errors import ConfigError
+from sonibus.bus.info import InfoRequests
+from sonibus.bus.options import bad
+from sonibus.bus.queue import SampleQueue
+from sonibus.bus.streams import Streams
+
+from .views import DERIVED_INFO, Views, joint_samples
+
+log = logging.getLogger(__name__)
+
+MAX_CHANNELS = 4096  # channels advertised at most (keys made up on the fly must not grow it for ever)
+
+
+@dataclass(frozen=True)
+class FoxgloveConfig:
+    """Options of the ``foxglove`` adapter."""
+
+    listen: str = "127.0.0.1:8765"            # host:port of the WebSocket ("0.0.0.0:8765": every interface; 0: any)
+    subscribe: tuple[str, ...] = ("*/joints/*", "*/derived/**", "*/events/*")  # robot info is always served
+    name: str = "sonibus"                     # the server's name, shown by Foxglove
+    per_joint_keys: bool = False              # joints from <robot>/joints/* instead of <robot>/frame
+    queue: int = 4096                         # messages waiting to be served; past this the oldest are dropped
+    info_every_s: float = 5.0                 # info and info/derived sent again this often (later clients)
+
+    def __post_init__(self) -> None:
+        parse_endpoint("listen", self.listen)
+        object.__setattr__(self, "subscribe", keys.patterns(self.subscribe))
+        if self.queue < 1:
+            raise bad("queue", f"{self.queue} must be at least 1")
+        if not self.info_every_s > 0:
+            raise bad("info_every_s", f"{self.info_every_s} must be more than 0 (seconds)")
+
+
+class FoxgloveServer(Adapter):
+    """Robots live in Foxglove: joints, frames, arm transforms and events as logs, over its WebSocket protocol."""
+
+    Config = FoxgloveConfig
+    counters = ("sent",)
+
+    def __init__(self, config: FoxgloveConfig | None = None, *, name: str = "") -> None:
+        super().__init__(config, name=name)
+        self.port = 0  # the port bound, once started
+
+    def _start(self) -> None:
+        cfg: FoxgloveConfig = self.config
+        host, port = parse_endpoint("listen", cfg.listen)
+        self._context = foxglove.Context()  # this node's channels only (tests run several servers)
+        try:
+            self.server = foxglove.start_server(name=cfg.name, host=host, port=port, context=self._context)
+        except RuntimeError as exc:
+            reason = str(exc).removeprefix("FoxgloveError: ")
+            raise ConfigError(f"node '{self.name}': key 'listen': cannot listen on {cfg.listen}: {reason} — "
+                              "choose a free port (0: any) on an address of this machine") from None
+        self.port = self.server.port
+        self._channels: dict[str, foxglove.Channel] = {}
+        self._infos: dict[str, dict[str, Any]] = {}  # info and info/derived keys → their latest message
+        self._queue = self.own(SampleQueue(cfg.queue))
+        self._info_seen: set[str] = set()
+        self._info = InfoRequests(self.bus, self._take_info, lambda robot, text: log.warning("%s", text))
+        self._views = Views(self.bus, self._take_derived_info)
+        try:
+            self._streams = Streams(self.bus, cfg.subscribe, self._queue, per_joint_keys=cfg.per_joint_keys)
+        except BaseException:
+            self.server.stop()
+            raise
+        log.info("%s: Foxglove → Open connection → ws://%s:%d", self.name,
+                 "localhost" if host in ("127.0.0.1", "0.0.0.0") else host, self.port)
+        self.spawn(self._serve, "serve")
+
+    def _stop(self) -> None:
+        if hasattr(self, "_streams"):
+            self._streams.undeclare()
+        if hasattr(self, "server"):
+            self.server.stop()
+
+    def metrics(self) -> dict[str, Any]:
+        """The port and the channels advertised."""
+        return {"port": self.port, "channels": len(getattr(self, "_channels", ()))}
+
+    def _take_info(self, robot: str, info: dict[str, Any]) -> None:  # on a Zenoh thread
+        self._queue.put((keys.info(robot), codec.encode(info)))
+
+    def _take_derived_info(self, key: str, payload: bytes) -> None:  # on a Zenoh thread
+        self._queue.put((key, payload))
+
+    def _serve(self) -> None:
+        again = time.monotonic() + self.config.info_every_s
+        while not self.stopping.is_set():
+            for key, payload in self._queue.drain(timeout=0.2):
+                self._take(key, payload)
+            if time.monotonic() >= again:
+                again = time.monotonic() + self.config.info_every_s
+                for key, message in list(self._infos.items()):
+                    self._log(key, message)
+
+    def _take(self, key: str, payload: bytes) -> None:
+        if key.endswith("/" + DERIVED_INFO):
+            try:
+                self._infos[key] = self._views.derived_info(key, payload)
+            except ValueError as exc:  # messages.BadMessage
+                self.count("bad")
+                self.warn("bad", f"message on '{key}' refused: {exc}")
+                return
+            self._log(key, self._infos[key])
+            return
+        incoming = self._streams.take(key, payload, self.count, self.warn)  # checked by the gate, counted
+        if incoming is None:
+            return
+        robot = incoming.source.robot
+        if key.endswith("/info"):
+            self._info_seen.add(robot)
+            self._infos[key] = incoming.message
+        elif robot not in self._info_seen:
+            self._info.ask(robot)
+        samples = joint_samples(incoming) if incoming.source.section == "frame" else [(key, incoming.message)]
+        for channel_key, message in [*samples, *self._views.of(incoming)]:
+            self._log(channel_key, message)
+
+    def _log(self, key: str, message: dict[str, Any]) -> None:
+        """``message`` on the channel of ``key`` (advertised now if new), when a client listens."""
+        channel = self._channels.get(key)
+        if channel is None:
+            if len(self._channels) >= MAX_CHANNELS:
+                self.warn("channels", f"'{key}' not served: {MAX_CHANNELS} channels already")
+                return
+            found = channel_schema(key)
+            schema = foxglove.Schema(name=found[0], encoding=SCHEMA_ENCODING, data=found[1]) if found else None
+            channel = self._channels[key] = foxglove.Channel(key, schema=schema, message_encoding=MESSAGE_ENCODING,
+                                                             context=self._context)
+        if channel.has_sinks():
+            try:
+                channel.log(to_json(message), log_time=time.time_ns())
+            except ValueError as exc:  # (past the gate: rare) not strict JSON
+                self.count("bad")
+                self.warn("unsendable", f"message on '{key}' not sent: {exc}")
+                return
+            self.count("sent")

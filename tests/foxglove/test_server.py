@@ -1,0 +1,181 @@
+"""The live ``foxglove`` adapter, seen by a real WebSocket client speaking Foxglove's
+protocol: channels advertised with their schemas, a subscription, and binary
+messages (opcode 1: subscription id u32, log time u64, payload) that decode to
+a frame and to the transforms of that frame; junk from a client harms no one."""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import socket
+import struct
+import time
+from typing import Any
+
+import aiohttp
+import jsonschema
+import numpy as np
+import pytest
+
+from sonibus import schemas
+from sonibus.adapters.features.kinematics import load_arms
+from sonibus.adapters.foxglove.server import FoxgloveConfig, FoxgloveServer
+from sonibus.bus.errors import ConfigError
+from sonibus.schemas import foxglove
+
+from ..conftest import wait_for
+from .test_convert import origins
+
+PROTOCOLS = ("foxglove.sdk.v1", "foxglove.websocket.v1")
+MESSAGE_DATA = 1  # the server's binary opcode of a message
+
+
+class Client:
+    """One Foxglove WebSocket client: the channels advertised, and messages by subscription id."""
+
+    def __init__(self, ws: aiohttp.ClientWebSocketResponse) -> None:
+        self.ws, self.channels, self.server_info = ws, {}, None
+
+    async def until(self, done: Any, timeout: float = 8.0) -> list[tuple[int, int, bytes]]:
+        """Read until ``done(messages)`` holds (messages: (subscription, log time, payload))."""
+        found: list[tuple[int, int, bytes]] = []
+        deadline = time.monotonic() + timeout
+        while not done(found):
+            left = deadline - time.monotonic()
+            assert left > 0, f"timed out; channels {sorted(self.channels)}, {len(found)} messages"
+            message = await self.ws.receive(timeout=left)
+            if message.type == aiohttp.WSMsgType.TEXT:
+                data = json.loads(message.data)
+                if data["op"] == "serverInfo":
+                    self.server_info = data
+                elif data["op"] == "advertise":
+                    self.channels.update({c["topic"]: c for c in data["channels"]})
+            elif message.type == aiohttp.WSMsgType.BINARY:
+                assert message.data[0] == MESSAGE_DATA
+                subscription, log_time = struct.unpack_from("<IQ", message.data, 1)
+                found.append((subscription, log_time, message.data[13:]))
+            else:
+                raise AssertionError(f"the server closed the connection: {message}")
+        return found
+
+    async def subscribe(self, topics: dict[int, str]) -> None:
+        await self.ws.send_str(json.dumps({"op": "subscribe", "subscriptions": [
+            {"id": sid, "channelId": self.channels[topic]["id"]} for sid, topic in topics.items()]}))
+
+
+async def connect(session: aiohttp.ClientSession, port: int) -> Client:
+    ws = await session.ws_connect(f"ws://127.0.0.1:{port}", protocols=PROTOCOLS)
+    assert ws.protocol in PROTOCOLS
+    return Client(ws)
+
+
+def run(coroutine: Any) -> Any:
+    return asyncio.run(asyncio.wait_for(coroutine, 30))
+
+
+@pytest.fixture
+def served(net):
+    server = net.start(FoxgloveServer(FoxgloveConfig(listen="127.0.0.1:0"), name="foxglove"))
+    net.sim("pepper", rate_hz=50)
+    return server
+
+
+def test_a_client_subscribes_and_decodes_a_frame_and_its_transforms(served):
+    async def scenario() -> None:
+        async with aiohttp.ClientSession() as session:
+            client = await connect(session, served.port)
+            await client.until(lambda _: {"pepper/frame", "pepper/tf", "pepper/info"} <= client.channels.keys())
+            assert client.server_info["name"] == "sonibus"
+            for topic, name, schema in [("pepper/frame", "sonibus.v1.frame", schemas.load("frame")),
+                                        ("pepper/tf", "foxglove.FrameTransforms",
+                                         foxglove.load("foxglove.FrameTransforms")),
+                                        ("pepper/joints/HeadYaw", "sonibus.v1.joint_sample",
+                                         schemas.load("joint_sample"))]:
+                channel = client.channels[topic]
+                assert (channel["schemaName"], channel["schemaEncoding"], channel["encoding"]) == \
+                    (name, "jsonschema", "json")
+                assert json.loads(channel["schema"]) == schema
+            await client.subscribe({1: "pepper/frame", 2: "pepper/tf"})
+            found = await client.until(lambda got: len({s for s, _, _ in got}) == 2 and len(got) >= 20)
+        frames = {}
+        transforms = {}
+        for subscription, log_time, payload in found:
+            assert abs(log_time / 1e9 - time.time()) < 60
+            message = json.loads(payload)
+            if subscription == 1:
+                jsonschema.validate(message, schemas.load("frame"))
+                frames[round(message["t"] * 1e9)] = message  # (to 256 ns: a float of 1.7e18)
+            else:
+                jsonschema.validate(message, foxglove.load("foxglove.FrameTransforms"))
+                stamp = message["transforms"][0]["timestamp"]
+                transforms[stamp["sec"] * 10**9 + stamp["nsec"]] = message
+        both = [t for t in frames if any(abs(t - u) <= 1000 for u in transforms)]
+        assert both, "no transforms of a frame that was received"
+        for t in both:
+            frame = frames[t]
+            message = next(m for u, m in transforms.items() if abs(t - u) <= 1000)
+            found_origins = origins(message, "pepper/Torso")
+            hands = load_arms("pepper").hands(dict(zip(frame["names"], frame["v"], strict=True)))
+            assert np.allclose([found_origins["pepper/LHand"], found_origins["pepper/RHand"]], hands, atol=1e-9)
+
+    run(scenario())
+    assert served.stats["sent"] > 0
+
+
+def test_junk_from_a_client_does_not_kill_the_node(served):
+    async def scenario() -> None:
+        async with aiohttp.ClientSession() as session:
+            rude = await connect(session, served.port)
+            await rude.until(lambda _: "pepper/frame" in rude.channels)
+            await rude.ws.send_str("not json at all")
+            await rude.ws.send_str(json.dumps({"op": "subscribe", "subscriptions": [{"id": 1, "channelId": 99999}]}))
+            await rude.ws.send_str(json.dumps({"op": "no such op"}))
+            await rude.ws.send_bytes(b"\x02\xff\xff\xff\xff junk")
+            await rude.ws.send_bytes(b"")
+            await rude.ws.close()
+            polite = await connect(session, served.port)
+            await polite.until(lambda _: "pepper/frame" in polite.channels)
+            await polite.subscribe({5: "pepper/frame"})
+            found = await polite.until(lambda got: len(got) >= 3)
+            assert {s for s, _, _ in found} == {5}
+
+    run(scenario())
+    assert served.state == "running"
+
+
+def test_it_stops_and_frees_its_port(net):
+    server = net.start(FoxgloveServer(FoxgloveConfig(listen="127.0.0.1:0"), name="foxglove"))
+    port = server.port
+    assert port > 0
+    with socket.create_connection(("127.0.0.1", port), timeout=2):
+        pass
+    server.stop()
+    assert server.state == "stopped"
+
+    def refused() -> bool:
+        try:
+            socket.create_connection(("127.0.0.1", port), timeout=0.5).close()
+        except OSError:
+            return True
+        return False
+
+    wait_for(refused, what="the port to be closed")
+
+
+def test_a_port_in_use_is_a_one_line_configuration_error(net):
+    with socket.socket() as taken:
+        taken.bind(("127.0.0.1", 0))
+        taken.listen()
+        port = taken.getsockname()[1]
+        with pytest.raises(ConfigError, match=rf"key 'listen': cannot listen on 127.0.0.1:{port}: .*in use.* — choose"):
+            net.start(FoxgloveServer(FoxgloveConfig(listen=f"127.0.0.1:{port}"), name="foxglove"))
+
+
+@pytest.mark.parametrize(("options", "message"), [
+    ({"listen": "nowhere"}, "key 'listen'"),
+    ({"queue": 0}, "key 'queue'"),
+    ({"info_every_s": 0}, "key 'info_every_s'"),
+])
+def test_bad_options(options, message):
+    with pytest.raises(ConfigError, match=message):
+        FoxgloveConfig(**options)
