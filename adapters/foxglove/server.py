@@ -22,7 +22,13 @@ import time
 from dataclasses import dataclass
 from typing import Any
 
-import foxglove
+try:
+    import foxglove
+except ModuleNotFoundError as exc:  # named by its distribution, which the registry maps to the extra to install
+    if exc.name != "foxglove":
+        raise
+    raise ModuleNotFoundError("No module named 'foxglove' (the foxglove-sdk distribution)", name="foxglove_sdk") \
+        from None
 
 from sonibus.adapters.osc.gateway import parse_endpoint
 from sonibus.adapters.recorder.channels import MESSAGE_ENCODING, SCHEMA_ENCODING, channel_schema, to_json

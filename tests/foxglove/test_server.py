@@ -9,6 +9,8 @@ import asyncio
 import json
 import socket
 import struct
+import subprocess
+import sys
 import time
 from typing import Any
 
@@ -179,3 +181,15 @@ def test_a_port_in_use_is_a_one_line_configuration_error(net):
 def test_bad_options(options, message):
     with pytest.raises(ConfigError, match=message):
         FoxgloveConfig(**options)
+
+
+def test_without_foxglove_sdk_it_is_listed_with_the_extra_to_install():
+    """Issue 19, item 9: an adapter whose extra is missing is no warning, but what to install."""
+    code = ("import sys; sys.modules['foxglove'] = None\n"  # (as if foxglove-sdk were not installed)
+            "from sonibus.bus import registry\n"
+            "lacking = {}; found = registry.load_all(lacking)\n"
+            "print('foxglove' in found, lacking.get('foxglove'))\n")
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.split(None, 1) == ["False", "pip install 'sonibus[foxglove]'\n"]
+    assert "WARNING" not in done.stderr, done.stderr
