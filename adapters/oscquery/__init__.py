@@ -16,12 +16,12 @@ from __future__ import annotations
 
 import ipaddress
 import logging
+import re
 import threading
 import time
 from typing import Any
 
 from sonibus.adapters.osc import encode
-from sonibus.adapters.osc.gateway import parse_endpoint
 from sonibus.adapters.osc.profiles import event_args
 from sonibus.bus.adapter import Adapter
 from sonibus.bus.errors import ConfigError
@@ -68,8 +68,8 @@ class OscQuery(Adapter):
                                   INFO_EVERY_S)
         try:
             self.web.start()
-        except ConfigError as exc:  # (the web server names its own key, 'port'; here it is 'listen')
-            raise bad("listen", str(exc).removeprefix("key 'port': ")) from None
+        except ConfigError as exc:  # (the web server names its own keys, 'host' or 'port'; here it is 'listen')
+            raise bad("listen", re.sub(r"^key '\w+': ", "", str(exc))) from None
         self.url = self.web.url  # the bound one (port 0: any free port)
         log.info("%s: OSCQuery on %s (WebSocket on the same port)", self.name, self.url)
         self._queue = self.own(SampleQueue(cfg.queue))
@@ -80,15 +80,14 @@ class OscQuery(Adapter):
         self.spawn(self._refresh, "info")
         if cfg.mdns:
             self._advertise(cfg)
-        osc_host = parse_endpoint("gateway", cfg.gateway)[0]
-        if _loopback(osc_host) and not _loopback(cfg.host):
+        if _loopback(cfg.gateway_address[0]) and not _loopback(cfg.host):
             log.warning("%s: gateway = %r tells clients on other machines to send commands to themselves — give "
                         "the gateway's address on the network (or \"0.0.0.0:<port>\": this server's address)",
                         self.name, cfg.gateway)
 
     def _host_info(self) -> dict[str, Any]:
         cfg: OscQueryConfig = self.config
-        osc_host, osc_port = parse_endpoint("gateway", cfg.gateway)
+        osc_host, osc_port = cfg.gateway_address
         info: dict[str, Any] = {"NAME": cfg.name, "EXTENSIONS": EXTENSIONS, "OSC_PORT": osc_port,
                                 "OSC_TRANSPORT": "UDP"}
         if osc_host not in ("0.0.0.0", "::"):  # (else a client takes this server's address)
@@ -96,9 +95,8 @@ class OscQuery(Adapter):
         return info
 
     def _advertise(self, cfg: OscQueryConfig) -> None:
-        osc_host, osc_port = parse_endpoint("gateway", cfg.gateway)
         bind = mdns.addresses(cfg.host, cfg.interfaces)
-        advertiser = self.own(mdns.Advertiser(cfg.name, bind, self.web.port, osc_host, osc_port))
+        advertiser = self.own(mdns.Advertiser(cfg.name, bind, self.web.port, *cfg.gateway_address))
 
         def run() -> None:
             try:
@@ -185,8 +183,5 @@ class OscQuery(Adapter):
             self.warn("encode", f"not streamed, OSC cannot carry it: {exc}")
 
 
-def _loopback(host: str) -> bool:
-    try:
-        return ipaddress.ip_address(host).is_loopback
-    except ValueError:  # a name
-        return host == "localhost"
+def _loopback(address: str) -> bool:
+    return ipaddress.ip_address(address).is_loopback

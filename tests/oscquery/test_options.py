@@ -6,6 +6,7 @@ from __future__ import annotations
 import socket
 
 import pytest
+import requests
 
 from sonibus.adapters.oscquery import OscQuery, OscQueryConfig
 from sonibus.bus import ConfigError
@@ -17,10 +18,27 @@ from .conftest import serve
 @pytest.mark.parametrize(("options", "key"), [
     ({"listen": "nowhere"}, "listen"), ({"gateway": "127.0.0.1:0"}, "gateway"), ({"name": "a.b"}, "name"),
     ({"interfaces": ("eth0",)}, "interfaces"), ({"queue": 0}, "queue"),
+    ({"listen": "nowhere.invalid:5678"}, "listen"), ({"gateway": "nowhere.invalid:9001"}, "gateway"),
+    ({"interfaces": ("fe80::1",)}, "interfaces"), ({"name": "x" * 64}, "name"), ({"name": "é" * 32}, "name"),
+    ({"listen": "[::1]:0"}, "listen"), ({"gateway": "[::1]:9001"}, "gateway"),
 ])
 def test_wrong_options_name_their_key(options, key):
-    with pytest.raises(ConfigError, match=f"key '{key}'"):
+    with pytest.raises(ConfigError, match=f"key '{key}'") as error:
         OscQueryConfig(**options)
+    assert str(error.value).count("key '") == 1  # (not "key 'listen': key 'host': ...")
+
+
+def test_names_are_resolved_and_ipv6_is_fine_without_mdns():
+    config = OscQueryConfig(listen="localhost:0", gateway="localhost:9001", name="n" * 63)
+    assert (config.listen_address, config.gateway_address) == (("127.0.0.1", 0), ("127.0.0.1", 9001))
+    assert OscQueryConfig(listen="[::1]:0", gateway="[::1]:9001", mdns=False).host == "::1"
+
+
+def test_localhost_with_mdns_starts_and_tells_an_ip_address(net):
+    config = OscQueryConfig(listen="localhost:0", gateway="localhost:9001", mdns=True)
+    node = net.start(OscQuery(config, name="oscquery"))
+    assert node.url.startswith("http://127.0.0.1:") and node.state == "running"
+    assert requests.get(node.url + "/?HOST_INFO", timeout=5).json()["OSC_IP"] == "127.0.0.1"
 
 
 def test_a_port_in_use_names_listen(net):
