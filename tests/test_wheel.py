@@ -39,6 +39,7 @@ ADAPTERS = sorted(PROJECT["entry-points"]["sonibus.adapters"])
 SOURCES = {"sonibus/bus": ROOT / "bus", "sonibus/adapters": ROOT / "adapters", "sonibus/schemas": ROOT / "schemas"}
 NOT_COPIED = shutil.ignore_patterns(".git", ".venv", "build", "*.egg-info", "__pycache__", ".*_cache", ".hypothesis")
 NOT_SHIPPED = re.compile(r"__pycache__|\.pyc$")
+ONE_LINER = 'eval "$(register-python-argcomplete sonibus)"'  # shell completion's set-up
 
 
 @dataclass(frozen=True)
@@ -250,8 +251,14 @@ def test_completion_offers_commands_from_argcomplete_and_the_readme_one_liner(in
                                 "_ARGCOMPLETE_STDOUT_FILENAME": str(installed.work / "offered")})
     assert (asked.returncode, asked.stdout, asked.stderr) == (0, "", ""), asked
     assert (installed.work / "offered").read_text().split("\v") == ["adapters "]
-    # what bash does on TAB after `eval "$(register-python-argcomplete sonibus)"` (README, docs/install.md)
-    script = ('eval "$(register-python-argcomplete sonibus)"; COMP_LINE="sonibus re"; COMP_POINT=10; '
+    # what argcomplete's global hook (activate-global-python-argcomplete) runs: the marker is found
+    marked = subprocess.run([str(installed.venv / "bin" / "python"), "-m", "argcomplete._check_console_script",
+                             installed.sonibus], capture_output=True, text=True, timeout=30, env=installed.env)
+    assert marked.returncode == 0, marked.stderr
+    # the set-up line the README and docs/install.md give, then what bash does on TAB
+    for doc in ("README.md", "docs/install.md"):
+        assert ONE_LINER in (ROOT / doc).read_text(encoding="utf-8"), doc
+    script = (f'{ONE_LINER}; COMP_LINE="sonibus re"; COMP_POINT=10; '
               '_python_argcomplete sonibus re sonibus; printf "%s\\n" "${COMPREPLY[@]}"')
     tab = subprocess.run(["bash", "-c", script], capture_output=True, text=True, timeout=30, cwd=installed.work,
                          env=installed.env)
