@@ -63,6 +63,7 @@ class OscQuery(Adapter):
         self.web = WebServer(self, cfg.host, cfg.port)
         self.server = QueryServer(self, self.web, self.live, self._host_info())
         self._present: set[str] = set()
+        self._left_out: dict[str, dict[str, Any]] = {}  # robot → the unusable info it was left out for
         self._present_lock = threading.Lock()
         self._info = InfoRequests(self.bus, self._take_info, lambda robot, text: self.warn("info", text),
                                   INFO_EVERY_S)
@@ -122,8 +123,10 @@ class OscQuery(Adapter):
                 self._present.add(robot)
             else:
                 self._present.discard(robot)
+                self._left_out.pop(robot, None)
                 if self.live.drop_robot(robot):
                     self.server.announce("PATH_REMOVED", f"/{robot}")
+                    self.server.announce("PATH_CHANGED", "/")  # (the spec: a method removed changes its parent)
         if alive:
             self._info.ask(robot)
 
@@ -141,13 +144,18 @@ class OscQuery(Adapter):
             try:
                 change = self.live.set_robot(robot, info)
             except (KeyError, TypeError, ValueError) as exc:
-                self.count("robots_left_out")
+                if self._left_out.get(robot) != info:  # (counted once per robot, until its info changes)
+                    self._left_out[robot] = info
+                    self.count("robots_left_out")
                 self.warn(f"info:{robot}", f"robot '{robot}' left out of the namespace: its info is unusable "
                                            f"({type(exc).__name__}: {exc})")
                 return
+            self._left_out.pop(robot, None)
             if change is not None:
                 log.info("%s: %s /%s", self.name, change, robot)
                 self.server.announce(change, f"/{robot}")
+                if change == "PATH_ADDED":
+                    self.server.announce("PATH_CHANGED", "/")
 
     # -- values ------------------------------------------------------------------------
 

@@ -64,11 +64,14 @@ def test_stream_rate_measured(served, websocket, figure):
 
 def test_robots_coming_going_and_changing_are_announced(served, websocket):
     client = websocket(served.url)
+    root = {"COMMAND": "PATH_CHANGED", "DATA": "/"}  # (for clients that handle only PATH_CHANGED)
     nao = served.net.sim("nao2", rate_hz=RATE)
     wait_for(lambda: {"COMMAND": "PATH_ADDED", "DATA": "/nao2"} in client.texts(), 10, "PATH_ADDED /nao2")
+    wait_for(lambda: root in client.texts(), what="PATH_CHANGED / with the robot added")
     assert served.json("/nao2/joints/LKneePitch")["UNIT"] == ["rad"]
     nao.stop()
     wait_for(lambda: {"COMMAND": "PATH_REMOVED", "DATA": "/nao2"} in client.texts(), 10, "PATH_REMOVED /nao2")
+    wait_for(lambda: client.texts().count(root) == 2, what="PATH_CHANGED / with the robot removed")
     assert served.get("/nao2").status_code == 404
     assert "/pepper" not in [t["DATA"] for t in client.texts()]  # pepper stayed as it was
 
@@ -143,16 +146,23 @@ def test_a_robot_whose_info_is_unusable_is_left_out_with_a_warning(served, caplo
     cannot use (a derived value of 65 numbers): both left out, the node and pepper served."""
     from sonibus.bus import codec
     bus = served.net.bus("liar")
+    asked = []
+
+    def answer(query):
+        asked.append(query)
+        query.reply("liar2/info", codec.encode(info))
     info = {**served.net.bus("asker").query("pepper/info")[0], "robot": "liar2", "owner": {"host": "h", "node": "n"},
             "derived": [{"name": "hand/L", "key": "liar2/derived/hand/L", "unit": "m", "size": 65}]}
     entities = [bus.serve("liar/info", lambda q: q.reply("liar/info", b"\xc1 not msgpack")),
                 bus.token("sonibus/robots/liar/1/h/n"),
-                bus.serve("liar2/info", lambda q: q.reply("liar2/info", codec.encode(info))),
+                bus.serve("liar2/info", answer),
                 bus.token("sonibus/robots/liar2/1/h/n")]
     try:
         wait_for(lambda: served.node.stats["robots_left_out"] >= 1, 10, "liar2 left out")
         wait_for(lambda: any("liar/info unusable" in r.getMessage() for r in caplog.records), 10, "liar warned")
         assert any("'liar2' left out" in r.getMessage() for r in caplog.records)
+        wait_for(lambda: len(asked) >= 3, 20, "liar2's info asked again twice")
+        assert served.node.stats["robots_left_out"] == 1  # a robot, not the times it was asked
         assert served.get("/liar").status_code == 404 and served.get("/liar2").status_code == 404
         assert served.node.state == "running" and served.get("/pepper/joints/HeadYaw").status_code == 200
     finally:
