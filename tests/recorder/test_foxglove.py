@@ -24,7 +24,7 @@ from sonibus.adapters.recorder.export import export_csv
 from sonibus.adapters.recorder.replay import Replay, ReplayConfig
 from sonibus.schemas import foxglove
 
-from ..conftest import Network
+from ..conftest import Network, run_cli
 from ..foxglove.test_convert import origins
 from .conftest import HEY, record_sim
 
@@ -144,3 +144,13 @@ def test_without_foxglove_there_are_no_views(tmp_path):
     channels, _ = read(tmp_path / "plain.mcap")
     assert all(name.startswith("sonibus.v1.") for name, *_ in channels.values())
     assert "foxglove" not in recorder.stats
+
+
+def test_sonibus_record_foxglove(net, tmp_path):
+    path = tmp_path / "cli.mcap"
+    net.sim("pepper", rate_hz=50)
+    done = run_cli("record", str(path), *net.cli_args(), "--foxglove", "--duration", "2")
+    assert done.returncode == 0, done.stderr
+    channels, messages = read(path)
+    assert channels["pepper/tf"][0] == "foxglove.FrameTransforms" and messages["pepper/tf"]
+    assert channels["pepper/frame"][0] == "sonibus.v1.frame" and messages["pepper/frame"]
