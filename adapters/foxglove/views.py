@@ -42,9 +42,10 @@ def is_view(key: str) -> bool:
 
 
 class Views:
-    """The views of what a sink takes (``of``), with what it needs to know per robot:
-    its arm chains once its info came, and its processors' ``info/derived``, asked
-    for (``ask(robot, on_reply)``) once derived values of it arrive."""
+    """The views of what a sink takes (``of``), with what it keeps per robot: its arm
+    chains once its info came; and its processors' ``<robot>/info/derived``, asked
+    for once derived values of it arrive (answers go to ``on_derived_info`` on a
+    Zenoh thread; ``derived_info`` checks one)."""
 
     def __init__(self, bus: Bus, on_derived_info: Callable[[str, bytes], None]) -> None:
         self.bus, self.on_derived_info = bus, on_derived_info
