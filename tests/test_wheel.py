@@ -97,9 +97,9 @@ def installed(tmp_path_factory: pytest.TempPathFactory) -> Installed:
 
 def test_the_wheel_holds_every_module_and_data_file_of_the_tree(installed):
     shipped = set(zipfile.ZipFile(installed.wheel).namelist())
-    missing = sorted(f"{package}/{path.relative_to(folder)}" for package, folder in SOURCES.items()
-                     for path in folder.rglob("*") if path.is_file() and not NOT_SHIPPED.search(str(path)))
-    missing = [name for name in missing if name not in shipped]
+    tree = sorted(f"{package}/{path.relative_to(folder)}" for package, folder in SOURCES.items()
+                  for path in folder.rglob("*") if path.is_file() and not NOT_SHIPPED.search(str(path)))
+    missing = [name for name in tree if name not in shipped]
     assert not missing, (f"not in the wheel: {', '.join(missing)} — add the package to [tool.setuptools] packages "
                          f"or its files to [tool.setuptools.package-data] in pyproject.toml")
 
@@ -124,12 +124,12 @@ def test_adapters_names_what_the_naoqi_extra_adds_and_warns_about_nothing(instal
     assert extras.get("naoqi") == extras.get("naoqi-sim") == "naoqi", listed
     assert set(extras.values()) <= set(PROJECT["optional-dependencies"]) - {"test"}, extras
     assert not {"sim", "osc", "osc-gateway", "console", "recorder", "replay", "features"} & set(extras), extras
-    assert all(listed[name].strip() for name in listed), listed  # the others say what they are
 
 
 def test_every_command_has_help_and_says_nothing_on_stderr(installed):
     top = installed.run("--help")
     assert (top.returncode, top.stderr) == (0, ""), top.stderr
+    assert "--version" in top.stdout
     assert all(re.search(rf"^\s+{re.escape(name)}\s", top.stdout, re.M) for name in COMMANDS), top.stdout
     for name in COMMANDS:
         result = installed.run(name, "--help")
@@ -246,9 +246,8 @@ def test_oscquery_example_serves_a_joint_with_its_limits(installed, spawn):
 
 
 def test_completion_offers_commands_from_argcomplete_and_the_readme_one_liner(installed):
-    asked = subprocess.run([installed.sonibus], capture_output=True, text=True, timeout=30, cwd=installed.work,
-                           env={**installed.env, "_ARGCOMPLETE": "1", "COMP_LINE": "sonibus ad", "COMP_POINT": "10",
-                                "_ARGCOMPLETE_STDOUT_FILENAME": str(installed.work / "offered")})
+    asked = installed.run(_ARGCOMPLETE="1", COMP_LINE="sonibus ad", COMP_POINT="10",
+                          _ARGCOMPLETE_STDOUT_FILENAME=str(installed.work / "offered"))  # instead of fd 8
     assert (asked.returncode, asked.stdout, asked.stderr) == (0, "", ""), asked
     assert (installed.work / "offered").read_text().split("\v") == ["adapters "]
     # what argcomplete's global hook (activate-global-python-argcomplete) runs: the marker is found
