@@ -22,7 +22,7 @@ import time
 from typing import Any
 
 from sonibus.adapters.osc import encode
-from sonibus.adapters.osc.profiles import event_args
+from sonibus.adapters.osc.profiles import EVENT_ARGS, event_args
 from sonibus.bus.adapter import Adapter
 from sonibus.bus.errors import ConfigError
 from sonibus.bus.info import InfoRequests
@@ -55,7 +55,8 @@ class OscQuery(Adapter):
 
     Config = OscQueryConfig
     # (values to WebSocket clients: `sent`; ws_dropped: the oldest lost by a client that does not read)
-    counters = ("http_requests", "ws_clients", "ws_dropped", "robots_left_out")
+    # unfit: an event or value that does not fit its method's TYPE (warned about, not served)
+    counters = ("http_requests", "ws_clients", "ws_dropped", "robots_left_out", "unfit")
 
     def _start(self) -> None:
         cfg: OscQueryConfig = self.config
@@ -169,8 +170,7 @@ class OscQuery(Adapter):
     def _serve(self, message: Incoming) -> None:
         out: list[tuple[str, bytes]] = []
         if message.event is not None:
-            kind = message.source.name
-            self._value(f"/{message.source.robot}/events/{kind}", event_args(kind, message.event), "", out)
+            self._event(message.source.robot, message.source.name, message.event, out)
         else:
             for sample in message.joints:
                 source = sample.source
@@ -181,14 +181,35 @@ class OscQuery(Adapter):
         if out:
             self.server.send_osc(out)
 
+    def _event(self, robot: str, kind: str, event: dict[str, Any], out: list[tuple[str, bytes]]) -> None:
+        path = f"/{robot}/events/{kind}"
+        try:
+            learned = kind not in EVENT_ARGS and self.live.learn_event(robot, kind, event)
+        except ValueError as exc:
+            self._unfit(exc)
+            return
+        if learned:  # (a kind its info does not name: motion onsets of a features node)
+            log.info("%s: PATH_ADDED %s", self.name, path)
+            self.server.announce("PATH_ADDED", path)
+            self.server.announce("PATH_CHANGED", f"/{robot}/events")
+        self._value(path, event_args(kind, event), "", out)
+
     def _value(self, path: str, values: Any, span: str, out: list[tuple[str, bytes]]) -> None:
-        served = self.live.update(path, list(values), span)
+        try:
+            served = self.live.update(path, list(values), span)
+        except ValueError as exc:
+            self._unfit(exc)
+            return
         if served is None or path not in self.server.listened:
             return
         try:
             out.append((path, encode.message(path, *served)))
         except encode.EncodeError as exc:
             self.warn("encode", f"not streamed, OSC cannot carry it: {exc}")
+
+    def _unfit(self, exc: ValueError) -> None:
+        self.count("unfit")
+        self.warn("unfit", f"not served: {exc}")
 
 
 def _loopback(address: str) -> bool:

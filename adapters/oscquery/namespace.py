@@ -6,7 +6,7 @@ methods, and a ``Tree`` of those methods renders any node as the spec's JSON.
 ...         "behaviors": ["Hey_1"], "postures": ["Stand"], "model": "pepper", "rate_hz": 50}
 >>> methods = robot_methods("pepper", info)
 >>> methods["/pepper/joints/HeadYaw"]["RANGE"], methods["/pepper/joints/HeadYaw"]["UNIT"]
-([{'MIN': -2.0, 'MAX': 2.0}], ['rad'])
+([{'MIN': -2.0, 'MAX': 2.0}], ['angle.radian'])
 >>> methods["/pepper/cmd/behavior/run"]["RANGE"], methods["/pepper/cmd/stop"]["TYPE"]
 ([{'VALS': ['Hey_1']}], 'N')
 >>> tree = Tree(methods)
@@ -25,6 +25,7 @@ import math
 from collections.abc import Mapping, Sequence
 from typing import Any
 
+from sonibus import schemas
 from sonibus.adapters.osc import routes
 from sonibus.adapters.osc.profiles import EVENT_ARGS
 
@@ -35,12 +36,23 @@ READ, WRITE = 1, 2  # ACCESS
 EVENT_STATES: dict[str, tuple[str, ...]] = {
     "behavior": ("started", "stopped", "failed"), "speech": ("started", "done"),
     "posture": ("started", "reached", "interrupted"), "connection": ("connected", "lost"),
+    "motion": ("onset", "offset"), "conflict": ("standby", "owner"),
 }
 EVENT_HELP = {
     "behavior": "a behavior started or ended: name, state", "speech": "speech: text, state",
     "posture": "a posture: name, state", "connection": "the owner lost or found the robot: state",
     "command": "the owner answered a command: verb, 1 (ok) or 0 (refused)",
+    "motion": "a chain started or stopped moving (a features node): chain, seq, state",
+    "conflict": "two owners of the robot met: state (standby, or owner again)",
 }
+# The spec's names (OSCQueryProposal's units.md) for the units robots and processors give; a unit it has no
+# name for ("fraction", "rad/s") is served as it is.
+SPEC_UNITS = {"rad": "angle.radian", "deg": "angle.degree", "m": "distance.m", "cm": "distance.cm",
+              "mm": "distance.mm", "m/s": "speed.m/s", "km/h": "speed.km/h", "s": "time.second", "ms": "time.ms",
+              "Hz": "time.hz"}
+SECTION_HELP = {"joints": "joint angles", "derived": "derived values (a features node)", "events": "events",
+                "cmd": "commands, sent to the OSC gateway's port (OSC_PORT)"}
+_TAGS = {bool: "i", int: "i", float: "f", str: "s"}  # (bools go as 0/1: event_args sends them so)
 
 
 def robot_methods(robot: str, info: Mapping[str, Any], normalized: bool = False) -> dict[str, Node]:
@@ -52,8 +64,8 @@ def robot_methods(robot: str, info: Mapping[str, Any], normalized: bool = False)
         methods[f"/{robot}/joints/{joint['name']}"] = _joint(robot, joint, normalized)
     for entry in info.get("derived", ()):
         methods[f"/{robot}/derived/{entry['name']}"] = _derived(entry, normalized)
-    for kind in EVENT_ARGS:
-        methods[f"/{robot}/events/{kind}"] = _event(kind)
+    for kind, fields in EVENT_ARGS.items():
+        methods[f"/{robot}/events/{kind}"] = _event(kind, fields, "".join("i" if f == "ok" else "s" for f in fields))
     for route in routes.ROUTES:
         if route is routes.PER_JOINT:
             for joint in info["joints"]:
@@ -70,7 +82,7 @@ def _joint(robot: str, joint: Mapping[str, Any], normalized: bool) -> Node:
     node: Node = {"TYPE": "f", "ACCESS": READ, "VALUE": [None], "RANGE": [{"MIN": low, "MAX": high}],
                   "DESCRIPTION": f"{joint['name']} of {robot} ({scale})"}
     if not normalized:
-        node["UNIT"] = [unit]
+        node["UNIT"] = [SPEC_UNITS.get(unit, unit)]
     return node
 
 
@@ -85,14 +97,31 @@ def _derived(entry: Mapping[str, Any], normalized: bool) -> Node:
     elif "min" in entry:
         node["RANGE"] = [{"MIN": float(entry["min"]), "MAX": float(entry["max"])}] * size
     if not (normalized and "min" in entry):
-        node["UNIT"] = [str(entry["unit"])] * size
+        node["UNIT"] = [SPEC_UNITS.get(str(entry["unit"]), str(entry["unit"]))] * size
     return node
 
 
-def _event(kind: str) -> Node:
-    fields = EVENT_ARGS[kind]
-    node: Node = {"TYPE": "".join("i" if f == "ok" else "s" for f in fields), "ACCESS": READ,
-                  "VALUE": [None] * len(fields), "DESCRIPTION": EVENT_HELP.get(kind, kind)}
+def seen_event(kind: str, event: Mapping[str, Any]) -> Node:
+    """The method of an event kind outside ``EVENT_ARGS`` (a features node's ``motion``), typed by
+    one event of it: its fields but ``t`` and ``kind``, by name, as ``event_args`` sends them."""
+    fields = sorted(k for k, v in event.items() if k not in ("t", "kind") and type(v) in _TAGS)
+    return _event(kind, tuple(fields), "".join(_TAGS[type(event[f])] for f in fields))
+
+
+def fits(types: str, values: Sequence[Any]) -> bool:
+    """Whether ``values`` are what OSC type tags ``types`` say (``f`` takes an int too).
+
+    >>> fits("sis", ["RArm", 7, "onset"]), fits("ss", ["Hey_1"]), fits("f", [True])
+    (True, False, False)
+    """
+    return len(types) == len(values) and all(
+        type(v) is str if t == "s" else type(v) is int if t == "i" else type(v) in (int, float) if t == "f" else True
+        for t, v in zip(types, values, strict=True))
+
+
+def _event(kind: str, fields: Sequence[str], types: str) -> Node:
+    node: Node = {"TYPE": types, "ACCESS": READ, "VALUE": [None] * len(fields),
+                  "DESCRIPTION": EVENT_HELP.get(kind) or f"{kind} events: {', '.join(fields)}"}
     ranges = [{"VALS": list(EVENT_STATES[kind])} if f == "state" and kind in EVENT_STATES
               else {"MIN": 0, "MAX": 1} if f == "ok" else {} for f in fields]
     if any(ranges):
@@ -104,8 +133,9 @@ def _command(route: routes.Route, info: Mapping[str, Any], joint: Mapping[str, A
     ranges = [_slot_range(route, slot, info, joint) for slot in route.slots]
     description = route.description
     if joint is not None:
+        speed = schemas.command_schema(route.verb)["properties"]["speed"]
         description = (f"Move {joint['name']} to an angle ({joint['unit']}); a second float, if sent, is the speed "
-                       "(0, 1] of its maximum velocity (default 0.3).")
+                       f"(0, 1] of its maximum velocity (default {speed['default']:g}).")
     node: Node = {"TYPE": route.types, "ACCESS": WRITE, "DESCRIPTION": description,
                   # write-only: a neutral VALUE, so that parsers which want one on every method take it
                   "VALUE": [_neutral(s.tag, r) for s, r in zip(route.slots, ranges, strict=True)] or [None]}
@@ -170,6 +200,17 @@ class Tree:
         # A method with methods below it (joints/set, and joints/set/<Joint>) is served as a container
         # that keeps its TYPE, RANGE and DESCRIPTION: clients such as python-oscquery refuse a node
         # with both a VALUE and CONTENTS, and one with an ACCESS but no VALUE.
-        described = {k: v for k, v in (method or {}).items() if k not in ("ACCESS", "VALUE")}
+        described = {"DESCRIPTION": _container_help(path),
+                     **{k: v for k, v in (method or {}).items() if k not in ("ACCESS", "VALUE")}}
         return {"FULL_PATH": path, **described, "ACCESS": 0,
                 "CONTENTS": {name: self.node(f"{prefix}/{name}", values) for name in sorted(children)}}
+
+
+def _container_help(path: str) -> str:
+    """What a container holds, said by where it is: ``/``, ``/<robot>``, ``/<robot>/<section>``..."""
+    robot, *below = path.strip("/").split("/")
+    if not robot:
+        return "the robots on the sonibus bus"
+    if not below:
+        return f"robot {robot}: its joints, derived values, events and commands"
+    return f"{SECTION_HELP.get(below[0], below[0]) if len(below) == 1 else '/'.join(below)} of {robot}"

@@ -85,9 +85,9 @@ class QueryServer:
         return web.json_response(answer, dumps=_dumps)
 
     def answer(self, path: str, attribute: str = "") -> tuple[int, Any]:
-        """``(200, JSON object)`` for ``path`` (and ``?attribute``), else ``(status, reason)``:
-        404 for a path not served, 400 for an attribute the spec does not name, 204 for one
-        the node lacks."""
+        """``(200, JSON object)`` for ``path`` (and ``?attribute``; ``?VALUE`` before a first value:
+        ``{}``), else ``(status, reason)``: 404 for a path not served, 400 for an attribute the
+        spec does not name, 204 for one the node lacks."""
         path = "/" + path.strip("/")
         if attribute == "HOST_INFO":
             return 200, self.host_info
@@ -100,6 +100,8 @@ class QueryServer:
             return 400, f"unknown attribute {attribute!r}: OSCQuery names {', '.join(sorted(ATTRIBUTES))}"
         if attribute not in node or (attribute == "VALUE" and node.get("ACCESS") != 1):
             return 204, ""  # (a write-only method's VALUE is only a placeholder)
+        if attribute == "VALUE" and all(v is None for v in node["VALUE"]):
+            return 200, {}  # no value yet
         return 200, {attribute: node[attribute]}
 
     async def _websocket(self, request: web.Request) -> web.WebSocketResponse:

@@ -11,6 +11,7 @@ from pythonoscquery.osc_query_client import OSCQueryClient
 from pythonoscquery.shared.osc_access import OSCAccess
 from zeroconf import ServiceInfo
 
+from sonibus import schemas
 from sonibus.adapters.osc import routes
 from sonibus.adapters.oscquery.namespace import EVENT_ARGS
 from sonibus.bus import load_model, robot_info
@@ -53,7 +54,7 @@ def test_joint_ranges_units_and_values_are_the_robots(served):
         node = served.json(f"/pepper/joints/{spec.name}")
         assert node["TYPE"] == "f"
         assert node["RANGE"] == [{"MIN": spec.min, "MAX": spec.max}]
-        assert node["UNIT"] == ["fraction" if spec.name.endswith("Hand") else "rad"]
+        assert node["UNIT"] == ["fraction" if spec.name.endswith("Hand") else "angle.radian"]  # (the spec's name)
         assert node["ACCESS"] == 1 and spec.name in node["DESCRIPTION"]
     wait_for(lambda: isinstance(served.json("/pepper/joints/HeadYaw")["VALUE"][0], float), what="a current value")
     value = served.json("/pepper/joints/HeadYaw")["VALUE"][0]
@@ -83,13 +84,14 @@ def test_commands_carry_the_robots_choices_and_the_schemas_bounds(served):
 
 
 def test_attribute_queries_and_errors(served):
-    assert served.json("/pepper/joints/HeadYaw?UNIT") == {"UNIT": ["rad"]}
+    assert served.json("/pepper/joints/HeadYaw?UNIT") == {"UNIT": ["angle.radian"]}
     hand = load_model("pepper").joint("LHand")
     assert served.json("/pepper/joints/LHand?RANGE") == {"RANGE": [{"MIN": hand.min, "MAX": hand.max}]}
     assert served.json("/pepper/cmd/say?TYPE") == {"TYPE": "s"}
     assert set(served.json("/pepper?CONTENTS")["CONTENTS"]) == {"joints", "events", "cmd"}
     assert served.get("/pepper/cmd/stop?RANGE").status_code == 204      # a node without it
     assert served.get("/pepper/cmd/say?VALUE").status_code == 204        # write-only: no value to read
+    assert served.json("/pepper/events/speech?VALUE") == {}               # no value yet
     assert served.get("/pepper/joints/HeadYaw?BOGUS").status_code == 400
     assert served.get("/pepper/joints/Tail").status_code == 404
     assert served.get("/nao").status_code == 404
@@ -120,8 +122,28 @@ def test_derived_values_carry_their_units_and_ranges(net):
     info = wait_for(lambda: {d["name"]: d for r in asker.query("pepper/info/derived") for d in r["derived"]},
                     what="derived info")
     hand = info["hand/L"]
-    assert node["TYPE"] == "f" * hand["size"] and node["UNIT"] == [hand["unit"]] * hand["size"]
+    assert hand["unit"] == "m" and node["TYPE"] == "f" * hand["size"] and node["UNIT"] == ["distance.m"] * hand["size"]
+    speed = served.wait_node("/pepper/derived/hand_speed/L")
+    assert info["hand_speed/L"]["unit"] == "m/s" and speed["UNIT"] == ["speed.m/s"]
     if "min" in hand:
         assert node["RANGE"] == [{"MIN": hand["min"], "MAX": hand["max"]}] * hand["size"]
     wait_for(lambda: None not in served.json("/pepper/derived/hand/L?VALUE")["VALUE"], what="a hand position")
     assert json.loads(served.get("/pepper/derived").text)["CONTENTS"]
+
+
+def test_containers_are_described_and_help_reads_the_schemas(served):
+    tree = served.json("/")
+    containers = []
+
+    def walk(node):
+        if "CONTENTS" in node:
+            containers.append(node)
+            for child in node["CONTENTS"].values():
+                walk(child)
+    walk(tree)
+    assert len(containers) >= 8  # /, /pepper, its joints, events, cmd, cmd/behavior, cmd/joints, cmd/joints/set
+    assert all(node["DESCRIPTION"] for node in containers), [n["FULL_PATH"] for n in containers
+                                                             if not n.get("DESCRIPTION")]
+    assert "joint angles" in served.json("/pepper/joints")["DESCRIPTION"]
+    speed = schemas.command_schema("joints/set")["properties"]["speed"]["default"]
+    assert f"(default {speed:g})" in served.json("/pepper/cmd/joints/set/HeadYaw")["DESCRIPTION"]

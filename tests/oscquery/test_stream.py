@@ -68,7 +68,7 @@ def test_robots_coming_going_and_changing_are_announced(served, websocket):
     nao = served.net.sim("nao2", rate_hz=RATE)
     wait_for(lambda: {"COMMAND": "PATH_ADDED", "DATA": "/nao2"} in client.texts(), 10, "PATH_ADDED /nao2")
     wait_for(lambda: root in client.texts(), what="PATH_CHANGED / with the robot added")
-    assert served.json("/nao2/joints/LKneePitch")["UNIT"] == ["rad"]
+    assert served.json("/nao2/joints/LKneePitch")["UNIT"] == ["angle.radian"]
     nao.stop()
     wait_for(lambda: {"COMMAND": "PATH_REMOVED", "DATA": "/nao2"} in client.texts(), 10, "PATH_REMOVED /nao2")
     wait_for(lambda: client.texts().count(root) == 2, what="PATH_CHANGED / with the robot removed")
@@ -183,6 +183,28 @@ def test_events_are_served_and_streamed(served, websocket):
     assert served.json("/pepper/events/behavior?VALUE")["VALUE"][0] == name
 
 
+def test_event_kinds_outside_the_table_are_served_once_seen_and_streamed(served, websocket, caplog):
+    """A features node's motion onsets (a kind the robot's info does not name): served once
+    seen, typed by its fields, announced and streamed; one that does not fit is counted."""
+    client = websocket(served.url)
+    motion = "/pepper/events/motion"
+    client.send({"COMMAND": "LISTEN", "DATA": motion})  # (not served yet: kept)
+    features = served.net.bus("features")
+    onset = {"t": time.time(), "kind": "motion", "chain": "RArm", "seq": 7, "state": "onset"}
+    features.put("pepper/events/motion", onset)
+    wait_for(lambda: any(m.address == motion and m.params == ["RArm", 7, "onset"] for m in osc(client)), 10,
+             "the onset streamed")
+    assert {"COMMAND": "PATH_ADDED", "DATA": motion} in client.texts()
+    assert {"COMMAND": "PATH_CHANGED", "DATA": "/pepper/events"} in client.texts()
+    node = served.json(motion)
+    assert (node["TYPE"], node["ACCESS"], node["VALUE"]) == ("sis", 1, ["RArm", 7, "onset"])
+    assert node["RANGE"][2] == {"VALS": ["onset", "offset"]} and "chain" in node["DESCRIPTION"]
+    features.put("pepper/events/motion", {**onset, "seq": 8, "extra": 1.5})  # a field more: no longer "sis"
+    wait_for(lambda: served.node.stats["unfit"] == 1, what="the event that does not fit counted")
+    assert any(f"not served: {motion}" in r.getMessage() and "'sis'" in r.getMessage() for r in caplog.records)
+    assert served.json(motion)["VALUE"] == ["RArm", 7, "onset"]
+
+
 def test_a_client_that_does_not_read_loses_values_not_the_node(served, websocket):
     """A client whose socket is never read: once the kernel's buffers are full its backlog
     overflows (counted as ws_dropped, apart from the node's own queue) while another client
@@ -223,6 +245,6 @@ def test_queries_over_the_websocket_are_answered_as_text(served, websocket):
     wait_for(lambda: len(client.texts()) >= 3, what="three answers")
     node, unit, host = client.texts()[:3]
     assert node["FULL_PATH"] == HEAD and node["RANGE"] == served.json(HEAD)["RANGE"]
-    assert unit == {"UNIT": ["rad"]} and host["OSC_PORT"] == served.gateway.udp_address[1]
+    assert unit == {"UNIT": ["angle.radian"]} and host["OSC_PORT"] == served.gateway.udp_address[1]
     client.send("/pepper/joints/Tail")
     wait_for(lambda: served.node.stats["bad"] == 1, what="an unknown path counted")
