@@ -1,5 +1,5 @@
-"""Issue 16: the WebSocket of the OSCQuery server — LISTEN streams a joint as binary OSC
-at about the robot's rate, IGNORE ends it; PATH_ADDED, PATH_REMOVED and PATH_CHANGED as
+"""Issue 16: the WebSocket of the OSCQuery server — LISTEN streams a joint as binary OSC,
+nearly every value the robot publishes, IGNORE ends it; PATH_ADDED, PATH_REMOVED and PATH_CHANGED as
 robots come, go and change; bad input is counted and leaves everything up; a value sent
 to a writable address at HOST_INFO's OSC port moves the simulated robot."""
 
@@ -9,16 +9,18 @@ import itertools
 import json
 import socket
 import statistics
+import struct
 import time
+from collections import Counter
 
 from pythonosc.osc_message import OscMessage
 from pythonosc.osc_message_builder import OscMessageBuilder
 
 from sonibus.adapters.sim import SimConfig, SimRobot
-from sonibus.bus import load_model
+from sonibus.bus import codec, load_model
 
 from ..conftest import wait_for
-from .conftest import RATE, serve, stalled
+from .conftest import RATE, Served, Socket, serve, stalled
 
 HEAD = "/pepper/joints/HeadYaw"
 
@@ -27,16 +29,51 @@ def osc(socket_) -> list[OscMessage]:
     return [OscMessage(m) for m in list(socket_.messages) if isinstance(m, bytes)]
 
 
-def test_listen_streams_a_joint_at_the_robots_rate_and_ignore_ends_it(served, websocket, figure):
+class Published:
+    """One joint's values as the robot published them, seen on the test bus (rounded to
+    float32, as OSC carries them): what a client should have got, by count, not by clock."""
+
+    def __init__(self, served: Served, key: str) -> None:
+        self.subscriber, self.queue = served.net.bus("watcher").subscribe(key)
+        self.values: list[float] = []
+
+    def take(self) -> list[float]:
+        self.values += [_f32(codec.decode(payload)["v"]) for _, payload in self.queue.drain(timeout=0)]
+        return self.values
+
+
+def _f32(value: float) -> float:
+    return struct.unpack("<f", struct.pack("<f", value))[0]
+
+
+def completeness(published: Published, client: Socket, count: int = 100) -> tuple[int, int]:
+    """``(got, count)``: how many of the next ``count`` values the robot publishes (once the
+    client gets values) reach the client. The window is over once the client has one of the
+    values published after it (the values come in order). HeadYaw's values tell frames apart:
+    the idle robot's head never stops."""
+    wait_for(lambda: osc(client), what="a first value")
+    begun = len(published.take())
+    end = begun + count
+    wait_for(lambda: len(published.take()) >= end + 20, 30, f"{count + 20} values published")
+    window, after = published.values[begun:end], set(published.values[end:end + 20])
+    assert len(set(window)) >= 0.9 * count, "HeadYaw held still: its values no longer tell frames apart"
+
+    def received() -> Counter[float]:
+        return Counter(m.params[0] for m in osc(client) if m.address == HEAD)
+    wait_for(lambda: not after.isdisjoint(received()), 30, "a value published after the window")
+    got = received()
+    return sum(min(n, got[v]) for v, n in Counter(window).items()), count
+
+
+def test_listen_streams_every_value_of_a_joint_and_ignore_ends_it(served, websocket, figure):
+    published = Published(served, "pepper/joints/HeadYaw")
     client = websocket(served.url)
     client.send({"COMMAND": "LISTEN", "DATA": HEAD})
-    first = wait_for(lambda: osc(client), what="a first value")[0]
-    begun, window = time.monotonic(), 2.0
-    wait_for(lambda: time.monotonic() - begun >= window, window + 1, "the window")
+    got, count = completeness(published, client)
     values = [m for m in osc(client) if m.address == HEAD]
-    assert first.address == HEAD and all(len(m.params) == 1 and isinstance(m.params[0], float) for m in values)
-    assert len(values) >= 0.5 * RATE * window, dict(served.node.stats.items())  # completeness, not timing
-    figure("HeadYaw values over WebSocket", len(values) / window, f"/s (robot {RATE} frames/s)")
+    assert all(len(m.params) == 1 and isinstance(m.params[0], float) for m in values)
+    assert got >= 0.9 * count, dict(served.node.stats.items())  # completeness, not timing
+    figure("HeadYaw values over WebSocket", 100 * got / count, f"% of {count} published (robot {RATE} frames/s)")
     # IGNORE, then LISTEN to another joint: once that one streams, HeadYaw no longer does
     client.send({"COMMAND": "IGNORE", "DATA": HEAD})
     client.send({"COMMAND": "LISTEN", "DATA": "/pepper/joints/HeadPitch"})
@@ -48,18 +85,21 @@ def test_listen_streams_a_joint_at_the_robots_rate_and_ignore_ends_it(served, we
 
 
 def test_stream_rate_measured(served, websocket, figure):
-    """The gaps between values of one joint over the WebSocket, against the robot's period."""
+    """The gaps between values of one joint over the WebSocket, against the robot's period
+    (measured, not asserted: the assertion is that nearly every published value came)."""
+    published = Published(served, "pepper/joints/HeadYaw")
     client = websocket(served.url)
     client.send({"COMMAND": "LISTEN", "DATA": HEAD})
     wait_for(lambda: osc(client), what="a first value")
     begun = time.monotonic()
-    wait_for(lambda: time.monotonic() - begun >= 3.0, 4.0, "the window")
+    got, count = completeness(published, client, 150)
+    took = time.monotonic() - begun
+    assert got >= 0.9 * count
     stamps = [at for at, m in zip(list(client.arrived), list(client.messages), strict=False)
               if isinstance(m, bytes) and at >= begun]
     gaps = [b - a for a, b in itertools.pairwise(stamps)]
-    assert len(stamps) >= 0.5 * RATE * 3.0
     figure("median gap between HeadYaw values", statistics.median(gaps) * 1000, f"ms (robot period {1000 / RATE:g} ms)")
-    figure("values per second", len(stamps) / 3.0, f"/s (robot {RATE} frames/s)")
+    figure("values per second", len(stamps) / took, f"/s (robot {RATE} frames/s)")
 
 
 def test_robots_coming_going_and_changing_are_announced(served, websocket):
