@@ -231,8 +231,8 @@ def test_event_kinds_outside_the_table_are_served_once_seen_and_streamed(served,
     client.send({"COMMAND": "LISTEN", "DATA": motion})  # (not served yet: kept)
     features = served.net.bus("features")
     onset = {"t": time.time(), "kind": "motion", "chain": "RArm", "seq": 7, "state": "onset"}
-    features.put("pepper/events/motion", onset)
-    wait_for(lambda: any(m.address == motion and m.params == ["RArm", 7, "onset"] for m in osc(client)), 10,
+    wait_for(lambda: features.put("pepper/events/motion", onset) or  # (again until the node's subscription is known)
+             any(m.address == motion and m.params == ["RArm", 7, "onset"] for m in osc(client)), 10,
              "the onset streamed")
     assert {"COMMAND": "PATH_ADDED", "DATA": motion} in client.texts()
     assert {"COMMAND": "PATH_CHANGED", "DATA": "/pepper/events"} in client.texts()
