@@ -16,6 +16,7 @@ from collections import Counter
 from pythonosc.osc_message import OscMessage
 from pythonosc.osc_message_builder import OscMessageBuilder
 
+from sonibus.adapters.oscquery import server
 from sonibus.adapters.sim import SimConfig, SimRobot
 from sonibus.bus import codec, load_model
 
@@ -261,7 +262,7 @@ def test_a_client_that_does_not_read_loses_values_not_the_node(served, websocket
         assert served.get("/pepper").status_code == 200
 
 
-def test_stop_is_not_held_by_a_client_that_does_not_read(net, caplog):
+def test_stop_is_not_held_by_a_client_that_does_not_read(net, caplog, figure):
     """Closing a client whose socket is full would wait for ever: it is cut after the close's
     wait, so the node stops within its time and no thread is left behind."""
     net.sim("fast", model="nao", rate_hz=500)
@@ -274,6 +275,22 @@ def test_stop_is_not_held_by_a_client_that_does_not_read(net, caplog):
         took = time.monotonic() - begun
     assert not [r.getMessage() for r in caplog.records if "did not stop" in r.getMessage()]
     assert took < 3.0  # (the node's time to stop; it hung 2 s per thread before)
+    figure("stop with a client that does not read", took, "s")
+
+
+def test_a_client_that_vanished_is_dropped_and_listens_are_bounded(served, websocket, monkeypatch):
+    """A client that never answers the server's pings (gone without closing: a cable pulled)
+    is dropped, one that answers stays; a client may LISTEN to MAX_LISTENS paths, no more."""
+    monkeypatch.setattr(server, "HEARTBEAT_S", 0.4)  # (10 s in use)
+    monkeypatch.setattr(server, "MAX_LISTENS", 3)
+    client = websocket(served.url)
+    with stalled(served.url, []):
+        wait_for(lambda: served.node.server.clients == 2, what="both clients connected")
+        wait_for(lambda: served.node.server.clients == 1, 10, "the client that does not answer dropped")
+    for joint in ("HeadYaw", "HeadPitch", "LHand", "RHand"):
+        client.send({"COMMAND": "LISTEN", "DATA": f"/pepper/joints/{joint}"})
+    wait_for(lambda: served.node.stats["bad"] == 1, what="the fourth LISTEN refused")
+    assert len(served.node.server.listened) == 3 and not client.closed
 
 
 def test_queries_over_the_websocket_are_answered_as_text(served, websocket):
