@@ -4,7 +4,7 @@
     adapter = "foxglove"
     listen = "127.0.0.1:8765"     # Foxglove → Open connection → ws://localhost:8765
 
-It serves what a recording with ``foxglove = true`` holds, as channels named by
+It serves what a recording holds (unless made with ``foxglove = false``), as channels named by
 their keys: the joints, derived values and events ``subscribe`` selects, each
 robot's ``<robot>/info``, and the views of ``views.py`` (``<robot>/frame``,
 ``<robot>/log``, ``<robot>/tf``, ``<robot>/info/derived``). A channel is

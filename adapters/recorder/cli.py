@@ -71,8 +71,8 @@ def _record_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--duration", type=float, metavar="S", help="stop after S seconds")
     p.add_argument("--per-joint-keys", action="store_true",
                    help="record joint keys as published, not from frames (for publishers that put no frames)")
-    p.add_argument("--foxglove", action="store_true",
-                   help="also the channels Foxglove's panels read: frames whole, events as logs, arm transforms")
+    p.add_argument("--no-foxglove", dest="foxglove", action="store_false",
+                   help="leave out the channels Foxglove's panels read (frames whole, events as logs, arm transforms)")
     p.add_argument("--status-every", type=float, default=5.0, metavar="S",
                    help="seconds between status lines when not on a terminal (default: 5)")
 

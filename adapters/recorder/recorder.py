@@ -10,7 +10,7 @@ Joints come as frames (``<robot>/frame``, one Zenoh sample per frame; see
 file is the same as if each joint key had been recorded; ``per_joint_keys =
 true`` records joint keys as published instead (publishers that put no frames).
 
-With ``foxglove = true`` it also writes the views Foxglove's panels read
+Unless ``foxglove = false`` it also writes the views Foxglove's panels read
 (``adapters/foxglove/views.py``): ``<robot>/frame`` (each frame whole), ``<robot>/log``
 (events as ``foxglove.Log``), ``<robot>/tf`` (the arms as
 ``foxglove.FrameTransforms``, every frame, once the robot's info names a model
@@ -60,7 +60,7 @@ class RecorderConfig:
     flush_s: float = 1.0                      # at most this much is lost if the recorder is killed
     status_every_s: float = 10.0              # a log line with what has been recorded; 0: none
     per_joint_keys: bool = False              # joints from <robot>/joints/* instead of <robot>/frame (bus/streams.py)
-    foxglove: bool = False                    # also the views Foxglove reads: <robot>/frame, /log, /tf, /info/derived
+    foxglove: bool = True                     # also the views Foxglove reads: <robot>/frame, /log, /tf, /info/derived
 
     def __post_init__(self) -> None:
         if not self.path:

@@ -1,4 +1,4 @@
-"""Recordings that open well in Foxglove (``foxglove = true``): each robot's frames
+"""Recordings that open well in Foxglove (the default; ``foxglove = false`` leaves it out): each robot's frames
 whole, its events as ``foxglove.Log``, its arms as ``foxglove.FrameTransforms``
 and its processors' ``info/derived``, each channel with its schema (Foxglove's
 published one, or sonibus's), read back with the ``mcap`` library; bus readers
@@ -138,7 +138,7 @@ def test_bus_readers_do_not_see_the_views(with_views, tmp_path, net):
 def test_without_foxglove_there_are_no_views(tmp_path):
     network = Network()
     try:
-        recorder, _ = record_sim(network, tmp_path / "plain.mcap", frames=20)
+        recorder, _ = record_sim(network, tmp_path / "plain.mcap", frames=20, foxglove=False)
     finally:
         network.close()
     channels, _ = read(tmp_path / "plain.mcap")
@@ -146,10 +146,13 @@ def test_without_foxglove_there_are_no_views(tmp_path):
     assert "foxglove" not in recorder.stats
 
 
-def test_sonibus_record_foxglove(net, tmp_path):
+def test_sonibus_record_writes_the_views_unless_told_not_to(net, tmp_path):
     path = tmp_path / "cli.mcap"
     net.sim("pepper", rate_hz=50)
-    done = run_cli("record", str(path), *net.cli_args(), "--foxglove", "--duration", "2")
+    plain = run_cli("record", str(tmp_path / "plain.mcap"), *net.cli_args(), "--no-foxglove", "--duration", "1")
+    assert plain.returncode == 0, plain.stderr
+    assert "pepper/tf" not in read(tmp_path / "plain.mcap")[0]
+    done = run_cli("record", str(path), *net.cli_args(), "--duration", "2")
     assert done.returncode == 0, done.stderr
     channels, messages = read(path)
     assert channels["pepper/tf"][0] == "foxglove.FrameTransforms" and messages["pepper/tf"]
