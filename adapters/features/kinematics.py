@@ -100,13 +100,19 @@ def _links(links: list[dict[str, Any]]) -> tuple[tuple[str, ...], np.ndarray, np
             np.array([np.asarray(link["axis"], dtype=float) / np.linalg.norm(link["axis"]) for link in turning]))
 
 
+def arm_chain(model: str) -> dict[str, list[dict[str, Any]]]:
+    """``arm_chain`` of ``model`` in robots.json (``left``, ``right``: links from the
+    shoulder to the hand); ``KeyError`` if sonibus has no kinematics for it."""
+    try:
+        return reference(model)["arm_chain"]
+    except KeyError:
+        raise KeyError(f"no kinematics for model '{model}'") from None
+
+
 @cache
 def load_arms(model: str) -> Arms:
     """Both arms of ``model``, left then right; ``KeyError`` if sonibus has no kinematics for it."""
-    try:
-        chain = reference(model)["arm_chain"]
-    except KeyError:
-        raise KeyError(f"no kinematics for model '{model}'") from None
+    chain = arm_chain(model)
     left, right = _links(chain["left"]), _links(chain["right"])
     return Arms(SIDES, (left[0], right[0]), *(np.stack([a, b]) for a, b in zip(left[1:], right[1:], strict=True)))
 

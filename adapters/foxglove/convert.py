@@ -30,7 +30,7 @@ from dataclasses import dataclass
 from functools import cache
 from typing import Any
 
-from sonibus.bus.robot import reference
+from sonibus.adapters.features.kinematics import arm_chain
 
 LOG = "foxglove.Log"
 FRAME_TRANSFORMS = "foxglove.FrameTransforms"
@@ -129,10 +129,7 @@ class ArmFrames:
     @cache
     def of(model: str) -> ArmFrames:
         """The chains of ``model``; ``KeyError`` if sonibus has no kinematics for it."""
-        try:
-            chain = reference(model)["arm_chain"]
-        except KeyError:
-            raise KeyError(f"no kinematics for model '{model}'") from None
+        chain = arm_chain(model)
         links = []
         for side in ("left", "right"):
             parent = None
