@@ -22,7 +22,7 @@ import time
 from typing import Any
 
 from sonibus.adapters.osc import encode
-from sonibus.adapters.osc.profiles import EVENT_ARGS, event_args
+from sonibus.adapters.osc.profiles import event_args
 from sonibus.bus.adapter import Adapter
 from sonibus.bus.errors import ConfigError
 from sonibus.bus.info import InfoRequests
@@ -54,8 +54,8 @@ class OscQuery(Adapter):
     """Serves every robot on the bus as an OSCQuery namespace over HTTP and WebSocket."""
 
     Config = OscQueryConfig
-    # (values to WebSocket clients: `sent`; ws_dropped: the oldest lost by a client that does not read)
-    # unfit: an event or value that does not fit its method's TYPE (warned about, not served)
+    # (values to WebSocket clients: `sent`); ws_dropped: lost by a client that does not read; unfit: an event
+    # or value that does not fit its method's TYPE (warned about, not served)
     counters = ("http_requests", "ws_clients", "ws_dropped", "robots_left_out", "unfit")
 
     def _start(self) -> None:
@@ -184,7 +184,7 @@ class OscQuery(Adapter):
     def _event(self, robot: str, kind: str, event: dict[str, Any], out: list[tuple[str, bytes]]) -> None:
         path = f"/{robot}/events/{kind}"
         try:
-            learned = kind not in EVENT_ARGS and self.live.learn_event(robot, kind, event)
+            learned = self.live.learn_event(robot, kind, event)
         except ValueError as exc:
             self._unfit(exc)
             return

@@ -58,7 +58,7 @@ class Live:
             self._robots[robot] = methods
             self._spans[robot] = spans
             self._values = {p: v for p, v in self._values.items() if _robot(p) != robot or p in methods}
-            self._grow()
+            self._rebuild()
         return "PATH_ADDED" if before is None else "PATH_CHANGED"
 
     def learn_event(self, robot: str, kind: str, event: Mapping[str, Any]) -> bool:
@@ -71,11 +71,11 @@ class Live:
                 return False
             learned = self._seen.setdefault(robot, {})
             if len(learned) >= MAX_LEARNED:
-                raise ValueError(f"{path}: not served, {robot} already sends {MAX_LEARNED} kinds of events "
+                raise ValueError(f"{path!r}: not served, {robot!r} already sends {MAX_LEARNED} kinds of events "
                                  "that its info does not describe")
             learned[path] = namespace.seen_event(kind, event)
             self._robots[robot] = {**self._robots[robot], path: learned[path]}
-            self._grow()
+            self._rebuild()
         return True
 
     def drop_robot(self, robot: str) -> bool:
@@ -86,10 +86,10 @@ class Live:
             self._spans.pop(robot, None)
             self._seen.pop(robot, None)
             self._values = {p: v for p, v in self._values.items() if _robot(p) != robot}
-            self._grow()
+            self._rebuild()
         return True
 
-    def _grow(self) -> None:  # (under the lock)
+    def _rebuild(self) -> None:  # (under the lock)
         self._tree = Tree({p: m for r in self._robots.values() for p, m in r.items()})
 
     @property
@@ -107,7 +107,7 @@ class Live:
             if method is None or method["ACCESS"] != namespace.READ:
                 return None
             if not namespace.fits(method["TYPE"], values):
-                raise ValueError(f"{path}: {_shown(values)} does not fit its TYPE {method['TYPE']!r}")
+                raise ValueError(f"{path!r}: {_shown(values)} does not fit its TYPE {method['TYPE']!r}")
             if self.normalized and span and (bounds := self._spans[_robot(path)].get(span)) is not None:
                 values = scale.normalized(values, bounds)
             served = self._values[path] = list(values)

@@ -53,6 +53,7 @@ SPEC_UNITS = {"rad": "angle.radian", "deg": "angle.degree", "m": "distance.m", "
 SECTION_HELP = {"joints": "joint angles", "derived": "derived values (a features node)", "events": "events",
                 "cmd": "commands, sent to the OSC gateway's port (OSC_PORT)"}
 _TAGS = {bool: "i", int: "i", float: "f", str: "s"}  # (bools go as 0/1: event_args sends them so)
+_ACCEPTS = {"s": (str,), "i": (int,), "f": (int, float)}  # the Python types a served value of a tag may have
 
 
 def robot_methods(robot: str, info: Mapping[str, Any], normalized: bool = False) -> dict[str, Node]:
@@ -114,9 +115,8 @@ def fits(types: str, values: Sequence[Any]) -> bool:
     >>> fits("sis", ["RArm", 7, "onset"]), fits("ss", ["Hey_1"]), fits("f", [True])
     (True, False, False)
     """
-    return len(types) == len(values) and all(
-        type(v) is str if t == "s" else type(v) is int if t == "i" else type(v) in (int, float) if t == "f" else True
-        for t, v in zip(types, values, strict=True))
+    return len(types) == len(values) and all(type(v) in _ACCEPTS.get(t, (type(v),))
+                                             for t, v in zip(types, values, strict=True))
 
 
 def _event(kind: str, fields: Sequence[str], types: str) -> Node:
