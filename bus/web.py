@@ -20,6 +20,7 @@ from __future__ import annotations
 import asyncio
 import concurrent.futures
 import contextlib
+import errno
 import json
 import logging
 import os
@@ -85,6 +86,9 @@ class WebServer:
                               "give an address of this machine (127.0.0.1: this machine only, 0.0.0.0: all)")
         if isinstance(error, OSError):
             reason = os.strerror(error.errno) if error.errno else str(error)
+            if error.errno == errno.EADDRNOTAVAIL:
+                raise bad("host", f"cannot listen on {self.host}:{self.port}: {reason} — {self.host} is not an "
+                                  "address of this machine (127.0.0.1: this machine only, 0.0.0.0: all)")
             raise bad("port", f"cannot listen on {self.host}:{self.port}: {reason} — "
                               "choose a free port (0: any)")
         if error is not None:
@@ -114,7 +118,7 @@ class WebServer:
         what it sends is ignored."""
         ws = web.WebSocketResponse(timeout=CLOSE_WAIT_S)
         await ws.prepare(request)
-        client = WebClient(ws, self._dropped)
+        client = WebClient(ws, self._dropped, request.transport)
         self._clients.add(client)
         if self._latest_text is not None:
             client.push(self._latest_text)
@@ -221,9 +225,11 @@ class WebClient:
     order by one task (``send_all``); a client ``CLIENT_BACKLOG`` behind loses the oldest,
     each one told to ``on_drop``."""
 
-    def __init__(self, ws: web.WebSocketResponse, on_drop: Callable[[], None]) -> None:
+    def __init__(self, ws: web.WebSocketResponse, on_drop: Callable[[], None],
+                 transport: asyncio.BaseTransport | None = None) -> None:
         self.ws = ws
         self.on_drop = on_drop
+        self.transport = transport  # cut by close_clients if the client never takes the close
         self.backlog: deque[str | bytes] = deque(maxlen=CLIENT_BACKLOG)
         self.waiting = asyncio.Event()
 
@@ -249,8 +255,14 @@ class WebClient:
 
 
 async def close_clients(clients: Iterable[WebClient]) -> None:
-    """Close every client's WebSocket ("going away"), waiting a bounded time for them."""
+    """Close every client's WebSocket ("going away"), waiting a bounded time for them; the
+    connection of one that does not read (its send blocked, the close never taken) is cut,
+    or the node's stop would wait on it."""
+    clients = list(clients)
     closing = [asyncio.create_task(c.ws.close(code=WSCloseCode.GOING_AWAY, message=b"node stopping"))
                for c in clients]
     if closing:
         await asyncio.wait(closing, timeout=2 * CLOSE_WAIT_S)
+    for client in clients:
+        if client.transport is not None and not client.transport.is_closing():
+            client.transport.abort()

@@ -324,6 +324,16 @@ def test_a_port_in_use_is_a_one_line_error_naming_the_key_and_the_fix(net):
     assert web_threads("web") == []
 
 
+def test_an_address_not_of_this_machine_is_named_as_such(net):
+    server = ValueServer(ValueServerConfig(robot="nobody", host="203.0.113.7", port=0), name="web")
+    with pytest.raises(ConfigError) as caught:
+        server.start(net.bus("web"))
+    assert str(caught.value).startswith("key 'host': cannot listen on 203.0.113.7:0: ")
+    assert str(caught.value).endswith("203.0.113.7 is not an address of this machine (127.0.0.1: this machine "
+                                      "only, 0.0.0.0: all)")  # not "choose a free port"
+    assert server.state == "stopped" and web_threads("web") == []
+
+
 def test_the_docs_example_is_the_plugins_ws_value_adapter():
     docs = (ROOT / "docs" / "adapters.md").read_text()
     section = docs.partition("## Serving HTTP and WebSocket")[2]

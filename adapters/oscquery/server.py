@@ -192,17 +192,12 @@ class QueryServer:
             client.push(text)
 
     async def _close_all(self, app: web.Application) -> None:
-        clients = list(self._clients)
-        await close_clients(clients)
-        for client in clients:  # a client that does not read never takes the close: cut, or the stop waits on it
-            if client.transport is not None and not client.transport.is_closing():
-                client.transport.abort()
+        await close_clients(self._clients)
 
 
 class _Client(WebClient):
     """A WebSocket client and the paths it listens to (``LISTEN``)."""
 
     def __init__(self, ws: web.WebSocketResponse, transport: asyncio.Transport | None, adapter: Adapter) -> None:
-        super().__init__(ws, lambda: adapter.count("ws_dropped"))
-        self.transport = transport
+        super().__init__(ws, lambda: adapter.count("ws_dropped"), transport)
         self.listens: set[str] = set()
