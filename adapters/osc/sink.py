@@ -26,6 +26,7 @@ from .profiles import PROFILES, Rendered
 log = logging.getLogger(__name__)
 
 INFO_RETRY_S = 2.0
+UNDESCRIBED_WAIT_S = 3.0  # a derived value no info describes is held back this long at most, then sent raw
 
 
 class _Link:
@@ -68,6 +69,7 @@ class OscSink(Adapter):
         cfg: OscSinkConfig = self.config
         self._ranges: dict[str, dict[str, tuple[float, float]]] = {}
         self._described: dict[str, set[str]] = {}  # robot → derived values its info describes (ranged or not)
+        self._first_seen: dict[tuple[str, str], float] = {}  # (robot, derived value) → when it first came
         self._info = InfoRequests(self.bus, self._take_info, lambda robot, text: self.warn("info", text),
                                   INFO_RETRY_S)
         self._links = [_Link(t, _resolve(t.to)) for t in cfg.resolved_targets()]
@@ -238,13 +240,23 @@ class OscSink(Adapter):
             return None
         name = source.name if source.section == "joints" else f"{source.feature}/{source.name}"
         span = ranges.get(name)
-        if span is None and source.section == "derived" and name not in self._described.get(source.robot, ()):
-            # its processor started after the info came: ask again, and send nothing raw meanwhile
-            # (a receiver of 0..1 cannot tell metres from fractions)
+        if span is None and source.section == "derived" and self._undescribed(source.robot, name):
             self.count("waiting_info")
             self._info.ask(source.robot)
             return None
         return values if span is None else scale.normalized(values, span)
+
+    def _undescribed(self, robot: str, name: str) -> bool:
+        """Whether to hold back derived value ``name``: its robot's info does not describe it
+        yet (its processor may have started after the info came, and a receiver of 0..1
+        cannot tell metres from fractions); ``UNDESCRIBED_WAIT_S`` after it first came,
+        still undescribed (a script's own derived key), it goes out raw."""
+        if name in self._described.get(robot, ()):
+            return False
+        if len(self._first_seen) > 4096:  # names made up on the fly must not grow it for ever
+            self._first_seen.clear()
+        first = self._first_seen.setdefault((robot, name), time.monotonic())
+        return time.monotonic() - first < UNDESCRIBED_WAIT_S
 
     def _take_info(self, robot: str, info: dict[str, Any]) -> None:
         try:

@@ -89,7 +89,7 @@ def delivered(receiver: Datagrams, key: str, value=None) -> bool:
                for a, p in messages(receiver))
 
 
-def handshake(src, key: str, receiver: Datagrams, message: dict | None = None) -> None:
+def handshake(src, key: str, receiver: Datagrams, message: dict | None = None, timeout: float = 5.0) -> None:
     """Publish on ``key`` until ``receiver`` gets something from it: the sink's subscription has
     reached ``src`` (until then Zenoh drops what ``src`` publishes)."""
 
@@ -97,7 +97,7 @@ def handshake(src, key: str, receiver: Datagrams, message: dict | None = None) -
         src.put(key, message or sample(0, 0.0))
         return delivered(receiver, key)
 
-    wait_for(arrived, what=f"a first message from {key}")
+    wait_for(arrived, timeout, what=f"a first message from {key}")
 
 
 # -- bundles ----------------------------------------------------------------------------
@@ -244,7 +244,8 @@ def test_normalized_values_use_info_not_the_model(net, receivers):
                                            values="normalized"), name="sound"))
     handshake(owner, "toy/joints/A", raw, sample(0, 1.0))
     assert sink.stats["waiting_info"] >= 1  # what came before the info was not sent raw
-    handshake(owner, "toy/derived/hello/x", raw)  # not in info: sent raw
+    # not in info: held back 3 s (a processor may describe it yet), then sent raw
+    handshake(owner, "toy/derived/hello/x", raw, timeout=15)
     for key, v in [("toy/joints/A", 5.0), ("toy/joints/B", -1.0), ("toy/joints/B", 2.5), ("toy/joints/C", 3.3),
                    ("toy/derived/hand/RHand", [0.5, 1.0, 3.0])]:
         owner.put(key, sample(1, v))
