@@ -7,6 +7,8 @@ STAMP  := $(VENV)/.installed
 .PHONY: demo test bench lint setup clean
 
 TESTS  := $(VENV)/.installed-tests
+# setuptools tells every editable install to beware of folders named like the package: none is here
+QUIET_PIP := PYTHONWARNINGS=ignore::UserWarning $(BIN)/python
 
 setup: $(TESTS)
 
@@ -14,12 +16,12 @@ setup: $(TESTS)
 $(STAMP): pyproject.toml
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
-	$(BIN)/python -m pip install --quiet -e .
+	$(QUIET_PIP) -m pip install --quiet -e .
 	touch $(STAMP)
 
 # what the tests need besides: the test extra and the test plug-in
 $(TESTS): $(STAMP) tests/plugin/pyproject.toml
-	$(BIN)/python -m pip install --quiet -e '.[test]' -e tests/plugin
+	$(QUIET_PIP) -m pip install --quiet -e '.[test]' -e tests/plugin
 	touch $(TESTS)
 
 # Ctrl-C is how a demo ends: no "Error 130" from make (the trap keeps the shell
