@@ -12,8 +12,10 @@ every verb (``verbs.RobotVerbs``), and a name two packages register is refused.
 from __future__ import annotations
 
 import dataclasses
+import json
 import logging
 import re
+import urllib.parse
 from importlib.metadata import EntryPoint, entry_points
 
 from .adapter import Adapter
@@ -104,6 +106,21 @@ class MissingExtra(AdapterError):
         self.install = install
 
 
+def install_line(ep: EntryPoint, extra: str) -> str:
+    """How to add ``extra`` to ``ep``'s distribution as it was installed: from a clone
+    (``pip install -e '/path/to/clone[naoqi]'``), a wheel or source file, or an index
+    (sonibus itself is not on PyPI: its name alone would point nowhere)."""
+    try:
+        origin = json.loads(ep.dist.read_text("direct_url.json") or "null") if ep.dist is not None else None
+    except ValueError:
+        origin = None
+    url = urllib.parse.urlparse(origin.get("url", "")) if isinstance(origin, dict) else None
+    if url is None or url.scheme != "file":
+        return f"pip install '{package(ep)}[{extra}]'"
+    editable = "-e " if (origin.get("dir_info") or {}).get("editable") else ""
+    return f"pip install {editable}'{urllib.parse.unquote(url.path)}[{extra}]'"
+
+
 def extra_of(ep: EntryPoint, module: str) -> str | None:
     """The extra of ``ep``'s distribution that installs ``module`` (``qi`` → ``naoqi``)."""
     for requirement in (ep.dist.requires or ()) if ep.dist is not None else ():
@@ -122,7 +139,7 @@ def _checked(ep: EntryPoint) -> type[Adapter]:
         extra = extra_of(ep, (exc.name or "").partition(".")[0])
         if extra is None:
             raise AdapterError(f"{where} cannot be imported: {type(exc).__name__}: {exc}") from exc
-        install = f"pip install '{package(ep)}[{extra}]'"
+        install = install_line(ep, extra)
         raise MissingExtra(f"adapter '{ep.name}' needs the optional '{extra}' dependencies ({exc.name}): "
                            f"{install}", install) from None
     except Exception as exc:

@@ -118,7 +118,8 @@ def test_adapters_names_what_the_naoqi_extra_adds_and_warns_about_nothing(instal
     assert (result.returncode, result.stderr) == (0, ""), result.stderr
     listed = dict(line.split(maxsplit=1) for line in result.stdout.splitlines())
     assert sorted(listed) == ADAPTERS  # every adapter of the wheel, and nothing of the test plug-in
-    lacking = {name: re.fullmatch(r"\(not installed: pip install 'sonibus\[(\w+)\]'\)", text)
+    wheel = re.escape(str(installed.wheel))  # what to install names the wheel it came from (not on PyPI)
+    lacking = {name: re.fullmatch(rf"\(not installed: pip install '{wheel}\[(\w+)\]'\)", text)
                for name, text in listed.items()}
     extras = {name: match.group(1) for name, match in lacking.items() if match}
     assert extras.get("naoqi") == extras.get("naoqi-sim") == "naoqi", listed

@@ -12,6 +12,7 @@ import struct
 import subprocess
 import sys
 import time
+from pathlib import Path
 from typing import Any
 
 import aiohttp
@@ -183,13 +184,15 @@ def test_bad_options(options, message):
         FoxgloveConfig(**options)
 
 
-def test_without_foxglove_sdk_it_is_listed_with_the_extra_to_install():
+def test_without_foxglove_sdk_it_is_listed_with_the_extra_to_install(tmp_path):
     """Issue 19, item 9: an adapter whose extra is missing is no warning, but what to install."""
     code = ("import sys; sys.modules['foxglove'] = None\n"  # (as if foxglove-sdk were not installed)
             "from sonibus.bus import registry\n"
             "lacking = {}; found = registry.load_all(lacking)\n"
             "print('foxglove' in found, lacking.get('foxglove'))\n")
-    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
+    # (run outside the clone, as the sonibus command runs: from inside, python -c finds its sonibus.egg-info)
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60, cwd=tmp_path)
     assert done.returncode == 0, done.stderr
-    assert done.stdout.split(None, 1) == ["False", "pip install 'sonibus[foxglove]'\n"]
+    root = Path(__file__).resolve().parents[2]  # the clone this sonibus is installed from (editable)
+    assert done.stdout.split(None, 1) == ["False", f"pip install -e '{root}[foxglove]'\n"]
     assert "WARNING" not in done.stderr, done.stderr
