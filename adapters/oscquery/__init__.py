@@ -205,7 +205,7 @@ class OscQuery(Adapter):
         try:
             out.append((path, encode.message(path, *served)))
         except encode.EncodeError as exc:
-            self.warn("encode", f"not streamed, OSC cannot carry it: {exc}")
+            self._unfit(ValueError(f"{path}: OSC cannot carry it: {exc}"))
 
     def _unfit(self, exc: ValueError) -> None:
         self.count("unfit")

@@ -16,7 +16,7 @@ import contextlib
 import functools
 import json
 import re
-from collections.abc import Callable, Iterable
+from collections.abc import Iterable
 from typing import TYPE_CHECKING, Any
 
 from aiohttp import WSMsgType, web
@@ -61,17 +61,11 @@ class QueryServer:
 
     def send_osc(self, messages: list[tuple[str, bytes]]) -> None:
         """Send each ``(path, OSC message)`` to the clients that listen to ``path``."""
-        self._call(self._send_osc, messages)
+        self.web.call(self._send_osc, messages)
 
     def announce(self, command: str, path: str) -> None:
         """Tell every client ``{"COMMAND": command, "DATA": path}``."""
-        self._call(self._push_all, _dumps({"COMMAND": command, "DATA": path}))
-
-    def _call(self, function: Callable[..., None], *args: Any) -> None:
-        async def call() -> None:
-            function(*args)
-        with contextlib.suppress(RuntimeError):  # the server is stopping: nobody listens any more
-            self.web.submit(call())
+        self.web.call(self._push_all, _dumps({"COMMAND": command, "DATA": path}))
 
     # -- on the loop -----------------------------------------------------------------
 
