@@ -160,8 +160,8 @@ class Recorder(Adapter):
 
     def _record(self, key: str, payload: bytes, arrived_ns: int) -> None:
         log_ns = self._wall0 + arrived_ns - self._mono0
-        if key.endswith("/" + DERIVED_INFO):
-            self._derived_info(key, payload, log_ns)
+        if self._views is not None and key.endswith("/" + DERIVED_INFO):  # (an answer the views asked for)
+            self._derived_info(self._views, key, payload, log_ns)
             return
         incoming = self._streams.take(key, payload, self.count, self.warn)  # checked by the gate, counted
         if incoming is None:
@@ -191,10 +191,10 @@ class Recorder(Adapter):
             return False
         return True
 
-    def _derived_info(self, key: str, payload: bytes, log_ns: int) -> None:
+    def _derived_info(self, views: Views, key: str, payload: bytes, log_ns: int) -> None:
         """What a feature processor answered on ``<robot>/info/derived``, checked by the gate."""
         try:
-            message = self._views.derived_info(key, payload)  # type: ignore[union-attr]  # (asked by views only)
+            message = views.derived_info(key, payload)
         except ValueError as exc:  # messages.BadMessage
             self.count("bad")
             self.warn("bad", f"message on '{key}' refused: {exc}")

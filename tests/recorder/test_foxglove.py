@@ -21,10 +21,11 @@ from sonibus.adapters.features.config import FeaturesConfig
 from sonibus.adapters.features.kinematics import load_arms
 from sonibus.adapters.recorder import Recording
 from sonibus.adapters.recorder.export import export_csv
+from sonibus.adapters.recorder.recorder import Recorder, RecorderConfig
 from sonibus.adapters.recorder.replay import Replay, ReplayConfig
 from sonibus.schemas import foxglove
 
-from ..conftest import Network, run_cli
+from ..conftest import Network, run_cli, wait_for
 from ..foxglove.test_convert import origins
 from .conftest import HEY, record_sim
 
@@ -157,3 +158,17 @@ def test_sonibus_record_writes_the_views_unless_told_not_to(net, tmp_path):
     channels, messages = read(path)
     assert channels["pepper/tf"][0] == "foxglove.FrameTransforms" and messages["pepper/tf"]
     assert channels["pepper/frame"][0] == "sonibus.v1.frame" and messages["pepper/frame"]
+
+
+def test_a_put_on_info_derived_does_not_kill_a_recorder_without_views(net, tmp_path):
+    """``<robot>/info/derived`` reaches a recorder's queue as an answer its views asked
+    for; put on the bus to a recorder of everything without views, it once went to the
+    views that are not there (the writer thread died): now the gate takes it like any key."""
+    recorder = net.start(Recorder(RecorderConfig(path=str(tmp_path / "all.mcap"), subscribe=("**",),
+                                                 foxglove=False), name="logger"))
+    bus = net.bus("script")
+    wait_for(lambda: (bus.put("toy/info/derived", {"robot": "toy", "derived": "nonsense"}) or True)
+             and recorder.stats["received"] >= 1, what="the put reaching the recorder")
+    bus.put("toy/events/done", {"t": 1.7e9, "kind": "done"})
+    wait_for(lambda: recorder.stats["written"] >= 1, what="the next event written")
+    assert recorder.state == "running" and recorder.stats["bad"] >= 1
