@@ -14,6 +14,8 @@ tools=(
   "ip iproute2"
   "sysctl procps"
   "openssl openssl"
+  "chromium chromium"
+  "chromedriver chromium-driver"
 )
 
 missing=()
