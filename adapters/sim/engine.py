@@ -56,6 +56,7 @@ class SimEngine:
         self.aware = idle  # basic awareness: idle looking around
         self._idle_home = self.body.pose()
         self._next_autoplay = time.monotonic() + autoplay_s
+        self._speeds: dict[str, float] = {}
 
     @staticmethod
     def behaviors() -> list[str]:
@@ -96,7 +97,7 @@ class SimEngine:
             if self.autoplay_s and self._playback is None and time.monotonic() >= self._next_autoplay:
                 self._next_autoplay = time.monotonic() + self.autoplay_s
                 events.extend(self._start_behavior(random.choice(list(LIBRARY)), now))
-            self.body.step(max(0.0, min(dt, 0.1)))
+            self._step(max(0.0, min(dt, 0.1)))
             if self._speaking_until and now >= self._speaking_until:
                 events.append(("speech", {"text": self._speech.popleft().text, "state": "done"}))
                 self._speaking_until = 0.0
@@ -105,6 +106,19 @@ class SimEngine:
                 events.append(("speech", {"text": self._speech[0].text, "state": "started"}))
             self._emit(events)
             return list(self.body.positions)
+
+    def speeds(self) -> dict[str, float]:
+        """Each moving joint's speed over the last step (rad/s, signed): what the body sound follows."""
+        with self.lock:
+            return dict(self._speeds)
+
+    def _step(self, dt: float) -> None:
+        if dt <= 0:
+            return
+        before = list(self.body.positions)
+        self.body.step(dt)
+        self._speeds = {name: (after - was) / dt for name, was, after
+                        in zip(self.body.names, before, self.body.positions, strict=True) if after != was}
 
     def _idle(self, now: float) -> None:
         targets = {}
