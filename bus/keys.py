@@ -41,6 +41,16 @@ def event(robot: str, kind: str) -> str:
     return f"{robot}/events/{kind}"
 
 
+AUDIO_STREAMS = ("mic", "speaker")  # a robot's microphones; what it should play
+
+
+def audio(robot: str, stream: str) -> str:
+    """Where ``robot``'s audio ``stream`` (``mic`` or ``speaker``) flows (``bus/audio.py``)."""
+    if stream not in AUDIO_STREAMS:
+        raise ValueError(f"audio stream '{stream}' is not one of {', '.join(AUDIO_STREAMS)}")
+    return f"{robot}/audio/{stream}"
+
+
 def command(robot: str, verb: str = "**") -> str:
     return f"{robot}/cmd/{verb}"
 

@@ -30,7 +30,7 @@ import jsonschema
 
 from .. import schemas
 from .codec import DecodeError, decode
-from .keys import Key
+from .keys import AUDIO_STREAMS, Key
 
 __all__ = ["FRAME_FIELDS", "SECTIONS", "BadMessage", "Gate", "Limits", "Section", "frame", "frame_samples",
            "schema_of", "valid_part"]
@@ -44,6 +44,12 @@ MAX_DEPTH = 8                                          # nesting of lists and ma
 EVENT_KINDS = {rule["if"]["properties"]["kind"]["const"]: jsonschema.Draft202012Validator(rule["then"])
                for rule in schemas.load("event")["allOf"]}  # kind → its fields' rules, as the schema defines them
 FRAME_FIELDS = ("t", "seq", "names", "v")  # a frame's own fields; every other one is a quantity per joint
+_AUDIO = schemas.load("audio_chunk")
+AUDIO_FIELDS = tuple(_AUDIO["required"])             # an audio chunk's fields, and no others
+MIN_RATE: int = _AUDIO["properties"]["rate"]["minimum"]
+MAX_RATE: int = _AUDIO["properties"]["rate"]["maximum"]
+MAX_CHANNELS: int = _AUDIO["properties"]["channels"]["maximum"]
+MAX_CHUNK_S: float = _AUDIO["x-max-duration-s"]      # an audio chunk's duration
 _NAME = re.compile(_FRAME["names"]["items"]["pattern"].removesuffix("$") + r"\Z").match  # one plain key chunk
 
 
@@ -147,6 +153,28 @@ class Gate:
         if fields is not None:  # (only its kind's rules: the whole schema would cost 100 µs an event)
             _schema_check(fields, f"{kind} event", message)
 
+    def audio(self, key: Key, message: dict[str, Any]) -> None:
+        if key.name not in AUDIO_STREAMS:
+            raise BadMessage(f"'{_cut(key.name, 40)}' is not an audio stream ({', '.join(AUDIO_STREAMS)})")
+        self.stamp(message)
+        rate, channels, pcm = message["rate"], message["channels"], message["pcm"]
+        if rate.__class__ is not int or not MIN_RATE <= rate <= MAX_RATE:
+            raise BadMessage(f"rate = {_short(rate)} is not an integer in {MIN_RATE}..{MAX_RATE} Hz")
+        if channels.__class__ is not int or not 1 <= channels <= MAX_CHANNELS:
+            raise BadMessage(f"channels = {_short(channels)} is not an integer in 1..{MAX_CHANNELS}")
+        if pcm.__class__ is not bytes:
+            raise BadMessage(f"pcm is a {type(pcm).__name__}, not bytes (int16 little-endian, interleaved)")
+        width = 2 * channels
+        if not pcm or len(pcm) % width:
+            raise BadMessage(f"pcm of {len(pcm)} bytes is not a whole number of {channels}-channel int16 frames "
+                             f"({width} bytes each, 1 at least)")
+        if len(pcm) // width > rate * MAX_CHUNK_S:
+            raise BadMessage(f"{len(pcm) // width} frames at {rate} Hz last "
+                             f"{1000 * len(pcm) / width / rate:.0f} ms, at most {1000 * MAX_CHUNK_S:g} ms")
+        if len(message) != len(AUDIO_FIELDS):
+            extra = next(field for field in message if field not in AUDIO_FIELDS)
+            raise BadMessage(f"field {_short(extra)} is not one of an audio chunk's ({', '.join(AUDIO_FIELDS)})")
+
     def info(self, key: Key, message: dict[str, Any]) -> None:
         json_like(message, "info")
         name = "derived_info" if key.name == "derived" else "robot_info"
@@ -211,6 +239,7 @@ SECTIONS: dict[str, Section] = {section.name: section for section in (
     Section("events", "event", Gate.event),
     Section("info", "robot_info", Gate.info),            # <robot>/info/derived: derived_info
     Section("cmd", None, Gate.command),
+    Section("audio", "audio_chunk", Gate.audio),        # <robot>/audio/mic, <robot>/audio/speaker
     Section("stats", "node_stats", Gate.node_stats, robot_data=False),  # sonibus/stats/<host>/<node>
 )}
 """Every section of the key space, the one table decoding, ``Streams`` and the recorder dispatch on."""

@@ -49,6 +49,10 @@ class Qos:
 # express: batching measured lossless where express lost samples on a busy 2-core machine,
 # at no cost in latency (docs/performance.md).
 STREAM = Qos(priority="DATA_HIGH", drop=True)
+# Audio chunks (bus/audio.py): a late chunk is worth no more than a lost one (the jitter buffer
+# plays silence for either), so never back-pressure the publisher; express, because batching
+# would hold a 10-20 ms chunk back for the next one and add its wait to the latency.
+AUDIO = Qos(priority="DATA_HIGH", drop=True, express=True)
 EVENTS = Qos()  # low rate, must not be dropped: blocks rather than drop
 
 
