@@ -1,0 +1,63 @@
+/* The kiosk page for visitors: only the buttons the installation lists (from
+   `hello`), big touch targets, one scenario at a time; each button shows
+   "running" then "done" from the server's `button` messages. It can only
+   `press`: no other control exists in this page. Protocol: docs/web.md. */
+"use strict";
+
+(() => {
+  const {el, status, withToken, Link} = sonibus;
+  const SHOWN = {idle: "", running: "running…", done: "done", failed: "failed"};
+  const buttons = new Map();   // id → button element
+  let waiting = null;          // the id of a press not yet answered
+
+  function onHello(message) {
+    const container = document.getElementById("buttons");
+    const wanted = JSON.stringify(message.buttons || []);
+    if (container.dataset.buttons === wanted) return;  // a reconnection: the same buttons, states kept
+    container.dataset.buttons = wanted;
+    buttons.clear();
+    container.replaceChildren(...(message.buttons || []).map((spec) => {
+      const button = el("button", {type: "button", class: "kiosk-button", dataset: {button: spec.id, state: "idle"},
+        onclick: () => press(spec.id)},
+      spec.image ? el("img", {src: withToken(spec.image), alt: ""}) : null,
+      el("span", {class: "label"}, spec.label || spec.id),
+      el("span", {class: "state"}));
+      buttons.set(spec.id, button);
+      return button;
+    }));
+    if (!buttons.size) container.append(el("p", {class: "placeholder"}, "No buttons are configured."));
+    refresh();
+  }
+
+  function onButton(message) {
+    const button = buttons.get(message.id);
+    if (!button) return;
+    const state = message.state in SHOWN ? message.state : "idle";
+    button.dataset.state = state;
+    button.querySelector(".state").textContent = SHOWN[state];
+    button.title = message.error || "";
+    refresh();
+  }
+
+  function press(id) {
+    if (waiting !== null || running()) return;
+    waiting = link.send({type: "press", button: id}, buttons.get(id).querySelector(".label").textContent,
+      () => { waiting = null; refresh(); });
+    refresh();
+  }
+
+  function running() {
+    return [...buttons.values()].some((button) => button.dataset.state === "running");
+  }
+
+  /** One scenario at a time: every button is disabled while one runs or a press is unanswered. */
+  function refresh() {
+    const busy = waiting !== null || running() || !link.connected;
+    for (const button of buttons.values()) button.disabled = busy;
+    document.body.classList.toggle("busy", busy);
+  }
+
+  const link = new Link("/kiosk/ws", {hello: onHello, button: onButton, connection: () => refresh()});
+  status("", "info");
+  Object.assign(sonibus, {link});
+})();
