@@ -1,0 +1,193 @@
+"""The show's browser surface (adapter ``web``): an operator's page with every robot's
+live joints, the nodes' health, the event log and the controls, and a kiosk page of a
+few big buttons for visitors.
+
+    [nodes.web]
+    adapter = "web"
+    listen = "127.0.0.1:8080"
+
+Open http://127.0.0.1:8080/ (operator) or /kiosk. Pages are plain files shipped in
+``static/``; they talk JSON over a WebSocket (``/ws``, ``/kiosk/ws``). docs/web.md has
+the options, the tokens and the protocol.
+
+Modules: ``config`` (options), ``auth`` (tokens), ``protocol`` (messages), ``server``
+(routes and clients), ``slider`` (coalesced joint moves), ``kiosk`` (the buttons' states).
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import re
+import threading
+import time
+from typing import Any
+
+import zenoh
+
+from sonibus.bus import keys
+from sonibus.bus.adapter import Adapter
+from sonibus.bus.errors import ConfigError
+from sonibus.bus.info import InfoRequests
+from sonibus.bus.options import bad
+from sonibus.bus.pacing import Pacer
+from sonibus.bus.presence import watch_robots
+from sonibus.bus.queue import SampleQueue
+from sonibus.bus.streams import Incoming, Streams
+from sonibus.bus.web import WebServer
+
+from .config import WebConfig
+from .server import Pages
+
+__all__ = ["WebConfig", "WebPages"]
+
+log = logging.getLogger(__name__)
+
+INFO_EVERY_S = 2.0   # how often each robot's info is asked again (behaviors installed, a new owner)
+GONE_AFTER_S = 3.0   # a node whose stats have not come for this long is shown gone
+FORGET_AFTER_S = 60.0  # ... and left out after this
+STATS_EVERY_S = 1.0    # how often the pages get the nodes' stats
+
+
+class WebPages(Adapter):
+    """Serves the operator's and the kiosk's pages and carries their commands to robots."""
+
+    Config = WebConfig
+    counters = ("clients", "commands", "refused", "frames_pushed", "frames_coalesced", "commands_coalesced")
+
+    def _start(self) -> None:
+        cfg: WebConfig = self.config
+        self._lock = threading.Lock()
+        self._present: set[str] = set()           # robots on the bus (all of them: a stop reaches each)
+        self._robots: dict[str, dict[str, Any]] = {}  # the shown robots, as the robots message says them
+        self._latest: dict[str, str] = {}         # robot → its newest frame message, not yet pushed
+        self._nodes: dict[tuple[str, str], tuple[float, dict[str, Any]]] = {}  # latest stats, when heard
+        self._shown = [zenoh.KeyExpr(keys.expr(r)) for r in cfg.robots]
+        self.web = WebServer(self, cfg.host, cfg.port)
+        self.pages = Pages(self, self.web, cfg, self._on_bus)
+        self._info = InfoRequests(self.bus, self._take_info, lambda robot, text: self.warn("info", text),
+                                  INFO_EVERY_S)
+        try:
+            self.web.start()
+        except ConfigError as exc:  # (the web server names its own keys, 'host' or 'port'; here it is 'listen')
+            raise bad("listen", re.sub(r"^key '\w+': ", "", str(exc))) from None
+        self.url = self.web.url
+        log.info("%s: operator page on %s/ , kiosk on %s/kiosk", self.name, self.url, self.url)
+        self._queue = self.own(SampleQueue(cfg.queue))
+        patterns = [f"{robot}/joints/*" for robot in cfg.robots] + ["*/events/*", keys.NODE_STATS]
+        self._streams = Streams(self.bus, patterns, self._queue)
+        self.spawn(self._feed, "feed")
+        self.own(self._streams)
+        self.own(watch_robots(self.bus, self._robot_changed))
+        self.spawn(self._push, "push")
+        self.spawn(self._refresh, "info")
+
+    def metrics(self) -> dict[str, Any]:
+        """Pages connected now, and the robots shown."""
+        if not hasattr(self, "pages"):
+            return {}
+        return {"operators": len(self.pages.operators), "kiosks": len(self.pages.kiosks),
+                "robots": len(self._robots)}
+
+    def shown_robots(self) -> dict[str, dict[str, Any]]:
+        """The robots the operator's pages show now, as the ``robots`` message says them."""
+        with self._lock:
+            return dict(self._robots)
+
+    def _shows(self, robot: str) -> bool:
+        return any(pattern.intersects(zenoh.KeyExpr(robot)) for pattern in self._shown)
+
+    def _on_bus(self) -> list[str]:
+        with self._lock:
+            return list(self._present)
+
+    # -- robots --------------------------------------------------------------------------
+
+    def _robot_changed(self, robot: str, alive: bool) -> None:
+        with self._lock:
+            if alive:
+                self._present.add(robot)
+            else:
+                self._present.discard(robot)
+                self._latest.pop(robot, None)
+            changed = robot in self._robots and self._robots[robot]["connected"] != alive
+            if changed:
+                self._robots[robot] = {**self._robots[robot], "connected": alive}
+            robots = dict(self._robots)
+        if changed:
+            self.pages.robots(robots)
+        if alive:
+            self._info.ask(robot)
+        else:
+            self.pages.robot_left(robot)
+
+    def _refresh(self) -> None:
+        while not self.stopping.wait(INFO_EVERY_S / 2):
+            for robot in self._on_bus():
+                self._info.ask(robot)
+
+    def _take_info(self, robot: str, info: dict[str, Any]) -> None:
+        if not self._shows(robot):
+            return
+        owner = info.get("owner", {})
+        shown = {"owner": f"{owner.get('host', '?')}/{owner.get('node', '?')}", "model": info.get("model", ""),
+                 "joints": [{"name": j["name"], "min": j["min"], "max": j["max"], "unit": j.get("unit", "rad")}
+                            for j in info.get("joints", ())],
+                 "behaviors": list(info.get("behaviors", ())), "postures": list(info.get("postures", ())),
+                 "rate_hz": info.get("rate_hz")}
+        with self._lock:
+            shown["connected"] = robot in self._present
+            if self._robots.get(robot) == shown:
+                return
+            self._robots[robot] = shown
+            robots = dict(self._robots)
+        self.pages.robots(robots)
+
+    # -- what comes off the bus ---------------------------------------------------------
+
+    def _feed(self) -> None:
+        while not self.stopping.is_set():
+            item = self._queue.get(timeout=0.2)
+            message = self._streams.take(item[0], item[1], self.count, self.warn) if item else None
+            if message is not None:
+                self._take(message)
+
+    def _take(self, message: Incoming) -> None:
+        source = message.source
+        if source.section == "frame":
+            frame = message.message
+            text = json.dumps({"type": "frame", "robot": source.robot, "t": frame["t"], "seq": frame["seq"],
+                               "names": frame["names"], "v": frame["v"]}, allow_nan=False)
+            with self._lock:
+                if source.robot in self._latest:
+                    self.count("frames_coalesced")
+                self._latest[source.robot] = text
+        elif source.section == "stats":
+            stats = message.message
+            with self._lock:
+                self._nodes[(stats["host"], stats["node"])] = (time.monotonic(), stats)
+        elif message.event is not None:
+            robot, kind = source.robot, source.name
+            self.pages.event(robot, kind, message.event, self._shows(robot) or robot == "sonibus")
+
+    def _push(self) -> None:
+        next_stats = time.monotonic()
+
+        def tick(_: int) -> None:
+            nonlocal next_stats
+            with self._lock:
+                texts, self._latest = list(self._latest.values()), {}
+            if texts and self.pages.operators:
+                self.pages.frames(texts)
+                self.count("frames_pushed", len(texts))
+            if time.monotonic() >= next_stats:
+                next_stats += STATS_EVERY_S
+                self.pages.stats(self._node_stats())
+        Pacer(self.config.update_hz).run(tick, self.stopping)
+
+    def _node_stats(self) -> list[dict[str, Any]]:
+        now = time.monotonic()
+        with self._lock:
+            self._nodes = {k: v for k, v in self._nodes.items() if now - v[0] < FORGET_AFTER_S}
+            nodes = sorted(self._nodes.items())
+        return [{**stats, "gone": now - heard > GONE_AFTER_S} for _, (heard, stats) in nodes]

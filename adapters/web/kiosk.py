@@ -1,0 +1,85 @@
+"""The kiosk's buttons: one scenario at a time, followed from the robot's events.
+
+A press is refused while a button is under way (``busy``). A pressed button is
+``running`` once its robot accepted the command, then ``done`` when the robot's
+behavior event says ``stopped`` (a say button: its speech event ``done``), or
+``failed`` (refused, a behavior event ``failed``, the robot gone). Every change goes
+to ``announce`` as a ``button`` message; ``states`` keeps the last of each button for
+a page that connects later. Runs on the web server's loop.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any
+
+from sonibus.bus.errors import CommandError
+
+from .config import Button, Kiosk
+
+
+class Stand:
+    """The kiosk ``kiosk``'s buttons and the one under way."""
+
+    def __init__(self, kiosk: Kiosk, announce: Callable[[dict[str, Any]], None]) -> None:
+        self.kiosk, self.announce = kiosk, announce
+        self.current: Button | None = None    # pressed, not yet done or failed
+        self.accepted = False                  # the robot took its command
+        self.ended: dict[str, Any] | None = None  # its end, when it came before the robot's answer
+        self.states: dict[str, dict[str, Any]] = {}
+
+    def busy(self) -> str:
+        """Why a press is refused now ("" when it is not)."""
+        return f"busy: {self.current.id!r} is running" if self.current is not None else ""
+
+    def press(self, button: Button) -> None:
+        self.current, self.accepted, self.ended = button, False, None
+
+    def answered(self, button: Button, outcome: dict[str, Any] | CommandError) -> None:
+        """The robot's answer to ``button``'s command."""
+        if button is not self.current:
+            return
+        if isinstance(outcome, CommandError):
+            self._end("failed", outcome.message)
+            return
+        self.accepted = True
+        self._say(button, "running")
+        if self.ended is not None:
+            self._end(**self.ended)
+
+    def event(self, robot: str, kind: str, event: dict[str, Any]) -> None:
+        """An event of ``robot``: the end of the current button's scenario, or not."""
+        button = self.current
+        if button is None or robot != self.kiosk.robot:
+            return
+        end = None
+        if kind == "behavior" and button.behavior and event.get("name") == button.behavior:
+            state = event.get("state")
+            end = {"state": "done"} if state == "stopped" else {"state": "failed",
+                                                                  "error": str(event.get("error", "failed"))}
+            if state not in ("stopped", "failed"):
+                return
+        elif kind == "speech" and button.say and event.get("text") == button.say and event.get("state") == "done":
+            end = {"state": "done"}
+        if end is None:
+            return
+        if self.accepted:
+            self._end(**end)
+        else:
+            self.ended = end
+
+    def robot_left(self, robot: str) -> None:
+        if self.current is not None and robot == self.kiosk.robot:
+            self._end("failed", f"robot '{robot}' left the bus")
+
+    def _end(self, state: str, error: str = "") -> None:
+        button, self.current = self.current, None
+        if button is not None:
+            self._say(button, state, error)
+
+    def _say(self, button: Button, state: str, error: str = "") -> None:
+        message: dict[str, Any] = {"type": "button", "id": button.id, "state": state}
+        if error:
+            message["error"] = " ".join(error.split())
+        self.states[button.id] = message
+        self.announce(message)

@@ -1,0 +1,113 @@
+"""The WebSocket protocol of the web pages: what a client may send, read strictly, and
+the messages the server sends (docs/web.md, "Protocol").
+
+>>> parse('{"type": "command", "id": 7, "robot": "pepper", "verb": "say", "args": {"text": "hi"}}')
+Command(id=7, robot='pepper', verb='say', args={'text': 'hi'})
+>>> parse('{"type": "stop", "id": 8}')
+Stop(id=8)
+>>> try:
+...     parse('{"type": "dance", "id": 9}')
+... except BadMessage as exc:
+...     print(exc.id, exc)
+9 unknown message type 'dance' — a page sends command, stop or press
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from typing import Any
+
+from sonibus.bus import keys
+from sonibus.bus.errors import CommandError
+
+MAX_MESSAGE = 64 * 1024  # characters of one client message; longer ones are refused (the connection stays)
+TYPES = ("command", "stop", "press")
+
+Id = int | str | None  # the client's own request id, echoed in the reply
+
+
+@dataclass(frozen=True)
+class Command:
+    """Operator: run ``verb`` on ``robot`` with ``args`` (shaped later by ``commands.from_json``)."""
+
+    id: Id
+    robot: str
+    verb: str
+    args: Any
+
+
+@dataclass(frozen=True)
+class Stop:
+    """Operator: stop every robot on the bus."""
+
+    id: Id
+
+
+@dataclass(frozen=True)
+class Press:
+    """Kiosk: a visitor pressed ``button``."""
+
+    id: Id
+    button: str
+
+
+Request = Command | Stop | Press
+
+
+class BadMessage(ValueError):
+    """A client message that cannot be taken; ``id`` is its id when it had a usable one."""
+
+    def __init__(self, message: str, id: Id = None) -> None:
+        super().__init__(message)
+        self.id = id
+
+
+def parse(text: str) -> Request:
+    """The request ``text`` stands for, or ``BadMessage`` saying what is wrong, in one line."""
+    if len(text) > MAX_MESSAGE:
+        raise BadMessage(f"a message of {len(text):,} characters (at most {MAX_MESSAGE:,})")
+    try:
+        message = json.loads(text)
+    except (ValueError, RecursionError) as exc:
+        raise BadMessage(f"not JSON: {str(exc).splitlines()[0][:80]}") from None
+    if not isinstance(message, dict):
+        raise BadMessage(f"a message must be a JSON object, got {type(message).__name__}")
+    raw_id = message.get("id")
+    id_: Id = raw_id if isinstance(raw_id, str | int) and not isinstance(raw_id, bool) else None
+    if isinstance(id_, str):
+        id_ = id_[:64]
+    kind = message.get("type")
+    if kind not in TYPES:
+        raise BadMessage(f"unknown message type {str(kind)[:40]!r} — a page sends {', '.join(TYPES[:-1])} "
+                         f"or {TYPES[-1]}", id_)
+    if kind == "stop":
+        return Stop(id_)
+    if kind == "press":
+        return Press(id_, _name(message, "button", id_))
+    robot, verb = _name(message, "robot", id_), _name(message, "verb", id_)
+    try:
+        for chunk in (robot, *verb.split("/")):
+            keys.check_name("robot" if chunk == robot else "verb", chunk)
+    except ValueError as exc:
+        raise BadMessage(f"command: {exc}", id_) from None
+    return Command(id_, robot, verb, message.get("args", {}))
+
+
+def _name(message: dict[str, Any], field: str, id_: Id) -> str:
+    value = message.get(field)
+    if not isinstance(value, str) or not value:
+        raise BadMessage(f"{message['type']}: '{field}' must be a non-empty string", id_)
+    return value[:200]
+
+
+def reply(id_: Id, outcome: dict[str, Any] | CommandError | str, robot: str = "") -> dict[str, Any]:
+    """The ``reply`` to request ``id_``: a result, or a refusal (a ``CommandError``'s line,
+    or the text of one)."""
+    message: dict[str, Any] = {"type": "reply", "id": id_}
+    if robot:
+        message["robot"] = robot
+    if isinstance(outcome, dict):
+        return {**message, "ok": True, "result": outcome}
+    error = outcome.message if isinstance(outcome, CommandError) else outcome
+    return {**message, "ok": False, "error": " ".join(str(error).split())}  # one line, whatever came

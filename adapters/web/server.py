@@ -1,0 +1,279 @@
+"""The routes of the web pages and their WebSocket clients, on ``bus/web.py``'s ``WebServer``.
+
+``/`` and ``/ws`` are the operator's, ``/kiosk`` and ``/kiosk/ws`` the kiosk's (``auth.Guard``
+checks each request), ``/static/<file>`` the shipped pages' code and ``/kiosk/image/<id>``
+a kiosk button's image. What clients send is read by ``protocol.parse``; commands are
+shaped by ``commands.from_json`` and sent with ``client.ask``; every answer comes back
+as a ``reply``. The adapter hands the bus's news to ``robots``, ``frames``, ``stats``,
+``event`` and ``robot_left`` from any thread (they run on the server's loop).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import functools
+import json
+import re
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from aiohttp import WSMsgType, web
+
+from sonibus.bus import client as bus_client
+from sonibus.bus import commands
+from sonibus.bus.errors import CommandError
+from sonibus.bus.web import CLOSE_WAIT_S, WebClient, WebServer, close_clients
+
+from . import protocol
+from .auth import Guard
+from .config import Button, WebConfig
+from .kiosk import Stand
+from .slider import Coalescer
+
+if TYPE_CHECKING:
+    from sonibus.bus.adapter import Adapter
+
+STATIC = Path(__file__).resolve().parent / "static"
+MAX_WS_MESSAGE = 1 << 20  # bytes; aiohttp closes a connection that sends more in one message (code 1009)
+HEARTBEAT_S = 10.0        # a ping this often; a client that does not answer within half of it is dropped
+_FILE = re.compile(r"[A-Za-z0-9_-][A-Za-z0-9_.-]{0,99}")
+HEADERS = {"Cache-Control": "no-store", "Referrer-Policy": "no-referrer", "X-Frame-Options": "DENY",
+           "X-Content-Type-Options": "nosniff"}  # (the token is in the page's URL: never sent on, never cached)
+_dumps = functools.partial(json.dumps, allow_nan=False)
+
+
+class Client(WebClient):
+    """A page's WebSocket: ``role`` "operator" or "kiosk"."""
+
+    def __init__(self, ws: web.WebSocketResponse, role: str, adapter: Adapter,
+                 transport: asyncio.BaseTransport | None) -> None:
+        super().__init__(ws, lambda: adapter.count("dropped"), transport)
+        self.role = role
+
+    def send(self, message: dict[str, Any]) -> None:
+        self.push(_dumps(message))
+
+
+class Pages:
+    """The pages' routes on ``web`` (a ``WebServer`` not started yet) for ``adapter``."""
+
+    def __init__(self, adapter: Adapter, web_server: WebServer, config: WebConfig,
+                 robots_on_bus: Any) -> None:
+        self.adapter, self.web, self.config = adapter, web_server, config
+        self.robots_on_bus = robots_on_bus  # () -> every robot on the bus now (a stop reaches them all)
+        self.guard = Guard(config.token, config.kiosk_token, adapter.name, adapter.count)
+        self.operators: set[Client] = set()
+        self.kiosks: set[Client] = set()
+        self.stand = Stand(config.stand, self._to_kiosks)
+        self.sliders: Coalescer | None = None  # made on the loop (its clock)
+        self._robots: str | None = None   # the latest robots message, for a page that connects
+        self._stats: str | None = None
+        app = web_server.app
+        app.router.add_get("/", functools.partial(self._page, "operator"))
+        app.router.add_get("/kiosk", functools.partial(self._page, "kiosk"))
+        app.router.add_get("/ws", functools.partial(self._websocket, "operator"))
+        app.router.add_get("/kiosk/ws", functools.partial(self._websocket, "kiosk"))
+        app.router.add_get("/static/{name}", self._static)
+        app.router.add_get("/kiosk/image/{id}", self._image)
+        app.on_shutdown.append(self._close_all)
+
+    @property
+    def clients(self) -> int:
+        return len(self.operators) + len(self.kiosks)
+
+    # -- from any thread -------------------------------------------------------------
+
+    def robots(self, robots: dict[str, Any]) -> None:
+        self.web.call(self._set_robots, _dumps({"type": "robots", "robots": robots}))
+
+    def frames(self, texts: list[str]) -> None:
+        self.web.call(self._to_operators, texts)
+
+    def stats(self, nodes: list[dict[str, Any]]) -> None:
+        self.web.call(self._set_stats, _dumps({"type": "stats", "nodes": nodes}))
+
+    def event(self, robot: str, kind: str, event: dict[str, Any], shown: bool) -> None:
+        """``robot``'s event (``shown``: to the operator's pages too)."""
+        text = _dumps({"type": "event", "robot": robot, "kind": kind, "event": event}) if shown else ""
+        self.web.call(self._event, robot, kind, event, text)
+
+    def robot_left(self, robot: str) -> None:
+        self.web.call(self.stand.robot_left, robot)
+
+    # -- routes (on the loop) --------------------------------------------------------
+
+    async def _page(self, role: str, request: web.Request) -> web.StreamResponse:
+        self.guard.check(request, role)
+        return web.FileResponse(STATIC / f"{role}.html", headers=HEADERS)
+
+    async def _static(self, request: web.Request) -> web.StreamResponse:
+        self.guard.check(request, "asset")
+        name = request.match_info["name"]
+        path = STATIC / name
+        if not _FILE.fullmatch(name) or not path.is_file():
+            raise web.HTTPNotFound(text=f"no file {name[:100]!r} in the pages' static files\n")
+        return web.FileResponse(path, headers=HEADERS)
+
+    async def _image(self, request: web.Request) -> web.StreamResponse:
+        self.guard.check(request, "asset")
+        button = self.config.button(request.match_info["id"])
+        if button is None or not button.image:
+            raise web.HTTPNotFound(text="no such kiosk button image\n")
+        return web.FileResponse(button.image, headers=HEADERS)
+
+    async def _websocket(self, role: str, request: web.Request) -> web.StreamResponse:
+        self.guard.check(request, role)
+        ws = web.WebSocketResponse(timeout=CLOSE_WAIT_S, max_msg_size=MAX_WS_MESSAGE, heartbeat=HEARTBEAT_S)
+        await ws.prepare(request)
+        if self.sliders is None:
+            self.sliders = Coalescer(asyncio.get_running_loop(), 1.0 / self.config.slider_hz, self._send_held)
+        client = Client(ws, role, self.adapter, request.transport)
+        group = self.operators if role == "operator" else self.kiosks
+        group.add(client)
+        self.adapter.count("clients")
+        self._greet(client)
+        sender = asyncio.create_task(client.send_all())
+        try:
+            async for message in ws:
+                if message.type == WSMsgType.TEXT:
+                    self._take(client, message.data)
+                elif message.type == WSMsgType.BINARY:
+                    self._bad(client, None, f"a binary message of {len(message.data)} bytes (the pages send "
+                                            "JSON text)")
+        finally:
+            group.discard(client)
+            sender.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                await sender
+        return ws
+
+    def _greet(self, client: Client) -> None:
+        cfg = self.config
+        buttons = [_button(b) for b in cfg.stand.buttons] if client.role == "kiosk" else []
+        client.send({"type": "hello", "role": client.role, "update_hz": cfg.update_hz, "slider_hz": cfg.slider_hz,
+                     "speed": cfg.speed, "buttons": buttons})
+        if client.role == "kiosk":
+            for state in self.stand.states.values():
+                client.send(state)
+            return
+        for text in (self._robots, self._stats):
+            if text is not None:
+                client.push(text)
+
+    # -- what clients send -----------------------------------------------------------
+
+    def _take(self, client: Client, text: str) -> None:
+        try:
+            request = protocol.parse(text)
+        except protocol.BadMessage as exc:
+            self._bad(client, exc.id, str(exc))
+            return
+        if client.role == "kiosk":
+            if not isinstance(request, protocol.Press):
+                self._bad(client, request.id, f"a kiosk sends only press, not {type(request).__name__.lower()}")
+            else:
+                self._press(client, request)
+        elif isinstance(request, protocol.Press):
+            self._bad(client, request.id, "press is the kiosk's (/kiosk/ws); the operator sends command")
+        elif isinstance(request, protocol.Stop):
+            self._stop(client, request.id)
+        else:
+            self._command(client, request)
+
+    def _bad(self, client: Client, id_: protocol.Id, what: str) -> None:
+        self.adapter.count("bad")
+        self.adapter.warn("ws", f"WebSocket ({client.role}): refused {what}")
+        client.send(protocol.reply(id_, what))
+
+    def _command(self, client: Client, request: protocol.Command) -> None:
+        try:
+            args = commands.from_json(request.verb, request.args)
+        except CommandError as exc:
+            client.send(protocol.reply(request.id, exc))
+            return
+        item = (client, request.id, request.robot, request.verb, args)
+        if request.verb != "joints/set" or self.sliders is None:
+            self._ask(*item)
+            return
+        args.setdefault("speed", self.config.speed)
+        superseded = self.sliders.offer((request.robot, tuple(args.get("names", ()))), item)
+        if superseded is not None:
+            self.adapter.count("commands_coalesced")
+            superseded[0].send(protocol.reply(superseded[1], {"coalesced": True}))
+
+    def _send_held(self, item: tuple[Any, ...]) -> None:
+        self._ask(*item)
+
+    def _stop(self, client: Client, id_: protocol.Id) -> None:
+        for held in self.sliders.cancel() if self.sliders is not None else ():
+            held[0].send(protocol.reply(held[1], "cancelled: a stop came first"))
+        robots = sorted(self.robots_on_bus())
+        if not robots:
+            client.send(protocol.reply(id_, "stop: no robot on the bus"))
+        for robot in robots:
+            self._ask(client, id_, robot, "stop", {}, robot)
+
+    def _ask(self, client: Client, id_: protocol.Id, robot: str, verb: str, args: dict[str, Any],
+             named: str = "") -> None:
+        self.adapter.count("commands")
+
+        def done(outcome: bus_client.Outcome) -> None:
+            self.web.call(client.send, protocol.reply(id_, outcome, named))
+        bus_client.ask(self.adapter.bus, robot, verb, args, done, self.config.timeout)
+
+    def _press(self, client: Client, request: protocol.Press) -> None:
+        button = self.config.button(request.button)
+        if button is None:
+            known = ", ".join(b.id for b in self.config.stand.buttons) or "none"
+            self._bad(client, request.id, f"press: no button {request.button[:64]!r} — buttons: {known}")
+            return
+        busy = self.stand.busy()
+        if busy:
+            client.send(protocol.reply(request.id, busy))
+            return
+        self.stand.press(button)
+        verb, args = button.command
+        self.adapter.count("commands")
+
+        def done(outcome: bus_client.Outcome) -> None:
+            self.web.call(self._pressed, client, request.id, button, outcome)
+        bus_client.ask(self.adapter.bus, self.config.stand.robot, verb, args, done, self.config.timeout)
+
+    def _pressed(self, client: Client, id_: protocol.Id, button: Button, outcome: bus_client.Outcome) -> None:
+        client.send(protocol.reply(id_, outcome))
+        self.stand.answered(button, outcome)
+
+    # -- what the bus says (on the loop) ---------------------------------------------
+
+    def _set_robots(self, text: str) -> None:
+        self._robots = text
+        self._to_operators([text])
+
+    def _set_stats(self, text: str) -> None:
+        self._stats = text
+        self._to_operators([text])
+
+    def _event(self, robot: str, kind: str, event: dict[str, Any], text: str) -> None:
+        if text:
+            self._to_operators([text])
+        self.stand.event(robot, kind, event)
+
+    def _to_operators(self, texts: list[str]) -> None:
+        for client in self.operators:
+            for text in texts:
+                client.push(text)
+
+    def _to_kiosks(self, message: dict[str, Any]) -> None:
+        for client in self.kiosks:
+            client.send(message)
+
+    async def _close_all(self, app: web.Application) -> None:
+        await close_clients(self.operators | self.kiosks)
+
+
+def _button(button: Button) -> dict[str, Any]:
+    shown = {"id": button.id, "label": button.label, "kind": button.kind}
+    if button.image:
+        shown["image"] = f"/kiosk/image/{button.id}"
+    return shown

@@ -1,0 +1,155 @@
+"""Fixtures of the web pages' tests (server and browser): a simulated ``pepper`` and a
+``web`` node on a private loopback bus, with an operator token, a kiosk token and two
+kiosk buttons; and a WebSocket client (aiohttp) that gathers what the server sends.
+
+    def test_x(stage):
+        stage.operator_url      # http://127.0.0.1:<port>/?token=...
+        stage.kiosk_url         # http://127.0.0.1:<port>/kiosk?token=...
+        stage.sim               # the SimRobot; stage.net the Network (net.bus() for a test session)
+"""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import threading
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass
+from typing import Any
+
+import aiohttp
+import pytest
+
+from sonibus.adapters.sim import SimRobot
+from sonibus.adapters.web import WebConfig, WebPages
+
+from ..conftest import Network, wait_for
+
+RATE = 50                 # frames/s of the simulated robot
+TOKEN = "operator-secret-1"
+KIOSK_TOKEN = "kiosk-secret-2"
+WAVE = "animations/Stand/Gestures/Hey_1"  # a sim behavior of about 3 s
+HELLO = "Hello, visitors!"
+BUTTONS = [{"id": "wave", "label": "Wave hello", "behavior": WAVE},
+           {"id": "hello", "label": "Say hello", "say": HELLO}]
+
+
+@dataclass
+class Stage:
+    """The running nodes and the pages' URLs (tokens included)."""
+
+    net: Network
+    sim: SimRobot
+    node: WebPages
+
+    @property
+    def url(self) -> str:
+        return self.node.url
+
+    @property
+    def operator_url(self) -> str:
+        return f"{self.url}/?token={TOKEN}"
+
+    @property
+    def kiosk_url(self) -> str:
+        return f"{self.url}/kiosk?token={KIOSK_TOKEN}"
+
+    def ws_url(self, role: str = "operator", token: str | None = None) -> str:
+        token = (TOKEN if role == "operator" else KIOSK_TOKEN) if token is None else token
+        path = "/ws" if role == "operator" else "/kiosk/ws"
+        return self.url.replace("http://", "ws://") + path + (f"?token={token}" if token else "")
+
+
+def start_web(net: Network, name: str = "web", **options: Any) -> WebPages:
+    """A ``web`` node on ``net`` listening on a free loopback port (``options``: WebConfig's)."""
+    config = WebConfig(**{"listen": "127.0.0.1:0", **options})
+    return net.start(WebPages(config, name=name))
+
+
+@pytest.fixture
+def stage(net: Network) -> Stage:
+    """A simulated ``pepper`` (``RATE`` frames/s, idle motion on) and a web node showing it,
+    with tokens and the kiosk's ``BUTTONS``; pepper's info already known to the node."""
+    sim = net.sim("pepper", rate_hz=RATE, idle=True)
+    node = start_web(net, token=TOKEN, kiosk_token=KIOSK_TOKEN, kiosk={"robot": "pepper", "buttons": BUTTONS})
+    wait_for(lambda: "pepper" in node.shown_robots(), 10, "pepper's info at the web node")
+    return Stage(net, sim, node)
+
+
+class Socket:
+    """A WebSocket client on a loop of its own: ``send`` JSON, ``messages`` as they come
+    (decoded), ``closed`` once the server closed it."""
+
+    def __init__(self, url: str) -> None:
+        self.url = url
+        self.messages: list[dict[str, Any]] = []
+        self.closed = False
+        self.loop = asyncio.new_event_loop()
+        self._ws: aiohttp.ClientWebSocketResponse | None = None
+        self._session: aiohttp.ClientSession | None = None
+        self._thread = threading.Thread(target=self.loop.run_forever, daemon=True)
+        self._thread.start()
+        self._run(self._open())
+
+    def _run(self, coro: Any, timeout: float = 10.0) -> Any:
+        return asyncio.run_coroutine_threadsafe(coro, self.loop).result(timeout)
+
+    async def _open(self) -> None:
+        self._session = aiohttp.ClientSession()
+        self._ws = await self._session.ws_connect(self.url)
+        asyncio.get_running_loop().create_task(self._read())
+
+    async def _read(self) -> None:
+        assert self._ws is not None
+        async for message in self._ws:
+            if message.type == aiohttp.WSMsgType.TEXT:
+                self.messages.append(json.loads(message.data))
+        self.closed = True
+
+    def send(self, data: dict[str, Any] | str) -> None:
+        async def send() -> None:
+            assert self._ws is not None
+            await self._ws.send_str(data if isinstance(data, str) else json.dumps(data))
+        self._run(send())
+
+    def of(self, kind: str, **fields: Any) -> list[dict[str, Any]]:
+        """The messages of ``type`` kind whose ``fields`` are as given."""
+        return [m for m in list(self.messages) if m.get("type") == kind
+                and all(m.get(k) == v for k, v in fields.items())]
+
+    def wait(self, kind: str, timeout: float = 10.0, **fields: Any) -> dict[str, Any]:
+        """The first message of ``type`` kind with ``fields`` (waiting for it)."""
+        return wait_for(lambda: (self.of(kind, **fields) or [None])[0], timeout, f"a {kind} message {fields}",
+                        lambda: f"got: {[m.get('type') for m in self.messages][-20:]}")
+
+    def close(self) -> None:
+        if self.loop.is_closed():
+            return
+
+        async def close() -> None:
+            if self._ws is not None:
+                await self._ws.close()
+            if self._session is not None:
+                await self._session.close()
+        try:
+            self._run(close())
+        finally:
+            self.loop.call_soon_threadsafe(self.loop.stop)
+            self._thread.join(5)
+            self.loop.close()
+
+
+@pytest.fixture
+def websocket() -> Iterator[Callable[[str], Socket]]:
+    """``websocket(url)`` opens a client, closed at the end of the test."""
+    opened: list[Socket] = []
+
+    def open_(url: str) -> Socket:
+        opened.append(Socket(url))
+        return opened[-1]
+
+    try:
+        yield open_
+    finally:
+        for client in opened:
+            client.close()
