@@ -122,9 +122,15 @@ const sonibus = (() => {
     reply(message) {
       this.counters.replies += 1;
       const request = this.pending.get(message.id);
-      const what = [message.robot, request ? request.what : `request ${message.id}`].filter(Boolean).join(" ");
-      if (message.ok) status(`✓ ${what}`, "ok");
-      else status(`✗ ${what}: ${message.error || "refused"}`, "error");
+      let what = request ? request.what : `request ${message.id}`;
+      if (message.robot && !what.startsWith(message.robot + " ")) what = `${message.robot} ${what}`;  // stop: one per robot
+      if (message.ok) {
+        status(`✓ ${what}`, "ok");
+      } else {
+        const error = message.error || "refused";
+        const head = error.split(":")[0];  // an owner's error may start with the verb: said once
+        status(what.endsWith(" " + head) ? `✗ ${what.slice(0, -head.length)}${error}` : `✗ ${what}: ${error}`, "error");
+      }
       if (request && request.done) request.done(message, performance.now() - request.sent);
     }
 

@@ -108,7 +108,7 @@
       return el("tr", {},
         el("th", {scope: "row"}, joint.name), cell,
         el("td", {class: "range", title: `${fixed(joint.min, 2)} … ${fixed(joint.max, 2)}`},
-          el("span", {class: "bar"}, bar)));
+          el("span", {class: "range-bar"}, bar)));
     }
 
     behaviorBox() {
