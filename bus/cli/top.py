@@ -1,0 +1,318 @@
+"""``sonibus top``: a live terminal view of the show — robots, nodes, the selected
+robot's joints, the last events — drawn from ``bus/monitor.py``'s ``Monitor``, so
+it reads only the bus and runs on any machine.
+
+Keys: ``s`` stops every robot (``y`` confirms, any other key cancels; each reply
+is listed with the events), tab or up/down select the robot, ``q`` quits (exit 0),
+Ctrl-C or SIGINT/SIGTERM end it as every command (130). docs/top.md shows it.
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import signal
+import sys
+import time
+from collections.abc import Iterable, Sequence
+from typing import Any, ClassVar
+
+from rich.text import Text
+from textual import events
+from textual.app import App, ComposeResult
+from textual.binding import Binding, BindingType
+from textual.containers import Horizontal, Vertical
+from textual.screen import ModalScreen
+from textual.widgets import DataTable, Footer, Static
+
+from ..client import Outcome, ask
+from ..errors import CommandError, ConfigError, SonibusError
+from ..monitor import EventView, JointView, Monitor, NodeView, RobotView, Snapshot
+from .api import Command, Environment, Exit, bus_config, joined
+
+EVERY_S = 0.25         # the view is redrawn this often
+STOP_TIMEOUT_S = 5.0   # a robot's answer to stop
+BAR = 20               # characters of a joint's bar
+SPARK_SPAN = 0.02      # the smallest range a sparkline spreads over, of a joint's limits
+SPARKS = "▁▂▃▄▅▆▇█"
+ALARM, WARNING, GONE = "bold red", "bold yellow", "red"
+
+ROBOT_COLUMNS = ("robot", "owner", "model", "frames/s", "latency", "seq gaps", "state")
+NODE_COLUMNS = ("adapter", "host", "node", "uptime", "state", "rx/s", "tx/s", "dropped", "stale", "bad", "errors")
+
+
+class Nodes(DataTable[Text], can_focus=False):
+    """The nodes table: shown, never focused (up/down belong to the robots)."""
+
+
+class ConfirmStop(ModalScreen[bool]):
+    """``y`` stops every robot; any other key cancels."""
+
+    DEFAULT_CSS = """
+    ConfirmStop { align: center middle; }
+    ConfirmStop > Static { width: auto; max-width: 90%; border: heavy red; padding: 1 2; background: $panel; }
+    """
+
+    def __init__(self, robots: Sequence[str]) -> None:
+        super().__init__()
+        self.robots = robots
+
+    def compose(self) -> ComposeResult:
+        yield Static(Text.assemble(("Stop every robot", ALARM), f" ({', '.join(self.robots)})?\n\n",
+                                   ("y", "bold"), " stop them    ", ("any other key", "bold"), " cancel"))
+
+    def on_key(self, event: events.Key) -> None:
+        event.stop()
+        self.dismiss(event.key == "y")
+
+
+class TopApp(App[int]):
+    """The view: ``monitor``'s snapshot redrawn every ``every_s``; with ``signals``,
+    SIGINT and SIGTERM end it (the command's process; tests drive it with a pilot)."""
+
+    TITLE = "sonibus top"
+    CSS = """
+    #robots { height: auto; max-height: 10; }
+    #nodes { height: auto; max-height: 14; }
+    #below { height: 1fr; }
+    #joints { width: 3fr; border-top: solid $accent; }
+    #events { width: 2fr; min-width: 40; border-top: solid $accent; }
+    #status { height: 1; color: $text-muted; }
+    """
+    BINDINGS: ClassVar[list[BindingType]] = [
+        Binding("s", "stop_all", "stop every robot"),
+        Binding("q", "quit_top", "quit"),
+        Binding("tab", "next_robot(1)", "next robot", priority=True),
+        Binding("shift+tab", "next_robot(-1)", "previous robot", show=False, priority=True),
+        Binding("ctrl+c", "interrupt", show=False, priority=True),
+    ]
+
+    def __init__(self, monitor: Monitor, every_s: float = EVERY_S, signals: bool = False) -> None:
+        super().__init__()
+        self.monitor, self.every_s, self.signals = monitor, every_s, signals
+        self.snapshot = monitor.snapshot()
+        self.selected: str | None = None
+
+    def compose(self) -> ComposeResult:
+        yield DataTable(id="robots", cursor_type="row", zebra_stripes=True)
+        yield Nodes(id="nodes", cursor_type="none", zebra_stripes=True)
+        with Horizontal(id="below"):
+            yield Static(id="joints")
+            with Vertical(id="events"):
+                yield Static(id="event-lines")
+        yield Static(id="status")
+        yield Footer()
+
+    def on_mount(self) -> None:
+        robots, nodes = self.query_one("#robots", DataTable), self.query_one("#nodes", Nodes)
+        for name in ROBOT_COLUMNS:
+            robots.add_column(name, key=name)
+        for name in NODE_COLUMNS:
+            nodes.add_column(name, key=name)
+        robots.focus()
+        if self.signals:
+            loop = asyncio.get_running_loop()
+            for sig in (signal.SIGINT, signal.SIGTERM):
+                loop.add_signal_handler(sig, self.exit, int(Exit.INTERRUPTED))
+        self.redraw()
+        self.set_interval(self.every_s, self.redraw)
+
+    # -- drawing --------------------------------------------------------------------
+
+    def redraw(self) -> None:
+        """Take a snapshot of the show and show it."""
+        snap = self.snapshot = self.monitor.snapshot()
+        robots = self.query_one("#robots", DataTable)
+        _fill(robots, ((r.name, robot_cells(r)) for r in snap.robots))
+        _fill(self.query_one("#nodes", Nodes), ((f"{n.host}/{n.node}", node_cells(n)) for n in snap.nodes))
+        if self.selected is None and snap.robots:
+            self.selected = snap.robots[0].name
+        robot = next((r for r in snap.robots if r.name == self.selected), None)
+        joints = self.query_one("#joints", Static)
+        joints.border_title = f"joints of {robot.name}" if robot else "joints"
+        joints.update(joint_lines(robot) if robot else Text("no robot on the bus yet", style="italic"))
+        shown = self.query_one("#events", Vertical)
+        shown.border_title = "events"
+        lines = max(1, shown.size.height - 1)
+        self.query_one("#event-lines", Static).update(event_lines(snap.events[-lines:]))
+        self.query_one("#status", Static).update(status_line(snap))
+
+    def on_data_table_row_highlighted(self, event: DataTable.RowHighlighted) -> None:
+        if event.data_table.id == "robots" and event.row_key.value is not None:
+            self.selected = event.row_key.value
+            self.redraw()
+
+    # -- keys -----------------------------------------------------------------------
+
+    def action_next_robot(self, step: int) -> None:
+        robots = self.query_one("#robots", DataTable)
+        if robots.row_count:
+            robots.move_cursor(row=(robots.cursor_row + step) % robots.row_count)
+
+    def action_stop_all(self) -> None:
+        robots = [r.name for r in self.snapshot.robots if not r.gone]
+        if not robots:
+            self.monitor.note("top", "stop", "no robot on the bus to stop")
+            return
+        self.push_screen(ConfirmStop(robots), lambda yes: self._stop(robots) if yes else self._cancelled())
+
+    def _cancelled(self) -> None:
+        self.monitor.note("top", "stop", "cancelled: nothing sent")
+        self.redraw()
+
+    def _stop(self, robots: Iterable[str]) -> None:
+        for robot in robots:
+            self.monitor.note(robot, "stop", "sent")
+            ask(self.monitor.bus, robot, "stop", {}, lambda outcome, r=robot: self._replied(r, outcome),
+                timeout=STOP_TIMEOUT_S)
+        self.redraw()
+
+    def _replied(self, robot: str, outcome: Outcome) -> None:
+        """(On a Zenoh thread: the monitor takes it, the next redraw shows it.)"""
+        if isinstance(outcome, CommandError):
+            self.monitor.note(robot, "stop", f"refused: {outcome.code}: {outcome.message}", alarm=True)
+        else:
+            self.monitor.note(robot, "stop", "ok: stopped")
+
+    def action_quit_top(self) -> None:
+        self.exit(int(Exit.OK))
+
+    def action_interrupt(self) -> None:
+        self.exit(int(Exit.INTERRUPTED))
+
+
+def _fill(table: DataTable[Text], rows: Iterable[tuple[str, list[Text]]]) -> None:
+    """Add the rows not there yet, update the others in place (the cursor stays put)."""
+    columns = list(table.columns)
+    for key, cells in rows:
+        if key not in table.rows:
+            table.add_row(*cells, key=key)
+            continue
+        for column, cell in zip(columns, cells, strict=True):
+            if table.get_cell(key, column) != cell:
+                table.update_cell(key, column, cell)
+
+
+def robot_cells(robot: RobotView) -> list[Text]:
+    """A robot's row: red once its owner left, yellow while another claim stands by."""
+    style = GONE if robot.gone else WARNING if robot.standby else ""
+    state = "gone" if robot.gone else f"CONFLICT: {', '.join(robot.standby)} stands by" if robot.standby else "on bus"
+    latency = f"{robot.latency_ms:.1f} ms" if robot.latency_ms is not None else "-"
+    gaps = Text(f"{robot.gaps:,}", style=style or (WARNING if robot.gaps else ""))
+    return [Text(robot.name, style=style), Text(robot.owner or "?", style=style), Text(robot.model or "?", style=style),
+            Text(f"{robot.rate_hz:.0f}", style=style), Text(latency, style=style), gaps, Text(state, style=style)]
+
+
+def node_cells(node: NodeView) -> list[Text]:
+    """A node's row: red when gone or failed, a loss counter yellow when it moved in the last second."""
+    style = ALARM if node.gone or node.state == "failed" else ""
+    state = f"{node.state}: {node.error}" if node.error else node.state
+    rates = ("-", "-") if node.gone else (f"{node.rx_per_s:,.0f}", f"{node.tx_per_s:,.0f}")
+    losses = [Text(f"{node.counters.get(k, 0):,}", style=style or (WARNING if k in node.moved else ""))
+              for k in ("dropped", "stale", "bad", "errors")]
+    return [Text(node.adapter, style=style), Text(node.host, style=style), Text(node.node, style=style),
+            Text(clock(node.uptime_s), style=style), Text(state, style=style),
+            *(Text(r, style=style) for r in rates), *losses]
+
+
+def clock(seconds: float | None) -> str:
+    """``h:mm:ss`` (``-`` when unknown).
+
+    >>> clock(3725.2), clock(None)
+    ('1:02:05', '-')
+    """
+    if seconds is None:
+        return "-"
+    whole = int(max(0.0, seconds))
+    return f"{whole // 3600}:{whole % 3600 // 60:02d}:{whole % 60:02d}"
+
+
+def joint_lines(robot: RobotView) -> Text:
+    """Each joint: a bar of its value within its limits, the value, the limits and a
+    sparkline of its last seconds (scaled to its own range: small motions show)."""
+    text = Text(no_wrap=True, overflow="crop")
+    for joint in robot.joints:
+        fraction = joint.fraction
+        if fraction is None:
+            bar = Text(" " * (BAR + 2))
+        else:
+            filled = round(fraction * BAR)
+            bar = Text.assemble("[", ("█" * filled, "green"), ("·" * (BAR - filled), "dim"), "]")
+        limits = f"{joint.min:+.2f}..{joint.max:+.2f}" if fraction is not None else ""
+        unit = "" if joint.unit == "rad" else joint.unit[:4]
+        text.append_text(Text.assemble(f"{joint.name:<15}", bar, f"{joint.value:+8.3f} {unit:<4} ",
+                                       (f"{limits:<13} ", "dim"), (sparkline(joint), "cyan"), "\n"))
+    return text
+
+
+def sparkline(joint: JointView) -> str:
+    """The joint's recent values as block characters, scaled to their own range (at
+    least ``SPARK_SPAN`` of the joint's limits: a still joint stays a flat line).
+
+    >>> sparkline(JointView("LHand", 1.0, 0.0, 1.0, "fraction", (0.0, 0.5, 1.0, 1.0)))
+    '▁▅██'
+    >>> sparkline(JointView("HeadYaw", 0.3, -2.0, 2.0, "rad", (0.3, 0.3)))
+    '▁▁'
+    """
+    values = joint.history
+    if not values:
+        return ""
+    low, high = min(values), max(values)
+    floor = SPARK_SPAN * (joint.max - joint.min) if joint.fraction is not None else 0.0
+    span = max(high - low, floor) or 1.0
+    top = len(SPARKS) - 1
+    return "".join(SPARKS[min(top, max(0, round((v - low) / span * top)))] for v in values)
+
+
+def event_lines(shown: Sequence[EventView]) -> Text:
+    """The events, oldest first, one line each; alarms in red."""
+    text = Text(no_wrap=True, overflow="ellipsis")
+    for event in shown:
+        stamp = time.strftime("%H:%M:%S", time.localtime(event.t))
+        text.append(f"{stamp} {event.source:<10} {event.kind:<9} {event.text}\n", style=ALARM if event.alarm else "")
+    return text
+
+
+def status_line(snap: Snapshot) -> Text:
+    """How many robots and nodes are on the bus, and what the monitor itself received and refused."""
+    on_bus = sum(not r.gone for r in snap.robots)
+    alive = sum(not n.gone for n in snap.nodes)
+    counters = snap.counters
+    text = Text(f"{on_bus} robot(s), {alive} node(s) on the bus   received {counters.get('received', 0):,}  "
+                f"bad {counters.get('bad', 0):,}  dropped {counters.get('dropped', 0):,}")
+    if snap.problem:
+        text.append(f"   last refused: {snap.problem}", style=WARNING)
+    return text
+
+
+# -- the command --------------------------------------------------------------------------
+
+
+def _arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--every", type=float, default=EVERY_S, metavar="SECONDS", help="redraw this often")
+
+
+def _top(args: argparse.Namespace, env: Environment) -> Exit:
+    if not (_is_terminal(sys.__stdin__) and _is_terminal(sys.__stderr__)):
+        raise SonibusError("top draws on a terminal, and its input or its error output is not one (a pipe, a "
+                           "file): run it in a terminal, or use `sonibus nodes` / `sonibus echo KEYEXPR` instead")
+    if not 0.02 <= args.every <= 10:
+        raise ConfigError(f"--every {args.every:g}: give a redraw interval of 0.02 to 10 s, e.g. --every 0.25")
+    cfg = bus_config(args)
+    handlers = {sig: signal.getsignal(sig) for sig in (signal.SIGINT, signal.SIGTERM)}
+    with joined(cfg) as bus, Monitor(bus) as monitor:
+        app = TopApp(monitor, args.every, signals=True)
+        try:
+            status = app.run()
+        finally:  # (the app's loop handled them; closing it left Python's defaults)
+            for sig, handler in handlers.items():
+                signal.signal(sig, handler)
+    return Exit(status) if status is not None else Exit.ERROR
+
+
+def _is_terminal(stream: Any) -> bool:
+    return stream is not None and stream.isatty()
+
+
+TOP = Command("top", "a live view of robots, nodes, joints and events (keys: s stop all, q quit)",
+              _arguments, _top, bus=True)

@@ -1,0 +1,397 @@
+"""A live model of the show, fed from the bus alone: robots (owner, model, frame
+rate, latency, seq gaps, joints), nodes (their stats, and whether their token is
+still there) and the last events. ``sonibus top`` draws it; it knows no screen.
+
+It reads only what any machine can: robots' claims and info, ``<robot>/frame``,
+``<robot>/events/*``, nodes' tokens, ``sonibus/stats/*/*`` and
+``sonibus/events/node``. Zenoh's threads only enqueue or note a token; one
+worker of its own takes the messages through the gate (``bus/messages.py``), so
+a bad one is counted (``bad``) and named (``problem``), never fatal.
+``snapshot()`` is safe from any thread and returns frozen dataclasses.
+
+>>> describe_event("behavior", {"t": 0.0, "kind": "behavior", "name": "wave", "state": "started"})
+'wave started'
+>>> describe_event("command", {"verb": "say", "args": {}, "ok": False, "error": {"code": "out_of_range"}})
+'say refused: out_of_range'
+"""
+
+from __future__ import annotations
+
+import contextlib
+import math
+import statistics
+import threading
+import time
+from collections import deque
+from dataclasses import dataclass, field
+from typing import Any
+
+from . import codec, keys, messages
+from .info import InfoRequests
+from .node import Bus, Reply
+from .ownership import Claim
+from .queue import SampleQueue
+from .stats import Counters
+
+WINDOW_S = 1.0          # frame rate and latency are over the last second
+HISTORY = 30            # values kept per joint for a sparkline
+HISTORY_EVERY_S = 0.1   # at most this often: a sparkline of three seconds
+EVENTS = 200            # events kept
+LOSSES = ("dropped", "stale", "bad", "errors")  # counters whose moving is a warning
+QUEUE = 8192
+
+
+@dataclass(frozen=True)
+class JointView:
+    """One joint of a robot: its latest value, its limits (from the robot's info) and recent values."""
+
+    name: str
+    value: float
+    min: float | None = None
+    max: float | None = None
+    unit: str = ""
+    history: tuple[float, ...] = ()
+
+    @property
+    def fraction(self) -> float | None:
+        """Where the value lies between the limits, 0..1 (None without limits).
+
+        >>> JointView("HeadYaw", 0.5, -1.0, 1.0).fraction
+        0.75
+        """
+        if self.min is None or self.max is None or self.max <= self.min:
+            return None
+        return min(1.0, max(0.0, (self.value - self.min) / (self.max - self.min)))
+
+
+@dataclass(frozen=True)
+class RobotView:
+    """A robot: who owns it (``host/node``; ``standby``: other claims), its model,
+    frames over the last second, latency (median of now − ``t``, ms), frames missing
+    by ``seq``, and whether its owner's token went (``gone``)."""
+
+    name: str
+    owner: str = ""
+    standby: tuple[str, ...] = ()
+    model: str = ""
+    rate_hz: float = 0.0
+    latency_ms: float | None = None
+    gaps: int = 0
+    frames: int = 0
+    gone: bool = False
+    joints: tuple[JointView, ...] = ()
+
+
+@dataclass(frozen=True)
+class NodeView:
+    """A node, from its token, description and stats: rates per second, its loss
+    counters (``LOSSES``) and those that moved in its last interval (``moved``);
+    ``state`` is ``gone`` once its token vanished (it stays listed)."""
+
+    host: str
+    node: str
+    adapter: str = "?"
+    state: str = "running"
+    uptime_s: float | None = None
+    rx_per_s: float = 0.0
+    tx_per_s: float = 0.0
+    counters: dict[str, int] = field(default_factory=dict)
+    moved: tuple[str, ...] = ()
+    error: str = ""
+
+    @property
+    def gone(self) -> bool:
+        return self.state == "gone"
+
+
+@dataclass(frozen=True)
+class EventView:
+    """An event as shown: when, whose (a robot, or ``host/node``), its kind and a short text."""
+
+    t: float
+    source: str
+    kind: str
+    text: str
+    alarm: bool = False  # a failure, a refusal, a conflict
+
+
+@dataclass(frozen=True)
+class Snapshot:
+    """The show at one instant; ``counters`` and ``problem`` are the monitor's own
+    (what it received, refused as bad, dropped, and the last refusal's reason)."""
+
+    t: float
+    robots: tuple[RobotView, ...]
+    nodes: tuple[NodeView, ...]
+    events: tuple[EventView, ...]
+    counters: dict[str, int]
+    problem: str = ""
+
+
+class _Robot:
+    """What the monitor keeps of one robot (under the monitor's lock)."""
+
+    def __init__(self) -> None:
+        self.claims: dict[str, Claim] = {}
+        self.claimed = False
+        self.info: dict[str, Any] | None = None
+        self.values: dict[str, float] = {}
+        self.history: dict[str, deque[float]] = {}
+        self.history_at = -math.inf
+        self.recent: deque[tuple[float, float]] = deque()  # (arrival, latency s) over WINDOW_S
+        self.seq: int | None = None
+        self.gaps = 0
+        self.frames = 0
+
+
+class _Node:
+    def __init__(self) -> None:
+        self.alive: bool | None = None  # None: its token not seen (yet)
+        self.about: dict[str, Any] = {}
+        self.stats: dict[str, Any] = {}
+        self.stats_at = 0.0
+        self.failed = ""
+        self.asked = False
+
+
+class Monitor:
+    """The show as the bus tells it; ``start`` subscribes, ``close`` ends it (also as
+    a context manager). The ``Bus``'s session stays the caller's."""
+
+    def __init__(self, bus: Bus, events: int = EVENTS) -> None:
+        self.bus = bus
+        self.counters = Counters(("received", "bad", "dropped"))
+        self._robots: dict[str, _Robot] = {}
+        self._nodes: dict[tuple[str, str], _Node] = {}
+        self._events: deque[EventView] = deque(maxlen=events)
+        self._problem = ""
+        self._lock = threading.Lock()
+        self._queue = SampleQueue(QUEUE)
+        self.counters.follow("dropped", lambda: self._queue.dropped)
+        self._gate = messages.Gate(bus.limits)
+        self._entities: list[Any] = []
+        self._stopping = threading.Event()
+        self._worker: threading.Thread | None = None
+        self._info = InfoRequests(bus, self._on_info, self._on_bad_info)
+
+    def start(self) -> Monitor:
+        for pattern in (keys.frame(), keys.event("*", "*"), keys.NODE_STATS):
+            self._entities.append(self.bus.subscribe(pattern, queue=self._queue)[0])
+        self._entities.append(self.bus.watch_tokens(f"{keys.NODES}/*/*", self._node_token))
+        self._entities.append(self.bus.watch_tokens(keys.robot_token(), self._robot_token))
+        self._worker = threading.Thread(target=self._work, name="monitor", daemon=True)
+        self._worker.start()
+        return self
+
+    def close(self) -> None:
+        self._stopping.set()
+        self._queue.close()
+        for entity in reversed(self._entities):
+            with contextlib.suppress(Exception):  # a session closed underneath: nothing left to undeclare
+                entity.undeclare()
+        self._entities.clear()
+        if self._worker is not None:
+            self._worker.join(2.0)
+
+    def __enter__(self) -> Monitor:
+        return self.start()
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def note(self, source: str, kind: str, text: str, alarm: bool = False) -> None:
+        """Add an event of the viewer's own (a command's reply) to the list."""
+        with self._lock:
+            self._events.append(EventView(time.time(), source, kind, text, alarm))
+
+    # -- Zenoh's threads: note and return ---------------------------------------------------
+
+    def _node_token(self, key: str, alive: bool) -> None:
+        host, _, node = key[len(keys.NODES) + 1:].partition("/")
+        with self._lock:
+            entry = self._nodes.setdefault((host, node), _Node())
+            entry.alive = alive
+            if alive:
+                entry.asked = False  # (a node back under the same name: ask what it is now)
+
+    def _robot_token(self, key: str, alive: bool) -> None:
+        claim = Claim.parse(key)
+        if claim is None:
+            return
+        with self._lock:
+            robot = self._robots.setdefault(claim.robot, _Robot())
+            if alive:
+                robot.claims[claim.key] = claim
+                robot.claimed = True
+            else:
+                robot.claims.pop(claim.key, None)
+                if not robot.claims:
+                    robot.info = None  # asked again if it comes back: another owner may differ
+
+    def _on_info(self, robot: str, info: dict[str, Any]) -> None:
+        with self._lock:
+            entry = self._robots.get(robot)
+            if entry is not None and entry.claims:
+                entry.info = info
+
+    def _on_bad_info(self, robot: str, reason: str) -> None:
+        self._refused(reason)
+
+    def _described(self, host: str, node: str, reply: Reply) -> None:
+        try:
+            about = codec.decode(reply.payload) if reply.payload is not None else None
+        except codec.DecodeError as exc:
+            self._refused(f"{keys.node_token(host, node)}: {exc}")
+            return
+        if isinstance(about, dict):
+            with self._lock:
+                self._nodes.setdefault((host, node), _Node()).about = about
+
+    # -- the worker --------------------------------------------------------------------
+
+    def _work(self) -> None:
+        while not self._stopping.is_set():
+            for key, payload in self._queue.drain(timeout=0.25):
+                self.counters.add("received")
+                try:
+                    self._take(key, payload)
+                except ValueError as exc:  # messages.BadMessage, or not a data key
+                    self._refused(f"{key}: {exc}")
+            self._ask()
+
+    def _take(self, key: str, payload: bytes) -> None:
+        parsed = keys.Key.parse(key)
+        message = self._gate.check(parsed, payload)
+        if parsed.section == "frame":
+            self._frame(parsed.robot, message)
+        elif parsed.section == "stats":
+            host, _, node = parsed.name.partition("/")
+            with self._lock:
+                entry = self._nodes.setdefault((host, node), _Node())
+                entry.stats, entry.stats_at = message, time.monotonic()
+        elif key == keys.NODE_EVENTS:
+            self._node_event(message)
+        elif parsed.section == "events":
+            self._event(parsed.robot, parsed.name, message)
+
+    def _frame(self, name: str, frame: dict[str, Any]) -> None:
+        now, arrival = time.time(), time.monotonic()
+        with self._lock:
+            robot = self._robots.setdefault(name, _Robot())
+            robot.frames += 1
+            seq = frame["seq"]
+            if robot.seq is not None and seq > robot.seq + 1:
+                robot.gaps += seq - robot.seq - 1
+            robot.seq = seq  # (lower: a new owner or a replay that started over, no gap)
+            robot.recent.append((arrival, now - frame["t"]))
+            _forget(robot.recent, arrival)
+            robot.values.update(zip(frame["names"], map(float, frame["v"]), strict=True))
+            if arrival - robot.history_at >= HISTORY_EVERY_S:
+                robot.history_at = arrival
+                for joint, value in robot.values.items():
+                    robot.history.setdefault(joint, deque(maxlen=HISTORY)).append(value)
+
+    def _event(self, robot: str, kind: str, message: dict[str, Any]) -> None:
+        alarm = (kind == "conflict" or (kind == "command" and not message.get("ok", True))
+                 or message.get("state") in ("failed", "lost"))
+        with self._lock:
+            self._events.append(EventView(float(message["t"]), robot, kind, describe_event(kind, message), alarm))
+
+    def _node_event(self, message: dict[str, Any]) -> None:
+        host, node = str(message.get("host", "?")), str(message.get("node", "?"))
+        with self._lock:
+            entry = self._nodes.setdefault((host, node), _Node())
+            if message.get("state") == "failed":
+                entry.failed = str(message.get("error", "failed"))
+            self._events.append(EventView(float(message["t"]), f"{host}/{node}", "node",
+                                          describe_event("node", message), message.get("state") == "failed"))
+
+    def _ask(self) -> None:
+        """Ask robots on the bus without info for it (``InfoRequests`` paces it), and new nodes what they are."""
+        with self._lock:
+            robots = [name for name, r in self._robots.items() if r.claims and r.info is None]
+            nodes = [hn for hn, n in self._nodes.items() if n.alive and not n.asked]
+            for host_node in nodes:
+                self._nodes[host_node].asked = True
+        for robot in robots:
+            self._info.ask(robot)
+        for host, node in nodes:
+            self.bus.ask(keys.node_token(host, node), lambda r, h=host, n=node: self._described(h, n, r),
+                         lambda: None, timeout=2.0)
+
+    def _refused(self, reason: str) -> None:
+        self.counters.add("bad")
+        with self._lock:
+            self._problem = reason
+
+    # -- what the show looks like ---------------------------------------------------------
+
+    def snapshot(self) -> Snapshot:
+        """The show now: robots and nodes by name, events oldest first."""
+        now, arrival = time.time(), time.monotonic()
+        with self._lock:
+            robots = tuple(_robot_view(name, r, arrival) for name, r in sorted(self._robots.items()))
+            nodes = tuple(_node_view(hn, n, arrival) for hn, n in sorted(self._nodes.items()))
+            events, problem = tuple(self._events), self._problem
+        return Snapshot(now, robots, nodes, events, dict(self.counters), problem)
+
+
+def _forget(recent: deque[tuple[float, float]], now: float) -> None:
+    while recent and now - recent[0][0] > WINDOW_S:
+        recent.popleft()
+
+
+def _robot_view(name: str, robot: _Robot, now: float) -> RobotView:
+    _forget(robot.recent, now)
+    claims = sorted(robot.claims.values(), key=lambda c: c.rank)
+    info = robot.info or {}
+    limits = {j["name"]: j for j in info.get("joints", ())}
+    order = [j for j in limits if j in robot.values] + [j for j in robot.values if j not in limits]
+    joints = tuple(JointView(j, robot.values[j], limits.get(j, {}).get("min"), limits.get(j, {}).get("max"),
+                             limits.get(j, {}).get("unit", ""), tuple(robot.history.get(j, ())))
+                   for j in order)
+    latency = statistics.median(lat for _, lat in robot.recent) * 1000.0 if robot.recent else None
+    return RobotView(name, f"{claims[0].host}/{claims[0].node}" if claims else "",
+                     tuple(f"{c.host}/{c.node}" for c in claims[1:]), str(info.get("model", "")),
+                     len(robot.recent) / WINDOW_S, latency, robot.gaps, robot.frames,
+                     robot.claimed and not claims, joints)
+
+
+def _node_view(host_node: tuple[str, str], node: _Node, now: float) -> NodeView:
+    host, name = host_node
+    stats, about = node.stats, node.about
+    counters = stats.get("counters", {})
+    rates = stats.get("rates", {})
+    if node.alive is False:
+        state = "gone"
+    elif node.failed:
+        state = "failed"
+    else:
+        state = str(stats.get("state") or about.get("state") or "running")
+    uptime = None
+    if "uptime_s" in stats:
+        uptime = stats["uptime_s"] + (now - node.stats_at if node.alive is not False else 0.0)
+    elif about.get("since"):
+        uptime = max(0.0, time.time() - about["since"])
+    return NodeView(host, name, str(stats.get("adapter") or about.get("adapter") or "?"), state, uptime,
+                    float(rates.get("received", 0.0)), float(rates.get("sent", 0.0)),
+                    {k: int(counters.get(k, 0)) for k in LOSSES},
+                    tuple(k for k in LOSSES if rates.get(k, 0) > 0), node.failed or str(about.get("failure", "")))
+
+
+def describe_event(kind: str, message: dict[str, Any]) -> str:
+    """A short text of an event's fields (those of its kind first, as the schemas name them)."""
+    if kind == "command":
+        error = message.get("error") or {}
+        outcome = "ok" if message.get("ok") else f"refused: {error.get('code', '?')}"
+        return f"{message.get('verb', '?')} {outcome}"
+    if kind == "node":
+        return f"{message.get('adapter', '?')} {message.get('state', '?')}: {message.get('error', '')}".rstrip(": ")
+    if kind == "conflict":
+        owner = message.get("owner") or {}
+        return f"{message.get('state', '?')}, owner {owner.get('node', '?')} on {owner.get('host', '?')}"
+    if kind == "speech":
+        return f"{message.get('state', '?')} '{message.get('text', '')}'"
+    if kind in ("behavior", "posture"):
+        return f"{message.get('name', '?')} {message.get('state', '?')}"
+    return " ".join(f"{k}={v}" for k, v in message.items() if k not in ("t", "kind"))
