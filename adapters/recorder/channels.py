@@ -8,6 +8,15 @@ messages, and the JSON Schema of its section so Foxglove can plot it as is.
 >>> to_json({"t": 1.5, "seq": 3, "v": 0.25})
 b'{"t":1.5,"seq":3,"v":0.25}'
 
+Audio chunks (``<robot>/audio/mic``, ``<robot>/audio/speaker``) carry bytes,
+which JSON has no type for: their channels hold msgpack, as on the bus
+(``encoding_of``), with the JSON Schema of their fields like the others.
+
+>>> encoding_of("pepper/audio/mic"), encoding_of("pepper/joints/HeadYaw")
+('msgpack', 'json')
+>>> from_data("msgpack", to_data("pepper/audio/mic", {"t": 1.5, "pcm": b"PCM"}))
+{'t': 1.5, 'pcm': b'PCM'}
+
 Beside the bus's keys, a recording may hold views of them for Foxglove's panels
 (``adapters/foxglove/views.py``): each frame whole, events as ``foxglove.Log``,
 the arms as ``foxglove.FrameTransforms``, and the derived keys' units and
@@ -26,15 +35,16 @@ from typing import Any
 
 from sonibus import schemas
 from sonibus.adapters.foxglove.views import FOXGLOVE, is_view
-from sonibus.bus import messages
+from sonibus.bus import codec, messages
 from sonibus.bus.keys import Key
 from sonibus.schemas import foxglove
 
 MESSAGE_ENCODING = "json"
+AUDIO_ENCODING = "msgpack"  # not one of MCAP's well-known encodings: Foxglove lists these channels but cannot show them
 SCHEMA_ENCODING = "jsonschema"
 SCHEMA_PREFIX = "sonibus.v1."
 PROFILE = ""  # no MCAP well-known profile fits; channels carry plain JSON
-__all__ = ["channel_schema", "from_json", "is_view", "schema_for", "to_json"]
+__all__ = ["channel_schema", "encoding_of", "from_data", "from_json", "is_view", "schema_for", "to_data", "to_json"]
 
 
 def channel_schema(key: str) -> tuple[str, bytes] | None:
@@ -65,3 +75,26 @@ def to_json(message: Any) -> bytes:
 
 def from_json(data: bytes) -> Any:
     return json.loads(data)
+
+
+def encoding_of(key: str) -> str:
+    """The MCAP message encoding of channel ``key``: msgpack for audio, JSON for the rest."""
+    parts = key.split("/")
+    return AUDIO_ENCODING if len(parts) == 3 and parts[1] == "audio" else MESSAGE_ENCODING
+
+
+def to_data(key: str, message: Any) -> bytes:
+    """``message`` as channel ``key`` holds it (``encoding_of``); ``ValueError`` or
+    ``TypeError`` for what its encoding cannot carry."""
+    if encoding_of(key) == AUDIO_ENCODING:
+        return codec.encode(message)
+    return to_json(message)
+
+
+def from_data(encoding: str, data: bytes) -> Any:
+    """A message out of a channel of ``encoding``; ``ValueError`` if not one of sonibus's."""
+    if encoding == AUDIO_ENCODING:
+        return codec.decode(data)
+    if encoding == MESSAGE_ENCODING:
+        return from_json(data)
+    raise ValueError(f"{encoding}, not {MESSAGE_ENCODING} or {AUDIO_ENCODING}")

@@ -20,6 +20,7 @@ from .plot import plot
 from .reading import Recording, RecordingError, recover
 from .recorder import Recorder, RecorderConfig, describe
 from .replay import Replay, ReplayConfig
+from .wav import audio_keys, export_wav
 
 
 def _while_running(env: Environment, line: Callable[[], str], done: Callable[[], bool] = lambda: False,
@@ -247,17 +248,25 @@ RECOVER = Command("recover", "save what a damaged recording holds into a new fil
 
 def _export_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("file", metavar="FILE.mcap")
-    p.add_argument("--csv", required=True, metavar="DIR", help="folder for <robot>.csv and events.csv")
+    p.add_argument("--csv", metavar="DIR", help="folder for <robot>.csv and events.csv")
+    p.add_argument("--wav", metavar="DIR", help="folder for <robot>-mic.wav and <robot>-speaker.wav (its audio)")
 
 
 def _export(args: argparse.Namespace, env: Environment) -> Exit:
+    if not args.csv and not args.wav:
+        raise ConfigError("export needs --csv DIR (joints, derived values, events), --wav DIR (audio), or both")
     with Recording(args.file) as recording:
-        for path in export_csv(recording, args.csv):
+        for path in export_csv(recording, args.csv) if args.csv else ():
+            env.say(path)
+        if args.wav and not audio_keys(recording):
+            env.say(f"no audio in {args.file}: no WAV written")
+        for path in export_wav(recording, args.wav, env.say) if args.wav else ():
             env.say(path)
     return Exit.OK
 
 
-EXPORT = Command("export", "a recording as CSV files (one per robot, one of events)", _export_arguments, _export)
+EXPORT = Command("export", "a recording as CSV files (one per robot, one of events) and WAV files (its audio)",
+                 _export_arguments, _export)
 
 
 def _plot_arguments(p: argparse.ArgumentParser) -> None:

@@ -40,7 +40,7 @@ from mcap.stream_reader import StreamReader, get_chunk_data_stream
 from sonibus.bus import keys
 from sonibus.bus.errors import SonibusError
 
-from .channels import MESSAGE_ENCODING, from_json, is_view
+from .channels import AUDIO_ENCODING, MESSAGE_ENCODING, from_data, is_view
 from .writer import METADATA_RECORDING, BadRecord, RecordingWriter
 
 MAGIC = b"\x89MCAP0\r\n"
@@ -183,10 +183,11 @@ def _check_file(path: str) -> None:
 
 
 def _message(channel: Channel, message: McapMessage) -> Message:
-    if channel.message_encoding != MESSAGE_ENCODING:
-        raise RecordingError(f"channel {channel.topic} is {channel.message_encoding}, not {MESSAGE_ENCODING}: "
-                             "not a sonibus recording")
-    return Message(channel.topic, message.log_time, message.publish_time, from_json(message.data))
+    if channel.message_encoding not in (MESSAGE_ENCODING, AUDIO_ENCODING):
+        raise RecordingError(f"channel {channel.topic} is {channel.message_encoding}, not {MESSAGE_ENCODING} "
+                             f"or {AUDIO_ENCODING}: not a sonibus recording")
+    return Message(channel.topic, message.log_time, message.publish_time,
+                   from_data(channel.message_encoding, message.data))
 
 
 def _why(exc: BaseException) -> str:

@@ -18,6 +18,10 @@ with kinematics) and ``<robot>/info/derived`` (what feature processors answer
 there: the derived keys' units and ranges). They are counted in ``foxglove``,
 not ``written``; readers of bus data (replay, export, plot) leave them out.
 
+Audio (``<robot>/audio/mic``, ``<robot>/audio/speaker``) is recorded by default
+too, a channel per key holding each chunk as msgpack (``channels.encoding_of``);
+``sonibus export --wav`` makes WAV files of them (``wav.py``).
+
 Messages wait in the recorder's own bounded queue; if the disk cannot keep up
 the oldest are dropped and counted (``stats["dropped"]``), never silently. A
 message the gate or the writer refuses is counted in ``bad`` and skipped; a
@@ -48,7 +52,7 @@ from .writer import BadRecord, RecordingWriter, WriteError, unwritable
 
 log = logging.getLogger(__name__)
 
-EVERYTHING = ("*/joints/*", "*/derived/**", "*/events/*")
+EVERYTHING = ("*/joints/*", "*/derived/**", "*/events/*", "*/audio/*")
 
 
 @dataclass(frozen=True)

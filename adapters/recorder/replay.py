@@ -11,8 +11,9 @@ Messages are scheduled against the recording's timeline (never a sleep between
 messages), so timing does not drift: each at the time the robot took it (its
 ``t``, the MCAP publish time), so a frame leaves whole, without the jitter the
 live bus added; ``t`` is moved to now and ``seq`` keeps
-counting across loops, so sinks' stale-sample checks and frame reassembly work
-unchanged. No wait is longer than ``max_gap_s`` (``timeline.py``): a longer gap
+counting across loops (each audio key's on its own), so sinks' stale-sample
+checks, frame reassembly and jitter buffers work unchanged. Audio chunks go
+out like the robot's, with the ``AUDIO`` QoS. No wait is longer than ``max_gap_s`` (``timeline.py``): a longer gap
 is shortened to it, with a warning. The joint samples of one frame go out like a robot owner's: the
 frame whole on ``<robot>/frame`` (what sinks listen to), then each joint's
 sample on its key while anyone subscribes there (``bus/ownership.py``, shared with
@@ -38,6 +39,7 @@ from sonibus.bus import codec, commands, keys, messages
 from sonibus.bus.adapter import Adapter
 from sonibus.bus.errors import CommandError
 from sonibus.bus.keys import Key
+from sonibus.bus.node import AUDIO, STREAM
 from sonibus.bus.options import bad
 
 from .reading import Message, Recording, RecordingError
@@ -48,6 +50,7 @@ log = logging.getLogger(__name__)
 MAX_LATE_S = 0.1  # samples later than this are skipped (events never): no bursts of stale data
 LEAD_S = 0.2      # between declaring the publishers and the first message: Zenoh settles its routes
 GATHER_NS = 5_000_000  # a frame's joint samples reach a recorder within this of each other
+STREAMED = {"joints": STREAM, "derived": STREAM, "audio": AUDIO}  # sections sent as streams (late: skipped)
 
 
 @dataclass(frozen=True)
@@ -116,8 +119,8 @@ class Replay(Adapter):
             self.own(self.bus.serve(keys.command(name), self._refuse))
         rates = [float(i.get("rate_hz") or 0) for i in infos.values()]
         self._gap_s = 1.0 / max(rates) if rates and max(rates) > 0 else 0.01
-        self._publishers = {self._renamed(key): self.own(self.bus.stream_publisher(self._renamed(key)))
-                            for key in self.keys if Key.parse(key).section in ("joints", "derived")}
+        self._publishers = {self._renamed(key): self.own(self.bus.stream_publisher(self._renamed(key), qos))
+                            for key in self.keys if (qos := STREAMED.get(Key.parse(key).section)) is not None}
         for robot in {k.partition("/")[0] for k in self.keys if Key.parse(k).section == "joints"}:
             self._owners[self.names[robot]].declare_publishers()
         self.spawn(self._play, "play")
@@ -151,7 +154,7 @@ class Replay(Adapter):
         first_seq: dict[str, int] = {}
         last_seq: dict[str, int] = {}
         while not self.stopping.is_set():
-            seq_shift = {robot: last_seq[robot] + 1 - first for robot, first in first_seq.items()}
+            seq_shift = {counter: last_seq[counter] + 1 - first for counter, first in first_seq.items()}
             timeline = Timeline(cfg.max_gap_s)
             ahead = itertools.islice(self.recording.messages(self.keys, cfg.start, cfg.end), OFFSETS)
             timeline.prime((m.publish_ns - m.log_ns) / 1e9 for m in ahead)
@@ -171,9 +174,9 @@ class Replay(Adapter):
                     continue
                 seq = message.data.get("seq")
                 if isinstance(seq, int):
-                    robot = message.key.partition("/")[0]
-                    first_seq.setdefault(robot, seq)
-                    seq = last_seq[robot] = seq + seq_shift.get(robot, 0)
+                    counter = _counter(message.key)
+                    first_seq.setdefault(counter, seq)
+                    seq = last_seq[counter] = seq + seq_shift.get(counter, 0)
                 # (a t that strayed is moved with its message: at_s − published_s)
                 t_origin = start + wall - (origin_ns / 1e9 + timeline.shift_s - at_s + published_s) / cfg.speed
                 late = time.monotonic() - due > MAX_LATE_S
@@ -236,6 +239,12 @@ class Replay(Adapter):
     def _moved(self, t: float, t_origin: float) -> float:
         """A recorded ``t`` on the replay's clock: now, at its speed."""
         return t_origin + t / self.config.speed
+
+
+def _counter(key: str) -> str:
+    """Whose ``seq`` a message on ``key`` carries: its robot's frames', or its own audio stream's."""
+    parsed = Key.parse(key)
+    return key if parsed.section == "audio" else parsed.robot
 
 
 def _in_frame(message: Message) -> bool:

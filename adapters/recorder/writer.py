@@ -7,7 +7,8 @@ index that make a file seekable.
 
 Each message is checked whole before any byte of it reaches the file: one
 that cannot be written (not strict JSON: bytes, NaN; a log time MCAP cannot
-hold) raises ``BadRecord`` and leaves nothing behind. A failing disk raises
+hold; audio chunks are msgpack, ``channels.encoding_of``) raises
+``BadRecord`` and leaves nothing behind. A failing disk raises
 ``WriteError`` naming the file; the file is then closed as it is (readable up
 to its last complete chunk with ``sonibus recover``), never finished over a
 torn chunk.
@@ -38,7 +39,7 @@ from mcap.writer import CompressionType, Writer
 
 from sonibus.bus.errors import SonibusError
 
-from .channels import MESSAGE_ENCODING, PROFILE, SCHEMA_ENCODING, channel_schema, to_json
+from .channels import AUDIO_ENCODING, PROFILE, SCHEMA_ENCODING, channel_schema, encoding_of, to_data
 
 METADATA_RECORDING = "sonibus.recording"
 METADATA_STATS = "sonibus.stats"
@@ -82,7 +83,7 @@ class RecordingWriter:
         if the file cannot."""
         if self.closed or self.failed:
             raise WriteError(f"cannot write {self.path}: it is {'closed' if self.closed else 'failed'}")
-        data = _json(message)
+        data = _data(key, message)
         if log_ns.__class__ is not int or not 0 <= log_ns < TIME_LIMIT_NS:
             raise BadRecord(f"log time {log_ns!r} is not in 0..2^64 ns")
         channel = self._channels.get(key)
@@ -153,7 +154,7 @@ class RecordingWriter:
         schema_id = self._schemas.get(name)
         if schema_id is None and schema is not None:
             schema_id = self._schemas[name] = self._writer.register_schema(name, SCHEMA_ENCODING, schema[1])
-        return self._writer.register_channel(key, MESSAGE_ENCODING, schema_id or 0)
+        return self._writer.register_channel(key, encoding_of(key), schema_id or 0)
 
     def __enter__(self) -> RecordingWriter:
         return self
@@ -162,14 +163,16 @@ class RecordingWriter:
         self.close()
 
 
-def _json(message: Any) -> bytes:
-    """``message`` as strict JSON (no bytes, NaN or infinity), else ``BadRecord``."""
+def _data(key: str, message: Any) -> bytes:
+    """``message`` as its channel holds it: strict JSON (no bytes, NaN or infinity), or
+    msgpack for audio; else ``BadRecord``."""
     if message.__class__ is not dict:
         raise BadRecord(f"not a map but {type(message).__name__}")
     try:
-        return to_json(message)
+        return to_data(key, message)
     except (TypeError, ValueError, RecursionError) as exc:
-        raise BadRecord(f"not strict JSON: {exc}") from None
+        what = "msgpack" if encoding_of(key) == AUDIO_ENCODING else "strict JSON"
+        raise BadRecord(f"not {what}: {exc}") from None
 
 
 def _publish_ns(t: Any, log_ns: int) -> int:

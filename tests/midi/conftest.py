@@ -1,12 +1,10 @@
-"""A private JACK server per test (dummy driver: no sound card), and MIDI ports to
-talk to the adapters through it."""
+"""A private JACK server per test (dummy driver: no sound card; ``tests/jackd.py``),
+and MIDI ports to talk to the adapters through it."""
 
 from __future__ import annotations
 
 import time
-import uuid
 from collections.abc import Iterator
-from pathlib import Path
 from typing import Any
 
 import pytest
@@ -14,34 +12,9 @@ import rtmidi
 
 from sonibus.bus import codec, keys, messages
 
-from ..conftest import Process, require_tool, wait_for
+from .. import jackd
 
-
-def _jack_up() -> bool:
-    try:
-        probe = rtmidi.MidiOut(rtmidi.API_UNIX_JACK, "probe")
-    except rtmidi.SystemError:
-        return False
-    probe.delete()
-    return True
-
-
-@pytest.fixture
-def jack(spawn, monkeypatch) -> Iterator[str]:
-    """The name of a running JACK server, made the default for this test; always stopped."""
-    jackd = require_tool("jackd", "jackd2")
-    name = f"sonibus-{uuid.uuid4().hex[:8]}"
-    monkeypatch.setenv("JACK_DEFAULT_SERVER", name)
-    monkeypatch.setenv("JACK_NO_START_SERVER", "1")
-    server: Process = spawn(jackd, "--no-realtime", "-n", name, "-d", "dummy", "-r", "48000", "-p", "256")
-    wait_for(lambda: server.popen.poll() is not None or _jack_up(), timeout=10, what=f"jackd -n {name}")
-    if server.popen.poll() is not None:
-        _, err = server.popen.communicate()
-        pytest.fail(f"jackd -n {name} ended at start: {err[-500:]}")
-    yield name
-    server.stop(timeout=5)
-    for leftover in Path("/dev/shm").glob(f"jack_sem.*_{name}_*"):  # jackd 1.9 leaves its clients' semaphores
-        leftover.unlink(missing_ok=True)
+jack = jackd.jack  # the fixture, shared with tests/jack
 
 
 class Reader:

@@ -1,0 +1,54 @@
+"""Opening a JACK client and connecting its ports, with one-line errors.
+
+libjack prints its own complaints on stderr ("Cannot connect to server
+socket ..."); they go to this module's debug log instead, so a missing server
+is the one line ``open_client`` raises.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+
+import jack
+
+from sonibus.bus.errors import ConfigError
+
+log = logging.getLogger(__name__)
+
+jack.set_error_function(lambda text: log.debug("libjack: %s", text))
+jack.set_info_function(lambda text: log.debug("libjack: %s", text))
+
+
+def server_name(server: str) -> str:
+    """The JACK server a client of ``server`` reaches ("" is the default one)."""
+    return server or os.environ.get("JACK_DEFAULT_SERVER", "default")
+
+
+def open_client(name: str, server: str) -> jack.Client:
+    """A client of JACK server ``server`` (never starting one); ``ConfigError`` naming
+    key ``server`` when it is not running."""
+    try:
+        return jack.Client(name, no_start_server=True, servername=server or None)
+    except jack.JackOpenError as exc:
+        jackd = f"jackd -n {server}" if server else "jackd"
+        log.debug("jack.Client(%r, servername=%r): %s", name, server, exc)
+        raise ConfigError(f"key 'server': no JACK server '{server_name(server)}' running — start one first, "
+                          f"e.g. '{jackd} -d dummy -r 48000' (no sound card) or '{jackd} -d alsa'") from None
+
+
+def connect(client: jack.Client, ours: list[jack.OwnPort], theirs: tuple[str, ...], key: str) -> None:
+    """Connect each of ``ours`` to the port of ``theirs`` in the same place (ours an
+    input: theirs plays into it); ``ConfigError`` naming ``key`` and the ports there
+    are when one cannot be connected."""
+    for port, other in zip(ours, theirs, strict=False):
+        try:
+            if port.is_input:
+                client.connect(other, port)
+            else:
+                client.connect(port, other)
+        except jack.JackError as exc:
+            there = client.get_ports(is_audio=True, is_input=port.is_output, is_output=port.is_input)
+            names = ", ".join(repr(p.name) for p in there if not p.name.startswith(client.name + ":")) or "none"
+            raise ConfigError(f"key '{key}': cannot connect '{port.name}' with '{other}' ({exc}) — "
+                              f"audio {'outputs' if port.is_input else 'inputs'} there: {names}") from None

@@ -1,0 +1,70 @@
+"""``FrameRing``: audio frames from JACK's process callback to a worker, without a lock.
+
+One writer (the real-time callback) copies each block into a preallocated
+array and then advances a counter; one reader cuts what is there into chunks.
+Only the writer changes ``written`` and ``anchor``, only the reader ``read``
+(a Python int assignment is atomic), so neither ever waits for the other. A
+reader that falls more than the ring behind loses the oldest frames, whole
+chunks of them (counted in ``lost``), and goes on from what is still there.
+
+>>> import numpy as np
+>>> ring = FrameRing(channels=2, rate=1000, capacity=8)
+>>> ring.write([np.arange(4, dtype=np.float32), -np.arange(4, dtype=np.float32)], t=100.0)
+>>> ring.read(3)
+(100.0, array([[ 0., -0.],
+       [ 1., -1.],
+       [ 2., -2.]], dtype=float32))
+>>> ring.read(3) is None                         # one frame waits for two more
+True
+>>> ring.write([np.zeros(6, np.float32)] * 2, t=100.004)
+>>> ring.read(3)[0], ring.lost                   # 10 written, 3 read: a chunk about to be overwritten
+(100.006, 3)
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+
+
+class FrameRing:
+    """Float32 frames in (``write``, real-time safe), fixed-size chunks out (``read``)."""
+
+    def __init__(self, channels: int, rate: int, capacity: int) -> None:
+        self.rate = rate
+        self.capacity = capacity
+        self.lost = 0                 # frames overwritten before they were read
+        self._data = np.zeros((capacity, channels), np.float32)
+        self._written = 0             # frames ever written (writer only)
+        self._read = 0                # frames ever read (reader only)
+        self._anchor = (0, 0.0)       # (frame number, wall-clock s) of the latest block (writer only)
+
+    def write(self, columns: Sequence[np.ndarray], t: float) -> None:
+        """One block, a column per channel, whose first frame was taken at ``t`` (wall clock)."""
+        n = len(columns[0])
+        start = self._written % self.capacity
+        first = min(n, self.capacity - start)
+        for channel, column in enumerate(columns):
+            self._data[start:start + first, channel] = column[:first]
+            if first < n:
+                self._data[:n - first, channel] = column[first:n]
+        self._anchor = (self._written, t)
+        self._written += n  # last: the reader sees the frames only once they are there
+
+    def read(self, frames: int) -> tuple[float, np.ndarray] | None:
+        """The next ``frames`` frames and the wall-clock time of the first, or None until written."""
+        written = self._written
+        excess = written - self._read - (self.capacity - frames)
+        if excess > 0:  # the writer is about to overwrite them: skip whole chunks (a reader sees a gap)
+            skip = -(-excess // frames) * frames
+            self.lost += skip
+            self._read += skip
+        if written - self._read < frames:
+            return None
+        index = np.arange(self._read, self._read + frames) % self.capacity
+        chunk = self._data[index]
+        anchor_frame, anchor_t = self._anchor
+        t = round(anchor_t + (self._read - anchor_frame) / self.rate, 6)
+        self._read += frames
+        return t, chunk

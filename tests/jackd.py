@@ -1,0 +1,47 @@
+"""A private JACK server per test (dummy driver: no sound card), shared by the
+MIDI and audio tests: their conftests import the ``jack`` fixture from here."""
+
+from __future__ import annotations
+
+import uuid
+from collections.abc import Iterator
+from pathlib import Path
+
+import jack as jack_client
+import pytest
+
+from .conftest import Process, require_tool, wait_for
+
+RATE = 48000
+PERIOD = 256
+
+jack_client.set_error_function(lambda text: None)  # libjack's "cannot connect" while the server starts
+jack_client.set_info_function(lambda text: None)
+
+
+def jack_up(name: str) -> bool:
+    """Whether JACK server ``name`` takes clients."""
+    try:
+        probe = jack_client.Client("probe", no_start_server=True, servername=name)
+    except jack_client.JackOpenError:
+        return False
+    probe.close()
+    return True
+
+
+@pytest.fixture
+def jack(spawn, monkeypatch) -> Iterator[str]:
+    """The name of a running JACK server, made the default for this test; always stopped."""
+    jackd = require_tool("jackd", "jackd2")
+    name = f"sonibus-{uuid.uuid4().hex[:8]}"
+    monkeypatch.setenv("JACK_DEFAULT_SERVER", name)
+    monkeypatch.setenv("JACK_NO_START_SERVER", "1")
+    server: Process = spawn(jackd, "--no-realtime", "-n", name, "-d", "dummy", "-r", str(RATE), "-p", str(PERIOD))
+    wait_for(lambda: server.popen.poll() is not None or jack_up(name), timeout=10, what=f"jackd -n {name}")
+    if server.popen.poll() is not None:
+        _, err = server.popen.communicate()
+        pytest.fail(f"jackd -n {name} ended at start: {err[-500:]}")
+    yield name
+    server.stop(timeout=5)
+    for leftover in Path("/dev/shm").glob(f"jack_sem.*_{name}_*"):  # jackd 1.9 leaves its clients' semaphores
+        leftover.unlink(missing_ok=True)
