@@ -19,7 +19,9 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["AudioChunk", "to_int16"]
+from .jitter import JitterBuffer
+
+__all__ = ["AudioChunk", "JitterBuffer", "to_int16"]
 
 FULL_SCALE = 32767
 SAMPLE = np.dtype("<i2")  # int16 little-endian, whatever this host's byte order
