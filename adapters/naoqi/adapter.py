@@ -4,7 +4,10 @@
 backoff, one log line per outage), learns the robot (``discover``), then reads
 every joint once per frame until the link breaks or the node stops, and
 connects again. ``connection`` events say ``connected``/``lost``; a ``status``
-event every ``status_every_s`` gives the achieved rate and read latency."""
+event every ``status_every_s`` gives the achieved rate and read latency.
+With ``audio`` (and a robot that has ALAudioDevice) its microphones go to
+``<robot>/audio/mic`` while anyone listens (``microphones``) and
+``<robot>/audio/speaker`` is played on it (``speaker``)."""
 
 from __future__ import annotations
 
@@ -15,7 +18,10 @@ import time
 from collections.abc import Sequence
 from typing import Any
 
+from sonibus.bus import codec, keys
+from sonibus.bus.audio import AudioChunk
 from sonibus.bus.errors import CommandError
+from sonibus.bus.node import AUDIO
 from sonibus.bus.owner import RobotAdapter
 from sonibus.bus.pacing import Pacer
 from sonibus.bus.robot import load_model
@@ -26,6 +32,9 @@ from .config import NaoqiConfig
 from .connection import Link, LinkDown, RemoteError
 from .discover import Robot, discover
 from .events import RobotEvents
+from .microphones import AUDIO_DEVICE, Microphones
+from .speaker import COUNTERS as SPEAKER_COUNTERS
+from .speaker import OUTPUT_CHANNELS, OUTPUT_RATE, Speaker
 
 log = logging.getLogger(__name__)
 announce = logging.getLogger(f"{__name__}.connected")  # "connected to Pepper 'x' at ...": said at the default level
@@ -41,6 +50,7 @@ class NaoqiRobot(RobotAdapter):
     Config = NaoqiConfig
     Verbs = NaoqiCommands
     verbs: NaoqiCommands
+    counters = ("mic_chunks", "mic_refused", *SPEAKER_COUNTERS)
 
     def _open(self) -> None:
         self.model = load_model(self.config.model_name)  # until the robot tells its own
@@ -56,11 +66,29 @@ class NaoqiRobot(RobotAdapter):
         self._error = "not connected yet"
         self._announced = ""                 # connection state last published
         self._seq, self._lost_at = -1, 0.0
+        self.audio_present = False  # the robot connected now has ALAudioDevice
+        self.microphones: Microphones | None = None
+        self.speaker: Speaker | None = None
+        if self.config.audio:
+            self._open_audio()
+
+    def _open_audio(self) -> None:
+        key = keys.audio(self.robot, "mic")
+        self._mic = self.own(self.bus.stream_publisher(key, AUDIO))
+        microphones = self.microphones = Microphones(self.link, self.config, self.name, self._publish_mic,
+                                                     self.warn, self.count)
+        self.own(self.bus.watch_subscribers(key, microphones.wanted))
+        self.speaker = Speaker(self, self.link, self.robot, self.config)
+        self.spawn(lambda: microphones.run(self.stopping), "microphones")
+        self.spawn(self.speaker.run, "speaker")
 
     def _stop(self) -> None:
         if not hasattr(self, "link"):  # start failed before _open finished
             return
         self._halt.set()
+        if self.microphones is not None:
+            self.microphones.close()
+        self._audio(False)
         try:
             self.verbs.restore_awareness()
         except (LinkDown, RemoteError) as exc:
@@ -106,6 +134,8 @@ class NaoqiRobot(RobotAdapter):
         reader = self._reader(robot, polled)
         robot = dataclasses.replace(robot, source=reader.source)
         self.verbs.connected(robot.behaviors)
+        if self.microphones is not None:
+            self._audio(self._has_audio())
         if self.config.pause_awareness:
             try:
                 self.verbs.pause_awareness()
@@ -142,6 +172,32 @@ class NaoqiRobot(RobotAdapter):
     def _lost(self, reason: str) -> None:
         self._error = reason
         self._halt.set()
+        self._audio(False)
+
+    # -- audio ------------------------------------------------------------------------
+
+    def _has_audio(self) -> bool:
+        try:
+            self.link.service(AUDIO_DEVICE)
+        except RemoteError as exc:
+            log.info("%s: robot '%s' has no audio: %s", self.name, self.robot, exc)
+            return False
+        return True
+
+    def _audio(self, present: bool) -> None:
+        """Audio works now (connected to a robot with ALAudioDevice), or not."""
+        self.audio_present = present and self.microphones is not None
+        if self.microphones is not None and self.speaker is not None:
+            self.microphones.available(self.audio_present)
+            if self.audio_present:
+                self.speaker.available.set()
+            else:
+                self.speaker.available.clear()
+
+    def _publish_mic(self, chunk: AudioChunk) -> None:
+        if self.ownership.active:  # (standing by: the owner's microphones speak)
+            self._mic.put(codec.encode(chunk.message()))
+            self.count("mic_chunks")
 
     def _announce(self, state: str) -> None:
         if state != self._announced:
@@ -206,6 +262,10 @@ class NaoqiRobot(RobotAdapter):
         info["naoqi"] = {"url": self.link.url, "connected": self.link.connected, "error": self._error,
                          "speech_events": self.events.mode, **(self.facts.info() if self.facts else {}),
                          **self.status()}
+        if self.audio_present and self.microphones is not None:
+            info["audio"] = {"mic": {"rate": self.microphones.rate, "channels": self.microphones.channels},
+                             "speaker": {"rate": OUTPUT_RATE, "channels": OUTPUT_CHANNELS}}
+            info["naoqi"].update(mic_subscribed=self.microphones.subscribed, mic_clock=self.microphones.clock.source)
         return info
 
     def execute(self, verb: str, args: Any) -> dict[str, Any]:

@@ -17,6 +17,9 @@ from sonibus.bus.robot import models
 
 Source = Literal["auto", "almemory", "motion"]
 Quantity = Literal["cmd", "cur", "temp"]
+MicChannels = Literal["all", "left", "right", "front", "rear"]
+
+MIC_RATES = (16000, 48000)  # what ALAudioDevice.setClientPreferences accepts
 
 DEFAULT_PORTS = {"tcp": 9559, "tcps": 9503}
 _URL = re.compile(r"^(?:(?P<scheme>[a-z]+)://)?(?P<host>\[[0-9a-fA-F:.]+\]|[^:/\s]+)(?::(?P<port>\d+))?/?$")
@@ -38,6 +41,11 @@ class NaoqiConfig:
     connect_timeout_s: float = 5.0      # a connect, or any call, that takes longer means the link is down
     retry_max_s: float = 10.0           # reconnect backoff grows from 0.25 s up to this
     status_every_s: float = 5.0         # a ``status`` event (achieved rate, read latency) this often
+    audio: bool = True                  # <robot>/audio/mic and /speaker, if the robot has ALAudioDevice
+    mic_rate: int = 16000               # 16000 or 48000 Hz, as ALAudioDevice delivers them
+    mic_channels: MicChannels = "all"   # all four microphones, or one of them
+    speaker_latency_ms: float = 100.0   # the speaker's jitter buffer: playback starts once this much is buffered
+    volume_ceiling: float = 0.25        # |sample| never above this fraction of full scale (visitors stand close)
 
     def __post_init__(self) -> None:
         if not 0 < self.rate_hz <= 1000:
@@ -57,6 +65,12 @@ class NaoqiConfig:
         for key in ("connect_timeout_s", "retry_max_s", "status_every_s"):
             if not getattr(self, key) > 0:
                 raise bad(key, f"{getattr(self, key):g} must be more than 0")
+        if self.mic_rate not in MIC_RATES:
+            raise bad("mic_rate", f"{self.mic_rate} Hz: ALAudioDevice delivers 16000 or 48000")
+        if not 10 <= self.speaker_latency_ms <= 2000:
+            raise bad("speaker_latency_ms", f"{self.speaker_latency_ms:g} must be in [10, 2000]")
+        if not 0 < self.volume_ceiling <= 1:
+            raise bad("volume_ceiling", f"{self.volume_ceiling:g} must be in (0, 1] (a fraction of full scale)")
 
     @property
     def model_name(self) -> str:

@@ -26,6 +26,7 @@ from sonibus.bus.pacing import Pacer
 from sonibus.bus.robot import load_model, models
 
 from .engine import SimEngine
+from .naoqi_audio import ALAudioDevice
 from .naoqi_services import MEMORY, QUANTITIES, SERVICES, ALBehaviorManager, ALMemory, f32
 
 log = logging.getLogger(__name__)
@@ -51,6 +52,11 @@ class FakeNaoqiConfig:
     robot_name: str = "sonibus-sim"        # what ALSystem.robotName() answers
     speech_keys: Literal["at-start", "after-first-say"] = "at-start"  # when ALTextToSpeech/Text* exist in ALMemory
     freeze_after_s: float = 0.0            # stop answering calls this long after start (socket kept open); 0: never
+    audio: bool = True                     # serve ALAudioDevice (microphones hear the motors; a speaker)
+    mic_buffer: int = 8192                 # frames at 48 kHz per processRemote (ALAudioDevice's inputBufferSize)
+    clock_offset_s: float = 0.0            # the robot's clock minus this machine's (its audio timestamps)
+    played_max_s: float = 60.0             # the speaker keeps this much of what it played
+    played_wav: str = ""                   # write what the speaker played there on stop (WAV); "": do not
 
     def __post_init__(self) -> None:
         if self.model not in models():
@@ -60,6 +66,10 @@ class FakeNaoqiConfig:
         for key in ("delay_ms", "almemory_period_ms", "freeze_after_s"):
             if getattr(self, key) < 0:
                 raise bad(key, "must be 0 or more")
+        if self.mic_buffer not in (8192, 16384):
+            raise bad("mic_buffer", f"{self.mic_buffer}: ALAudioDevice's inputBufferSize is 8192 or 16384")
+        if not self.played_max_s > 0:
+            raise bad("played_max_s", f"{self.played_max_s:g} must be more than 0")
 
 
 class FakeNaoqi:
@@ -86,6 +96,11 @@ class FakeNaoqi:
     def url(self) -> str:
         return self.config.listen
 
+    @property
+    def session(self) -> Any:
+        """The fake robot's libqi session (where clients' modules are found)."""
+        return self._session
+
     def start(self) -> FakeNaoqi:
         import qi
         self._refresh()
@@ -95,9 +110,11 @@ class FakeNaoqi:
         qi.logging.setLevel(qi.logging.ERROR)  # libqi's chatter on stderr; our own log says what matters
         self._session = qi.Session()
         self._session.listenStandalone(self.config.listen)
-        for service in SERVICES:
+        for service in (*SERVICES, ALAudioDevice) if self.config.audio else SERVICES:
             self.services[service.__name__] = service(self)
             self._session.registerService(service.__name__, self.services[service.__name__])
+        if self.config.audio:
+            self.services["ALAudioDevice"].start()
         self._thread = threading.Thread(target=self._run, name="fake-naoqi", daemon=True)
         self._thread.start()
         return self
@@ -120,6 +137,12 @@ class FakeNaoqi:
         self.answering.set()
         if self._thread is not None:
             self._thread.join(2.0)
+        audio: ALAudioDevice | None = self.services.get("ALAudioDevice")
+        if audio is not None:
+            audio.stop()
+            if self.config.played_wav:
+                log.info("fake NAOqi at %s: %d frames played, written to %s", self.url,
+                         audio.dumpPlayed(self.config.played_wav), self.config.played_wav)
         if self._session is not None:
             self._session.close()
             self._session = None
