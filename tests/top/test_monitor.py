@@ -1,0 +1,142 @@
+"""The model behind ``sonibus top`` (bus/monitor.py) on a real bus: robots with their
+owner, model, rate, latency, gaps and joint limits; nodes with their stats; events;
+bad messages counted, never fatal; a robot or node that leaves stays, as gone."""
+
+from __future__ import annotations
+
+import threading
+import time
+from dataclasses import dataclass
+
+from sonibus.bus import Adapter, keys, load_model, messages
+from sonibus.bus.monitor import Monitor, Snapshot
+
+from ..conftest import wait_for
+
+
+def robot(snapshot: Snapshot, name: str):
+    return next((r for r in snapshot.robots if r.name == name), None)
+
+
+def node(snapshot: Snapshot, name: str):
+    return next((n for n in snapshot.nodes if n.node == name), None)
+
+
+def test_a_robot_shows_its_owner_model_rate_latency_and_joints_within_its_limits(net):
+    sim = net.sim("pepper", rate_hz=50)
+    with Monitor(net.bus("top")) as monitor:
+        seen = wait_for(lambda: (r := robot(monitor.snapshot(), "pepper")) and r.model and r.rate_hz > 10 and r,
+                        what="pepper with its info and frames")
+    assert seen.owner == f"{sim.bus.host}/sim-pepper" and seen.model == "pepper" and not seen.gone
+    assert seen.latency_ms is not None and seen.latency_ms >= 0
+    model = load_model("pepper")
+    assert [j.name for j in seen.joints] == list(model.joint_names)
+    for joint in seen.joints:
+        spec = model.joint(joint.name)
+        assert (joint.min, joint.max, joint.unit) == (spec.min, spec.max, spec.unit)
+        assert 0.0 <= joint.fraction <= 1.0 and joint.history
+
+
+def test_frames_missing_by_seq_are_counted_as_gaps_and_a_restart_is_none(net):
+    script = net.bus("script")
+    with Monitor(net.bus("top")) as monitor:
+        def put(seq: int) -> None:
+            script.put(keys.frame("bot"), messages.frame(time.time(), seq, ["HeadYaw"], [0.1 * seq]))
+
+        put(1)  # (the subscription may not reach the script yet: until the first frame is seen)
+        wait_for(lambda: robot(monitor.snapshot(), "bot") or put(1), what="the first frame of bot")
+        for seq in (2, 5, 6, 1, 2, 9):  # 3 and 4 missing; then it starts over (no gap); 3..8 missing
+            put(seq)
+        seen = wait_for(lambda: (r := robot(monitor.snapshot(), "bot")) and r.joints[0].value == 0.9 and r,
+                        what="the last frame")
+    assert seen.gaps == 2 + 6
+    assert seen.owner == "" and not seen.gone  # frames with nobody claiming the robot: shown, owner unknown
+
+
+def test_bad_stats_and_events_are_counted_and_named_and_the_monitor_goes_on(net):
+    script = net.bus("script")
+    with Monitor(net.bus("top")) as monitor:
+        stats = script.session.declare_publisher(keys.node_stats("rogue", "node"))
+        wait_for(lambda: stats.matching_status.matching, what="the monitor's stats subscription")
+        stats.put(b"\xc1 not msgpack")
+        script.put(keys.node_stats("rogue", "node"), {"t": time.time(), "host": "rogue"})  # fields missing
+        script.put(keys.event("pepper", "behavior"), {"t": time.time(), "kind": "behavior"})  # name, state missing
+        wait_for(lambda: monitor.snapshot().counters["bad"] >= 3, what="three bad messages counted")
+        assert "sonibus/stats/rogue/node" in monitor.snapshot().problem or "pepper/events/behavior" in \
+            monitor.snapshot().problem
+        script.put(keys.event("pepper", "speech"), {"t": time.time(), "kind": "speech", "text": "hi", "state": "done"})
+        event = wait_for(lambda: monitor.snapshot().events, what="a good event after the bad ones")[-1]
+    assert (event.source, event.kind, event.text, event.alarm) == ("pepper", "speech", "done 'hi'", False)
+    assert len(monitor.snapshot().events) == 1  # the bad one is not listed
+    assert node(monitor.snapshot(), "node") is None or node(monitor.snapshot(), "node").adapter == "?"
+
+
+def test_a_robot_and_its_node_leaving_are_shown_as_gone_and_stay_listed(net):
+    sim = net.sim("nao", rate_hz=20)
+    with Monitor(net.bus("top")) as monitor:
+        wait_for(lambda: (r := robot(monitor.snapshot(), "nao")) and r.frames and node(monitor.snapshot(), "sim-nao"),
+                 what="nao and its node")
+        assert node(monitor.snapshot(), "sim-nao").state == "running"
+        sim.stop()
+        wait_for(lambda: robot(monitor.snapshot(), "nao").gone, what="nao shown as gone")
+        wait_for(lambda: node(monitor.snapshot(), "sim-nao").gone, what="its node shown as gone")
+        snapshot = monitor.snapshot()
+    assert robot(snapshot, "nao").owner == "" and robot(snapshot, "nao").joints  # its last values stay
+    assert node(snapshot, "sim-nao").adapter == "sim"
+
+
+class Lossy(Adapter):
+    """A node that drops something every few milliseconds, and receives."""
+
+    @dataclass(frozen=True)
+    class Config:
+        pass
+
+    def _start(self) -> None:
+        self.spawn(self._lose, "lose")
+
+    def _lose(self) -> None:
+        while not self.stopping.wait(0.01):
+            self.count("dropped")
+            self.count("received", 10)
+
+
+class Failing(Adapter):
+    """A node whose worker dies once told to."""
+
+    @dataclass(frozen=True)
+    class Config:
+        pass
+
+    def _start(self) -> None:
+        self.die = threading.Event()
+        self.spawn(self._work, "work")
+
+    def _work(self) -> None:
+        while not self.stopping.wait(0.01):
+            if self.die.is_set():
+                raise RuntimeError("the lamp broke")
+
+
+def test_node_stats_show_rates_losses_that_moved_and_a_failure(net):
+    with Monitor(net.bus("top")) as monitor:
+        lossy = net.start(Lossy(name="lossy"))
+        failing = net.start(Failing(name="failing"))
+        seen = wait_for(lambda: (n := node(monitor.snapshot(), "lossy")) and n.counters["dropped"] and n,
+                        what="lossy's stats")
+        assert seen.host == lossy.bus.host and seen.adapter == "Lossy" and seen.state == "running"  # (its class name)
+        assert "dropped" in seen.moved and seen.rx_per_s > 0 and seen.uptime_s is not None
+        assert node(monitor.snapshot(), "failing").moved == ()
+        failing.die.set()
+        failed = wait_for(lambda: (n := node(monitor.snapshot(), "failing")) and n.state == "failed" and n,
+                          what="the failed node")
+        event = wait_for(lambda: [e for e in monitor.snapshot().events if e.kind == "node"], what="its event")[0]
+    assert "the lamp broke" in failed.error
+    assert event.source == f"{failing.bus.host}/failing" and event.alarm and "the lamp broke" in event.text
+
+
+def test_a_note_of_the_viewer_is_listed_with_the_events(net):
+    with Monitor(net.bus("top")) as monitor:
+        monitor.note("pepper", "stop", "ok: stopped")
+        (event,) = monitor.snapshot().events
+    assert (event.source, event.kind, event.text) == ("pepper", "stop", "ok: stopped")
