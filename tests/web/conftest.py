@@ -112,14 +112,14 @@ class Socket:
             await self._ws.send_str(data if isinstance(data, str) else json.dumps(data))
         self._run(send())
 
-    def of(self, kind: str, **fields: Any) -> list[dict[str, Any]]:
-        """The messages of ``type`` kind whose ``fields`` are as given."""
-        return [m for m in list(self.messages) if m.get("type") == kind
+    def of(self, type_: str, /, **fields: Any) -> list[dict[str, Any]]:
+        """The messages of type ``type_`` whose ``fields`` are as given."""
+        return [m for m in list(self.messages) if m.get("type") == type_
                 and all(m.get(k) == v for k, v in fields.items())]
 
-    def wait(self, kind: str, timeout: float = 10.0, **fields: Any) -> dict[str, Any]:
-        """The first message of ``type`` kind with ``fields`` (waiting for it)."""
-        return wait_for(lambda: (self.of(kind, **fields) or [None])[0], timeout, f"a {kind} message {fields}",
+    def wait(self, type_: str, /, timeout: float = 10.0, **fields: Any) -> dict[str, Any]:
+        """The first message of type ``type_`` with ``fields`` (waiting for it)."""
+        return wait_for(lambda: (self.of(type_, **fields) or [None])[0], timeout, f"a {type_} message {fields}",
                         lambda: f"got: {[m.get('type') for m in self.messages][-20:]}")
 
     def close(self) -> None:
