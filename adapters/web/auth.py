@@ -2,8 +2,9 @@
 
 A request carries its token as ``?token=`` or ``Authorization: Bearer <token>``.
 Operator routes take the operator token only; kiosk routes take the kiosk token or the
-operator's. With no token configured a route is served to this machine alone (the
-server then listens on loopback: ``WebConfig`` refuses anything else). A refusal is a
+operator's; the shipped code and kiosk images take none. With no token configured
+every route is served to this machine alone (the server then listens on loopback:
+``WebConfig`` refuses anything else, and a kiosk token without an operator token). A refusal is a
 403 with one plain line, counted ``refused``, and warned about once per client address.
 """
 
@@ -13,6 +14,7 @@ import hmac
 import ipaddress
 import logging
 from collections.abc import Callable
+from typing import NoReturn
 
 from aiohttp import web
 
@@ -33,24 +35,20 @@ class Guard:
         """Return if ``request`` may use a route of ``role`` ("operator", "kiosk", or "asset":
         shipped files and kiosk images, public where a token is configured); else raise a 403."""
         peer = request.remote or ""
-        if role == "asset":  # (the shipped code and kiosk images: no secret, and a page cannot pass tokens on)
-            if self.token or _loopback(peer):
-                return
-            self._refuse(peer, request, "this server has no token and serves this machine only")
-        given = _token(request)
-        if role == "operator" and given and self.kiosk_token and _same(given, self.kiosk_token):
-            self._refuse(peer, request, "the kiosk's token does not open operator pages")
-        accepted = [t for t in (self.token, self.kiosk_token if role == "kiosk" else "") if t]
-        if not accepted:
+        if not self.token:  # (no kiosk token either: WebConfig wants the operator's first)
             if _loopback(peer):
                 return
             self._refuse(peer, request, "this server has no token and serves this machine only")
+        if role == "asset":  # the shipped code and kiosk images: no secret, and a page cannot pass tokens on
+            return
+        given = _token(request)
         if given is None:
             self._refuse(peer, request, "a token is needed (?token=... or Authorization: Bearer ...)")
+        accepted = (self.token, self.kiosk_token) if role == "kiosk" and self.kiosk_token else (self.token,)
         if not any(_same(given, t) for t in accepted):
             self._refuse(peer, request, "wrong token for this page")
 
-    def _refuse(self, peer: str, request: web.Request, reason: str) -> None:
+    def _refuse(self, peer: str, request: web.Request, reason: str) -> NoReturn:
         self.count("refused")
         if peer not in self._warned:
             if len(self._warned) >= MAX_WARNED:

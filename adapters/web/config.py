@@ -101,6 +101,9 @@ class WebConfig:
             raise bad("listen", f"{self.listen!r} serves beyond this machine without a token — set token = "
                                 "\"<a long random string>\" (e.g. from `openssl rand -hex 16`) or listen on "
                                 "127.0.0.1")
+        if self.kiosk_token and not self.token:
+            raise bad("kiosk_token", "is set but token is not: the operator's page would be open to anyone at "
+                                     "this machine, the kiosk's visitors too — set token as well")
         if self.kiosk_token and self.kiosk_token == self.token:
             raise bad("kiosk_token", "is the operator token: a kiosk would reach the operator's controls — "
                                      "give the kiosk a token of its own")

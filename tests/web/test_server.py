@@ -259,6 +259,7 @@ def test_from_another_address_a_token_is_needed_and_without_one_configured_nothi
 
 CONFIG_ERRORS = {
     "token = \"same\"\nkiosk_token = \"same\"": "key 'kiosk_token': is the operator token",
+    "kiosk_token = \"k\"": "key 'kiosk_token': is set but token is not",
     "update_hz = 0": "key 'update_hz': 0 must be in [1, 100]",
     "speed = 1.5": "key 'speed': 1.5 must be in (0, 1]",
     "[nodes.web.kiosk]\nrobot = \"pepper\"\n[[nodes.web.kiosk.buttons]]\nid = \"x\"\nlabel = \"X\"\n"
