@@ -189,7 +189,8 @@ def _fill(table: DataTable[Text], rows: Iterable[tuple[str, list[Text]]]) -> Non
             table.add_row(*cells, key=key)
             continue
         for column, cell in zip(columns, cells, strict=True):
-            if table.get_cell(key, column) != cell:
+            shown = table.get_cell(key, column)
+            if (shown.plain, str(shown.style)) != (cell.plain, str(cell.style)):  # (Text's == ignores its style)
                 table.update_cell(key, column, cell)
 
 

@@ -1,0 +1,150 @@
+"""``sonibus top``'s app driven by textual's pilot against a running simulator on a
+private bus: joint values change on screen, a killed node turns red ("gone") within
+the lease and stays listed, ``s`` then ``y`` halts every robot (checked on the bus),
+``s`` then any other key sends nothing, tab selects the next robot, ``q`` quits."""
+
+from __future__ import annotations
+
+import re
+import time
+
+from sonibus.bus import decode, keys, send_command
+from sonibus.bus.cli.top import ALARM
+
+from ..conftest import SONIBUS
+from .pilot import drive, row, shown, until
+
+BEHAVIOR = "animations/Stand/Gestures/Hey_1"
+
+
+def joint_value(app, joint: str) -> str:
+    found = re.search(rf"^{joint} .*?([+-]\d+\.\d{{3}})", shown(app, "joints"), re.MULTILINE)
+    return found[1] if found else ""
+
+
+def test_joint_values_change_on_screen(net):
+    net.sim("pepper", rate_hz=50, idle=True)  # breathing and looking around: its joints move on their own
+    values: list[str] = []
+
+    async def scenario(app, pilot):
+        first = await until(pilot, lambda: joint_value(app, "HeadPitch"), what="HeadPitch on screen")
+        values.append(first)
+        values.append(await until(pilot, lambda: (v := joint_value(app, "HeadPitch")) != first and v,
+                                  what="HeadPitch to change on screen"))
+        assert shown(app, "joints").splitlines()[0].startswith("HeadYaw ")
+        cells = await until(pilot, lambda: (r := row(app, "robots", "pepper")) and r[2].plain == "pepper" and r,
+                            what="pepper's model in its row")
+        assert [str(c) for c in cells][-1] == "on bus"
+
+    drive(net.bus("top"), scenario)
+    assert len(set(values)) == 2
+
+
+def test_a_killed_node_turns_red_and_gone_within_the_lease_and_stays_listed(net, spawn, tmp_path, figure):
+    show = tmp_path / "show.toml"
+    show.write_text('[nodes.doomed]\nadapter = "sim"\nrobot = "nao"\nrate_hz = 20\n')
+    process = spawn(SONIBUS, "run", str(show), *net.cli_args())
+    top = net.bus("top")
+    lease_s = top.lease_s
+    nodes = f"{top.host}/doomed"
+
+    async def scenario(app, pilot):
+        await until(pilot, lambda: (r := row(app, "nodes", nodes)) and r[4].plain == "running", timeout=20,
+                    what="the run's node listed, running")
+        await until(pilot, lambda: (r := row(app, "robots", "nao")) and r[-1].plain == "on bus",
+                    what="its robot listed")
+        process.kill()  # SIGKILL: no goodbye, only the lease tells
+        killed = time.monotonic()
+        cells = await until(pilot, lambda: (r := row(app, "nodes", nodes)) and r[4].plain == "gone" and r,
+                            timeout=lease_s + 10, what="the killed node shown as gone")
+        figure("a killed node shown gone after", time.monotonic() - killed, "s")
+        figure("lease", lease_s, "s")
+        assert all(str(c.style) == ALARM for c in cells), [c.style for c in cells]
+        assert cells[0].plain == "sim" and cells[2].plain == "doomed"
+        await until(pilot, lambda: row(app, "robots", "nao")[-1].plain == "gone", what="its robot shown gone")
+        await pilot.pause(0.3)  # a few redraws later, both are still listed
+        assert row(app, "nodes", nodes)[4].plain == "gone" and row(app, "robots", "nao") is not None
+
+    drive(top, scenario)
+
+
+def watch_events(net, robot: str) -> list[dict]:
+    """The events of ``robot`` as a separate machine sees them."""
+    seen: list[dict] = []
+    watcher = net.bus("watcher")
+    watcher.session.declare_subscriber(keys.event(robot, "*"), lambda s: seen.append(decode(s.payload.to_bytes())))
+    return seen
+
+
+def commands(seen: list[dict], verb: str) -> list[dict]:
+    return [e for e in seen if e["kind"] == "command" and e["verb"] == verb]
+
+
+def test_s_then_y_stops_every_robot_and_shows_each_reply(net):
+    pepper, nao = net.sim("pepper", rate_hz=50), net.sim("nao", rate_hz=50)
+    seen, heard_nao = watch_events(net, "pepper"), watch_events(net, "nao")
+    top = net.bus("top")
+
+    async def scenario(app, pilot):
+        await until(pilot, lambda: row(app, "robots", "pepper") and row(app, "robots", "nao"), what="both robots")
+        send_command(top, "pepper", "behavior/run", {"name": BEHAVIOR})
+        await until(pilot, lambda: pepper.engine.running_behavior, what="the behavior running")
+        await pilot.press("s")
+        await until(pilot, lambda: "Stop every robot" in str(app.screen.query_one("Static").content),
+                    what="the confirmation")
+        await pilot.press("y")
+        await until(pilot, lambda: commands(seen, "stop") and commands(heard_nao, "stop"), what="both stop commands")
+        lines = await until(pilot, lambda: (t := shown(app, "event-lines")).count("ok: stopped") == 2 and t,
+                            what="both replies on screen")
+        assert re.search(r"pepper +stop +ok: stopped", lines) and re.search(r"nao +stop +ok: stopped", lines)
+
+    drive(top, scenario)
+    assert commands(seen, "stop")[0]["ok"] is True and commands(heard_nao, "stop")[0]["ok"] is True
+    stopped = [e for e in seen if e["kind"] == "behavior" and e["state"] == "stopped"]
+    assert stopped and stopped[0]["name"] == BEHAVIOR
+    assert pepper.engine.running_behavior is None and not pepper.body.moving() and not nao.body.moving()
+
+
+def test_s_then_another_key_sends_nothing(net):
+    pepper = net.sim("pepper", rate_hz=50)
+    seen = watch_events(net, "pepper")
+    top = net.bus("top")
+
+    async def scenario(app, pilot):
+        await until(pilot, lambda: row(app, "robots", "pepper"), what="pepper listed")
+        await pilot.press("s")
+        await until(pilot, lambda: "Stop every robot" in str(app.screen.query_one("Static").content),
+                    what="the confirmation")
+        await pilot.press("n")
+        await until(pilot, lambda: "cancelled: nothing sent" in shown(app, "event-lines"), what="the cancel shown")
+        assert app.screen is app.screen_stack[0]  # the confirmation is gone
+        # A command after the cancel: once its event is here, a stop sent on the cancel would be too.
+        send_command(top, "pepper", "behavior/list")
+        await until(pilot, lambda: commands(seen, "behavior/list"), what="the later command's event")
+
+    drive(top, scenario)
+    assert commands(seen, "stop") == []
+    assert pepper.stats["errors"] == 0
+
+
+def test_tab_selects_the_next_robot_and_q_quits_with_0(net):
+    net.sim("pepper", rate_hz=20)
+    net.sim("nao", rate_hz=20)
+
+    async def scenario(app, pilot):
+        await until(pilot, lambda: row(app, "robots", "pepper") and row(app, "robots", "nao"), what="both robots")
+        title = str(app.query_one("#joints").border_title)
+        await pilot.press("tab")
+        await until(pilot, lambda: str(app.query_one("#joints").border_title) != title, what="the other robot")
+        assert {title, str(app.query_one("#joints").border_title)} == {"joints of nao", "joints of pepper"}
+        await pilot.press("q")
+
+    app = drive(net.bus("top"), scenario)
+    assert app.return_value == 0
+
+
+def test_ctrl_c_ends_it_as_an_interrupted_command(net):
+    async def scenario(app, pilot):
+        await pilot.press("ctrl+c")
+
+    assert drive(net.bus("top"), scenario).return_value == 130
