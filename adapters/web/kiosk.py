@@ -52,20 +52,12 @@ class Stand:
         button = self.current
         if button is None or robot != self.kiosk.robot:
             return
-        end = None
-        if kind == "behavior" and button.behavior and event.get("name") == button.behavior:
-            state = event.get("state")
-            end = {"state": "done"} if state == "stopped" else {"state": "failed",
-                                                                  "error": str(event.get("error", "failed"))}
-            if state not in ("stopped", "failed"):
-                return
-        elif kind == "speech" and button.say and event.get("text") == button.say and event.get("state") == "done":
-            end = {"state": "done"}
+        end = _end_of(button, kind, event)
         if end is None:
             return
         if self.accepted:
             self._end(**end)
-        else:
+        else:  # (the end came before the robot's answer: a very short scenario)
             self.ended = end
 
     def robot_left(self, robot: str) -> None:
@@ -83,3 +75,16 @@ class Stand:
             message["error"] = " ".join(error.split())
         self.states[button.id] = message
         self.announce(message)
+
+
+def _end_of(button: Button, kind: str, event: dict[str, Any]) -> dict[str, str] | None:
+    """How ``event`` ends ``button``'s scenario (``state``, ``error``), or None if it does not."""
+    state = event.get("state")
+    if kind == "behavior" and button.behavior and event.get("name") == button.behavior:
+        if state == "stopped":
+            return {"state": "done"}
+        if state == "failed":
+            return {"state": "failed", "error": str(event.get("error") or f"behavior '{button.behavior}' failed")}
+    if kind == "speech" and button.say and event.get("text") == button.say and state == "done":
+        return {"state": "done"}
+    return None
