@@ -1,0 +1,310 @@
+"""The operator and kiosk pages in a real browser (Debian's headless Chromium through
+Selenium) against a real ``web`` node and a simulated robot on a private bus: what
+the page shows is checked in the page, what it makes the robot do on the bus."""
+
+from __future__ import annotations
+
+import urllib.error
+import urllib.request
+from collections.abc import Iterator
+from typing import Any
+
+import pytest
+from selenium.webdriver.common.action_chains import ActionChains
+from selenium.webdriver.common.keys import Keys
+
+from sonibus.bus import Bus, codec, keys, send_command
+from sonibus.bus.errors import CommandError
+
+from ..conftest import Network, wait_for
+from .browser import Browser
+from .conftest import BUTTONS, HELLO, KIOSK_TOKEN, RATE, TOKEN, WAVE, Stage, start_web
+
+NOD = "animations/Stand/Gestures/Yes_1"            # a short behavior: about 1.7 s
+LONG = "animations/Stand/Gestures/Enthusiastic_4"  # about 2.9 s: time to stop it
+
+# Every change of data-state of the elements matching a selector, in the page, in order.
+RECORD_STATES = """
+window.seenStates = [];
+for (const node of document.querySelectorAll(arguments[0])) {
+  const note = () => seenStates.push([node.dataset.behavior || node.dataset.button, node.dataset.state]);
+  new MutationObserver(note).observe(node, {attributes: true, attributeFilter: ["data-state"]});
+}
+"""
+
+
+@pytest.fixture(scope="module")
+def browser(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Browser]:
+    """One Chromium for the module (each test opens its own page of its own server)."""
+    chromium = Browser(tmp_path_factory.mktemp("chromium-profile"))
+    try:
+        yield chromium
+    finally:
+        chromium.quit()
+
+
+class Watch:
+    """What the robot publishes, read on the test's own session: events and frames, in order."""
+
+    def __init__(self, bus: Bus, robot: str = "pepper") -> None:
+        self._event_sub, self._events = bus.subscribe(f"{robot}/events/*", maxlen=100_000)
+        self._frame_sub, self._frames = bus.subscribe(keys.frame(robot), maxlen=100_000)
+        self.events: list[tuple[str, dict[str, Any]]] = []  # (kind, event)
+        self.frames: list[dict[str, Any]] = []
+
+    def update(self) -> None:
+        for key, payload in self._events.drain(0):
+            self.events.append((key.rsplit("/", 1)[1], codec.decode(payload)))
+        for _, payload in self._frames.drain(0):
+            self.frames.append(codec.decode(payload))
+
+    def event(self, kind: str, **fields: Any) -> list[dict[str, Any]]:
+        """Events of ``kind`` whose ``fields`` are as given, oldest first."""
+        self.update()
+        return [e for k, e in self.events if k == kind and all(e.get(f) == v for f, v in fields.items())]
+
+    def commands(self, verb: str) -> list[dict[str, Any]]:
+        """The robot's notices of ``verb`` commands it answered."""
+        return self.event("command", verb=verb)
+
+    def wait_event(self, kind: str, what: str, **fields: Any) -> dict[str, Any]:
+        return wait_for(lambda: self.event(kind, **fields), 10, what, lambda: f"events: {self.events[-10:]}")[0]
+
+    def value(self, joint: str) -> float:
+        """``joint`` in the newest frame."""
+        self.update()
+        frame = self.frames[-1]
+        return frame["v"][frame["names"].index(joint)]
+
+    def still(self, frames: int) -> bool:
+        """Whether the last ``frames`` frames are all the same pose (the robot halted)."""
+        self.update()
+        last = self.frames[-frames:]
+        return len(last) == frames and all(f["v"] == last[0]["v"] for f in last)
+
+
+@pytest.fixture
+def still_stage(net: Network) -> Stage:
+    """The stage of tests/web/conftest.py with a robot that moves only when told (no idle
+    motion), so that a halt shows as frames that no longer change."""
+    sim = net.sim("pepper", rate_hz=RATE, idle=False)
+    node = start_web(net, token=TOKEN, kiosk_token=KIOSK_TOKEN, kiosk={"robot": "pepper", "buttons": BUTTONS})
+    wait_for(lambda: "pepper" in node.shown_robots(), 10, "pepper's info at the web node")
+    return Stage(net, sim, node)
+
+
+def open_operator(browser: Browser, stage: Stage) -> None:
+    browser.open(stage.operator_url)
+    browser.wait(lambda: browser.attribute("#connection", "data-state") == "connected", "the page connected")
+    browser.wait(lambda: (browser.text('[data-robot="pepper"] [data-joint="HeadYaw"]') or "–") != "–",
+                 "pepper's HeadYaw shown")
+
+
+def states_of(browser: Browser, name: str) -> list[str]:
+    return [state for who, state in browser.js("return window.seenStates") if who == name]
+
+
+def http_status(url: str) -> int:
+    try:
+        with urllib.request.urlopen(url, timeout=10) as response:
+            return response.status
+    except urllib.error.HTTPError as exc:
+        return exc.code
+
+
+# -- operator ---------------------------------------------------------------------------
+
+
+def test_the_operator_page_plots_live_joints_and_lists_the_nodes(stage, browser, figure):
+    open_operator(browser, stage)
+    cell = '[data-robot="pepper"] [data-joint="HeadYaw"]'
+    first = browser.text(cell)
+    browser.wait(lambda: browser.text(cell) != first, "HeadYaw's value to change (idle motion)")
+    assert -2.09 <= float(browser.text(cell)) <= 2.09  # HeadYaw's limits, radians
+
+    # The head's chart has traces: pixels drawn in its canvas.
+    drawn = """const c = document.querySelector('[data-robot="pepper"] canvas[data-chart="Head"]');
+               const d = c.getContext("2d").getImageData(0, 0, c.width, c.height).data;
+               let n = 0; for (let i = 3; i < d.length; i += 4) if (d[i]) n++; return n;"""
+    browser.wait(lambda: browser.js(drawn) > 100, "HeadYaw and HeadPitch plotted")
+
+    # The page draws what the server pushes, once per animation frame.
+    started = browser.js("return [performance.now(), sonibus.counters.rendered, sonibus.counters.frames]")
+    browser.wait(lambda: browser.js("return sonibus.counters.rendered") >= started[1] + 25, "25 more renders")
+    now = browser.js("return [performance.now(), sonibus.counters.rendered, sonibus.counters.frames]")
+    seconds = (now[0] - started[0]) / 1000
+    figure("operator page renders", (now[1] - started[1]) / seconds, "frames/s")
+    figure("operator page receives", (now[2] - started[2]) / seconds, "frames/s")
+
+    # The nodes with their stats (the simulator and the web node itself), none gone.
+    browser.wait(lambda: {"sim-pepper", "web"} <= {row.get_attribute("data-node").split("/")[-1]
+                                                   for row in browser.all("#nodes tr[data-node]")},
+                 "the sim and web nodes listed")
+    assert not browser.all("#nodes tr.gone")
+    # Controls from pepper's info: its behaviors, the head and arm sliders within the joints' limits.
+    info = stage.node.shown_robots()["pepper"]
+    shown = {b.get_attribute("data-behavior") for b in browser.all('[data-robot="pepper"] [data-behavior]')}
+    assert shown == set(info["behaviors"])
+    limits = {j["name"]: (j["min"], j["max"]) for j in info["joints"]}
+    sliders = browser.all('[data-robot="pepper"] [data-slider]')
+    assert {"HeadYaw", "HeadPitch", "LShoulderPitch", "RElbowRoll"} <= {s.get_attribute("data-slider") for s in sliders}
+    for slider in sliders:
+        low, high = limits[slider.get_attribute("data-slider")]
+        assert (float(slider.get_attribute("min")), float(slider.get_attribute("max"))) == pytest.approx((low, high))
+    assert browser.find("#stop").is_displayed()
+    assert browser.errors() == []
+
+
+def test_a_behavior_click_runs_on_the_robot_and_shows_running_then_done(stage, browser, tmp_path):
+    watch = Watch(stage.net.bus("watch"))
+    open_operator(browser, stage)
+    button = f'[data-robot="pepper"] [data-behavior="{NOD}"]'
+    browser.js(RECORD_STATES, button)
+    browser.find(button).click()
+
+    watch.wait_event("behavior", "the robot to start the behavior", name=NOD, state="started")
+    browser.wait(lambda: "running" in states_of(browser, NOD), "the button to show running")
+    assert browser.text("#status") == "✓ pepper behavior/run"
+    shot = browser.screenshot("web-operator.png", tmp_path, publish=True)  # mid-behavior: the docs' picture
+    watch.wait_event("behavior", "the robot to end the behavior", name=NOD, state="stopped")
+    browser.wait(lambda: browser.attribute(button, "data-state") == "done", "the button to show done")
+    states = states_of(browser, NOD)
+    assert states.index("running") < states.index("done"), states
+    assert "done" in browser.find(button).text
+    # The event log, newest first, has the robot's events.
+    log = [item.text for item in browser.all("#events li")]
+    assert any(f"name={NOD} state=started" in line for line in log), log
+    assert (shot.width, shot.height) > (600, 400) and not shot.blank, shot
+    assert browser.errors() == []
+
+
+def test_a_slider_moves_the_joint_and_the_last_position_wins(still_stage, browser):
+    watch = Watch(still_stage.net.bus("watch"))
+    open_operator(browser, still_stage)
+    slider = browser.find('[data-robot="pepper"] [data-slider="HeadYaw"]')
+    low, high = float(slider.get_attribute("min")), float(slider.get_attribute("max"))
+    width = slider.size["width"]
+    # A drag from the thumb to near the right end: many input events, throttled by the page.
+    drag = ActionChains(browser.driver).click_and_hold(slider)
+    for _ in range(12):
+        drag.move_by_offset(width // 30, 0)
+    drag.release().perform()
+    target = float(slider.get_attribute("value"))  # read at once: an untouched slider follows the robot
+    assert 0.2 < target <= high
+
+    sent = wait_for(lambda: [c for c in watch.commands("joints/set") if c["args"]["angles"] == [target]], 10,
+                    "the slider's last position sent", lambda: f"sent: {watch.commands('joints/set')}")
+    assert sent[0]["ok"] is True and sent[0]["args"]["names"] == ["HeadYaw"]
+    assert sent[0]["args"]["speed"] == pytest.approx(0.2)  # the node's configured slider speed
+    wait_for(lambda: abs(watch.value("HeadYaw") - target) < 0.01, 10, f"HeadYaw at {target:.3f}",
+             lambda: f"HeadYaw {watch.value('HeadYaw')}")
+    assert all(low <= f["v"][f["names"].index("HeadYaw")] <= high for f in watch.frames)
+
+
+def test_an_out_of_range_request_shows_the_owners_error(still_stage, browser):
+    bus = still_stage.net.bus("asker")
+    open_operator(browser, still_stage)
+    # A slider forced past its max, as a page with its limits tampered with would send.
+    browser.js("""const s = document.querySelector('[data-robot="pepper"] [data-slider="HeadYaw"]');
+                  s.step = "any"; s.max = 10; s.value = 5; s.dispatchEvent(new Event("input"));""")
+    with pytest.raises(CommandError) as refusal:
+        send_command(bus, "pepper", "joints/set", {"names": ["HeadYaw"], "angles": [5.0], "speed": 0.2})
+    browser.wait(lambda: refusal.value.message in (browser.text("#status") or ""), "the owner's error shown")
+    assert browser.attribute("#status", "data-kind") == "error"
+    assert "HeadYaw" in refusal.value.message and "limits" in refusal.value.message  # (what the owner says)
+
+
+def test_space_and_escape_stop_the_robot_but_space_types_in_the_say_box(still_stage, browser):
+    watch = Watch(still_stage.net.bus("watch"))
+    open_operator(browser, still_stage)
+    button = browser.find(f'[data-robot="pepper"] [data-behavior="{LONG}"]')
+    button.click()
+    watch.wait_event("behavior", "the behavior started", name=LONG, state="started")
+    wait_for(lambda: not watch.still(3), 10, "the robot moving")
+
+    # Space on the page (the behavior button still has the focus: it must not run again).
+    ActionChains(browser.driver).send_keys(Keys.SPACE).perform()
+    watch.wait_event("command", "the robot to get stop", verb="stop")
+    watch.wait_event("behavior", "the behavior to stop", name=LONG, state="stopped")
+    wait_for(lambda: watch.still(RATE // 2), 10, "the robot halted (half a second of identical frames)")
+    assert len(watch.event("behavior", name=LONG, state="started")) == 1  # Space did not press the button
+    browser.wait(lambda: "pepper stop" in (browser.text("#status") or ""), "the stop's reply shown")
+
+    # In the say box Space is a space; Escape stops from anywhere.
+    say = browser.find('[data-say="pepper"]')
+    say.click()
+    say.send_keys("hello there")
+    assert say.get_attribute("value") == "hello there"
+    say.send_keys(Keys.ESCAPE)
+    wait_for(lambda: len(watch.commands("stop")) >= 2, 10, "Escape's stop")
+    assert len(watch.commands("stop")) == 2  # (the robot answers in order: a stop from the typed space came first)
+    assert browser.errors() == []
+
+
+def test_the_page_shows_disconnected_and_reconnects(still_stage, browser):
+    open_operator(browser, still_stage)
+    port = still_stage.node.web.port
+    still_stage.node.stop()
+    browser.wait(lambda: browser.attribute("#connection", "data-state") == "disconnected", "disconnected shown")
+    assert "disconnected" in browser.text("#connection")
+    assert browser.js("return document.body.classList.contains('disconnected')")
+    start_web(still_stage.net, name="web2", listen=f"127.0.0.1:{port}", token=TOKEN)
+    browser.wait(lambda: browser.attribute("#connection", "data-state") == "connected", "reconnected", timeout=20)
+    frames = browser.js("return sonibus.counters.frames")
+    browser.wait(lambda: browser.js("return sonibus.counters.frames") > frames + 5, "frames again")
+
+
+# -- kiosk ------------------------------------------------------------------------------
+
+
+def test_the_kiosk_has_only_its_buttons_and_follows_the_robot(stage, browser, tmp_path):
+    watch = Watch(stage.net.bus("watch"))
+    browser.open(stage.kiosk_url)
+    browser.wait(lambda: len(browser.all("[data-button]")) == len(BUTTONS), "the kiosk's buttons")
+    assert [b.get_attribute("data-button") for b in browser.all("[data-button]")] == [b["id"] for b in BUTTONS]
+    assert [b.find_element("css selector", ".label").text for b in browser.all("[data-button]")] == \
+        [b["label"] for b in BUTTONS]
+    # Nothing else to reach: no stop, sliders, behaviors, postures, text boxes; every button is a kiosk button.
+    for operator_control in ("#stop", "[data-slider]", "[data-behavior]", "[data-posture]", "[data-say]",
+                             "[data-awareness]", "input", "textarea", "select", "a[href]"):
+        assert not browser.all(operator_control), operator_control
+    assert len(browser.all("button")) == len(BUTTONS)
+
+    browser.js(RECORD_STATES, "[data-button]")
+    browser.find('[data-button="wave"]').click()
+    watch.wait_event("behavior", "the robot to run the wave", name=WAVE, state="started")
+    browser.wait(lambda: browser.attribute('[data-button="wave"]', "data-state") == "running", "wave running")
+    assert not browser.find('[data-button="hello"]').is_enabled()  # one scenario at a time
+    shot = browser.screenshot("web-kiosk.png", tmp_path, publish=True)
+    watch.wait_event("behavior", "the wave to end", name=WAVE, state="stopped")
+    browser.wait(lambda: browser.attribute('[data-button="wave"]', "data-state") == "done", "wave done")
+    assert states_of(browser, "wave") == ["running", "done"]
+    assert browser.find('[data-button="hello"]').is_enabled()
+
+    browser.find('[data-button="hello"]').click()
+    watch.wait_event("speech", "the robot to say it", text=HELLO, state="done")
+    browser.wait(lambda: browser.attribute('[data-button="hello"]', "data-state") == "done", "hello done")
+    assert states_of(browser, "hello") == ["running", "done"]
+    assert not shot.blank, shot
+    assert browser.errors() == []
+
+
+def test_operator_urls_refuse_the_kiosk_token(stage, browser):
+    base = stage.url
+    for path in ("/", "/ws"):
+        assert http_status(f"{base}{path}?token={KIOSK_TOKEN}") == 403, path
+        assert http_status(f"{base}{path}") == 403, path
+    assert http_status(f"{base}/kiosk?token={KIOSK_TOKEN}") == 200
+    browser.open(f"{base}/?token={KIOSK_TOKEN}")
+    assert browser.find("body").text.startswith("403")
+    assert not browser.all("#stop")
+
+
+def test_screenshots_are_checked_for_blankness(browser, tmp_path):
+    """The blank check itself: an empty page is blank, a drawn one is not."""
+    browser.open("about:blank")
+    assert browser.screenshot("blank.png", tmp_path).blank
+    browser.js("""document.body.innerHTML = '<h1>sonibus</h1>' + 'text '.repeat(400);
+                  document.body.style.cssText = 'background: #123; color: #fe9; font-size: 20px';""")
+    assert not browser.screenshot("drawn.png", tmp_path).blank
+
