@@ -210,6 +210,9 @@ class Monitor:
         host, _, node = key[len(keys.NODES) + 1:].partition("/")
         with self._lock:
             entry = self._nodes.setdefault((host, node), _Node())
+            if entry.alive is not None and entry.alive != alive:  # (not the tokens there when it started)
+                self._events.append(EventView(time.time(), f"{host}/{node}", "node",
+                                              "back on the bus" if alive else "gone: its token vanished", not alive))
             entry.alive = alive
             if alive:
                 entry.asked = False  # (a node back under the same name: ask what it is now)
@@ -220,13 +223,17 @@ class Monitor:
             return
         with self._lock:
             robot = self._robots.setdefault(claim.robot, _Robot())
+            was = bool(robot.claims)
             if alive:
                 robot.claims[claim.key] = claim
-                robot.claimed = True
             else:
                 robot.claims.pop(claim.key, None)
                 if not robot.claims:
                     robot.info = None  # asked again if it comes back: another owner may differ
+            if robot.claimed and was != bool(robot.claims):
+                text = f"on the bus again, owned by {claim}" if alive else "left the bus: its owner's claim went"
+                self._events.append(EventView(time.time(), claim.robot, "connection", text, not alive))
+            robot.claimed = robot.claimed or alive
 
     def _on_info(self, robot: str, info: dict[str, Any]) -> None:
         with self._lock:

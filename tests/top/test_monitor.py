@@ -68,7 +68,7 @@ def test_bad_stats_and_events_are_counted_and_named_and_the_monitor_goes_on(net)
         event = wait_for(lambda: monitor.snapshot().events, what="a good event after the bad ones")[-1]
     assert (event.source, event.kind, event.text, event.alarm) == ("pepper", "speech", "done 'hi'", False)
     assert len(monitor.snapshot().events) == 1  # the bad one is not listed
-    assert node(monitor.snapshot(), "node") is None or node(monitor.snapshot(), "node").adapter == "?"
+    assert node(monitor.snapshot(), "node") is None  # refused stats make no node
 
 
 def test_a_robot_and_its_node_leaving_are_shown_as_gone_and_stay_listed(net):
@@ -83,6 +83,9 @@ def test_a_robot_and_its_node_leaving_are_shown_as_gone_and_stay_listed(net):
         snapshot = monitor.snapshot()
     assert robot(snapshot, "nao").owner == "" and robot(snapshot, "nao").joints  # its last values stay
     assert node(snapshot, "sim-nao").adapter == "sim"
+    said = {(e.source, e.kind, e.text, e.alarm) for e in snapshot.events}
+    assert ("nao", "connection", "left the bus: its owner's claim went", True) in said, said
+    assert (f"{sim.bus.host}/sim-nao", "node", "gone: its token vanished", True) in said, said
 
 
 class Lossy(Adapter):
