@@ -41,6 +41,8 @@ SCRIPTS: dict[str, tuple[str, list[str], float]] = {
     "zenoh_hop": ("zenoh_hop", [], 90),
     "receive_cpu": ("receive_cpu", [], 60),
     "gate": ("gate", [], 60),
+    "web": ("web", ["--trials", "300"], 90),  # a web page's command round trip (issue 17)
+    "web_page": ("web_page", [], 120),  # the operator page in headless Chromium: updates/s, click → robot → page
     "pacing": ("pacing", [], 90),  # the sim's pacing, the OSC rate cap, replay timing: no longer asserted by tests
     "soak": ("soak", ["--minutes", "3"], 330),  # the fuzz suite of tests/fuzz for minutes
 }
