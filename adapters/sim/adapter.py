@@ -12,6 +12,7 @@ from sonibus.bus.owner import RobotAdapter
 from sonibus.bus.pacing import Pacer
 from sonibus.bus.robot import load_model, models
 
+from . import audio
 from .engine import SimEngine
 
 
@@ -26,10 +27,15 @@ class SimConfig:
     idle: bool = False              # gentle breathing and looking around when nothing runs
     autoplay_s: float = 0.0         # run a random behavior every N seconds (0: never)
     words_per_minute: float = 150.0  # speaking rate at say speed 100
+    body_sound: bool = True         # microphones hearing the motors' whine on <robot>/audio/mic
+    speaker: bool = True            # a speaker playing <robot>/audio/speaker
+    speaker_latency_ms: float = 100.0  # the speaker's jitter buffer
 
     def __post_init__(self) -> None:
         if not 0 < self.rate_hz <= 1000:
             raise bad("rate_hz", f"{self.rate_hz:g} must be in (0, 1000]")
+        if not 10 <= self.speaker_latency_ms <= 2000:
+            raise bad("speaker_latency_ms", f"{self.speaker_latency_ms:g} must be in 10..2000 ms")
         if self.model_name not in models():
             raise bad("model", f"'{self.model_name}' is unknown — known models: {', '.join(models())}")
         postures = load_model(self.model_name).postures
@@ -50,6 +56,7 @@ class SimRobot(RobotAdapter):
     """Simulated Pepper or NAO: joints, behaviors, speech and postures, no robot needed."""
 
     Config = SimConfig
+    counters = audio.MIC_COUNTERS + audio.SPEAKER_COUNTERS
     Verbs = SimEngine  # the engine carries out the commands
     verbs: SimEngine
 
@@ -60,8 +67,23 @@ class SimRobot(RobotAdapter):
         self.rate_hz = self.config.rate_hz
         self.body = self.engine.body
 
+    def _start(self) -> None:
+        super()._start()
+        if self.config.body_sound:
+            self.mic = audio.SimMic(self, self.robot, self.model, self.engine.speeds)
+            self.spawn(self.mic.run, "mic")
+        if self.config.speaker:
+            self.speaker = audio.SimSpeaker(self, self.robot, self.config.speaker_latency_ms)
+            self.spawn(self.speaker.run, "speaker")
+
     def behaviors(self) -> Sequence[str]:
         return self.engine.behaviors()
+
+    def robot_info(self) -> dict[str, Any]:
+        info = super().robot_info()
+        if self.config.body_sound or self.config.speaker:
+            info["audio"] = audio.info(self.config.body_sound, self.config.speaker)
+        return info
 
     def _acquire(self) -> None:
         self.pacer = Pacer(self.rate_hz)

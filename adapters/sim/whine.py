@@ -23,6 +23,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from sonibus.bus.audio import to_int16
 from sonibus.bus.robot import RobotModel, load_model
 
 BASE_HZ = 180.0          # a joint's pitch just above rest
@@ -56,17 +57,18 @@ class Whine:
 
     ``speeds`` maps joint names to their speed now (rad/s, sign ignored); a joint
     left out is at rest. ``gain`` is the level of one joint at full speed
-    (fraction of full scale); ``floor`` the noise floor's amplitude."""
+    (fraction of full scale), ``grit`` the gear noise relative to the motors'
+    level, ``floor`` the noise floor's amplitude."""
 
     def __init__(self, rate: int, channels: int, *, model: str | RobotModel = "pepper", seed: int = 0,
-                 gain: float = 0.25, floor: float = 2e-4) -> None:
+                 gain: float = 0.25, grit: float = 0.15, floor: float = 2e-4) -> None:
         if not 8000 <= rate <= 192000:
             raise ValueError(f"rate {rate} Hz must be in 8000..192000")
         if not 1 <= channels <= 8:
             raise ValueError(f"channels {channels} must be in 1..8")
         self.rate, self.channels = rate, channels
         self.model = load_model(model) if isinstance(model, str) else model
-        self.gain, self.floor = gain, floor
+        self.gain, self.grit, self.floor = gain, grit, floor
         self._seed = seed
         self._rng = np.random.default_rng(seed)
         self._voices: dict[str, _Voice] = {}
@@ -88,10 +90,10 @@ class Whine:
                 continue
             mono += level[0]
             loudness += level[1]
-        grit = 0.15 * loudness * self._rng.standard_normal(frames)  # gears: noise that follows the motors
+        grit = self.grit * loudness * self._rng.standard_normal(frames)  # gears: noise that follows the motors
         mono = np.tanh(mono + grit)  # many joints at once saturate softly instead of wrapping
         out = mono[:, None] + self.floor * self._rng.uniform(-1.0, 1.0, (frames, self.channels))
-        return np.round(np.clip(out, -1.0, 1.0) * 32767).astype(np.int16)
+        return to_int16(out)
 
     def reset(self) -> None:
         """Back to silence and the seed's first noise."""

@@ -1,0 +1,145 @@
+"""The sim robot's audio: microphones that hear its motors, a speaker that plays in real time.
+
+``SimMic`` publishes the body's servo whine (``whine.py``) on ``<robot>/audio/mic``
+in chunks, only while anyone subscribes there (nothing is rendered otherwise).
+``SimSpeaker`` takes ``<robot>/audio/speaker`` into a jitter buffer and drains it
+at the speaker's rate, as a sound card would, keeping the last seconds it played.
+Both run on monotonic deadlines (``bus/pacing.py``): a stall skips, never bursts.
+"""
+
+from __future__ import annotations
+
+import functools
+import time
+from collections import deque
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from sonibus.bus import codec, keys, messages
+from sonibus.bus.adapter import Adapter
+from sonibus.bus.audio import AudioChunk, JitterBuffer
+from sonibus.bus.node import AUDIO
+from sonibus.bus.owner import RobotAdapter
+from sonibus.bus.pacing import Pacer
+from sonibus.bus.robot import RobotModel
+
+from .whine import Whine
+
+MIC_COUNTERS = ("mic_chunks",)
+SPEAKER_COUNTERS = ("speaker_frames", "speaker_underruns", "speaker_overruns", "speaker_gaps", "speaker_refused")
+
+
+@dataclass(frozen=True)
+class Format:
+    """A stream's sample rate (Hz), channel count and chunk length (ms)."""
+
+    rate: int
+    channels: int
+    chunk_ms: float = 20.0
+
+    @property
+    def frames(self) -> int:
+        return round(self.rate * self.chunk_ms / 1000.0)
+
+    def info(self) -> dict[str, int]:
+        return {"rate": self.rate, "channels": self.channels}
+
+
+MIC = Format(16000, 1)
+SPEAKER = Format(48000, 2)
+
+
+class SimMic:
+    """Publishes ``Whine(speeds())`` on ``<robot>/audio/mic`` while anyone listens; run ``run(stop)``."""
+
+    def __init__(self, node: RobotAdapter, robot: str, model: RobotModel, speeds: Callable[[], Mapping[str, float]],
+                 fmt: Format = MIC) -> None:
+        self.node, self.fmt, self.speeds = node, fmt, speeds
+        self.whine = Whine(fmt.rate, fmt.channels, model=model)
+        key = keys.audio(robot, "mic")
+        self._publisher = node.own(node.bus.stream_publisher(key, AUDIO))
+        self.listening = False
+        node.own(node.bus.watch_subscribers(key, self._wanted))
+        self._seq = -1
+        self._last: int | None = None  # the frame of the last chunk sent, while listening
+
+    def _wanted(self, matching: bool) -> None:
+        self.listening = matching
+
+    def run(self) -> None:
+        period = self.fmt.chunk_ms / 1000.0
+        wall0 = time.time()
+
+        def tick(frame: int) -> None:
+            if not self.listening or not self.node.ownership.active:  # (standing by: the owner's mic speaks)
+                self._last = None
+                return
+            # frames the pacer skipped while listening show as a gap in seq
+            self._seq += 1 if self._last is None else frame - self._last
+            self._last = frame
+            samples = self.whine.render(self.fmt.frames, self.speeds())
+            chunk = AudioChunk.from_samples(wall0 + (frame - 1) * period, self._seq, self.fmt.rate, samples)
+            self._publisher.put(codec.encode(chunk.message()))
+            self.node.count("mic_chunks")
+
+        Pacer(1.0 / period).run(tick, self.node.stopping)
+
+
+class SimSpeaker:
+    """Plays ``<robot>/audio/speaker`` through a jitter buffer in real time; run ``run()``.
+
+    ``played`` holds the last ``keep_s`` seconds it played (int16 blocks)."""
+
+    def __init__(self, node: Adapter, robot: str, target_ms: float, fmt: Format = SPEAKER,
+                 keep_s: float = 10.0) -> None:
+        self.node, self.fmt = node, fmt
+        self.buffer = JitterBuffer(fmt.rate, fmt.channels, target_ms=target_ms)
+        subscriber, self._queue = node.bus.subscribe(keys.audio(robot, "speaker"), maxlen=256)
+        node.own(subscriber)
+        node.own(self._queue)
+        self._gate = messages.Gate(node.bus.limits)
+        self.played: deque[np.ndarray] = deque(maxlen=max(1, round(keep_s * 1000 / fmt.chunk_ms)))
+        for counter in SPEAKER_COUNTERS[1:]:  # the jitter buffer's own counts
+            node.stats.follow(counter, functools.partial(self._buffer_stat, counter.removeprefix("speaker_")))
+
+    def run(self) -> None:
+        last = -1
+
+        def tick(frame: int) -> None:
+            nonlocal last
+            for key, payload in self._queue.drain(0):
+                self._take(key, payload)
+            frames = self.fmt.frames * (frame - last)  # a stalled card still plays what the skipped ticks would
+            last = frame
+            self.played.append(self.buffer.pull(frames))
+            self.node.count("speaker_frames", frames)
+
+        Pacer(1000.0 / self.fmt.chunk_ms).run(tick, self.node.stopping)
+
+    def recent(self, seconds: float) -> np.ndarray:
+        """The last ``seconds`` played (int16, ``(frames, channels)``)."""
+        blocks = list(self.played)
+        if not blocks:
+            return np.zeros((0, self.fmt.channels), np.int16)
+        return np.concatenate(blocks)[-round(seconds * self.fmt.rate):]
+
+    def _buffer_stat(self, name: str) -> int:
+        return self.buffer.stats[name]
+
+    def _take(self, key: str, payload: bytes) -> None:
+        self.node.count("received")
+        try:
+            chunk = AudioChunk.of(self._gate.check(keys.Key.parse(key), payload))
+        except ValueError as exc:  # messages.BadMessage
+            self.node.count("bad")
+            self.node.warn("speaker", f"{key}: chunk refused: {exc}")
+            return
+        self.buffer.push(chunk)
+
+
+def info(mic: bool, speaker: bool) -> dict[str, Any]:
+    """The ``audio`` field of the robot's info."""
+    return {"mic": MIC.info() if mic else None, "speaker": SPEAKER.info() if speaker else None}
