@@ -223,13 +223,14 @@ class Gate:
 class Section:
     """One section of the key space (``<robot>/<section>/...``): the schema of its
     messages in ``schemas/v1/``, the gate's check of them, and how a sink takes them
-    (``streams.Selection``)."""
+    (``streams.Selection``; ``by_name``: audio, which most sinks cannot carry, and
+    nodes' stats, which are about the bus, come only with a pattern that names them)."""
 
     name: str
     schema: str | None                                   # None: no one schema (a command's is its verb's)
     check: Callable[[Gate, Key, dict[str, Any]], None]
     taken_as: str = "message"                            # "frame", "sample" (t, seq, values) or "message"
-    robot_data: bool = True                              # False: about the bus, left out unless asked by name
+    by_name: bool = False                                # True: a sink takes it only where a pattern names it
 
 
 SECTIONS: dict[str, Section] = {section.name: section for section in (
@@ -239,8 +240,8 @@ SECTIONS: dict[str, Section] = {section.name: section for section in (
     Section("events", "event", Gate.event),
     Section("info", "robot_info", Gate.info),            # <robot>/info/derived: derived_info
     Section("cmd", None, Gate.command),
-    Section("audio", "audio_chunk", Gate.audio),        # <robot>/audio/mic, <robot>/audio/speaker
-    Section("stats", "node_stats", Gate.node_stats, robot_data=False),  # sonibus/stats/<host>/<node>
+    Section("audio", "audio_chunk", Gate.audio, by_name=True),  # <robot>/audio/mic, <robot>/audio/speaker
+    Section("stats", "node_stats", Gate.node_stats, by_name=True),  # sonibus/stats/<host>/<node>: about the bus
 )}
 """Every section of the key space, the one table decoding, ``Streams`` and the recorder dispatch on."""
 

@@ -9,6 +9,10 @@ frame reaches its process instead of one per joint (docs/performance.md).
 Publishers that put joint keys only (a script of your own) need
 ``per_joint_keys = true``.
 
+Audio (``<robot>/audio/...``) comes only with a pattern that names its section
+(``pepper/audio/mic``, ``*/audio/*``): ``pepper/**`` brings none. A sink that
+cannot carry audio refuses such a pattern in its configuration (``without_audio``).
+
 >>> plan(["*/joints/*", "*/events/*"])
 Plan(frames=('*/frame',), keys=('*/events/*',), broad=())
 >>> plan(["pepper/**"]).broad, plan(["pepper/joints/R*"], per_joint_keys=True).keys
@@ -26,6 +30,7 @@ from typing import Any, NamedTuple
 import zenoh
 
 from . import keys, messages
+from .errors import ConfigError
 from .node import Bus
 from .queue import SampleQueue
 
@@ -185,15 +190,30 @@ def _from_frames(key: str) -> bool:
 
 def _skip(pattern: str, also: Callable[[str], bool]) -> Callable[[str], bool]:
     """What a subscription to ``pattern`` leaves out: keys ``also`` names, and keys of sections
-    that are no robot's data (nodes' stats) unless ``pattern`` names that section."""
-    chunks = pattern.split("/")
-    named = chunks[1] if len(chunks) > 1 and chunks[1] in messages.SECTIONS else ""
+    taken only by name (audio, nodes' stats) unless ``pattern`` names that section."""
+    named = named_section(pattern)
 
     def skip(key: str) -> bool:
         if also(key):
             return True
         chunks = key.split("/", 2)
         section = messages.SECTIONS.get(chunks[1]) if len(chunks) > 1 else None
-        return section is not None and not section.robot_data and section.name != named
+        return section is not None and section.by_name and section.name != named
 
     return skip
+
+
+def named_section(pattern: str) -> str:
+    """The section ``pattern`` names (``pepper/audio/mic``: ``audio``), or "" (``pepper/**``)."""
+    chunks = pattern.split("/")
+    return chunks[1] if len(chunks) > 1 and chunks[1] in messages.SECTIONS else ""
+
+
+def without_audio(patterns: tuple[str, ...], sink: str, key: str = "subscribe") -> tuple[str, ...]:
+    """The ``patterns`` of a sink that cannot carry audio (``sink``: "an OSC sink"), unchanged;
+    ``ConfigError`` naming ``key`` if one names the audio section (others never bring audio)."""
+    for pattern in patterns:
+        if named_section(pattern) == "audio":
+            raise ConfigError(f"key '{key}': '{pattern}' is audio, which {sink} cannot carry — leave it out "
+                              "(the jack adapter plays audio; the recorder records it)")
+    return patterns

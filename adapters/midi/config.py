@@ -15,6 +15,7 @@ from sonibus.bus import keys
 from sonibus.bus.errors import ConfigError
 from sonibus.bus.options import bad, from_mapping
 from sonibus.bus.robot import load_model
+from sonibus.bus.streams import without_audio
 
 from .mapping import BEHAVIOR_NOTES, SPEECH_NOTE
 
@@ -99,7 +100,7 @@ class MidiSinkConfig:
 
     def __post_init__(self) -> None:
         _port(self.port, self.connect)
-        object.__setattr__(self, "subscribe", keys.patterns(self.subscribe))
+        object.__setattr__(self, "subscribe", without_audio(keys.patterns(self.subscribe), "a MIDI sink"))
         for robot, channel in (self.channels or {}).items():
             if not isinstance(channel, int) or isinstance(channel, bool) or not 1 <= channel <= 16:
                 raise bad("channels", f"{robot} = {channel!r} must be a channel in 1..16")

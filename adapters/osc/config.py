@@ -17,6 +17,7 @@ from typing import Any, Literal
 from sonibus.bus import keys
 from sonibus.bus.errors import ConfigError
 from sonibus.bus.options import bad, from_mapping
+from sonibus.bus.streams import without_audio
 
 JOINT_FIELDS = ("robot", "section", "joint", "name", "key")
 DERIVED_FIELDS = ("robot", "section", "feature", "name", "key")
@@ -115,7 +116,7 @@ class OscSinkConfig(TargetSettings):
 
     def __post_init__(self) -> None:
         super().__post_init__()
-        object.__setattr__(self, "subscribe", keys.patterns(self.subscribe))
+        object.__setattr__(self, "subscribe", without_audio(keys.patterns(self.subscribe), "an OSC sink"))
         if not self.targets:
             raise bad("targets", "targets is empty — give at least one host:port")
         if self.max_age_ms < 0 or self.queue < 1:
