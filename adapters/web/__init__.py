@@ -30,6 +30,7 @@ from sonibus.bus.adapter import Adapter
 from sonibus.bus.errors import ConfigError
 from sonibus.bus.info import InfoRequests
 from sonibus.bus.options import bad
+from sonibus.bus.ownership import owners
 from sonibus.bus.pacing import Pacer
 from sonibus.bus.presence import watch_robots
 from sonibus.bus.queue import SampleQueue
@@ -78,6 +79,7 @@ class WebPages(Adapter):
         self._streams = Streams(self.bus, patterns, self._queue)
         self.spawn(self._feed, "feed")
         self.own(self._streams)
+        owners(self.bus)  # (the view of robots' owners a command names, kept from now: the first one too)
         self.own(watch_robots(self.bus, self._robot_changed))
         self.spawn(self._push, "push")
         self.spawn(self._refresh, "info")
@@ -127,6 +129,12 @@ class WebPages(Adapter):
                 self._info.ask(robot)
 
     def _take_info(self, robot: str, info: dict[str, Any]) -> None:
+        stand = self.config.stand
+        if robot == stand.robot:
+            missing = [b.id for b in stand.buttons if b.behavior and b.behavior not in info.get("behaviors", ())]
+            if missing:  # (said, not refused: a behavior may be installed on the robot later)
+                self.warn("kiosk", f"kiosk button(s) {', '.join(missing)}: robot '{robot}' has no such behavior "
+                                   f"(its info lists them: `sonibus send {robot} behavior/list`)")
         if not self._shows(robot):
             return
         owner = info.get("owner", {})

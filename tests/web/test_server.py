@@ -306,3 +306,26 @@ def test_the_node_stops_within_3_s_with_pages_connected(stage, websocket, figure
     assert took < STOP_WITHIN_S
     wait_for(lambda: all(p.closed for p in pages), 5, "the pages' WebSockets closed by the node")
     assert not [t for t in threading.enumerate() if t.name.startswith("web:")]
+
+
+def test_a_robot_that_leaves_is_shown_disconnected_and_its_node_gone(stage, websocket):
+    page = websocket(stage.ws_url())
+    page.wait("hello")
+    wait_for(lambda: any(n["node"] == "sim-pepper" and not n["gone"] for m in page.of("stats") for n in m["nodes"]),
+             10, "sim-pepper's stats")
+    stage.sim.stop()
+    wait_for(lambda: page.of("robots")[-1]["robots"]["pepper"]["connected"] is False, 10,
+             "pepper shown disconnected")
+    wait_for(lambda: any(n["node"] == "sim-pepper" and n["gone"] for n in page.of("stats")[-1]["nodes"]), 10,
+             "sim-pepper shown gone")
+
+
+def test_a_kiosk_button_whose_behavior_the_robot_lacks_is_warned_about(net, caplog):
+    caplog.set_level(logging.WARNING, logger="sonibus")
+    net.sim("pepper", rate_hz=RATE)
+    start_web(net, token=TOKEN, kiosk={"robot": "pepper", "buttons": [
+        {"id": "dance", "label": "Dance", "behavior": "animations/NoSuch_1"},
+        {"id": "wave", "label": "Wave", "behavior": WAVE}]})
+    warned = wait_for(lambda: [r.getMessage() for r in caplog.records if "kiosk button" in r.getMessage()], 10,
+                      "the warning")
+    assert "kiosk button(s) dance: robot 'pepper' has no such behavior" in warned[0]
