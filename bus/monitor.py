@@ -10,7 +10,7 @@ a bad one is counted (``bad``) and named (``problem``), never fatal.
 ``snapshot()`` is safe from any thread and returns frozen dataclasses.
 
 >>> describe_event("behavior", {"t": 0.0, "kind": "behavior", "name": "wave", "state": "started"})
-'wave started'
+'started wave'
 >>> describe_event("command", {"verb": "say", "args": {}, "ok": False, "error": {"code": "out_of_range"}})
 'say refused: out_of_range'
 """
@@ -399,6 +399,6 @@ def describe_event(kind: str, message: dict[str, Any]) -> str:
         return f"{message.get('state', '?')}, owner {owner.get('node', '?')} on {owner.get('host', '?')}"
     if kind == "speech":
         return f"{message.get('state', '?')} '{message.get('text', '')}'"
-    if kind in ("behavior", "posture"):
-        return f"{message.get('name', '?')} {message.get('state', '?')}"
+    if kind in ("behavior", "posture"):  # (the state first: a long name is what a narrow view cuts)
+        return f"{message.get('state', '?')} {message.get('name', '?')}"
     return " ".join(f"{k}={v}" for k, v in message.items() if k not in ("t", "kind"))

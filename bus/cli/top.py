@@ -27,7 +27,7 @@ from textual.widgets import DataTable, Footer, Static
 
 from ..client import Outcome, ask
 from ..errors import CommandError, ConfigError, SonibusError
-from ..monitor import EventView, JointView, Monitor, NodeView, RobotView, Snapshot
+from ..monitor import HISTORY, EventView, JointView, Monitor, NodeView, RobotView, Snapshot
 from .api import Command, Environment, Exit, bus_config, joined
 
 EVERY_S = 0.25         # the view is redrawn this often
@@ -75,8 +75,9 @@ class TopApp(App[int]):
     #robots { height: auto; max-height: 10; }
     #nodes { height: auto; max-height: 14; }
     #below { height: 1fr; }
-    #joints { width: 3fr; border-top: solid $accent; }
+    #joints { width: 3fr; border-top: solid $accent; text-wrap: nowrap; text-overflow: clip; }
     #events { width: 2fr; min-width: 40; border-top: solid $accent; }
+    #event-lines { text-wrap: nowrap; text-overflow: ellipsis; }
     #status { height: 1; color: $text-muted; }
     """
     BINDINGS: ClassVar[list[BindingType]] = [
@@ -229,9 +230,10 @@ def clock(seconds: float | None) -> str:
 
 
 def joint_lines(robot: RobotView) -> Text:
-    """Each joint: a bar of its value within its limits, the value, the limits and a
-    sparkline of its last seconds (scaled to its own range: small motions show)."""
-    text = Text(no_wrap=True, overflow="crop")
+    """Each joint: a bar of its value within its limits, the value, a sparkline of its
+    last seconds (scaled to its own range: small motions show) and the limits (last:
+    what a narrow terminal crops)."""
+    text = Text()
     for joint in robot.joints:
         fraction = joint.fraction
         if fraction is None:
@@ -242,7 +244,7 @@ def joint_lines(robot: RobotView) -> Text:
         limits = f"{joint.min:+.2f}..{joint.max:+.2f}" if fraction is not None else ""
         unit = "" if joint.unit == "rad" else joint.unit[:4]
         text.append_text(Text.assemble(f"{joint.name:<15}", bar, f"{joint.value:+8.3f} {unit:<4} ",
-                                       (f"{limits:<13} ", "dim"), (sparkline(joint), "cyan"), "\n"))
+                                       (f"{sparkline(joint):<{HISTORY}} ", "cyan"), (limits, "dim"), "\n"))
     return text
 
 
@@ -267,7 +269,7 @@ def sparkline(joint: JointView) -> str:
 
 def event_lines(shown: Sequence[EventView]) -> Text:
     """The events, oldest first, one line each; alarms in red."""
-    text = Text(no_wrap=True, overflow="ellipsis")
+    text = Text()
     for event in shown:
         stamp = time.strftime("%H:%M:%S", time.localtime(event.t))
         text.append(f"{stamp} {event.source:<10} {event.kind:<9} {event.text}\n", style=ALARM if event.alarm else "")
