@@ -11,8 +11,6 @@ kiosk buttons; and a WebSocket client (aiohttp) that gathers what the server sen
 from __future__ import annotations
 
 import asyncio
-import json
-import threading
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from typing import Any
@@ -24,6 +22,7 @@ from sonibus.adapters.sim import SimRobot
 from sonibus.adapters.web import WebConfig, WebPages
 
 from ..conftest import Network, wait_for
+from ..oscquery.conftest import Socket as QuerySocket
 
 RATE = 50                 # frames/s of the simulated robot
 TOKEN = "operator-secret-1"
@@ -76,67 +75,28 @@ def stage(net: Network) -> Stage:
     return Stage(net, sim, node)
 
 
-class Socket:
-    """A WebSocket client on a loop of its own: ``send`` JSON, ``messages`` as they come
-    (decoded), ``closed`` once the server closed it."""
+class Socket(QuerySocket):
+    """A WebSocket client on a loop of its own (the OSCQuery tests' client, opened at
+    ``url`` as given): ``send`` JSON, ``messages`` as they come, ``of``/``wait`` the
+    decoded ones of a type; ``closed`` once the server closed it."""
 
     def __init__(self, url: str) -> None:
-        self.url = url
-        self.messages: list[dict[str, Any]] = []
-        self.closed = False
-        self.loop = asyncio.new_event_loop()
-        self._ws: aiohttp.ClientWebSocketResponse | None = None
-        self._session: aiohttp.ClientSession | None = None
-        self._thread = threading.Thread(target=self.loop.run_forever, daemon=True)
-        self._thread.start()
-        self._run(self._open())
-
-    def _run(self, coro: Any, timeout: float = 10.0) -> Any:
-        return asyncio.run_coroutine_threadsafe(coro, self.loop).result(timeout)
+        self.given_url = url
+        super().__init__(url)
 
     async def _open(self) -> None:
         self._session = aiohttp.ClientSession()
-        self._ws = await self._session.ws_connect(self.url)
-        asyncio.get_running_loop().create_task(self._read())
-
-    async def _read(self) -> None:
-        assert self._ws is not None
-        async for message in self._ws:
-            if message.type == aiohttp.WSMsgType.TEXT:
-                self.messages.append(json.loads(message.data))
-        self.closed = True
-
-    def send(self, data: dict[str, Any] | str) -> None:
-        async def send() -> None:
-            assert self._ws is not None
-            await self._ws.send_str(data if isinstance(data, str) else json.dumps(data))
-        self._run(send())
+        self._ws = await self._session.ws_connect(self.given_url)
+        self._reader = asyncio.create_task(self._read())
 
     def of(self, type_: str, /, **fields: Any) -> list[dict[str, Any]]:
         """The messages of type ``type_`` whose ``fields`` are as given."""
-        return [m for m in list(self.messages) if m.get("type") == type_
-                and all(m.get(k) == v for k, v in fields.items())]
+        return [m for m in self.texts() if m.get("type") == type_ and all(m.get(k) == v for k, v in fields.items())]
 
     def wait(self, type_: str, /, timeout: float = 10.0, **fields: Any) -> dict[str, Any]:
         """The first message of type ``type_`` with ``fields`` (waiting for it)."""
         return wait_for(lambda: (self.of(type_, **fields) or [None])[0], timeout, f"a {type_} message {fields}",
-                        lambda: f"got: {[m.get('type') for m in self.messages][-20:]}")
-
-    def close(self) -> None:
-        if self.loop.is_closed():
-            return
-
-        async def close() -> None:
-            if self._ws is not None:
-                await self._ws.close()
-            if self._session is not None:
-                await self._session.close()
-        try:
-            self._run(close())
-        finally:
-            self.loop.call_soon_threadsafe(self.loop.stop)
-            self._thread.join(5)
-            self.loop.close()
+                        lambda: f"got: {[m.get('type') for m in self.texts()][-20:]}")
 
 
 @pytest.fixture
