@@ -117,8 +117,9 @@ class EventView:
 
 @dataclass(frozen=True)
 class Snapshot:
-    """The show at one instant; ``counters`` and ``problem`` are the monitor's own
-    (what it received, refused as bad, dropped, and the last refusal's reason)."""
+    """The show at one instant; ``counters``, ``problem`` and ``failure`` are the
+    monitor's own (what it received, refused as bad, dropped; the last refusal's
+    reason; why it stopped, if it did)."""
 
     t: float
     robots: tuple[RobotView, ...]
@@ -126,6 +127,7 @@ class Snapshot:
     events: tuple[EventView, ...]
     counters: dict[str, int]
     problem: str = ""
+    failure: str = ""
 
 
 class _Robot:
@@ -172,6 +174,7 @@ class Monitor:
         self._entities: list[Any] = []
         self._stopping = threading.Event()
         self._worker: threading.Thread | None = None
+        self.failure = ""  # why the monitor's worker died, if it did: its view no longer changes
         self._info = InfoRequests(bus, self._on_info, self._on_bad_info)
 
     def start(self) -> Monitor:
@@ -257,6 +260,13 @@ class Monitor:
     # -- the worker --------------------------------------------------------------------
 
     def _work(self) -> None:
+        try:
+            self._take_all()
+        except Exception as exc:  # a bug of the monitor's own: said on every snapshot, not a silent freeze
+            self.failure = f"the monitor stopped: {type(exc).__name__}: {exc}"
+            raise
+
+    def _take_all(self) -> None:
         while not self._stopping.is_set():
             for key, payload in self._queue.drain(timeout=0.25):
                 self.counters.add("received")
@@ -340,7 +350,7 @@ class Monitor:
             robots = tuple(_robot_view(name, r, arrival) for name, r in sorted(self._robots.items()))
             nodes = tuple(_node_view(hn, n, arrival) for hn, n in sorted(self._nodes.items()))
             events, problem = tuple(self._events), self._problem
-        return Snapshot(now, robots, nodes, events, dict(self.counters), problem)
+        return Snapshot(now, robots, nodes, events, dict(self.counters), problem, self.failure)
 
 
 def _forget(recent: deque[tuple[float, float]], now: float) -> None:

@@ -28,6 +28,7 @@ from textual.widgets import DataTable, Footer, Static
 from ..client import Outcome, ask
 from ..errors import CommandError, ConfigError, SonibusError
 from ..monitor import HISTORY, EventView, JointView, Monitor, NodeView, RobotView, Snapshot
+from ..ownership import owners
 from .api import Command, Environment, Exit, bus_config, joined
 
 EVERY_S = 0.25         # the view is redrawn this often
@@ -111,6 +112,7 @@ class TopApp(App[int]):
         for name in NODE_COLUMNS:
             nodes.add_column(name, key=name)
         robots.focus()
+        owners(self.monitor.bus)  # the claims, followed from now: a stop is sent to each robot's owner alone
         if self.signals:
             loop = asyncio.get_running_loop()
             for sig in (signal.SIGINT, signal.SIGTERM):
@@ -285,6 +287,8 @@ def status_line(snap: Snapshot) -> Text:
                 f"bad {counters.get('bad', 0):,}  dropped {counters.get('dropped', 0):,}")
     if snap.problem:
         text.append(f"   last refused: {snap.problem}", style=WARNING)
+    if snap.failure:
+        text = Text(f"{snap.failure}: what is shown no longer changes; quit (q) and start again", style=ALARM)
     return text
 
 
