@@ -38,7 +38,7 @@ from sonibus.bus.errors import ConfigError
 from sonibus.bus.info import InfoRequests
 from sonibus.bus.options import bad
 from sonibus.bus.queue import SampleQueue
-from sonibus.bus.streams import Streams
+from sonibus.bus.streams import Streams, without_audio
 
 from .views import DERIVED_INFO, Views, joint_samples
 
@@ -60,7 +60,8 @@ class FoxgloveConfig:
 
     def __post_init__(self) -> None:
         parse_endpoint("listen", self.listen)
-        object.__setattr__(self, "subscribe", keys.patterns(self.subscribe))
+        # (Foxglove's JSON channels have no form for PCM: an audio chunk would stop the node)
+        object.__setattr__(self, "subscribe", without_audio(keys.patterns(self.subscribe), "the foxglove adapter"))
         if self.queue < 1:
             raise bad("queue", f"{self.queue} must be at least 1")
         if not self.info_every_s > 0:

@@ -9,6 +9,7 @@ import time
 import numpy as np
 import pytest
 
+from sonibus.adapters.foxglove.server import FoxgloveConfig
 from sonibus.adapters.midi.config import MidiSinkConfig
 from sonibus.adapters.osc import OscSink, OscSinkConfig
 from sonibus.bus import ConfigError, encode, keys
@@ -71,7 +72,8 @@ def test_streams_bring_audio_only_to_a_pattern_that_names_it(net):
             stream.undeclare()
 
 
-@pytest.mark.parametrize(("config", "sink"), [(OscSinkConfig, "an OSC sink"), (MidiSinkConfig, "a MIDI sink")])
+@pytest.mark.parametrize(("config", "sink"), [(OscSinkConfig, "an OSC sink"), (MidiSinkConfig, "a MIDI sink"),
+                                              (FoxgloveConfig, "the foxglove adapter")])
 def test_a_sink_that_cannot_carry_audio_refuses_a_pattern_naming_it(config, sink):
     for pattern in ("pepper/audio/mic", "*/audio/*"):
         with pytest.raises(ConfigError) as caught:
