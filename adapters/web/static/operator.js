@@ -9,6 +9,7 @@
   const HISTORY = 600;          // frames kept per robot for the charts (24 s at 25/s)
   const CHART_S = 10;           // seconds a chart shows
   const EVENTS_KEPT = 200;      // entries of the event log
+  const TRACE_KEPT = 1000;      // round trips kept for a bench
   const TOUCHED_MS = 1500;      // a slider the operator moved is left alone this long before it follows the robot
   const AMBER_MS = 5000;        // a node stays amber this long after a loss counter moved
   const LOSS_COUNTERS = ["dropped", "stale", "bad", "errors"];  // every node has them (node_stats)
@@ -23,9 +24,14 @@
 
   const settings = {update_hz: 25, slider_hz: 20, speed: 0.2};
   const views = new Map();       // robot name → RobotView
-  const counters = {frames: 0, rendered: 0, events: 0, stats: 0};
-  const trace = [];              // {what, ms}: a behavior click until the page shows it running (bench/web_page.py)
+  const counters = {frames: 0, rendered: 0, render_ms: 0, events: 0, stats: 0};
+  const trace = [];              // {what, ms}: a behavior click until its reply, until it shows running (bench/web_page.py)
   let dirty = false;
+
+  function note(what, ms) {
+    trace.push({what, ms});
+    if (trace.length > TRACE_KEPT) trace.splice(0, trace.length - TRACE_KEPT);
+  }
 
   function groupOf(name) {
     return GROUPS.find(([, test]) => test(name))[0];
@@ -96,7 +102,16 @@
       const canvas = el("canvas", {height: 90, dataset: {chart: group}});
       const legend = el("div", {class: "legend"}, ...members.map((joint, i) =>
         el("span", {style: `color:${COLOURS[i % COLOURS.length]}`}, joint.name)));
-      this.charts.push({canvas, members});
+      const chart = {canvas, members, width: 0, height: 0};
+      // Sizes come from a ResizeObserver: reading clientWidth while drawing would force a layout every frame.
+      new ResizeObserver(([entry]) => {
+        const ratio = window.devicePixelRatio || 1;
+        chart.width = Math.max(Math.round(entry.contentRect.width * ratio), 10);
+        chart.height = Math.max(Math.round(entry.contentRect.height * ratio), 10);
+        this.fresh = true;
+        dirty = true;
+      }).observe(canvas);
+      this.charts.push(chart);
       return el("figure", {class: "chart"}, el("figcaption", {}, group), canvas, legend);
     }
 
@@ -173,7 +188,8 @@
       const clicked = performance.now();
       button.dataset.clicked = String(clicked);
       button.dataset.state = "starting";
-      command(this.name, "behavior/run", {name}, (reply) => {
+      command(this.name, "behavior/run", {name}, (reply, ms) => {
+        note("behavior reply", ms);
         if (!reply.ok && button.dataset.state === "starting") this.behaviorState(name, "failed", reply.error);
       });
     }
@@ -183,7 +199,7 @@
       if (!button) return;
       const shown = {started: "running", stopped: "done", failed: "failed"}[state] || state;
       if (shown === "running" && button.dataset.clicked) {
-        trace.push({what: "behavior running", ms: performance.now() - Number(button.dataset.clicked)});
+        note("behavior running", performance.now() - Number(button.dataset.clicked));
         delete button.dataset.clicked;
       }
       button.dataset.state = shown;
@@ -235,7 +251,7 @@
         const joint = this.joints.get(name);
         const span = joint.max - joint.min;
         const share = span > 0 ? Math.min(Math.max((value - joint.min) / span, 0), 1) : 0.5;
-        this.bars.get(name).style.width = `${(share * 100).toFixed(1)}%`;
+        this.bars.get(name).style.transform = `scaleX(${share.toFixed(3)})`;
         const control = this.sliders.get(name);
         if (control && document.activeElement !== control.slider
             && now - (this.touched.get(name) || -Infinity) > TOUCHED_MS) {
@@ -247,10 +263,9 @@
       return true;
     }
 
-    drawChart({canvas, members}) {
+    drawChart({canvas, members, width, height}) {
+      if (!width) return;  // not laid out yet
       const ratio = window.devicePixelRatio || 1;
-      const width = Math.max(Math.round(canvas.clientWidth * ratio), 10);
-      const height = Math.max(Math.round(canvas.clientHeight * ratio), 10);
       if (canvas.width !== width || canvas.height !== height) {
         canvas.width = width;
         canvas.height = height;
@@ -415,10 +430,14 @@
 
   function frameLoop(now) {
     if (dirty) {
+      const began = performance.now();
       dirty = false;
       let drawn = false;
       for (const view of views.values()) drawn = view.render(now) || drawn;
-      if (drawn) counters.rendered += 1;
+      if (drawn) {
+        counters.rendered += 1;
+        counters.render_ms += performance.now() - began;
+      }
     } else {
       for (const view of views.values()) view.render(now);
     }
