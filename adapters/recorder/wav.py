@@ -54,7 +54,9 @@ def export_wav(recording: Recording, directory: str, say: Callable[[str], None])
         paths.append(os.path.join(directory, f"{key_parts.robot}-{key_parts.name}.wav"))
         skipped = _write(recording, key, paths[-1])
         if skipped:
-            say(f"{key}: {skipped[0]} chunks skipped: at {skipped[1]}, not the {skipped[2]} of its first chunk")
+            count, found, kept = skipped
+            say(f"{key}: {count} chunk{'s' if count != 1 else ''} skipped: {found}, not the {kept} of the "
+                f"first chunk (the WAV's)")
     return paths
 
 

@@ -28,7 +28,8 @@ def record_sim(net: Network, path: Path, frames: int = 100, rate_hz: float = 50.
     watch = net.bus("watch")
     seen = SampleQueue(1 << 20)
     subscribers = [watch.subscribe(p, queue=seen)[0] for p in ("pepper/joints/*", "pepper/events/*")]
-    sim = net.start(robot(SimConfig(robot="pepper", rate_hz=rate_hz, idle=True), name="sim-pepper"))
+    sim = net.start(robot(SimConfig(robot="pepper", rate_hz=rate_hz, idle=True, body_sound=False),  # (audio:
+                          name="sim-pepper"))                                          # test_audio.py)
     wait_for(lambda: robot_info(watch, "pepper", timeout=0.5), what="pepper/info")
     send_command(watch, "pepper", "behavior/run", {"name": HEY})
     send_command(watch, "pepper", "say", {"text": "hello there"})

@@ -20,6 +20,7 @@ from sonibus.adapters.features import Features
 from sonibus.adapters.features.config import FeaturesConfig
 from sonibus.adapters.features.kinematics import load_arms
 from sonibus.adapters.recorder import Recording
+from sonibus.adapters.recorder.channels import from_data
 from sonibus.adapters.recorder.export import export_csv
 from sonibus.adapters.recorder.recorder import Recorder, RecorderConfig
 from sonibus.adapters.recorder.replay import Replay, ReplayConfig
@@ -54,7 +55,7 @@ def read(path: Any) -> tuple[dict[str, Any], dict[str, list[tuple[int, dict[str,
                     for c in summary.channels.values() if c.schema_id}
         by_topic = defaultdict(list)
         for _, channel, message in reader.iter_messages(log_time_order=False):
-            by_topic[channel.topic].append((message.log_time, json.loads(message.data)))
+            by_topic[channel.topic].append((message.log_time, from_data(channel.message_encoding, message.data)))
     return channels, by_topic
 
 

@@ -13,10 +13,11 @@ import jsonschema
 import pytest
 from mcap.exceptions import EndOfFile
 from mcap.reader import make_reader
-from mcap.records import Footer
+from mcap.records import Channel, Footer
 from mcap.records import Message as McapMessage
 from mcap.stream_reader import StreamReader
 
+from sonibus.adapters.recorder.channels import from_data
 from sonibus.adapters.recorder.recorder import Recorder, RecorderConfig
 from sonibus.bus import ConfigError
 
@@ -29,7 +30,8 @@ def read_back(path):
     with open(path, "rb") as f:
         reader = make_reader(f)
         summary = reader.get_summary()
-        out = [(channel.topic, message.log_time, message.publish_time, json.loads(message.data), schema)
+        out = [(channel.topic, message.log_time, message.publish_time,
+                from_data(channel.message_encoding, message.data), schema)
                for schema, channel, message in reader.iter_messages(log_time_order=False)]
         metadata = {m.name: dict(m.metadata) for m in reader.iter_metadata()}
     return summary, out, metadata
@@ -117,12 +119,14 @@ def test_sigkill_leaves_a_file_readable_up_to_its_last_chunk(net, tmp_path, spaw
     net.sim("pepper", rate_hz=50)
     wait_for(lambda: path.exists() and path.stat().st_size > 20_000, timeout=20, what="two chunks on disk")
     recording.kill()
-    messages, complete = [], False
+    messages, complete, encodings = [], False, {}
     with open(path, "rb") as f, pytest.raises(EndOfFile):  # it ends mid-record: that is the point
         for record in StreamReader(f).records:
             complete = complete or isinstance(record, Footer)
             if isinstance(record, McapMessage):
                 messages.append(record)
+            elif isinstance(record, Channel):
+                encodings[record.id] = record.message_encoding
     assert not complete and len(messages) >= 17 * 10
     info = run_cli("info", str(path))
     assert info.returncode == 1
@@ -131,7 +135,7 @@ def test_sigkill_leaves_a_file_readable_up_to_its_last_chunk(net, tmp_path, spaw
     assert saved.returncode == 0, saved.stderr
     assert f"recovered {len(messages)} messages" in saved.stdout
     _, recovered, _ = read_back(tmp_path / "killed.recovered.mcap")
-    assert [json.loads(m.data) for m in messages] == [data for _, _, _, data, _ in recovered]
+    assert [from_data(encodings[m.channel_id], m.data) for m in messages] == [data for _, _, _, data, _ in recovered]
 
 
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
