@@ -4,8 +4,12 @@ A request carries its token as ``?token=`` or ``Authorization: Bearer <token>``.
 Operator routes take the operator token only; kiosk routes take the kiosk token or the
 operator's; the shipped code and kiosk images take none. With no token configured
 every route is served to this machine alone (the server then listens on loopback:
-``WebConfig`` refuses anything else, and a kiosk token without an operator token). A refusal is a
-403 with one plain line, counted ``refused``, and warned about once per client address.
+``WebConfig`` refuses anything else, and a kiosk token without an operator token), and
+only under a loopback name: a web site the operator visits that renames itself to
+127.0.0.1 (DNS rebinding) is refused. A WebSocket opened by a page of another site
+(its ``Origin`` is not this server) is refused too: browsers let any page open one.
+A refusal is a 403 with one plain line, counted ``refused``, and warned about once per
+client address.
 """
 
 from __future__ import annotations
@@ -15,6 +19,7 @@ import ipaddress
 import logging
 from collections.abc import Callable
 from typing import NoReturn
+from urllib.parse import urlsplit
 
 from aiohttp import web
 
@@ -35,10 +40,16 @@ class Guard:
         """Return if ``request`` may use a route of ``role`` ("operator", "kiosk", or "asset":
         shipped files and kiosk images, public where a token is configured); else raise a 403."""
         peer = request.remote or ""
+        if role != "asset" and not _same_origin(request):
+            self._refuse(peer, request, f"a page of another site ({request.headers['Origin'][:80]}) may not "
+                                        "open this server's WebSocket")
         if not self.token:  # (no kiosk token either: WebConfig wants the operator's first)
-            if _loopback(peer):
-                return
-            self._refuse(peer, request, "this server has no token and serves this machine only")
+            if not _loopback(peer):
+                self._refuse(peer, request, "this server has no token and serves this machine only")
+            if not _loopback_name(request.host):
+                self._refuse(peer, request, f"this server has no token and answers to loopback names only, "
+                                            f"not {request.host[:80]!r} — open http://127.0.0.1:<port>/")
+            return
         if role == "asset":  # the shipped code and kiosk images: no secret, and a page cannot pass tokens on
             return
         given = _token(request)
@@ -68,6 +79,21 @@ def _token(request: web.Request) -> str | None:
 
 def _same(given: str, token: str) -> bool:
     return hmac.compare_digest(given.encode(), token.encode())
+
+
+def _same_origin(request: web.Request) -> bool:
+    """Whether a WebSocket request comes from a page of this server (or from no page:
+    a program sends no ``Origin``)."""
+    origin = request.headers.get("Origin")
+    if origin is None:
+        return True
+    return urlsplit(origin).netloc.lower() == request.host.lower()
+
+
+def _loopback_name(host: str) -> bool:
+    """Whether a ``Host`` header names this machine by a loopback name or address."""
+    name = urlsplit(f"//{host}").hostname or ""
+    return name == "localhost" or name.endswith(".localhost") or _loopback(name)
 
 
 def _loopback(address: str) -> bool:

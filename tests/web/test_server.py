@@ -5,6 +5,7 @@ browser tests are in test_browser.py)."""
 
 from __future__ import annotations
 
+import asyncio
 import logging
 import math
 import re
@@ -12,6 +13,7 @@ import subprocess
 import threading
 import time
 
+import aiohttp
 import pytest
 import requests
 
@@ -227,6 +229,29 @@ def test_tokens_open_their_own_routes_only_and_a_refusal_is_warned_once_per_addr
     warned = [r for r in caplog.records if "refused" in r.getMessage() and "127.0.0.1" in r.getMessage()]
     assert len(warned) == 1, [r.getMessage() for r in warned]
     assert status("/static/style.css") == 200  # the shipped code needs no token (a page cannot pass it on)
+
+
+def test_other_sites_are_refused_a_websocket_and_without_a_token_a_non_loopback_name(net, websocket):
+    node = start_web(net)  # no token: this machine only
+    port = node.web.port
+    ws = node.url.replace("http://", "ws://") + "/ws"
+
+    async def handshake(origin: str | None) -> int:
+        async with aiohttp.ClientSession() as session:
+            try:
+                async with session.ws_connect(ws, origin=origin) as socket:
+                    await socket.close()
+                    return 101
+            except aiohttp.WSServerHandshakeError as exc:
+                return exc.status
+    assert asyncio.run(handshake(f"http://127.0.0.1:{port}")) == 101  # the node's own page
+    assert asyncio.run(handshake("http://evil.example")) == 403      # any other site's page
+    assert asyncio.run(handshake(f"http://evil.example:{port}")) == 403
+    renamed = requests.get(node.url + "/", headers={"Host": f"evil.example:{port}"}, timeout=5)
+    assert renamed.status_code == 403 and "loopback names only" in renamed.text  # DNS rebinding
+    assert requests.get(f"http://localhost:{port}/", timeout=5).status_code == 200
+    page = websocket(ws)
+    assert page.wait("hello")["role"] == "operator"
 
 
 def non_loopback_address() -> str:
