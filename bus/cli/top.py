@@ -27,7 +27,7 @@ from textual.widgets import DataTable, Footer, Static
 
 from ..client import Outcome, ask
 from ..errors import CommandError, ConfigError, SonibusError
-from ..monitor import HISTORY, EventView, JointView, Monitor, NodeView, RobotView, Snapshot
+from ..monitor import EventView, JointView, Monitor, NodeView, RobotView, Snapshot
 from ..ownership import owners
 from .api import Command, Environment, Exit, bus_config, joined
 
@@ -76,7 +76,7 @@ class TopApp(App[int]):
     #robots { height: auto; max-height: 10; }
     #nodes { height: auto; max-height: 14; }
     #below { height: 1fr; }
-    #joints { width: 3fr; border-top: solid $accent; text-wrap: nowrap; text-overflow: clip; }
+    #joints { width: 3fr; padding-right: 2; border-top: solid $accent; text-wrap: nowrap; text-overflow: clip; }
     #events { width: 2fr; min-width: 40; border-top: solid $accent; }
     #event-lines { text-wrap: nowrap; text-overflow: ellipsis; }
     #status { height: 1; color: $text-muted; }
@@ -232,9 +232,9 @@ def clock(seconds: float | None) -> str:
 
 
 def joint_lines(robot: RobotView) -> Text:
-    """Each joint: a bar of its value within its limits, the value, a sparkline of its
-    last seconds (scaled to its own range: small motions show) and the limits (last:
-    what a narrow terminal crops)."""
+    """Each joint: a bar of its value within its limits, the value, the limits and a
+    sparkline of its last seconds (scaled to its own range: small motions show; last,
+    so a narrow terminal crops the sparkline, not the figures)."""
     text = Text()
     for joint in robot.joints:
         fraction = joint.fraction
@@ -246,7 +246,7 @@ def joint_lines(robot: RobotView) -> Text:
         limits = f"{joint.min:+.2f}..{joint.max:+.2f}" if fraction is not None else ""
         unit = "" if joint.unit == "rad" else joint.unit[:4]
         text.append_text(Text.assemble(f"{joint.name:<15}", bar, f"{joint.value:+8.3f} {unit:<4} ",
-                                       (f"{sparkline(joint):<{HISTORY}} ", "cyan"), (limits, "dim"), "\n"))
+                                       (f"{limits:<13} ", "dim"), (sparkline(joint), "cyan"), "\n"))
     return text
 
 
