@@ -21,7 +21,7 @@ import numpy as np
 
 from .jitter import JitterBuffer
 
-__all__ = ["AudioChunk", "JitterBuffer", "to_int16"]
+__all__ = ["FULL_SCALE", "SAMPLE", "AudioChunk", "JitterBuffer", "to_int16"]
 
 FULL_SCALE = 32767
 SAMPLE = np.dtype("<i2")  # int16 little-endian, whatever this host's byte order

@@ -56,7 +56,7 @@ def test_a_sine_comes_out_sample_for_sample_after_its_fade_in():
     assert buffer.stats == {"underruns": 0, "overruns": 0, "gaps": 0, "refused": 0, "played_frames": len(out)}
 
 
-def test_a_sine_resampled_from_16_to_48_khz_keeps_its_frequency_and_has_no_seams():
+def test_a_sine_resampled_from_16_to_48_khz_keeps_its_frequency_and_has_no_seams(figure):
     buffer = JitterBuffer(48000, 2, target_ms=100)
     signal = sine(1000, 16000, 32000, amplitude=0.5, channels=1)               # 2 s of one microphone
     out = []
@@ -66,6 +66,8 @@ def test_a_sine_resampled_from_16_to_48_khz_keeps_its_frequency_and_has_no_seams
             out.append(buffer.pull(960))
     out = np.concatenate(out)
     assert buffer.stats["underruns"] == 0 and buffer.stats["overruns"] == 0
+    held = 3 * len(signal) - buffer.stats["played_frames"] - buffer.buffered     # still inside soxr
+    figure("held by the 16 -> 48 kHz resampler", 1000 * held / 48000, "ms")
     steady = out[4800:].astype(np.float64)                                      # past the fade-in
     assert np.array_equal(steady[:, 0], steady[:, 1])                           # one microphone on both sides
     spectrum = np.abs(np.fft.rfft(steady[:, 0] * np.hanning(len(steady))))
@@ -159,6 +161,24 @@ def test_a_chunk_whose_seq_goes_back_is_dropped_but_a_restarted_sender_is_heard(
     restarted = chunks(sine(440, 48000, 480), 48000, 480, seq=0, t=2000.0)[0]
     buffer.push(restarted)                                                      # seq behind, t ahead
     assert buffer.stats["refused"] == 1 and buffer.stats["gaps"] == 0 and buffer.buffered == 1920
+
+
+def test_a_sender_that_changes_its_rate_is_converted_on_without_a_break():
+    buffer = JitterBuffer(48000, 1, target_ms=100)
+    first = chunks(sine(500, 48000, 24000, amplitude=0.5), 48000, 960)          # 0.5 s at 48 kHz, then
+    then = chunks(sine(500, 16000, 16000, amplitude=0.5), 16000, 320, seq=len(first))  # 1 s at 16 kHz
+    out = []
+    for n, chunk in enumerate(first + then):
+        buffer.push(chunk)
+        if n >= 5:
+            out.append(buffer.pull(960))
+    out = np.concatenate(out)
+    assert buffer.stats["underruns"] == 0 and buffer.stats["gaps"] == 0 and buffer.stats["refused"] == 0
+    late = out[len(out) // 2:].astype(np.float64)                               # well into the 16 kHz part
+    spectrum = np.abs(np.fft.rfft(late[:, 0] * np.hanning(len(late))))
+    assert abs(np.fft.rfftfreq(len(late), 1 / 48000)[spectrum.argmax()] - 500) < 2 * 48000 / len(late)
+    quiet = np.abs(out[FADE:FADE + (len(out) - FADE) // 96 * 96, 0]) < 10
+    assert not quiet.reshape(-1, 96).all(axis=1).any()                          # no 2 ms of silence anywhere
 
 
 def test_the_ceiling_holds_for_full_scale_input_even_through_resampling():
