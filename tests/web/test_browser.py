@@ -158,6 +158,9 @@ def test_the_operator_page_plots_live_joints_and_lists_the_nodes(stage, browser,
 def test_a_behavior_click_runs_on_the_robot_and_shows_running_then_done(stage, browser, tmp_path):
     watch = Watch(stage.net.bus("watch"))
     open_operator(browser, stage)
+    # (for the picture: two seconds of charts, and both nodes' stats)
+    browser.wait(lambda: browser.js("return sonibus.counters.frames") >= 50
+                 and len(browser.all("#nodes tr[data-node]")) >= 2, "charts and nodes filled")
     button = f'[data-robot="pepper"] [data-behavior="{NOD}"]'
     browser.js(RECORD_STATES, button)
     browser.find(button).click()

@@ -7,7 +7,7 @@
 (() => {
   const {el, status, Link} = sonibus;
   const HISTORY = 600;          // frames kept per robot for the charts (24 s at 25/s)
-  const CHART_S = 10;           // seconds a chart shows
+  const CHART_S = 6;            // seconds a chart shows
   const EVENTS_KEPT = 200;      // entries of the event log
   const TRACE_KEPT = 1000;      // round trips kept for a bench
   const TOUCHED_MS = 1500;      // a slider the operator moved is left alone this long before it follows the robot
