@@ -61,7 +61,7 @@ class WebPages(Adapter):
         self._lock = threading.Lock()
         self._present: set[str] = set()           # robots on the bus (all of them: a stop reaches each)
         self._robots: dict[str, dict[str, Any]] = {}  # the shown robots, as the robots message says them
-        self._latest: dict[str, str] = {}         # robot → its newest frame message, not yet pushed
+        self._latest: dict[str, dict[str, Any]] = {}  # robot → its newest frame, not yet pushed
         self._nodes: dict[tuple[str, str], tuple[float, dict[str, Any]]] = {}  # latest stats, when heard
         self._shown = [zenoh.KeyExpr(keys.expr(r)) for r in cfg.robots]
         self.web = WebServer(self, cfg.host, cfg.port)
@@ -163,13 +163,10 @@ class WebPages(Adapter):
     def _take(self, message: Incoming) -> None:
         source = message.source
         if source.section == "frame":
-            frame = message.message
-            text = json.dumps({"type": "frame", "robot": source.robot, "t": frame["t"], "seq": frame["seq"],
-                               "names": frame["names"], "v": frame["v"]}, allow_nan=False)
             with self._lock:
                 if source.robot in self._latest:
                     self.count("frames_coalesced")
-                self._latest[source.robot] = text
+                self._latest[source.robot] = message.message  # (made JSON when pushed: most are replaced first)
         elif source.section == "stats":
             stats = message.message
             with self._lock:
@@ -184,10 +181,10 @@ class WebPages(Adapter):
         def tick(_: int) -> None:
             nonlocal next_stats
             with self._lock:
-                texts, self._latest = list(self._latest.values()), {}
-            if texts and self.pages.operators:
-                self.pages.frames(texts)
-                self.count("frames_pushed", len(texts))
+                latest, self._latest = self._latest, {}
+            if latest and self.pages.operators:
+                self.pages.frames([_frame(robot, frame) for robot, frame in latest.items()])
+                self.count("frames_pushed", len(latest))
             if time.monotonic() >= next_stats:
                 next_stats += STATS_EVERY_S
                 self.pages.stats(self._node_stats())
@@ -199,3 +196,9 @@ class WebPages(Adapter):
             self._nodes = {k: v for k, v in self._nodes.items() if now - v[0] < FORGET_AFTER_S}
             nodes = sorted(self._nodes.items())
         return [{**stats, "gone": now - heard > GONE_AFTER_S} for _, (heard, stats) in nodes]
+
+
+def _frame(robot: str, frame: dict[str, Any]) -> str:
+    """The ``frame`` message of ``robot``'s frame (checked by the gate: finite numbers)."""
+    return json.dumps({"type": "frame", "robot": robot, "t": frame["t"], "seq": frame["seq"], "names": frame["names"],
+                       "v": frame["v"]}, allow_nan=False)

@@ -26,6 +26,7 @@ from pathlib import Path
 from typing import Any
 
 from sonibus.adapters.osc.gateway import parse_endpoint
+from sonibus.bus import keys
 from sonibus.bus.errors import ConfigError
 from sonibus.bus.options import bad, from_mapping
 
@@ -53,9 +54,11 @@ class Button:
                                   "and 'say' (a text to say)")
         if self.say and (not self.say.strip() or len(self.say) > MAX_SAY):
             raise bad("say", f"button {self.id!r}: the text must be 1..{MAX_SAY} characters, not blank")
-        if self.image and not Path(self.image).is_file():
-            raise bad("image", f"button {self.id!r}: {self.image!r} is not a file (a path from where sonibus "
-                               f"runs: {Path.cwd()}) — give an image file or leave 'image' out")
+        if self.image:
+            if not Path(self.image).is_file():
+                raise bad("image", f"button {self.id!r}: {self.image!r} is not a file (a path from where sonibus "
+                                   f"runs: {Path.cwd()}) — give an image file or leave 'image' out")
+            object.__setattr__(self, "image", str(Path(self.image).resolve()))
 
     @property
     def kind(self) -> str:
@@ -118,6 +121,9 @@ class WebConfig:
             raise bad("speed", f"{self.speed:g} must be in (0, 1] (a fraction of each joint's max speed)")
         if not self.robots:
             raise bad("robots", "is empty: give robot names or \"*\" (every robot)")
+        for pattern in self.robots:
+            if not pattern or "/" in pattern:
+                raise bad("robots", f"{pattern!r} is not a robot name or glob (\"pepper\", \"pepper*\", \"*\")")
         if self.queue < 1:
             raise bad("queue", f"{self.queue} must be at least 1")
         object.__setattr__(self, "stand", _kiosk(self.kiosk))
@@ -143,6 +149,11 @@ def _kiosk(table: dict[str, Any]) -> Kiosk:
                            "what the page presses: make them unique")
     if kiosk.buttons and not kiosk.robot:
         raise bad("kiosk", "has buttons but no robot — add robot = \"pepper\" (the robot they command)")
+    if kiosk.robot:
+        try:
+            keys.check_name("robot", kiosk.robot)
+        except ValueError as exc:
+            raise bad("kiosk", f"{exc}") from None
     return kiosk
 
 

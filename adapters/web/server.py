@@ -15,6 +15,7 @@ import contextlib
 import functools
 import json
 import re
+from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -59,9 +60,9 @@ class Pages:
     """The pages' routes on ``web`` (a ``WebServer`` not started yet) for ``adapter``."""
 
     def __init__(self, adapter: Adapter, web_server: WebServer, config: WebConfig,
-                 robots_on_bus: Any) -> None:
+                 robots_on_bus: Callable[[], list[str]]) -> None:
         self.adapter, self.web, self.config = adapter, web_server, config
-        self.robots_on_bus = robots_on_bus  # () -> every robot on the bus now (a stop reaches them all)
+        self.robots_on_bus = robots_on_bus  # every robot on the bus now (a stop reaches them all)
         self.guard = Guard(config.token, config.kiosk_token, adapter.name, adapter.count)
         self.operators: set[Client] = set()
         self.kiosks: set[Client] = set()

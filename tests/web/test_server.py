@@ -190,6 +190,20 @@ def test_kiosk_can_only_press_its_buttons(stage, websocket):
     assert stage.node.stats["commands"] == 1
 
 
+def test_a_kiosk_buttons_image_is_served(net, tmp_path, websocket):
+    image = tmp_path / "wave.png"
+    image.write_bytes(b"\x89PNG\r\n\x1a\n not really a picture")
+    node = start_web(net, token=TOKEN, kiosk_token=KIOSK_TOKEN, kiosk={"robot": "pepper", "buttons": [
+        {"id": "wave", "label": "Wave", "behavior": WAVE, "image": str(image)}]})
+    kiosk = websocket(node.url.replace("http", "ws") + f"/kiosk/ws?token={KIOSK_TOKEN}")
+    assert kiosk.wait("hello")["buttons"][0]["image"] == "/kiosk/image/wave"
+    served = requests.get(node.url + "/kiosk/image/wave", timeout=5)
+    assert served.status_code == 200 and served.content == image.read_bytes()
+    assert served.headers["Content-Type"] == "image/png"
+    assert requests.get(node.url + "/kiosk/image/nope", timeout=5).status_code == 404
+    assert requests.get(node.url + "/static/..%2Fconfig.py", timeout=5).status_code == 404
+
+
 def test_bad_messages_get_a_one_line_refusal_and_the_connection_stays(stage, websocket):
     page = websocket(stage.ws_url())
     page.wait("hello")
@@ -293,6 +307,8 @@ CONFIG_ERRORS = {
     "[nodes.web.kiosk]\nrobot = \"pepper\"\n[[nodes.web.kiosk.buttons]]\nid = \"x\"\nlabel = \"X\"\n"
     "say = \"b\"\nimage = \"missing.png\"": "'missing.png' is not a file",
     "[nodes.web.kiosk]\nrobot = \"pepper\"\nbutons = []": "unknown key 'butons'",
+    "[nodes.web.kiosk]\nrobot = \"pep/per\"": "robot name 'pep/per' must be",
+    "robots = [\"pepper/joints\"]": "key 'robots': 'pepper/joints' is not a robot name or glob",
 }
 
 
