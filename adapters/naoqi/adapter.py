@@ -80,6 +80,7 @@ class NaoqiRobot(RobotAdapter):
         self.own(self.bus.watch_subscribers(key, microphones.wanted))
         self.speaker = Speaker(self, self.link, self.robot, self.config)
         self.spawn(lambda: microphones.run(self.stopping), "microphones")
+        self.spawn(lambda: microphones.send(self.stopping), "mic-out")
         self.spawn(self.speaker.run, "speaker")
 
     def _stop(self) -> None:

@@ -13,7 +13,10 @@ a robot that still lists one of a dead link never mixes them up.
 
 A buffer (about 170 ms) is cut into chunks of at most ``CHUNK_MS``, ``seq`` +1
 each; ``t`` is the robot's timestamp mapped to this machine's wall clock
-(``RobotClock``), or the arrival time when the robot gives none."""
+(``RobotClock``), or the arrival time when the robot gives none. The chunks
+are published spread over the buffer's duration (``send``), as they were
+heard: a steady stream, not a burst of a buffer's worth that a congested bus
+(``AUDIO`` drops rather than waits) would cut into."""
 
 from __future__ import annotations
 
@@ -43,6 +46,7 @@ CHANNEL_FLAGS = {"all": 0, "left": 1, "right": 2, "front": 3, "rear": 4}  # ALSo
 CHUNK_MS = 20.0      # the longest chunk published (a robot's buffer is cut into these)
 RETRY_S = 1.0        # a subscription that failed is tried again this often
 GOODBYE_MS = 300     # unsubscribing on stop waits this long at most (a frozen robot never answers)
+MAX_AHEAD_S = 0.5    # a schedule this far ahead of now (a robot whose clock runs fast) starts again
 
 
 class RobotClock:
@@ -135,6 +139,9 @@ class Microphones:
         self._stale: list[str] = []                     # modules of dead links the robot may still list
         self._calls = threading.Lock()                  # one (un)subscription at a time: worker or close
         self._seq = -1
+        self._outbox: deque[tuple[float, AudioChunk]] = deque()  # (when to publish, monotonic s; chunk)
+        self._next_due = 0.0
+        self._out = threading.Condition()
 
     @property
     def subscribed(self) -> bool:
@@ -173,6 +180,17 @@ class Microphones:
                 if (self._wanted and self._available) == want and not stopping.is_set():
                     self._state.wait(0.2)  # (also notices a new session: the link changes without a word)
 
+    def send(self, stopping: threading.Event) -> None:
+        """The publishing worker: each chunk at its time."""
+        while not stopping.is_set():
+            with self._out:
+                wait = self._outbox[0][0] - time.monotonic() if self._outbox else 0.2
+                if wait > 0:
+                    self._out.wait(min(wait, 0.2))
+                    continue
+                chunk = self._outbox.popleft()[1]
+            self.publish(chunk)
+
     def close(self) -> None:
         """Unsubscribe before the link closes (at most ``GOODBYE_MS`` per call on a robot that does not answer)."""
         with self._state:
@@ -197,7 +215,7 @@ class Microphones:
                 self.link.call(AUDIO_DEVICE, "setClientPreferences", name, self.rate, self.flag, 0)
                 self.link.call(AUDIO_DEVICE, "subscribe", name)
             except (LinkDown, RemoteError):
-                self._forget(subscription, GOODBYE_MS)
+                self._forget(subscription)
                 raise
             self._current = subscription
             log.info("microphones subscribed as %s: %d Hz, %s", name, self.rate,
@@ -208,8 +226,8 @@ class Microphones:
             subscription, self._current = self._current, None
             if subscription is None:
                 return
-            if subscription.session is not self.link.session:  # its link died: tell the next one
-                self._stale.append(subscription.name)
+            if subscription.session is not self.link.session or not self.link.connected:
+                self._stale.append(subscription.name)  # its link died: the next one unsubscribes it
                 return
             try:
                 self.link.call(AUDIO_DEVICE, "unsubscribe", subscription.name,
@@ -217,13 +235,13 @@ class Microphones:
             except (LinkDown, RemoteError) as exc:
                 log.debug("unsubscribe %s: %s", subscription.name, exc)
                 self._stale.append(subscription.name)
-            self._forget(subscription, GOODBYE_MS if goodbye else self.link.timeout_ms)
+            self._forget(subscription)
             log.info("microphones unsubscribed (%s)", subscription.name)
 
-    def _forget(self, subscription: Subscription, timeout_ms: int) -> None:
+    def _forget(self, subscription: Subscription) -> None:
+        """Unregister the module (the robot's service directory: bounded, it may not answer)."""
         try:
-            future = subscription.session.unregisterService(subscription.service_id, _async=True)
-            future.wait(timeout_ms)
+            subscription.session.unregisterService(subscription.service_id, _async=True).wait(GOODBYE_MS)
         except Exception as exc:  # a session closed underneath
             log.debug("unregister %s: %s", subscription.name, exc)
 
@@ -241,8 +259,16 @@ class Microphones:
             return
         samples = np.frombuffer(buffer, SAMPLE).reshape(frames, channels)
         first = self.clock.start(stamp, frames / self.rate, arrived)
+        now = time.monotonic()
+        due = max(now, self._next_due) if self._next_due - now < MAX_AHEAD_S else now
+        self._next_due = due + frames / self.rate
         step = max(1, round(self.rate * CHUNK_MS / 1000.0))
+        chunks = []
         for start in range(0, frames, step):
             self._seq += 1
-            piece = samples[start:start + step]
-            self.publish(AudioChunk(first + start / self.rate, self._seq, self.rate, channels, piece.tobytes()))
+            piece = AudioChunk(first + start / self.rate, self._seq, self.rate, channels,
+                               samples[start:start + step].tobytes())
+            chunks.append((due + start / self.rate, piece))
+        with self._out:
+            self._outbox.extend(chunks)
+            self._out.notify()

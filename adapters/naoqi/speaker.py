@@ -22,8 +22,8 @@ from typing import Any
 import numpy as np
 
 from sonibus.bus import keys, messages
-from sonibus.bus.adapter import Adapter
 from sonibus.bus.audio import AudioChunk, JitterBuffer
+from sonibus.bus.owner import RobotAdapter
 
 from .config import NaoqiConfig
 from .connection import Link, LinkDown, RemoteError
@@ -44,7 +44,7 @@ assert MAX_BEHIND_BLOCKS * BLOCK_FRAMES <= MAX_FRAMES  # a catch-up is still one
 class Speaker:
     """Plays ``<robot>/audio/speaker`` on the robot behind ``link``; ``run()`` is the worker of ``node``."""
 
-    def __init__(self, node: Adapter, link: Link, robot: str, config: NaoqiConfig) -> None:
+    def __init__(self, node: RobotAdapter, link: Link, robot: str, config: NaoqiConfig) -> None:
         self.node, self.link = node, link
         self.buffer = JitterBuffer(OUTPUT_RATE, OUTPUT_CHANNELS, target_ms=config.speaker_latency_ms,
                                    ceiling=config.volume_ceiling)
@@ -102,8 +102,8 @@ class Speaker:
     def _send(self, block: np.ndarray) -> None:
         frames = len(block)
         assert 1 <= frames <= MAX_FRAMES, f"{frames} frames in one call"
-        if not self.available.is_set():
-            return  # no robot, or one without ALAudioDevice: the block is played to nobody
+        if not self.available.is_set() or not self.node.ownership.active:
+            return  # no robot, one without ALAudioDevice, or another node owns it: played to nobody
         self.largest_call = max(self.largest_call, frames)
         try:
             played: Any = self.link.call(AUDIO_DEVICE, "sendRemoteBufferToOutput", frames, block.tobytes(),

@@ -4,6 +4,7 @@ the microphones (processRemote → <robot>/audio/mic, only while anyone listens)
 
 from __future__ import annotations
 
+import itertools
 import threading
 import time
 from collections.abc import Iterator
@@ -26,6 +27,7 @@ from sonibus.bus.options import from_mapping
 
 from ..conftest import wait_for
 from .conftest import NaoqiRig, attach
+from .relay import Relay
 
 OUT = 48000          # the robot's output rate
 CEILING = 0.25       # the adapter's default volume ceiling
@@ -232,14 +234,16 @@ def test_microphones_flow_only_while_someone_listens(rig, figure):
     mic = MicChunks(r.bus, "pepper")
     chunks = wait_for(lambda: len(mic.poll()) >= 40 and mic.chunks, timeout=10.0, what="microphone chunks")
     assert len(device.listeners) == 1
-    assert [c.seq for c in chunks] == list(range(chunks[0].seq, chunks[0].seq + len(chunks)))
+    seqs = [c.seq for c in chunks]  # (AUDIO drops under congestion: a busy machine may lose one)
+    assert seqs == sorted(set(seqs)) and len(seqs) >= 0.9 * (seqs[-1] - seqs[0] + 1), seqs
     for chunk in chunks:
         assert (chunk.rate, chunk.channels) == (16000, 4) and 1 <= chunk.frames <= 320
         schemas.validate("audio_chunk", {**chunk.message(), "pcm": "(bytes)"})
     times = np.array([c.t for c in chunks])
     assert np.all(np.diff(times) > 0) and abs(times[-1] - time.time()) < 1.0, "robot time mapped to wall clock"
-    frames = np.array([c.frames for c in chunks])
-    assert np.allclose(np.diff(times), frames[:-1] / 16000, atol=0.05), "t advances by each chunk's length"
+    for before, after in itertools.pairwise(chunks):
+        if after.seq == before.seq + 1:
+            assert after.t - before.t == pytest.approx(before.frames / 16000, abs=0.05), "t advances by a chunk"
     assert robot_info(r.bus, "pepper")["naoqi"]["mic_clock"] == "robot"
     figure("latency of the newest chunk's first sample", time.time() - times[-1], "s")
 
@@ -265,6 +269,28 @@ def test_the_microphone_level_follows_a_commanded_joint_move(rig):
     mic.chunks.clear()
     wait_for(lambda: len(mic.poll()) >= 20 and rms(mic.chunks[-10:]) < 3 * max(rest, 1.0), timeout=5.0,
              what="the level to fall at rest")
+
+
+def test_microphones_come_back_after_the_link_is_replaced(net, fakes):
+    """Wi-Fi drop: the link goes silent; on the new one the adapter subscribes a module of a new name."""
+    robot = fakes()
+    device: ALAudioDevice = robot.services["ALAudioDevice"]
+    relay = Relay(int(robot.url.rsplit(":", 1)[1])).start()
+    try:
+        r = attach(net, relay.url(), connect_timeout_s=0.5, retry_max_s=0.5, fake=robot)
+        mic = MicChunks(r.bus, "pepper")
+        wait_for(lambda: mic.poll() and device.listeners, timeout=10.0, what="microphone chunks")
+        first = set(device.listeners)
+        relay.cut()
+        r.events.wait("connection", timeout=5.0, state="lost")
+        wait_for(lambda: r.events.find("connection", state="connected")[1:], timeout=10.0, what="connected again")
+        count = len(mic.poll())
+        wait_for(lambda: len(mic.poll()) > count + 20, timeout=10.0, what="microphone chunks on the new link")
+        assert set(device.listeners) and not set(device.listeners) & first, "a module of a new name"
+        seqs = [c.seq for c in mic.chunks]
+        assert seqs == sorted(set(seqs)), "seq goes on across links"
+    finally:
+        relay.stop()
 
 
 # -- a frozen robot -----------------------------------------------------------------------------
