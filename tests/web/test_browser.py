@@ -244,6 +244,37 @@ def test_space_and_escape_stop_the_robot_but_space_types_in_the_say_box(still_st
     assert browser.errors() == []
 
 
+def test_say_posture_and_awareness_reach_the_robot(still_stage, browser):
+    watch = Watch(still_stage.net.bus("watch"))
+    open_operator(browser, still_stage)
+    say = browser.find('[data-say="pepper"]')
+    say.send_keys("hello visitors", Keys.ENTER)
+    watch.wait_event("speech", "the robot to say it", text="hello visitors", state="started")
+    assert say.get_attribute("value") == ""  # sent, so cleared
+    browser.find('[data-robot="pepper"] [data-posture="Crouch"]').click()
+    watch.wait_event("posture", "the posture to start", name="Crouch", state="started")
+    browser.find('[data-awareness="pepper"]').click()
+    notice = watch.wait_event("command", "awareness on", verb="awareness")
+    assert notice["args"] == {"enabled": True} and notice["ok"] is True
+    browser.wait(lambda: browser.text("#status") == "✓ pepper awareness", "its reply shown")
+
+
+def test_a_node_turns_amber_when_a_loss_counter_moves_and_red_when_gone(still_stage, browser):
+    nao = still_stage.net.sim("nao", rate_hz=10)
+    open_operator(browser, still_stage)
+    row = "#nodes tr[data-node$='/{}']".format
+    browser.wait(lambda: browser.attribute(row("web"), "data-state") == "ok"
+                 and browser.attribute(row("sim-nao"), "data-state") == "ok", "the web and nao nodes listed, fine")
+    # Bytes that are no frame, on a key the web node takes: its gate refuses them, counted 'bad'.
+    still_stage.net.bus("vandal").session.put(keys.frame("pepper"), b"\xc1 no msgpack")
+    browser.wait(lambda: browser.attribute(row("web"), "data-state") == "warning", "the web node amber")
+    assert "bad 1" in browser.text(row("web"))
+    nao.stop()
+    browser.wait(lambda: browser.attribute(row("sim-nao"), "data-state") == "gone", "nao's node red (gone)")
+    assert "gone" in browser.find(row("sim-nao")).get_attribute("class")
+    assert browser.attribute(row("sim-pepper"), "data-state") == "ok"
+
+
 def test_the_page_shows_disconnected_and_reconnects(still_stage, browser):
     open_operator(browser, still_stage)
     port = still_stage.node.web.port
