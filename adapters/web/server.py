@@ -67,7 +67,7 @@ class Pages:
         self.operators: set[Client] = set()
         self.kiosks: set[Client] = set()
         self.stand = Stand(config.stand, self._to_kiosks)
-        self.sliders: Coalescer | None = None  # made on the loop (its clock)
+        self.sliders: Coalescer  # made when the server starts (it runs on its loop's clock)
         self._robots: str | None = None   # the latest robots message, for a page that connects
         self._stats: str | None = None
         app = web_server.app
@@ -77,11 +77,8 @@ class Pages:
         app.router.add_get("/kiosk/ws", functools.partial(self._websocket, "kiosk"))
         app.router.add_get("/static/{name}", self._static)
         app.router.add_get("/kiosk/image/{id}", self._image)
+        app.on_startup.append(self._startup)
         app.on_shutdown.append(self._close_all)
-
-    @property
-    def clients(self) -> int:
-        return len(self.operators) + len(self.kiosks)
 
     # -- from any thread -------------------------------------------------------------
 
@@ -127,8 +124,6 @@ class Pages:
         self.guard.check(request, role)
         ws = web.WebSocketResponse(timeout=CLOSE_WAIT_S, max_msg_size=MAX_WS_MESSAGE, heartbeat=HEARTBEAT_S)
         await ws.prepare(request)
-        if self.sliders is None:
-            self.sliders = Coalescer(asyncio.get_running_loop(), 1.0 / self.config.slider_hz, self._send_held)
         client = Client(ws, role, self.adapter, request.transport)
         group = self.operators if role == "operator" else self.kiosks
         group.add(client)
@@ -194,7 +189,7 @@ class Pages:
             client.send(protocol.reply(request.id, exc))
             return
         item = (client, request.id, request.robot, request.verb, args)
-        if request.verb != "joints/set" or self.sliders is None:
+        if request.verb != "joints/set":
             self._ask(*item)
             return
         args.setdefault("speed", self.config.speed)
@@ -203,11 +198,8 @@ class Pages:
             self.adapter.count("commands_coalesced")
             superseded[0].send(protocol.reply(superseded[1], {"coalesced": True}))
 
-    def _send_held(self, item: tuple[Any, ...]) -> None:
-        self._ask(*item)
-
     def _stop(self, client: Client, id_: protocol.Id) -> None:
-        for held in self.sliders.cancel() if self.sliders is not None else ():
+        for held in self.sliders.cancel():
             held[0].send(protocol.reply(held[1], "cancelled: a stop came first"))
         robots = sorted(self.robots_on_bus())
         if not robots:
@@ -268,6 +260,9 @@ class Pages:
     def _to_kiosks(self, message: dict[str, Any]) -> None:
         for client in self.kiosks:
             client.send(message)
+
+    async def _startup(self, app: web.Application) -> None:
+        self.sliders = Coalescer(asyncio.get_running_loop(), 1.0 / self.config.slider_hz, lambda i: self._ask(*i))
 
     async def _close_all(self, app: web.Application) -> None:
         await close_clients(self.operators | self.kiosks)
