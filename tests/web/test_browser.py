@@ -231,7 +231,7 @@ def test_space_and_escape_stop_the_robot_but_space_types_in_the_say_box(still_st
     watch.wait_event("behavior", "the behavior to stop", name=LONG, state="stopped")
     wait_for(lambda: watch.still(RATE // 2), 10, "the robot halted (half a second of identical frames)")
     assert len(watch.event("behavior", name=LONG, state="started")) == 1  # Space did not press the button
-    browser.wait(lambda: "pepper stop" in (browser.text("#status") or ""), "the stop's reply shown")
+    browser.wait(lambda: browser.text("#status") == "STOP: ✓ pepper", "the stop's reply shown")
 
     # In the say box Space is a space; Escape stops from anywhere.
     say = browser.find('[data-say="pepper"]')

@@ -36,11 +36,11 @@ const sonibus = (() => {
   }
 
   /** The status line (#status): the latest reply or notice; `kind` is ok, error or info. */
-  function status(text, kind) {
+  function status(text, kind = "info") {
     const line = document.getElementById("status");
-    if (!line) return;
+    if (!line || (line.textContent === text && line.dataset.kind === kind)) return;  // (a slider's replies: no flicker)
     line.textContent = text;
-    line.dataset.kind = kind || "info";
+    line.dataset.kind = kind;
     line.classList.remove("flash");
     void line.offsetWidth;  // restart the flash animation
     line.classList.add("flash");

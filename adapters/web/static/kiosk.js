@@ -57,6 +57,7 @@
     document.body.classList.toggle("busy", busy);
   }
 
+  document.addEventListener("contextmenu", (event) => event.preventDefault());  // a long press on a touchscreen
   const link = new Link("/kiosk/ws", {hello: onHello, button: onButton, connection: () => refresh()});
   status("", "info");
   Object.assign(sonibus, {link});

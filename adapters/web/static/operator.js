@@ -50,7 +50,6 @@
     constructor(name, info) {
       this.name = name;
       this.info = info;
-      this.key = JSON.stringify(info);
       this.joints = new Map(info.joints.map((joint) => [joint.name, joint]));
       this.values = new Map();         // joint → latest value
       this.times = new Float64Array(HISTORY);
@@ -405,7 +404,12 @@
     stop.classList.remove("pressed");
     void stop.offsetWidth;
     stop.classList.add("pressed");
-    if (link.send({type: "stop"}, "stop") !== null) status("STOP sent to every robot", "info");
+    const answers = [];  // one reply per robot on the bus
+    const sent = link.send({type: "stop"}, "stop", (reply) => {
+      answers.push(reply.ok ? `✓ ${reply.robot || "?"}` : `✗ ${reply.robot || "?"}: ${reply.error || "refused"}`);
+      status(`STOP: ${answers.join(", ")}`, answers.some((a) => a.startsWith("✗")) ? "error" : "ok");
+    });
+    if (sent !== null) status("STOP sent to every robot", "info");
   }
 
   function typing(target) {
