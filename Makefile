@@ -29,10 +29,12 @@ $(TESTS): $(STAMP) tests/plugin/pyproject.toml
 demo: $(STAMP)
 	trap true INT; $(BIN)/sonibus demo $(DEMO_ARGS) || test $$? -eq 130
 
+# the suite waits on processes and networks more than it computes: one worker per core
+TEST_WORKERS ?= 2
 test: $(TESTS)
 	bash scripts/test-tools.sh
 	$(BIN)/ruff check .
-	$(BIN)/python -m pytest
+	$(BIN)/python -m pytest -n $(TEST_WORKERS) --dist loadscope
 
 bench: $(TESTS)
 	bash scripts/test-tools.sh

@@ -126,7 +126,9 @@ def extra_of(ep: EntryPoint, module: str) -> str | None:
     for requirement in (ep.dist.requires or ()) if ep.dist is not None else ():
         name, _, marker = requirement.partition(";")
         extra = re.search(r"extra\s*==\s*['\"]([^'\"]+)['\"]", marker)
-        if extra and re.split(r"[\s<>=!~\[(]", name.strip())[0].replace("-", "_").lower() == module.lower():
+        project = re.split(r"[\s<>=!~\[(]", name.strip())[0].replace("-", "_").lower()
+        # a project installs its module under its name or its first word (JACK-Client: jack, foxglove-sdk: foxglove)
+        if extra and module.lower() in (project, project.partition("_")[0]):
             return extra.group(1)
     return None
 

@@ -166,8 +166,15 @@ def figure(request: pytest.FixtureRequest) -> Callable[..., None]:
     """``figure("loss detected", 1.62, "s")``: a measured value, shown in the summary."""
     def record(name: str, value: float, unit: str = "") -> None:
         shown = f"{value:.3f}" if isinstance(value, float) else str(value)
-        FIGURES.append(f"{request.node.name}: {name}: {shown}{f' {unit}' if unit else ''}")
+        # a test's user properties travel with its report, so figures measured in an xdist worker reach the summary
+        line = f"{request.node.name}: {name}: {shown}{f' {unit}' if unit else ''}"
+        request.node.user_properties.append(("figure", line))
     return record
+
+
+def pytest_runtest_logreport(report: pytest.TestReport) -> None:
+    if report.when == "teardown":
+        FIGURES.extend(value for name, value in report.user_properties if name == "figure")
 
 
 def pytest_terminal_summary(terminalreporter: pytest.TerminalReporter) -> None:

@@ -26,7 +26,7 @@ from pathlib import Path
 
 import pytest
 
-from .conftest import FIGURES, Process, free_port, wait_for
+from .conftest import Process, free_port, wait_for
 
 # pip and a package index are outside tools; the first test also pays for the install
 pytestmark = [pytest.mark.external, pytest.mark.timeout(600)]
@@ -49,6 +49,7 @@ class Installed:
     wheel: Path
     venv: Path
     work: Path  # the working folder of every command run here (not the repo)
+    seconds: float  # to build the wheel, make the virtualenv and install
 
     @property
     def env(self) -> dict[str, str]:
@@ -89,13 +90,13 @@ def installed(tmp_path_factory: pytest.TempPathFactory) -> Installed:
     venv = base / "venv"
     _done([sys.executable, "-m", "venv", str(venv)], "python -m venv", 120)
     _done([str(venv / "bin" / "python"), "-m", "pip", "install", "--quiet", str(wheel)], "pip install", 500)
-    FIGURES.append(f"test_wheel: wheel built, clean virtualenv made and installed in {time.monotonic() - began:.1f} s")
     work = base / "work"
     work.mkdir()
-    return Installed(wheel, venv, work)
+    return Installed(wheel, venv, work, time.monotonic() - began)
 
 
-def test_the_wheel_holds_every_module_and_data_file_of_the_tree(installed):
+def test_the_wheel_holds_every_module_and_data_file_of_the_tree(installed, figure):
+    figure("wheel built, clean virtualenv made and installed", installed.seconds, "s")
     shipped = set(zipfile.ZipFile(installed.wheel).namelist())
     tree = sorted(f"{package}/{path.relative_to(folder)}" for package, folder in SOURCES.items()
                   for path in folder.rglob("*") if path.is_file() and not NOT_SHIPPED.search(str(path)))

@@ -61,7 +61,8 @@ def test_a_log_time_mcap_cannot_hold_is_refused(tmp_path, log_ns):
 
 
 @pytest.mark.parametrize("t", [1e12, 1e30, -5.0, NOW_NS / 1e9 + 3600, NOW_NS / 1e9 - 3600, 10**400, math.inf, "soon",
-                               True])
+                               True],
+                         ids=["1e12", "1e30", "-5", "an hour ahead", "an hour ago", "10**400", "inf", "soon", "True"])
 def test_a_publish_time_no_clock_gave_falls_back_to_the_log_time(tmp_path, t):
     """The frame of issue 13 (t = 1e12 overflowed uint64 ns: struct.error, a torn last chunk)."""
     path = tmp_path / "r.mcap"
