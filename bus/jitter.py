@@ -125,21 +125,21 @@ class JitterBuffer:
         with self._lock:
             if not self._playing and self.buffered >= self.target:
                 self._playing = True
-            played = min(frames, self.buffered) if self._playing else 0
-            out[:played] = self._buffer[self._start:self._start + played]
+            at = self._play_tail(out, 0)  # the rest of a fade-out comes before anything else
+            played = min(frames - at, self.buffered) if self._playing else 0
+            out[at:at + played] = self._buffer[self._start:self._start + played]
             self._start += played
             self.stats["played_frames"] += played
-            if self._playing and played < frames:  # ran dry
+            at += played
+            if self._playing and at < frames:  # ran dry
                 self.stats["underruns"] += 1
                 self._playing = False
                 self._fade_in = 0
                 if played >= len(self._down):
-                    out[played - len(self._down):played] *= self._down
+                    out[at - len(self._down):at] *= self._down
                 else:  # too little left to fade: from the last frame down to silence instead
-                    self._tail = (out[played - 1] if played else self._last) * self._down
-            if played < frames and len(self._tail):
-                tail, self._tail = self._tail[:frames - played], self._tail[frames - played:]
-                out[played:played + len(tail)] = tail
+                    self._tail = (out[at - 1] if at else self._last) * self._down
+                    self._play_tail(out, at)
             if frames:
                 self._last = out[-1].copy()
         level = np.rint(out * (SCALE * self.ceiling))
@@ -147,6 +147,12 @@ class JitterBuffer:
         return np.clip(level, -limit, limit, out=level).astype(np.int16)
 
     # -- the queue (self._lock held) ---------------------------------------------------
+
+    def _play_tail(self, out: np.ndarray, at: int) -> int:
+        """Put what is left of a fade-out into ``out`` from ``at``; where it ends."""
+        tail, self._tail = self._tail[:len(out) - at], self._tail[len(out) - at:]
+        out[at:at + len(tail)] = tail
+        return at + len(tail)
 
     def _append(self, sound: np.ndarray, fade: bool = True) -> None:
         if not len(sound):

@@ -111,6 +111,20 @@ def test_running_dry_with_too_little_left_to_fade_ramps_down_from_the_last_frame
     assert joined[4800:4800 + FADE - 1].all() and not joined[4800 + FADE:].any()   # the ramp, then silence
 
 
+def test_a_fade_out_cut_short_by_a_small_pull_finishes_before_playback_starts_again():
+    buffer = JitterBuffer(48000, 1, target_ms=10)
+    signal = sine(442.5, 48000, 1440, amplitude=0.8)
+    pieces = chunks(signal, 48000, 480)
+    buffer.push(pieces[0])
+    out = [buffer.pull(475), buffer.pull(7)]                                     # dry 2 frames into the ramp
+    buffer.push(pieces[1])
+    out += [buffer.pull(480), buffer.pull(480), buffer.pull(480)]              # again, and dry again
+    joined = np.concatenate(out)
+    assert buffer.stats["underruns"] == 2 and buffer.stats["played_frames"] == 960
+    assert largest_step(joined) <= 0.8 * 32767 * (2 * np.pi * 442.5 / 48000 + 1 / FADE) * 1.1
+    assert not joined[-480:].any()                                              # silence at the end
+
+
 def test_an_overrun_drops_the_oldest_so_the_newest_plays():
     buffer = JitterBuffer(48000, 1, target_ms=20, max_ms=60)
     signal = sine(440, 48000, 4800)
