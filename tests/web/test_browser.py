@@ -19,6 +19,7 @@ from sonibus.bus.errors import CommandError
 from ..conftest import Network, wait_for
 from .browser import Browser
 from .conftest import BUTTONS, HELLO, KIOSK_TOKEN, RATE, TOKEN, WAVE, Stage, start_web
+from .test_server import non_loopback_address
 
 NOD = "animations/Stand/Gestures/Yes_1"            # a short behavior: about 1.7 s
 LONG = "animations/Stand/Gestures/Enthusiastic_4"  # about 2.9 s: time to stop it
@@ -332,6 +333,28 @@ def test_operator_urls_refuse_the_kiosk_token(stage, browser):
     browser.open(f"{base}/?token={KIOSK_TOKEN}")
     assert browser.find("body").text.startswith("403")
     assert not browser.all("#stop")
+
+
+def test_from_another_address_the_pages_work_with_their_token_only(net, browser, tmp_path):
+    """Served on every address, opened at this machine's LAN address (the server sees a peer
+    that is not loopback): no token → 403; with it the page's WebSocket gets it too."""
+    net.sim("pepper", rate_hz=RATE)
+    image = tmp_path / "wave.png"
+    image.write_bytes(browser.driver.get_screenshot_as_png())  # any PNG will do
+    buttons = [{**BUTTONS[0], "image": str(image)}, BUTTONS[1]]
+    node = start_web(net, listen="0.0.0.0:0", token=TOKEN, kiosk_token=KIOSK_TOKEN,
+                     kiosk={"robot": "pepper", "buttons": buttons})
+    base = f"http://{non_loopback_address()}:{node.web.port}"
+    browser.open(f"{base}/")
+    assert browser.find("body").text.startswith("403")
+    browser.open(f"{base}/?token={TOKEN}")
+    browser.wait(lambda: browser.attribute("#connection", "data-state") == "connected", "connected over the LAN")
+    browser.wait(lambda: browser.all('[data-robot="pepper"] [data-joint="HeadYaw"]'), "pepper shown")
+    browser.open(f"{base}/kiosk?token={KIOSK_TOKEN}")
+    browser.wait(lambda: browser.attribute("#connection", "data-state") == "connected", "the kiosk connected")
+    loaded = "const i = document.querySelector('[data-button=\"wave\"] img'); return i && i.complete && i.naturalWidth"
+    assert browser.wait(lambda: browser.js(loaded), "the wave button's image") > 0
+    assert browser.errors() == []
 
 
 def test_screenshots_are_checked_for_blankness(browser, tmp_path):
