@@ -92,6 +92,7 @@ class Adapter:
         if self.state != "new":
             raise RuntimeError(f"{self!r} cannot start: it is {self.state}")
         self._bus = bus.for_node(self.name)
+        self._bus.on_error = self._callback_failed
         self.state = "starting"
         self.since = time.time()
         self._stats_report = Report(self.stats)  # (its first interval starts now)
@@ -187,6 +188,9 @@ class Adapter:
         self._threads.append(thread)
         thread.start()
         return thread
+
+    def _callback_failed(self, what: str, exc: BaseException) -> None:
+        self.fail(f"{what} failed: {type(exc).__name__}: {_first_line(exc)}", exc)
 
     def fail(self, reason: str, exc: BaseException | None = None) -> None:
         """Mark the node failed, loudly: its state (``sonibus nodes``), a log line (with

@@ -91,11 +91,26 @@ class Bus:
         self.limits = limits or Limits()  # what the gate of each node on this bus lets through
         self._shared: dict[str, Any] = {}  # per session, for every node's Bus on it (see ``shared``)
         self._lock = threading.Lock()
+        # what a callback of this node that raised is handed to (its adapter's ``fail``): Zenoh would
+        # print it and go on, and the node would report itself well while hearing nothing
+        self.on_error: Callable[[str, BaseException], None] | None = None
 
     def for_node(self, node: str) -> Bus:
         bus = Bus(self.session, node, self.host, self.limits)
         bus._shared, bus._lock = self._shared, self._lock
         return bus
+
+    def guarded(self, callback: Callable[..., Any], what: str) -> Callable[..., Any]:
+        """``callback`` as Zenoh will call it: an exception goes to ``on_error`` (if set)."""
+        def run(*args: Any) -> Any:
+            try:
+                return callback(*args)
+            except Exception as exc:
+                if self.on_error is None:
+                    raise
+                self.on_error(what, exc)
+                return None
+        return run
 
     def shared(self, name: str, make: Callable[[Bus], T]) -> T:
         """The one ``make(self)`` of this session (a view every node on it shares), made on first use."""
@@ -118,7 +133,8 @@ class Bus:
         """Call ``changed(True/False)`` now and whenever anyone starts or stops
         subscribing to ``keyexpr``; undeclare what it returns to stop."""
         interest = self.session.declare_publisher(keyexpr)
-        listener = interest.declare_matching_listener(lambda status: changed(status.matching))
+        listener = interest.declare_matching_listener(
+            self.guarded(lambda status: changed(status.matching), f"listener of subscribers to {keyexpr}"))
         changed(interest.matching_status.matching)
         return Entities((listener, interest))
 
@@ -142,7 +158,7 @@ class Bus:
                 queue.put((key, sample.payload.to_bytes(), time.monotonic_ns()) if stamped
                           else (key, sample.payload.to_bytes()))
 
-        return self.session.declare_subscriber(keyexpr, enqueue), queue
+        return self.session.declare_subscriber(keyexpr, self.guarded(enqueue, f"subscriber to {keyexpr}")), queue
 
     # -- presence (liveliness tokens) ---------------------------------------------------
 
@@ -159,7 +175,8 @@ class Bus:
         """Call ``changed(key, alive)`` for every token under ``keyexpr`` alive now and
         whenever one appears or goes (on a Zenoh thread)."""
         return self.session.liveliness().declare_subscriber(
-            keyexpr, lambda s: changed(str(s.key_expr), s.kind == zenoh.SampleKind.PUT), history=True)
+            keyexpr, self.guarded(lambda s: changed(str(s.key_expr), s.kind == zenoh.SampleKind.PUT),
+                                  f"watcher of {keyexpr}"), history=True)
 
     def discover(self) -> list[str]:
         """Wait until this session is really on the bus (``session.discover``); the ids it reached."""
@@ -173,7 +190,7 @@ class Bus:
     # -- serving and asking -------------------------------------------------------------
 
     def serve(self, keyexpr: str, handler: Callable[[zenoh.Query], None]) -> zenoh.Queryable:
-        return self.session.declare_queryable(keyexpr, handler)
+        return self.session.declare_queryable(keyexpr, self.guarded(handler, f"server of {keyexpr}"))
 
     def ask(self, selector: str, on_reply: Callable[[Reply], None], on_end: Callable[[], None], *,
             message: dict[str, Any] | None = None, timeout: float = 5.0, every_answer: bool = False) -> None:
@@ -189,7 +206,9 @@ class Bus:
         options: dict[str, Any] = {"consolidation": zenoh.ConsolidationMode.NONE} if every_answer else {}
         if message is not None:
             options.update(payload=codec.encode(message), encoding=codec.ENCODING)
-        self.session.get(selector, zenoh.handlers.Callback(reply, on_end), timeout=timeout, **options)
+        self.session.get(selector, zenoh.handlers.Callback(self.guarded(reply, f"answer to {selector}"),
+                                                           self.guarded(on_end, f"end of {selector}")),
+                         timeout=timeout, **options)
 
     def query(self, selector: str, message: dict[str, Any] | None = None,
               timeout: float = 5.0) -> list[dict[str, Any]]:

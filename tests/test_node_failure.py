@@ -119,3 +119,31 @@ def test_ctrl_c_while_a_worker_is_being_spawned_stops_the_node_cleanly(net, monk
             node.start(bus)
     assert node.state == "stopped" and [t.name for t in node._threads] == ["busy:work"]
     assert not bus.alive(keys.node_token(bus.host, "busy"), timeout=0.5)
+
+
+class Fussy(Adapter):
+    """A node whose subscription's ``skip`` raises on a key it did not expect (a bug of its own)."""
+
+    @dataclass(frozen=True)
+    class Config:
+        pass
+
+    def _start(self) -> None:
+        def skip(key: str) -> bool:
+            if key.endswith("surprise"):
+                raise KeyError(key)
+            return False
+
+        subscriber, self.queue = self.bus.subscribe("pepper/events/*", skip=skip)
+        self.own(subscriber)
+
+
+def test_a_callback_that_raises_fails_its_node_instead_of_zenoh_printing_it(net):
+    """A Zenoh callback that raised was printed by Zenoh and forgotten: the node went on
+    reporting itself well while hearing nothing (a half-done edit showed it: 0 messages)."""
+    fussy = net.start(Fussy(name="fussy"))
+    script = net.bus("script").session.declare_publisher("pepper/events/surprise")
+    wait_for(lambda: script.matching_status.matching, what="the node's subscription")
+    script.put(msgpack.packb({"t": 1.0, "kind": "x"}))
+    wait_for(lambda: fussy.state == "failed", what="the node to fail")
+    assert fussy.failure == "subscriber to pepper/events/* failed: KeyError: 'pepper/events/surprise'", fussy.failure
