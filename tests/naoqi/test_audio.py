@@ -202,7 +202,7 @@ def test_chunks_of_another_rate_are_converted_to_the_robots_48_khz(rig):
 
 
 def test_the_fake_speaker_refuses_what_naoqi_refuses_and_writes_what_it_played(fakes, qi_client, tmp_path):
-    fake = fakes()
+    fake = fakes(played_wav=str(tmp_path / "on-stop.wav"))
     device = qi_client(fake.url).service("ALAudioDevice")
     with pytest.raises(RuntimeError, match=r"nbOfFrames 16385 is not in \[1, 16384\]"):
         device.sendRemoteBufferToOutput(16385, bytes(16385 * 4))
@@ -216,6 +216,9 @@ def test_the_fake_speaker_refuses_what_naoqi_refuses_and_writes_what_it_played(f
     assert rate == OUT and data.tolist() == frames.tolist()
     audio = fake.services["ALAudioDevice"]
     assert (audio.calls, audio.refused, audio.largest) == (3, 2, 3)
+    fake.stop()  # played_wav: written on stop
+    data, rate = soundfile.read(tmp_path / "on-stop.wav", dtype="int16")
+    assert rate == OUT and data.tolist() == frames.tolist()
 
 
 # -- microphones ---------------------------------------------------------------------------------
