@@ -5,6 +5,7 @@ the microphones (processRemote → <robot>/audio/mic, only while anyone listens)
 from __future__ import annotations
 
 import itertools
+import logging
 import threading
 import time
 from collections.abc import Iterator
@@ -199,6 +200,23 @@ def test_chunks_of_another_rate_are_converted_to_the_robots_48_khz(rig):
     assert abs(len(sound) - 1.5 * OUT) <= 0.03 * 1.5 * OUT
     assert abs(dominant_hz(sound, OUT) - 1000.0) <= 2.0
     assert quiet_runs(sound, OUT // 1000) == []
+
+
+def test_a_call_that_times_out_is_one_warning_and_the_speaker_goes_on(rig, caplog):
+    r, device = speaker_rig(rig, connect_timeout_s=5.0)  # the link outlives the speaker's 1 s call timeout
+    streaming = threading.Thread(target=play, args=(r.bus, "pepper", sine_chunks(440.0, OUT, 4.0)), daemon=True)
+    with caplog.at_level(logging.WARNING, logger="sonibus.bus.adapter"):
+        streaming.start()
+        wait_for(lambda: r.adapter.stats["speaker_calls"] >= 10, what="the speaker playing")
+        r.fake.freeze()  # every call now hangs
+        wait_for(lambda: r.adapter.stats["speaker_errors"] >= 1, what="a call to time out")
+        r.fake.resume()
+        calls = r.adapter.stats["speaker_calls"]
+        wait_for(lambda: r.adapter.stats["speaker_calls"] > calls + 10, timeout=10.0, what="the speaker again")
+        streaming.join(10.0)
+    warnings = [rec.getMessage() for rec in caplog.records if "did not play a block" in rec.getMessage()]
+    assert len(warnings) == 1 and "no answer within 1 s" in warnings[0] and "\n" not in warnings[0], warnings
+    assert r.adapter.state == "running" and device.refused == 0
 
 
 def test_the_fake_speaker_refuses_what_naoqi_refuses_and_writes_what_it_played(fakes, qi_client, tmp_path):
