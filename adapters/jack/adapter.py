@@ -36,7 +36,7 @@ log = logging.getLogger(__name__)
 
 RING_S = 1.0          # input frames the ring holds: how far behind the publish worker may fall
 PAYLOAD_SLACK = 64    # bytes of a chunk's payload besides its PCM (t, seq, rate, channels, keys)
-JITTER_STATS = ("underruns", "overruns", "gaps")
+JITTER_STATS = ("underruns", "overruns", "gaps", "refused")
 
 
 class JackBridge(Adapter):
