@@ -317,7 +317,7 @@ def test_microphones_come_back_after_the_link_is_replaced(net, fakes):
 # -- a frozen robot -----------------------------------------------------------------------------
 
 
-def test_stop_is_bounded_while_streaming_to_a_frozen_robot(net, fake_process):
+def test_stop_is_bounded_while_streaming_to_a_frozen_robot(net, fake_process, figure):
     fake = fake_process()
     r = attach(net, fake.url, connect_timeout_s=5.0)
     wait_for(lambda: r.adapter.audio_present, what="the adapter to find ALAudioDevice")
@@ -332,6 +332,7 @@ def test_stop_is_bounded_while_streaming_to_a_frozen_robot(net, fake_process):
     started = time.monotonic()
     r.adapter.stop()
     elapsed = time.monotonic() - started
+    figure("stop with the robot frozen, microphones subscribed and the speaker playing", elapsed, "s")
     assert elapsed <= EXIT_BOUND_S, f"stopped after {elapsed:.1f} s"
     assert r.adapter.state == "stopped"
     assert not [t.name for t in r.adapter._threads if t.is_alive()]
