@@ -9,6 +9,7 @@ import asyncio
 import logging
 import math
 import re
+import signal
 import subprocess
 import threading
 import time
@@ -23,7 +24,7 @@ from sonibus.bus.client import send_command
 from sonibus.bus.config import parse
 from sonibus.bus.errors import CommandError
 
-from ..conftest import run_cli, wait_for
+from ..conftest import SONIBUS, free_port, run_cli, wait_for
 from .conftest import KIOSK_TOKEN, RATE, TOKEN, WAVE, start_web
 
 STOP_WITHIN_S = 3.0  # the node's contract (docs/adapters.md)
@@ -370,3 +371,25 @@ def test_a_kiosk_button_whose_behavior_the_robot_lacks_is_warned_about(net, capl
     warned = wait_for(lambda: [r.getMessage() for r in caplog.records if "kiosk button" in r.getMessage()], 10,
                       "the warning")
     assert "kiosk button(s) dance: robot 'pepper' has no such behavior" in warned[0]
+
+
+def test_sonibus_run_serves_the_pages_and_ends_on_sigint_with_a_page_connected(tmp_path, spawn, websocket):
+    port = free_port()
+    path = tmp_path / "show.toml"
+    path.write_text(f"[bus]\nmulticast = false\n\n[nodes.pepper]\nadapter = \"sim\"\nrate_hz = 50\n\n"
+                    f"[nodes.web]\nadapter = \"web\"\nlisten = \"127.0.0.1:{port}\"\n", encoding="utf-8")
+    process = spawn(SONIBUS, "run", str(path), collect=True, merge=True)
+    url = f"http://127.0.0.1:{port}"
+
+    def served() -> bool:
+        try:
+            return requests.get(url + "/", timeout=2).status_code == 200
+        except requests.ConnectionError:
+            return False
+    wait_for(served, 30, "the operator page served", lambda: "\n".join(process.lines))
+    page = websocket(url.replace("http", "ws") + "/ws")
+    page.wait("frame", robot="pepper", timeout=20)
+    code, _, _ = process.stop(signal.SIGINT, timeout=STOP_WITHIN_S + 5)
+    assert code in (0, 130), "\n".join(process.lines)
+    wait_for(lambda: page.closed, 5, "the page's WebSocket closed by the node")
+    assert not any("Traceback" in line for line in process.lines), "\n".join(process.lines)
