@@ -19,6 +19,7 @@ import pytest
 import requests
 
 from sonibus.adapters.web import WebConfig, WebPages
+from sonibus.adapters.web.slider import Coalescer
 from sonibus.bus import ConfigError, decode, keys
 from sonibus.bus.client import send_command
 from sonibus.bus.config import parse
@@ -393,3 +394,30 @@ def test_sonibus_run_serves_the_pages_and_ends_on_sigint_with_a_page_connected(t
     assert code in (0, 130), "\n".join(process.lines)
     wait_for(lambda: page.closed, 5, "the page's WebSocket closed by the node")
     assert not any("Traceback" in line for line in process.lines), "\n".join(process.lines)
+
+
+def test_the_coalescer_sends_the_first_at_once_then_only_the_latest_and_a_cancel_sends_nothing():
+    async def run() -> tuple[list, list, list, list]:
+        loop = asyncio.get_running_loop()
+        sent: list = []
+        arrived = asyncio.Event()
+
+        def send(item: object) -> None:
+            sent.append(item)
+            arrived.set()
+        lanes = Coalescer(loop, 0.05, send)
+        superseded = [lanes.offer("HeadYaw", n) for n in range(5)] + [lanes.offer("HeadPitch", "p")]
+        at_once = list(sent)
+        while len(sent) < 3:  # HeadYaw's latest, once its period is over
+            arrived.clear()
+            await asyncio.wait_for(arrived.wait(), 5)
+        slow = Coalescer(loop, 3600.0, send)  # (a held item waits an hour: only a cancel ends it)
+        slow.offer("HeadYaw", "first")
+        slow.offer("HeadYaw", "held")
+        return at_once, superseded, list(sent), slow.cancel()
+
+    at_once, superseded, sent, cancelled = asyncio.run(run())
+    assert at_once == [0, "p"]
+    assert superseded == [None, None, 1, 2, 3, None]
+    assert sent == [0, "p", 4, "first"]
+    assert cancelled == ["held"]
