@@ -107,13 +107,19 @@ class Browser:
     def all(self, css: str) -> list[WebElement]:
         return self.driver.find_elements(By.CSS_SELECTOR, css)
 
+    # Read in one script: the page may replace an element between a find and a read (the nodes table).
     def text(self, css: str) -> str | None:
-        found = self.all(css)
-        return found[0].text if found else None
+        """The shown text of the first element matching ``css`` (None: there is none)."""
+        return self.js("const e = document.querySelector(arguments[0]); return e ? e.innerText.trim() : null", css)
 
     def attribute(self, css: str, name: str) -> str | None:
-        found = self.all(css)
-        return found[0].get_attribute(name) if found else None
+        return self.js("const e = document.querySelector(arguments[0]); return e ? e.getAttribute(arguments[1]) : null",
+                       css, name)
+
+    def attributes(self, css: str, name: str) -> list[str | None]:
+        """Attribute ``name`` of every element matching ``css``, in document order."""
+        return self.js("return [...document.querySelectorAll(arguments[0])].map((e) => e.getAttribute(arguments[1]))",
+                       css, name)
 
     def read_console(self) -> list[dict[str, Any]]:
         self.console.extend(self.driver.get_log("browser"))
