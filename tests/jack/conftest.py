@@ -3,6 +3,7 @@ test's own: it plays a sine into the bridge and listens to what comes out."""
 
 from __future__ import annotations
 
+import time
 from collections.abc import Iterator
 
 import jack as jack_client
@@ -24,6 +25,7 @@ class Peer:
         self.sine = self.client.outports.register("sine")
         self.ear = self.client.inports.register("ear")
         self.heard: list[np.ndarray] = []
+        self.first_sound: float | None = None  # time.monotonic() of the first block heard louder than 0.1
         self.client.set_process_callback(self._process)
         self.client.activate()
 
@@ -32,6 +34,8 @@ class Peer:
         self.sine.get_array()[:] = self.amplitude * np.sin(2 * np.pi * self.hz * n / self.rate)
         self.played += frames
         self.heard.append(self.ear.get_array().copy())
+        if self.first_sound is None and np.abs(self.heard[-1]).max() > 0.1:
+            self.first_sound = time.monotonic()
 
     def recording(self) -> np.ndarray:
         return np.concatenate(self.heard[:]) if self.heard else np.zeros(0, np.float32)

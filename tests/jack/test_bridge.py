@@ -82,6 +82,8 @@ def test_chunks_on_the_mic_key_come_out_of_an_output_port(net, peer, figure):
     assert np.abs(signal).max() < 0.55
     assert node.stats["chunks_received"] > 0 and node.stats["bad"] == 0
     figure("underruns while playing", node.stats["underruns"])
+    figure("first mic chunk published → first sound out of the port (target_ms 60)",
+           (peer.first_sound - start) * 1000, "ms")
 
 
 def test_port_names_and_the_client_name_are_configurable(net, peer):
