@@ -96,22 +96,26 @@ class TopApp(App[int]):
         self.selected: str | None = None
 
     def compose(self) -> ComposeResult:
-        yield DataTable(id="robots", cursor_type="row", zebra_stripes=True)
-        yield Nodes(id="nodes", cursor_type="none", zebra_stripes=True)
+        self.robots = DataTable[Text](id="robots", cursor_type="row", zebra_stripes=True)
+        self.nodes = Nodes(id="nodes", cursor_type="none", zebra_stripes=True)
+        self.joints, self.events = Static(id="joints"), Vertical(id="events")
+        self.event_lines, self.status = Static(id="event-lines"), Static(id="status")
+        yield self.robots
+        yield self.nodes
         with Horizontal(id="below"):
-            yield Static(id="joints")
-            with Vertical(id="events"):
-                yield Static(id="event-lines")
-        yield Static(id="status")
+            yield self.joints
+            with self.events:
+                yield self.event_lines
+        yield self.status
         yield Footer()
 
     def on_mount(self) -> None:
-        robots, nodes = self.query_one("#robots", DataTable), self.query_one("#nodes", Nodes)
         for name in ROBOT_COLUMNS:
-            robots.add_column(name, key=name)
+            self.robots.add_column(name, key=name)
         for name in NODE_COLUMNS:
-            nodes.add_column(name, key=name)
-        robots.focus()
+            self.nodes.add_column(name, key=name)
+        self.robots.focus()
+        self.events.border_title = "events"
         owners(self.monitor.bus)  # the claims, followed from now: a stop is sent to each robot's owner alone
         if self.signals:
             loop = asyncio.get_running_loop()
@@ -120,37 +124,38 @@ class TopApp(App[int]):
         self.redraw()
         self.set_interval(self.every_s, self.redraw)
 
+    def check_action(self, action: str, parameters: tuple[object, ...]) -> bool | None:
+        """While the stop is asked for, its screen has every key (and Ctrl-C still ends)."""
+        return action == "interrupt" or not isinstance(self.screen, ConfirmStop)
+
     # -- drawing --------------------------------------------------------------------
 
     def redraw(self) -> None:
         """Take a snapshot of the show and show it."""
+        if not self.robots.is_attached:  # (a tick while the app ends)
+            return
         snap = self.snapshot = self.monitor.snapshot()
-        robots = self.query_one("#robots", DataTable)
-        _fill(robots, ((r.name, robot_cells(r)) for r in snap.robots))
-        _fill(self.query_one("#nodes", Nodes), ((f"{n.host}/{n.node}", node_cells(n)) for n in snap.nodes))
+        _fill(self.robots, ((r.name, robot_cells(r)) for r in snap.robots))
+        _fill(self.nodes, ((f"{n.host}/{n.node}", node_cells(n)) for n in snap.nodes))
         if self.selected is None and snap.robots:
             self.selected = snap.robots[0].name
         robot = next((r for r in snap.robots if r.name == self.selected), None)
-        joints = self.query_one("#joints", Static)
-        joints.border_title = f"joints of {robot.name}" if robot else "joints"
-        joints.update(joint_lines(robot) if robot else Text("no robot on the bus yet", style="italic"))
-        shown = self.query_one("#events", Vertical)
-        shown.border_title = "events"
-        lines = max(1, shown.size.height - 1)
-        self.query_one("#event-lines", Static).update(event_lines(snap.events[-lines:]))
-        self.query_one("#status", Static).update(status_line(snap))
+        self.joints.border_title = f"joints of {robot.name}" if robot else "joints"
+        self.joints.update(joint_lines(robot) if robot else Text("no robot on the bus yet", style="italic"))
+        lines = max(1, self.events.size.height - 1)
+        self.event_lines.update(event_lines(snap.events[-lines:]))
+        self.status.update(status_line(snap))
 
     def on_data_table_row_highlighted(self, event: DataTable.RowHighlighted) -> None:
-        if event.data_table.id == "robots" and event.row_key.value is not None:
+        if event.data_table is self.robots and event.row_key.value is not None:
             self.selected = event.row_key.value
             self.redraw()
 
     # -- keys -----------------------------------------------------------------------
 
     def action_next_robot(self, step: int) -> None:
-        robots = self.query_one("#robots", DataTable)
-        if robots.row_count:
-            robots.move_cursor(row=(robots.cursor_row + step) % robots.row_count)
+        if self.robots.row_count:
+            self.robots.move_cursor(row=(self.robots.cursor_row + step) % self.robots.row_count)
 
     def action_stop_all(self) -> None:
         robots = [r.name for r in self.snapshot.robots if not r.gone]

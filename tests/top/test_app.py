@@ -8,6 +8,8 @@ from __future__ import annotations
 import re
 import time
 
+import pytest
+
 from sonibus.bus import decode, keys, send_command
 from sonibus.bus.cli.top import ALARM
 
@@ -105,7 +107,8 @@ def test_s_then_y_stops_every_robot_and_shows_each_reply(net):
     assert pepper.engine.running_behavior is None and not pepper.body.moving() and not nao.body.moving()
 
 
-def test_s_then_another_key_sends_nothing(net):
+@pytest.mark.parametrize("key", ["n", "q", "tab", "escape"])
+def test_s_then_another_key_sends_nothing(net, key):
     pepper = net.sim("pepper", rate_hz=50)
     seen = watch_events(net, "pepper")
     top = net.bus("top")
@@ -115,9 +118,9 @@ def test_s_then_another_key_sends_nothing(net):
         await pilot.press("s")
         await until(pilot, lambda: "Stop every robot" in str(app.screen.query_one("Static").content),
                     what="the confirmation")
-        await pilot.press("n")
+        await pilot.press(key)
         await until(pilot, lambda: "cancelled: nothing sent" in shown(app, "event-lines"), what="the cancel shown")
-        assert app.screen is app.screen_stack[0]  # the confirmation is gone
+        assert app.screen is app.screen_stack[0] and app.is_running  # the confirmation is gone, the view goes on
         # A command after the cancel: once its event is here, a stop sent on the cancel would be too.
         send_command(top, "pepper", "behavior/list")
         await until(pilot, lambda: commands(seen, "behavior/list"), what="the later command's event")

@@ -74,8 +74,8 @@ def test_bad_stats_and_events_are_counted_and_named_and_the_monitor_goes_on(net)
 def test_a_robot_and_its_node_leaving_are_shown_as_gone_and_stay_listed(net):
     sim = net.sim("nao", rate_hz=20)
     with Monitor(net.bus("top")) as monitor:
-        wait_for(lambda: (r := robot(monitor.snapshot(), "nao")) and r.frames and node(monitor.snapshot(), "sim-nao"),
-                 what="nao and its node")
+        wait_for(lambda: (r := robot(monitor.snapshot(), "nao")) and r.frames
+                 and (n := node(monitor.snapshot(), "sim-nao")) and n.adapter == "sim", what="nao and its node")
         assert node(monitor.snapshot(), "sim-nao").state == "running"
         sim.stop()
         wait_for(lambda: robot(monitor.snapshot(), "nao").gone, what="nao shown as gone")
