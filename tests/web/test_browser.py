@@ -205,6 +205,34 @@ def test_a_slider_moves_the_joint_and_the_last_position_wins(still_stage, browse
     assert all(low <= f["v"][f["names"].index("HeadYaw")] <= high for f in watch.frames)
 
 
+def test_the_page_throttles_a_slider_and_sends_its_last_position(still_stage, browser):
+    """100 moves within one script: the page sends the first at once and the last one period
+    later, nothing between (the server coalesces too; this is the page's own share)."""
+    watch = Watch(still_stage.net.bus("watch"))
+    open_operator(browser, still_stage)
+    sent = browser.js("""
+        const slider = document.querySelector('[data-robot="pepper"] [data-slider="HeadPitch"]');
+        const socket = sonibus.link.ws, send = socket.send.bind(socket);
+        window.sentMoves = [];
+        socket.send = (text) => {
+          const m = JSON.parse(text);
+          if (m.verb === "joints/set") sentMoves.push(m);
+          send(text);
+        };
+        for (let i = 1; i <= 100; i++) {
+          slider.value = -0.5 + i * 0.005;
+          slider.dispatchEvent(new Event("input"));
+        }
+        return [sentMoves.length, Number(slider.value)];""")
+    assert sent[0] == 1  # the first move, at once
+    last = sent[1]
+    moves = browser.wait(lambda: len(browser.js("return sentMoves")) >= 2 and browser.js("return sentMoves"),
+                         "the held last move")
+    assert [m["args"]["angles"] for m in moves] == [[pytest.approx(-0.495, abs=0.01)], [last]]
+    wait_for(lambda: [c for c in watch.commands("joints/set") if c["args"]["angles"] == [last]], 10,
+             "the robot to get the last position", lambda: f"got: {watch.commands('joints/set')}")
+
+
 def test_an_out_of_range_request_shows_the_owners_error(still_stage, browser):
     bus = still_stage.net.bus("asker")
     open_operator(browser, still_stage)
