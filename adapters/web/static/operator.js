@@ -184,13 +184,17 @@
     }
 
     runBehavior(name, button) {
-      const clicked = performance.now();
-      button.dataset.clicked = String(clicked);
+      const before = button.dataset.state;
+      button.dataset.clicked = String(performance.now());
       button.dataset.state = "starting";
-      command(this.name, "behavior/run", {name}, (reply, ms) => {
+      const sent = command(this.name, "behavior/run", {name}, (reply, ms) => {
         note("behavior reply", ms);
-        if (!reply.ok && button.dataset.state === "starting") this.behaviorState(name, "failed", reply.error);
+        if (reply.ok || button.dataset.state !== "starting") return;
+        delete button.dataset.clicked;
+        // Refused: "already running" leaves it running; anything else is a failure to start.
+        this.behaviorState(name, before === "running" ? "started" : "failed", reply.error);
       });
+      if (sent === null) button.dataset.state = before;
     }
 
     behaviorState(name, state, error) {
