@@ -4,6 +4,7 @@ the page shows is checked in the page, what it makes the robot do on the bus."""
 
 from __future__ import annotations
 
+import math
 import urllib.error
 import urllib.request
 from collections.abc import Iterator
@@ -72,8 +73,10 @@ class Watch:
         return wait_for(lambda: self.event(kind, **fields), 10, what, lambda: f"events: {self.events[-10:]}")[0]
 
     def value(self, joint: str) -> float:
-        """``joint`` in the newest frame."""
+        """``joint`` in the newest frame (NaN before the first)."""
         self.update()
+        if not self.frames:
+            return math.nan
         frame = self.frames[-1]
         return frame["v"][frame["names"].index(joint)]
 
