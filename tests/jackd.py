@@ -30,8 +30,8 @@ def jack_up(name: str) -> bool:
 
 
 @pytest.fixture
-def jack(spawn, monkeypatch) -> Iterator[str]:
-    """The name of a running JACK server, made the default for this test; always stopped."""
+def jack_server(spawn, monkeypatch) -> Iterator[tuple[str, Process]]:
+    """A running JACK server, made the default for this test: its name and its process; always stopped."""
     jackd = require_tool("jackd", "jackd2")
     name = f"sonibus-{uuid.uuid4().hex[:8]}"
     monkeypatch.setenv("JACK_DEFAULT_SERVER", name)
@@ -41,7 +41,13 @@ def jack(spawn, monkeypatch) -> Iterator[str]:
     if server.popen.poll() is not None:
         _, err = server.popen.communicate()
         pytest.fail(f"jackd -n {name} ended at start: {err[-500:]}")
-    yield name
+    yield name, server
     server.stop(timeout=5)
     for leftover in Path("/dev/shm").glob(f"jack_sem.*_{name}_*"):  # jackd 1.9 leaves its clients' semaphores
         leftover.unlink(missing_ok=True)
+
+
+@pytest.fixture
+def jack(jack_server) -> str:
+    """The name of a running JACK server, made the default for this test; always stopped."""
+    return jack_server[0]

@@ -48,7 +48,7 @@ class JackBridge(Adapter):
     def _start(self) -> None:
         cfg: JackConfig = self.config
         self._client: jack.Client | None = None
-        self._failure = ""  # what the real-time callback or the server reported, for a worker to fail with
+        self._failure: Exception | None = None  # what JACK's threads met, for the watch worker to fail with
         self._client = jack_client.open_client(cfg.client_name, cfg.server)
         self.rate = self._client.samplerate
         self.chunk_frames = max(1, round(cfg.chunk_ms * self.rate / 1000))
@@ -116,19 +116,20 @@ class JackBridge(Adapter):
                 for channel, port in enumerate(self._outputs):
                     np.multiply(block[:, channel], 1 / 32768, out=port.get_array(), casting="same_kind")
         except Exception as exc:  # JACK would stop calling: the watch worker fails the node with it
-            self._failure = f"JACK process callback failed: {type(exc).__name__}: {exc}"
+            self._failure = exc
             raise jack.CallbackExit from None
 
     def _server_gone(self, status: jack.Status, reason: str) -> None:
-        self._failure = f"JACK server '{jack_client.server_name(self.config.server)}' went away: {reason}"
+        self._failure = jack_client.ServerGone(f"JACK server '{jack_client.server_name(self.config.server)}' "
+                                               f"went away: {reason}")
 
     # -- workers --------------------------------------------------------------------------
 
     def _watch(self) -> None:
-        """Turns a failure JACK reported on its own threads into the node's failure."""
+        """Turns what JACK's threads met into the node's failure (``Adapter.fail``)."""
         while not self.stopping.wait(0.1):
-            if self._failure:
-                raise RuntimeError(self._failure)
+            if self._failure is not None:
+                raise self._failure
 
     def _publish(self) -> None:
         ring, seq, lost = self._ring, 0, 0

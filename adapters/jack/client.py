@@ -12,9 +12,14 @@ import os
 
 import jack
 
-from sonibus.bus.errors import ConfigError
+from sonibus.bus.errors import ConfigError, SonibusError
 
 log = logging.getLogger(__name__)
+
+
+class ServerGone(SonibusError):
+    """The JACK server a client was on stopped (or threw it out)."""
+
 
 jack.set_error_function(lambda text: log.debug("libjack: %s", text))
 jack.set_info_function(lambda text: log.debug("libjack: %s", text))

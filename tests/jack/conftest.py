@@ -12,7 +12,7 @@ import pytest
 
 from .. import jackd
 
-jack = jackd.jack  # the fixture, shared with tests/midi
+jack, jack_server = jackd.jack, jackd.jack_server  # the fixtures, shared with tests/midi
 
 
 class Peer:

@@ -4,6 +4,7 @@ output port, a missing server is one line, and stop leaves nothing behind."""
 
 from __future__ import annotations
 
+import logging
 import os
 import threading
 import time
@@ -138,3 +139,16 @@ def _os_threads() -> int:
             return ""
     own = name(str(os.getpid()))
     return sum(name(task) == own for task in os.listdir("/proc/self/task"))
+
+
+def test_a_server_that_goes_away_fails_the_node_in_one_line(net, jack_server, caplog):
+    name, server = jack_server
+    node = bridge(net, client_name="bridge")
+    server.stop(timeout=5)
+    wait_for(lambda: node.failure, what="the node to fail")
+    assert node.state == "failed" and f"ServerGone: JACK server '{name}' went away" in node.failure
+    assert len(node.failure.splitlines()) == 1
+    said = [r for r in caplog.records if r.levelno >= logging.WARNING and "went away" in r.getMessage()]
+    assert said and all(r.exc_info is None for r in said)  # no traceback: a failure foreseen
+    node.stop()  # (closing a client whose server is gone returns)
+    assert not [t.name for t in threading.enumerate() if t.name.startswith("jack:")]
