@@ -50,6 +50,7 @@ class JackBridge(Adapter):
         self._client: jack.Client | None = None
         self._failure: Exception | None = None  # what JACK's threads met, for the watch worker to fail with
         self._client = jack_client.open_client(cfg.client_name, cfg.server)
+        self.client_name = self._client.name  # (JACK may have added -01: the ports are named after it)
         self.rate = self._client.samplerate
         self.chunk_frames = max(1, round(cfg.chunk_ms * self.rate / 1000))
         self._inputs = [self._client.inports.register(n) for n in cfg.input_names] if cfg.to_robot else []
@@ -74,7 +75,7 @@ class JackBridge(Adapter):
         self._client.activate()
         jack_client.connect(self._client, self._inputs, cfg.connect_inputs, "connect_inputs")
         jack_client.connect(self._client, self._outputs, cfg.connect_outputs, "connect_outputs")
-        log.info("%s: JACK client '%s' on server '%s' at %d Hz: %s", self.name, self._client.name,
+        log.info("%s: JACK client '%s' on server '%s' at %d Hz: %s", self.name, self.client_name,
                  jack_client.server_name(cfg.server), self.rate, ", ".join(self.ports))
         if self._ring is not None:
             self.spawn(self._publish, "publish")
@@ -88,8 +89,8 @@ class JackBridge(Adapter):
         return [port.name for port in (*self._inputs, *self._outputs)]
 
     def metrics(self) -> dict[str, Any]:
-        client = self._client
-        return {"rate": self.rate, "jack_client": client.name} if client is not None else {}
+        """JACK's sample rate and the client's name (read once: the client may be closing)."""
+        return {"rate": self.rate, "jack_client": self.client_name} if hasattr(self, "rate") else {}
 
     def _stop(self) -> None:
         client, self._client = getattr(self, "_client", None), None
