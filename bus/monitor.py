@@ -23,6 +23,7 @@ import statistics
 import threading
 import time
 from collections import deque
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -39,6 +40,7 @@ HISTORY_EVERY_S = 0.1   # at most this often: a sparkline of three seconds
 EVENTS = 200            # events kept
 LOSSES = ("dropped", "stale", "bad", "errors")  # counters whose moving is a warning
 QUEUE = 8192
+MAX_SHOWN = 1024        # robots, and nodes, kept: names made up on the fly must not grow it for ever
 
 
 @dataclass(frozen=True)
@@ -160,8 +162,8 @@ class Monitor:
     """The show as the bus tells it; ``start`` subscribes, ``close`` ends it (also as
     a context manager). The ``Bus``'s session stays the caller's."""
 
-    def __init__(self, bus: Bus, events: int = EVENTS) -> None:
-        self.bus = bus
+    def __init__(self, bus: Bus, events: int = EVENTS, most: int = MAX_SHOWN) -> None:
+        self.bus, self.most = bus, most
         self.counters = Counters(("received", "bad", "dropped"))
         self._robots: dict[str, _Robot] = {}
         self._nodes: dict[tuple[str, str], _Node] = {}
@@ -212,7 +214,9 @@ class Monitor:
     def _node_token(self, key: str, alive: bool) -> None:
         host, _, node = key[len(keys.NODES) + 1:].partition("/")
         with self._lock:
-            entry = self._nodes.setdefault((host, node), _Node())
+            entry = self._node(host, node)
+            if entry is None:
+                return
             if entry.alive is not None and entry.alive != alive:  # (not the tokens there when it started)
                 self._events.append(EventView(time.time(), f"{host}/{node}", "node",
                                               "back on the bus" if alive else "gone: its token vanished", not alive))
@@ -225,7 +229,9 @@ class Monitor:
         if claim is None:
             return
         with self._lock:
-            robot = self._robots.setdefault(claim.robot, _Robot())
+            robot = self._robot(claim.robot)
+            if robot is None:
+                return
             was = bool(robot.claims)
             if alive:
                 robot.claims[claim.key] = claim
@@ -255,7 +261,8 @@ class Monitor:
             return
         if isinstance(about, dict):
             with self._lock:
-                self._nodes.setdefault((host, node), _Node()).about = about
+                if (entry := self._node(host, node)) is not None:
+                    entry.about = about
 
     # -- the worker --------------------------------------------------------------------
 
@@ -284,8 +291,8 @@ class Monitor:
         elif parsed.section == "stats":
             host, _, node = parsed.name.partition("/")
             with self._lock:
-                entry = self._nodes.setdefault((host, node), _Node())
-                entry.stats, entry.stats_at = message, time.monotonic()
+                if (entry := self._node(host, node)) is not None:
+                    entry.stats, entry.stats_at = message, time.monotonic()
         elif key == keys.NODE_EVENTS:
             self._node_event(message)
         elif parsed.section == "events":
@@ -294,7 +301,9 @@ class Monitor:
     def _frame(self, name: str, frame: dict[str, Any]) -> None:
         now, arrival = time.time(), time.monotonic()
         with self._lock:
-            robot = self._robots.setdefault(name, _Robot())
+            robot = self._robot(name)
+            if robot is None:
+                return
             robot.frames += 1
             seq = frame["seq"]
             if robot.seq is not None and seq > robot.seq + 1:
@@ -302,6 +311,9 @@ class Monitor:
             robot.seq = seq  # (lower: a new owner or a replay that started over, no gap)
             robot.recent.append((arrival, now - frame["t"]))
             _forget(robot.recent, arrival)
+            if len(robot.values) > messages.MAX_JOINTS:  # joint names made up on the fly: start over
+                robot.values.clear()
+                robot.history.clear()
             robot.values.update(zip(frame["names"], map(float, frame["v"]), strict=True))
             if arrival - robot.history_at >= HISTORY_EVERY_S:
                 robot.history_at = arrival
@@ -317,8 +329,8 @@ class Monitor:
     def _node_event(self, message: dict[str, Any]) -> None:
         host, node = str(message.get("host", "?")), str(message.get("node", "?"))
         with self._lock:
-            entry = self._nodes.setdefault((host, node), _Node())
-            if message.get("state") == "failed":
+            entry = self._node(host, node)
+            if entry is not None and message.get("state") == "failed":
                 entry.failed = str(message.get("error", "failed"))
             self._events.append(EventView(float(message["t"]), f"{host}/{node}", "node",
                                           describe_event("node", message), message.get("state") == "failed"))
@@ -335,6 +347,23 @@ class Monitor:
         for host, node in nodes:
             self.bus.ask(keys.node_token(host, node), lambda r, h=host, n=node: self._described(h, n, r),
                          lambda: None, timeout=2.0)
+
+    def _robot(self, name: str) -> _Robot | None:
+        """(Under the lock.) Robot ``name``'s entry, made if there is room (``most``)."""
+        return self._entry(self._robots, name, _Robot, f"robot '{name}'")
+
+    def _node(self, host: str, node: str) -> _Node | None:
+        """(Under the lock.) The entry of node ``node`` of ``host``, made if there is room."""
+        return self._entry(self._nodes, (host, node), _Node, f"node '{node}' on '{host}'")
+
+    def _entry(self, table: dict[Any, Any], key: Any, make: Callable[[], Any], what: str) -> Any:
+        entry = table.get(key)
+        if entry is None and len(table) < self.most:
+            entry = table[key] = make()
+        elif entry is None:
+            self.counters.add("bad")
+            self._problem = f"{what} not shown: already {self.most} listed"
+        return entry
 
     def _refused(self, reason: str) -> None:
         self.counters.add("bad")

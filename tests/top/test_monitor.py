@@ -143,3 +143,18 @@ def test_a_note_of_the_viewer_is_listed_with_the_events(net):
         monitor.note("pepper", "stop", "ok: stopped")
         (event,) = monitor.snapshot().events
     assert (event.source, event.kind, event.text) == ("pepper", "stop", "ok: stopped")
+
+
+def test_robots_beyond_the_most_it_keeps_are_counted_not_kept(net):
+    script = net.bus("script")
+    with Monitor(net.bus("top"), most=2) as monitor:
+        def put(name: str) -> None:
+            script.put(keys.frame(name), messages.frame(time.time(), 1, ["HeadYaw"], [0.5]))
+
+        wait_for(lambda: robot(monitor.snapshot(), "a") or put("a"), what="the first robot")
+        for name in ("b", "c", "d"):
+            put(name)
+        wait_for(lambda: monitor.snapshot().counters["bad"] >= 2, what="the robots over the limit counted")
+        snapshot = monitor.snapshot()
+    assert [r.name for r in snapshot.robots] == ["a", "b"]
+    assert snapshot.problem == "robot 'd' not shown: already 2 listed"
