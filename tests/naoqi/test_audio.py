@@ -314,6 +314,18 @@ def test_microphones_come_back_after_the_link_is_replaced(net, fakes):
         relay.stop()
 
 
+@pytest.mark.parametrize(("options", "fake"), [({"audio": False}, {}), ({}, {"audio": False})],
+                         ids=["audio off", "no ALAudioDevice"])
+def test_without_audio_the_info_says_none_and_nothing_is_subscribed(rig, options, fake):
+    r = rig(fake=fake, **options)
+    mic = MicChunks(r.bus, "pepper")
+    time.sleep(1.0)
+    assert "audio" not in robot_info(r.bus, "pepper") and not r.adapter.audio_present
+    assert mic.poll() == [] and r.adapter.stats["mic_chunks"] == 0
+    device = r.fake.services.get("ALAudioDevice")
+    assert device is None or device.listeners == {}
+
+
 # -- a frozen robot -----------------------------------------------------------------------------
 
 
