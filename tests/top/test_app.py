@@ -11,10 +11,11 @@ import time
 import pytest
 
 from sonibus.bus import decode, keys, send_command
-from sonibus.bus.cli.top import ALARM
+from sonibus.bus.cli.top import ALARM, WARNING
 
 from ..conftest import SONIBUS
 from .pilot import drive, row, shown, until
+from .test_monitor import Lossy
 
 BEHAVIOR = "animations/Stand/Gestures/Hey_1"
 
@@ -156,3 +157,17 @@ def test_ctrl_c_ends_it_as_an_interrupted_command(net):
         await pilot.press("ctrl+c")
 
     assert drive(net.bus("top"), scenario).return_value == 130
+
+
+def test_a_loss_counter_that_moves_is_yellow_and_others_are_not(net):
+    lossy = net.start(Lossy(name="lossy"))
+    key = f"{lossy.bus.host}/lossy"
+
+    async def scenario(app, pilot):
+        cells = await until(pilot, lambda: (r := row(app, "nodes", key)) and r[7].plain != "0" and r,
+                            what="lossy's drops on screen")
+        dropped, stale, bad, errors = cells[7:]
+        assert str(dropped.style) == WARNING and int(dropped.plain.replace(",", "")) > 0
+        assert [str(c.style) for c in (stale, bad, errors)] == ["", "", ""] and cells[4].plain == "running"
+
+    drive(net.bus("top"), scenario)
