@@ -136,7 +136,7 @@ def test_s_then_another_key_sends_nothing(net, key):
     assert pepper.stats["errors"] == 0
 
 
-def test_tab_selects_the_next_robot_and_q_quits_with_0(net):
+def test_tab_and_up_select_the_robot_and_q_quits_with_0(net):
     net.sim("pepper", rate_hz=20)
     net.sim("nao", rate_hz=20)
 
@@ -146,6 +146,8 @@ def test_tab_selects_the_next_robot_and_q_quits_with_0(net):
         await pilot.press("tab")
         await until(pilot, lambda: str(app.query_one("#joints").border_title) != title, what="the other robot")
         assert {title, str(app.query_one("#joints").border_title)} == {"joints of nao", "joints of pepper"}
+        await pilot.press("up")
+        await until(pilot, lambda: str(app.query_one("#joints").border_title) == title, what="the first robot again")
         await pilot.press("q")
 
     app = drive(net.bus("top"), scenario)
