@@ -34,6 +34,17 @@ for (const node of document.querySelectorAll(arguments[0])) {
 }
 """
 
+# The joints/set messages the page sends, gathered in window.sentMoves (its WebSocket's send, wrapped).
+SPY_MOVES = """
+const socket = sonibus.link.ws, send = socket.send.bind(socket);
+window.sentMoves = [];
+socket.send = (text) => {
+  const message = JSON.parse(text);
+  if (message.verb === "joints/set") sentMoves.push(message);
+  send(text);
+};
+"""
+
 
 @pytest.fixture(scope="module")
 def browser(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Browser]:
@@ -213,15 +224,8 @@ def test_the_page_throttles_a_slider_and_sends_its_last_position(still_stage, br
     later, nothing between (the server coalesces too; this is the page's own share)."""
     watch = Watch(still_stage.net.bus("watch"))
     open_operator(browser, still_stage)
-    sent = browser.js("""
+    sent = browser.js(SPY_MOVES + """
         const slider = document.querySelector('[data-robot="pepper"] [data-slider="HeadPitch"]');
-        const socket = sonibus.link.ws, send = socket.send.bind(socket);
-        window.sentMoves = [];
-        socket.send = (text) => {
-          const m = JSON.parse(text);
-          if (m.verb === "joints/set") sentMoves.push(m);
-          send(text);
-        };
         for (let i = 1; i <= 100; i++) {
           slider.value = -0.5 + i * 0.005;
           slider.dispatchEvent(new Event("input"));
@@ -234,6 +238,25 @@ def test_the_page_throttles_a_slider_and_sends_its_last_position(still_stage, br
     assert [m["args"]["angles"] for m in moves] == [[pytest.approx(-0.495, abs=0.01)], [last]]
     wait_for(lambda: [c for c in watch.commands("joints/set") if c["args"]["angles"] == [last]], 10,
              "the robot to get the last position", lambda: f"got: {watch.commands('joints/set')}")
+
+
+def test_a_slider_move_held_by_the_page_is_dropped_by_stop(still_stage, browser):
+    watch = Watch(still_stage.net.bus("watch"))
+    open_operator(browser, still_stage)
+    browser.js(SPY_MOVES + """
+        const slider = document.querySelector('[data-robot="pepper"] [data-slider="HeadPitch"]');
+        for (const value of [0.1, 0.3]) {  // the first goes at once, the second is held for a period
+          slider.value = value;
+          slider.dispatchEvent(new Event("input"));
+        }
+        sonibus.stop();
+        // A timer due after the held move's: timers run in the order they are due.
+        setTimeout(() => { window.movesAfterStop = sentMoves.length; }, 2000 / sonibus.settings.slider_hz);""")
+    assert browser.wait(lambda: browser.js("return window.movesAfterStop"), "two periods after the stop") == 1
+    watch.wait_event("command", "the robot's stop", verb="stop")
+    watch.wait_event("command", "the first move", verb="joints/set")
+    assert [c["args"]["angles"] for c in watch.commands("joints/set")] == [[pytest.approx(0.1, abs=0.01)]]
+    browser.wait(lambda: browser.text("#status") == "STOP: ✓ pepper", "the stop's reply shown")
 
 
 def test_an_out_of_range_request_shows_the_owners_error(still_stage, browser):

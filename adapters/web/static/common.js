@@ -106,7 +106,8 @@ const sonibus = (() => {
       if (handler) handler(message);
     }
 
-    /** Send `message` (an id is given when it has none); `what` names it in the status line. */
+    /** Send `message` (an id is given when it has none); `what` names it in the status line.
+        `done(reply, ms)` gets each reply first; when it returns true it has shown the reply itself. */
     send(message, what, done) {
       if (!this.ws || this.ws.readyState !== WebSocket.OPEN) {
         status(`not connected: ${what} not sent`, "error");
@@ -122,8 +123,9 @@ const sonibus = (() => {
     reply(message) {
       this.counters.replies += 1;
       const request = this.pending.get(message.id);
+      if (request && request.done && request.done(message, performance.now() - request.sent) === true) return;
       let what = request ? request.what : `request ${message.id}`;
-      if (message.robot && !what.startsWith(message.robot + " ")) what = `${message.robot} ${what}`;  // stop: one per robot
+      if (message.robot && !what.startsWith(message.robot + " ")) what = `${message.robot} ${what}`;
       if (message.ok) {
         status(`✓ ${what}`, "ok");
       } else {
@@ -131,7 +133,6 @@ const sonibus = (() => {
         const head = error.split(":")[0];  // an owner's error may start with the verb: said once
         status(what.endsWith(" " + head) ? `✗ ${what.slice(0, -head.length)}${error}` : `✗ ${what}: ${error}`, "error");
       }
-      if (request && request.done) request.done(message, performance.now() - request.sent);
     }
 
     prune() {

@@ -189,10 +189,11 @@
       button.dataset.state = "starting";
       const sent = command(this.name, "behavior/run", {name}, (reply, ms) => {
         note("behavior reply", ms);
-        if (reply.ok || button.dataset.state !== "starting") return;
+        if (reply.ok || button.dataset.state !== "starting") return false;
         delete button.dataset.clicked;
         // Refused: "already running" leaves it running; anything else is a failure to start.
         this.behaviorState(name, before === "running" ? "started" : "failed", reply.error);
+        return false;
       });
       if (sent === null) button.dataset.state = before;
     }
@@ -219,11 +220,20 @@
       const send = () => {
         entry.timer = null;
         entry.last = performance.now();
-        command(this.name, "joints/set", {names: [joint], angles: [entry.value]});
+        // Shown: refusals only (the joint moving says the rest; a move the node held when STOP came is cancelled).
+        command(this.name, "joints/set", {names: [joint], angles: [entry.value]},
+          (reply) => reply.ok || (reply.error || "").startsWith("cancelled"));
       };
       const wait = entry.last + period - performance.now();
       if (wait <= 0 && entry.timer === null) send();
       else if (entry.timer === null) entry.timer = setTimeout(send, wait);
+    }
+
+    dropHeldMoves() {
+      for (const entry of this.throttle.values()) {
+        clearTimeout(entry.timer);
+        entry.timer = null;
+      }
     }
 
     take(frame) {
@@ -408,10 +418,13 @@
     stop.classList.remove("pressed");
     void stop.offsetWidth;
     stop.classList.add("pressed");
+    for (const view of views.values()) view.dropHeldMoves();  // nothing of this page moves a robot after a stop
     const answers = [];  // one reply per robot on the bus
     const sent = link.send({type: "stop"}, "stop", (reply) => {
-      answers.push(reply.ok ? `✓ ${reply.robot || "?"}` : `✗ ${reply.robot || "?"}: ${reply.error || "refused"}`);
+      if (!reply.robot) return false;  // ("stop: no robot on the bus": shown as it is)
+      answers.push(reply.ok ? `✓ ${reply.robot}` : `✗ ${reply.robot}: ${reply.error || "refused"}`);
       status(`STOP: ${answers.join(", ")}`, answers.some((a) => a.startsWith("✗")) ? "error" : "ok");
+      return true;
     });
     if (sent !== null) status("STOP sent to every robot", "info");
   }
