@@ -8,6 +8,7 @@ import threading
 import time
 from dataclasses import dataclass
 
+from sonibus.adapters.sim import SimConfig, SimRobot
 from sonibus.bus import Adapter, keys, load_model, messages
 from sonibus.bus.monitor import Monitor, Snapshot
 
@@ -86,6 +87,37 @@ def test_a_robot_and_its_node_leaving_are_shown_as_gone_and_stay_listed(net):
     said = {(e.source, e.kind, e.text, e.alarm) for e in snapshot.events}
     assert ("nao", "connection", "left the bus: its owner's claim went", True) in said, said
     assert (f"{sim.bus.host}/sim-nao", "node", "gone: its token vanished", True) in said, said
+
+
+def test_a_robot_back_on_the_bus_is_no_longer_gone(net):
+    first = net.sim("nao", rate_hz=20)
+    with Monitor(net.bus("top")) as monitor:
+        wait_for(lambda: (r := robot(monitor.snapshot(), "nao")) and r.model, what="nao with its info")
+        first.stop()
+        wait_for(lambda: robot(monitor.snapshot(), "nao").gone, what="nao gone")
+        again = net.start(SimRobot(SimConfig(robot="nao", rate_hz=20), name="nao-again"))
+        back = wait_for(lambda: (r := robot(monitor.snapshot(), "nao")) and not r.gone and r.model and r,
+                        what="nao back, with its info")
+        events = monitor.snapshot().events
+    assert back.owner == f"{again.bus.host}/nao-again"
+    assert events[-1].text == f"on the bus again, owned by node 'nao-again' on host '{again.bus.host}'"
+    assert not events[-1].alarm
+
+
+def test_a_second_claim_of_a_robot_is_shown_standing_by(net):
+    """A rival claim, later than the owner's: the owner keeps the robot and says so."""
+    sim = net.sim("pepper", rate_hz=20)
+    rival = net.bus("rival")
+    with Monitor(net.bus("top")) as monitor:
+        wait_for(lambda: (r := robot(monitor.snapshot(), "pepper")) and r.owner, what="pepper's owner")
+        claim = rival.token(f"{keys.ROBOTS}/pepper/{time.time_ns() // 1_000_000 + 1000}/stage/understudy")
+        seen = wait_for(lambda: (r := robot(monitor.snapshot(), "pepper")) and r.standby and r,
+                        what="the second claim")
+        conflict = wait_for(lambda: [e for e in monitor.snapshot().events if e.kind == "conflict"],
+                            what="the owner's conflict event")[0]
+        claim.undeclare()
+    assert seen.owner == f"{sim.bus.host}/sim-pepper" and seen.standby == ("stage/understudy",)
+    assert conflict.alarm and conflict.text == f"standby, owner sim-pepper on {sim.bus.host}"
 
 
 class Lossy(Adapter):
