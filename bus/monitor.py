@@ -220,9 +220,11 @@ class Monitor:
             if entry.alive is not None and entry.alive != alive:  # (not the tokens there when it started)
                 self._events.append(EventView(time.time(), f"{host}/{node}", "node",
                                               "back on the bus" if alive else "gone: its token vanished", not alive))
+            if alive and entry.alive is False:  # a node back under the same name: a new start, asked anew
+                entry.about, entry.stats, entry.failed = {}, {}, ""
             entry.alive = alive
             if alive:
-                entry.asked = False  # (a node back under the same name: ask what it is now)
+                entry.asked = False
 
     def _robot_token(self, key: str, alive: bool) -> None:
         claim = Claim.parse(key)

@@ -166,6 +166,12 @@ def test_node_stats_show_rates_losses_that_moved_and_a_failure(net):
         failed = wait_for(lambda: (n := node(monitor.snapshot(), "failing")) and n.state == "failed" and n,
                           what="the failed node")
         event = wait_for(lambda: [e for e in monitor.snapshot().events if e.kind == "node"], what="its event")[0]
+        failing.stop()
+        wait_for(lambda: node(monitor.snapshot(), "failing").gone, what="the failed node gone")
+        net.start(Lossy(name="failing"))  # started again under the same name: a new node
+        again = wait_for(lambda: (n := node(monitor.snapshot(), "failing")) and n.adapter == "Lossy" and n,
+                         what="the node started again")
+    assert (again.state, again.error) == ("running", "")
     assert "the lamp broke" in failed.error
     assert event.source == f"{failing.bus.host}/failing" and event.alarm and "the lamp broke" in event.text
 
