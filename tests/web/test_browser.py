@@ -382,6 +382,21 @@ def test_the_kiosk_has_only_its_buttons_and_follows_the_robot(stage, browser, tm
     assert browser.errors() == []
 
 
+def test_the_kiosk_disables_its_buttons_while_disconnected(still_stage, browser):
+    browser.open(still_stage.kiosk_url)
+    browser.wait(lambda: browser.attribute("#connection", "data-state") == "connected", "the kiosk connected")
+    assert browser.find('[data-button="wave"]').is_enabled()
+    port = still_stage.node.web.port
+    still_stage.node.stop()
+    browser.wait(lambda: browser.attribute("#connection", "data-state") == "disconnected", "disconnected shown")
+    assert not any(button.is_enabled() for button in browser.all("[data-button]"))
+    start_web(still_stage.net, name="web2", listen=f"127.0.0.1:{port}", token=TOKEN, kiosk_token=KIOSK_TOKEN,
+              kiosk={"robot": "pepper", "buttons": BUTTONS})
+    browser.wait(lambda: browser.attribute("#connection", "data-state") == "connected", "reconnected", timeout=20)
+    browser.wait(lambda: all(button.is_enabled() for button in browser.all("[data-button]")), "buttons usable again")
+    assert len(browser.all("[data-button]")) == len(BUTTONS)
+
+
 def test_operator_urls_refuse_the_kiosk_token(stage, browser):
     base = stage.url
     for path in ("/", "/ws"):

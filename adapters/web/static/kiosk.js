@@ -9,12 +9,13 @@
   const SHOWN = {idle: "", running: "running…", done: "done", failed: "failed"};
   const buttons = new Map();   // id → button element
   let waiting = null;          // the id of a press not yet answered
+  let shown = "";              // the buttons of the last hello, as JSON
 
   function onHello(message) {
     const container = document.getElementById("buttons");
     const wanted = JSON.stringify(message.buttons || []);
-    if (container.dataset.buttons === wanted) return;  // a reconnection: the same buttons, states kept
-    container.dataset.buttons = wanted;
+    if (shown === wanted) return;  // a reconnection: the same buttons, states kept
+    shown = wanted;
     buttons.clear();
     container.replaceChildren(...(message.buttons || []).map((spec) => {
       const button = el("button", {type: "button", class: "kiosk-button", dataset: {button: spec.id, state: "idle"},
@@ -58,7 +59,12 @@
   }
 
   document.addEventListener("contextmenu", (event) => event.preventDefault());  // a long press on a touchscreen
-  const link = new Link("/kiosk/ws", {hello: onHello, button: onButton, connection: () => refresh()});
+  function onConnection(connected) {
+    if (!connected) waiting = null;  // a press the link lost is never answered
+    refresh();
+  }
+
+  const link = new Link("/kiosk/ws", {hello: onHello, button: onButton, connection: onConnection});
   status("", "info");
   Object.assign(sonibus, {link});
 })();
