@@ -328,10 +328,12 @@ def test_a_node_turns_amber_when_a_loss_counter_moves_and_red_when_gone(still_st
         return browser.attribute(row("web"), "data-state") == "warning"
     browser.wait(amber, "the web node amber")
     assert "bad " in browser.text(row("web"))
+    assert browser.all('[data-robot="nao"] [data-slider="LElbowRoll"]')  # (a NAO shown too: arms, legs)
     nao.stop()
     browser.wait(lambda: browser.attribute(row("sim-nao"), "data-state") == "gone", "nao's node red (gone)")
     assert "gone" in browser.attribute(row("sim-nao"), "class")
     assert browser.attribute(row("sim-pepper"), "data-state") == "ok"
+    assert browser.errors() == []
 
 
 def test_the_page_shows_disconnected_and_reconnects(still_stage, browser):
