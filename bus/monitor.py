@@ -11,8 +11,8 @@ a bad one is counted (``bad``) and named (``problem``), never fatal.
 
 >>> describe_event("behavior", {"t": 0.0, "kind": "behavior", "name": "wave", "state": "started"})
 'started wave'
->>> describe_event("command", {"verb": "say", "args": {}, "ok": False, "error": {"code": "out_of_range"}})
-'say refused: out_of_range'
+>>> describe_event("command", {"verb": "say", "args": {}, "ok": False, "error": "text is empty"})
+'say refused: text is empty'
 """
 
 from __future__ import annotations
@@ -24,7 +24,7 @@ import threading
 import time
 from collections import deque
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 from . import codec, keys, messages
@@ -115,6 +115,7 @@ class EventView:
     kind: str
     text: str
     alarm: bool = False  # a failure, a refusal, a conflict
+    repeated: int = 1    # the same event in a row this many times (``t``: the last one's)
 
 
 @dataclass(frozen=True)
@@ -207,7 +208,7 @@ class Monitor:
     def note(self, source: str, kind: str, text: str, alarm: bool = False) -> None:
         """Add an event of the viewer's own (a command's reply) to the list."""
         with self._lock:
-            self._events.append(EventView(time.time(), source, kind, text, alarm))
+            self._listed(EventView(time.time(), source, kind, text, alarm))
 
     # -- Zenoh's threads: note and return ---------------------------------------------------
 
@@ -218,7 +219,7 @@ class Monitor:
             if entry is None:
                 return
             if entry.alive is not None and entry.alive != alive:  # (not the tokens there when it started)
-                self._events.append(EventView(time.time(), f"{host}/{node}", "node",
+                self._listed(EventView(time.time(), f"{host}/{node}", "node",
                                               "back on the bus" if alive else "gone: its token vanished", not alive))
             if alive and entry.alive is False:  # a node back under the same name: a new start, asked anew
                 entry.about, entry.stats, entry.failed = {}, {}, ""
@@ -243,7 +244,7 @@ class Monitor:
                     robot.info = None  # asked again if it comes back: another owner may differ
             if robot.claimed and was != bool(robot.claims):
                 text = f"on the bus again, owned by {claim}" if alive else "left the bus: its owner's claim went"
-                self._events.append(EventView(time.time(), claim.robot, "connection", text, not alive))
+                self._listed(EventView(time.time(), claim.robot, "connection", text, not alive))
             robot.claimed = robot.claimed or alive
 
     def _on_info(self, robot: str, info: dict[str, Any]) -> None:
@@ -326,7 +327,7 @@ class Monitor:
         alarm = (kind == "conflict" or (kind == "command" and not message.get("ok", True))
                  or message.get("state") in ("failed", "lost"))
         with self._lock:
-            self._events.append(EventView(float(message["t"]), robot, kind, describe_event(kind, message), alarm))
+            self._listed(EventView(float(message["t"]), robot, kind, describe_event(kind, message), alarm))
 
     def _node_event(self, message: dict[str, Any]) -> None:
         host, node = str(message.get("host", "?")), str(message.get("node", "?"))
@@ -334,7 +335,7 @@ class Monitor:
             entry = self._node(host, node)
             if entry is not None and message.get("state") == "failed":
                 entry.failed = str(message.get("error", "failed"))
-            self._events.append(EventView(float(message["t"]), f"{host}/{node}", "node",
+            self._listed(EventView(float(message["t"]), f"{host}/{node}", "node",
                                           describe_event("node", message), message.get("state") == "failed"))
 
     def _ask(self) -> None:
@@ -349,6 +350,16 @@ class Monitor:
         for host, node in nodes:
             self.bus.ask(keys.node_token(host, node), lambda r, h=host, n=node: self._described(h, n, r),
                          lambda: None, timeout=2.0)
+
+    def _listed(self, event: EventView) -> None:
+        """(Under the lock.) Add ``event``; one like the last (a slider's ``joints/set ok`` 20 times a
+        second) counts on the last one instead of pushing the others out."""
+        last = self._events[-1] if self._events else None
+        if last is not None and (last.source, last.kind, last.text, last.alarm) == \
+                (event.source, event.kind, event.text, event.alarm):
+            self._events[-1] = replace(event, repeated=last.repeated + 1)
+        else:
+            self._events.append(event)
 
     def _robot(self, name: str) -> _Robot | None:
         """(Under the lock.) Robot ``name``'s entry, made if there is room (``most``)."""
@@ -429,9 +440,8 @@ def _node_view(host_node: tuple[str, str], node: _Node, now: float) -> NodeView:
 
 def describe_event(kind: str, message: dict[str, Any]) -> str:
     """A short text of an event's fields (those of its kind first, as the schemas name them)."""
-    if kind == "command":
-        error = message.get("error") or {}
-        outcome = "ok" if message.get("ok") else f"refused: {error.get('code', '?')}"
+    if kind == "command":  # (its error is the owner's message)
+        outcome = "ok" if message.get("ok") else f"refused: {message.get('error', '?')}"
         return f"{message.get('verb', '?')} {outcome}"
     if kind == "node":
         return f"{message.get('adapter', '?')} {message.get('state', '?')}: {message.get('error', '')}".rstrip(": ")

@@ -275,11 +275,13 @@ def sparkline(joint: JointView) -> str:
 
 
 def event_lines(shown: Sequence[EventView]) -> Text:
-    """The events, oldest first, one line each; alarms in red."""
+    """The events, oldest first, one line each (``×N``: N in a row); alarms in red."""
     text = Text()
     for event in shown:
         stamp = time.strftime("%H:%M:%S", time.localtime(event.t))
-        text.append(f"{stamp} {event.source:<10} {event.kind:<9} {event.text}\n", style=ALARM if event.alarm else "")
+        times = f" ×{event.repeated}" if event.repeated > 1 else ""
+        text.append(f"{stamp} {event.source:<10} {event.kind:<9} {event.text}{times}\n",
+                    style=ALARM if event.alarm else "")
     return text
 
 

@@ -8,8 +8,10 @@ import threading
 import time
 from dataclasses import dataclass
 
+import pytest
+
 from sonibus.adapters.sim import SimConfig, SimRobot
-from sonibus.bus import Adapter, keys, load_model, messages
+from sonibus.bus import Adapter, CommandError, keys, load_model, messages, send_command
 from sonibus.bus.monitor import Monitor, Snapshot
 
 from ..conftest import wait_for
@@ -196,3 +198,19 @@ def test_robots_beyond_the_most_it_keeps_are_counted_not_kept(net):
         snapshot = monitor.snapshot()
     assert [r.name for r in snapshot.robots] == ["a", "b"]
     assert snapshot.problem == "robot 'd' not shown: already 2 listed"
+
+
+def test_the_same_event_in_a_row_is_counted_on_one_line_and_a_refusal_is_an_alarm(net):
+    net.sim("pepper", rate_hz=20)
+    sender = net.bus("sliders")
+    with Monitor(net.bus("top")) as monitor:
+        wait_for(lambda: robot(monitor.snapshot(), "pepper"), what="pepper")
+        for angle in (0.1, 0.2, 0.3, 0.4, 0.5):  # a slider's moves
+            send_command(sender, "pepper", "joints/set", {"names": ["HeadYaw"], "angles": [angle]})
+        with pytest.raises(CommandError) as refused:
+            send_command(sender, "pepper", "joints/set", {"names": ["HeadYaw"], "angles": [9.0]})
+        events = wait_for(lambda: len(e := monitor.snapshot().events) == 2 and e, what="two lines",
+                          explain=lambda: str(monitor.snapshot()))
+    assert refused.value.code == "out_of_range"
+    assert [(e.text, e.repeated, e.alarm) for e in events] == [
+        ("joints/set ok", 5, False), (f"joints/set refused: {refused.value.message}", 1, True)]
