@@ -257,15 +257,25 @@ class Monitor:
         self._refused(reason)
 
     def _described(self, host: str, node: str, reply: Reply) -> None:
-        try:
-            about = codec.decode(reply.payload) if reply.payload is not None else None
-        except codec.DecodeError as exc:
-            self._refused(f"{keys.node_token(host, node)}: {exc}")
+        """A node's description (``Adapter.describe``; no section of the gate's): what is shown of it, checked here."""
+        if reply.payload is None:
             return
-        if isinstance(about, dict):
-            with self._lock:
-                if (entry := self._node(host, node)) is not None:
-                    entry.about = about
+        where = keys.node_token(host, node)
+        try:
+            about = codec.decode(reply.payload)
+        except codec.DecodeError as exc:
+            self._refused(f"{where}: {exc}")
+            return
+        if not isinstance(about, dict):
+            self._refused(f"{where}: a description is a map, not {type(about).__name__}")
+            return
+        shown = {k: about[k] for k in ("adapter", "state", "failure") if isinstance(about.get(k), str)}
+        since = about.get("since")
+        if isinstance(since, (int, float)) and not isinstance(since, bool) and math.isfinite(since):
+            shown["since"] = float(since)
+        with self._lock:
+            if (entry := self._node(host, node)) is not None:
+                entry.about = shown
 
     # -- the worker --------------------------------------------------------------------
 

@@ -11,7 +11,7 @@ from dataclasses import dataclass
 import pytest
 
 from sonibus.adapters.sim import SimConfig, SimRobot
-from sonibus.bus import Adapter, CommandError, keys, load_model, messages, send_command
+from sonibus.bus import Adapter, CommandError, encode, keys, load_model, messages, send_command
 from sonibus.bus.monitor import Monitor, Snapshot
 
 from ..conftest import wait_for
@@ -214,3 +214,17 @@ def test_the_same_event_in_a_row_is_counted_on_one_line_and_a_refusal_is_an_alar
     assert refused.value.code == "out_of_range"
     assert [(e.text, e.repeated, e.alarm) for e in events] == [
         ("joints/set ok", 5, False), (f"joints/set refused: {refused.value.message}", 1, True)]
+
+
+def test_a_node_description_of_the_wrong_types_shows_what_is_usable(net):
+    rogue = net.bus("rogue")
+    key = keys.node_token("stage", "liar")
+    liar = {"adapter": 5, "state": "starting", "since": "yesterday", "failure": ["no"]}
+    served = rogue.serve(key, lambda query: query.reply(key, encode(liar), encoding="application/msgpack"))
+    token = rogue.token(key)
+    with Monitor(net.bus("top")) as monitor:
+        shown = wait_for(lambda: (n := node(monitor.snapshot(), "liar")) and n.state == "starting" and n,
+                         what="the node, from its token and description")
+        assert (shown.adapter, shown.uptime_s, shown.error) == ("?", None, "")
+    token.undeclare()
+    served.undeclare()
