@@ -140,7 +140,7 @@ class TopApp(App[int]):
         if self.selected is None and snap.robots:
             self.selected = snap.robots[0].name
         robot = next((r for r in snap.robots if r.name == self.selected), None)
-        self.joints.border_title = f"joints of {robot.name}" if robot else "joints"
+        self.joints.border_title = Text(f"joints of {robot.name}" if robot else "joints")  # (a str is markup)
         self.joints.update(joint_lines(robot) if robot else Text("no robot on the bus yet", style="italic"))
         lines = max(1, self.events.size.height - 1)
         self.event_lines.update(event_lines(snap.events[-lines:]))

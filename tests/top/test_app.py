@@ -10,7 +10,7 @@ import time
 
 import pytest
 
-from sonibus.bus import decode, keys, send_command
+from sonibus.bus import decode, keys, messages, send_command
 from sonibus.bus.cli.top import ALARM, WARNING
 
 from ..conftest import SONIBUS
@@ -171,5 +171,21 @@ def test_a_loss_counter_that_moves_is_yellow_and_others_are_not(net):
         dropped, stale, bad, errors = cells[7:]
         assert str(dropped.style) == WARNING and int(dropped.plain.replace(",", "")) > 0
         assert [str(c.style) for c in (stale, bad, errors)] == ["", "", ""] and cells[4].plain == "running"
+
+    drive(net.bus("top"), scenario)
+
+
+def test_a_robot_name_like_markup_is_shown_as_written(net):
+    """Names are key chunks, and ``[`` is allowed in one: a title given as a str would be rich markup."""
+    script = net.bus("script")
+
+    async def scenario(app, pilot):
+        def put() -> None:
+            script.put(keys.frame("[b]bot"), messages.frame(time.time(), 1, ["HeadYaw"], [0.5]))
+
+        await until(pilot, lambda: row(app, "robots", "[b]bot") or put(), what="the robot listed")
+        await until(pilot, lambda: app.joints.border_title != "joints", what="its joints' title")
+        assert app.joints.border_title == "joints of \\[b]bot"  # (the title as markup: the bracket escaped)
+        assert row(app, "robots", "[b]bot")[0].plain == "[b]bot"
 
     drive(net.bus("top"), scenario)
