@@ -307,11 +307,11 @@ def _arguments(p: argparse.ArgumentParser) -> None:
 
 
 def _top(args: argparse.Namespace, env: Environment) -> Exit:
+    if not 0.02 <= args.every <= 10:
+        raise ConfigError(f"--every {args.every:g}: give a redraw interval of 0.02 to 10 s, e.g. --every 0.25")
     if not (_is_terminal(sys.__stdin__) and _is_terminal(sys.__stderr__)):
         raise SonibusError("top draws on a terminal, and its input or its error output is not one (a pipe, a "
                            "file): run it in a terminal, or use `sonibus nodes` / `sonibus echo KEYEXPR` instead")
-    if not 0.02 <= args.every <= 10:
-        raise ConfigError(f"--every {args.every:g}: give a redraw interval of 0.02 to 10 s, e.g. --every 0.25")
     cfg = bus_config(args)
     handlers = {sig: signal.getsignal(sig) for sig in (signal.SIGINT, signal.SIGTERM)}
     with joined(cfg) as bus, Monitor(bus) as monitor:

@@ -112,3 +112,9 @@ def test_top_without_a_terminal_says_so_in_one_line():
     assert result.returncode == 1
     (line,) = result.stderr.splitlines()
     assert line.startswith("sonibus: error: top draws on a terminal") and "sonibus nodes" in line
+
+
+def test_a_bad_redraw_interval_is_a_usage_error_in_one_line():
+    result = run_cli("top", "--every", "0", "--no-multicast")
+    assert result.returncode == 2
+    assert result.stderr == "sonibus: error: --every 0: give a redraw interval of 0.02 to 10 s, e.g. --every 0.25\n"
