@@ -3,9 +3,11 @@ MIDI and audio tests: their conftests import the ``jack`` fixture from here."""
 
 from __future__ import annotations
 
+import contextlib
 import uuid
 from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
 import jack as jack_client
 import pytest
@@ -29,25 +31,35 @@ def jack_up(name: str) -> bool:
     return True
 
 
-@pytest.fixture
-def jack_server(spawn, monkeypatch) -> Iterator[tuple[str, Process]]:
-    """A running JACK server, made the default for this test: its name and its process; always stopped."""
+@contextlib.contextmanager
+def running(spawn: Any, monkeypatch: pytest.MonkeyPatch) -> Iterator[tuple[str, Process]]:
+    """A JACK server of a name of its own, made the default: its name and its process; always stopped."""
     jackd = require_tool("jackd", "jackd2")
     name = f"sonibus-{uuid.uuid4().hex[:8]}"
     monkeypatch.setenv("JACK_DEFAULT_SERVER", name)
     monkeypatch.setenv("JACK_NO_START_SERVER", "1")
     server: Process = spawn(jackd, "--no-realtime", "-n", name, "-d", "dummy", "-r", str(RATE), "-p", str(PERIOD))
-    wait_for(lambda: server.popen.poll() is not None or jack_up(name), timeout=10, what=f"jackd -n {name}")
-    if server.popen.poll() is not None:
-        _, err = server.popen.communicate()
-        pytest.fail(f"jackd -n {name} ended at start: {err[-500:]}")
-    yield name, server
-    server.stop(timeout=5)
-    for leftover in Path("/dev/shm").glob(f"jack_sem.*_{name}_*"):  # jackd 1.9 leaves its clients' semaphores
-        leftover.unlink(missing_ok=True)
+    try:
+        wait_for(lambda: server.popen.poll() is not None or jack_up(name), timeout=10, what=f"jackd -n {name}")
+        if server.popen.poll() is not None:
+            _, err = server.popen.communicate()
+            pytest.fail(f"jackd -n {name} ended at start: {err[-500:]}")
+        yield name, server
+    finally:
+        server.stop(timeout=5)
+        for leftover in Path("/dev/shm").glob(f"jack_sem.*_{name}_*"):  # jackd 1.9 leaves its clients' semaphores
+            leftover.unlink(missing_ok=True)
 
 
 @pytest.fixture
-def jack(jack_server) -> str:
+def jack(spawn, monkeypatch) -> Iterator[str]:
     """The name of a running JACK server, made the default for this test; always stopped."""
-    return jack_server[0]
+    with running(spawn, monkeypatch) as (name, _):
+        yield name
+
+
+@pytest.fixture
+def jack_server(spawn, monkeypatch) -> Iterator[tuple[str, Process]]:
+    """Instead of ``jack``, for a test that stops the server itself: its name and its process."""
+    with running(spawn, monkeypatch) as server:
+        yield server

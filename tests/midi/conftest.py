@@ -14,7 +14,7 @@ from sonibus.bus import codec, keys, messages
 
 from .. import jackd
 
-jack, jack_server = jackd.jack, jackd.jack_server  # the fixtures, shared with tests/jack
+jack = jackd.jack  # the fixture, shared with tests/jack
 
 
 class Reader:
