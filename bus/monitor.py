@@ -181,6 +181,8 @@ class Monitor:
         self._info = InfoRequests(bus, self._on_info, self._on_bad_info)
 
     def start(self) -> Monitor:
+        if self._worker is not None:
+            raise RuntimeError(f"{self!r} is started already")
         for pattern in (keys.frame(), keys.event("*", "*"), keys.NODE_STATS):
             self._entities.append(self.bus.subscribe(pattern, queue=self._queue)[0])
         self._entities.append(self.bus.watch_tokens(f"{keys.NODES}/*/*", self._node_token))
@@ -204,6 +206,10 @@ class Monitor:
 
     def __exit__(self, *exc: object) -> None:
         self.close()
+
+    def __repr__(self) -> str:
+        state = "closed" if self._stopping.is_set() else "watching" if self._worker is not None else "new"
+        return f"<Monitor {state} robots={len(self._robots)} nodes={len(self._nodes)} {dict(self.counters)}>"
 
     def note(self, source: str, kind: str, text: str, alarm: bool = False) -> None:
         """Add an event of the viewer's own (a command's reply) to the list."""
