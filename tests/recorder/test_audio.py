@@ -114,3 +114,15 @@ def test_replay_publishes_the_audio_again_on_its_keys(net, tmp_path):
         assert abs(received.t - time.time()) < 30
     steps = np.diff([c.t for c in got]) / np.diff(seqs)
     assert np.allclose(steps, 0.02, rtol=0, atol=1e-5)  # (t near 1.7e9: float steps of 2.4e-7)
+
+
+def test_export_says_when_there_is_no_audio_and_needs_a_format(tmp_path):
+    path = tmp_path / "joints.mcap"
+    with RecordingWriter(str(path)) as out:
+        out.write("pepper/joints/HeadYaw", time.time_ns(), {"t": time.time(), "seq": 0, "v": 0.1})
+    exported = run_cli("export", str(path), "--wav", str(tmp_path / "wav"))
+    assert exported.returncode == 0 and f"no audio in {path}: no WAV written" in exported.stdout
+    assert not (tmp_path / "wav").exists()
+    neither = run_cli("export", str(path))
+    assert neither.returncode == 2 and neither.stderr.startswith("sonibus: error: ")
+    assert len(neither.stderr.splitlines()) == 1 and "--csv DIR" in neither.stderr and "--wav DIR" in neither.stderr
