@@ -86,7 +86,8 @@ class Browser:
         self.driver.quit()
 
     def open(self, url: str) -> None:
-        self.read_console()  # what the previous page said stays with it
+        self.driver.get("about:blank")  # the previous page is gone (its server too, maybe: it would retry) ...
+        self.driver.get_log("browser")  # ... and what it said stays with it
         self.console.clear()
         self.driver.get(url)
 
