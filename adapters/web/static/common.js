@@ -20,6 +20,11 @@ const sonibus = (() => {
     return scheme + "//" + location.host + withToken(path);
   }
 
+  /** `value` with `digits` decimals, or "–" when it is no number. */
+  function fixed(value, digits) {
+    return Number.isFinite(value) ? value.toFixed(digits) : "–";
+  }
+
   /** `el("button", {class: "x", dataset: {behavior: "wave"}}, "text", child)` */
   function el(tag, attributes, ...children) {
     const node = document.createElement(tag);
@@ -144,5 +149,5 @@ const sonibus = (() => {
     }
   }
 
-  return {token, withToken, el, status, Link};
+  return {token, withToken, el, fixed, status, Link};
 })();
