@@ -10,13 +10,16 @@ Publishers that put joint keys only (a script of your own) need
 ``per_joint_keys = true``.
 
 Audio (``<robot>/audio/...``) comes only with a pattern that names its section
-(``pepper/audio/mic``, ``*/audio/*``): ``pepper/**`` brings none. A sink that
-cannot carry audio refuses such a pattern in its configuration (``without_audio``).
+(``pepper/audio/mic``, ``*/audio/*``): ``pepper/**`` brings none, and does not
+even subscribe to it — it is narrowed to the sections it may take (``narrowed``),
+so a robot's microphones, published only while someone subscribes, stay off for
+an OSC sink of ``pepper/**``. A sink that cannot carry audio refuses a pattern
+naming audio in its configuration (``without_audio``).
 
 >>> plan(["*/joints/*", "*/events/*"])
 Plan(frames=('*/frame',), keys=('*/events/*',), broad=())
 >>> plan(["pepper/**"]).broad, plan(["pepper/joints/R*"], per_joint_keys=True).keys
-(('pepper/**',), ('pepper/joints/R$*',))
+(('pepper/joints/**',), ('pepper/joints/R$*',))
 """
 
 from __future__ import annotations
@@ -56,7 +59,7 @@ def plan(patterns: Iterable[str], per_joint_keys: bool = False) -> Plan:
     frames: list[str] = []
     direct: list[str] = []
     broad: list[str] = []
-    for pattern in (keys.expr(p) for p in patterns):
+    for pattern in dict.fromkeys(n for p in patterns for n in narrowed(keys.expr(p))):
         selected = zenoh.KeyExpr(pattern)
         if per_joint_keys or not selected.intersects(_JOINTS):
             direct.append(pattern)  # (subscribed without frame keys: pepper/** would take them twice)
@@ -201,6 +204,30 @@ def _skip(pattern: str, also: Callable[[str], bool]) -> Callable[[str], bool]:
         return section is not None and section.by_name and section.name != named
 
     return skip
+
+
+def narrowed(pattern: str) -> list[str]:
+    """``pattern`` as subscriptions that leave out the sections taken only by name
+    (audio, stats) when it does not name them: ``pepper/**`` → ``pepper/frame/**``,
+    ``pepper/joints/**``, ... (every key of ours is ``<robot>/<section>/...``, so a
+    leading ``**`` is ``*/**`` here).
+
+    >>> narrowed("pepper/*/mic"), narrowed("pepper/audio/mic"), len(narrowed("**"))
+    (['pepper/joints/mic', 'pepper/derived/mic', 'pepper/events/mic', 'pepper/info/mic', 'pepper/cmd/mic'], \
+['pepper/audio/mic'], 5)
+    """
+    chunks = pattern.split("/")
+    if chunks[0] == "**":
+        chunks = ["*", *chunks] if len(chunks) > 1 else ["*", "**"]
+    if len(chunks) < 2 or "*" not in chunks[1]:
+        return [pattern]  # it names its section (or is not a robot's key at all)
+    robot, section, rest = chunks[0], chunks[1], chunks[2:]
+    if section == "**":  # <robot>/**/rest: any section, then what ** stands for past it
+        rest = ["**", *rest]
+    # (not ``frame``: a pattern's frames come from ``plan``'s frame subscription, or are left out)
+    wanted = [name for name, s in messages.SECTIONS.items() if not s.by_name and name != "frame"
+              and (section == "**" or zenoh.KeyExpr(section).intersects(zenoh.KeyExpr(name)))]
+    return ["/".join([robot, name, *rest]) for name in wanted]
 
 
 def named_section(pattern: str) -> str:

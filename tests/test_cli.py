@@ -671,3 +671,15 @@ def test_a_command_that_cannot_add_its_options_is_skipped_and_named(caplog):
     with pytest.raises(SystemExit):
         top.parse_args(["clash"])
     assert any("command 'clash' cannot add its options" in r.getMessage() for r in caplog.records), caplog.text
+
+
+def test_echo_of_audio_shows_its_pcm_as_a_size(net):
+    """It ended in 'TypeError: Object of type bytes is not JSON serializable'."""
+    net.sim("pepper", rate_hz=50)
+    result = run_cli("echo", "pepper/audio/mic", "--count", "2", *net.cli_args())
+    assert result.returncode == 0, result.stderr
+    for line in result.stdout.splitlines():
+        key, _, payload = line.partition(" ")
+        chunk = json.loads(payload)
+        assert key == "pepper/audio/mic" and re.fullmatch(r"<\d+ bytes>", chunk["pcm"]), line
+        assert chunk["rate"] > 0 and chunk["channels"] > 0

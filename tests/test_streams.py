@@ -14,18 +14,28 @@ from sonibus.bus.streams import Incoming, Plan, Streams, plan
 
 from .conftest import wait_for
 
+REST = ("derived", "events", "info", "cmd")  # the sections besides frames and joints a broad pattern takes
+REST_OF_PEPPER = tuple(f"pepper/{s}/**" for s in REST)
+
 
 @pytest.mark.parametrize(("patterns", "per_joint_keys", "expected"), [
     (["*/joints/*"], False, Plan(frames=("*/frame",))),
     (["pepper/joints/R*", "nao/joints/*"], False, Plan(frames=("pepper/frame", "nao/frame"))),
     (["*/joints/*", "*/derived/**", "*/events/*"], False,
      Plan(frames=("*/frame",), keys=("*/derived/**", "*/events/*"))),
-    (["**"], False, Plan(frames=("*/frame",), broad=("**",))),
-    (["pepper/**"], False, Plan(frames=("pepper/frame",), broad=("pepper/**",))),
-    (["**/HeadYaw"], False, Plan(frames=("*/frame",), broad=("**/HeadYaw",))),
-    (["pepper/joints/R*", "pepper/**"], True, Plan(keys=("pepper/joints/R$*", "pepper/**"))),
+    # a pattern that does not name audio (or stats) is narrowed to the sections it may take: it does
+    # not subscribe to the microphones (their owner publishes them only while someone listens)
+    (["**"], False, Plan(frames=("*/frame",), keys=("*/derived/**", "*/events/**", "*/info/**", "*/cmd/**"),
+                         broad=("*/joints/**",))),
+    (["pepper/**"], False, Plan(frames=("pepper/frame",), keys=REST_OF_PEPPER, broad=("pepper/joints/**",))),
+    (["**/HeadYaw"], False, Plan(frames=("*/frame",), keys=tuple(f"*/{s}/**/HeadYaw" for s in REST),
+                                 broad=("*/joints/**/HeadYaw",))),
+    (["pepper/joints/R*", "pepper/**"], True, Plan(keys=("pepper/joints/R$*", "pepper/joints/**", *REST_OF_PEPPER))),
     (["*/joints/HeadYaw", "pepper/joints/R*"], False, Plan(frames=("*/frame",))),  # overlapping: one frame key
-    (["pepper/**", "*/joints/*"], False, Plan(frames=("*/frame",), broad=("pepper/**",))),
+    (["pepper/**", "*/joints/*"], False, Plan(frames=("*/frame",), keys=REST_OF_PEPPER, broad=("pepper/joints/**",))),
+    (["pepper/audio/mic", "pepper/*/mic"], False,
+     Plan(keys=("pepper/audio/mic", *(f"pepper/{s}/mic" for s in REST)),
+          frames=("pepper/frame",))),
 ])
 def test_joint_patterns_are_served_from_frames(patterns, per_joint_keys, expected):
     assert plan(patterns, per_joint_keys) == expected

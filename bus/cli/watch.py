@@ -117,7 +117,7 @@ def _echo(args: argparse.Namespace, env: Environment) -> Exit:
                     continue
                 key, payload = item
                 try:
-                    shown = json.dumps(codec.decode(payload), separators=(", ", ": "))
+                    shown = json.dumps(codec.decode(payload), separators=(", ", ": "), default=_unprintable)
                 except codec.DecodeError:
                     shown = repr(payload)
                 env.say(f"{key} {shown}")
@@ -127,6 +127,11 @@ def _echo(args: argparse.Namespace, env: Environment) -> Exit:
         finally:
             subscriber.undeclare()
     return Exit.OK
+
+
+def _unprintable(value: object) -> str:
+    """What JSON cannot show: audio's PCM (``"<640 bytes>"``) and anything else by its type."""
+    return f"<{len(value)} bytes>" if isinstance(value, bytes | bytearray) else f"<{type(value).__name__}>"
 
 
 def _echo_hint(bus: Bus, cfg: BusConfig, pattern: str) -> str:
