@@ -83,7 +83,7 @@ class RecorderConfig:
 
 
 class Recorder(Adapter):
-    """Records joints, derived values, events and robot info into an MCAP file."""
+    """Records joints, derived values, events, audio and robot info into an MCAP file."""
 
     Config = RecorderConfig
     counters = ("written",)
