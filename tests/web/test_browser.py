@@ -64,6 +64,8 @@ class Watch:
         self._frame_sub, self._frames = bus.subscribe(keys.frame(robot), maxlen=100_000)
         self.events: list[tuple[str, dict[str, Any]]] = []  # (kind, event)
         self.frames: list[dict[str, Any]] = []
+        # Routes to a new subscriber take a moment: once frames come, the events (declared first) do too.
+        wait_for(lambda: self.update() or self.frames, 10, f"{robot}'s frames at the test's session")
 
     def update(self) -> None:
         for key, payload in self._events.drain(0):
