@@ -168,7 +168,11 @@ def test_the_operator_page_plots_live_joints_and_lists_the_nodes(stage, browser,
     for slider in sliders:
         low, high = limits[slider.get_attribute("data-slider")]
         assert (float(slider.get_attribute("min")), float(slider.get_attribute("max"))) == pytest.approx((low, high))
-    assert browser.find("#stop").is_displayed()
+    # STOP: large, and on screen wherever the page is scrolled.
+    for scroll in ("0", "document.body.scrollHeight"):
+        box = browser.js(f"window.scrollTo(0, {scroll}); const r = document.getElementById('stop')"
+                         ".getBoundingClientRect(); return [r.top, r.bottom, r.width, innerHeight]")
+        assert box[0] >= 0 and box[1] <= box[3] and box[2] >= 100, box
     assert browser.errors() == []
 
 
