@@ -211,7 +211,7 @@ def test_a_slider_moves_the_joint_and_the_last_position_wins(still_stage, browse
     # A drag from the thumb to near the right end: many input events, throttled by the page.
     drag = ActionChains(browser.driver).click_and_hold(slider)
     for _ in range(12):
-        drag.move_by_offset(width // 30, 0)
+        drag.move_by_offset(max(width // 30, 2), 0)
     drag.release().perform()
     target = float(slider.get_attribute("value"))  # read at once: an untouched slider follows the robot
     assert 0.2 < target <= high
