@@ -188,7 +188,7 @@ def test_a_behavior_click_runs_on_the_robot_and_shows_running_then_done(stage, b
 
     watch.wait_event("behavior", "the robot to start the behavior", name=NOD, state="started")
     browser.wait(lambda: "running" in states_of(browser, NOD), "the button to show running")
-    browser.wait(lambda: browser.text("#status") == "✓ pepper behavior/run", "the reply shown")  # (or before)
+    browser.wait(lambda: browser.text("#status") == "✓ pepper behavior/run", "the reply (after the event, maybe)")
     shot = browser.screenshot("web-operator.png", tmp_path, publish=True)  # mid-behavior: the docs' picture
     watch.wait_event("behavior", "the robot to end the behavior", name=NOD, state="stopped")
     browser.wait(lambda: browser.attribute(button, "data-state") == "done", "the button to show done")
