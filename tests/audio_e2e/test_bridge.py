@@ -61,7 +61,7 @@ def counters(bus: Any, node: str) -> dict[str, int]:
     pytest.fail(f"node {node} serves no stats")
 
 
-def test_a_sine_into_the_jack_adapter_is_played_by_the_robot(peer, net, spawn, qi_session, tmp_path, figure):
+def test_a_sine_into_the_jack_adapter_is_played_by_the_robot(peer, net, spawn, qi_client, tmp_path, figure):
     # Each side in a process of its own, as on two machines: the robot (naoqi-sim and the naoqi
     # adapter) and the sound tool's jack adapter. In this process they would share one
     # interpreter with the test's JACK client, whose late cycles slow the dummy driver's clock.
@@ -81,7 +81,7 @@ def test_a_sine_into_the_jack_adapter_is_played_by_the_robot(peer, net, spawn, q
     wait_for(lambda: peer.ports("sonibus:") or tool.popen.poll() is not None, timeout=20,
              what="the jack adapter's ports", explain=lambda: "\n".join(tool.lines))
     started, played = time.monotonic(), peer.played
-    device = qi_session(url).service("ALAudioDevice")
+    device = qi_client(url).service("ALAudioDevice")
     wav = tmp_path / "played.wav"
     checked = [0.0]
 

@@ -47,7 +47,7 @@ def pd_ports(server: str) -> list[str]:
         probe.close()
 
 
-def test_the_pd_example_plays_into_the_robot_and_records_its_microphones(jack, net, spawn, qi_session,
+def test_the_pd_example_plays_into_the_robot_and_records_its_microphones(jack, net, spawn, qi_client,
                                                                          tmp_path, figure):
     pd = require_tool("pd", "puredata")
     url = f"tcp://127.0.0.1:{free_port()}"
@@ -86,7 +86,7 @@ def test_the_pd_example_plays_into_the_robot_and_records_its_microphones(jack, n
     figure("Pd's recording of the robot's microphones, RMS", float(np.sqrt(np.mean(recorded ** 2))), "of full scale")
 
     played_wav = tmp_path / "played.wav"
-    qi_session(url).service("ALAudioDevice").dumpPlayed(str(played_wav))
+    qi_client(url).service("ALAudioDevice").dumpPlayed(str(played_wav))
     played: Any = soundfile.read(played_wav, dtype="int16")[0][:, 0]
     loud = played[np.abs(played) > 100]
     assert len(loud) > OUT, "Pd's sine was not played by the robot"
