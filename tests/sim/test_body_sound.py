@@ -5,6 +5,7 @@ listens, level following a joint move, the speaker playing what it is sent)."""
 from __future__ import annotations
 
 import itertools
+import threading
 import time
 from typing import Any
 
@@ -12,7 +13,7 @@ import numpy as np
 import pytest
 
 from sonibus.adapters.sim.whine import Whine
-from sonibus.bus import Bus, decode, encode, robot_info, send_command
+from sonibus.bus import Bus, decode, robot_info, send_command
 from sonibus.bus.audio import AudioChunk
 
 from ..conftest import wait_for
@@ -227,7 +228,12 @@ def test_the_speaker_converts_the_rate_and_counts_a_bad_chunk(net):
     assert sim.stats["bad"] == 1
 
 
-def test_chunks_are_the_gates_encoding():
-    """What the test publishes is what the robot's gate takes (a check of the helper above)."""
-    chunk = sine_chunks(440.0, 48000, 2, 0.02)[0]
-    assert AudioChunk.of(decode(encode(chunk.message()))) == chunk
+def test_stopping_the_sim_ends_its_audio_threads(net):
+    sim = net.sim()
+    client = net.bus("client")
+    chunks = Chunks(client)
+    wait_for(lambda: len(chunks.poll()) >= 3 and sim.stats["speaker_frames"] > 0, what="mic and speaker running")
+    names = {t.name for t in sim._threads}
+    assert {f"{sim.name}:mic", f"{sim.name}:speaker"} <= names
+    sim.stop()
+    assert [t.name for t in threading.enumerate() if t.name.startswith(f"{sim.name}:")] == []
