@@ -53,7 +53,8 @@ class SimConfig:
 
 
 class SimRobot(RobotAdapter):
-    """Simulated Pepper or NAO: joints, behaviors, speech and postures, no robot needed."""
+    """Simulated Pepper or NAO: joints, behaviors, speech and postures, no robot needed; its
+    microphones hear its motors (``audio.SimMic``) and its speaker plays ``<robot>/audio/speaker``."""
 
     Config = SimConfig
     counters = audio.MIC_COUNTERS + audio.SPEAKER_COUNTERS
