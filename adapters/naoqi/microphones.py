@@ -55,13 +55,17 @@ class RobotClock:
     The offset is the smallest (arrival − end of buffer − robot time) of the last
     ``WINDOW`` buffers, the least delayed one: network jitter does not move ``t``
     and the robot's clock may be set to anything. A jump of the robot's clock by
-    more than ``JUMP_S`` starts the estimate again."""
+    more than ``JUMP_S`` starts the estimate again. A buffer never starts before the
+    previous one ended: a smaller offset found later must not send ``t`` back, and
+    buffers that follow each other keep ``t`` contiguous (the better offset shows
+    after a gap)."""
 
     WINDOW = 64
     JUMP_S = 1.0
 
     def __init__(self) -> None:
         self._offsets: deque[float] = deque(maxlen=self.WINDOW)
+        self._end = float("-inf")  # where the previous buffer ended, wall clock
         self.source = "robot"  # robot: the robot's timestamps; receive: arrival times (no usable timestamp)
 
     def start(self, stamp: Any, duration: float, arrived: float) -> float:
@@ -69,13 +73,17 @@ class RobotClock:
         robot = seconds(stamp)
         if robot is None:
             self.source = "receive"
-            return arrived - duration
-        self.source = "robot"
-        offset = arrived - duration - robot
-        if self._offsets and abs(offset - min(self._offsets)) > self.JUMP_S:
-            self._offsets.clear()
-        self._offsets.append(offset)
-        return robot + min(self._offsets)
+            start = arrived - duration
+        else:
+            self.source = "robot"
+            offset = arrived - duration - robot
+            if self._offsets and abs(offset - min(self._offsets)) > self.JUMP_S:
+                self._offsets.clear()
+            self._offsets.append(offset)
+            start = robot + min(self._offsets)
+        start = max(start, self._end)
+        self._end = start + duration
+        return start
 
 
 def seconds(stamp: Any) -> float | None:

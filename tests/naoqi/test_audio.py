@@ -366,3 +366,15 @@ def test_audio_options_are_checked(key, value, says):
         from_mapping(NaoqiConfig, {key: value}, "show.toml [nodes.pepper]")
     message = str(error.value)
     assert key in message and says in message and "\n" not in message
+
+
+def test_a_less_delayed_buffer_found_later_does_not_send_t_back():
+    """The clock's offset is the least delayed buffer's: one arriving 50 ms sooner than the
+    first moved t back by 50 ms, and chunk times went backwards (seen under load)."""
+    from sonibus.adapters.naoqi.microphones import RobotClock
+    clock = RobotClock()
+    first = clock.start([100, 0], 0.17, arrived=1000.30)    # 130 ms late
+    second = clock.start([100, 170000], 0.17, arrived=1000.42)  # 80 ms late: a smaller offset
+    third = clock.start([100, 340000], 0.17, arrived=1000.59)
+    assert first == pytest.approx(1000.13) and second >= first + 0.17 and third >= second + 0.17
+    assert third == pytest.approx(second + 0.17)  # contiguous buffers stay contiguous
