@@ -7,10 +7,12 @@ the sound tool, a JACK client playing a 440 Hz sine into the ``jack`` adapter's 
 Two processes, one Zenoh session each on loopback TCP: the ``jack`` adapter
 (``JackBridge``, its defaults: 10 ms chunks, 60 ms jitter buffer), and the simulated
 Pepper (``sim``: its speaker's jitter buffer at the default 100 ms, its microphones
-the servo whine of its idle motion, 16 kHz mono in 20 ms chunks). Each phase runs
+the servo whine of its idle motion, 16 kHz mono in 20 ms chunks) — or, for the
+speaker, naoqi-sim and the ``naoqi`` adapter owning it over libqi, in one process
+(its speaker's jitter buffer at the default 100 ms, ceiling 0.25). Each phase runs
 one stream one way:
 
-- speaker: JACK input → chunks → the robot's speaker buffer;
+- speaker: JACK input → chunks → the robot's speaker buffer (sim; naoqi);
 - mic: the robot's whine → chunks → the ``jack`` adapter's buffer → JACK output.
 
 Latency = arrival at the receiving worker (where a chunk enters the jitter buffer)
@@ -47,6 +49,11 @@ from common import free_port, latency_stats, write
 RATE, PERIOD = 48000, 256
 WARMUP_S = 2.0  # connecting, the jitter buffers filling: left out
 MODES = ("sonibus", "udp")
+STREAMS = {  # name → (robot, direction, what is measured)
+    "speaker_sim": ("sim", "speaker", "JACK input → robot speaker buffer (sim)"),
+    "speaker_naoqi": ("naoqi", "speaker", "JACK input → robot speaker buffer (naoqi adapter, naoqi-sim)"),
+    "mic_sim": ("sim", "mic", "robot mic (sim) → JACK output buffer"),
+}
 
 
 def _cpu() -> float:
@@ -77,9 +84,15 @@ class _Measured:
         self.arrival: list[float] = []
         self.played: list[float] = []
 
+    def get(self, timeout: float | None = None) -> Any:
+        item = self.queue.get(timeout)
+        return self._time([item])[0] if item is not None else None
+
     def drain(self, timeout: float | None = None) -> list[Any]:
+        return self._time(self.queue.drain(timeout))
+
+    def _time(self, items: list[Any]) -> list[Any]:
         from sonibus.bus import decode
-        items = self.queue.drain(timeout)
         now = time.time()
         ahead = self.buffer.buffered / self.buffer.rate
         for _key, payload in items:
@@ -115,12 +128,30 @@ def _udp_into(queue: Any, port: int, stop: threading.Event) -> threading.Thread:
     return thread
 
 
-def _side(role: str, direction: str, mode: str, endpoint: str, server: str, ports: dict[str, int],
+def _robot(robot: str, speaker: bool, bus: Any) -> tuple[Any, Any]:
+    """The robot's node (started) and what it plays or hears with: ``(node, speaker or mic)``;
+    ``naoqi``: naoqi-sim in this process and the naoqi adapter owning it."""
+    from sonibus.adapters.sim import SimConfig, SimRobot
+    if robot == "sim":
+        node = SimRobot(SimConfig(robot="pepper", idle=True, body_sound=not speaker, speaker=speaker), name="sim")
+        node.start(bus)
+        return node, node.speaker if speaker else node.mic
+    from sonibus.adapters.naoqi import NaoqiConfig, NaoqiRobot
+    from sonibus.adapters.sim.naoqi import FakeNaoqi, FakeNaoqiConfig
+    fake = FakeNaoqi(FakeNaoqiConfig(listen=f"tcp://127.0.0.1:{free_port()}", rate_hz=50, idle=True)).start()
+    node = NaoqiRobot(NaoqiConfig(robot="pepper", url=fake.url, rate_hz=50), name="pepper")
+    node.start(bus)
+    node.fake = fake  # (stopped after the node)
+    if not node.speaker.available.wait(20):
+        raise SystemExit("the naoqi adapter found no ALAudioDevice")
+    return node, node.speaker
+
+
+def _side(role: str, robot: str, direction: str, mode: str, endpoint: str, server: str, ports: dict[str, int],
           seconds: float, ready: Any, go: Any, out: Any) -> None:
-    """One process: the ``jack`` adapter (role ``jack``) or the simulated robot (``robot``)."""
+    """One process: the ``jack`` adapter (role ``jack``) or the robot (``robot``: ``sim`` or ``naoqi``)."""
     os.environ["JACK_DEFAULT_SERVER"] = server
     from sonibus.adapters.jack import JackBridge, JackConfig
-    from sonibus.adapters.sim import SimConfig, SimRobot
     from sonibus.bus import Bus, BusConfig, open_session
     role_bus = {"listen": (endpoint,)} if role == "jack" else {"connect": (endpoint,)}
     session = open_session(BusConfig(multicast=False, **role_bus))
@@ -130,25 +161,23 @@ def _side(role: str, direction: str, mode: str, endpoint: str, server: str, port
     if role == "jack":
         node: Any = JackBridge(JackConfig(robot="pepper", to_robot=speaker, from_robot=not speaker, outputs=1),
                                name="jack")
+        node.start(bus)
+        owner = node
     else:
-        node = SimRobot(SimConfig(robot="pepper", idle=True, body_sound=not speaker, speaker=speaker), name="sim")
-    node.start(bus)
+        node, owner = _robot(robot, speaker, bus)
     sending = (role == "jack") == speaker
     measured = None
     if sending:
-        owner = node if role == "jack" else node.mic
         owner._publisher = _Tee(owner._publisher, mode, f"pepper/audio/{direction}", ports[direction])
-    else:
-        owner = node if role == "jack" else node.speaker
-        if mode == "udp":
-            _udp_into(owner._queue, ports[direction], stop)
+    elif mode == "udp":
+        _udp_into(owner._queue, ports[direction], stop)
     ready.set()
     go.wait(30)
     start_wall = time.time() + WARMUP_S
     time.sleep(WARMUP_S)
     start_cpu = _cpu()
     if not sending:
-        buffer = node._buffer if role == "jack" else node.speaker.buffer
+        buffer = node._buffer if role == "jack" else owner.buffer
         measured = owner._queue = _Measured(owner._queue, buffer, start_wall)
         before = dict(buffer.stats)
     time.sleep(seconds)
@@ -158,6 +187,8 @@ def _side(role: str, direction: str, mode: str, endpoint: str, server: str, port
         report.update(arrival=measured.arrival, played=measured.played, buffer=stats)
     stop.set()
     node.stop()
+    if hasattr(node, "fake"):
+        node.fake.stop()
     session.close()
     out.put(report)
 
@@ -181,7 +212,7 @@ def _tone(server: str) -> Any:
     return client
 
 
-def phase(direction: str, mode: str, server: str, seconds: float) -> dict[str, Any]:
+def phase(robot: str, direction: str, mode: str, server: str, seconds: float) -> dict[str, Any]:
     ctx = mp.get_context("spawn")  # never fork a process that has opened a Zenoh session
     endpoint = f"tcp/127.0.0.1:{free_port()}"
     ports = {"speaker": free_port(socket.SOCK_DGRAM), "mic": free_port(socket.SOCK_DGRAM)}
@@ -189,7 +220,8 @@ def phase(direction: str, mode: str, server: str, seconds: float) -> dict[str, A
     readies, procs = [], []
     for role in ("jack", "robot"):
         ready = ctx.Event()
-        proc = ctx.Process(target=_side, args=(role, direction, mode, endpoint, server, ports, seconds, ready, go, out))
+        proc = ctx.Process(target=_side,
+                           args=(role, robot, direction, mode, endpoint, server, ports, seconds, ready, go, out))
         proc.start()
         if not ready.wait(30):
             raise SystemExit(f"the {role} process did not start")
@@ -219,9 +251,8 @@ def _ms(us: float) -> str:
 
 def summary(runs: dict[str, dict[str, Any]]) -> list[dict[str, str]]:
     rows = []
-    names = {"speaker": "JACK input → robot speaker buffer", "mic": "robot mic → JACK output buffer"}
-    for direction, name in names.items():
-        bus, udp = runs[direction]["sonibus"], runs[direction]["udp"]
+    for stream, (_robot_kind, _direction, name) in STREAMS.items():
+        bus, udp = runs[stream]["sonibus"], runs[stream]["udp"]
         rows.append({"scenario": f"audio: {name}, p50 / p99 (to played)",
                      "sonibus": f"{_ms(bus['arrival']['p50_us'])} / {_ms(bus['arrival']['p99_us'])} "
                                 f"({_ms(bus['to_played']['p50_us'])})",
@@ -248,10 +279,10 @@ def main() -> None:
     try:
         time.sleep(1.0)  # (jackd takes clients within a second; the first phase's open fails loudly if not)
         runs: dict[str, dict[str, Any]] = {}
-        for direction in ("speaker", "mic"):
+        for stream, (robot, direction, _name) in STREAMS.items():
             for mode in MODES:
-                runs.setdefault(direction, {})[mode] = result = phase(direction, mode, server, args.seconds)
-                print(f"{direction:8} {mode:8} arrival p50 {_ms(result['arrival']['p50_us'])} "
+                runs.setdefault(stream, {})[mode] = result = phase(robot, direction, mode, server, args.seconds)
+                print(f"{stream:14} {mode:8} arrival p50 {_ms(result['arrival']['p50_us'])} "
                       f"p99 {_ms(result['arrival']['p99_us'])}, to played p50 {_ms(result['to_played']['p50_us'])}, "
                       f"dropouts/min {result['dropouts_per_min']:.1f}, CPU jack {result['cpu_jack_pct']:.1f} % "
                       f"robot {result['cpu_robot_pct']:.1f} %", flush=True)

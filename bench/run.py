@@ -44,7 +44,7 @@ SCRIPTS: dict[str, tuple[str, list[str], float]] = {
     "web": ("web", ["--trials", "300"], 90),  # a web page's command round trip (issue 17)
     "web_page": ("web_page", [], 120),  # the operator page in headless Chromium: updates/s, click → robot → page
     "pacing": ("pacing", [], 90),  # the sim's pacing, the OSC rate cap, replay timing: no longer asserted by tests
-    "audio": ("audio", ["--seconds", "20"], 240),  # JACK ↔ robot audio over the bus and over plain UDP
+    "audio": ("audio", ["--seconds", "20"], 330),  # JACK ↔ robot audio over the bus and over plain UDP
     "soak": ("soak", ["--minutes", "3"], 330),  # the fuzz suite of tests/fuzz for minutes
 }
 
