@@ -53,7 +53,8 @@ SPEAKER = Format(48000, 2)
 
 
 class SimMic:
-    """Publishes ``Whine(speeds())`` on ``<robot>/audio/mic`` while anyone listens; run ``run(stop)``."""
+    """Publishes ``Whine(speeds())`` on ``<robot>/audio/mic`` while anyone listens; ``run()`` is
+    the node's worker (until it stops). A chunk's ``t`` is its first sample's place on the schedule."""
 
     def __init__(self, node: RobotAdapter, robot: str, model: RobotModel, speeds: Callable[[], Mapping[str, float]],
                  fmt: Format = MIC) -> None:
@@ -91,7 +92,7 @@ class SimMic:
 class SimSpeaker:
     """Plays ``<robot>/audio/speaker`` through a jitter buffer in real time; run ``run()``.
 
-    ``played`` holds the last ``keep_s`` seconds it played (int16 blocks)."""
+    ``played`` holds the last ``keep_s`` seconds or so it played (int16 blocks of 20 ms, longer after a stall)."""
 
     def __init__(self, node: Adapter, robot: str, target_ms: float, fmt: Format = SPEAKER,
                  keep_s: float = 10.0) -> None:
@@ -118,13 +119,6 @@ class SimSpeaker:
             self.node.count("speaker_frames", frames)
 
         Pacer(1000.0 / self.fmt.chunk_ms).run(tick, self.node.stopping)
-
-    def recent(self, seconds: float) -> np.ndarray:
-        """The last ``seconds`` played (int16, ``(frames, channels)``)."""
-        blocks = list(self.played)
-        if not blocks:
-            return np.zeros((0, self.fmt.channels), np.int16)
-        return np.concatenate(blocks)[-round(seconds * self.fmt.rate):]
 
     def _buffer_stat(self, name: str) -> int:
         return self.buffer.stats[name]
