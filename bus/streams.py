@@ -26,7 +26,8 @@ from __future__ import annotations
 
 import itertools
 import logging
-from collections.abc import Callable, Iterable
+import threading
+from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass
 from typing import Any, NamedTuple
 
@@ -170,6 +171,7 @@ class Streams(Selection):
     def __init__(self, bus: Bus, patterns: Iterable[str], queue: SampleQueue, *,
                  per_joint_keys: bool = False, stamped: bool = False, limits: messages.Limits | None = None) -> None:
         super().__init__(patterns := tuple(patterns), limits or bus.limits)
+        self.queue = queue
         self.plan = plan(patterns, per_joint_keys)
         if self.plan.frames:  # said once: what a user asked for is not the key subscribed to
             log.info("%s: %s served from whole frames on %s (per_joint_keys = true for publishers of "
@@ -179,6 +181,16 @@ class Streams(Selection):
                              for k in self.plan.keys]
         self.subscribers += [bus.subscribe(k, queue=queue, stamped=stamped, skip=_skip(k, _from_frames))[0]
                              for k in self.plan.broad]
+
+    def each(self, stopping: threading.Event, count: Callable[[str, int], None],
+             warn: Callable[[str, str], None]) -> Iterator[Incoming]:
+        """The checked messages of the queue (see ``take``) until ``stopping`` is set:
+        the loop of a node's worker."""
+        while not stopping.is_set():
+            item = self.queue.get(timeout=0.2)
+            message = self.take(item[0], item[1], count, warn) if item else None
+            if message is not None:
+                yield message
 
     def undeclare(self) -> None:
         for subscriber in self.subscribers:

@@ -161,11 +161,8 @@ class OscQuery(Adapter):
     # -- values ------------------------------------------------------------------------
 
     def _forward(self) -> None:
-        while not self.stopping.is_set():
-            item = self._queue.get(timeout=0.2)
-            message = self._streams.take(item[0], item[1], self.count, self.warn) if item else None
-            if message is not None:
-                self._serve(message)
+        for message in self._streams.each(self.stopping, self.count, self.warn):
+            self._serve(message)
 
     def _serve(self, message: Incoming) -> None:
         out: list[tuple[str, bytes]] = []

@@ -154,11 +154,8 @@ class WebPages(Adapter):
     # -- what comes off the bus ---------------------------------------------------------
 
     def _feed(self) -> None:
-        while not self.stopping.is_set():
-            item = self._queue.get(timeout=0.2)
-            message = self._streams.take(item[0], item[1], self.count, self.warn) if item else None
-            if message is not None:
-                self._take(message)
+        for message in self._streams.each(self.stopping, self.count, self.warn):
+            self._take(message)
 
     def _take(self, message: Incoming) -> None:
         source = message.source
