@@ -2,7 +2,8 @@
 as many frames as a speaker or a JACK port asks for.
 
 It converts each chunk to its own rate (soxr, one stream per sender's rate so
-there are no seams between chunks) and channel count (down by the mean, up by
+there are no seams between chunks; a lost chunk or a new rate fades the old
+stream out and starts a new one) and channel count (down by the mean, up by
 copying). Playback starts once ``target_ms`` is buffered. A chunk missing by
 ``seq`` plays as silence of its length; a chunk whose ``seq`` goes back comes
 too late and is dropped (a sender that restarted, ``seq`` back but ``t``
@@ -101,17 +102,16 @@ class JitterBuffer:
                     return
                 missing = max(0, chunk.seq - self._next_seq)
             self._next_seq, self._last_t = chunk.seq + 1, chunk.t
-            ending = np.zeros((0, self.channels), np.float32)
             converter = self._converter
-            if converter is None or missing or converter.source != (chunk.rate, chunk.channels):
-                ending = converter.flush() if converter is not None else ending
+            restart = converter is not None and (missing or converter.source != (chunk.rate, chunk.channels))
+            if converter is None or restart:
                 converter = self._converter = _Converter(chunk.rate, chunk.channels, self.rate, self.channels)
             sound = converter.convert(chunk.samples())
             with self._lock:
-                self._append(ending)
+                if restart:  # the old stream's last ms, still in the resampler, are left out: cut short, they ring
+                    self._end_sound()
                 if missing:
                     self.stats["gaps"] += missing
-                    self._end_sound()
                     silence = min(self.limit, round(missing * chunk.frames * self.rate / chunk.rate))
                     self._append(np.zeros((silence, self.channels), np.float32), fade=False)
                 self._append(sound)
@@ -174,7 +174,9 @@ class JitterBuffer:
     def _end_sound(self) -> None:
         """Fade out the end of what is queued (silence follows); fade in what comes next."""
         fade = len(self._down)
-        if self.buffered >= fade:
+        if not self.buffered and not self._playing:
+            pass  # dry after an underrun: the output has faded out already (or its fade-out is under way)
+        elif self.buffered >= fade:
             self._buffer[self._end - fade:self._end] *= self._down
         else:
             last = self._buffer[self._end - 1] if self.buffered else self._last
@@ -208,9 +210,3 @@ class _Converter:
             mixed = sound if sound.shape[1] == 1 else sound.mean(axis=1, keepdims=True)
             sound = np.repeat(mixed, self.out_channels, axis=1)
         return self._stream.resample_chunk(sound) if self._stream is not None else sound
-
-    def flush(self) -> np.ndarray:
-        """What the resampler still holds (the stream ends here)."""
-        if self._stream is None:
-            return np.zeros((0, self.out_channels), np.float32)
-        return self._stream.resample_chunk(np.zeros((0, self.out_channels), np.float32), last=True)

@@ -165,6 +165,30 @@ def test_a_missing_chunk_plays_as_silence_of_its_length():
     assert largest_step(out) <= 0.8 * 32767 * (2 * np.pi * 442.5 / 48000 + 1 / FADE) * 1.1
 
 
+def test_a_lost_chunk_while_a_fade_out_is_under_way_does_not_fade_out_a_second_time():
+    buffer = JitterBuffer(48000, 1, target_ms=10)
+    pieces = chunks(sine(442.5, 48000, 1440, amplitude=0.8), 48000, 480)
+    buffer.push(pieces[0])
+    out = [buffer.pull(475), buffer.pull(7)]                                     # dry 2 frames into the ramp
+    buffer.push(pieces[2])                                                      # seq 1 lost
+    out += [buffer.pull(480) for _ in range(4)]
+    joined = np.concatenate(out)
+    assert buffer.stats["gaps"] == 1 and buffer.stats["played_frames"] == 480 + 480 + 480
+    assert largest_step(joined) <= 0.8 * 32767 * (2 * np.pi * 442.5 / 48000 + 1 / FADE) * 1.1
+
+
+def test_a_lost_chunk_of_a_resampled_stream_fades_out_without_the_resampler_ringing():
+    buffer = JitterBuffer(48000, 1, target_ms=20)
+    pieces = chunks(sine(442.5, 44100, 441 * 12, amplitude=0.8), 44100, 441)
+    out = []
+    for n, chunk in enumerate(pieces):
+        if n != 4:                                                              # seq 4 lost
+            buffer.push(chunk)
+        out.append(buffer.pull(960))
+    assert buffer.stats["gaps"] == 1
+    assert largest_step(np.concatenate(out)) <= 0.8 * 32767 * (2 * np.pi * 442.5 / 48000 + 1 / FADE) * 1.1
+
+
 def test_a_chunk_whose_seq_goes_back_is_dropped_but_a_restarted_sender_is_heard():
     buffer = JitterBuffer(48000, 1, target_ms=20)
     pieces = chunks(sine(440, 48000, 1440), 48000, 480)
