@@ -100,7 +100,9 @@ class JitterBuffer:
                     with self._lock:
                         self.stats["refused"] += 1
                     return
-                missing = max(0, chunk.seq - self._next_seq)
+                # (a jump past what the buffer holds is that many: the silence of more would be cut anyway)
+                most = self.limit * chunk.rate // (chunk.frames * self.rate) + 1
+                missing = min(max(0, chunk.seq - self._next_seq), most)
             self._next_seq, self._last_t = chunk.seq + 1, chunk.t
             converter = self._converter
             restart = converter is not None and (missing or converter.source != (chunk.rate, chunk.channels))

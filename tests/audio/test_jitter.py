@@ -189,6 +189,15 @@ def test_a_lost_chunk_of_a_resampled_stream_fades_out_without_the_resampler_ring
     assert largest_step(np.concatenate(out)) <= 0.8 * 32767 * (2 * np.pi * 442.5 / 48000 + 1 / FADE) * 1.1
 
 
+def test_a_jump_of_seq_counts_no_more_missing_chunks_than_the_buffer_could_hold():
+    buffer = JitterBuffer(48000, 1, target_ms=20, max_ms=60)
+    pieces = chunks(sine(440, 48000, 960), 48000, 480)
+    buffer.push(pieces[0])
+    buffer.push(AudioChunk(pieces[1].t, 2**62, 48000, 1, pieces[1].pcm))        # one chunk, seq far ahead
+    assert 0 < buffer.stats["gaps"] <= 60 / 10 + 1 and buffer.buffered == buffer.target
+    assert buffer.pull(buffer.buffered)[-480 + FADE:].any()                    # the chunk still plays
+
+
 def test_a_chunk_whose_seq_goes_back_is_dropped_but_a_restarted_sender_is_heard():
     buffer = JitterBuffer(48000, 1, target_ms=20)
     pieces = chunks(sine(440, 48000, 1440), 48000, 480)
