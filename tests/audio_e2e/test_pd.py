@@ -4,7 +4,6 @@ microphones, with examples/sound-through-robot.toml's wiring (the jack adapter).
 
 from __future__ import annotations
 
-import time
 from pathlib import Path
 from typing import Any
 
@@ -13,7 +12,7 @@ import numpy as np
 import pytest
 import soundfile
 
-from sonibus.bus import robot_info, send_command
+from sonibus.bus import decode, load_model, robot_info, send_command
 
 from ..conftest import SONIBUS, free_port, require_tool, wait_for
 from ..jack.conftest import peak_hz
@@ -70,12 +69,19 @@ def test_the_pd_example_plays_into_the_robot_and_records_its_microphones(jack, n
     wait_for(lambda: any(line.startswith("sonibus: running") for line in tool.lines) or tool.popen.poll(),
              timeout=20, what="the jack adapter", explain=lambda: "\n".join(tool.lines))
 
-    moves = 0
-    while patch.popen.poll() is None and moves < 6:  # the head turns while Pd records: a whine to hear
-        send_command(client, "pepper", "joints/set", {"names": ["HeadYaw"], "angles": [(-1) ** moves * 1.0],
-                                                      "speed": 0.3})
-        moves += 1
-        time.sleep(0.6)  # (lets each move run a while; nothing is asserted about when)
+    _frames, frames = client.subscribe("pepper/frame")
+    head = load_model("pepper").joint_names.index("HeadYaw")
+    latest: list[float] = [0.0]
+
+    def head_at(angle: float) -> bool:
+        for _key, payload in frames.drain(0):
+            latest[0] = decode(payload)["v"][head]
+        return abs(latest[0] - angle) < 0.05 or patch.popen.poll() is not None
+
+    for move in range(4):  # the head turns from side to side while Pd records: a whine to hear
+        angle = 1.0 if move % 2 == 0 else -1.0
+        send_command(client, "pepper", "joints/set", {"names": ["HeadYaw"], "angles": [angle], "speed": 0.2})
+        wait_for(lambda angle=angle: head_at(angle), timeout=10, what=f"HeadYaw at {angle}")
     wait_for(lambda: patch.popen.poll() is not None, timeout=RECORD_S + 10, what="Pd to quit once it has recorded")
     assert patch.popen.returncode == 0, "\n".join(patch.lines)
     assert not [line for line in patch.lines if "error" in line.lower() or "couldn't create" in line], patch.lines
