@@ -146,7 +146,8 @@ def test_the_robots_whine_comes_out_of_the_jack_adapter_and_follows_a_joint_move
     figure("whine RMS while HeadYaw moves at 0.1 × max speed", during, "of full scale")
 
 
-def test_stopping_any_node_leaves_no_ports_and_no_threads(peer, rig, net):
+@pytest.mark.parametrize("first", ["robot owner", "bridge"])
+def test_stopping_any_node_leaves_no_ports_and_no_threads(peer, rig, net, first):
     r = rig()
     device = r.fake.services["ALAudioDevice"]
     wait_for(lambda: r.adapter.audio_present, what="the adapter to find ALAudioDevice")
@@ -155,14 +156,20 @@ def test_stopping_any_node_leaves_no_ports_and_no_threads(peer, rig, net):
              what="audio both ways", explain=lambda: f"jack {dict(node.stats)}; naoqi {dict(r.adapter.stats)}")
     assert peer.ports("sonibus:") == ["sonibus:mic_1", "sonibus:speaker_1"]
 
-    r.adapter.stop()  # the robot's owner first: the bridge goes on, its ports stay
-    assert node_threads(r.adapter.name) == []
-    assert node.state == "running" and peer.ports("sonibus:") == ["sonibus:mic_1", "sonibus:speaker_1"]
-    sent = node.stats["chunks_sent"]
-    wait_for(lambda: node.stats["chunks_sent"] >= sent + 20, what="the bridge to go on publishing")
-
+    if first == "robot owner":  # the bridge goes on, its ports stay
+        r.adapter.stop()
+        assert node_threads(r.adapter.name) == []
+        assert node.state == "running" and peer.ports("sonibus:") == ["sonibus:mic_1", "sonibus:speaker_1"]
+        sent = node.stats["chunks_sent"]
+        wait_for(lambda: node.stats["chunks_sent"] >= sent + 20, what="the bridge to go on publishing")
     node.stop()
     assert peer.ports("sonibus:") == []
     assert node_threads(node.name) == []
+    if first == "bridge":  # the robot's owner goes on; nobody listens to the microphones any more
+        assert r.adapter.state == "running"
+        wait_for(lambda: not r.adapter.microphones.subscribed and not device.listeners, timeout=10,
+                 what="the robot's owner to unsubscribe ALAudioDevice")
+        r.adapter.stop()
+        assert node_threads(r.adapter.name) == []
     r.fake.stop()
     assert [t.name for t in threading.enumerate() if t.name.startswith("fake-naoqi")] == []
