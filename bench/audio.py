@@ -221,7 +221,8 @@ def phase(robot: str, direction: str, mode: str, server: str, seconds: float) ->
     for role in ("jack", "robot"):
         ready = ctx.Event()
         proc = ctx.Process(target=_side,
-                           args=(role, robot, direction, mode, endpoint, server, ports, seconds, ready, go, out))
+                           args=(role, robot, direction, mode, endpoint, server, ports, seconds, ready, go, out),
+                           daemon=True)  # (ended with this process if a phase fails)
         proc.start()
         if not ready.wait(30):
             raise SystemExit(f"the {role} process did not start")
