@@ -30,8 +30,6 @@ QUIET = 100          # |sample| at or below this is silence (the sine peaks at 0
 SECONDS = 10.0
 SETTLE = OUT // 2  # the first 0.5 s of sound is left out
 
-# peer (its JACK server) first and net last: the nodes stop before the server and the fake robot do
-
 
 def bridge(net: Any, **options: Any) -> JackBridge:
     return net.start(JackBridge(JackConfig(robot="pepper", **options), name="jack"))
@@ -60,6 +58,13 @@ def counters(bus: Any, node: str) -> dict[str, int]:
             return stats["counters"]
     pytest.fail(f"node {node} serves no stats")
 
+
+def info_of(bus: Any) -> dict[str, Any]:
+    return robot_info(bus, "pepper", timeout=0.5) or {}
+
+
+# Fixture order: peer (its JACK server) before rig and net, so that the nodes stop first, then the
+# fake robot, then the server.
 
 def test_a_sine_into_the_jack_adapter_is_played_by_the_robot(peer, net, spawn, qi_client, tmp_path, figure):
     # Each side in a process of its own, as on two machines: the robot (naoqi-sim and the naoqi
@@ -111,10 +116,6 @@ def test_a_sine_into_the_jack_adapter_is_played_by_the_robot(peer, net, spawn, q
     assert speaker["speaker_gaps"] == 0 and bridge_counts["input_lost"] == 0
     assert speaker["speaker_errors"] == 0  # naoqi-sim refuses a call over 16384 frames (tests/naoqi/test_audio)
     figure("speaker calls, mean frames", speaker["speaker_frames"] / max(1, speaker["speaker_calls"]), "")
-
-
-def info_of(bus: Any) -> dict[str, Any]:
-    return robot_info(bus, "pepper", timeout=0.5) or {}
 
 
 def test_the_robots_whine_comes_out_of_the_jack_adapter_and_follows_a_joint_move(peer, rig, net, figure):
