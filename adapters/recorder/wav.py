@@ -5,7 +5,8 @@ key's first chunk). A gap in ``seq`` (chunks lost on the way, or dropped by
 the recorder) becomes silence of the missing chunks' length, so the file keeps
 time; a ``seq`` that goes back (the publisher restarted) is played on as it
 comes. A chunk of another rate or channel count than the first is skipped, and
-said once per file.
+said once per file; so is a message that is no audio chunk (the gate's check:
+a file not written by sonibus), and a key with none gets no file.
 
 >>> import os, tempfile
 >>> import numpy as np
@@ -27,12 +28,16 @@ said once per file.
 
 from __future__ import annotations
 
+import math
 import os
 import wave
 from collections.abc import Callable
+from typing import Any
 
+from sonibus.bus import codec
 from sonibus.bus.audio import AudioChunk
 from sonibus.bus.keys import Key
+from sonibus.bus.messages import BadMessage, Gate, Limits
 
 from .reading import Recording
 
@@ -51,36 +56,62 @@ def export_wav(recording: Recording, directory: str, say: Callable[[str], None])
     for key in audio_keys(recording):
         os.makedirs(directory, exist_ok=True)
         key_parts = Key.parse(key)
-        paths.append(os.path.join(directory, f"{key_parts.robot}-{key_parts.name}.wav"))
-        skipped = _write(recording, key, paths[-1])
-        if skipped:
-            count, found, kept = skipped
-            say(f"{key}: {count} chunk{'s' if count != 1 else ''} skipped: {found}, not the {kept} of the "
-                f"first chunk (the WAV's)")
+        path = os.path.join(directory, f"{key_parts.robot}-{key_parts.name}.wav")
+        written = _Writer(path)
+        try:
+            for message in recording.messages([key]):
+                written.add(key_parts, message.data)
+        finally:
+            written.close()
+        if written.skipped and written.first is not None:
+            count, found = written.skipped, written.other
+            say(f"{key}: {count} chunk{'s' if count != 1 else ''} skipped: {found}, not the "
+                f"{_format(written.first)} of the first chunk (the WAV's)")
+        if written.bad:
+            say(f"{key}: {written.bad} chunk{'s' if written.bad != 1 else ''} not an audio chunk, left out "
+                f"(the first: {written.why})")
+        if written.first is not None:
+            paths.append(path)
     return paths
 
 
-def _write(recording: Recording, key: str, path: str) -> tuple[int, str, str] | None:
-    """Write ``key``'s chunks to ``path``; (how many, their format, the file's) of chunks skipped."""
-    skipped, other = 0, ""
-    first: AudioChunk | None = None
-    last: AudioChunk | None = None
-    with wave.open(path, "wb") as out:
-        for message in recording.messages([key]):
-            chunk = AudioChunk.of(message.data)
-            if first is None:
-                first = chunk
-                out.setnchannels(chunk.channels)
-                out.setsampwidth(2)
-                out.setframerate(chunk.rate)
-            elif (chunk.rate, chunk.channels) != (first.rate, first.channels):
-                skipped, other = skipped + 1, other or _format(chunk)
-                continue
-            if last is not None and chunk.seq > last.seq + 1:
-                out.writeframes(bytes(_silence(last, chunk) * 2 * chunk.channels))
-            out.writeframes(chunk.pcm)
-            last = chunk
-    return (skipped, other, _format(first)) if skipped and first is not None else None
+class _Writer:
+    """One key's chunks into a WAV file, opened at the first good chunk (its format)."""
+
+    def __init__(self, path: str) -> None:
+        self.path = path
+        self.first: AudioChunk | None = None
+        self.last: AudioChunk | None = None
+        self.skipped, self.other = 0, ""    # chunks of another format than the first
+        self.bad, self.why = 0, ""          # messages that are no audio chunk (a file not written by sonibus)
+        # (a recording's t are old, and its bus may have allowed larger payloads)
+        self._gate = Gate(Limits(max_future_s=math.inf, max_payload=1 << 30))
+        self._out: wave.Wave_write | None = None
+
+    def add(self, key: Key, message: Any) -> None:
+        try:
+            self._gate.check(key, codec.encode(message))
+        except (BadMessage, TypeError, ValueError) as exc:
+            self.bad, self.why = self.bad + 1, self.why or str(exc)
+            return
+        chunk = AudioChunk.of(message)
+        if self._out is None:
+            self.first = chunk
+            self._out = wave.open(self.path, "wb")  # noqa: SIM115 (closed by close(), after the last chunk)
+            self._out.setnchannels(chunk.channels)
+            self._out.setsampwidth(2)
+            self._out.setframerate(chunk.rate)
+        elif self.first is not None and (chunk.rate, chunk.channels) != (self.first.rate, self.first.channels):
+            self.skipped, self.other = self.skipped + 1, self.other or _format(chunk)
+            return
+        if self.last is not None and chunk.seq > self.last.seq + 1:
+            self._out.writeframes(bytes(_silence(self.last, chunk) * 2 * chunk.channels))
+        self._out.writeframes(chunk.pcm)
+        self.last = chunk
+
+    def close(self) -> None:
+        if self._out is not None:
+            self._out.close()
 
 
 def _silence(last: AudioChunk, chunk: AudioChunk) -> int:

@@ -126,3 +126,24 @@ def test_export_says_when_there_is_no_audio_and_needs_a_format(tmp_path):
     neither = run_cli("export", str(path))
     assert neither.returncode == 2 and neither.stderr.startswith("sonibus: error: ")
     assert len(neither.stderr.splitlines()) == 1 and "--csv DIR" in neither.stderr and "--wav DIR" in neither.stderr
+
+
+def test_export_leaves_out_what_is_no_audio_chunk_in_one_line(tmp_path):
+    path = tmp_path / "foreign.mcap"  # (sonibus's recorder gate-checks what it writes; this file was made elsewhere)
+    t0 = time.time() - 60
+    with RecordingWriter(str(path)) as out:
+        for seq in range(3):
+            good = chunk(seq, MIC, t0)
+            out.write("pepper/audio/mic", int(good.t * 1e9), good.message())
+            if seq == 1:  # a cut-short chunk: half a frame more
+                out.write("pepper/audio/mic", int(good.t * 1e9) + 1, {**good.message(), "pcm": good.pcm + b"\1\0"})
+        out.write("pepper/audio/speaker", int(t0 * 1e9), {"t": t0, "seq": 0, "rate": 48000, "channels": 0,
+                                                          "pcm": b"\1\0"})
+    exported = run_cli("export", str(path), "--wav", str(tmp_path / "wav"))
+    assert exported.returncode == 0 and not exported.stderr, exported.stderr
+    assert "pepper/audio/mic: 1 chunk not an audio chunk, left out (the first: pcm of 1282 bytes" in exported.stdout
+    assert "pepper/audio/speaker: 1 chunk not an audio chunk, left out (the first: channels = 0" in exported.stdout
+    mic_wav, rate = soundfile.read(tmp_path / "wav" / "pepper-mic.wav", dtype="int16", always_2d=True)
+    assert rate == 16000 and mic_wav.shape == (3 * 320, 2)
+    assert (mic_wav[320:640] == samples(1, *MIC)).all()
+    assert not (tmp_path / "wav" / "pepper-speaker.wav").exists()  # nothing to write: no file
