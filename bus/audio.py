@@ -14,14 +14,17 @@ True
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
 from .jitter import JitterBuffer
+from .keys import Key
+from .messages import Gate
 
-__all__ = ["FULL_SCALE", "SAMPLE", "AudioChunk", "JitterBuffer", "to_int16"]
+__all__ = ["FULL_SCALE", "SAMPLE", "AudioChunk", "JitterBuffer", "received", "to_int16"]
 
 FULL_SCALE = 32767
 SAMPLE = np.dtype("<i2")  # int16 little-endian, whatever this host's byte order
@@ -81,3 +84,16 @@ def to_int16(samples: np.ndarray) -> np.ndarray:
     if array.dtype != np.int16:
         raise TypeError(f"samples of dtype {array.dtype}: int16, or float in [-1, 1], expected")
     return array
+
+
+def received(gate: Gate, key: str, payload: bytes, count: Callable[..., None],
+             warn: Callable[[str, str], None]) -> AudioChunk | None:
+    """The chunk that came on ``key``, checked by ``gate`` and counted by a node's
+    ``count`` (``received``; ``bad``, ``warn``ed about): None if it is refused."""
+    count("received")
+    try:
+        return AudioChunk.of(gate.check(Key.parse(key), payload))
+    except ValueError as exc:  # messages.BadMessage, or a key that is not a data key
+        count("bad")
+        warn("bad", f"audio chunk on '{key}' refused: {exc}")
+        return None

@@ -24,7 +24,7 @@ import numpy as np
 
 from sonibus.bus import codec, keys, messages
 from sonibus.bus.adapter import Adapter
-from sonibus.bus.audio import AudioChunk, JitterBuffer
+from sonibus.bus.audio import AudioChunk, JitterBuffer, received
 from sonibus.bus.errors import ConfigError
 from sonibus.bus.node import AUDIO
 
@@ -153,11 +153,8 @@ class JackBridge(Adapter):
         assert buffer is not None
         while not self.stopping.is_set():
             for key, payload in self._queue.drain(timeout=0.2):
-                try:
-                    chunk = AudioChunk.of(gate.check(keys.Key.parse(key), payload))
-                except messages.BadMessage as exc:
-                    self.count("bad")
-                    self.warn("bad", f"audio chunk on '{key}' refused: {exc}")
+                chunk = received(gate, key, payload, self.count, self.warn)
+                if chunk is None:
                     continue
                 buffer.push(chunk)
                 self.count("chunks_received")

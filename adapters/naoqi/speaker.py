@@ -22,7 +22,7 @@ from typing import Any
 import numpy as np
 
 from sonibus.bus import keys, messages
-from sonibus.bus.audio import AudioChunk, JitterBuffer
+from sonibus.bus.audio import JitterBuffer, received
 from sonibus.bus.owner import RobotAdapter
 
 from .config import NaoqiConfig
@@ -90,14 +90,9 @@ class Speaker:
             stopping.wait(max(0.0, start + sent * BLOCK_S - time.monotonic()))
 
     def _take(self, key: str, payload: bytes) -> None:
-        self.node.count("received")
-        try:
-            chunk = AudioChunk.of(self._gate.check(keys.Key.parse(key), payload))
-        except ValueError as exc:  # messages.BadMessage
-            self.node.count("bad")
-            self.node.warn("speaker_chunk", f"{key}: chunk refused: {exc}")
-            return
-        self.buffer.push(chunk)
+        chunk = received(self._gate, key, payload, self.node.count, self.node.warn)
+        if chunk is not None:
+            self.buffer.push(chunk)
 
     def _send(self, block: np.ndarray) -> None:
         frames = len(block)

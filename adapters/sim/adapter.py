@@ -53,8 +53,9 @@ class SimConfig:
 
 
 class SimRobot(RobotAdapter):
-    """Simulated Pepper or NAO: joints, behaviors, speech and postures, no robot needed; its
-    microphones hear its motors (``audio.SimMic``) and its speaker plays ``<robot>/audio/speaker``."""
+    """Simulated Pepper or NAO: joints, behaviors, speech, postures and body sound, no robot needed.
+
+    Its microphones hear its motors (``audio.SimMic``) and its speaker plays ``<robot>/audio/speaker``."""
 
     Config = SimConfig
     counters = audio.MIC_COUNTERS + audio.SPEAKER_COUNTERS

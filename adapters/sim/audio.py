@@ -20,7 +20,7 @@ import numpy as np
 
 from sonibus.bus import codec, keys, messages
 from sonibus.bus.adapter import Adapter
-from sonibus.bus.audio import AudioChunk, JitterBuffer
+from sonibus.bus.audio import AudioChunk, JitterBuffer, received
 from sonibus.bus.node import AUDIO
 from sonibus.bus.owner import RobotAdapter
 from sonibus.bus.pacing import Pacer
@@ -124,14 +124,9 @@ class SimSpeaker:
         return self.buffer.stats[name]
 
     def _take(self, key: str, payload: bytes) -> None:
-        self.node.count("received")
-        try:
-            chunk = AudioChunk.of(self._gate.check(keys.Key.parse(key), payload))
-        except ValueError as exc:  # messages.BadMessage
-            self.node.count("bad")
-            self.node.warn("speaker", f"{key}: chunk refused: {exc}")
-            return
-        self.buffer.push(chunk)
+        chunk = received(self._gate, key, payload, self.node.count, self.node.warn)
+        if chunk is not None:
+            self.buffer.push(chunk)
 
 
 def info(mic: bool, speaker: bool) -> dict[str, Any]:
