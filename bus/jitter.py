@@ -2,9 +2,10 @@
 as many frames as a speaker or a JACK port asks for.
 
 It converts each chunk to its own rate (soxr, one stream per sender's rate so
-there are no seams between chunks; a lost chunk or a new rate fades the old
-stream out and starts a new one) and channel count (down by the mean, up by
-copying). Playback starts once ``target_ms`` is buffered. A chunk missing by
+there are no seams between chunks; a lost chunk, a new rate or a sender that
+restarted fades the old stream out and starts a new one, with silence for what
+the old one still held) and channel count (down by the mean, up by copying).
+Playback starts once ``target_ms`` is buffered. A chunk missing by
 ``seq`` plays as silence of its length; a chunk whose ``seq`` goes back comes
 too late and is dropped (a sender that restarted, ``seq`` back but ``t``
 ahead, is taken as a new stream). Running dry plays silence; more than
@@ -94,7 +95,7 @@ class JitterBuffer:
         """Queue ``chunk`` (of any rate and channel count), after silence for the
         chunks missing before it; drop it if its ``seq`` goes back."""
         with self._push_lock:
-            missing = 0
+            missing, new_stream = 0, False
             if self._next_seq is not None and chunk.seq != self._next_seq:
                 if chunk.seq < self._next_seq and chunk.t <= self._last_t:
                     with self._lock:
@@ -103,19 +104,24 @@ class JitterBuffer:
                 # (a jump past what the buffer holds is that many: the silence of more would be cut anyway)
                 most = self.limit * chunk.rate // (chunk.frames * self.rate) + 1
                 missing = min(max(0, chunk.seq - self._next_seq), most)
+                new_stream = chunk.seq < self._next_seq  # a sender that restarted: its sound does not follow on
             self._next_seq, self._last_t = chunk.seq + 1, chunk.t
             converter = self._converter
-            restart = converter is not None and (missing or converter.source != (chunk.rate, chunk.channels))
+            restart = converter is not None and (missing or new_stream
+                                                 or converter.source != (chunk.rate, chunk.channels))
+            held = 0  # frames the old stream's resampler still held: silence instead (cut short, they ring)
             if converter is None or restart:
+                held = converter.held() if converter is not None else 0
                 converter = self._converter = _Converter(chunk.rate, chunk.channels, self.rate, self.channels)
             sound = converter.convert(chunk.samples())
             with self._lock:
-                if restart:  # the old stream's last ms, still in the resampler, are left out: cut short, they ring
+                if restart:
                     self._end_sound()
-                if missing:
-                    self.stats["gaps"] += missing
-                    silence = min(self.limit, round(missing * chunk.frames * self.rate / chunk.rate))
-                    self._append(np.zeros((silence, self.channels), np.float32), fade=False)
+                    silence = held
+                    if missing:
+                        self.stats["gaps"] += missing
+                        silence += round(missing * chunk.frames * self.rate / chunk.rate)
+                    self._append(np.zeros((min(self.limit, silence), self.channels), np.float32), fade=False)
                 self._append(sound)
                 if self.buffered > self.limit:
                     self._cut()
@@ -212,3 +218,9 @@ class _Converter:
             mixed = sound if sound.shape[1] == 1 else sound.mean(axis=1, keepdims=True)
             sound = np.repeat(mixed, self.out_channels, axis=1)
         return self._stream.resample_chunk(sound) if self._stream is not None else sound
+
+    def held(self) -> int:
+        """Frames the resampler still holds (the stream ends here: they are not played)."""
+        if self._stream is None:
+            return 0
+        return len(self._stream.resample_chunk(np.zeros((0, self.out_channels), np.float32), last=True))

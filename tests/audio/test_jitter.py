@@ -210,6 +210,31 @@ def test_a_chunk_whose_seq_goes_back_is_dropped_but_a_restarted_sender_is_heard(
     assert buffer.stats["refused"] == 1 and buffer.stats["gaps"] == 0 and buffer.buffered == 1920
 
 
+def test_a_restarted_sender_is_faded_in_after_the_old_stream_without_a_click():
+    buffer = JitterBuffer(48000, 1, target_ms=20)
+    old = chunks(sine(442.5, 48000, 3360, amplitude=0.8), 48000, 480)
+    new = chunks(-sine(442.5, 48000, 4800, amplitude=0.8)[::-1].copy(), 48000, 480, seq=0, t=2000.0)  # not at 0
+    out = []
+    for chunk in old + new:                                                     # seq back to 0, t ahead
+        buffer.push(chunk)
+        out.append(buffer.pull(480))
+    out.append(buffer.pull(buffer.buffered))
+    assert buffer.stats["refused"] == 0 and buffer.stats["played_frames"] == 3360 + 4800
+    assert largest_step(np.concatenate(out)) <= 0.8 * 32767 * (2 * np.pi * 442.5 / 48000 + 1 / FADE) * 1.1
+
+
+def test_a_lost_chunk_of_a_resampled_stream_keeps_time():
+    buffer = JitterBuffer(48000, 1, target_ms=100)
+    pieces = chunks(sine(442.5, 16000, 16000, amplitude=0.8), 16000, 320)
+    for n, chunk in enumerate(pieces):
+        if n != 20:                                                             # seq 20 lost
+            buffer.push(chunk)
+    whole = JitterBuffer(48000, 1, target_ms=100)
+    for chunk in pieces:
+        whole.push(chunk)
+    assert buffer.stats["gaps"] == 1 and buffer.buffered == whole.buffered     # silence for all it did not play
+
+
 def test_a_sender_that_changes_its_rate_is_converted_on_without_a_break():
     buffer = JitterBuffer(48000, 1, target_ms=100)
     first = chunks(sine(500, 48000, 24000, amplitude=0.5), 48000, 960)          # 0.5 s at 48 kHz, then
