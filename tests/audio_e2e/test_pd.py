@@ -1,4 +1,4 @@
-"""The README's Pd example, run headless: patches/pd/sonibus-through-robot.pd on JACK
+"""The README's Pd example, run headless: patches/pd/examples/through-robot.pd on JACK
 plays into the robot (naoqi-sim through the naoqi adapter) and records the robot's
 microphones, with examples/sound-through-robot.toml's wiring (the jack adapter)."""
 
@@ -18,7 +18,7 @@ from ..conftest import SONIBUS, free_port, require_tool, wait_for
 from ..jack.conftest import peak_hz
 from ..naoqi.conftest import toml_node
 
-PATCH = Path(__file__).resolve().parents[2] / "patches" / "pd" / "sonibus-through-robot.pd"
+PATCH = Path(__file__).resolve().parents[2] / "patches" / "pd" / "examples" / "through-robot.pd"
 RECORD_S = 12.0  # what the driver patch has Pd record before it quits
 OUT = 48000
 
