@@ -91,7 +91,7 @@ class _Writer:
     def add(self, key: Key, message: Any) -> None:
         try:
             self._gate.check(key, codec.encode(message))
-        except (BadMessage, TypeError, ValueError) as exc:
+        except (BadMessage, TypeError, ValueError, OverflowError) as exc:  # (what msgpack cannot carry too)
             self.bad, self.why = self.bad + 1, self.why or str(exc)
             return
         chunk = AudioChunk.of(message)

@@ -4,12 +4,14 @@ replay publishes the chunks again on their keys."""
 
 from __future__ import annotations
 
+import json
 import threading
 import time
 
 import numpy as np
 import soundfile
 from mcap.reader import make_reader
+from mcap.writer import Writer
 
 from sonibus.adapters.recorder.recorder import Recorder, RecorderConfig
 from sonibus.adapters.recorder.replay import Replay, ReplayConfig
@@ -147,3 +149,19 @@ def test_export_leaves_out_what_is_no_audio_chunk_in_one_line(tmp_path):
     assert rate == 16000 and mic_wav.shape == (3 * 320, 2)
     assert (mic_wav[320:640] == samples(1, *MIC)).all()
     assert not (tmp_path / "wav" / "pepper-speaker.wav").exists()  # nothing to write: no file
+
+
+def test_export_leaves_out_an_audio_key_written_as_json_with_a_number_msgpack_cannot_hold(tmp_path):
+    path = tmp_path / "json.mcap"
+    with open(path, "wb") as f:
+        writer = Writer(f)
+        writer.start(profile="", library="elsewhere")
+        channel = writer.register_channel("pepper/audio/mic", "json", 0)
+        message = {"t": time.time() - 60, "seq": 2**70, "rate": 16000, "channels": 1, "pcm": "AAA="}
+        writer.add_message(channel, log_time=time.time_ns(), publish_time=time.time_ns(),
+                           data=json.dumps(message).encode())
+        writer.finish()
+    exported = run_cli("export", str(path), "--wav", str(tmp_path / "wav"))
+    assert exported.returncode == 0 and not exported.stderr, exported.stderr
+    assert "pepper/audio/mic: 1 chunk not an audio chunk, left out" in exported.stdout
+    assert not (tmp_path / "wav" / "pepper-mic.wav").exists()
