@@ -199,7 +199,7 @@ def _fill(table: DataTable[Text], rows: Iterable[tuple[str, list[Text]]]) -> Non
         for column, cell in zip(columns, cells, strict=True):
             shown = table.get_cell(key, column)
             if (shown.plain, str(shown.style)) != (cell.plain, str(cell.style)):  # (Text's == ignores its style)
-                table.update_cell(key, column, cell)
+                table.update_cell(key, column, cell, update_width=True)  # (else a wider value is cropped: 2,15)
 
 
 def robot_cells(robot: RobotView) -> list[Text]:
