@@ -71,6 +71,7 @@ class Adapter:
         self.robots: list[str] = []       # robots this node owns (see claim_robot)
         self.where: Callable[[str], str] | None = None  # key → "file [nodes.x] line N", when built from a file
         self.since = 0.0                  # when it started (epoch seconds)
+        self.address = ""                 # where a person reaches it once started (a page's URL), said by `run`
         self.stats = Counters(BASE + self.counters)  # what it did (count() adds; dropped: its queues')
         self.failure = ""                 # why the node failed (a worker died), once it has
         self._stats_report = Report(self.stats)

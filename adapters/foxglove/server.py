@@ -100,8 +100,9 @@ class FoxgloveServer(Adapter):
         except BaseException:
             self.server.stop()
             raise
-        log.info("%s: Foxglove → Open connection → ws://%s:%d", self.name,
-                 "localhost" if host in ("127.0.0.1", "0.0.0.0") else host, self.port)
+        self.address = (f"Foxglove → Open connection → ws://"
+                        f"{'localhost' if host in ('127.0.0.1', '0.0.0.0') else host}:{self.port}")
+        log.info("%s: %s", self.name, self.address)
         self.spawn(self._serve, "serve")
 
     def _stop(self) -> None:

@@ -105,7 +105,8 @@ class OscGateway(Adapter):
             self.spawn(self._serve_tcp, "tcp")
         self.spawn(self._receive_udp, "udp")
         self.spawn(self._send_replies, "reply")
-        log.info("%s: OSC commands on udp %s%s", self.name, cfg.listen, f" and tcp {cfg.tcp}" if cfg.tcp else "")
+        self.address = f"OSC commands on udp {cfg.listen}{f' and tcp {cfg.tcp}' if cfg.tcp else ''}"
+        log.info("%s: %s", self.name, self.address)
 
     def _serve_tcp(self) -> None:
         tcp.serve(self._tcp, self.stopping, self._allowed, self._guarded, self._problem, self._refused, POLL_S)

@@ -73,7 +73,8 @@ class OscQuery(Adapter):
         except ConfigError as exc:  # (the web server names its own keys, 'host' or 'port'; here it is 'listen')
             raise bad("listen", re.sub(r"^key '\w+': ", "", str(exc))) from None
         self.url = self.web.url  # the bound one (port 0: any free port)
-        log.info("%s: OSCQuery on %s (WebSocket on the same port)", self.name, self.url)
+        self.address = f"OSCQuery on {self.url} (WebSocket on the same port)"
+        log.info("%s: %s", self.name, self.address)
         self._queue = self.own(SampleQueue(cfg.queue))
         self._streams = Streams(self.bus, SUBSCRIBE, self._queue)
         self.spawn(self._forward, "forward")  # before anything else is declared: nothing waits in the queue

@@ -73,7 +73,10 @@ class WebPages(Adapter):
         except ConfigError as exc:  # (the web server names its own keys, 'host' or 'port'; here it is 'listen')
             raise bad("listen", re.sub(r"^key '\w+': ", "", str(exc))) from None
         self.url = self.web.url
-        log.info("%s: operator page on %s/ , kiosk on %s/kiosk", self.name, self.url, self.url)
+        token = "?token=<token>" if cfg.token else ""  # (never the token itself: this line ends up in logs)
+        kiosk = "?token=<kiosk_token>" if cfg.kiosk_token else token
+        self.address = f"operator page {self.url}/{token}, kiosk {self.url}/kiosk{kiosk}"
+        log.info("%s: %s", self.name, self.address)
         self._queue = self.own(SampleQueue(cfg.queue))
         patterns = [f"{robot}/joints/*" for robot in cfg.robots] + ["*/events/*", keys.NODE_STATS]
         self._streams = Streams(self.bus, patterns, self._queue)

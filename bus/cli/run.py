@@ -7,6 +7,7 @@ import socket
 from dataclasses import replace
 
 from .. import config, runner
+from ..node import Bus
 from ..session import open_session
 from .api import Command, Environment, Exit, add_bus_arguments, bus_config
 
@@ -23,8 +24,14 @@ def _run(args: argparse.Namespace, env: Environment) -> Exit:
     host = args.host or socket.gethostname()
     adapters = runner.build(installation, args.only, host)
     names = ", ".join(f"{a.name} ({a.kind})" for a in adapters)
-    runner.run(adapters, bus_config(args, installation.bus.for_host(host)), env.stop,
-               on_started=lambda bus: env.say(f"sonibus: running {names} on {bus.host}"), host=host)
+
+    def started(bus: Bus) -> None:
+        env.say(f"sonibus: running {names} on {bus.host}")
+        for adapter in adapters:
+            if adapter.address:
+                env.say(f"sonibus: {adapter.name}: {adapter.address}")
+
+    runner.run(adapters, bus_config(args, installation.bus.for_host(host)), env.stop, on_started=started, host=host)
     return Exit.OK
 
 

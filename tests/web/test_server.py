@@ -390,10 +390,24 @@ def test_sonibus_run_serves_the_pages_and_ends_on_sigint_with_a_page_connected(t
     wait_for(served, 30, "the operator page served", lambda: "\n".join(process.lines))
     page = websocket(url.replace("http", "ws") + "/ws")
     page.wait("frame", robot="pepper", timeout=20)
+    assert f"sonibus: web: operator page {url}/, kiosk {url}/kiosk" in process.lines, "where to go, said by run"
     code, _, _ = process.stop(signal.SIGINT, timeout=STOP_WITHIN_S + 5)
     assert code in (0, 130), "\n".join(process.lines)
     wait_for(lambda: page.closed, 5, "the page's WebSocket closed by the node")
     assert not any("Traceback" in line for line in process.lines), "\n".join(process.lines)
+
+
+def test_sonibus_run_says_where_the_pages_are_but_never_a_token(tmp_path, spawn):
+    port = free_port()
+    path = tmp_path / "show.toml"
+    path.write_text(f"[bus]\nmulticast = false\n\n[nodes.web]\nadapter = \"web\"\nlisten = \"127.0.0.1:{port}\"\n"
+                    f"token = \"s3cret-operator\"\nkiosk_token = \"s3cret-kiosk\"\n", encoding="utf-8")
+    process = spawn(SONIBUS, "run", str(path), collect=True, merge=True)
+    url = f"http://127.0.0.1:{port}"
+    said = f"sonibus: web: operator page {url}/?token=<token>, kiosk {url}/kiosk?token=<kiosk_token>"
+    wait_for(lambda: said in process.lines, 30, "where the pages are", lambda: "\n".join(process.lines))
+    process.stop(signal.SIGINT, timeout=STOP_WITHIN_S + 5)
+    assert not any("s3cret" in line for line in process.lines), "\n".join(process.lines)
 
 
 def test_the_coalescer_sends_the_first_at_once_then_only_the_latest_and_a_cancel_sends_nothing():
