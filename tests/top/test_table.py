@@ -30,5 +30,5 @@ def test_a_cell_that_grows_wider_is_shown_whole():
             await pilot.pause()
             return ["".join(segment.text for segment in table.render_line(y)) for y in range(2)]
 
-    header, line = asyncio.run(run())
+    _, line = asyncio.run(run())
     assert line.split() == ["2,150", "web"], line
