@@ -14,6 +14,15 @@ between sound and silence is faded over ``FADE_S``, and a cut is a crossfade,
 so none clicks. ``ceiling`` is the loudest the output may be (a fraction of full
 scale): samples are scaled by it, so nothing is distorted.
 
+Two sound clocks never run at exactly one rate (a JACK card's and a robot's, or
+wall-clock pacing): a fixed buffer then runs dry or over every so often. While
+playing, the buffer follows the drift: when its level, averaged over
+``LEVEL_TAU_S``, stays out of ``DEADBAND`` around target, it plays slightly faster
+or slower (linear interpolation, at most ``follow_drift``, 0.5 % by default:
+under a tenth of a semitone), so the level comes back instead of running out.
+Within the dead band nothing is touched: a stream at the same rate plays
+sample for sample.
+
 >>> import numpy as np
 >>> from sonibus.bus.audio import AudioChunk
 >>> buffer = JitterBuffer(8000, 1, target_ms=20)
@@ -38,6 +47,10 @@ if TYPE_CHECKING:
 __all__ = ["JitterBuffer"]
 
 FADE_S = 0.005        # fade-in and fade-out at every edge between sound and silence
+LEVEL_TAU_S = 2.0     # how slowly the buffer's level is followed (arrivals make it saw-tooth around target)
+DEADBAND = (-0.25, 0.5)  # a level this far under / over target (fractions of it) is left alone: no rate change
+# (wider over target: more buffered is only latency, up to max_ms; less is the way to running dry)
+GAIN = 0.02           # rate change per unit of level error past the dead band
 SCALE = 32768.0       # int16 ↔ float in [-1, 1): a power of two, so int16 round-trips exactly
 MAX_CHANNELS = 8
 
@@ -51,7 +64,7 @@ class JitterBuffer:
     included)."""
 
     def __init__(self, rate: int, channels: int, target_ms: float = 100.0,
-                 max_ms: float | None = None, ceiling: float = 1.0) -> None:
+                 max_ms: float | None = None, ceiling: float = 1.0, follow_drift: float = 0.005) -> None:
         max_ms = 3 * target_ms if max_ms is None else max_ms
         for value, name, valid, fix in (
                 (rate, "rate", isinstance(rate, int) and rate > 0, "a positive integer, in Hz"),
@@ -59,7 +72,8 @@ class JitterBuffer:
                  f"an integer in 1..{MAX_CHANNELS}"),
                 (target_ms, "target_ms", target_ms > 0, "a positive number of ms"),
                 (max_ms, "max_ms", max_ms > target_ms, f"more than target_ms ({target_ms:g})"),
-                (ceiling, "ceiling", 0 < ceiling <= 1, "a fraction of full scale in (0, 1]")):
+                (ceiling, "ceiling", 0 < ceiling <= 1, "a fraction of full scale in (0, 1]"),
+                (follow_drift, "follow_drift", 0 <= follow_drift <= 0.05, "a fraction of the rate in [0, 0.05]")):
             if not valid:
                 raise ValueError(f"jitter buffer {name} = {value!r}: expected {fix}")
         self.rate, self.channels, self.ceiling = rate, channels, ceiling
@@ -79,6 +93,10 @@ class JitterBuffer:
         self._last = np.zeros(channels, np.float32)  # the last frame played
         self._converter: _Converter | None = None
         self._next_seq: int | None = None
+        self.follow_drift = follow_drift
+        self.ratio = 1.0                    # frames taken from the buffer per frame played (drift following)
+        self._level = 0.0                   # the buffer's level past target, averaged (a fraction of target)
+        self._phase = 0.0                   # where between two buffered frames the next one is read
         self._last_t = 0.0
 
     def __repr__(self) -> str:
@@ -134,14 +152,19 @@ class JitterBuffer:
             if not self._playing and self.buffered >= self.target:
                 self._playing = True
             at = self._play_tail(out, 0)  # the rest of a fade-out comes before anything else
-            played = min(frames - at, self.buffered) if self._playing else 0
-            out[at:at + played] = self._buffer[self._start:self._start + played]
-            self._start += played
+            self._follow(frames)
+            if self.ratio != 1.0 and self._playing and not at and self._interpolate(out):
+                played = at = frames
+            else:
+                played = min(frames - at, self.buffered) if self._playing else 0
+                out[at:at + played] = self._buffer[self._start:self._start + played]
+                self._start += played
+                at += played
             self.stats["played_frames"] += played
-            at += played
             if self._playing and at < frames:  # ran dry
                 self.stats["underruns"] += 1
                 self._playing = False
+                self._phase = 0.0
                 self._fade_in = 0
                 if played >= len(self._down):
                     out[at - len(self._down):at] *= self._down
@@ -155,6 +178,34 @@ class JitterBuffer:
         return np.clip(level, -limit, limit, out=level).astype(np.int16)
 
     # -- the queue (self._lock held) ---------------------------------------------------
+
+    def _follow(self, frames: int) -> None:
+        """Set ``ratio`` from the buffer's averaged level (see the module's docstring)."""
+        if not self._playing or not self.follow_drift:
+            self.ratio, self._level = 1.0, 0.0
+            return
+        weight = min(1.0, frames / (self.rate * LEVEL_TAU_S))
+        self._level += weight * ((self.buffered - self.target) / self.target - self._level)
+        past = max(DEADBAND[0] - self._level, self._level - DEADBAND[1])
+        if past <= 0:  # (back on whole frames: less than one frame's shift, inaudible)
+            self.ratio, self._phase = 1.0, 0.0
+            return
+        self.ratio = 1.0 + min(self.follow_drift, GAIN * past) * (1 if self._level > 0 else -1)
+
+    def _interpolate(self, out: np.ndarray) -> bool:
+        """Fill ``out`` reading the buffer ``ratio`` frames a frame (linear
+        interpolation); False, touching nothing, if too little is buffered."""
+        at = self._phase + self.ratio * np.arange(len(out))
+        whole = at.astype(np.int64)
+        if whole[-1] + 1 >= self.buffered:
+            return False
+        part = (at - whole)[:, np.newaxis].astype(np.float32)
+        frames = self._buffer[self._start + whole]
+        out[:] = frames + (self._buffer[self._start + whole + 1] - frames) * part
+        taken = self._phase + self.ratio * len(out)
+        self._start += int(taken)
+        self._phase = taken - int(taken)
+        return True
 
     def _play_tail(self, out: np.ndarray, at: int) -> int:
         """Put what is left of a fade-out into ``out`` from ``at``; where it ends."""

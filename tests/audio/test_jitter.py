@@ -57,7 +57,7 @@ def test_a_sine_comes_out_sample_for_sample_after_its_fade_in():
 
 
 def test_a_sine_resampled_from_16_to_48_khz_keeps_its_frequency_and_has_no_seams(figure):
-    buffer = JitterBuffer(48000, 2, target_ms=100)
+    buffer = JitterBuffer(48000, 2, target_ms=100, follow_drift=0)  # (twice its target buffered: it would follow)
     signal = sine(1000, 16000, 32000, amplitude=0.5, channels=1)               # 2 s of one microphone
     out = []
     for n, chunk in enumerate(chunks(signal, 16000, 320)):                      # 20 ms chunks
@@ -307,3 +307,42 @@ def test_a_pushing_thread_and_a_pulling_one_lose_no_frame_unaccounted():
     stats = buffer.stats
     assert stats["played_frames"] + stats["overruns"] + buffer.buffered == len(signal), (stats, buffer.buffered)
     assert stats["gaps"] == 0 and stats["refused"] == 0
+
+
+def _two_clocks(drift: float, follow_drift: float, seconds: float = 120.0) -> tuple[JitterBuffer, np.ndarray]:
+    """A sender whose clock runs ``drift`` off the player's (0.002: 0.2 % faster), 20 ms
+    chunks of a 440 Hz sine at 8 kHz, played 20 ms at a time for ``seconds``."""
+    rate, size = 8000, 160
+    buffer = JitterBuffer(rate, 1, target_ms=100, follow_drift=follow_drift)
+    pieces = chunks(sine(440, rate, round(rate * seconds * 1.01) + size), rate, size)
+    sent, due, out = 0, 5.0, []          # (five chunks up front: the buffer's target)
+    for _ in range(round(seconds * rate / size)):
+        due += 1 + drift
+        while sent < due:
+            buffer.push(pieces[sent])
+            sent += 1
+        out.append(buffer.pull(size))
+    return buffer, np.concatenate(out)
+
+
+@pytest.mark.parametrize("drift", [-0.002, 0.002])
+def test_two_clocks_apart_run_dry_or_over_unless_the_buffer_follows_the_drift(drift):
+    """Two sound clocks are never one: 0.2 % apart (a dummy JACK beside wall-clock pacing;
+    real cards are ~0.01 %), a fixed 100 ms buffer runs dry (or over) within a minute."""
+    fixed, _ = _two_clocks(drift, follow_drift=0)
+    assert fixed.stats["underruns" if drift < 0 else "overruns"] > 0, fixed.stats
+    following, out = _two_clocks(drift, follow_drift=0.005)
+    assert following.stats["underruns"] == following.stats["overruns"] == 0, following.stats
+    assert following.ratio == pytest.approx(1 + drift, abs=0.0015)      # it plays at the sender's pace
+    assert 0.2 * following.target < following.buffered < 2 * following.target  # (measured after a pull)
+    natural = 0.5 * 32767 * 2 * np.pi * 440 / 8000 * 1.05                 # a sine's largest step, a little faster
+    assert largest_step(out[800:]) <= 1.1 * natural                       # no click where it reads between frames
+    steady = out[-80000:].astype(np.float64)                              # the last 10 s
+    peak = np.fft.rfftfreq(len(steady), 1 / 8000)[np.abs(np.fft.rfft(steady[:, 0] * np.hanning(len(steady)))).argmax()]
+    assert abs(peak - 440 * (1 + drift)) < 0.3, peak                      # pitch moved by the drift only
+
+
+def test_a_stream_at_the_players_rate_is_never_resampled():
+    buffer, out = _two_clocks(0.0, follow_drift=0.005, seconds=30)
+    assert buffer.ratio == 1.0 and buffer.stats["underruns"] == buffer.stats["overruns"] == 0
+    assert np.array_equal(out[800:1600], sine(440, 8000, 1600)[:800])  # sample for sample, past the fade-in
