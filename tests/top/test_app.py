@@ -57,8 +57,8 @@ def test_a_killed_node_turns_red_and_gone_within_the_lease_and_stays_listed(net,
     nodes = f"{top.host}/doomed"
 
     async def scenario(app, pilot):
-        await until(pilot, lambda: (r := row(app, "nodes", nodes)) and r[4].plain == "running", timeout=20,
-                    what="the run's node listed, running")
+        await until(pilot, lambda: (r := row(app, "nodes", nodes)) and r[4].plain == "running"
+                    and r[0].plain == "sim", timeout=20, what="the run's node listed, running, its adapter known")
         await until(pilot, lambda: (r := row(app, "robots", "nao")) and r[-1].plain == "on bus",
                     what="its robot listed")
         process.kill()  # SIGKILL: no goodbye, only the lease tells
