@@ -37,6 +37,7 @@ log = logging.getLogger(__name__)
 RING_S = 1.0          # input frames the ring holds: how far behind the publish worker may fall
 PAYLOAD_SLACK = 64    # bytes of a chunk's payload besides its PCM (t, seq, rate, channels, keys)
 JITTER_STATS = ("underruns", "overruns", "gaps", "refused")
+CLOSE_TIMEOUT_S = 2.0  # a JACK server that does not answer must not hold the node's stop (3 s at most)
 
 
 class JackBridge(Adapter):
@@ -94,9 +95,11 @@ class JackBridge(Adapter):
 
     def _stop(self) -> None:
         client, self._client = getattr(self, "_client", None), None
-        if client is not None:  # the ports go with the client; the callbacks stop before the workers are joined
-            client.deactivate()
-            client.close()
+        # the ports go with the client; the callbacks stop before the workers are joined
+        if client is not None and not jack_client.close_client(client, CLOSE_TIMEOUT_S):
+            log.warning("%s: JACK server '%s' did not answer within %g s: client '%s' and its ports stay "
+                        "until it does (is jackd stopped or hung?)", self.name,
+                        jack_client.server_name(self.config.server), CLOSE_TIMEOUT_S, self.client_name)
 
     def _check_payload(self, channels: int) -> None:
         size = self.chunk_frames * channels * 2 + PAYLOAD_SLACK

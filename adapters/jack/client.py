@@ -1,4 +1,4 @@
-"""Opening a JACK client and connecting its ports, with one-line errors.
+"""Opening a JACK client, connecting its ports and closing it, with one-line errors.
 
 libjack prints its own complaints on stderr ("Cannot connect to server
 socket ..."); they go to this module's debug log instead, so a missing server
@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import logging
 import os
+import threading
 
 import jack
 
@@ -57,3 +58,24 @@ def connect(client: jack.Client, ours: list[jack.OwnPort], theirs: tuple[str, ..
             names = ", ".join(repr(p.name) for p in there if not p.name.startswith(client.name + ":")) or "none"
             raise ConfigError(f"key '{key}': cannot connect '{port.name}' with '{other}' ({exc}) — "
                               f"audio {'outputs' if port.is_input else 'inputs'} there: {names}") from None
+
+
+def close_client(client: jack.Client, timeout: float) -> bool:
+    """Deactivate and close ``client`` (its ports go with it); False if its server did
+    not answer within ``timeout`` s (a stopped or hung jackd: libjack waits for it
+    without a bound, so the closing is left to a daemon thread that ends when it does)."""
+    failed: list[BaseException] = []
+
+    def close() -> None:
+        try:
+            client.deactivate()
+            client.close()
+        except Exception as exc:  # (raised again below, by the caller's thread)
+            failed.append(exc)
+
+    closing = threading.Thread(target=close, name=f"jack-close-{client.name}", daemon=True)
+    closing.start()
+    closing.join(timeout)
+    if failed:
+        raise failed[0]
+    return not closing.is_alive()

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import logging
 import os
+import signal
 import threading
 import time
 import uuid
@@ -151,4 +152,23 @@ def test_a_server_that_goes_away_fails_the_node_in_one_line(net, jack_server, ca
     said = [r for r in caplog.records if r.levelno >= logging.WARNING and "went away" in r.getMessage()]
     assert said and all(r.exc_info is None for r in said)  # no traceback: a failure foreseen
     node.stop()  # (closing a client whose server is gone returns)
+    assert not [t.name for t in threading.enumerate() if t.name.startswith("jack:")]
+
+
+def test_stop_is_bounded_while_the_jack_server_does_not_answer(net, jack_server, caplog):
+    name, server = jack_server
+    node = bridge(net, client_name="bridge")
+    os.kill(server.popen.pid, signal.SIGSTOP)  # jackd hangs: libjack waits for it without a bound
+    try:
+        stopping = threading.Thread(target=node.stop, daemon=True)
+        stopping.start()
+        stopping.join(10.0)  # (the node's own bound is 2 s; a stop that hangs fails here instead of hanging)
+        assert not stopping.is_alive(), "stop hangs on a JACK server that does not answer"
+    finally:
+        os.kill(server.popen.pid, signal.SIGCONT)
+    assert node.state == "stopped"
+    said = [r.getMessage() for r in caplog.records if r.levelno == logging.WARNING]
+    assert any(f"JACK server '{name}' did not answer" in line and "'bridge'" in line for line in said), said
+    wait_for(lambda: not [t for t in threading.enumerate() if t.name.startswith("jack-close-")],
+             what="the client closed once the server answers again")
     assert not [t.name for t in threading.enumerate() if t.name.startswith("jack:")]
