@@ -2,7 +2,8 @@
 
 A press is refused while a button is under way (``busy``). A pressed button is
 ``running`` once its robot accepted the command, then ``done`` when the robot's
-behavior event says ``stopped`` (a say button: its speech event ``done``), or
+behavior event says ``stopped`` (a say button: its speech event ``done``) or the
+robot was stopped (its ``command`` event of a ``stop``), or
 ``failed`` (refused, a behavior event ``failed``, the robot gone). Every change goes
 to ``announce`` as a ``button`` message; ``states`` keeps the last of each button for
 a page that connects later. Runs on the web server's loop.
@@ -86,5 +87,9 @@ def _end_of(button: Button, kind: str, event: dict[str, Any]) -> dict[str, str] 
         if state == "failed":
             return {"state": "failed", "error": str(event.get("error") or f"behavior '{button.behavior}' failed")}
     if kind == "speech" and button.say and event.get("text") == button.say and state == "done":
+        return {"state": "done"}
+    if kind == "command" and event.get("verb") == "stop" and event.get("ok"):
+        # (a stop ends a running behavior with its own event, but a say still queued behind another
+        # text is dropped without one: the kiosk would stay busy for good)
         return {"state": "done"}
     return None

@@ -174,6 +174,25 @@ def test_kiosk_press_runs_then_is_done_and_a_second_press_meanwhile_is_busy(stag
     assert [m["state"] for m in kiosk.of("button", id="hello")] == ["running", "done"]
 
 
+def test_a_stop_ends_the_kiosks_running_button_even_a_say_queued_behind_the_operators(stage, websocket):
+    """A stop clears the robot's speech queue with a ``done`` for the text it was saying only:
+    the kiosk's queued say never gets its own, and the kiosk stayed busy for the rest of the show."""
+    operator, kiosk = websocket(stage.ws_url()), websocket(stage.ws_url("kiosk"))
+    operator.wait("hello")
+    kiosk.wait("hello")
+    operator.send({"type": "command", "id": 1, "robot": "pepper", "verb": "say",
+                   "args": {"text": "A long welcome from the operator, said slowly to everyone here."}})
+    assert operator.wait("reply", id=1)["ok"] is True
+    kiosk.send({"type": "press", "id": 2, "button": "hello"})
+    assert kiosk.wait("reply", id=2)["result"]["queued"] == 1  # behind the operator's text
+    kiosk.wait("button", id="hello", state="running")
+    operator.send({"type": "stop", "id": 3})
+    assert operator.wait("reply", id=3)["ok"] is True
+    kiosk.wait("button", id="hello", state="done")
+    kiosk.send({"type": "press", "id": 4, "button": "wave"})
+    assert kiosk.wait("reply", id=4)["ok"] is True
+
+
 def test_kiosk_can_only_press_its_buttons(stage, websocket):
     seen = command_events(stage.net)
     kiosk = websocket(stage.ws_url("kiosk"))
