@@ -31,16 +31,47 @@ def server_name(server: str) -> str:
     return server or os.environ.get("JACK_DEFAULT_SERVER", "default")
 
 
+OPEN_TIMEOUT_S = 5.0  # a JACK server that does not answer (jackd stopped with Ctrl-Z, or hung): one line, not a hang
+
+
 def open_client(name: str, server: str) -> jack.Client:
     """A client of JACK server ``server`` (never starting one); ``ConfigError`` naming
-    key ``server`` when it is not running."""
-    try:
-        return jack.Client(name, no_start_server=True, servername=server or None)
-    except jack.JackOpenError as exc:
-        jackd = f"jackd -n {server}" if server else "jackd"
-        log.debug("jack.Client(%r, servername=%r): %s", name, server, exc)
-        raise ConfigError(f"key 'server': no JACK server '{server_name(server)}' running — start one first, "
-                          f"e.g. '{jackd} -d dummy -r 48000' (no sound card) or '{jackd} -d alsa'") from None
+    key ``server`` when it is not running, or does not answer within ``OPEN_TIMEOUT_S``
+    (libjack waits for it without a bound: a client it opens too late is closed)."""
+    opened: list[jack.Client] = []
+    failed: list[Exception] = []
+    late = threading.Lock()  # the caller gave up (held) or took the client: never both
+
+    def open_() -> None:
+        try:
+            client = jack.Client(name, no_start_server=True, servername=server or None)
+        except Exception as exc:  # (raised again by the caller's thread)
+            failed.append(exc)
+            return
+        with late:
+            if given_up:
+                client.close()
+            else:
+                opened.append(client)
+
+    given_up = False
+    opening = threading.Thread(target=open_, name=f"jack-open-{name}", daemon=True)
+    opening.start()
+    opening.join(OPEN_TIMEOUT_S)
+    with late:
+        if opened:
+            return opened[0]
+        if opening.is_alive():
+            given_up = True
+            raise ConfigError(f"key 'server': JACK server '{server_name(server)}' does not answer within "
+                              f"{OPEN_TIMEOUT_S:g} s — is jackd stopped (Ctrl-Z in its terminal: 'fg') or hung?")
+    exc = failed[0]
+    if not isinstance(exc, jack.JackOpenError):
+        raise exc
+    jackd = f"jackd -n {server}" if server else "jackd"
+    log.debug("jack.Client(%r, servername=%r): %s", name, server, exc)
+    raise ConfigError(f"key 'server': no JACK server '{server_name(server)}' running — start one first, "
+                      f"e.g. '{jackd} -d dummy -r 48000' (no sound card) or '{jackd} -d alsa'") from None
 
 
 def connect(client: jack.Client, ours: list[jack.OwnPort], theirs: tuple[str, ...], key: str) -> None:

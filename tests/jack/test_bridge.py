@@ -11,10 +11,12 @@ import threading
 import time
 import uuid
 
+import jack
 import numpy as np
 import pytest
 
 from sonibus.adapters.jack import JackBridge, JackConfig
+from sonibus.adapters.jack import client as jack_client
 from sonibus.bus import codec, keys
 from sonibus.bus.audio import AudioChunk
 from sonibus.bus.errors import ConfigError
@@ -172,3 +174,32 @@ def test_stop_is_bounded_while_the_jack_server_does_not_answer(net, jack_server,
     wait_for(lambda: not [t for t in threading.enumerate() if t.name.startswith("jack-close-")],
              what="the client closed once the server answers again")
     assert not [t.name for t in threading.enumerate() if t.name.startswith("jack:")]
+
+
+def test_a_jack_server_that_does_not_answer_at_start_is_one_line_not_a_hang(net, jack_server, monkeypatch):
+    name, server = jack_server
+    monkeypatch.setattr(jack_client, "OPEN_TIMEOUT_S", 1.0)
+    os.kill(server.popen.pid, signal.SIGSTOP)  # jackd stopped (Ctrl-Z in its terminal)
+    try:
+        errors: list[str] = []
+        starting = threading.Thread(target=lambda: errors.append(_start_error(net)), daemon=True)
+        starting.start()
+        starting.join(10.0)
+        assert not starting.is_alive(), "start hangs on a JACK server that does not answer"
+    finally:
+        os.kill(server.popen.pid, signal.SIGCONT)
+    assert len(errors) == 1 and f"JACK server '{name}' does not answer" in errors[0], errors
+    assert len(errors[0].splitlines()) == 1
+    wait_for(lambda: not [t for t in threading.enumerate() if t.name.startswith("jack-open-")],
+             what="the late open to end once the server answers again")
+    probe = jack.Client("probe", no_start_server=True, servername=name)
+    try:
+        assert not [p.name for p in probe.get_ports() if p.name.startswith("bridge:")], "a late client stayed"
+    finally:
+        probe.close()
+
+
+def _start_error(net) -> str:
+    with pytest.raises(ConfigError) as error:
+        bridge(net, client_name="bridge")
+    return str(error.value)
