@@ -11,8 +11,10 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import contextlib
 import signal
 import sys
+import threading
 import time
 from collections.abc import Iterable, Sequence
 from typing import Any, ClassVar
@@ -29,13 +31,16 @@ from ..client import Outcome, ask
 from ..errors import CommandError, ConfigError, SonibusError
 from ..monitor import EventView, JointView, Monitor, NodeView, RobotView, Snapshot
 from ..ownership import owners
+from ..session import BusConfig
 from .api import Command, Environment, Exit, bus_config, joined
+from .hints import reach_hint
 
 EVERY_S = 0.25         # the view is redrawn this often
 STOP_TIMEOUT_S = 5.0   # a robot's answer to stop
 BAR = 20               # characters of a joint's bar
 SPARK_SPAN = 0.02      # the smallest range a sparkline spreads over, of a joint's limits
 SPARKS = "▁▂▃▄▅▆▇█"
+LONELY_S = 3.0         # with no node on the bus for this long, the status line says whom top reached
 ALARM, WARNING, GONE = "bold red", "bold yellow", "red"
 
 ROBOT_COLUMNS = ("robot", "owner", "model", "frames/s", "latency", "seq gaps", "state")
@@ -79,7 +84,7 @@ class TopApp(App[int]):
     #joints { width: 3fr; padding-right: 2; border-top: solid $accent; text-wrap: nowrap; text-overflow: clip; }
     #events { width: 2fr; min-width: 40; border-top: solid $accent; }
     #event-lines { text-wrap: nowrap; text-overflow: ellipsis; }
-    #status { height: 1; color: $text-muted; }
+    #status { height: auto; max-height: 3; color: $text-muted; }
     """
     BINDINGS: ClassVar[list[BindingType]] = [
         Binding("s", "stop_all", "stop every robot"),
@@ -89,11 +94,16 @@ class TopApp(App[int]):
         Binding("ctrl+c", "interrupt", show=False, priority=True),
     ]
 
-    def __init__(self, monitor: Monitor, every_s: float = EVERY_S, signals: bool = False) -> None:
+    def __init__(self, monitor: Monitor, every_s: float = EVERY_S, signals: bool = False,
+                 bus_config: BusConfig | None = None) -> None:
         super().__init__()
         self.monitor, self.every_s, self.signals = monitor, every_s, signals
+        self.bus_config = bus_config  # (given: with no node listed, the status line says whom top reached)
         self.snapshot = monitor.snapshot()
         self.selected: str | None = None
+        self.reach = ""  # why no node is listed: whom top's session reached (found on a thread)
+        self._lonely_since = time.monotonic()
+        self._reaching: threading.Thread | None = None
 
     def compose(self) -> ComposeResult:
         self.robots = DataTable[Text](id="robots", cursor_type="row", zebra_stripes=True)
@@ -144,7 +154,24 @@ class TopApp(App[int]):
         self.joints.update(joint_lines(robot) if robot else Text("no robot on the bus yet", style="italic"))
         lines = max(1, self.events.size.height - 1)
         self.event_lines.update(event_lines(snap.events[-lines:]))
-        self.status.update(status_line(snap))
+        self.status.update(status_line(snap, self._reach_hint(any(not n.gone for n in snap.nodes))))
+
+    def _reach_hint(self, listed: bool) -> str:
+        """With no node on the bus for ``LONELY_S``: whom this session reached and what to check
+        (looked up again every ``LONELY_S`` on a thread: it may wait for a link)."""
+        now = time.monotonic()
+        if listed or self.bus_config is None:
+            self._lonely_since, self.reach = now, ""
+            return ""
+        if now - self._lonely_since >= LONELY_S and (self._reaching is None or not self._reaching.is_alive()):
+            self._lonely_since = now
+            self._reaching = threading.Thread(target=self._find_reach, args=(self.bus_config,), daemon=True)
+            self._reaching.start()
+        return self.reach
+
+    def _find_reach(self, cfg: BusConfig) -> None:
+        with contextlib.suppress(Exception):  # (the session closing as top ends: nothing to say any more)
+            self.reach = reach_hint(cfg, self.monitor.bus.discover(), "no node on the bus")
 
     def on_data_table_row_highlighted(self, event: DataTable.RowHighlighted) -> None:
         if event.data_table is self.robots and event.row_key.value is not None:
@@ -285,8 +312,9 @@ def event_lines(shown: Sequence[EventView]) -> Text:
     return text
 
 
-def status_line(snap: Snapshot) -> Text:
-    """How many robots and nodes are on the bus, and what the monitor itself received and refused."""
+def status_line(snap: Snapshot, hint: str = "") -> Text:
+    """How many robots and nodes are on the bus, and what the monitor itself received and refused
+    (``hint``: why there is nobody, said after it)."""
     on_bus = sum(not r.gone for r in snap.robots)
     alive = sum(not n.gone for n in snap.nodes)
     counters = snap.counters
@@ -294,6 +322,8 @@ def status_line(snap: Snapshot) -> Text:
                 f"bad {counters.get('bad', 0):,}  dropped {counters.get('dropped', 0):,}")
     if snap.problem:
         text.append(f"   last refused: {snap.problem}", style=WARNING)
+    if hint:
+        text.append(f"\n{hint}", style=WARNING)
     if snap.failure:
         text = Text(f"{snap.failure}: what is shown no longer changes; quit (q) and start again", style=ALARM)
     return text
@@ -315,7 +345,7 @@ def _top(args: argparse.Namespace, env: Environment) -> Exit:
     cfg = bus_config(args)
     handlers = {sig: signal.getsignal(sig) for sig in (signal.SIGINT, signal.SIGTERM)}
     with joined(cfg) as bus, Monitor(bus) as monitor:
-        app = TopApp(monitor, args.every, signals=True)
+        app = TopApp(monitor, args.every, signals=True, bus_config=cfg)
         try:
             status = app.run()
         finally:  # (the app's loop handled them; closing it left Python's defaults)

@@ -17,7 +17,7 @@ from collections.abc import Callable, Iterator
 
 import pytest
 
-from ..conftest import SONIBUS, run_cli, wait_for
+from ..conftest import SONIBUS, free_port, run_cli, wait_for
 
 EXIT_WITHIN_S = 3.0
 
@@ -105,6 +105,20 @@ def test_top_in_a_terminal_draws_the_show_and_ends_within_3_s(net, terminal, fig
     assert code == status, screen.tail()
     assert b"Traceback" not in screen.output
     assert b"\x1b[?1049l" in screen.output  # the terminal's own screen given back (the alternate one left)
+
+
+def test_top_reaching_nobody_says_whom_it_tried_and_what_to_check():
+    """An empty show is not silent: a wrong --connect is named on the status line."""
+    port = free_port()
+    screen = Terminal("--no-multicast", "--connect", f"tcp/127.0.0.1:{port}")
+    try:
+        wait_for(lambda: b"reached no peer or router" in screen.output, timeout=20,
+                 what="top's hint on its status line", explain=lambda: repr(screen.tail()))
+        assert f"tcp/127.0.0.1:{port}".encode() in screen.output
+        screen.type(b"q")
+        assert screen.ended_within(EXIT_WITHIN_S)[0] == 0
+    finally:
+        screen.close()
 
 
 def test_top_without_a_terminal_says_so_in_one_line():
