@@ -58,8 +58,8 @@ class Stand:
             return
         if self.accepted:
             self._end(**end)
-        else:  # (the end came before the robot's answer: a very short scenario)
-            self.ended = end
+        elif kind != "command":  # (the end came before the robot's answer: a very short scenario)
+            self.ended = end      # (but a stop heard before it came from the robot before this press)
 
     def robot_left(self, robot: str) -> None:
         if self.current is not None and robot == self.kiosk.robot:

@@ -1,0 +1,38 @@
+"""The kiosk's buttons (``adapters/web/kiosk.py``) against the order the robot's answers
+and events may come in: a stop ends the running button, but a stop heard before the
+robot answered the press was run by the robot before it and ends nothing."""
+
+from __future__ import annotations
+
+from sonibus.adapters.web.config import Button, Kiosk
+from sonibus.adapters.web.kiosk import Stand
+
+SAY = Button("hello", "Say hello", say="Hello, visitors!")
+STOPPED = {"t": 1.0, "kind": "command", "verb": "stop", "args": {}, "ok": True}
+
+
+def stand() -> tuple[Stand, list[str]]:
+    states: list[str] = []
+    return Stand(Kiosk("pepper", (SAY,)), lambda m: states.append(m["state"])), states
+
+
+def test_a_stop_after_the_robot_took_the_press_ends_the_button():
+    kiosk, states = stand()
+    kiosk.press(SAY)
+    kiosk.answered(SAY, {"duration": 1.8, "queued": 1})
+    kiosk.event("nao", "command", STOPPED)  # another robot's stop: not this kiosk's
+    assert states == ["running"]
+    kiosk.event("pepper", "command", {**STOPPED, "ok": False, "error": "refused"})
+    assert states == ["running"] and kiosk.busy()
+    kiosk.event("pepper", "command", STOPPED)
+    assert states == ["running", "done"] and not kiosk.busy()
+
+
+def test_a_stop_heard_before_the_robot_answered_the_press_ends_nothing():
+    kiosk, states = stand()
+    kiosk.press(SAY)
+    kiosk.event("pepper", "command", STOPPED)
+    kiosk.answered(SAY, {"duration": 1.8, "queued": 0})
+    assert states == ["running"] and kiosk.busy()
+    kiosk.event("pepper", "speech", {"t": 2.0, "kind": "speech", "text": SAY.say, "state": "done"})
+    assert states == ["running", "done"]
