@@ -18,7 +18,7 @@ import json
 from dataclasses import dataclass
 from typing import Any
 
-from sonibus.bus import keys
+from sonibus.bus import keys, messages
 from sonibus.bus.errors import CommandError
 
 MAX_MESSAGE = 64 * 1024  # characters of one client message; longer ones are refused (the connection stays)
@@ -102,12 +102,16 @@ def _name(message: dict[str, Any], field: str, id_: Id) -> str:
 
 
 def reply(id_: Id, outcome: dict[str, Any] | CommandError | str, robot: str = "") -> dict[str, Any]:
-    """The ``reply`` to request ``id_``: a result, or a refusal (a ``CommandError``'s line,
-    or the text of one)."""
+    """The ``reply`` to request ``id_``: a result (refused if JSON cannot carry it), or a
+    refusal (a ``CommandError``'s line, or the text of one)."""
     message: dict[str, Any] = {"type": "reply", "id": id_}
     if robot:
         message["robot"] = robot
     if isinstance(outcome, dict):
+        try:  # (a reply does not pass the gate on its way: a NaN would end the server's loop, every page with it)
+            messages.json_like(outcome, "result")
+        except messages.BadMessage as exc:
+            return {**message, "ok": False, "error": f"the robot answered, but its reply cannot be shown: {exc}"}
         return {**message, "ok": True, "result": outcome}
     error = outcome.message if isinstance(outcome, CommandError) else outcome
     return {**message, "ok": False, "error": " ".join(str(error).split())}  # one line, whatever came

@@ -15,6 +15,7 @@ import threading
 import time
 
 import aiohttp
+import msgpack
 import pytest
 import requests
 
@@ -238,6 +239,26 @@ def test_bad_messages_get_a_one_line_refusal_and_the_connection_stays(stage, web
     assert stage.node.stats["bad"] == 5
     page.send({"type": "command", "id": 7, "robot": "pepper", "verb": "behavior/list"})
     assert page.wait("reply", id=7)["ok"] is True and not page.closed
+
+
+def test_a_robots_reply_json_cannot_carry_is_refused_in_one_line_and_the_node_stays(stage, websocket):
+    """A reply is not checked by the gate on its way (an owner's bug, a node impersonating a
+    robot): a NaN in its result ended the web server's loop, and every page with it."""
+    def answer(query):
+        query.reply(query.key_expr, msgpack.packb({"ok": True, "result": {"level": math.nan}}))
+    rogue = stage.net.bus("rogue")
+    served = rogue.serve(keys.command("rogue", "**"), answer)
+    page = websocket(stage.ws_url())
+    page.wait("hello")
+    try:
+        page.send({"type": "command", "id": 1, "robot": "rogue", "verb": "say", "args": {"text": "hi"}})
+        refused = page.wait("reply", id=1)
+    finally:
+        served.undeclare()
+    assert refused["ok"] is False and "level" in refused["error"] and "\n" not in refused["error"]
+    page.send({"type": "command", "id": 2, "robot": "pepper", "verb": "behavior/list"})
+    assert page.wait("reply", id=2)["ok"] is True and not page.closed
+    assert stage.node.state == "running"
 
 
 # -- tokens ------------------------------------------------------------------------------------
