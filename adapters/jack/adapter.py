@@ -44,7 +44,7 @@ class JackBridge(Adapter):
     """Robot audio as JACK ports: inputs to its speaker, its microphones to outputs."""
 
     Config = JackConfig
-    counters = ("xruns", "chunks_sent", "chunks_received", "input_lost", *JITTER_STATS)
+    counters = ("xruns", "chunks_sent", "chunks_silent", "chunks_received", "input_lost", *JITTER_STATS)
 
     def _start(self) -> None:
         cfg: JackConfig = self.config
@@ -146,6 +146,11 @@ class JackBridge(Adapter):
                     lost = ring.lost
                     self.warn("input_lost", "input frames lost: the publish worker fell behind JACK")
                 t, frames = taken
+                if not frames.any() and not self.config.send_silence:
+                    # a quiet or closed sound tool: nothing goes out (no seq used, so no gap), the robot's
+                    # jitter buffer runs dry, fades out and its speaker stops calling the robot
+                    self.count("chunks_silent")
+                    continue
                 chunk = AudioChunk.from_samples(t, seq, self.rate, frames)
                 self._publisher.put(codec.encode(chunk.message()))
                 self.count("chunks_sent")

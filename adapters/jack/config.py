@@ -56,6 +56,7 @@ class JackConfig:
     connect_outputs: tuple[str, ...] = ()        # ports our outputs play into, in order ("pd:input_1")
     chunk_ms: float = 10.0                       # length of a published chunk
     target_ms: float = 60.0                      # jitter buffer of the output side
+    send_silence: bool = False                   # false: digital silence is not sent (the robot's speaker idles)
     queue: int = 256                             # chunks from the bus waiting for the jitter buffer
 
     def __post_init__(self) -> None:

@@ -82,7 +82,7 @@ class Speaker:
                 last_input = now
             elif now - last_input > self.idle_s:
                 return
-            due = int((now - start) / BLOCK_S) + 1 - sent
+            due = max(1, int((now - start) / BLOCK_S) + 1 - sent)  # (float rounding must not make it 0)
             if due > MAX_BEHIND_BLOCKS:  # a stall: what piled up is the jitter buffer's overrun to drop
                 start, sent, due = now, 0, 1
             self._send(self.buffer.pull(due * BLOCK_FRAMES))

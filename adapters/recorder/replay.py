@@ -101,6 +101,11 @@ class Replay(Adapter):
         self.recording = self.own(Recording(cfg.path))
         chosen = self.recording.matching(cfg.keys) if cfg.keys else self.recording.keys
         self.keys = [k for k in chosen if Key.parse(k).section != "cmd"]
+        audio = [k for k in self.keys if Key.parse(k).section == "audio"]
+        if audio and cfg.speed != 1:  # chunks sent `speed` times as often: every player would overrun
+            self.keys = [k for k in self.keys if k not in audio]
+            self.warn("audio", f"--speed {cfg.speed:g}: audio left out ({', '.join(audio)}): sound plays only at "
+                               "the speed it was recorded")
         robots = sorted({k.partition("/")[0] for k in self.keys})
         unknown = sorted(set(cfg.rename) - set(robots))
         if unknown:

@@ -59,6 +59,23 @@ def test_a_sine_into_an_input_port_arrives_on_the_speaker_key(net, peer, figure)
     figure("latency: a chunk's first frame to the subscriber, p50", float(np.median(delays)) * 1000, "ms")
 
 
+@pytest.mark.parametrize("send_silence", [False, True])
+def test_digital_silence_is_not_sent_unless_asked(net, jack, send_silence):
+    """An input nothing plays into (a closed Pd) sent zeros 100 times a second for ever, and a
+    robot's speaker called the robot 50 times a second for them."""
+    listener = net.bus("listener")
+    subscriber, queue = listener.subscribe(keys.audio("pepper", "speaker"), maxlen=4096)
+    node = bridge(net, from_robot=False, inputs=1, send_silence=send_silence)
+    counted = "chunks_sent" if send_silence else "chunks_silent"
+    wait_for(lambda: node.stats[counted] >= 50, timeout=20, what=f"50 {counted}")
+    subscriber.undeclare()
+    arrived = len(queue.drain(0))
+    if send_silence:
+        assert arrived and node.stats["chunks_silent"] == 0
+    else:
+        assert arrived == 0 and node.stats["chunks_sent"] == 0, dict(node.stats)
+
+
 def test_chunks_on_the_mic_key_come_out_of_an_output_port(net, peer, figure):
     node = bridge(net, to_robot=False, outputs=2, connect_outputs=("tester:ear",), target_ms=60)
     robot = net.bus("robot")

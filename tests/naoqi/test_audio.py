@@ -376,5 +376,17 @@ def test_a_less_delayed_buffer_found_later_does_not_send_t_back():
     first = clock.start([100, 0], 0.17, arrived=1000.30)    # 130 ms late
     second = clock.start([100, 170000], 0.17, arrived=1000.42)  # 80 ms late: a smaller offset
     third = clock.start([100, 340000], 0.17, arrived=1000.59)
-    assert first == pytest.approx(1000.13) and second >= first + 0.17 and third >= second + 0.17
-    assert third == pytest.approx(second + 0.17)  # contiguous buffers stay contiguous
+    assert first == pytest.approx(1000.13) and second - first >= 0.99 * 0.17 - 1e-9 <= third - second
+    assert third == pytest.approx(second + 0.99 * 0.17)  # nearly contiguous, slewing toward the better offset
+
+
+def test_a_robot_sound_clock_that_runs_fast_is_followed_not_run_ahead_of():
+    """A buffer forced to start where the last one ended never came back: a robot whose
+    sound clock runs 100 ppm fast put t 0.36 s an hour ahead, past the gate's 5 s in a day."""
+    from sonibus.adapters.naoqi.microphones import RobotClock
+    clock, duration, fast = RobotClock(), 0.17, 1.0001
+    starts = [clock.start([n * duration * fast, 0], duration, arrived=1000.0 + (n + 1) * duration)
+              for n in range(25_000)]                                    # 70 minutes of buffers
+    steps = np.diff(starts)
+    assert steps.min() > 0.98 * duration                                  # t never goes back
+    assert abs(starts[-1] + duration - (1000.0 + 25_000 * duration)) < 0.01  # still on the wall clock

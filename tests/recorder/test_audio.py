@@ -165,3 +165,25 @@ def test_export_leaves_out_an_audio_key_written_as_json_with_a_number_msgpack_ca
     assert exported.returncode == 0 and not exported.stderr, exported.stderr
     assert "pepper/audio/mic: 1 chunk not an audio chunk, left out" in exported.stdout
     assert not (tmp_path / "wav" / "pepper-mic.wav").exists()
+
+
+def test_replay_faster_or_slower_leaves_audio_out_in_one_warning(net, tmp_path, caplog):
+    """At --speed 2 the chunks went out twice as often: every player overran."""
+    path = tmp_path / "take.mcap"
+    t0 = time.time() - 60
+    with RecordingWriter(str(path)) as out:
+        for seq in range(10):
+            sent = chunk(seq, MIC, t0)
+            out.write("pepper/audio/mic", int((sent.t + 0.005) * 1e9), sent.message())
+            out.write("pepper/events/status", int((sent.t + 0.005) * 1e9), {"t": sent.t, "kind": "status", "n": seq})
+    listener = net.bus("listener")
+    subscriber, queue = listener.subscribe("pepper/**", maxlen=1024)
+    replay = net.start(Replay(ReplayConfig(path=str(path), speed=2.0), name="replay"))
+    wait_for(replay.finished.is_set, timeout=20, what="the replay's end")
+    seen: list[str] = []
+    wait_for(lambda: seen.extend(k for k, _ in queue.drain(0.2)) or seen.count("pepper/events/status") >= 1,
+             what="an event replayed")
+    subscriber.undeclare()
+    assert "pepper/audio/mic" not in replay.keys and "pepper/audio/mic" not in seen, seen
+    warned = [r.getMessage() for r in caplog.records if "audio left out" in r.getMessage()]
+    assert len(warned) == 1 and "--speed 2: audio left out (pepper/audio/mic)" in warned[0], warned
