@@ -12,6 +12,7 @@ from __future__ import annotations
 import argparse
 import asyncio
 import contextlib
+import re
 import signal
 import sys
 import threading
@@ -40,6 +41,7 @@ STOP_TIMEOUT_S = 5.0   # a robot's answer to stop
 BAR = 20               # characters of a joint's bar
 SPARK_SPAN = 0.02      # the smallest range a sparkline spreads over, of a joint's limits
 SPARKS = "▁▂▃▄▅▆▇█"
+CONTROL = re.compile(r"[\x00-\x1f\x7f-\x9f]")  # what a terminal takes as commands (ESC sequences, newlines)
 LONELY_S = 3.0         # with no node on the bus for this long, the status line says whom top reached
 ALARM, WARNING, GONE = "bold red", "bold yellow", "red"
 
@@ -64,7 +66,7 @@ class ConfirmStop(ModalScreen[bool]):
         self.robots = robots
 
     def compose(self) -> ComposeResult:
-        yield Static(Text.assemble(("Stop every robot", ALARM), f" ({', '.join(self.robots)})?\n\n",
+        yield Static(Text.assemble(("Stop every robot", ALARM), f" ({printable(', '.join(self.robots))})?\n\n",
                                    ("y", "bold"), " stop them    ", ("any other key", "bold"), " cancel"))
 
     def on_key(self, event: events.Key) -> None:
@@ -150,7 +152,7 @@ class TopApp(App[int]):
         if self.selected is None and snap.robots:
             self.selected = snap.robots[0].name
         robot = next((r for r in snap.robots if r.name == self.selected), None)
-        self.joints.border_title = Text(f"joints of {robot.name}" if robot else "joints")  # (a str is markup)
+        self.joints.border_title = Text(printable(f"joints of {robot.name}" if robot else "joints"))  # (str: markup)
         self.joints.update(joint_lines(robot) if robot else Text("no robot on the bus yet", style="italic"))
         lines = max(1, self.events.size.height - 1)
         self.event_lines.update(event_lines(snap.events[-lines:]))
@@ -219,7 +221,8 @@ class TopApp(App[int]):
 def _fill(table: DataTable[Text], rows: Iterable[tuple[str, list[Text]]]) -> None:
     """Add the rows not there yet, update the others in place (the cursor stays put)."""
     columns = list(table.columns)
-    for key, cells in rows:
+    for key, shown_cells in rows:
+        cells = [Text(printable(c.plain), style=c.style) for c in shown_cells]
         if key not in table.rows:
             table.add_row(*cells, key=key)
             continue
@@ -251,6 +254,16 @@ def node_cells(node: NodeView) -> list[Text]:
             *(Text(r, style=style) for r in rates), *losses]
 
 
+def printable(text: str) -> str:
+    r"""``text`` with control characters shown as '�': from the bus, an escape sequence
+    would clear the screen or retitle the terminal, a newline break a row.
+
+    >>> printable("A\x1b[2J\nB")
+    'A�[2J�B'
+    """
+    return CONTROL.sub("\ufffd", text)
+
+
 def clock(seconds: float | None) -> str:
     """``h:mm:ss`` (``-`` when unknown).
 
@@ -276,8 +289,8 @@ def joint_lines(robot: RobotView) -> Text:
             filled = round(fraction * BAR)
             bar = Text.assemble("[", ("█" * filled, "green"), ("·" * (BAR - filled), "dim"), "]")
         limits = f"{joint.min:+.2f}..{joint.max:+.2f}" if fraction is not None else ""
-        unit = "" if joint.unit == "rad" else joint.unit[:4]
-        text.append_text(Text.assemble(f"{joint.name:<15}", bar, f"{joint.value:+8.3f} {unit:<4} ",
+        unit = "" if joint.unit == "rad" else printable(joint.unit[:4])
+        text.append_text(Text.assemble(printable(f"{joint.name:<15}"), bar, f"{joint.value:+8.3f} {unit:<4} ",
                                        (f"{limits:<13} ", "dim"), (sparkline(joint), "cyan"), "\n"))
     return text
 
@@ -307,7 +320,7 @@ def event_lines(shown: Sequence[EventView]) -> Text:
     for event in shown:
         stamp = time.strftime("%H:%M:%S", time.localtime(event.t))
         times = f" ×{event.repeated}" if event.repeated > 1 else ""
-        text.append(f"{stamp} {event.source:<10} {event.kind:<9} {event.text}{times}\n",
+        text.append(printable(f"{stamp} {event.source:<10} {event.kind:<9} {event.text}{times}") + "\n",
                     style=ALARM if event.alarm else "")
     return text
 
@@ -321,11 +334,12 @@ def status_line(snap: Snapshot, hint: str = "") -> Text:
     text = Text(f"{on_bus} robot(s), {alive} node(s) on the bus   received {counters.get('received', 0):,}  "
                 f"bad {counters.get('bad', 0):,}  dropped {counters.get('dropped', 0):,}")
     if snap.problem:
-        text.append(f"   last refused: {snap.problem}", style=WARNING)
+        text.append(f"   last refused: {printable(snap.problem)}", style=WARNING)
     if hint:
-        text.append(f"\n{hint}", style=WARNING)
+        text.append(f"\n{printable(hint)}", style=WARNING)
     if snap.failure:
-        text = Text(f"{snap.failure}: what is shown no longer changes; quit (q) and start again", style=ALARM)
+        text = Text(f"{printable(snap.failure)}: what is shown no longer changes; quit (q) and start again",
+                    style=ALARM)
     return text
 
 

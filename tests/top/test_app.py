@@ -189,3 +189,28 @@ def test_a_robot_name_like_markup_is_shown_as_written(net):
         assert row(app, "robots", "[b]bot")[0].plain == "[b]bot"
 
     drive(net.bus("top"), scenario)
+
+
+def test_control_characters_from_the_bus_are_shown_not_sent_to_the_terminal(net):
+    """An event's text is any JSON string: an escape sequence in it cleared the operator's
+    screen and set the terminal's title, a newline broke the event list's lines."""
+    script = net.bus("script")
+    text = "A\x1b[2J\x1b]0;title\x07B\nC\rD\x9bE"
+    bad_robot = "r\x1bbot"
+
+    async def scenario(app, pilot):
+        def put() -> None:
+            script.put(keys.event("pepper", "speech"), {"t": time.time(), "kind": "speech", "text": text,
+                                                        "state": "started"})
+            script.put(keys.frame(bad_robot), messages.frame(time.time(), 1, ["HeadYaw"], [0.5]))
+
+        await until(pilot, lambda: ("started" in shown(app, "event-lines") and row(app, "robots", bad_robot))
+                    or put(), what="the event and the robot shown")
+        await pilot.pause(0.3)  # (a redraw with both)
+        lines = [line for line in shown(app, "event-lines").splitlines() if "speech" in line]
+        assert len(lines) == 1 and "[2J" in lines[0] and "D" in lines[0], lines
+        shown_text = shown(app, "event-lines") + shown(app, "joints") + "".join(
+            c.plain for c in row(app, "robots", bad_robot)) + str(app.joints.border_title)
+        assert not any((ord(c) < 0x20 and c != "\n") or 0x7f <= ord(c) <= 0x9f for c in shown_text), repr(shown_text)
+
+    drive(net.bus("top"), scenario)
