@@ -241,6 +241,21 @@ def test_bad_messages_get_a_one_line_refusal_and_the_connection_stays(stage, web
     assert page.wait("reply", id=7)["ok"] is True and not page.closed
 
 
+def test_control_characters_a_client_sends_never_reach_the_log(stage, websocket, caplog):
+    """A refusal names what was sent: an escape sequence in it would drive the terminal of
+    whoever watches the node's log, a newline forge a log line of its own."""
+    kiosk = websocket(stage.ws_url("kiosk"))
+    kiosk.wait("hello")
+    with caplog.at_level(logging.WARNING):
+        kiosk.send({"type": "command", "id": 1, "robot": "x*\x1b[2J\x1b]0;title\x07\nsonibus: FORGED", "verb": "stop"})
+        kiosk.send({"type": "press", "id": 2, "button": "\x9b2J\rwave"})
+        assert kiosk.wait("reply", id=1)["ok"] is False and kiosk.wait("reply", id=2)["ok"] is False
+        logged = wait_for(lambda: [r.getMessage() for r in caplog.records if "refused" in r.getMessage()], 10,
+                          "the refusals warned about")
+    assert any("[2J" in line for line in logged), logged
+    assert not any(c in line for line in logged for c in "\x1b\x07\n\r\x9b"), logged
+
+
 def test_a_robots_reply_json_cannot_carry_is_refused_in_one_line_and_the_node_stays(stage, websocket):
     """A reply is not checked by the gate on its way (an owner's bug, a node impersonating a
     robot): a NaN in its result ended the web server's loop, and every page with it."""
