@@ -193,12 +193,17 @@ class TopApp(App[int]):
             return
         self.push_screen(ConfirmStop(robots), lambda yes: self._stop(robots) if yes else self._cancelled())
 
+    def _on_bus_now(self, asked: list[str]) -> list[str]:
+        """The robots asked about and those on the bus now (one may have come while the stop was asked)."""
+        snap = self.snapshot = self.monitor.snapshot()
+        return asked + [r.name for r in snap.robots if not r.gone and r.name not in asked]
+
     def _cancelled(self) -> None:
         self.monitor.note("top", "stop", "cancelled: nothing sent")
         self.redraw()
 
-    def _stop(self, robots: Iterable[str]) -> None:
-        for robot in robots:
+    def _stop(self, asked: list[str]) -> None:
+        for robot in self._on_bus_now(asked):
             self.monitor.note(robot, "stop", "sent")
             ask(self.monitor.bus, robot, "stop", {}, lambda outcome, r=robot: self._replied(r, outcome),
                 timeout=STOP_TIMEOUT_S)

@@ -113,6 +113,25 @@ def test_s_then_y_stops_every_robot_and_shows_each_reply(net):
     assert pepper.engine.running_behavior is None and not pepper.body.moving() and not nao.body.moving()
 
 
+def test_y_also_stops_a_robot_that_came_while_the_stop_was_asked(net):
+    net.sim("pepper", rate_hz=50)
+    heard_nao = watch_events(net, "nao")
+    top = net.bus("top")
+
+    async def scenario(app, pilot):
+        await until(pilot, lambda: row(app, "robots", "pepper"), what="pepper listed")
+        await pilot.press("s")
+        await until(pilot, lambda: "Stop every robot" in str(app.screen.query_one("Static").content),
+                    what="the confirmation")
+        net.sim("nao", rate_hz=50)  # (the operator reads the question; a robot joins the show)
+        await until(pilot, lambda: (r := row(app, "robots", "nao")) and r[-1].plain == "on bus", what="nao listed")
+        await pilot.press("y")
+        await until(pilot, lambda: commands(heard_nao, "stop"), what="nao's stop")
+
+    drive(top, scenario)
+    assert commands(heard_nao, "stop")[0]["ok"] is True
+
+
 @pytest.mark.parametrize("key", ["n", "q", "tab", "escape"])
 def test_s_then_another_key_sends_nothing(net, key):
     pepper = net.sim("pepper", rate_hz=50)
