@@ -88,6 +88,13 @@ def commands(seen: list[dict], verb: str) -> list[dict]:
     return [e for e in seen if e["kind"] == "command" and e["verb"] == verb]
 
 
+async def ask_to_stop(app, pilot) -> None:
+    """Press ``s`` and wait for the question."""
+    await pilot.press("s")
+    await until(pilot, lambda: "Stop every robot" in str(app.screen.query_one("Static").content),
+                what="the confirmation")
+
+
 def test_s_then_y_stops_every_robot_and_shows_each_reply(net):
     pepper, nao = net.sim("pepper", rate_hz=50), net.sim("nao", rate_hz=50)
     seen, heard_nao = watch_events(net, "pepper"), watch_events(net, "nao")
@@ -97,9 +104,7 @@ def test_s_then_y_stops_every_robot_and_shows_each_reply(net):
         await until(pilot, lambda: row(app, "robots", "pepper") and row(app, "robots", "nao"), what="both robots")
         send_command(top, "pepper", "behavior/run", {"name": BEHAVIOR})
         await until(pilot, lambda: pepper.engine.running_behavior, what="the behavior running")
-        await pilot.press("s")
-        await until(pilot, lambda: "Stop every robot" in str(app.screen.query_one("Static").content),
-                    what="the confirmation")
+        await ask_to_stop(app, pilot)
         await pilot.press("y")
         await until(pilot, lambda: commands(seen, "stop") and commands(heard_nao, "stop"), what="both stop commands")
         lines = await until(pilot, lambda: (t := shown(app, "event-lines")).count("ok: stopped") == 2 and t,
@@ -120,9 +125,7 @@ def test_y_also_stops_a_robot_that_came_while_the_stop_was_asked(net):
 
     async def scenario(app, pilot):
         await until(pilot, lambda: row(app, "robots", "pepper"), what="pepper listed")
-        await pilot.press("s")
-        await until(pilot, lambda: "Stop every robot" in str(app.screen.query_one("Static").content),
-                    what="the confirmation")
+        await ask_to_stop(app, pilot)
         net.sim("nao", rate_hz=50)  # (the operator reads the question; a robot joins the show)
         await until(pilot, lambda: (r := row(app, "robots", "nao")) and r[-1].plain == "on bus", what="nao listed")
         await pilot.press("y")
@@ -140,9 +143,7 @@ def test_s_then_another_key_sends_nothing(net, key):
 
     async def scenario(app, pilot):
         await until(pilot, lambda: row(app, "robots", "pepper"), what="pepper listed")
-        await pilot.press("s")
-        await until(pilot, lambda: "Stop every robot" in str(app.screen.query_one("Static").content),
-                    what="the confirmation")
+        await ask_to_stop(app, pilot)
         await pilot.press(key)
         await until(pilot, lambda: "cancelled: nothing sent" in shown(app, "event-lines"), what="the cancel shown")
         assert app.screen is app.screen_stack[0] and app.is_running  # the confirmation is gone, the view goes on
