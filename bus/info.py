@@ -22,6 +22,7 @@ from . import keys, messages
 from .node import Bus, Reply
 
 MAX_ROBOTS = 1024  # robots asked about and remembered (their retry time)
+UNANSWERED_RETRY_S = 0.25  # a robot whose info nobody answered is asked again this soon (at most 4 a second)
 
 
 class InfoRequests:
@@ -40,17 +41,25 @@ class InfoRequests:
         if len(self._asked) >= MAX_ROBOTS:  # robot names made up on the fly must not grow it for ever
             self._asked = {r: at for r, at in self._asked.items() if now - at < self.retry_s}
         self._asked[robot] = now
-        merge = _Merge(robot, self.on_info, self.on_error, self._gate)
+        merge = _Merge(robot, self.on_info, self.on_error, self._gate, self._unanswered)
         self.bus.ask(keys.info(robot) + "/**", merge.take, merge.finish, timeout=self.retry_s)
+
+    def _unanswered(self, robot: str) -> None:
+        # an owner claims its robot before it serves the info (it is still connecting): asked again after
+        # UNANSWERED_RETRY_S, not retry_s (a page showed a robot's frames 2.7 s before its controls)
+        if robot in self._asked:
+            self._asked[robot] = min(self._asked[robot], time.monotonic() - self.retry_s + UNANSWERED_RETRY_S)
 
 
 class _Merge:
     """The replies to one info query, merged when the query ends."""
 
     def __init__(self, robot: str, on_info: Callable[[str, dict[str, Any]], None],
-                 on_error: Callable[[str, str], None], gate: messages.Gate) -> None:
-        self.robot, self.on_info, self.on_error, self.gate = robot, on_info, on_error, gate
+                 on_error: Callable[[str, str], None], gate: messages.Gate,
+                 on_none: Callable[[str], None] = lambda robot: None) -> None:
+        self.robot, self.on_info, self.on_error, self.gate, self.on_none = robot, on_info, on_error, gate, on_none
         self.main: dict[str, Any] | None = None
+        self.answered = False  # by an owner (a bad info too: that one is asked again only after retry_s)
         self.derived: list[dict[str, Any]] = []
         self.unavailable: dict[str, Any] = {}
         self._lock = threading.Lock()
@@ -64,6 +73,7 @@ class _Merge:
         if not main and key != keys.derived_info(self.robot):
             return
         where = keys.info(self.robot) if main else key
+        self.answered |= main
         try:
             message = self.gate.check(keys.Key.parse(where), reply.payload)
         except ValueError as exc:  # messages.BadMessage
@@ -79,6 +89,8 @@ class _Merge:
     def finish(self) -> None:
         with self._lock:
             if self.main is None:
+                if not self.answered:
+                    self.on_none(self.robot)
                 return
             info = dict(self.main)
             if self.derived:

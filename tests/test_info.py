@@ -1,0 +1,46 @@
+"""Robot info asked for over the bus (``bus/info.py``): an owner claims its robot before it
+serves its info (it is still connecting), so an unanswered robot is asked again soon."""
+
+from __future__ import annotations
+
+import time
+
+from sonibus.bus import encode, keys
+from sonibus.bus.info import UNANSWERED_RETRY_S, InfoRequests
+
+from .conftest import wait_for
+
+
+def test_a_robot_that_answered_nothing_is_asked_again_soon_not_after_the_full_retry(net):
+    """A page showed a robot's frames 2.7 s before its controls: its first ask came before the
+    owner served its info, and the next one only retry_s later."""
+    watcher = net.bus("watcher")
+    answers: list[dict] = []
+    requests = InfoRequests(watcher, lambda robot, info: answers.append(info), lambda robot, text: None,
+                            retry_s=30.0)
+    asked = time.monotonic()
+    requests.ask("pepper")                                     # nobody serves pepper/info yet
+    net.sim("pepper")
+
+    def ask_again() -> bool:
+        requests.ask("pepper")                                 # what a node's refresh loop does
+        return bool(answers)
+    wait_for(ask_again, timeout=10, what="the info, asked again well before retry_s (30 s)")
+    assert answers[0]["model"] == "pepper" and time.monotonic() - asked < 10
+
+
+def test_a_robot_whose_info_is_unusable_waits_the_full_retry(net):
+    owner, watcher = net.bus("owner"), net.bus("watcher")
+    errors: list[str] = []
+    requests = InfoRequests(watcher, lambda robot, info: None, lambda robot, text: errors.append(text), retry_s=30.0)
+    served = owner.serve(keys.info("liar"), lambda q: q.reply(keys.info("liar"), encode({"robot": "liar"})))
+    try:
+        requests.ask("liar")
+        wait_for(lambda: errors, what="the unusable info said")
+        deadline = time.monotonic() + 4 * UNANSWERED_RETRY_S
+        while time.monotonic() < deadline:                     # (an absence: asked often, never sent again)
+            requests.ask("liar")
+            time.sleep(UNANSWERED_RETRY_S / 5)
+    finally:
+        served.undeclare()
+    assert len(errors) == 1, errors
