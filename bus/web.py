@@ -67,7 +67,8 @@ class WebServer:
 
     @property
     def url(self) -> str:
-        return f"http://{self.host}:{self.port}"
+        host = f"[{self.host}]" if ":" in self.host else self.host  # (an IPv6 address: http://[::1]:8080)
+        return f"http://{host}:{self.port}"
 
     @property
     def clients(self) -> int:

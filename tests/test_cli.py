@@ -683,3 +683,14 @@ def test_echo_of_audio_shows_its_pcm_as_a_size(net):
         chunk = json.loads(payload)
         assert key == "pepper/audio/mic" and re.fullmatch(r"<\d+ bytes>", chunk["pcm"]), line
         assert chunk["rate"] > 0 and chunk["channels"] > 0
+
+
+def test_a_log_line_shows_the_control_characters_of_a_name_off_the_bus_as_printable():
+    """Any warning may quote a robot, node or key name from the bus: an escape sequence in it
+    drove the terminal showing the log, a newline forged a log line."""
+    import logging
+
+    from sonibus.bus.text import PrintableFormatter
+    record = logging.LogRecord("sonibus.x", logging.WARNING, __file__, 1, "robot %s left", ("a\x1b[2J\nb",), None)
+    assert PrintableFormatter("sonibus: %(levelname)s: %(message)s").format(record) == \
+        "sonibus: WARNING: robot a\ufffd[2J\ufffdb left"

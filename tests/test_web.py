@@ -358,3 +358,14 @@ def test_malformed_requests_are_one_counted_line_not_tracebacks(net, caplog):
     warned = [r.getMessage() for r in caplog.records if r.levelno == logging.WARNING]
     assert len(warned) == 1 and "LineTooLong" in warned[0] and "\n" not in warned[0], warned
     assert node.state == "running"
+
+
+def test_an_ipv6_server_gives_a_url_a_client_can_use(net):
+    """http://::1:port is no URL (aiohttp refuses it): an IPv6 host goes in brackets."""
+    server = net.start(ValueServer(ValueServerConfig(robot="pepper", host="::1", port=0), name="web6"))
+    assert server.web.url == f"http://[::1]:{server.web.port}"
+
+    async def scenario() -> int:
+        async with aiohttp.ClientSession(server.web.url) as http, http.get("/value") as response:
+            return response.status
+    assert asyncio.run(scenario()) == 200  # answered, over IPv6

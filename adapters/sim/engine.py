@@ -55,6 +55,7 @@ class SimEngine:
         self._speaking_until = 0.0
         self.aware = idle  # basic awareness: idle looking around
         self._idle_home = self.body.pose()
+        self.halted = False  # a stop holds the body still (no idle motion, no autoplay) until the next move
         self._next_autoplay = time.monotonic() + autoplay_s
         self._speeds: dict[str, float] = {}
 
@@ -92,9 +93,10 @@ class SimEngine:
                 events.append(("posture", {"name": self._posture, "state": "reached"}))
                 self._last_posture = (self._posture, "reached")
                 self._posture = None
-            elif self.idle:
+            elif self.idle and not self.halted:
                 self._idle(now)
-            if self.autoplay_s and self._playback is None and time.monotonic() >= self._next_autoplay:
+            if (self.autoplay_s and self._playback is None and not self.halted
+                    and time.monotonic() >= self._next_autoplay):
                 self._next_autoplay = time.monotonic() + self.autoplay_s
                 events.extend(self._start_behavior(random.choice(list(LIBRARY)), now))
             self._step(max(0.0, min(dt, 0.1)))
@@ -129,6 +131,7 @@ class SimEngine:
 
     def _start_behavior(self, name: str, now: float) -> list[tuple[str, dict[str, Any]]]:
         events = self._interrupt()
+        self.halted = False
         self._playback = Playback(LIBRARY[name], self.body.pose())
         self._playback_started = now
         events.append(("behavior", {"name": name, "state": "started"}))
@@ -178,6 +181,7 @@ class SimEngine:
         targets = dict(zip(names, map(float, angles), strict=True))
         with self.lock:
             self._emit(self._interrupt())
+            self.halted = False
             self.body.set_targets(targets, speed)
             self._idle_home.update(targets)
         return {}
@@ -185,6 +189,7 @@ class SimEngine:
     def posture(self, name: str, speed: float) -> dict[str, Any]:
         with self.lock:
             self._emit([*self._interrupt(), ("posture", {"name": name, "state": "started"})])
+            self.halted = False
             pose = self.model.posture(name)
             self.body.set_targets(pose, speed)
             self._idle_home.update(pose)
@@ -226,6 +231,9 @@ class SimEngine:
         with self.lock:
             events = self._interrupt() if motion else []
             if motion:
+                # (a real robot's breathing may go on; an operator's STOP means still: idle motion and
+                # autoplay wait for the next behavior, posture or joint move)
+                self.halted = True
                 self.body.halt()
             if speech:
                 if self._speaking_until:

@@ -24,6 +24,7 @@ from aiohttp import WSMsgType, web
 from sonibus.bus import client as bus_client
 from sonibus.bus import commands
 from sonibus.bus.errors import CommandError
+from sonibus.bus.text import printable
 from sonibus.bus.web import CLOSE_WAIT_S, WebClient, WebServer, close_clients
 
 from . import protocol
@@ -39,7 +40,6 @@ STATIC = Path(__file__).resolve().parent / "static"
 MAX_WS_MESSAGE = 1 << 20  # bytes; aiohttp closes a connection that sends more in one message (code 1009)
 HEARTBEAT_S = 10.0        # a ping this often; a client that does not answer within half of it is dropped
 _FILE = re.compile(r"[A-Za-z0-9_-][A-Za-z0-9_.-]{0,99}")
-_CONTROL = re.compile(r"[\x00-\x1f\x7f-\x9f]")  # in what a client sent: never logged (it would drive a terminal)
 HEADERS = {"Cache-Control": "no-store", "Referrer-Policy": "no-referrer", "X-Frame-Options": "DENY",
            "X-Content-Type-Options": "nosniff"}  # (the token is in the page's URL: never sent on, never cached)
 _dumps = functools.partial(json.dumps, allow_nan=False)
@@ -180,7 +180,7 @@ class Pages:
 
     def _bad(self, client: Client, id_: protocol.Id, what: str) -> None:
         self.adapter.count("bad")
-        self.adapter.warn("ws", f"WebSocket ({client.role}): refused {_CONTROL.sub(chr(0xFFFD), what)}")
+        self.adapter.warn("ws", f"WebSocket ({client.role}): refused {printable(what)}")
         client.send(protocol.reply(id_, what))
 
     def _command(self, client: Client, request: protocol.Command) -> None:

@@ -17,6 +17,7 @@ from importlib.metadata import EntryPoint, entry_points, version
 
 from .. import registry
 from ..errors import CommandError, ConfigError, RobotNotFound, SonibusError
+from ..text import PrintableFormatter
 from .api import COMMAND_GROUP, Command, Environment, Exit, add_bus_arguments
 
 log = logging.getLogger(__name__)
@@ -99,7 +100,7 @@ def main(argv: Sequence[str] | None = None, env: Environment | None = None) -> i
     env = env or Environment()
     argv = sys.argv[1:] if argv is None else list(argv)
     handler = logging.StreamHandler(env.stderr)
-    handler.setFormatter(logging.Formatter("sonibus: %(levelname)s: %(message)s"))
+    handler.setFormatter(PrintableFormatter("sonibus: %(levelname)s: %(message)s"))
     logger = logging.getLogger("sonibus")
     logger.addHandler(handler)
     logger.setLevel(logging.WARNING)

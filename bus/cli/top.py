@@ -12,7 +12,6 @@ from __future__ import annotations
 import argparse
 import asyncio
 import contextlib
-import re
 import signal
 import sys
 import threading
@@ -33,6 +32,7 @@ from ..errors import CommandError, ConfigError, SonibusError
 from ..monitor import EventView, JointView, Monitor, NodeView, RobotView, Snapshot
 from ..ownership import owners
 from ..session import BusConfig
+from ..text import printable
 from .api import Command, Environment, Exit, bus_config, joined
 from .hints import reach_hint
 
@@ -41,7 +41,6 @@ STOP_TIMEOUT_S = 5.0   # a robot's answer to stop
 BAR = 20               # characters of a joint's bar
 SPARK_SPAN = 0.02      # the smallest range a sparkline spreads over, of a joint's limits
 SPARKS = "▁▂▃▄▅▆▇█"
-CONTROL = re.compile(r"[\x00-\x1f\x7f-\x9f]")  # what a terminal takes as commands (ESC sequences, newlines)
 LONELY_S = 3.0         # with no node on the bus for this long, the status line says whom top reached
 ALARM, WARNING, GONE = "bold red", "bold yellow", "red"
 
@@ -259,14 +258,6 @@ def node_cells(node: NodeView) -> list[Text]:
             *(Text(r, style=style) for r in rates), *losses]
 
 
-def printable(text: str) -> str:
-    r"""``text`` with control characters shown as '�': from the bus, an escape sequence
-    would clear the screen or retitle the terminal, a newline break a row.
-
-    >>> printable("A\x1b[2J\nB")
-    'A�[2J�B'
-    """
-    return CONTROL.sub("\ufffd", text)
 
 
 def clock(seconds: float | None) -> str:

@@ -363,3 +363,28 @@ def test_two_robots_on_one_bus_keep_their_keys_apart(net):
     wait_for(lambda: nao.poll() and nao.latest["nao/joints/HeadYaw"]["v"] == 1.0, 5.0, "nao's head to turn")
     pepper.collect(pepper.span() + 0.1)
     assert {k: m["v"] for k, m in pepper.latest.items()} == {k: m["v"] for k, m in pepper_before.items()}
+
+
+def test_a_stop_holds_an_idling_robot_still_until_the_next_move():
+    """The operator's STOP left examples/web.toml's robot breathing and looking around (idle
+    motion), and an autoplaying demo started its next behavior: a stop means still."""
+    from sonibus.adapters.sim.engine import SimEngine
+    events: list[tuple[str, dict]] = []
+    engine = SimEngine(load_model("pepper"), lambda kind, fields: events.append((kind, fields)), idle=True,
+                       autoplay_s=0.05)
+    now = 1000.0
+    for _ in range(100):                                   # 2 s of idle motion (and autoplay)
+        now += 0.02
+        engine.advance(now, 0.02)
+    engine.stop()
+    for _ in range(25):                                    # let the halt settle
+        now += 0.02
+        engine.advance(now, 0.02)
+    held = engine.advance(now + 0.02, 0.02)
+    started = len([e for e in events if e[0] == "behavior" and e[1]["state"] == "started"])
+    for step in range(2, 200):                             # 4 s more: nothing moves, nothing starts
+        assert engine.advance(now + 0.02 * step, 0.02) == held
+    assert len([e for e in events if e[0] == "behavior" and e[1]["state"] == "started"]) == started
+    engine.joints_set(["HeadYaw"], [0.5], 0.5)             # the next move: idle motion again after it
+    moved = [engine.advance(now + 4 + 0.02 * step, 0.02) for step in range(100)]
+    assert moved[-1] != held
