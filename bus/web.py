@@ -50,8 +50,9 @@ Handler = Callable[[web.Request], Awaitable[web.StreamResponse]]
 class WebServer:
     """An aiohttp ``app`` served on ``host:port`` (0: any free port) while ``adapter`` runs."""
 
-    def __init__(self, adapter: Adapter, host: str = "127.0.0.1", port: int = 0) -> None:
+    def __init__(self, adapter: Adapter, host: str = "127.0.0.1", port: int = 0, key: str = "") -> None:
         self.adapter = adapter
+        self.key = key  # the configuration key of host:port ("listen"); "": keys 'host' and 'port'
         self.host = host
         self.port = port                   # the bound port once started
         self.app = web.Application(middlewares=[self._errors])
@@ -77,20 +78,20 @@ class WebServer:
 
     def start(self) -> None:
         """Serve ``app`` on a worker thread of the adapter; return once listening.
-        A port that cannot be bound is a ``ConfigError`` naming key 'port'."""
+        A port that cannot be bound is a ``ConfigError`` naming key 'port' (or ``key``)."""
         self.adapter.spawn(self._serve, "web")
         if not self._ready.wait(START_TIMEOUT_S):
             raise RuntimeError(f"the web server on {self.host}:{self.port} did not start within {START_TIMEOUT_S} s")
-        error = self._start_error
+        error, host_key, port_key = self._start_error, self.key or "host", self.key or "port"
         if isinstance(error, socket.gaierror):
-            raise bad("host", f"cannot listen on {self.host!r}: {error.strerror} — "
+            raise bad(host_key, f"cannot listen on {self.host!r}: {error.strerror} — "
                               "give an address of this machine (127.0.0.1: this machine only, 0.0.0.0: all)")
         if isinstance(error, OSError):
             reason = os.strerror(error.errno) if error.errno else str(error)
             if error.errno == errno.EADDRNOTAVAIL:
-                raise bad("host", f"cannot listen on {self.host}:{self.port}: {reason} — {self.host} is not an "
+                raise bad(host_key, f"cannot listen on {self.host}:{self.port}: {reason} — {self.host} is not an "
                                   "address of this machine (127.0.0.1: this machine only, 0.0.0.0: all)")
-            raise bad("port", f"cannot listen on {self.host}:{self.port}: {reason} — "
+            raise bad(port_key, f"cannot listen on {self.host}:{self.port}: {reason} — "
                               "choose a free port (0: any)")
         if error is not None:
             raise error

@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import ipaddress
 import logging
-import re
 import threading
 import time
 from typing import Any
@@ -24,9 +23,7 @@ from typing import Any
 from sonibus.adapters.osc import encode
 from sonibus.adapters.osc.profiles import event_args
 from sonibus.bus.adapter import Adapter
-from sonibus.bus.errors import ConfigError
 from sonibus.bus.info import InfoRequests
-from sonibus.bus.options import bad
 from sonibus.bus.presence import watch_robots
 from sonibus.bus.queue import SampleQueue
 from sonibus.bus.streams import Incoming, Streams
@@ -61,17 +58,14 @@ class OscQuery(Adapter):
     def _start(self) -> None:
         cfg: OscQueryConfig = self.config
         self.live = Live(normalized=cfg.values == "normalized")
-        self.web = WebServer(self, cfg.host, cfg.port)
+        self.web = WebServer(self, cfg.host, cfg.port, key="listen")
         self.server = QueryServer(self, self.web, self.live, self._host_info())
         self._present: set[str] = set()
         self._left_out: dict[str, dict[str, Any]] = {}  # robot → the unusable info it was left out for
         self._present_lock = threading.Lock()
         self._info = InfoRequests(self.bus, self._take_info, lambda robot, text: self.warn("info", text),
                                   INFO_EVERY_S)
-        try:
-            self.web.start()
-        except ConfigError as exc:  # (the web server names its own keys, 'host' or 'port'; here it is 'listen')
-            raise bad("listen", re.sub(r"^key '\w+': ", "", str(exc))) from None
+        self.web.start()
         self.url = self.web.url  # the bound one (port 0: any free port)
         self.address = f"OSCQuery on {self.url} (WebSocket on the same port)"
         log.info("%s: %s", self.name, self.address)

@@ -18,7 +18,6 @@ from __future__ import annotations
 
 import json
 import logging
-import re
 import threading
 import time
 from typing import Any
@@ -27,9 +26,7 @@ import zenoh
 
 from sonibus.bus import keys
 from sonibus.bus.adapter import Adapter
-from sonibus.bus.errors import ConfigError
 from sonibus.bus.info import InfoRequests
-from sonibus.bus.options import bad
 from sonibus.bus.ownership import owners
 from sonibus.bus.pacing import Pacer
 from sonibus.bus.presence import watch_robots
@@ -64,14 +61,11 @@ class WebPages(Adapter):
         self._latest: dict[str, dict[str, Any]] = {}  # robot → its newest frame, not yet pushed
         self._nodes: dict[tuple[str, str], tuple[float, dict[str, Any]]] = {}  # latest stats, when heard
         self._shown = [zenoh.KeyExpr(keys.expr(r)) for r in cfg.robots]
-        self.web = WebServer(self, cfg.host, cfg.port)
+        self.web = WebServer(self, cfg.host, cfg.port, key="listen")
         self.pages = Pages(self, self.web, cfg, self._on_bus)
         self._info = InfoRequests(self.bus, self._take_info, lambda robot, text: self.warn("info", text),
                                   INFO_EVERY_S)
-        try:
-            self.web.start()
-        except ConfigError as exc:  # (the web server names its own keys, 'host' or 'port'; here it is 'listen')
-            raise bad("listen", re.sub(r"^key '\w+': ", "", str(exc))) from None
+        self.web.start()
         self.url = self.web.url
         token = "?token=<token>" if cfg.token else ""  # (never the token itself: this line ends up in logs)
         kiosk = "?token=<kiosk_token>" if cfg.kiosk_token else token
