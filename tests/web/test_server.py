@@ -26,7 +26,7 @@ from sonibus.bus.client import send_command
 from sonibus.bus.config import parse
 from sonibus.bus.errors import CommandError
 
-from ..conftest import SONIBUS, free_port, run_cli, wait_for
+from ..conftest import SONIBUS, Process, free_port, run_cli, wait_for
 from .conftest import KIOSK_TOKEN, RATE, TOKEN, WAVE, start_web
 
 STOP_WITHIN_S = 3.0  # the node's contract (docs/adapters.md)
@@ -429,13 +429,17 @@ def test_a_kiosk_button_whose_behavior_the_robot_lacks_is_warned_about(net, capl
     assert "kiosk button(s) dance: robot 'pepper' has no such behavior" in warned[0]
 
 
-def test_sonibus_run_serves_the_pages_and_ends_on_sigint_with_a_page_connected(tmp_path, spawn, websocket):
+def run_web(tmp_path, spawn, nodes: str = "", web: str = "") -> tuple[Process, str]:
+    """``sonibus run`` of a file with ``nodes`` and a web node (its options ``web``); the process, the pages' URL."""
     port = free_port()
     path = tmp_path / "show.toml"
-    path.write_text(f"[bus]\nmulticast = false\n\n[nodes.pepper]\nadapter = \"sim\"\nrate_hz = 50\n\n"
-                    f"[nodes.web]\nadapter = \"web\"\nlisten = \"127.0.0.1:{port}\"\n", encoding="utf-8")
-    process = spawn(SONIBUS, "run", str(path), collect=True, merge=True)
-    url = f"http://127.0.0.1:{port}"
+    path.write_text(f"[bus]\nmulticast = false\n\n{nodes}[nodes.web]\nadapter = \"web\"\n"
+                    f"listen = \"127.0.0.1:{port}\"\n{web}", encoding="utf-8")
+    return spawn(SONIBUS, "run", str(path), collect=True, merge=True), f"http://127.0.0.1:{port}"
+
+
+def test_sonibus_run_serves_the_pages_and_ends_on_sigint_with_a_page_connected(tmp_path, spawn, websocket):
+    process, url = run_web(tmp_path, spawn, nodes="[nodes.pepper]\nadapter = \"sim\"\nrate_hz = 50\n\n")
 
     def served() -> bool:
         try:
@@ -453,12 +457,7 @@ def test_sonibus_run_serves_the_pages_and_ends_on_sigint_with_a_page_connected(t
 
 
 def test_sonibus_run_says_where_the_pages_are_but_never_a_token(tmp_path, spawn):
-    port = free_port()
-    path = tmp_path / "show.toml"
-    path.write_text(f"[bus]\nmulticast = false\n\n[nodes.web]\nadapter = \"web\"\nlisten = \"127.0.0.1:{port}\"\n"
-                    f"token = \"s3cret-operator\"\nkiosk_token = \"s3cret-kiosk\"\n", encoding="utf-8")
-    process = spawn(SONIBUS, "run", str(path), collect=True, merge=True)
-    url = f"http://127.0.0.1:{port}"
+    process, url = run_web(tmp_path, spawn, web="token = \"s3cret-operator\"\nkiosk_token = \"s3cret-kiosk\"\n")
     said = f"sonibus: web: operator page {url}/?token=<token>, kiosk {url}/kiosk?token=<kiosk_token>"
     wait_for(lambda: said in process.lines, 30, "where the pages are", lambda: "\n".join(process.lines))
     process.stop(signal.SIGINT, timeout=STOP_WITHIN_S + 5)
