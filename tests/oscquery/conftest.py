@@ -128,13 +128,12 @@ class Socket:
             self.loop.close()
 
 
-@pytest.fixture
-def websocket() -> Iterator[Callable[[str], Socket]]:
-    """``websocket(url)`` opens a client, closed at the end of the test."""
+def opener(make: Callable[[str], Socket]) -> Iterator[Callable[[str], Socket]]:
+    """``open_(url)`` makes a client with ``make``; every one is closed when the test ends."""
     opened: list[Socket] = []
 
     def open_(url: str) -> Socket:
-        opened.append(Socket(url))
+        opened.append(make(url))
         return opened[-1]
 
     try:
@@ -142,6 +141,12 @@ def websocket() -> Iterator[Callable[[str], Socket]]:
     finally:
         for socket in opened:
             socket.close()
+
+
+@pytest.fixture
+def websocket() -> Iterator[Callable[[str], Socket]]:
+    """``websocket(url)`` opens a client, closed at the end of the test."""
+    yield from opener(Socket)
 
 
 @contextlib.contextmanager

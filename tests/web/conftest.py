@@ -23,6 +23,7 @@ from sonibus.adapters.web import WebConfig, WebPages
 
 from ..conftest import Network, wait_for
 from ..oscquery.conftest import Socket as QuerySocket
+from ..oscquery.conftest import opener
 
 RATE = 50                 # frames/s of the simulated robot
 TOKEN = "operator-secret-1"
@@ -102,14 +103,4 @@ class Socket(QuerySocket):
 @pytest.fixture
 def websocket() -> Iterator[Callable[[str], Socket]]:
     """``websocket(url)`` opens a client, closed at the end of the test."""
-    opened: list[Socket] = []
-
-    def open_(url: str) -> Socket:
-        opened.append(Socket(url))
-        return opened[-1]
-
-    try:
-        yield open_
-    finally:
-        for client in opened:
-            client.close()
+    yield from opener(Socket)
