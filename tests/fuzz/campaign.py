@@ -20,9 +20,11 @@ from .fuzzer import BURST_RATE, Fuzzer
 from .show import Show
 
 # Commands that undo what valid fuzz commands may have left (a posture or a joint held, a
-# behavior), sent as valid input before the flow is measured: the idle robot breathes again,
-# so its joints change every frame and the MIDI sink (which sends changes only) has something to send.
-RESET = (("stop", {}), ("stiffness", {"names": ["Body"], "value": 1.0}), ("awareness", {"enabled": True}))
+# behavior), sent as valid input before the flow is measured: the idle robot breathes again
+# (a stop holds it still until its next move: the posture is that move), so its joints change
+# every frame and the MIDI sink (which sends changes only) has something to send.
+RESET = (("stop", {}), ("stiffness", {"names": ["Body"], "value": 1.0}), ("awareness", {"enabled": True}),
+         ("posture", {"name": "StandInit", "speed": 1.0}))
 
 
 @dataclass(frozen=True)
