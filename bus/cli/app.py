@@ -173,10 +173,6 @@ def console_main() -> None:
     signal.signal(signal.SIGTERM, terminate)
     signal.signal(signal.SIGINT, terminate)  # also when started in the background, where SIGINT is ignored
     status = main(sys.argv[1:], env)
-    if env.stop.is_set() and status == Exit.OK:
-        # the signal's KeyboardInterrupt may land where a command ends on its own (between its last wait
-        # and its return): the exit status still says it was interrupted (seen once in CI: 0, not 130)
-        status = Exit.INTERRUPTED
     try:
         sys.stdout.flush()  # what is still buffered (argparse's --help) meets a closed pipe here, not at exit
     except BrokenPipeError:
