@@ -220,19 +220,21 @@ def _skip(pattern: str, also: Callable[[str], bool]) -> Callable[[str], bool]:
 
 def narrowed(pattern: str) -> list[str]:
     """``pattern`` as subscriptions that leave out the sections taken only by name
-    (audio, stats) when it does not name them: ``pepper/**`` → ``pepper/frame/**``,
-    ``pepper/joints/**``, ... (every key of ours is ``<robot>/<section>/...``, so a
-    leading ``**`` is ``*/**`` here).
+    (audio, stats) when it does not name them: ``pepper/**`` → ``pepper/joints/**``,
+    ``pepper/derived/**``, ... (every key of ours is ``<robot>/<section>/...``, so a
+    leading ``**`` is ``*/**`` here; ``**/audio/mic`` names audio and stays).
 
     >>> narrowed("pepper/*/mic"), narrowed("pepper/audio/mic"), len(narrowed("**"))
     (['pepper/joints/mic', 'pepper/derived/mic', 'pepper/events/mic', 'pepper/info/mic', 'pepper/cmd/mic'], \
 ['pepper/audio/mic'], 5)
     """
+    if named_section(pattern):
+        return [pattern]
     chunks = pattern.split("/")
     if chunks[0] == "**":
         chunks = ["*", *chunks] if len(chunks) > 1 else ["*", "**"]
     if len(chunks) < 2 or "*" not in chunks[1]:
-        return [pattern]  # it names its section (or is not a robot's key at all)
+        return [pattern]  # a section named after a leading ** (or no robot's key at all)
     robot, section, rest = chunks[0], chunks[1], chunks[2:]
     if section == "**":  # <robot>/**/rest: any section, then what ** stands for past it
         rest = ["**", *rest]

@@ -33,6 +33,7 @@ REST_OF_PEPPER = tuple(f"pepper/{s}/**" for s in REST)
     (["pepper/joints/R*", "pepper/**"], True, Plan(keys=("pepper/joints/R$*", "pepper/joints/**", *REST_OF_PEPPER))),
     (["*/joints/HeadYaw", "pepper/joints/R*"], False, Plan(frames=("*/frame",))),  # overlapping: one frame key
     (["pepper/**", "*/joints/*"], False, Plan(frames=("*/frame",), keys=REST_OF_PEPPER, broad=("pepper/joints/**",))),
+    (["**/audio/mic"], False, Plan(keys=("**/audio/mic",))),  # audio named after a leading **: kept
     (["pepper/audio/mic", "pepper/*/mic"], False,
      Plan(keys=("pepper/audio/mic", *(f"pepper/{s}/mic" for s in REST)),
           frames=("pepper/frame",))),
