@@ -29,11 +29,11 @@ STEP = 300  # bytes between two cuts
 
 @pytest.fixture(scope="module")
 def chunky(tmp_path_factory):
-    """A real recording of the simulator in several chunks (one every 0.2 s)."""
+    """A real recording of the simulator in several chunks (one every 0.12 s)."""
     path = tmp_path_factory.mktemp("chunky") / "show.mcap"
     network = Network()
     try:
-        record_sim(network, path, frames=40, flush_s=0.2)
+        record_sim(network, path, frames=40, flush_s=0.12)  # (about 6 chunks: 4 at least on a busy machine)
     finally:
         network.close()
     return path
