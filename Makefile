@@ -29,12 +29,13 @@ $(TESTS): $(STAMP) tests/plugin/pyproject.toml
 demo: $(STAMP)
 	trap true INT; $(BIN)/sonibus demo $(DEMO_ARGS) || test $$? -eq 130
 
-# the suite waits on processes and networks more than it computes: one worker per core
+# the suite waits on processes and networks more than it computes: one worker per core;
+# a worker that crashes ends the run (xdist's replacement worker once left the run waiting for ever)
 TEST_WORKERS ?= 2
 test: $(TESTS)
 	bash scripts/test-tools.sh
 	$(BIN)/ruff check .
-	$(BIN)/python -m pytest -n $(TEST_WORKERS) --dist loadscope
+	$(BIN)/python -m pytest -n $(TEST_WORKERS) --dist loadscope --max-worker-restart 0
 
 bench: $(TESTS)
 	bash scripts/test-tools.sh

@@ -4,7 +4,13 @@ notice the loss, connect again on the same session.
 Every call goes out with ``_async=True`` — also connecting and disconnecting
 signals, unsubscribing and closing — and is waited for with a bound, so nothing
 the adapter does can hang on a robot that stopped answering (frozen, or a link
-that vanished without closing)."""
+that vanished without closing).
+
+libqi crashed the process (a segfault in one of its own threads) when a call
+was sent on a session that another thread was closing, or once a closed
+session was freed while work on it was still in flight. So calls are sent
+only on the current session and never while it is being closed, and a closed
+session is kept for ``RETIRE_S`` before Python may free it."""
 
 from __future__ import annotations
 
@@ -22,7 +28,9 @@ log = logging.getLogger(__name__)
 
 DROP_MS = 500  # a drop waits this long at most for the robot to hear goodbye
 POLL_S = 0.05  # a wait on the robot looks at ``stopping`` this often
-LINK_ERRORS = ("Session closed", "Socket is not connected", "no answer within", "disconnected", "not connected")
+RETIRE_S = 30.0  # a closed session is freed no sooner: far longer than any call on it can wait
+LINK_ERRORS = ("Session closed", "Socket is not connected", "no answer within", "disconnected", "not connected",
+               "Future has already been set")  # (libqi's words for a call cut short by a closing session)
 
 
 class LinkDown(Exception):
@@ -83,6 +91,8 @@ class Link:
         self.connected = False
         self._generation = 0  # which session is current: signals of older ones are ignored
         self._lock = threading.Lock()
+        self._sending = threading.Lock()  # held while a call is sent on a session, and while one is closed
+        self._retired: list[tuple[float, Any]] = []  # (monotonic time it may be freed, closed session)
         self._services: dict[str, Any] = {}
         self._signals: list[tuple[Any, int]] = []
         self._kept: list[Any] = []
@@ -119,13 +129,18 @@ class Link:
         goodbyes = []
         for signal, link_id in signals if live else ():
             try:
-                goodbyes.append(signal.disconnect(link_id, _async=True))
+                with self._sending:
+                    goodbyes.append(signal.disconnect(link_id, _async=True))
             except Exception as exc:  # the link is gone already
                 log.debug("disconnect signal: %s", exc)
-        try:
-            goodbyes.append(session.close(_async=True))  # fails whatever still waits on this session
-        except Exception as exc:
-            log.debug("close session: %s", exc)
+        with self._sending:
+            try:
+                goodbyes.append(session.close(_async=True))  # fails whatever still waits on this session
+            except Exception as exc:
+                log.debug("close session: %s", exc)
+        now = time.monotonic()
+        self._retired = [(free_at, old) for free_at, old in self._retired if free_at > now]
+        self._retired.append((now + RETIRE_S, session))
         for future in goodbyes:
             if not future.isFinished():
                 future.wait(max(0, int((deadline - time.monotonic()) * 1000)))
@@ -133,6 +148,7 @@ class Link:
     def close(self) -> None:
         """Drop the connection for good (the adapter stops)."""
         self.drop()
+        self._retired.clear()
 
     def _disconnected(self, reason: Any, generation: int) -> None:
         with self._lock:
@@ -151,23 +167,45 @@ class Link:
     # -- calling --------------------------------------------------------------------
 
     def service(self, name: str) -> Any:
-        proxy = self._services.get(name)
+        """The proxy of service ``name`` on the current session (asked for once per session)."""
+        with self._lock:
+            proxy, session, generation = self._services.get(name), self.session, self._generation
         if proxy is None:
-            session = self.session
             if session is None:
                 raise LinkDown("not connected")
-            proxy = self.wait(session.service(name, _async=True), f"service {name}")
-            self._services[name] = proxy
+            proxy = self.wait(self.send(generation, session.service, name), f"service {name}")
+            with self._lock:
+                if generation != self._generation:  # dropped meanwhile: not a proxy for the next session
+                    raise LinkDown(f"service {name}: the link was replaced")
+                self._services[name] = proxy
         return proxy
+
+    def current(self) -> tuple[int, Any]:
+        """(generation, session) of the current connection; ``LinkDown`` when there is none."""
+        with self._lock:
+            if self.session is None:
+                raise LinkDown("not connected")
+            return self._generation, self.session
+
+    def send(self, generation: int | None, method: Callable[..., Any], *args: Any) -> Any:
+        """``method(*args, _async=True)`` on session ``generation``'s objects: its ``qi.Future``,
+        or ``LinkDown`` if that session is no longer the current one (``None``: any session,
+        a goodbye to an old one)."""
+        with self._sending:
+            if generation is not None and (generation != self._generation or self.session is None):
+                raise LinkDown("not connected (the link was replaced)")
+            return method(*args, _async=True)
 
     def start(self, service: str, method: str, *args: Any) -> Any:
         """Send a call; its ``qi.Future``."""
         if not self.connected:
             raise LinkDown("not connected")
+        generation = self._generation
         try:
-            return getattr(self.service(service), method)(*args, _async=True)
+            bound = getattr(self.service(service), method)
         except AttributeError:
             raise RemoteError(f"{service} has no method {method}") from None
+        return self.send(generation, bound, *args)
 
     def call(self, service: str, method: str, *args: Any, timeout_ms: int | None = None,
              interruptible: bool = True) -> Any:
@@ -203,15 +241,25 @@ class Link:
             return None
 
     def on_signal(self, service: str, signal: str, callback: Callable[..., None]) -> None:
+        generation = self._generation
         try:
             proxy = getattr(self.service(service), signal)
         except AttributeError:
             raise RemoteError(f"{service} has no signal {signal}") from None
-        self._signals.append((proxy, self.wait(proxy.connect(callback, _async=True), f"{service}.{signal}")))
+        self._connect(generation, proxy, callback, f"{service}.{signal}")
 
     def subscribe(self, key: str, callback: Callable[[Any], None]) -> None:
         """``ALMemory.subscriber(key).signal``; ``RemoteError`` where NAOqi refuses it."""
+        generation = self._generation
         subscriber = self.call("ALMemory", "subscriber", key)
-        self._kept.append(subscriber)  # the subscription lives as long as this object
-        link_id = self.wait(subscriber.signal.connect(callback, _async=True), f"subscriber({key}).signal")
-        self._signals.append((subscriber.signal, link_id))
+        self._connect(generation, subscriber.signal, callback, f"subscriber({key}).signal", keep=subscriber)
+
+    def _connect(self, generation: int, signal: Any, callback: Callable[..., None], what: str,
+                 keep: Any = None) -> None:
+        link_id = self.wait(self.send(generation, signal.connect, callback), what)
+        with self._lock:
+            if generation != self._generation:  # dropped meanwhile: its session is closed, with the signal
+                raise LinkDown(f"{what}: the link was replaced")
+            self._signals.append((signal, link_id))
+            if keep is not None:
+                self._kept.append(keep)  # the subscription lives as long as this object

@@ -211,16 +211,15 @@ class Microphones:
 
     def _subscribe(self) -> None:
         with self._calls:
-            session = self.link.session
-            if session is None:
-                raise LinkDown("not connected")
+            generation, session = self.link.current()
             for name in self._stale:  # best effort: a robot may still list the module of a link that died
                 with contextlib.suppress(RemoteError):
                     self.link.call(AUDIO_DEVICE, "unsubscribe", name)
             self._stale.clear()
             name = f"{self._base}_{next(self._numbers)}"
             module = MicModule(lambda *args: self._received(name, *args))
-            service_id = self.link.wait(session.registerService(name, module, _async=True), f"registerService({name})")
+            service_id = self.link.wait(self.link.send(generation, session.registerService, name, module),
+                                        f"registerService({name})")
             subscription = Subscription(session, name, service_id)
             try:
                 self.link.call(AUDIO_DEVICE, "setClientPreferences", name, self.rate, self.flag, 0)
@@ -252,7 +251,7 @@ class Microphones:
     def _forget(self, subscription: Subscription) -> None:
         """Unregister the module (the robot's service directory: bounded, it may not answer)."""
         try:
-            subscription.session.unregisterService(subscription.service_id, _async=True).wait(GOODBYE_MS)
+            self.link.send(None, subscription.session.unregisterService, subscription.service_id).wait(GOODBYE_MS)
         except Exception as exc:  # a session closed underneath
             log.debug("unregister %s: %s", subscription.name, exc)
 

@@ -99,3 +99,31 @@ def test_the_connection_line_names_the_robot_at_the_default_level(net, fakes, sp
     assert lines[0].startswith(f"sonibus: INFO: pepper: connected to Pepper 'Juliette' at {fake.url} "
                                "(NAOqi 2.5.10.7): 17 joints from almemory"), lines
     assert robot.stop()[0] == 130
+
+
+def test_nothing_is_sent_on_a_session_that_was_replaced(fakes):
+    """libqi crashed the process when a call went out on a session being closed: a call, a
+    signal or a module meant for a replaced session is refused (``LinkDown``) and not sent."""
+    from sonibus.adapters.naoqi import NaoqiConfig
+    from sonibus.adapters.naoqi.connection import Link, LinkDown
+
+    robot = fakes()
+    link = Link(NaoqiConfig(url=robot.url, connect_timeout_s=2.0), on_lost=lambda reason: None)
+    try:
+        link.connect()
+        old, session = link.current()
+        system = link.service("ALSystem")
+        assert link.call("ALSystem", "robotName") is not None
+        link.connect()  # the link is replaced: a new session
+        new, _ = link.current()
+        assert new != old
+        with pytest.raises(LinkDown, match="replaced"):
+            link.send(old, system.robotName)
+        with pytest.raises(LinkDown, match="replaced"):
+            link.send(old, session.registerService, "stale_module", object())
+        assert link.service("ALSystem") is not system, "a proxy of the closed session was reused"
+        assert link.call("ALSystem", "robotName") is not None
+        assert [s for _, s in link._retired] == [session], "a closed session is kept a while, not freed at once"
+    finally:
+        link.close()
+    assert not link._retired and link.session is None
