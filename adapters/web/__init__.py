@@ -51,7 +51,8 @@ class WebPages(Adapter):
     """Serves the operator's and the kiosk's pages and carries their commands to robots."""
 
     Config = WebConfig
-    counters = ("clients", "commands", "refused", "frames_pushed", "frames_coalesced", "commands_coalesced")
+    counters = ("clients", "commands", "refused", "frames_pushed", "frames_coalesced", "commands_coalesced",
+                "buttons_timed_out")
 
     def _start(self) -> None:
         cfg: WebConfig = self.config

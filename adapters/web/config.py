@@ -43,6 +43,7 @@ class Button:
     image: str = ""        # a file, served at /kiosk/image/<id>
     behavior: str = ""     # exactly one of behavior and say
     say: str = ""
+    timeout_s: float = 120.0  # no end heard from the robot by then: the button fails and the kiosk is free again
 
     def __post_init__(self) -> None:
         if not _BUTTON_ID.fullmatch(self.id):
@@ -52,6 +53,9 @@ class Button:
         if bool(self.behavior) == bool(self.say):
             raise bad("behavior", f"button {self.id!r} needs exactly one of 'behavior' (a behavior to run) "
                                   "and 'say' (a text to say)")
+        if not 0 < self.timeout_s <= 3600:
+            raise bad("timeout_s", f"button {self.id!r}: {self.timeout_s:g} must be in (0, 3600] seconds "
+                                   "(longer than the scenario takes: a button without an end frees the kiosk then)")
         if self.say and (not self.say.strip() or len(self.say) > MAX_SAY):
             raise bad("say", f"button {self.id!r}: the text must be 1..{MAX_SAY} characters, not blank")
         if self.image:

@@ -4,7 +4,9 @@ A press is refused while a button is under way (``busy``). A pressed button is
 ``running`` once its robot accepted the command, then ``done`` when the robot's
 behavior event says ``stopped`` (a say button: its speech event ``done``) or the
 robot was stopped (its ``command`` event of a ``stop``), or
-``failed`` (refused, a behavior event ``failed``, the robot gone). Every change goes
+``failed`` (refused, a behavior event ``failed``, the robot gone, or no end heard within
+the button's ``timeout_s``: an event lost must not keep the kiosk busy for the rest of
+the show). Every change goes
 to ``announce`` as a ``button`` message; ``states`` keeps the last of each button for
 a page that connects later. Runs on the web server's loop.
 """
@@ -28,13 +30,26 @@ class Stand:
         self.accepted = False                  # the robot took its command
         self.ended: dict[str, Any] | None = None  # its end, when it came before the robot's answer
         self.states: dict[str, dict[str, Any]] = {}
+        self.presses = 0                       # presses so far: which one an ``overdue`` is about
 
     def busy(self) -> str:
         """Why a press is refused now ("" when it is not)."""
         return f"busy: {self.current.id!r} is running" if self.current is not None else ""
 
-    def press(self, button: Button) -> None:
+    def press(self, button: Button) -> int:
+        """``button`` is under way; the press's number (for ``overdue``)."""
         self.current, self.accepted, self.ended = button, False, None
+        self.presses += 1
+        return self.presses
+
+    def overdue(self, press: int) -> bool:
+        """Press number ``press`` reached its button's ``timeout_s``: if it is still under way,
+        it fails (True)."""
+        button = self.current
+        if button is None or press != self.presses:
+            return False
+        self._end("failed", f"no end heard from '{self.kiosk.robot}' within {button.timeout_s:g} s")
+        return True
 
     def answered(self, button: Button, outcome: dict[str, Any] | CommandError) -> None:
         """The robot's answer to ``button``'s command."""

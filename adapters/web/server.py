@@ -226,13 +226,21 @@ class Pages:
         if busy:
             client.send(protocol.reply(request.id, busy))
             return
-        self.stand.press(button)
+        press = self.stand.press(button)
+        asyncio.get_running_loop().call_later(button.timeout_s, self._overdue, press)
         verb, args = button.command
         self.adapter.count("commands")
 
         def done(outcome: bus_client.Outcome) -> None:
             self.web.call(self._pressed, client, request.id, button, outcome)
         bus_client.ask(self.adapter.bus, self.config.stand.robot, verb, args, done, self.config.timeout)
+
+    def _overdue(self, press: int) -> None:
+        button = self.stand.current
+        if self.stand.overdue(press) and button is not None:
+            self.adapter.count("buttons_timed_out")
+            self.adapter.warn("kiosk", f"kiosk button {button.id!r}: no end heard from '{self.config.stand.robot}' "
+                                       f"within {button.timeout_s:g} s — the kiosk takes presses again")
 
     def _pressed(self, client: Client, id_: protocol.Id, button: Button, outcome: bus_client.Outcome) -> None:
         client.send(protocol.reply(id_, outcome))

@@ -36,3 +36,17 @@ def test_a_stop_heard_before_the_robot_answered_the_press_ends_nothing():
     assert states == ["running"] and kiosk.busy()
     kiosk.event("pepper", "speech", {"t": 2.0, "kind": "speech", "text": SAY.say, "state": "done"})
     assert states == ["running", "done"]
+
+
+def test_a_button_whose_end_never_comes_fails_at_its_timeout_and_frees_the_kiosk():
+    kiosk, states = stand()
+    first = kiosk.press(SAY)
+    kiosk.answered(SAY, {"duration": 1.8, "queued": 0})
+    assert not kiosk.overdue(first - 1), "an earlier press's timer ends nothing"
+    assert kiosk.overdue(first) and states == ["running", "failed"] and not kiosk.busy()
+    assert "within 120 s" in kiosk.states["hello"]["error"]
+    second = kiosk.press(SAY)
+    kiosk.answered(SAY, {"duration": 1.8, "queued": 0})
+    kiosk.event("pepper", "speech", {"t": 2.0, "kind": "speech", "text": SAY.say, "state": "done"})
+    assert not kiosk.overdue(second), "a press that ended in time is not failed later"
+    assert states == ["running", "failed", "running", "done"]

@@ -27,7 +27,7 @@ from sonibus.bus.config import parse
 from sonibus.bus.errors import CommandError
 
 from ..conftest import SONIBUS, Process, free_port, run_cli, wait_for
-from .conftest import KIOSK_TOKEN, RATE, TOKEN, WAVE, start_web
+from .conftest import HELLO, KIOSK_TOKEN, RATE, TOKEN, WAVE, start_web
 
 STOP_WITHIN_S = 3.0  # the node's contract (docs/adapters.md)
 
@@ -192,6 +192,28 @@ def test_a_stop_ends_the_kiosks_running_button_even_a_say_queued_behind_the_oper
     kiosk.wait("button", id="hello", state="done")
     kiosk.send({"type": "press", "id": 4, "button": "wave"})
     assert kiosk.wait("reply", id=4)["ok"] is True
+
+
+def test_a_kiosk_button_with_no_end_heard_fails_at_its_timeout_and_the_kiosk_takes_presses_again(net, websocket):
+    """An end event lost (a router restarted, a robot that never says ``stopped``) kept the
+    kiosk busy for the rest of the show."""
+    net.sim("pepper", rate_hz=RATE)
+    node = start_web(net, kiosk={"robot": "pepper", "buttons": [
+        {"id": "wave", "label": "Wave hello", "behavior": WAVE, "timeout_s": 0.5},  # WAVE takes ~3 s
+        {"id": "hello", "label": "Say hello", "say": HELLO}]})
+    wait_for(lambda: "pepper" in node.shown_robots(), 10, "pepper's info at the web node")
+    kiosk = websocket(node.url.replace("http", "ws") + "/kiosk/ws")
+    kiosk.wait("hello")
+    kiosk.send({"type": "press", "id": 1, "button": "wave"})
+    assert kiosk.wait("reply", id=1)["ok"] is True
+    failed = kiosk.wait("button", id="wave", state="failed")
+    assert failed["error"] == "no end heard from 'pepper' within 0.5 s"
+    assert node.stats["buttons_timed_out"] == 1
+    kiosk.send({"type": "press", "id": 2, "button": "hello"})
+    assert kiosk.wait("reply", id=2)["ok"] is True, "the kiosk is free again"
+    kiosk.wait("button", id="hello", state="done")
+    assert [m["state"] for m in kiosk.of("button", id="wave")] == ["running", "failed"], \
+        "the behavior's own end, later, changes nothing"
 
 
 def test_kiosk_can_only_press_its_buttons(stage, websocket):
@@ -363,6 +385,8 @@ CONFIG_ERRORS = {
     "[nodes.web.kiosk]\n[[nodes.web.kiosk.buttons]]\nid = \"x\"\nlabel = \"X\"\nsay = \"b\"": "but no robot",
     "[nodes.web.kiosk]\nrobot = \"pepper\"\n[[nodes.web.kiosk.buttons]]\nid = \"x\"\nlabel = \"X\"\n"
     "say = \"b\"\nimage = \"missing.png\"": "'missing.png' is not a file",
+    "[nodes.web.kiosk]\nrobot = \"pepper\"\n[[nodes.web.kiosk.buttons]]\nid = \"x\"\nlabel = \"X\"\n"
+    "say = \"b\"\ntimeout_s = 0": "button 'x': 0 must be in (0, 3600] seconds",
     "[nodes.web.kiosk]\nrobot = \"pepper\"\nbutons = []": "unknown key 'butons'",
     "[nodes.web.kiosk]\nrobot = \"pep/per\"": "robot name 'pep/per' must be",
     "robots = [\"pepper/joints\"]": "key 'robots': 'pepper/joints' is not a robot name or glob",
