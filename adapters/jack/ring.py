@@ -5,7 +5,9 @@ array and then advances a counter; one reader cuts what is there into chunks.
 Only the writer changes ``written`` and ``offset``, only the reader ``read``
 (a Python assignment is atomic), so neither ever waits for the other. A
 reader that falls more than the ring behind loses the oldest frames, whole
-chunks of them (counted in ``lost``), and goes on from what is still there.
+chunks of them (counted in ``lost``), and goes on from what is still there;
+a chunk the writer overwrote while it was being copied is lost the same way,
+never handed on torn.
 
 Times: the callback reads the clock late by however long JACK took to call
 it, so the wall clock of frame ``n`` is ``offset + n / rate``, ``offset`` the
@@ -76,4 +78,7 @@ class FrameRing:
         chunk = self._data[index]
         t = round(self._offset + self._read / self.rate, 6)
         self._read += frames
+        if self._written > self._read - frames + self.capacity:  # lapped during the copy: part is newer
+            self.lost += frames
+            return None
         return t, chunk
