@@ -1,12 +1,12 @@
 """A soak of the bus under bad input: the fuzz suite of ``tests/fuzz`` (every
 family — frames, joint samples, derived values, events, commands, info queries
 and garbage info replies, OSC packets — valid, malformed and hostile, the huge
-frames of issue 13 and bursts at up to 5000 inputs/s) against one ``sonibus run``
-holding every built-in node, again and again with fresh random inputs for
-``--minutes``, then the same checks as the test: every node running after each
-family, data flowing again at its normal rate to every sink, no command from
-invalid input, RSS growth under 150 MB, and the recording passing ``info``,
-``export``, a full read and ``replay``.
+frames of issue 13, a flood of 300 of them each round, and bursts at up to 5000
+inputs/s) against one ``sonibus run`` holding every built-in node, again and again
+with fresh random inputs for ``--minutes``, then the same checks as the test: every
+node running after each family, data flowing again at its normal rate to every
+sink, no command from invalid input, RSS growth under 150 MB, and the recording
+passing ``info``, ``export``, a full read and ``replay``.
 
     .venv/bin/python bench/soak.py [--minutes 3]
 
@@ -36,8 +36,8 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--minutes", type=float, default=3.0, help="how long to fuzz (default: 3)")
     args = parser.parse_args()
-    plan = Plan(examples=CI.examples, huge_frames=CI.huge_frames, bursts=CI.bursts, derandomize=False,
-                seconds=args.minutes * 60)
+    plan = Plan(examples=CI.examples, huge_frames=CI.huge_frames, huge_flood=300, bursts=CI.bursts,
+                derandomize=False, seconds=args.minutes * 60)
     tmp = Path(tempfile.mkdtemp(prefix="soak-"))
     with Show(tmp) as show:
         report = campaign(show, plan, tmp / "fuzz.json")

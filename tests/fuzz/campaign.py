@@ -31,6 +31,7 @@ RESET = (("stop", {}), ("stiffness", {"names": ["Body"], "value": 1.0}), ("aware
 class Plan:
     examples: dict[str, int]      # family → Hypothesis examples
     huge_frames: int = 10         # frames of 50,000 joints
+    huge_flood: int = 0           # more of them, at up to BURST_RATE (about 1 MB each: the memory bound's test)
     bursts: int = 8               # bursts of 500-2000 inputs at up to 5000/s
     derandomize: bool = True      # the same inputs every run (CI)
     rounds: int = 1               # the whole sequence of families, at least this often
@@ -89,6 +90,9 @@ def campaign(show: Show, plan: Plan, out: Path) -> checks.Report:
             for _ in range(plan.huge_frames):
                 fuzzer.send(huge_frame())
             _after(fuzzer, report, before, "huge frames")
+            if plan.huge_flood:
+                fuzzer.burst(huge_frame(), plan.huge_flood)
+                _after(fuzzer, report, before, f"a flood of {plan.huge_flood} huge frames")
             frames = flood()
             burst_rates.append(fuzzer.burst(frames, len(frames)))
             _after(fuzzer, report, before, f"a {frames[0].note} at {BURST_RATE}/s")
