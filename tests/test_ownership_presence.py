@@ -59,3 +59,23 @@ def test_a_robot_that_streams_is_not_silent(net, quick, receiver, caplog):
     wait_for(lambda: receiver.data(), what="data at the receiver")
     time.sleep(1.5)
     assert warnings(caplog) == []
+
+
+def test_a_silent_robot_whose_data_then_arrives_is_told_so_once(net, quick, receiver, caplog):
+    """README: the warning "comes once, and `its data arrives now` follows when it does"."""
+    caplog.set_level(logging.WARNING, logger="sonibus")
+    net.start(OscSink(OscSinkConfig(subscribe=("nao/joints/*",), targets=(receiver.target,)), name="sound"))
+    owner = net.bus("nao-owner")
+    token = owner.token(Claim("nao", int(time.time() * 1000), owner.host, "nao-owner").key)  # noqa: F841 (held)
+    info = {"robot": "nao", "model": "nao", "joints": [], "rate_hz": 50}
+    served = owner.serve(keys.info("nao"), lambda q: q.reply(q.key_expr, codec.encode(info),  # noqa: F841
+                                                             encoding=codec.ENCODING))
+    wait_for(lambda: warnings(caplog), what="the silence warning")
+    arrives = "sound: robot 'nao': its data arrives now"
+    for seq in range(5):
+        owner.put(keys.frame("nao"), {"t": time.time(), "seq": seq, "names": ["HeadYaw"], "v": [0.1]})
+        time.sleep(0.05)
+    wait_for(lambda: arrives in caplog.text, what="'its data arrives now'")
+    wait_for(lambda: receiver.data(), what="the joint at the receiver")
+    assert caplog.text.count(arrives) == 1
+    assert len(warnings(caplog)) == 1

@@ -31,7 +31,7 @@ def frames_stopped(joints: Joints, quiet_s: float = 0.3) -> bool:
 @pytest.mark.parametrize(("when", "sig"), [("reading", signal.SIGINT), ("reconnecting", signal.SIGINT),
                                            ("reconnecting", signal.SIGTERM)])
 def test_a_signal_ends_the_adapter_within_3_s_while_the_robot_is_frozen(net, spawn, tmp_path, fake_process,
-                                                                         when, sig):
+                                                                         when, sig, figure):
     fake = fake_process()
     show = tmp_path / "robot.toml"
     show.write_text(toml_node("pepper", adapter="naoqi", url=fake.url, rate_hz=50, pause_awareness=True,
@@ -51,13 +51,13 @@ def test_a_signal_ends_the_adapter_within_3_s_while_the_robot_is_frozen(net, spa
         robot.popen.wait(timeout=15.0)
     finally:
         elapsed = time.monotonic() - started
-        print(f"{when}, {signal.Signals(sig).name}: exited after {elapsed:.2f} s")
+        figure(f"frozen robot, {when}: exit after {signal.Signals(sig).name}", elapsed, "s")
     assert elapsed <= EXIT_BOUND_S, f"exited after {elapsed:.1f} s:\n" + "\n".join(robot.lines)
     assert robot.popen.returncode == 130
     assert not [line for line in robot.lines if "Traceback" in line], robot.lines
 
 
-def test_frozen_then_resumed_streams_again(net, fake_process):
+def test_frozen_then_resumed_streams_again(net, fake_process, figure):
     fake = fake_process()
     r = attach(net, fake.url, connect_timeout_s=0.5, retry_max_s=0.5)
     r.events.wait("connection", state="connected")
@@ -65,9 +65,12 @@ def test_frozen_then_resumed_streams_again(net, fake_process):
     r.events.wait("connection", timeout=5.0, state="lost")
     wait_for(lambda: frames_stopped(r.joints, 1.0), what="reconnect attempts on the frozen robot")
     outage = r.joints.last()[0]
+    resumed = time.time()
     fake.resume()
     wait_for(lambda: r.events.find("connection", state="connected")[1:], timeout=10.0, what="connected again")
     assert r.joints.next(5)[0][0] > outage
+    first = r.joints.complete(outage)[0][0]
+    figure("frozen then resumed: first frame after the resume", r.joints.t[first] - resumed, "s")
     assert send_command(r.bus, "pepper", "joints/set", {"names": ["HeadYaw"], "angles": [0.3]}) == {}
 
 
