@@ -6,6 +6,7 @@ layer's business (``bus/messages.py``).
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Any
 
 import msgpack
@@ -22,9 +23,26 @@ def encode(message: dict[str, Any]) -> bytes:
     return msgpack.packb(message, use_bin_type=True)
 
 
-def decode(payload: bytes | zenoh.ZBytes | None) -> dict[str, Any]:
+@dataclass(frozen=True)
+class Oversize:
+    """What a subscription queues in place of a payload over the size limit
+    (``messages.Limits``): its size only. A flood of huge payloads must not fill the
+    memory before the gate refuses them; ``len()`` is the payload's size."""
+
+    size: int
+
+    def __len__(self) -> int:
+        return self.size
+
+    def __repr__(self) -> str:
+        return f"<{self.size} bytes: over the size limit, not kept>"
+
+
+def decode(payload: bytes | zenoh.ZBytes | Oversize | None) -> dict[str, Any]:
     if payload is None:
         return {}
+    if isinstance(payload, Oversize):
+        raise DecodeError(f"payload of {payload.size} bytes is over the size limit (not kept)")
     data = payload.to_bytes() if isinstance(payload, zenoh.ZBytes) else payload
     if not data:
         return {}

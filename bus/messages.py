@@ -65,6 +65,10 @@ class Limits:
     max_payload: int = 64 * 1024       # bytes of any payload but robot info
     max_info_payload: int = 1 << 20    # bytes of a robot's info (joint table, behaviors)
 
+    def payload_limit(self, section: str) -> int:
+        """The most bytes of a payload in ``section`` of the key space."""
+        return self.max_info_payload if section == "info" else self.max_payload
+
 
 class Gate:
     """``check(key, payload)``: the decoded, checked message, or ``BadMessage``.
@@ -82,7 +86,7 @@ class Gate:
         section = SECTIONS.get(key.section)
         if section is None:
             raise BadMessage(f"'{key.section}' is not a section of the key space ({', '.join(SECTIONS)})")
-        limit = self.limits.max_info_payload if key.section == "info" else self.limits.max_payload
+        limit = self.limits.payload_limit(key.section)
         if len(payload) > limit:
             raise BadMessage(f"payload of {len(payload)} bytes is over the limit of {limit}")
         try:

@@ -144,7 +144,8 @@ class Bus:
                   stamped: bool = False, skip: Callable[[str], bool] | None = None,
                   ) -> tuple[zenoh.Subscriber, SampleQueue]:
         """Samples of ``keyexpr`` as ``(key, payload bytes)`` in a bounded queue
-        (``(key, payload, time.monotonic_ns())`` of arrival if ``stamped``).
+        (``(key, payload, time.monotonic_ns())`` of arrival if ``stamped``). A payload
+        over the gate's size limit is queued as ``codec.Oversize`` (its size only).
 
         ``keyexpr`` may use globs inside a chunk (``pepper/joints/R*``); a bad one
         raises ``ConfigError``. Pass ``queue`` to feed several subscriptions into one,
@@ -155,10 +156,22 @@ class Bus:
         def enqueue(sample: zenoh.Sample) -> None:
             key = str(sample.key_expr)
             if skip is None or not skip(key):
-                queue.put((key, sample.payload.to_bytes(), time.monotonic_ns()) if stamped
-                          else (key, sample.payload.to_bytes()))
+                payload = self._kept(key, sample.payload)
+                queue.put((key, payload, time.monotonic_ns()) if stamped else (key, payload))
 
         return self.session.declare_subscriber(keyexpr, self.guarded(enqueue, f"subscriber to {keyexpr}")), queue
+
+    def _kept(self, key: str, payload: zenoh.ZBytes) -> bytes | codec.Oversize:
+        """The bytes of ``payload``, or only its size when it is over the gate's limit."""
+        size = len(payload)
+        if size > self.limits.max_payload:
+            try:
+                section = keys.Key.parse(key).section
+            except ValueError:
+                section = ""
+            if size > self.limits.payload_limit(section):
+                return codec.Oversize(size)
+        return payload.to_bytes()
 
     # -- presence (liveliness tokens) ---------------------------------------------------
 

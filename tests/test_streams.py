@@ -10,7 +10,7 @@ import pytest
 from sonibus import schemas
 from sonibus.bus import codec
 from sonibus.bus.queue import SampleQueue
-from sonibus.bus.streams import Incoming, Plan, Streams, plan
+from sonibus.bus.streams import Incoming, Plan, Selection, Streams, plan
 
 from .conftest import wait_for
 
@@ -92,3 +92,36 @@ def test_a_broad_pattern_takes_each_joint_once(net):
     assert all(len(m.joints) == 17 for m in taken if m.source.section == "frame")
     watcher.undeclare()
     streams.undeclare()
+
+
+def test_a_payload_over_the_size_limit_is_queued_as_its_size_only_and_refused_by_the_gate(net):
+    """A flood of huge frames filled a sink's memory (+251 MB in the soak) before the gate
+    refused them by their size: the subscription keeps only the size of such a payload."""
+    sink, robot = net.bus("sink"), net.bus("robot")
+    limit = sink.limits.max_payload
+    subscriber, queue = sink.subscribe("pepper/**")
+    try:
+        huge = {"t": 1.0, "seq": 1, "names": ["J"], "v": [0.0], "pad": "x" * (4 * limit)}
+        info = {"robot": "pepper", "pad": "x" * (2 * limit)}  # a robot's info may be larger: kept
+        items: dict[str, object] = {}
+
+        def both_arrived() -> bool:  # (sent again until the subscription has reached the robot's session)
+            robot.put("pepper/frame", huge)
+            robot.put("pepper/info", info)
+            items.update(queue.drain(timeout=0.2))
+            return len(items) == 2
+        wait_for(both_arrived, what="both payloads at the sink")
+        size = len(codec.encode(huge))
+        assert isinstance(items["pepper/frame"], codec.Oversize) and len(items["pepper/frame"]) == size
+        assert items["pepper/info"] == codec.encode(info)
+        counted: list[tuple[str, int]] = []
+        warned: list[str] = []
+        assert Selection(["pepper/joints/*"], sink.limits).take(
+            "pepper/frame", items["pepper/frame"], lambda k, n: counted.append((k, n)),
+            lambda k, m: warned.append(m)) is None
+        assert ("bad", 1) in counted
+        assert warned == [f"message on 'pepper/frame' refused: payload of {size} bytes is over the limit of {limit}"]
+        with pytest.raises(codec.DecodeError, match="over the size limit"):
+            codec.decode(items["pepper/frame"])
+    finally:
+        subscriber.undeclare()
