@@ -36,7 +36,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--minutes", type=float, default=3.0, help="how long to fuzz (default: 3)")
     args = parser.parse_args()
-    plan = Plan(examples=CI.examples, huge_frames=CI.huge_frames, huge_flood=300, bursts=CI.bursts,
+    plan = Plan(examples=CI.examples, huge_frames=CI.huge_frames, huge_flood=CI.huge_flood, bursts=CI.bursts,
                 derandomize=False, seconds=args.minutes * 60)
     tmp = Path(tempfile.mkdtemp(prefix="soak-"))
     with Show(tmp) as show:

@@ -39,7 +39,7 @@ class Plan:
 
 
 CI = Plan(examples={"frame": 300, "joint": 200, "derived": 150, "event": 150, "command": 150, "info": 60,
-                    "osc": 300})
+                    "osc": 300}, huge_flood=300)
 
 
 def _run(fuzzer: Fuzzer, strategy: st.SearchStrategy[Any], examples: int, derandomize: bool,
