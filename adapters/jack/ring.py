@@ -1,13 +1,15 @@
 """``FrameRing``: audio frames from JACK's process callback to a worker, without a lock.
 
-One writer (the real-time callback) copies each block into a preallocated
-array and then advances a counter; one reader cuts what is there into chunks.
-Only the writer changes ``written`` and ``offset``, only the reader ``read``
+One writer (the real-time callback) says how far the block it copies in will
+reach (``writing``), copies it into a preallocated array and then advances a
+counter (``written``); one reader cuts what is there into chunks.
+Only the writer changes ``writing``, ``written`` and ``offset``, only the reader ``read``
 (a Python assignment is atomic), so neither ever waits for the other. A
 reader that falls more than the ring behind loses the oldest frames, whole
 chunks of them (counted in ``lost``), and goes on from what is still there;
 a chunk the writer overwrote while it was being copied is lost the same way,
-never handed on torn.
+never handed on torn (also when the writer was still in the middle of its block:
+``writing`` says so before ``written`` does).
 
 Times: the callback reads the clock late by however long JACK took to call
 it, so the wall clock of frame ``n`` is ``offset + n / rate``, ``offset`` the
@@ -49,12 +51,14 @@ class FrameRing:
         self.lost = 0                 # frames overwritten before they were read
         self._data = np.zeros((capacity, channels), np.float32)
         self._written = 0             # frames ever written (writer only)
+        self._writing = 0             # frames written once the block being copied in is (writer only)
         self._read = 0                # frames ever read (reader only)
         self._offset = math.inf       # wall-clock s of frame 0 (writer only)
 
     def write(self, columns: Sequence[np.ndarray], t: float) -> None:
         """One block, a column per channel, whose first frame was taken at ``t`` (wall clock)."""
         n = len(columns[0])
+        self._writing = self._written + n  # first: a reader sees which frames may be changing under it
         start = self._written % self.capacity
         first = min(n, self.capacity - start)
         for channel, column in enumerate(columns):
@@ -78,7 +82,7 @@ class FrameRing:
         chunk = self._data[index]
         t = round(self._offset + self._read / self.rate, 6)
         self._read += frames
-        if self._written > self._read - frames + self.capacity:  # lapped during the copy: part is newer
+        if self._writing > self._read - frames + self.capacity:  # lapped during the copy (or being): part is newer
             self.lost += frames
             return None
         return t, chunk

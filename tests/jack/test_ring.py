@@ -40,3 +40,30 @@ def test_a_copy_the_writer_did_not_reach_is_handed_on():
     ring._data = data
     t, chunk = ring.read(4)
     assert chunk[:, 0].tolist() == [0.0, 1.0, 2.0, 3.0] and t == 100.0 and ring.lost == 0
+
+
+class PreemptedWrite(np.ndarray):
+    """The ring's storage, whose writer is preempted right after it copied the wrapped
+    part of its block, before it advanced its counter: the reader runs then."""
+
+    reader: object
+
+    def __setitem__(self, index, value):  # type: ignore[no-untyped-def]
+        super().__setitem__(index, value)
+        reader = getattr(self, "reader", None)
+        if reader is not None and isinstance(index, tuple) and index[0].start is None:
+            self.reader = None
+            reader()
+
+
+def test_a_chunk_the_writer_is_still_overwriting_is_lost_whole_not_torn():
+    ring = FrameRing(channels=1, rate=1000, capacity=16)
+    ring.write([np.arange(6, dtype=np.float32)], t=100.0)
+    data = ring._data.view(PreemptedWrite)
+    read: list[object] = []
+    data.reader = lambda: read.append(ring.read(4))
+    ring._data = data
+    ring.write([np.full(12, 9.0, np.float32)], t=100.006)      # frames 6..17: slots 6..15, then 0 and 1
+    assert read == [None] and ring.lost == 4                  # frames 0..3 were half overwritten
+    t, chunk = ring.read(4)
+    assert chunk[:, 0].tolist() == [9.0, 9.0, 9.0, 9.0] and t == 100.008 and ring.lost == 8  # (4..7 too near)
