@@ -51,9 +51,11 @@ class Stand:
         self._end("failed", f"no end heard from '{self.kiosk.robot}' within {button.timeout_s:g} s")
         return True
 
-    def answered(self, button: Button, outcome: dict[str, Any] | CommandError) -> None:
-        """The robot's answer to ``button``'s command."""
-        if button is not self.current:
+    def answered(self, button: Button, outcome: dict[str, Any] | CommandError, press: int | None = None) -> None:
+        """The robot's answer to ``button``'s command (of press number ``press``; None: the
+        current press). An answer to a press that timed out is late: it ends nothing, not
+        even a new press of the same button."""
+        if button is not self.current or press not in (None, self.presses):
             return
         if isinstance(outcome, CommandError):
             self._end("failed", outcome.message)

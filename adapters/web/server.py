@@ -232,7 +232,7 @@ class Pages:
         self.adapter.count("commands")
 
         def done(outcome: bus_client.Outcome) -> None:
-            self.web.call(self._pressed, client, request.id, button, outcome)
+            self.web.call(self._pressed, client, request.id, button, press, outcome)
         bus_client.ask(self.adapter.bus, self.config.stand.robot, verb, args, done, self.config.timeout)
 
     def _overdue(self, press: int) -> None:
@@ -242,9 +242,10 @@ class Pages:
             self.adapter.warn("kiosk", f"kiosk button {button.id!r}: no end heard from '{self.config.stand.robot}' "
                                        f"within {button.timeout_s:g} s — the kiosk takes presses again")
 
-    def _pressed(self, client: Client, id_: protocol.Id, button: Button, outcome: bus_client.Outcome) -> None:
+    def _pressed(self, client: Client, id_: protocol.Id, button: Button, press: int,
+                 outcome: bus_client.Outcome) -> None:
         client.send(protocol.reply(id_, outcome))
-        self.stand.answered(button, outcome)
+        self.stand.answered(button, outcome, press)
 
     # -- what the bus says (on the loop) ---------------------------------------------
 

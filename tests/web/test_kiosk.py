@@ -6,6 +6,7 @@ from __future__ import annotations
 
 from sonibus.adapters.web.config import Button, Kiosk
 from sonibus.adapters.web.kiosk import Stand
+from sonibus.bus.errors import CommandError
 
 SAY = Button("hello", "Say hello", say="Hello, visitors!")
 STOPPED = {"t": 1.0, "kind": "command", "verb": "stop", "args": {}, "ok": True}
@@ -50,3 +51,14 @@ def test_a_button_whose_end_never_comes_fails_at_its_timeout_and_frees_the_kiosk
     kiosk.event("pepper", "speech", {"t": 2.0, "kind": "speech", "text": SAY.say, "state": "done"})
     assert not kiosk.overdue(second), "a press that ended in time is not failed later"
     assert states == ["running", "failed", "running", "done"]
+
+
+def test_a_late_answer_to_a_press_that_timed_out_ends_nothing_of_the_next_press():
+    kiosk, states = stand()
+    first = kiosk.press(SAY)
+    assert kiosk.overdue(first) and states == ["failed"]      # the robot did not answer within timeout_s
+    second = kiosk.press(SAY)                                # the same button again
+    kiosk.answered(SAY, CommandError("timeout", "no answer within 5 s"), first)  # the first press's, late
+    assert states == ["failed"] and kiosk.busy(), "a late answer ended the press after it"
+    kiosk.answered(SAY, {"duration": 1.8, "queued": 0}, second)
+    assert states == ["failed", "running"] and kiosk.busy()
