@@ -107,12 +107,18 @@ class Link:
             session.setClientAuthenticatorFactory(self._factory)
         with self._lock:
             self._generation += 1
-            generation, self.session = self._generation, session
+            generation = self._generation
+        # set up before other threads see the session (nobody closes it meanwhile); connecting
+        # is sent like any call: never while a drop closes it, not at all once dropped
         session.disconnected.connect(lambda reason="": self._disconnected(reason, generation))
-        self.wait(session.connect(self.url, _async=True), "connect")
         with self._lock:
-            if self._generation == generation:
-                self.connected = True
+            if generation == self._generation:
+                self.session = session
+        self.wait(self.send(generation, session.connect, self.url), "connect")
+        with self._lock:
+            if self._generation != generation:  # dropped while it connected: not connected, and says so
+                raise LinkDown("connect: the link was dropped meanwhile")
+            self.connected = True
 
     def drop(self) -> None:
         """Forget the current connection (signals, services) and close it, waiting at most

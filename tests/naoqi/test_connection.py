@@ -4,6 +4,7 @@ says so on the bus, and streams again on its own."""
 from __future__ import annotations
 
 import socket
+import threading
 import time
 
 import pytest
@@ -127,3 +128,64 @@ def test_nothing_is_sent_on_a_session_that_was_replaced(fakes):
     finally:
         link.close()
     assert not link._retired and link.session is None
+
+
+class WatchedLock:
+    """A lock that notes when a thread other than its holder waits for it."""
+
+    def __init__(self) -> None:
+        self._lock = threading.Lock()
+        self.waited = threading.Event()
+
+    def acquire(self, blocking: bool = True, timeout: float = -1) -> bool:
+        if not self._lock.acquire(blocking=False):
+            self.waited.set()
+            return self._lock.acquire(blocking, timeout)
+        return True
+
+    def release(self) -> None:
+        self._lock.release()
+
+    def __enter__(self) -> WatchedLock:
+        self.acquire()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.release()
+
+
+def test_a_connect_waits_for_a_close_under_way_and_a_drop_meanwhile_wins(fakes):
+    """Connecting is sent like a call: not while a session is being closed (the send lock is
+    held), and not at all once the link was dropped meanwhile; ``connect`` says so (``LinkDown``)
+    rather than return with the link not connected."""
+    from sonibus.adapters.naoqi import NaoqiConfig
+    from sonibus.adapters.naoqi.connection import Link, LinkDown
+
+    robot = fakes()
+    link = Link(NaoqiConfig(url=robot.url, connect_timeout_s=5.0), on_lost=lambda reason: None)
+    link._sending = sending = WatchedLock()
+    outcome: dict[str, object] = {}
+
+    def connect() -> None:
+        try:
+            link.connect()
+            outcome["connect"] = "returned"
+        except LinkDown as exc:
+            outcome["connect"] = exc
+
+    connecting = threading.Thread(target=connect)
+    dropping = threading.Thread(target=link.drop)
+    try:
+        with sending:  # a close under way
+            connecting.start()
+            wait_for(lambda: sending.waited.is_set() or "connect" in outcome, what="the connect to wait or return")
+            assert "connect" not in outcome, "connect went out while a session was being closed"
+            assert link.session is not None and not link.connected
+            dropping.start()  # (a stop: it closes the new session once the send lock is free)
+            wait_for(lambda: link.session is None, what="the drop to take the session")
+        connecting.join(10.0)
+        dropping.join(10.0)
+        assert isinstance(outcome["connect"], LinkDown), outcome
+        assert not link.connected and link.session is None
+    finally:
+        link.close()
