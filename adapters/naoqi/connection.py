@@ -90,6 +90,7 @@ class Link:
         self.session: Any = None
         self.connected = False
         self._generation = 0  # which session is current: signals of older ones are ignored
+        self._closed = False  # for good: no session is opened any more
         self._lock = threading.Lock()
         self._sending = threading.Lock()  # held while a call is sent on a session, and while one is closed
         self._retired: list[tuple[float, Any]] = []  # (monotonic time it may be freed, closed session)
@@ -106,6 +107,8 @@ class Link:
         if self._factory is not None:
             session.setClientAuthenticatorFactory(self._factory)
         with self._lock:
+            if self._closed:  # (a reader that was connecting when the adapter stopped)
+                raise LinkDown("connect: the link is closed")
             self._generation += 1
             generation = self._generation
         # set up before other threads see the session (nobody closes it meanwhile); connecting
@@ -152,7 +155,10 @@ class Link:
                 future.wait(max(0, int((deadline - time.monotonic()) * 1000)))
 
     def close(self) -> None:
-        """Drop the connection for good (the adapter stops)."""
+        """Drop the connection for good (the adapter stops): a connect under way, or tried
+        later, opens nothing (``LinkDown``)."""
+        with self._lock:
+            self._closed = True
         self.drop()
         self._retired.clear()
 

@@ -189,3 +189,21 @@ def test_a_connect_waits_for_a_close_under_way_and_a_drop_meanwhile_wins(fakes):
         assert not link.connected and link.session is None
     finally:
         link.close()
+
+
+def test_a_closed_link_opens_no_session_again(fakes):
+    """``close`` is for good: the adapter's reader, connecting (or about to) when the node stops,
+    opened a session after the stop closed the link; nothing closed that one."""
+    from sonibus.adapters.naoqi import NaoqiConfig
+    from sonibus.adapters.naoqi.connection import Link, LinkDown
+
+    robot = fakes()
+    link = Link(NaoqiConfig(url=robot.url, connect_timeout_s=5.0), on_lost=lambda reason: None)
+    link.connect()
+    link.close()
+    try:
+        with pytest.raises(LinkDown, match="closed"):
+            link.connect()
+        assert link.session is None and not link.connected
+    finally:
+        link.close()
