@@ -33,6 +33,17 @@ LINK_ERRORS = ("Session closed", "Socket is not connected", "no answer within", 
                "Future has already been set")  # (libqi's words for a call cut short by a closing session)
 
 
+_kept_closed: list[tuple[float, Any]] = []  # closed sessions of closed links: (time they may be freed, session)
+_kept_lock = threading.Lock()
+
+
+def _keep_closed(sessions: list[tuple[float, Any]]) -> None:
+    """Keep closed ``sessions`` past the ``Link`` that closed them, until they may be freed."""
+    now = time.monotonic()
+    with _kept_lock:
+        _kept_closed[:] = [(free_at, old) for free_at, old in _kept_closed if free_at > now] + sessions
+
+
 class LinkDown(Exception):
     """The robot cannot be reached (connect failed, the link broke, a call timed out)."""
 
@@ -160,7 +171,8 @@ class Link:
         with self._lock:
             self._closed = True
         self.drop()
-        self._retired.clear()
+        retired, self._retired = self._retired, []
+        _keep_closed(retired)  # (work may still be under way on them: the node's threads stop after this)
 
     def _disconnected(self, reason: Any, generation: int) -> None:
         with self._lock:

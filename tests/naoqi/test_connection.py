@@ -207,3 +207,24 @@ def test_a_closed_link_opens_no_session_again(fakes):
         assert link.session is None and not link.connected
     finally:
         link.close()
+
+
+def test_the_sessions_of_a_closed_link_are_not_freed_at_its_close(fakes):
+    """The node's threads stop after it closes the link, and libqi crashed when a session was
+    freed with work on it still under way: a closed link's sessions outlive it for a while."""
+    import gc
+    import weakref
+
+    from sonibus.adapters.naoqi import NaoqiConfig
+    from sonibus.adapters.naoqi.connection import Link
+
+    robot = fakes()
+    link = Link(NaoqiConfig(url=robot.url, connect_timeout_s=2.0), on_lost=lambda reason: None)
+    link.connect()
+    first = weakref.ref(link.current()[1])
+    link.connect()
+    last = weakref.ref(link.current()[1])
+    link.close()
+    del link
+    gc.collect()
+    assert first() is not None and last() is not None, "a session was freed at the close of its link"
