@@ -1,8 +1,9 @@
 """sonibus core: the bus, its keys and payloads, adapters and their lifecycle.
 
+    from contextlib import closing
     from sonibus.bus import Bus, BusConfig, open_session, send_command
 
-    with open_session(BusConfig()) as session:          # join the bus
+    with closing(open_session(BusConfig())) as session:  # join the bus (and close it at the end)
         bus = Bus(session)
         send_command(bus, "pepper", "say", {"text": "hello"})
         subscriber, queue = bus.subscribe("pepper/joints/*")

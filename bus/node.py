@@ -1,8 +1,9 @@
 """``Bus``: one node's handle on a Zenoh session, the only way adapters and the
 core talk (``tests/test_bus_only.py`` fails if another module touches a session).
 
+>>> from contextlib import closing
 >>> from sonibus.bus import BusConfig, open_session
->>> with open_session(BusConfig(multicast=False)) as session:
+>>> with closing(open_session(BusConfig(multicast=False))) as session:
 ...     bus = Bus(session, node="demo")
 ...     bus.put("pepper/events/hello", {"t": 0.0, "kind": "hello"})
 """

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import re
 import threading
@@ -51,7 +52,7 @@ def run(adapters: list[Adapter], bus_config: BusConfig, stop: threading.Event,
     reverse order and close the session — also on Ctrl-C or an error. ``host`` names
     this machine on the bus (default: its hostname). A node that fails (a worker
     died) stops them all too, and ``NodeFailed`` says which and why."""
-    with open_session(bus_config, wait=True) as session:
+    with contextlib.closing(open_session(bus_config, wait=True)) as session:
         bus = Bus(session, host=host, limits=Limits(max_future_s=bus_config.max_future_s))
         started: list[Adapter] = []
         try:

@@ -1,7 +1,8 @@
 """Zenoh sessions from a typed config: the one place that builds ``zenoh.Config``.
 
+>>> from contextlib import closing
 >>> cfg = BusConfig(mode="peer", multicast=False)
->>> with open_session(cfg) as session:
+>>> with closing(open_session(cfg)) as session:
 ...     len(str(session.zid())) > 0
 True
 """
@@ -326,7 +327,11 @@ def lease_s(session: zenoh.Session) -> float:
 
 
 def open_session(config: BusConfig, wait: bool = False) -> zenoh.Session:
-    """Open a Zenoh session; the caller closes it (it is a context manager).
+    """Open a Zenoh session; the caller closes it with ``session.close()``, or
+    ``with contextlib.closing(open_session(cfg)) as session``. Not with the session's
+    own ``with``: its exit fails ("Already borrowed") when a Zenoh callback is using
+    the session at that instant (a conflict event put as the node stops), and
+    ``close()`` does not.
 
     A client needs its router (at ``connect``, or found by multicast). With ``wait``
     (nodes that run for days) it waits for one, trying every ``reconnect_ms`` —

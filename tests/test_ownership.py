@@ -11,6 +11,7 @@ import logging
 import threading
 import time
 from collections.abc import Iterator
+from contextlib import closing
 
 import pytest
 
@@ -31,7 +32,7 @@ RACE_TRIES = 20
 def router() -> Iterator[str]:
     """A Zenoh router on loopback (as `sonibus router`); its endpoint."""
     endpoint = f"tcp/127.0.0.1:{free_port()}"
-    with open_session(BusConfig(mode="router", multicast=False, listen=(endpoint,))):
+    with closing(open_session(BusConfig(mode="router", multicast=False, listen=(endpoint,)))):
         yield endpoint
 
 
@@ -47,13 +48,13 @@ def test_a_second_owner_joining_right_after_it_connects_is_never_silent(router, 
     loudly; none may stream beside the first."""
     caplog.set_level(logging.WARNING, logger="sonibus")
     peer = BusConfig(multicast=False, connect=(router,))
-    with open_session(peer) as first_session:
+    with closing(open_session(peer)) as first_session:
         first = sim(Bus(first_session, host="robot-laptop"), "pepper")
         refused = standing_by = silent = 0
         try:
             for attempt in range(RACE_TRIES):
                 caplog.clear()
-                with open_session(peer) as session:
+                with closing(open_session(peer)) as session:
                     second = SimRobot(SimConfig(robot="pepper", rate_hz=50), name=f"again{attempt}")
                     try:
                         second.start(Bus(session, host="other-pc"))
@@ -111,7 +112,7 @@ def test_two_owners_started_in_the_same_instant_leave_one_owner(router, caplog, 
     both_claimed = 0
     for attempt in range(SAME_INSTANT_TRIES):
         caplog.clear()
-        with open_session(peer) as one, open_session(peer) as two:
+        with closing(open_session(peer)) as one, closing(open_session(peer)) as two:
             buses = [Bus(one, host="laptop-a"), Bus(two, host="laptop-b")]
             owners = [SimRobot(SimConfig(robot="pepper", rate_hz=50), name=f"{side}{attempt}") for side in "ab"]
             refusals = start_together(owners, buses)

@@ -148,5 +148,5 @@ def _zenoh_options(items: list[str], options: dict[str, Any]) -> dict[str, Any]:
 @contextlib.contextmanager
 def joined(cfg: BusConfig, node: str = "") -> Iterator[Bus]:
     """A ``Bus`` on a session of its own for one command, closed at the end."""
-    with open_session(cfg) as session:
+    with contextlib.closing(open_session(cfg)) as session:
         yield Bus(session, node=node)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
 import socket
 from dataclasses import replace
 
@@ -44,7 +45,7 @@ def _router(args: argparse.Namespace, env: Environment) -> Exit:
     cfg = replace(bus_config(args), mode="router")
     if not cfg.listen:
         cfg = replace(cfg, listen=("tcp/0.0.0.0:7447",))
-    with open_session(cfg) as session:
+    with contextlib.closing(open_session(cfg)) as session:
         env.say(f"sonibus router {session.zid()} listening on {', '.join(cfg.listen)}")
         while not env.stop.wait(0.25):
             pass
