@@ -38,6 +38,7 @@ class Client:
 
     def __init__(self, ws: aiohttp.ClientWebSocketResponse) -> None:
         self.ws, self.channels, self.server_info = ws, {}, None
+        self.said: list[str] = []  # every text message's op (and channel ids): what a timeout reports
 
     async def until(self, done: Any, timeout: float = 8.0) -> list[tuple[int, int, bytes]]:
         """Read until ``done(messages)`` holds (messages: (subscription, log time, payload))."""
@@ -45,10 +46,16 @@ class Client:
         deadline = time.monotonic() + timeout
         while not done(found):
             left = deadline - time.monotonic()
-            assert left > 0, f"timed out; channels {sorted(self.channels)}, {len(found)} messages"
-            message = await self.ws.receive(timeout=left)
+            assert left > 0, (f"timed out; channels {sorted((t, c['id']) for t, c in self.channels.items())}, "
+                              f"{len(found)} messages; the server said {self.said}")
+            try:
+                message = await self.ws.receive(timeout=left)
+            except TimeoutError:
+                continue  # (said by the assertion above)
             if message.type == aiohttp.WSMsgType.TEXT:
                 data = json.loads(message.data)
+                ids = [c.get("id") for c in data.get("channels", [])] + data.get("channelIds", [])
+                self.said.append(f"{data['op']} {ids}" if ids else f"{data['op']}: {str(data)[:200]}")
                 if data["op"] == "serverInfo":
                     self.server_info = data
                 elif data["op"] == "advertise":
