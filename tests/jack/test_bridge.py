@@ -198,7 +198,11 @@ def test_a_jack_server_that_does_not_answer_at_start_is_one_line_not_a_hang(net,
     monkeypatch.setattr(jack_client, "OPEN_TIMEOUT_S", 1.0)
     os.kill(server.popen.pid, signal.SIGSTOP)  # jackd stopped (Ctrl-Z in its terminal)
     try:
-        errors = start_errors(net)
+        errors: list[str] = []
+        starting = threading.Thread(target=lambda: errors.append(_start_error(net)), daemon=True)
+        starting.start()
+        starting.join(10.0)
+        assert not starting.is_alive(), "start hangs on a JACK server that does not answer"
     finally:
         os.kill(server.popen.pid, signal.SIGCONT)
     assert len(errors) == 1 and f"JACK server '{name}' does not answer" in errors[0], errors
@@ -217,9 +221,19 @@ def test_a_jack_server_that_stops_answering_once_the_client_is_open_is_one_line_
     """Registering ports, activating and connecting wait on the server too."""
     name, server = jack_server
     monkeypatch.setattr(jack_client, "OPEN_TIMEOUT_S", 1.0)
-    freeze_after_open(server, monkeypatch)
+    opened = jack_client.open_client
+
+    def open_then_freeze(*args):
+        client = opened(*args)
+        os.kill(server.popen.pid, signal.SIGSTOP)
+        return client
+    monkeypatch.setattr(jack_client, "open_client", open_then_freeze)
     try:
-        errors = start_errors(net)
+        errors: list[str] = []
+        starting = threading.Thread(target=lambda: errors.append(_start_error(net)), daemon=True)
+        starting.start()
+        starting.join(10.0)
+        assert not starting.is_alive(), "start hangs on a JACK server that stopped answering"
     finally:
         os.kill(server.popen.pid, signal.SIGCONT)
     assert len(errors) == 1 and f"JACK server '{name}' does not answer within 1 s (register ports)" in errors[0], \
@@ -238,23 +252,8 @@ def test_a_jack_server_that_stops_answering_once_the_client_is_open_is_one_line_
 def test_a_client_whose_call_was_given_up_on_is_closed_after_that_call_not_under_it(net, jack_server, monkeypatch):
     """The stop of a node whose start gave up on registering ports closed the client while
     libjack was still in that call: the process crashed once the server answered again."""
-    _, server = jack_server
+    name, server = jack_server
     monkeypatch.setattr(jack_client, "OPEN_TIMEOUT_S", 1.0)
-    freeze_after_open(server, monkeypatch)
-    try:
-        errors = start_errors(net)
-        assert "(register ports)" in errors[0], errors
-        threads = [t.name for t in threading.enumerate()]
-        assert "jack-register-ports" in threads, threads  # the call given up on, still in libjack
-        assert not [t for t in threads if t.startswith("jack-close")], "the stop closes the client under it"
-    finally:
-        os.kill(server.popen.pid, signal.SIGCONT)
-    wait_for(lambda: not [t for t in threading.enumerate() if t.name.startswith(("jack-register", "jack-close"))],
-             what="the call given up on to end, and close its client")
-
-
-def freeze_after_open(server, monkeypatch) -> None:
-    """The node's start stops jackd (SIGSTOP) right after its client opened."""
     opened = jack_client.open_client
 
     def open_then_freeze(*args):
@@ -262,16 +261,25 @@ def freeze_after_open(server, monkeypatch) -> None:
         os.kill(server.popen.pid, signal.SIGSTOP)
         return client
     monkeypatch.setattr(jack_client, "open_client", open_then_freeze)
-
-
-def start_errors(net) -> list[str]:
-    """The errors of the node's start, run on a thread that must end within 10 s."""
-    errors: list[str] = []
-    starting = threading.Thread(target=lambda: errors.append(_start_error(net)), daemon=True)
-    starting.start()
-    starting.join(10.0)
-    assert not starting.is_alive(), "start hangs on a JACK server that does not answer"
-    return errors
+    try:
+        errors: list[str] = []
+        starting = threading.Thread(target=lambda: errors.append(_start_error(net)), daemon=True)
+        starting.start()
+        starting.join(10.0)
+        assert not starting.is_alive() and "(register ports)" in errors[0], errors
+        threads = [t.name for t in threading.enumerate()]
+        assert "jack-register-ports" in threads, threads  # the call given up on, still in libjack
+        assert not [t for t in threads if t.startswith("jack-close")], "the stop closes the client under it"
+    finally:
+        os.kill(server.popen.pid, signal.SIGCONT)
+    wait_for(lambda: not [t for t in threading.enumerate() if t.name.startswith(("jack-register", "jack-close"))],
+             what="the call given up on to end, and close its client")
+    probe = jack.Client("probe", no_start_server=True, servername=name)
+    try:
+        wait_for(lambda: not [p.name for p in probe.get_ports() if p.name.startswith("bridge:")],
+                 what="no port of the failed node left on the server")
+    finally:
+        probe.close()
 
 
 def _start_error(net) -> str:
