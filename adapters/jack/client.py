@@ -85,7 +85,7 @@ def open_client(name: str, server: str) -> jack.Client:
     is closed)."""
     try:
         return answered(server, "open", lambda: jack.Client(name, no_start_server=True, servername=server or None),
-                        late=lambda client: None if client is None else client.close())
+                        late=lambda client: client and client.close())
     except jack.JackOpenError as exc:
         jackd = f"jackd -n {server}" if server else "jackd"
         log.debug("jack.Client(%r, servername=%r): %s", name, server, exc)
