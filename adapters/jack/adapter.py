@@ -17,8 +17,7 @@ from __future__ import annotations
 
 import logging
 import time
-from collections.abc import Callable
-from typing import Any, TypeVar
+from typing import Any
 
 import jack
 import numpy as np
@@ -34,7 +33,6 @@ from .config import JackConfig
 from .ring import FrameRing
 
 log = logging.getLogger(__name__)
-T = TypeVar("T")
 
 RING_S = 1.0          # input frames the ring holds: how far behind the publish worker may fall
 PAYLOAD_SLACK = 64    # bytes of a chunk's payload besides its PCM (t, seq, rate, channels, keys)
@@ -56,7 +54,7 @@ class JackBridge(Adapter):
         self.client_name = self._client.name  # (JACK may have added -01: the ports are named after it)
         self.rate = self._client.samplerate
         self.chunk_frames = max(1, round(cfg.chunk_ms * self.rate / 1000))
-        self._inputs, self._outputs = self._on_client("register ports", self._register)
+        self._inputs, self._outputs = jack_client.answered(cfg.server, "register ports", self._register)
         self._ring: FrameRing | None = None
         self._buffer: JitterBuffer | None = None
         if self._inputs:
@@ -74,7 +72,7 @@ class JackBridge(Adapter):
         self._client.set_process_callback(self._process)
         self._client.set_xrun_callback(lambda delay_us: self.count("xruns"))
         self._client.set_shutdown_callback(self._server_gone)
-        self._on_client("activate and connect", self._activate)
+        jack_client.answered(cfg.server, "activate and connect", self._activate)
         log.info("%s: JACK client '%s' on server '%s' at %d Hz: %s", self.name, self.client_name,
                  jack_client.server_name(cfg.server), self.rate, ", ".join(self.ports))
         if self._ring is not None:
@@ -83,28 +81,16 @@ class JackBridge(Adapter):
             self.spawn(self._receive, "receive")
         self.spawn(self._watch, "watch")
 
-    def _on_client(self, what: str, call: Callable[[jack.Client], T]) -> T:
-        """``call(client)`` within the bound of ``jack_client.answered``. Given up on, the
-        client is closed by the call's thread once libjack returns, not by the stop: closing
-        it under a call still in libjack crashed the process."""
-        client = self._client
-        try:
-            return jack_client.answered(self.config.server, what, lambda: call(client),
-                                        late=lambda result: client.close())
-        except jack_client.NoAnswer:
-            self._client = None
-            raise
-
-    def _register(self, client: jack.Client) -> tuple[list[jack.OwnPort], list[jack.OwnPort]]:
+    def _register(self) -> tuple[list[jack.OwnPort], list[jack.OwnPort]]:
         cfg: JackConfig = self.config
-        return ([client.inports.register(n) for n in cfg.input_names] if cfg.to_robot else [],
-                [client.outports.register(n) for n in cfg.output_names] if cfg.from_robot else [])
+        return ([self._client.inports.register(n) for n in cfg.input_names] if cfg.to_robot else [],
+                [self._client.outports.register(n) for n in cfg.output_names] if cfg.from_robot else [])
 
-    def _activate(self, client: jack.Client) -> None:
+    def _activate(self) -> None:
         cfg: JackConfig = self.config
-        client.activate()
-        jack_client.connect(client, self._inputs, cfg.connect_inputs, "connect_inputs")
-        jack_client.connect(client, self._outputs, cfg.connect_outputs, "connect_outputs")
+        self._client.activate()
+        jack_client.connect(self._client, self._inputs, cfg.connect_inputs, "connect_inputs")
+        jack_client.connect(self._client, self._outputs, cfg.connect_outputs, "connect_outputs")
 
     @property
     def ports(self) -> list[str]:

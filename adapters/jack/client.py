@@ -11,7 +11,7 @@ import logging
 import os
 import threading
 from collections.abc import Callable
-from typing import Any, TypeVar
+from typing import TypeVar
 
 import jack
 
@@ -37,46 +37,41 @@ def server_name(server: str) -> str:
 OPEN_TIMEOUT_S = 5.0  # a JACK server that does not answer (jackd stopped with Ctrl-Z, or hung): one line, not a hang
 
 
-class NoAnswer(ConfigError):
-    """A call to the JACK server that did not answer in time (``answered``)."""
-
-
-def answered(server: str, what: str, call: Callable[[], T], late: Callable[[T | None], None] | None = None) -> T:
+def answered(server: str, what: str, call: Callable[[], T], late: Callable[[T], None] | None = None) -> T:
     """``call()``, which talks to JACK server ``server``, within ``OPEN_TIMEOUT_S``: libjack
-    waits for its server without a bound, so the call runs on a daemon thread, and
-    ``NoAnswer`` (a ``ConfigError`` naming key ``server``) says when it does not answer. A call
-    given up on hands its result (None if it raised) to ``late`` on its thread once it ends:
-    the one place to close a client it was using (closing a client while libjack is still in
-    a call on it crashed the process)."""
-    outcome: list[tuple[bool, Any]] = []  # (returned, result or exception): the caller's, if it waited
+    waits for its server without a bound, so the call runs on a daemon thread, and a
+    ``ConfigError`` naming key ``server`` says when it does not answer (a result that comes
+    after that goes to ``late``)."""
+    value: list[T] = []
+    failed: list[Exception] = []
     given_up = threading.Event()
-    lock = threading.Lock()  # the caller gave up or took the outcome: never both
+    late_lock = threading.Lock()  # the caller gave up or took the value: never both
 
     def run() -> None:
         try:
-            ended: tuple[bool, Any] = (True, call())
+            result = call()
         except Exception as exc:  # (raised again by the caller's thread)
-            ended = (False, exc)
-        with lock:
+            failed.append(exc)
+            return
+        with late_lock:
             if not given_up.is_set():
-                outcome.append(ended)
+                value.append(result)
                 return
         if late is not None:
-            late(ended[1] if ended[0] else None)
+            late(result)
 
     worker = threading.Thread(target=run, name=f"jack-{what.replace(' ', '-')}", daemon=True)
     worker.start()
     worker.join(OPEN_TIMEOUT_S)
-    with lock:
-        if not outcome:
+    with late_lock:
+        if value:
+            return value[0]
+        if worker.is_alive():
             given_up.set()
-            raise NoAnswer(f"key 'server': JACK server '{server_name(server)}' does not answer within "
-                           f"{OPEN_TIMEOUT_S:g} s ({what}) — is jackd stopped (Ctrl-Z in its terminal: 'fg') "
-                           "or hung?")
-    returned, result = outcome[0]
-    if not returned:
-        raise result
-    return result
+            raise ConfigError(f"key 'server': JACK server '{server_name(server)}' does not answer within "
+                              f"{OPEN_TIMEOUT_S:g} s ({what}) — is jackd stopped (Ctrl-Z in its terminal: 'fg') "
+                              "or hung?")
+    raise failed[0]
 
 
 def open_client(name: str, server: str) -> jack.Client:
@@ -85,7 +80,7 @@ def open_client(name: str, server: str) -> jack.Client:
     is closed)."""
     try:
         return answered(server, "open", lambda: jack.Client(name, no_start_server=True, servername=server or None),
-                        late=lambda client: client and client.close())
+                        late=lambda client: client.close())
     except jack.JackOpenError as exc:
         jackd = f"jackd -n {server}" if server else "jackd"
         log.debug("jack.Client(%r, servername=%r): %s", name, server, exc)

@@ -249,39 +249,6 @@ def test_a_jack_server_that_stops_answering_once_the_client_is_open_is_one_line_
         probe.close()
 
 
-def test_a_client_whose_call_was_given_up_on_is_closed_after_that_call_not_under_it(net, jack_server, monkeypatch):
-    """The stop of a node whose start gave up on registering ports closed the client while
-    libjack was still in that call: the process crashed once the server answered again."""
-    name, server = jack_server
-    monkeypatch.setattr(jack_client, "OPEN_TIMEOUT_S", 1.0)
-    opened = jack_client.open_client
-
-    def open_then_freeze(*args):
-        client = opened(*args)
-        os.kill(server.popen.pid, signal.SIGSTOP)
-        return client
-    monkeypatch.setattr(jack_client, "open_client", open_then_freeze)
-    try:
-        errors: list[str] = []
-        starting = threading.Thread(target=lambda: errors.append(_start_error(net)), daemon=True)
-        starting.start()
-        starting.join(10.0)
-        assert not starting.is_alive() and "(register ports)" in errors[0], errors
-        threads = [t.name for t in threading.enumerate()]
-        assert "jack-register-ports" in threads, threads  # the call given up on, still in libjack
-        assert not [t for t in threads if t.startswith("jack-close")], "the stop closes the client under it"
-    finally:
-        os.kill(server.popen.pid, signal.SIGCONT)
-    wait_for(lambda: not [t for t in threading.enumerate() if t.name.startswith(("jack-register", "jack-close"))],
-             what="the call given up on to end, and close its client")
-    probe = jack.Client("probe", no_start_server=True, servername=name)
-    try:
-        wait_for(lambda: not [p.name for p in probe.get_ports() if p.name.startswith("bridge:")],
-                 what="no port of the failed node left on the server")
-    finally:
-        probe.close()
-
-
 def _start_error(net) -> str:
     with pytest.raises(ConfigError) as error:
         bridge(net, client_name="bridge")
