@@ -54,7 +54,8 @@ class JackBridge(Adapter):
         self.client_name = self._client.name  # (JACK may have added -01: the ports are named after it)
         self.rate = self._client.samplerate
         self.chunk_frames = max(1, round(cfg.chunk_ms * self.rate / 1000))
-        self._inputs, self._outputs = jack_client.answered(cfg.server, "register ports", self._register)
+        self._inputs = [self._client.inports.register(n) for n in cfg.input_names] if cfg.to_robot else []
+        self._outputs = [self._client.outports.register(n) for n in cfg.output_names] if cfg.from_robot else []
         self._ring: FrameRing | None = None
         self._buffer: JitterBuffer | None = None
         if self._inputs:
@@ -72,7 +73,9 @@ class JackBridge(Adapter):
         self._client.set_process_callback(self._process)
         self._client.set_xrun_callback(lambda delay_us: self.count("xruns"))
         self._client.set_shutdown_callback(self._server_gone)
-        jack_client.answered(cfg.server, "activate and connect", self._activate)
+        self._client.activate()
+        jack_client.connect(self._client, self._inputs, cfg.connect_inputs, "connect_inputs")
+        jack_client.connect(self._client, self._outputs, cfg.connect_outputs, "connect_outputs")
         log.info("%s: JACK client '%s' on server '%s' at %d Hz: %s", self.name, self.client_name,
                  jack_client.server_name(cfg.server), self.rate, ", ".join(self.ports))
         if self._ring is not None:
@@ -80,17 +83,6 @@ class JackBridge(Adapter):
         if self._buffer is not None:
             self.spawn(self._receive, "receive")
         self.spawn(self._watch, "watch")
-
-    def _register(self) -> tuple[list[jack.OwnPort], list[jack.OwnPort]]:
-        cfg: JackConfig = self.config
-        return ([self._client.inports.register(n) for n in cfg.input_names] if cfg.to_robot else [],
-                [self._client.outports.register(n) for n in cfg.output_names] if cfg.from_robot else [])
-
-    def _activate(self) -> None:
-        cfg: JackConfig = self.config
-        self._client.activate()
-        jack_client.connect(self._client, self._inputs, cfg.connect_inputs, "connect_inputs")
-        jack_client.connect(self._client, self._outputs, cfg.connect_outputs, "connect_outputs")
 
     @property
     def ports(self) -> list[str]:

@@ -10,15 +10,12 @@ from __future__ import annotations
 import logging
 import os
 import threading
-from collections.abc import Callable
-from typing import TypeVar
 
 import jack
 
 from sonibus.bus.errors import ConfigError, SonibusError
 
 log = logging.getLogger(__name__)
-T = TypeVar("T")
 
 
 class ServerGone(SonibusError):
@@ -37,55 +34,44 @@ def server_name(server: str) -> str:
 OPEN_TIMEOUT_S = 5.0  # a JACK server that does not answer (jackd stopped with Ctrl-Z, or hung): one line, not a hang
 
 
-def answered(server: str, what: str, call: Callable[[], T], late: Callable[[T], None] | None = None) -> T:
-    """``call()``, which talks to JACK server ``server``, within ``OPEN_TIMEOUT_S``: libjack
-    waits for its server without a bound, so the call runs on a daemon thread, and a
-    ``ConfigError`` naming key ``server`` says when it does not answer (a result that comes
-    after that goes to ``late``)."""
-    value: list[T] = []
+def open_client(name: str, server: str) -> jack.Client:
+    """A client of JACK server ``server`` (never starting one); ``ConfigError`` naming
+    key ``server`` when it is not running, or does not answer within ``OPEN_TIMEOUT_S``
+    (libjack waits for it without a bound: a client it opens too late is closed)."""
+    opened: list[jack.Client] = []
     failed: list[Exception] = []
-    given_up = threading.Event()
-    late_lock = threading.Lock()  # the caller gave up or took the value: never both
+    late = threading.Lock()  # the caller gave up (held) or took the client: never both
 
-    def run() -> None:
+    def open_() -> None:
         try:
-            result = call()
+            client = jack.Client(name, no_start_server=True, servername=server or None)
         except Exception as exc:  # (raised again by the caller's thread)
             failed.append(exc)
             return
-        with late_lock:
-            if not given_up.is_set():
-                value.append(result)
-                return
-        if late is not None:
-            late(result)
+        with late:
+            if given_up:
+                client.close()
+            else:
+                opened.append(client)
 
-    worker = threading.Thread(target=run, name=f"jack-{what.replace(' ', '-')}", daemon=True)
-    worker.start()
-    worker.join(OPEN_TIMEOUT_S)
-    with late_lock:
-        if value:
-            return value[0]
-        if worker.is_alive():
-            given_up.set()
+    given_up = False
+    opening = threading.Thread(target=open_, name=f"jack-open-{name}", daemon=True)
+    opening.start()
+    opening.join(OPEN_TIMEOUT_S)
+    with late:
+        if opened:
+            return opened[0]
+        if opening.is_alive():
+            given_up = True
             raise ConfigError(f"key 'server': JACK server '{server_name(server)}' does not answer within "
-                              f"{OPEN_TIMEOUT_S:g} s ({what}) — is jackd stopped (Ctrl-Z in its terminal: 'fg') "
-                              "or hung?")
-    raise failed[0]
-
-
-def open_client(name: str, server: str) -> jack.Client:
-    """A client of JACK server ``server`` (never starting one); ``ConfigError`` naming
-    key ``server`` when it is not running, or does not answer (a client opened too late
-    is closed)."""
-    try:
-        return answered(server, "open", lambda: jack.Client(name, no_start_server=True, servername=server or None),
-                        late=lambda client: client.close())
-    except jack.JackOpenError as exc:
-        jackd = f"jackd -n {server}" if server else "jackd"
-        log.debug("jack.Client(%r, servername=%r): %s", name, server, exc)
-        raise ConfigError(f"key 'server': no JACK server '{server_name(server)}' running — start one first, "
-                          f"e.g. '{jackd} -d dummy -r 48000' (no sound card) or '{jackd} -d alsa'") from None
+                              f"{OPEN_TIMEOUT_S:g} s — is jackd stopped (Ctrl-Z in its terminal: 'fg') or hung?")
+    exc = failed[0]
+    if not isinstance(exc, jack.JackOpenError):
+        raise exc
+    jackd = f"jackd -n {server}" if server else "jackd"
+    log.debug("jack.Client(%r, servername=%r): %s", name, server, exc)
+    raise ConfigError(f"key 'server': no JACK server '{server_name(server)}' running — start one first, "
+                      f"e.g. '{jackd} -d dummy -r 48000' (no sound card) or '{jackd} -d alsa'") from None
 
 
 def connect(client: jack.Client, ours: list[jack.OwnPort], theirs: tuple[str, ...], key: str) -> None:

@@ -207,44 +207,11 @@ def test_a_jack_server_that_does_not_answer_at_start_is_one_line_not_a_hang(net,
         os.kill(server.popen.pid, signal.SIGCONT)
     assert len(errors) == 1 and f"JACK server '{name}' does not answer" in errors[0], errors
     assert len(errors[0].splitlines()) == 1
-    wait_for(lambda: not [t for t in threading.enumerate() if t.name.startswith("jack-open")],
+    wait_for(lambda: not [t for t in threading.enumerate() if t.name.startswith("jack-open-")],
              what="the late open to end once the server answers again")
     probe = jack.Client("probe", no_start_server=True, servername=name)
     try:
         assert not [p.name for p in probe.get_ports() if p.name.startswith("bridge:")], "a late client stayed"
-    finally:
-        probe.close()
-
-
-def test_a_jack_server_that_stops_answering_once_the_client_is_open_is_one_line_not_a_hang(
-        net, jack_server, monkeypatch):
-    """Registering ports, activating and connecting wait on the server too."""
-    name, server = jack_server
-    monkeypatch.setattr(jack_client, "OPEN_TIMEOUT_S", 1.0)
-    opened = jack_client.open_client
-
-    def open_then_freeze(*args):
-        client = opened(*args)
-        os.kill(server.popen.pid, signal.SIGSTOP)
-        return client
-    monkeypatch.setattr(jack_client, "open_client", open_then_freeze)
-    try:
-        errors: list[str] = []
-        starting = threading.Thread(target=lambda: errors.append(_start_error(net)), daemon=True)
-        starting.start()
-        starting.join(10.0)
-        assert not starting.is_alive(), "start hangs on a JACK server that stopped answering"
-    finally:
-        os.kill(server.popen.pid, signal.SIGCONT)
-    assert len(errors) == 1 and f"JACK server '{name}' does not answer within 1 s (register ports)" in errors[0], \
-        errors
-    assert len(errors[0].splitlines()) == 1
-    wait_for(lambda: not [t for t in threading.enumerate() if t.name.startswith(("jack-register", "jack-close"))],
-             what="the waiting calls to end once the server answers again")
-    probe = jack.Client("probe", no_start_server=True, servername=name)
-    try:
-        wait_for(lambda: not [p.name for p in probe.get_ports() if p.name.startswith("bridge:")],
-                 what="no port of the failed node left on the server")
     finally:
         probe.close()
 
