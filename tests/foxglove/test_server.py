@@ -91,6 +91,13 @@ def served(net):
 
 
 def test_a_client_subscribes_and_decodes_a_frame_and_its_transforms(served):
+    # The client connects once the robot's channels exist. Twice in ~13 full runs a channel created
+    # while the client was connecting was advertised and its subscription then refused by Foxglove's
+    # SDK (0.30) as "unknown channel"; a race in the SDK is suspected, not proven (the client's
+    # timeout message now lists what the server said).
+    wait_for(lambda: {"pepper/frame", "pepper/tf", "pepper/info"} <= served._channels.keys(),
+             what="pepper's channels at the server")
+
     async def scenario() -> None:
         async with aiohttp.ClientSession() as session:
             client = await connect(session, served.port)
