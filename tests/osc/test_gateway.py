@@ -102,15 +102,17 @@ def client(gate):
 def test_oscsend_makes_the_robot_speak_and_a_python_client_gets_replies(net, gate, client):
     oscsend = require_tool("oscsend", "liblo-tools")
     speech = Watch(net, "pepper/events/speech")
+    # (watched before any command: a subscription declared after one can miss its event)
+    commands = Watch(net, "pepper/events/command")
     subprocess.run([oscsend, "localhost", str(gate.udp_address[1]), "/pepper/cmd/say", "s", "hello"],
                    check=True, timeout=10)
     wait_for(lambda: {"text": "hello", "state": "started"}.items() <= (speech.all() or [{}])[-1].items(),
              what="the robot speaking 'hello'")
-    commands = Watch(net, "pepper/events/command")
     address, (ok, result) = client.ask("/pepper/cmd/say", "good", "morning", 1, 120)  # words as Pd sends them
     assert (address, ok) == ("/pepper/reply/say", 1)
     assert json.loads(result)["queued"] in (0, 1)
-    event = wait_for(lambda: commands.all() and commands.seen[-1], what="the command event")
+    event = wait_for(lambda: [e for e in commands.all() if e["args"].get("text") == "good morning"],
+                     what="the command event")[-1]
     assert event["args"] == {"text": "good morning", "volume": 1.0, "speed": 120.0}
 
 
