@@ -68,8 +68,16 @@ class Watch:
     """Decoded samples of a key expression, gathered as they arrive."""
 
     def __init__(self, net: Any, keyexpr: str) -> None:
-        self.subscriber, self.queue = net.bus("watch").subscribe(keyexpr)
+        bus = net.bus("watch")
+        self.subscriber, self.queue = bus.subscribe(keyexpr)
         self.seen: list[dict[str, Any]] = []
+        # Ready once a frame arrives on a subscription declared after it on the same link: an
+        # event put right after this returns is not missed (the robot streams frames all along).
+        frames, arrived = bus.subscribe("pepper/frame")
+        try:
+            wait_for(lambda: arrived.get(timeout=0.05), what="pepper's frames (the watch in place)")
+        finally:
+            frames.undeclare()
 
     def all(self) -> list[dict[str, Any]]:
         while (item := self.queue.get(timeout=0)) is not None:
