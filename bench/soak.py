@@ -22,13 +22,14 @@ import platform
 import shutil
 import sys
 import tempfile
+from dataclasses import replace
 from pathlib import Path
 
 from common import write
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # the tests package, for its fuzzer
 
-from tests.fuzz.campaign import CI, Plan, campaign
+from tests.fuzz.campaign import CI, campaign
 from tests.fuzz.show import Show
 
 
@@ -36,8 +37,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--minutes", type=float, default=3.0, help="how long to fuzz (default: 3)")
     args = parser.parse_args()
-    plan = Plan(examples=CI.examples, huge_frames=CI.huge_frames, huge_flood=CI.huge_flood, bursts=CI.bursts,
-                derandomize=False, seconds=args.minutes * 60)
+    plan = replace(CI, derandomize=False, seconds=args.minutes * 60)  # CI's families, fresh inputs, for longer
     tmp = Path(tempfile.mkdtemp(prefix="soak-"))
     with Show(tmp) as show:
         report = campaign(show, plan, tmp / "fuzz.json")

@@ -33,15 +33,17 @@ LINK_ERRORS = ("Session closed", "Socket is not connected", "no answer within", 
                "Future has already been set")  # (libqi's words for a call cut short by a closing session)
 
 
-_kept_closed: list[tuple[float, Any]] = []  # closed sessions of closed links: (time they may be freed, session)
-_kept_lock = threading.Lock()
+_retired: list[tuple[float, Any]] = []  # closed sessions, of every link: (monotonic time they may be freed, session)
+_retired_lock = threading.Lock()
 
 
-def _keep_closed(sessions: list[tuple[float, Any]]) -> None:
-    """Keep closed ``sessions`` past the ``Link`` that closed them, until they may be freed."""
+def _retire(session: Any) -> None:
+    """Keep closed ``session`` for ``RETIRE_S`` (past its ``Link`` too: the node's threads
+    stop after the link closes), and let those kept long enough go."""
     now = time.monotonic()
-    with _kept_lock:
-        _kept_closed[:] = [(free_at, old) for free_at, old in _kept_closed if free_at > now] + sessions
+    with _retired_lock:
+        _retired[:] = [(free_at, old) for free_at, old in _retired if free_at > now]
+        _retired.append((now + RETIRE_S, session))
 
 
 class LinkDown(Exception):
@@ -104,7 +106,6 @@ class Link:
         self._closed = False  # for good: no session is opened any more
         self._lock = threading.Lock()
         self._sending = threading.Lock()  # held while a call is sent on a session, and while one is closed
-        self._retired: list[tuple[float, Any]] = []  # (monotonic time it may be freed, closed session)
         self._services: dict[str, Any] = {}
         self._signals: list[tuple[Any, int]] = []
         self._kept: list[Any] = []
@@ -158,9 +159,7 @@ class Link:
                 goodbyes.append(session.close(_async=True))  # fails whatever still waits on this session
             except Exception as exc:
                 log.debug("close session: %s", exc)
-        now = time.monotonic()
-        self._retired = [(free_at, old) for free_at, old in self._retired if free_at > now]
-        self._retired.append((now + RETIRE_S, session))
+        _retire(session)
         for future in goodbyes:
             if not future.isFinished():
                 future.wait(max(0, int((deadline - time.monotonic()) * 1000)))
@@ -171,8 +170,6 @@ class Link:
         with self._lock:
             self._closed = True
         self.drop()
-        retired, self._retired = self._retired, []
-        _keep_closed(retired)  # (work may still be under way on them: the node's threads stop after this)
 
     def _disconnected(self, reason: Any, generation: int) -> None:
         with self._lock:

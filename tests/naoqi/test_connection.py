@@ -105,7 +105,7 @@ def test_the_connection_line_names_the_robot_at_the_default_level(net, fakes, sp
 def test_nothing_is_sent_on_a_session_that_was_replaced(fakes):
     """libqi crashed the process when a call went out on a session being closed: a call, a
     signal or a module meant for a replaced session is refused (``LinkDown``) and not sent."""
-    from sonibus.adapters.naoqi import NaoqiConfig
+    from sonibus.adapters.naoqi import NaoqiConfig, connection
     from sonibus.adapters.naoqi.connection import Link, LinkDown
 
     robot = fakes()
@@ -124,10 +124,10 @@ def test_nothing_is_sent_on_a_session_that_was_replaced(fakes):
             link.send(old, session.registerService, "stale_module", object())
         assert link.service("ALSystem") is not system, "a proxy of the closed session was reused"
         assert link.call("ALSystem", "robotName") is not None
-        assert [s for _, s in link._retired] == [session], "a closed session is kept a while, not freed at once"
+        assert session in [s for _, s in connection._retired], "a closed session is kept a while, not freed at once"
     finally:
         link.close()
-    assert not link._retired and link.session is None
+    assert link.session is None
 
 
 class WatchedLock:
