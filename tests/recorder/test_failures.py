@@ -25,6 +25,7 @@ from sonibus.adapters.recorder import Recording, recover
 from sonibus.bus import messages
 
 from ..conftest import SONIBUS, run_cli, wait_for
+from .conftest import tmpfs
 from .test_cut_files import passes_every_reader
 
 STATUS = re.compile(r"recording .*: [\d.]+ s, (\d+) messages .*, (\d+) dropped, (\d+) bad")
@@ -81,14 +82,9 @@ def test_garbage_on_the_bus_is_counted_and_recording_goes_on(net, tmp_path, spaw
 
 @pytest.fixture
 def small_disk():
-    """A 256 KiB file system of its own (tmpfs), unmounted whatever happens."""
-    folder = tempfile.mkdtemp(prefix="sonibus-full-")
-    subprocess.run(["mount", "-t", "tmpfs", "-o", "size=256k", "tmpfs", folder], check=True)
-    try:
+    """A 256 KiB file system of its own."""
+    with tmpfs("256k") as folder:
         yield folder
-    finally:
-        subprocess.run(["umount", "-l", folder], check=False)
-        os.rmdir(folder)
 
 
 def test_a_full_disk_ends_the_recorder_loudly_and_leaves_a_recoverable_file(net, tmp_path, spawn, small_disk):
