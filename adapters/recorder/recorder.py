@@ -300,12 +300,10 @@ class Recorder(Adapter):
         if self._disk.level != "low":
             return
         elapsed = (time.monotonic_ns() - self._mono0) / 1e9
-        rate = self._series.bytes / elapsed if elapsed > 1 else 0.0
-        left = ((self._disk.free or 0) - self._disk.min) / rate / 3600 if rate else 0.0
-        when = f" (in about {left:.1f} h at {rate / 1e3:.0f} kB/s)" if rate else ""
+        left = self._disk.left(self._series.bytes / elapsed if elapsed > 1 else 0.0)
         log.warning("%s: %s, below warn_free_mb %g: recording pauses at min_free_mb %g%s — free some space, "
                     "or record elsewhere (path)", self.name, self._disk.describe(self._folder()), cfg.warn_free_mb,
-                    cfg.min_free_mb, when)
+                    cfg.min_free_mb, f" ({left})" if left else "")
 
     def _pause(self, why: str, guard: bool) -> None:
         """Stop writing (the file finished, or only closed after a failed write) and say so;

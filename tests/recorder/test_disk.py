@@ -14,6 +14,7 @@ import socket
 
 from sonibus.adapters.recorder import Recording, recover
 from sonibus.bus import decode, keys
+from sonibus.bus.monitor import Monitor
 
 from ..conftest import SONIBUS, free_port, require_tool, run_cli, wait_for
 from .conftest import tmpfs
@@ -50,6 +51,12 @@ def fill(path: str, leave: int) -> None:
                 return
 
 
+def logger(monitor: Monitor):
+    """The recorder as ``sonibus top`` shows it: (state, why)."""
+    node = next((n for n in monitor.snapshot().nodes if n.node == "logger"), None)
+    return (node.state, node.error) if node is not None else None
+
+
 def test_a_full_disk_pauses_the_recorder_and_the_show_goes_on(net, tmp_path, spawn):
     oscdump = require_tool("oscdump", "liblo-tools")
     port = free_port(socket.SOCK_DGRAM)
@@ -57,7 +64,7 @@ def test_a_full_disk_pauses_the_recorder_and_the_show_goes_on(net, tmp_path, spa
     watch = net.bus("watch")
     events = []
     watch.session.declare_subscriber(keys.NODE_EVENTS, lambda s: events.append(decode(s.payload.to_bytes())))
-    with tmpfs("2m") as disk:
+    with tmpfs("2m") as disk, Monitor(net.bus("top")) as top:
         show = tmp_path / "show.toml"
         show.write_text(SHOW.format(port=port, disk=disk))
         run = spawn(SONIBUS, "run", str(show), *net.cli_args(), collect=True, merge=True)
@@ -75,6 +82,8 @@ def test_a_full_disk_pauses_the_recorder_and_the_show_goes_on(net, tmp_path, spa
         paused = next(e for e in events if e.get("state") == "paused")
         assert paused["node"] == "logger" and "the disk is nearly full" in paused["error"], paused
         heard = len(sound.lines)
+        _, why = wait_for(lambda: (seen := logger(top)) and seen[0] == "paused" and seen, what="top: paused")
+        assert why.startswith("the disk is nearly full: 0."), why
         nodes = run_cli("nodes", *net.cli_args())
         line = next(line for line in nodes.stdout.splitlines() if " logger " in line)
         assert "PAUSED: the disk is nearly full: 0." in line and "below min_free_mb 0.5" in line, nodes.stdout
@@ -90,6 +99,7 @@ def test_a_full_disk_pauses_the_recorder_and_the_show_goes_on(net, tmp_path, spa
             os.unlink(os.path.join(disk, name))
         wait_for(lambda: any(e.get("state") == "running" for e in events), timeout=10, what="recording again",
                  explain=said)
+        wait_for(lambda: logger(top) == ("running", ""), what="top: running, no reason left")
         second = [f for f in sorted(os.listdir(disk)) if f.endswith(".mcap") and f != first[0]]
         assert len(second) == 1, os.listdir(disk)
         wait_for(lambda: os.path.getsize(os.path.join(disk, second[0])) > 10_000, what="a chunk in the new file")
