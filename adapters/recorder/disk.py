@@ -75,7 +75,9 @@ class DiskGuard:
 
     def describe(self, folder: str) -> str:
         """``1.2 MB free on /srv/recordings``."""
-        return f"{(self.free or 0) / MB:.1f} MB free on {_existing(folder)}"
+        if self.free is None:
+            return f"free space not known on {_existing(folder)}"
+        return f"{self.free / MB:.1f} MB free on {_existing(folder)}"
 
 
 def _free(folder: str) -> int | None:

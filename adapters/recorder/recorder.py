@@ -155,8 +155,7 @@ class Recorder(Adapter):
         self._queue = self.own(SampleQueue(cfg.queue))
         self._info_seen: set[str] = set()
         if self._disk.check(self._folder()) == "full":
-            self._pause(f"the disk is full: {self._disk.describe(self._folder())}, below min_free_mb "
-                        f"{cfg.min_free_mb:g}", guard=True)
+            self._pause(self._full(), guard=True)
         else:
             self._warn_low()
             self._open(first=True)
@@ -284,16 +283,19 @@ class Recorder(Adapter):
         log.info("%s: %s done (%s); now %s", self.name, done, why, self.path)
 
     def _look_at_disk(self, now: float) -> None:
-        cfg: RecorderConfig = self.config
         level = self._disk.check(self._folder())
         if level == "full" and not self.paused:
-            self._pause(f"the disk is nearly full: {self._disk.describe(self._folder())}, below min_free_mb "
-                        f"{cfg.min_free_mb:g} — free some space; recording goes on by itself once "
-                        f"{self._disk.resume / MB:g} MB are free", guard=True)
+            self._pause(self._full(), guard=True)
         elif level == "low":
             self._warn_low()
-        if self.paused and now >= self._retry_at and (self._disk.free or 0) >= self._disk.resume:
+        free = self._disk.free  # (None: a file system that does not say; trying is the only way to know)
+        if self.paused and now >= self._retry_at and (free is None or free >= self._disk.resume):
             self._resume()
+
+    def _full(self) -> str:
+        return (f"the disk is nearly full: {self._disk.describe(self._folder())}, below min_free_mb "
+                f"{self.config.min_free_mb:g} — free some space; recording goes on by itself, into a new file, "
+                f"once {self._disk.resume / MB:g} MB are free")
 
     def _warn_low(self) -> None:
         cfg: RecorderConfig = self.config
