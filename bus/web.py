@@ -88,15 +88,17 @@ class Limits:
 
 class WebServer:
     """An aiohttp ``app`` served on ``host:port`` (0: any free port) while ``adapter`` runs,
-    within ``limits``; ``browsers``: every request passes ``check_browser``."""
+    within ``limits``; ``browsers``: every request passes ``check_browser`` (pages of ``origins``
+    may read it too: ``"*"``, any)."""
 
     def __init__(self, adapter: Adapter, host: str = "127.0.0.1", port: int = 0, key: str = "",
-                 limits: Limits = Limits(), browsers: bool = False) -> None:
+                 limits: Limits = Limits(), browsers: bool = False, origins: tuple[str, ...] = ()) -> None:
         self.adapter = adapter
         self.key = key  # the configuration key of host:port ("listen"); "": keys 'host' and 'port'
         self.host = host
         self.port = port                   # the bound port once started
         self.limits = limits
+        self.origins = origins
         self.app = web.Application(middlewares=[self._errors, *([self._browsers] if browsers else [])])
         self.latest: Any = None            # the last value broadcast (a new WebSocket client gets it first)
         self.dropped = 0                   # messages a slow client missed
@@ -330,7 +332,7 @@ class WebServer:
     @web.middleware
     async def _browsers(self, request: web.Request, handler: Handler) -> web.StreamResponse:
         """``check_browser`` on every request: a refusal is a 403, counted ``refused``."""
-        reason = check_browser(request)
+        reason = check_browser(request, self.origins)
         if reason:
             self.adapter.count("refused")
             self.adapter.warn("refused", f"web server: refused {request.method} {request.path[:80]} from "
@@ -350,16 +352,20 @@ class _Refused(asyncio.Protocol):
         transport.close()  # (after the write is flushed; what the client sends is ignored)
 
 
-def check_browser(request: web.Request) -> str:
+def check_browser(request: web.Request, origins: tuple[str, ...] = ()) -> str:
     """Why ``request`` may come from a web page that must not read this server ("" if
     none): an ``Origin`` that is not this server (a page of another site: browsers let
     any page open a WebSocket, and send ``Origin`` with it), or a ``Host`` that names this
     machine by a name that is not its own (a site that renamed itself to this machine's
-    address: DNS rebinding). Programs that send no ``Origin`` pass; an address, ``localhost``,
-    ``*.local`` (mDNS) and this machine's host name are its own names."""
+    address: DNS rebinding). Programs that send no ``Origin`` pass, and pages of ``origins``
+    (``"*"``: any); an address, ``localhost``, ``*.local`` (mDNS) and this machine's host name
+    are its own names."""
     origin = request.headers.get("Origin")
-    if origin is not None and urlsplit(origin).netloc.lower() != request.host.lower():
-        return f"a page of another site ({origin[:80]}) may not read this server"
+    if origin is not None and urlsplit(origin).netloc.lower() != request.host.lower() \
+            and origin not in origins and "*" not in origins:
+        return (f"a page of another site ({origin[:80]}) may not read this server (a site to let in goes in the "
+                "node's `origins`)" if origins else f"a page of another site ({origin[:80]}) may not read this "
+                "server")
     if "Host" in request.headers and not own_name(request.host):
         return (f"{request.host[:80]!r} is not a name of this machine (a web site that renames itself to this "
                 "address?) — open it by its address or host name")

@@ -12,7 +12,6 @@ import struct
 import subprocess
 import sys
 import time
-from pathlib import Path
 from typing import Any
 
 import aiohttp
@@ -91,13 +90,6 @@ def served(net):
 
 
 def test_a_client_subscribes_and_decodes_a_frame_and_its_transforms(served):
-    # The client connects once the robot's channels exist. Twice in ~13 full runs a channel created
-    # while the client was connecting was advertised and its subscription then refused by Foxglove's
-    # SDK (0.30) as "unknown channel"; a race in the SDK is suspected, not proven (the client's
-    # timeout message now lists what the server said).
-    wait_for(lambda: {"pepper/frame", "pepper/tf", "pepper/info"} <= served._channels.keys(),
-             what="pepper's channels at the server")
-
     async def scenario() -> None:
         async with aiohttp.ClientSession() as session:
             client = await connect(session, served.port)
@@ -198,8 +190,8 @@ def test_bad_options(options, message):
         FoxgloveConfig(**options)
 
 
-def test_without_foxglove_sdk_it_is_listed_with_the_extra_to_install(tmp_path):
-    """Issue 19, item 9: an adapter whose extra is missing is no warning, but what to install."""
+def test_the_adapter_needs_no_foxglove_sdk(tmp_path):
+    """The protocol is sonibus's own (wire.py): no extra to install for the adapter."""
     code = ("import sys; sys.modules['foxglove'] = None\n"  # (as if foxglove-sdk were not installed)
             "from sonibus.bus import registry\n"
             "lacking = {}; found = registry.load_all(lacking)\n"
@@ -207,6 +199,4 @@ def test_without_foxglove_sdk_it_is_listed_with_the_extra_to_install(tmp_path):
     # (run outside the clone, as the sonibus command runs: from inside, python -c finds its sonibus.egg-info)
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60, cwd=tmp_path)
     assert done.returncode == 0, done.stderr
-    root = Path(__file__).resolve().parents[2]  # the clone this sonibus is installed from (editable)
-    assert done.stdout.split(None, 1) == ["False", f"pip install -e '{root}[foxglove]'\n"]
-    assert "WARNING" not in done.stderr, done.stderr
+    assert done.stdout.split() == ["True", "None"]
