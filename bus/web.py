@@ -54,6 +54,8 @@ from .options import bad
 if TYPE_CHECKING:
     from .adapter import Adapter
 
+log = logging.getLogger(__name__)
+
 START_TIMEOUT_S = 5.0   # binding the port takes milliseconds; this only guards a wedged loop
 CLOSE_WAIT_S = 0.5      # how long a WebSocket client has to answer the server's close
 SHUTDOWN_S = 0.5        # how long running handlers have to finish before they are cancelled
@@ -64,6 +66,8 @@ LISTEN_BACKLOG = 128    # connections the kernel holds before accept (aiohttp's 
 MAX_HEADERS = 64        # header lines of one request (aiohttp's default 128); each at most 8190 bytes
 # accept() errors that say the process or the machine is out of something: asyncio retries a second later
 OUT_OF_RESOURCES = frozenset({errno.EMFILE, errno.ENFILE, errno.ENOBUFS, errno.ENOMEM})
+FILES_SHARE = 8         # one server holds at most 1/8 of the files the process may open: the rest is the bus's,
+                        # the recorder's, the other servers' (1,100 connections under `ulimit -n 1024` ended the show)
 
 Handler = Callable[[web.Request], Awaitable[web.StreamResponse]]
 
@@ -80,8 +84,8 @@ class Limits:
         if not 1 <= self.connections <= 60000:
             raise bad("connections", f"{self.connections} must be in [1, 60000] (and below the process's limit "
                                      "of open files, `ulimit -n`)")
-        if not 1 <= self.clients <= self.connections:
-            raise bad("clients", f"{self.clients} must be in [1, connections = {self.connections}]")
+        if not 1 <= self.clients <= 60000:
+            raise bad("clients", f"{self.clients} must be in [1, 60000] (each is a connection too)")
         if not 0.1 <= self.timeout_s <= 3600:
             raise bad("timeout_s", f"{self.timeout_s:g} must be in [0.1, 3600] (seconds)")
 
@@ -105,12 +109,16 @@ class WebServer:
         self._latest_text: str | None = None
         self._clients: set[WebClient] = set()
         self._sockets: set[web.WebSocketResponse] = set()  # every route's WebSocket clients (limits.clients)
-        self._handlers: Any = None         # aiohttp's protocol factory: its ``connections`` are the open ones
+        self._handlers: Any = None         # aiohttp's protocol factory (web_server.Server)
+        self._open = 0                     # connections handed to aiohttp and not lost yet
+        self._cap = limits.connections     # limits.connections, within the process's files (FILES_SHARE)
         self._loop: asyncio.AbstractEventLoop | None = None
         self._ready = threading.Event()
         self._start_error: BaseException | None = None
         self._crash: BaseException | None = None
         adapter.stats.follow("dropped", lambda: self.dropped)  # the node's stats count them too
+        # what the limits refused (below), shown at zero
+        adapter.stats.declare(("connections_refused", "clients_refused", "accept_failed", "refused"))
 
     @property
     def url(self) -> str:
@@ -124,8 +132,8 @@ class WebServer:
 
     @property
     def connections(self) -> int:
-        """How many TCP connections are open now."""
-        return len(self._handlers.connections) if self._handlers is not None else 0
+        """How many TCP connections are open now (refused ones aside)."""
+        return self._open
 
     def start(self) -> None:
         """Serve ``app`` on a worker thread of the adapter; return once listening.
@@ -235,6 +243,12 @@ class WebServer:
         try:
             await runner.setup()
             self._handlers = runner.server
+            lost = self._handlers.connection_lost
+
+            def connection_lost(handler: Any, exc: BaseException | None = None) -> None:
+                self._open -= 1  # (counted here, not from aiohttp's list: that one is made a loop turn later)
+                lost(handler, exc)
+            self._handlers.connection_lost = connection_lost
             # (not aiohttp's TCPSite: a connection past the cap must get a protocol of its own)
             listener = await loop.create_server(self._connection, self.host, self.port, backlog=LISTEN_BACKLOG,
                                                 reuse_address=True)
@@ -244,6 +258,7 @@ class WebServer:
             await runner.cleanup()
             return
         self.port = listener.sockets[0].getsockname()[1]
+        self._cap = self._connection_cap()
         self._loop = loop
         self._ready.set()
         try:
@@ -258,11 +273,12 @@ class WebServer:
     def _connection(self) -> asyncio.Protocol:
         """The protocol of a connection just accepted: aiohttp's, or past ``limits.connections``
         one that answers 503 and closes (counted ``connections_refused``)."""
-        if self.connections < self.limits.connections:
+        if self._open < self._cap:
+            self._open += 1
             return self._handlers()
         self.adapter.count("connections_refused")
-        self.adapter.warn("connections", f"web server on {self.url}: {self.limits.connections} connections open, "
-                                         "the most [limits] connections allows: new ones get 503 and are closed "
+        self.adapter.warn("connections", f"web server on {self.url}: {self._cap} connections open, the most it "
+                                         "takes ([limits] connections): new ones get 503 and are closed "
                                          f"(a connection without a whole request is closed after "
                                          f"{self.limits.timeout_s:g} s)")
         return _Refused()
@@ -294,6 +310,18 @@ class WebServer:
 
         requests.addFilter(one_line)
         return requests
+
+    def _connection_cap(self) -> int:
+        """``limits.connections``, lowered (and said) past 1/``FILES_SHARE`` of the files the
+        process may open: connections must never take the files the rest of the show needs."""
+        soft, _ = resource.getrlimit(resource.RLIMIT_NOFILE)
+        share = max(4, soft // FILES_SHARE) if soft != resource.RLIM_INFINITY else self.limits.connections
+        if self.limits.connections <= share:
+            return self.limits.connections
+        log.warning("%s: web server on %s: [limits] connections = %d lowered to %d: this process may open %d "
+                    "files (ulimit -n), and one server takes at most 1/%d of them — raise the limit to take more",
+                    self.adapter.name, self.url, self.limits.connections, share, soft, FILES_SHARE)
+        return share
 
     def _on_loop_error(self, loop: asyncio.AbstractEventLoop, context: dict[str, Any]) -> None:
         exc = context.get("exception")
