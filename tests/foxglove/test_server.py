@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import asyncio
 import json
+import logging
 import socket
 import struct
 import subprocess
@@ -200,3 +201,48 @@ def test_the_adapter_needs_no_foxglove_sdk(tmp_path):
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60, cwd=tmp_path)
     assert done.returncode == 0, done.stderr
     assert done.stdout.split() == ["True", "None"]
+
+
+@pytest.mark.parametrize("protocols", [("foxglove.sdk.v1",), ("foxglove.websocket.v1",),
+                                       ("foxglove.sdk.v1.1", "foxglove.websocket.v1")])
+def test_either_subprotocol_is_accepted_and_no_other(served, protocols):
+    """Issue 26, item 7c: foxglove-sdk's server refused a client offering only
+    foxglove.websocket.v1 (ws-protocol's constant) with HTTP 400."""
+    async def scenario() -> tuple[str | None, int]:
+        async with aiohttp.ClientSession() as session:
+            async with session.ws_connect(f"ws://127.0.0.1:{served.port}", protocols=protocols) as ws:
+                agreed = ws.protocol
+            try:
+                await session.ws_connect(f"ws://127.0.0.1:{served.port}", protocols=("foxglove.sdk.v2", "x"))
+            except aiohttp.WSServerHandshakeError as exc:
+                return agreed, exc.status
+            return agreed, 101
+
+    agreed, other = run(scenario())
+    assert agreed == next(p for p in protocols if p in PROTOCOLS)
+    assert other == 400
+
+
+def test_bad_subscriptions_and_clients_that_vanish_say_a_few_lines_not_thousands(served, caplog):
+    """Issue 26, item 7d: one stderr line per bad subscription and up to 640 'Broken pipe'
+    lines per departed client (1,820 lines from 10 clients). Now: counted, warned about at
+    most once per WARN_EVERY_S."""
+    async def client(session: aiohttp.ClientSession) -> None:
+        rude = await connect(session, served.port)
+        await rude.until(lambda _: "pepper/frame" in rude.channels)
+        await rude.ws.send_str(json.dumps({"op": "subscribe", "subscriptions": [
+            {"id": 1000 + i, "channelId": 900000 + i} for i in range(100)]}))
+        await rude.subscribe({i: topic for i, topic in enumerate(rude.channels)})
+        await rude.until(lambda got: len(got) >= 10)
+        rude.ws._response.connection.transport.abort()  # gone without a close, while subscribed at 50 Hz
+
+    async def scenario() -> None:
+        async with aiohttp.ClientSession() as session:
+            await asyncio.gather(*(client(session) for _ in range(10)))
+        await asyncio.sleep(1.0)  # (what the server does with clients gone: sending to them fails)
+
+    run(scenario())
+    wait_for(lambda: served.stats["bad"] >= 1000, what="the bad subscriptions counted")
+    lines = [r.getMessage() for r in caplog.records if r.name.startswith("sonibus") and r.levelno >= logging.WARNING]
+    assert len(lines) <= 2, lines
+    assert served.state == "running"
