@@ -7,16 +7,16 @@ for; no capability is advertised, so a client sends only ``subscribe`` and ``uns
 
 >>> server_info("sonibus", "s1")["capabilities"]
 []
->>> message_data(7, 1_500_000_000, b'{"v":1}')
-b'\\x01\\x07\\x00\\x00\\x00\\x00/\\rY\\x00\\x00\\x00\\x00{"v":1}'
+>>> message_data(7, 1_500_000_000, b'{"v":1}').hex(" ")
+'01 07 00 00 00 00 2f 68 59 00 00 00 00 7b 22 76 22 3a 31 7d'
 >>> parse('{"op": "subscribe", "subscriptions": [{"id": 1, "channelId": 3}]}')
 ('subscribe', [(1, 3)])
 >>> parse('{"op": "unsubscribe", "subscriptionIds": [1]}')
 ('unsubscribe', [1])
->>> parse('{"op": "advertise", "channels": []}')
+>>> parse('{"op": "advertise", "channels": []}')  # doctest: +ELLIPSIS
 Traceback (most recent call last):
 ...
-wire.Refused: op 'advertise' is not served (this server advertises no capability: subscribe and unsubscribe only)
+sonibus.adapters.foxglove.wire.Refused: op 'advertise' is not served (this server advertises no capability: ...)
 """
 
 from __future__ import annotations
