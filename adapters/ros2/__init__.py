@@ -20,7 +20,7 @@ from sonibus.bus import ConfigError
 from sonibus.bus.owner import RobotAdapter
 
 from . import cdr
-from .commands import Positions, Ros2Verbs
+from .commands import UNSUPPORTED, Positions, Ros2Verbs
 from .config import Ros2Config
 from .description import Description, describe, wrap
 from .urdf import UrdfError, group_states, parse
@@ -108,6 +108,14 @@ class Ros2Robot(RobotAdapter):
         if self.description.kinematics is not None:
             info["kinematics"] = self.description.kinematics
         return info
+
+    def execute(self, verb: str, args: Any) -> dict[str, Any]:
+        """A verb a ROS robot has no interface for is refused as such before its arguments are
+        checked (``behavior/run`` would otherwise be an unknown behavior)."""
+        if verb in UNSUPPORTED:
+            self.ownership.check(verb)
+            raise self.verbs.unsupported(verb)
+        return super().execute(verb, args)
 
     def _graph(self, key: str, alive: bool) -> None:
         chunks = key.split("/")

@@ -29,6 +29,7 @@ from . import cdr
 from .description import Description, wrap
 
 MIN_DURATION_S = 0.1  # no controller should be asked to jump
+UNSUPPORTED = {"behavior/run": "behaviors", "say": "speech", "stiffness": "stiffness", "awareness": "awareness"}
 
 
 class Positions:
@@ -102,21 +103,22 @@ class Ros2Verbs:
 
     # -- what it cannot ---------------------------------------------------------------
 
-    def _unsupported(self, verb: str, what: str) -> CommandError:
+    def unsupported(self, verb: str) -> CommandError:
+        """The refusal of a verb in ``UNSUPPORTED``."""
         return CommandError("unsupported", f"{verb}: robot '{self.robot}' is a ROS 2 robot, which has no standard "
-                            f"interface for {what}; it takes joints/set, posture and stop")
+                            f"interface for {UNSUPPORTED[verb]}; it takes joints/set, posture and stop")
 
     def behavior_run(self, name: str) -> dict[str, Any]:
-        raise self._unsupported("behavior/run", "behaviors")
+        raise self.unsupported("behavior/run")
 
     def say(self, text: str, volume: float | None = None, speed: float | None = None) -> dict[str, Any]:
-        raise self._unsupported("say", "speech")
+        raise self.unsupported("say")
 
     def stiffness(self, names: list[str], value: float) -> dict[str, Any]:
-        raise self._unsupported("stiffness", "stiffness")
+        raise self.unsupported("stiffness")
 
     def awareness(self, enabled: bool) -> dict[str, Any]:
-        raise self._unsupported("awareness", "awareness")
+        raise self.unsupported("awareness")
 
     # -- helpers ----------------------------------------------------------------------
 
