@@ -16,7 +16,7 @@ from typing import Any
 from sonibus.bus.queue import SampleQueue
 
 try:
-    from cyclonedds.core import Policy, Qos, ReadCondition, SampleState, ViewState, InstanceState, WaitSet
+    from cyclonedds.core import InstanceState, Policy, Qos, ReadCondition, SampleState, ViewState, WaitSet
     from cyclonedds.domain import Domain, DomainParticipant
     from cyclonedds.idl import IdlStruct, types
     from cyclonedds.pub import DataWriter

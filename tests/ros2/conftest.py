@@ -25,6 +25,7 @@ from sonibus.adapters.ros2 import Ros2Config, Ros2Robot
 from sonibus.bus.node import Bus
 
 from ..conftest import Network
+from ..web.conftest import websocket  # noqa: F401  (the page's WebSocket client, a fixture here too)
 
 ROOT = Path(__file__).resolve().parent.parent.parent
 ARM_URDF = ROOT / "examples" / "ros2-arm.urdf"

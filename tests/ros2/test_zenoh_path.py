@@ -19,7 +19,7 @@ from sonibus.bus.client import send_command
 from sonibus.bus.errors import CommandError
 
 from ..conftest import wait_for
-from ..web.conftest import start_web, websocket  # noqa: F401  (a fixture)
+from ..web.conftest import start_web
 from .conftest import TRAJECTORY_HASH, start_arm
 
 POSE = {"lift": 0.1, "torso_yaw": 0.2, "shoulder": 0.3, "elbow": -0.4, "wrist": 0.5, "finger_left": 0.02,
