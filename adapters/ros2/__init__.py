@@ -73,6 +73,7 @@ class Ros2Robot(RobotAdapter):
             bus = self.own(RosSession(self.config.router, self.bus)).bus
         link = ZenohLink(bus, self.config, self._graph)
         self.own(link)
+        self.own(link.queue)  # its drops (a flood) are the node's `dropped`
         link.open()
         return link
 
