@@ -7,7 +7,7 @@ trajectory writer reliable and volatile, keep last 10 (ROS 2's default profile, 
 joint_trajectory_controller subscribes with).
 """
 
-from __future__ import annotations
+# (no `from __future__ import annotations`: Cyclone reads the IDL structs' annotations as objects)
 
 import threading
 from dataclasses import dataclass
@@ -19,6 +19,7 @@ try:
     from cyclonedds.core import InstanceState, Policy, Qos, ReadCondition, SampleState, ViewState, WaitSet
     from cyclonedds.domain import Domain, DomainParticipant
     from cyclonedds.idl import IdlStruct, types
+    from cyclonedds.internal import InvalidSample
     from cyclonedds.pub import DataWriter
     from cyclonedds.sub import DataReader
     from cyclonedds.topic import Topic
@@ -121,7 +122,8 @@ class DdsLink:
     def take(self, timeout: float) -> Received | None:
         if not self._pending:
             self.waitset.wait(duration(seconds=timeout))
-            self._pending = list(self.reader.take(N=BATCH))
+            taken = self.reader.take(N=BATCH)
+            self._pending = [s for s in taken if not isinstance(s, InvalidSample)]  # (not data: a writer gone)
         if not self._pending:
             return None
         sample = self._pending.pop(0)
