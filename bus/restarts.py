@@ -105,7 +105,7 @@ class RunState:
             return {}
         try:
             record = json.loads(self.path.read_text(encoding="utf-8"))
-        except FileNotFoundError:
+        except (FileNotFoundError, NotADirectoryError):  # (a folder that cannot be: said once, when written)
             return {}
         except (OSError, ValueError) as exc:
             log.warning("run state %s unreadable (%s): counting restarts from 0", self.path, exc)
@@ -122,7 +122,8 @@ class RunState:
             os.replace(temporary, self.path)  # whole or not at all, whenever the process is killed
         except OSError as exc:
             log.warning("cannot write the run state %s: %s — restarts are not counted here (set STATE_DIRECTORY "
-                        "or XDG_STATE_HOME to a writable folder)", self.path, exc.strerror or exc)
+                        "or XDG_STATE_HOME to a writable folder)", self.path,
+                        f"{exc.strerror}: {exc.filename}" if exc.filename else exc)
             self.path = None
 
 
