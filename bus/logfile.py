@@ -61,8 +61,9 @@ class LogFile:
             self.handler = logging.handlers.RotatingFileHandler(
                 self.path, maxBytes=max(1, int(config.max_mb * 1e6)), backupCount=config.keep, encoding="utf-8")
         except OSError as exc:
-            raise ConfigError(f"log file {self.path}: {exc.strerror or exc} — give a file in a folder this user "
-                              f"can write ([log] file, or --log-file)") from None
+            why = f"{exc.strerror}: {exc.filename}" if exc.filename else str(exc)
+            raise ConfigError(f"log file {self.path}: {why} — give a file in a folder this user can write "
+                              f"([log] file, or --log-file)") from None
         self.handler.setFormatter(logging.Formatter(FORMAT))
         self.handler.setLevel(logging.INFO)
         self._logger = logging.getLogger(LOGGER)

@@ -107,7 +107,7 @@ TimeoutStopSec=10
 SuccessExitStatus=130
 # SIGTERM to sonibus only, which stops its nodes (and what they started) in order
 KillMode=mixed
-ExecStart={' '.join(_argument(a) for a in command)}
+ExecStart={' '.join(_argument(a, command=i == 0) for i, a in enumerate(command))}
 WorkingDirectory={_escaped(str(config_path.parent))}
 User={user}
 # $STATE_DIRECTORY: where the run keeps how it ended (bus/restarts.py)
@@ -154,10 +154,11 @@ def _escaped(text: str) -> str:
     return text.replace("%", "%%")
 
 
-def _argument(text: str) -> str:
-    """One word of ``ExecStart=``: ``%`` and ``$`` kept literal, quoted when it has spaces or
+def _argument(text: str, command: bool = False) -> str:
+    """One word of ``ExecStart=``: ``%`` kept literal, and ``$`` in an argument (systemd
+    expands variables there, not in the ``command`` itself); quoted when it has spaces or
     quotes (systemd's rules)."""
-    text = _escaped(text).replace("$", "$$")
+    text = _escaped(text) if command else _escaped(text).replace("$", "$$")
     if text and not re.search(r"[\s\"'\\;]", text):
         return text
     return '"' + text.replace("\\", "\\\\").replace('"', '\\"') + '"'
