@@ -254,7 +254,6 @@ class Adapter:
         self.own(self.bus.serve(key, lambda query: self._serve_stats(key, query)))
 
         def report() -> None:
-            self._stats_beat = time.monotonic()
             while not self.stopping.wait(STATS_EVERY_S):
                 self._stats_beat = time.monotonic()  # (health: a metrics() that hangs stops the beat)
                 try:
@@ -263,6 +262,7 @@ class Adapter:
                 except Exception as exc:  # a metrics() that raised, a closing session: the next second
                     if not self.stopping.is_set():
                         self.warn("stats", f"stats not sent: {type(exc).__name__}: {_first_line(exc)}")
+        self._stats_beat = time.monotonic()  # (before its thread runs: the node is healthy from its start)
         self.spawn(report, "stats", restart=True)
 
     def _serve_stats(self, key: str, query: Any) -> None:
