@@ -48,6 +48,7 @@ def test_sonibus_run_says_ready_pings_the_watchdog_and_says_stopping(supervisor,
     assert ready[0]["STATUS"].startswith("running pepper on "), ready
     assert any(s.startswith("joining the bus (peer") for s in supervisor.statuses()), supervisor.statuses()
     assert "starting node 'pepper' (sim)" in supervisor.statuses()
+    assert supervisor.with_key("EXTEND_TIMEOUT_USEC")[0] == {"EXTEND_TIMEOUT_USEC": "10000000"}  # joining: no hurry
     wait_for(lambda: len(supervisor.after(lambda m: "READY" in m)) > 4, 10, "watchdog pings after READY")
     assert all(m == {"WATCHDOG": "1"} for m in supervisor.after(lambda m: "READY" in m)[1:4])
     code, _, err = run.stop(signal.SIGTERM)
