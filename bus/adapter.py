@@ -150,13 +150,14 @@ class Adapter:
         return described
 
     def health(self) -> str:
-        """Why this node is not healthy, or "" when it is: running, not failed, and not hung
+        """Why this node is not healthy, or "" when it is: running (or paused: a recorder whose
+        disk is nearly full must not have the show restarted), not failed, and not hung
         (its stats worker goes round every second; every queue it owns with items waiting
         is taken from within ``HANG_S``). ``sonibus run`` feeds a supervisor's watchdog
         only while every node is healthy. Safe from any thread."""
         if self.failure:
             return f"failed: {self.failure}"
-        if self.state != "running":
+        if self.state not in ("running", "paused"):  # (paused: waiting, by design, for what it needs to come back)
             return self.state
         still = time.monotonic() - self._stats_beat
         if still > HANG_S:

@@ -1,4 +1,5 @@
-"""The disk guard, on a real small file system (tmpfs) inside a real ``sonibus run``
+"""The disk guard, on a real small file system (tmpfs) inside a real ``sonibus run`` (under a
+watchdog: a paused recorder keeps it fed)
 with a simulated robot and an OSC sink to oscdump: a warning when space runs
 low; below ``min_free_mb`` the file is finished and the recorder pauses (state,
 event, ``sonibus nodes``) while the sound goes on and the process stays up; a
@@ -11,12 +12,19 @@ import errno
 import os
 import shutil
 import socket
+import tempfile
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
 
 from sonibus.adapters.recorder import Recording, recover
 from sonibus.bus import decode, keys
 from sonibus.bus.monitor import Monitor
 
 from ..conftest import SONIBUS, free_port, require_tool, run_cli, wait_for
+from ..supervisor import Supervisor
 from .conftest import tmpfs
 
 SHOW = """
@@ -57,7 +65,19 @@ def logger(monitor: Monitor):
     return (node.state, node.error) if node is not None else None
 
 
-def test_a_full_disk_pauses_the_recorder_and_the_show_goes_on(net, tmp_path, spawn):
+@pytest.fixture
+def supervisor() -> Iterator[Supervisor]:
+    """systemd's side of the watchdog: a paused recorder must not get the show killed."""
+    folder = tempfile.mkdtemp(prefix="sb-notify-")  # (a unix socket's path has at most 107 bytes)
+    listening = Supervisor(Path(folder) / "notify")
+    try:
+        yield listening
+    finally:
+        listening.close()
+        shutil.rmtree(folder, ignore_errors=True)
+
+
+def test_a_full_disk_pauses_the_recorder_and_the_show_goes_on(net, tmp_path, spawn, supervisor):
     oscdump = require_tool("oscdump", "liblo-tools")
     port = free_port(socket.SOCK_DGRAM)
     sound = spawn(oscdump, "-L", str(port), collect=True)
@@ -67,7 +87,9 @@ def test_a_full_disk_pauses_the_recorder_and_the_show_goes_on(net, tmp_path, spa
     with tmpfs("2m") as disk, Monitor(net.bus("top")) as top:
         show = tmp_path / "show.toml"
         show.write_text(SHOW.format(port=port, disk=disk))
-        run = spawn(SONIBUS, "run", str(show), *net.cli_args(), collect=True, merge=True)
+        environ = {k: v for k, v in supervisor.environ(watchdog_s=0.6).items() if k != "WATCHDOG_PID"}
+        run = spawn(SONIBUS, "run", str(show), *net.cli_args(), collect=True, merge=True,
+                    env={**os.environ, **environ})
         said = lambda: "\n".join(run.lines)  # noqa: E731
         first = wait_for(lambda: sorted(f for f in os.listdir(disk) if f.endswith(".mcap")), timeout=20,
                          what="the first file", explain=said)
@@ -81,6 +103,10 @@ def test_a_full_disk_pauses_the_recorder_and_the_show_goes_on(net, tmp_path, spa
         wait_for(lambda: any(e.get("state") == "paused" for e in events), what="the paused event", explain=said)
         paused = next(e for e in events if e.get("state") == "paused")
         assert paused["node"] == "logger" and "the disk is nearly full" in paused["error"], paused
+        since = time.monotonic()
+        wait_for(lambda: len(supervisor.with_key("WATCHDOG", since)) >= 3, what="watchdog pings while paused",
+                 explain=lambda: str(supervisor.messages[-5:]))
+        assert not [s for s in supervisor.statuses(since) if s.startswith("unhealthy")], supervisor.statuses(since)
         heard = len(sound.lines)
         _, why = wait_for(lambda: (seen := logger(top)) and seen[0] == "paused" and seen, what="top: paused")
         assert why.startswith("the disk is nearly full: 0."), why
