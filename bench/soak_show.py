@@ -58,6 +58,7 @@ from tests.fuzz.show import SONIBUS, Child, _has_port, _jack_up, until
 HERE = Path(__file__).resolve().parent
 GOAL_MB_H = 2.0
 LONG_MIN = 60.0  # the goal is judged on a run at least this long
+MAPPINGS_EVERY_S = 300.0
 
 
 @dataclass
@@ -165,12 +166,34 @@ every_s = 10
 """
 
 
+def mappings(pid: int) -> dict[str, float]:
+    """The process's resident MB by kind of mapping (/proc/PID/smaps): ``heap`` (glibc's main
+    arena), ``arenas`` (anonymous mappings aligned on 64 MiB: glibc's other arenas, where
+    threads' mallocs go, Zenoh's Rust side's too), ``anon`` (other anonymous ones: Python's
+    small-object arenas, large blocks, thread stacks), ``files``."""
+    kinds: dict[str, float] = {}
+    kind = "files"
+    with contextlib.suppress(OSError), open(f"/proc/{pid}/smaps") as smaps:
+        for line in smaps:
+            if line[0] in "0123456789abcdef" and "-" in line.split(" ", 1)[0]:
+                span, *rest = line.split()
+                low = int(span.split("-")[0], 16)
+                name = rest[4] if len(rest) > 4 else ""
+                kind = ("heap" if name == "[heap]" else "files" if name.startswith("/") else "other" if name
+                        else "arenas" if low % (64 << 20) == 0 else "anon")
+            elif line.startswith("Rss:"):
+                kinds[kind] = kinds.get(kind, 0.0) + int(line.split()[1]) / 1024
+    return {k: round(v, 1) for k, v in sorted(kinds.items())}
+
+
 class Process:
-    """The run's RSS, open files and threads, read from /proc every ``every_s``."""
+    """The run's RSS, open files and threads, read from /proc every ``every_s``; its
+    mappings (``mappings``) every ``MAPPINGS_EVERY_S``."""
 
     def __init__(self, pid: int, every_s: float) -> None:
         self.pid, self.started = pid, time.monotonic()
         self.samples: list[tuple[float, float, int, int]] = []  # (s since start, RSS MB, fds, threads)
+        self.mappings: list[tuple[float, dict[str, float]]] = []
         self._done = threading.Event()
         self._thread = threading.Thread(target=self._run, args=(every_s,), daemon=True)
         self._thread.start()
@@ -185,10 +208,14 @@ class Process:
         return int(fields["VmRSS"].split()[0]) / 1024, fds, int(fields["Threads"])
 
     def _run(self, every_s: float) -> None:
+        next_mappings = 0.0
         while not self._done.wait(every_s):
-            now = self.read()
+            now, since = self.read(), time.monotonic() - self.started
             if now is not None:
-                self.samples.append((time.monotonic() - self.started, *now))
+                self.samples.append((since, *now))
+            if since >= next_mappings:
+                next_mappings += MAPPINGS_EVERY_S
+                self.mappings.append((round(since / 60, 1), mappings(self.pid)))
 
     def close(self) -> None:
         self._done.set()
@@ -244,7 +271,7 @@ class Soak:
                        "--frames", str(self.args.trace), "--base-after", str(self.args.warmup_min * 60),
                        "--report-every", str(self.args.trace_report_s)]
         self.run = run = self._child(command)
-        until(lambda: not run.alive or any("sonibus: running" in text for _, text in run.out), 60,
+        until(lambda: not run.alive or any("sonibus: running" in text for _, text in run.out), 300,
               "sonibus run to start every node", 0.1)
         if not run.alive:
             raise RuntimeError(f"sonibus run ended at start: {run.tail(30)}")
@@ -339,6 +366,7 @@ def analyse(args: argparse.Namespace, show: Soak, process: Process, clients: Cli
         "restarts": {"workers": worker_restarts, "run_ended_at_min": show.ended_at},
         "exit_code": code, "stop_s": round(show.stop_s, 2), "errors_in_log": failures,
         "clients": dict(clients.counts), "client_errors": clients.errors,
+        "mappings_mb": process.mappings,
         "samples": [[round(t, 1), rss, fds, threads] for t, rss, fds, threads in samples],
     }
     fds, threads = steady.get("fds", ["?", "?"]), steady.get("threads", ["?", "?"])
@@ -361,6 +389,10 @@ def analyse(args: argparse.Namespace, show: Soak, process: Process, clients: Cli
     return result
 
 
+def _interrupt(signum: int, frame: object) -> None:
+    raise KeyboardInterrupt
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--minutes", type=float, default=6.0, help="how long (default 6; the long form: 60 or more)")
@@ -376,6 +408,7 @@ def main() -> None:
     parser.add_argument("--name", default="soak_show", help="results name (default soak_show)")
     parser.add_argument("--keep", action="store_true", help="keep the log, recordings and trace")
     args = parser.parse_args()
+    signal.signal(signal.SIGTERM, _interrupt)  # (ends the show and its JACK server, as Ctrl-C does)
     if args.warmup_min is None:
         args.warmup_min = min(15.0, max(1.0, args.minutes / 5))
     tmp = Path(tempfile.mkdtemp(prefix="soak-show-"))
