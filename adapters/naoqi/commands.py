@@ -4,7 +4,9 @@ arrive validated (``RobotAdapter``); what can block on the robot (``say``,
 most the connect timeout.
 
 Errors: a robot that refuses → ``failed`` with its message on one line; no
-robot → ``failed`` saying so."""
+robot → ``not_connected``; a call it did not answer in time → ``not_answering``.
+A ``stop`` that could not reach the robot is kept (``stop_pending``) and sent as
+soon as the robot answers again (``send_pending_stop``, on the next connection)."""
 
 from __future__ import annotations
 
@@ -25,6 +27,7 @@ log = logging.getLogger(__name__)
 STOP_CALLS = (("ALBehaviorManager", "stopAllBehaviors"), ("ALMotion", "killAll"), ("ALMotion", "stopMove"),
               ("ALTextToSpeech", "stopAll"))
 RESTORE_TIMEOUT_MS = 800  # on stop: the node must end within about a second
+UNANSWERED_STOP_MS = 1000  # a stop sent to a robot that does not answer waits this long for it, not the connect timeout
 
 
 class Postures:
@@ -62,8 +65,9 @@ class NaoqiCommands:
     """Carries out validated commands on the robot behind ``link``."""
 
     def __init__(self, link: Link, events: RobotEvents, model: Callable[[], RobotModel],
-                 down: Callable[[str], CommandError]) -> None:
-        self.link, self.events, self.model, self.down = link, events, model, down
+                 down: Callable[[str], CommandError], answering: Callable[[], bool] = lambda: True) -> None:
+        self.link, self.events, self.model, self.down, self.answering = link, events, model, down, answering
+        self.stop_pending = False  # a stop that did not reach the robot: sent when it answers again
         self.postures = Postures(events.publish)
         self.installed: tuple[str, ...] = ()  # behaviors, as the robot last listed them
         self.voice_defaults: dict[str, float] = {}
@@ -94,7 +98,9 @@ class NaoqiCommands:
         except LinkDown as exc:
             if not self.link.connected:
                 raise self.down(f"{verb}: {exc}") from None
-            raise CommandError("failed", f"{verb}: {exc}") from None  # e.g. a slow answer on a live link
+            if "no answer within" in str(exc):  # a live link, a robot that does not answer
+                raise CommandError("not_answering", f"{verb}: robot does not answer: {exc}") from None
+            raise CommandError("failed", f"{verb}: {exc}") from None
         except RemoteError as exc:
             raise CommandError("failed", f"{verb}: {exc}") from None
 
@@ -176,10 +182,13 @@ class NaoqiCommands:
         return {"enabled": enabled, "previous": previous}
 
     def stop(self) -> dict[str, Any]:
-        """Every part is sent at once and each is waited for, whatever the others do."""
+        """Every part is sent at once and each is waited for, whatever the others do (at most
+        ``UNANSWERED_STOP_MS`` on a robot that does not answer). Not reached: kept for later."""
         self.events.speech.forget()
         self.postures.interrupt()
-        sent, failures = [], []
+        self.stop_pending = True  # (until the robot has done every part)
+        wait_ms = None if self.answering() else UNANSWERED_STOP_MS
+        sent, failures, unanswered = [], [], []
         for service, method in STOP_CALLS:
             try:
                 sent.append((f"{service}.{method}", self.link.start(service, method)))
@@ -187,14 +196,33 @@ class NaoqiCommands:
                 failures.append(f"{service}.{method}: {exc}")
         for what, future in sent:
             try:
-                self.link.wait(future, what)
-            except (LinkDown, RemoteError) as exc:
+                self.link.wait(future, what, wait_ms)
+            except LinkDown as exc:
+                unanswered.append(str(exc))
+            except RemoteError as exc:
                 failures.append(str(exc))
         if not self.link.connected:
             raise self.down("stop")
+        if unanswered:  # sent: the robot does them if it answers again; sent again on the next connection
+            raise CommandError("not_answering", f"stop: robot does not answer: {'; '.join(unanswered)}")
+        self.stop_pending = False
         if failures:
             raise CommandError("failed", f"stop: {'; '.join(failures)} (the other parts were done)")
         return {}
+
+    def send_pending_stop(self) -> None:
+        """On a new connection: the stop asked for while the robot could not be reached."""
+        if not self.stop_pending:
+            return
+        failures = []
+        for service, method in STOP_CALLS:
+            try:
+                self.link.call(service, method)
+            except (LinkDown, RemoteError) as exc:
+                failures.append(f"{service}.{method}: {exc}")
+        self.stop_pending = bool(failures) and not self.link.connected
+        log.warning("sent the stop asked for while the robot could not be reached%s",
+                    f" — failed: {'; '.join(failures)}" if failures else "")
 
     # -- awareness held paused while the adapter runs ---------------------------------
 

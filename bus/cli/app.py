@@ -16,6 +16,7 @@ from collections.abc import Callable, Sequence
 from importlib.metadata import EntryPoint, entry_points, version
 
 from .. import registry
+from ..client import UNANSWERED
 from ..errors import CommandError, ConfigError, RobotNotFound, SonibusError
 from ..text import PrintableFormatter
 from .api import COMMAND_GROUP, Command, Environment, Exit, add_bus_arguments
@@ -135,7 +136,7 @@ def _status(exc: Exception) -> Exit:
     if isinstance(exc, RobotNotFound):
         return Exit.NOT_FOUND
     if isinstance(exc, CommandError):
-        return Exit.TIMEOUT if exc.code == "timeout" else Exit.REFUSED
+        return Exit.TIMEOUT if exc.code in UNANSWERED else Exit.REFUSED
     if isinstance(exc, ConfigError):
         return Exit.USAGE
     return Exit.ERROR
