@@ -61,6 +61,7 @@ class NaoqiRobot(RobotAdapter):
         self.events = RobotEvents(self.publish_event)
         self.link = Link(self.config, self._lost, self.stopping)
         self.connection.answer_s = self.config.answer_timeout_s
+        self.connection.details = {"url": self.link.url}  # (in the first event, "connecting", too)
         self.verbs = NaoqiCommands(self.link, self.events, lambda: self.model, self._down,
                                    lambda: self.connection.state == "connected")
         self.facts: Robot | None = None

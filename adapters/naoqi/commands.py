@@ -67,13 +67,21 @@ class NaoqiCommands:
     def __init__(self, link: Link, events: RobotEvents, model: Callable[[], RobotModel],
                  down: Callable[[str], CommandError], answering: Callable[[], bool] = lambda: True) -> None:
         self.link, self.events, self.model, self.down, self.answering = link, events, model, down, answering
-        self.stop_pending = False  # a stop that did not reach the robot: sent when it answers again
+        self._stop_wanted = False          # a stop was asked and the robot has not done it yet
+        self._stop_sent: list[Any] = []    # ... its calls, sent to a robot that did not answer them (futures)
         self.postures = Postures(events.publish)
         self.installed: tuple[str, ...] = ()  # behaviors, as the robot last listed them
         self.voice_defaults: dict[str, float] = {}
         self._voice: dict[str, float] = {}
         self._awareness_paused = False   # by this adapter, to be resumed on stop
         self._paused_before: bool | None = None
+
+    @property
+    def stop_pending(self) -> bool:
+        """A stop that did not reach the robot: sent again on the next connection (``send_pending_stop``),
+        unless the robot answered its calls meanwhile (it was frozen, not gone)."""
+        sent = self._stop_sent
+        return self._stop_wanted and not (sent and all(f.isFinished() and not f.hasError() for f in sent))
 
     def connected(self, behaviors: Sequence[str]) -> None:
         """A (new) connection: its behaviors, and the voice settings it has now (the first ones are the defaults)."""
@@ -186,7 +194,7 @@ class NaoqiCommands:
         ``UNANSWERED_STOP_MS`` on a robot that does not answer). Not reached: kept for later."""
         self.events.speech.forget()
         self.postures.interrupt()
-        self.stop_pending = True  # (until the robot has done every part)
+        self._stop_wanted, self._stop_sent = True, []  # (until the robot has done every part)
         wait_ms = None if self.answering() else UNANSWERED_STOP_MS
         sent, failures, unanswered = [], [], []
         for service, method in STOP_CALLS:
@@ -203,9 +211,10 @@ class NaoqiCommands:
                 failures.append(str(exc))
         if not self.link.connected:
             raise self.down("stop")
-        if unanswered:  # sent: the robot does them if it answers again; sent again on the next connection
+        if unanswered:  # sent: the robot does them if it answers again, else they go again on the next connection
+            self._stop_sent = [future for _, future in sent]
             raise CommandError("not_answering", f"stop: robot does not answer: {'; '.join(unanswered)}")
-        self.stop_pending = False
+        self._stop_wanted = False
         if failures:
             raise CommandError("failed", f"stop: {'; '.join(failures)} (the other parts were done)")
         return {}
@@ -220,7 +229,7 @@ class NaoqiCommands:
                 self.link.call(service, method)
             except (LinkDown, RemoteError) as exc:
                 failures.append(f"{service}.{method}: {exc}")
-        self.stop_pending = bool(failures) and not self.link.connected
+        self._stop_wanted, self._stop_sent = bool(failures) and not self.link.connected, []
         log.warning("sent the stop asked for while the robot could not be reached%s",
                     f" — failed: {'; '.join(failures)}" if failures else "")
 
