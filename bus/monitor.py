@@ -486,6 +486,9 @@ def describe_event(kind: str, message: dict[str, Any]) -> str:
         return f"{message.get('state', '?')}, owner {owner.get('node', '?')} on {owner.get('host', '?')}"
     if kind == "speech":
         return f"{message.get('state', '?')} '{message.get('text', '')}'"
+    if kind == "connection":  # (its error says why it is not connected)
+        error = message.get("error")
+        return f"{message.get('state', '?')}: {error}" if error else str(message.get("state", "?"))
     if kind in ("behavior", "posture"):  # (the state first: a long name is what a narrow view cuts)
         return f"{message.get('state', '?')} {message.get('name', '?')}"
     return " ".join(f"{k}={v}" for k, v in message.items() if k not in ("t", "kind"))

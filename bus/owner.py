@@ -13,7 +13,8 @@ adapter), connects and sets ``self.model`` and ``self.verbs`` (an instance of
 ``publish_frame`` per frame until ``self.stopping`` is set).
 
 The robot's connection state (``bus/connection.py``) is the owner's too: it starts
-as ``first_state``, a subclass says each change with ``self.connection.set(...)``,
+as ``first_state`` ("connected", or "connecting" for an adapter that dials its robot
+after ``_open``), a subclass says each change with ``self.connection.set(...)``,
 and the owner serves it in the info, sends it as ``connection`` events and refuses
 commands (but ``stop``) while the robot is not connected.
 """
@@ -46,8 +47,9 @@ class RobotAdapter(Adapter):
     model: RobotModel
     verbs: RobotVerbs
     rate_hz: float = 100.0
-    first_state: ClassVar[str] = "connecting"
-    """The robot's connection state once ``_open()`` returned (a simulator is "connected")."""
+    first_state: ClassVar[str] = "connected"
+    """The robot's connection state once ``_open()`` returned: an adapter that reaches its robot
+    later (NAOqi's) starts "connecting" and says each change (``self.connection.set``)."""
     stop_pending = False
     """True while a ``stop`` that did not reach the robot waits to be sent to it (an adapter that does so)."""
 

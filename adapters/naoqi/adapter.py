@@ -53,6 +53,7 @@ class NaoqiRobot(RobotAdapter):
     Verbs = NaoqiCommands
     verbs: NaoqiCommands
     counters = ("mic_chunks", "mic_refused", *SPEAKER_COUNTERS)
+    first_state = "connecting"  # (the acquisition thread dials the robot once the node runs)
 
     def _open(self) -> None:
         self.model = load_model(self.config.model_name)  # until the robot tells its own

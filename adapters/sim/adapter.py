@@ -61,7 +61,6 @@ class SimRobot(RobotAdapter):
     counters = audio.MIC_COUNTERS + audio.SPEAKER_COUNTERS
     Verbs = SimEngine  # the engine carries out the commands
     verbs: SimEngine
-    first_state = "connected"  # (the robot is this process: it always answers)
 
     def _open(self) -> None:
         self.engine = self.config.engine(lambda kind, fields: self.publish_event(kind, **fields))
