@@ -30,6 +30,7 @@ from ..conftest import free_port, run_cli, wait_for
 from ..jackd import jack  # noqa: F401 (the fixture)
 from ..midi.conftest import Reader
 from ..osc.pd import Patch, osc_input, oscdump_lines, printed, start_oscdump, start_pd
+from ..web.browser import Browser
 from ..web.conftest import websocket  # noqa: F401 (the fixture)
 from .conftest import attach
 
@@ -45,7 +46,7 @@ def unreachable(net):
     return rig
 
 
-def test_nodes_info_monitor_and_the_web_page_say_not_connected_and_0_frames(net, unreachable, websocket):  # noqa: F811 (the fixture)
+def test_nodes_info_monitor_and_the_web_page_say_not_connected_and_0_frames(net, unreachable, websocket, tmp_path):  # noqa: F811 (the fixture)
     listed = run_cli("nodes", *net.cli_args())
     [line] = [line for line in listed.stdout.splitlines() if "robot pepper" in line]
     assert " 0 frames/s" in line and "NOT CONNECTED: lost" in line and "Connection refused" in line, line
@@ -53,8 +54,8 @@ def test_nodes_info_monitor_and_the_web_page_say_not_connected_and_0_frames(net,
     shown = run_cli("info", "pepper", *net.cli_args())
     header = shown.stdout.splitlines()[0]
     assert "NOT CONNECTED: lost" in header and " 0 frames/s (of 50 asked)" in header, header
-    as_json = json.loads(run_cli("info", "pepper", "--json", *net.cli_args()).stdout)
-    assert as_json["connection"]["state"] == "lost" and as_json["connection"]["frames_per_s"] == 0
+    info = robot_info(unreachable.bus, "pepper")
+    assert info["connection"]["state"] == "lost" and info["connection"]["frames_per_s"] == 0
 
     with Monitor(net.bus("top")) as monitor:
         robot = wait_for(lambda: next((r for r in monitor.snapshot().robots if r.name == "pepper"
@@ -67,6 +68,16 @@ def test_nodes_info_monitor_and_the_web_page_say_not_connected_and_0_frames(net,
                                          if "pepper" in m["robots"]), None), 10, "pepper on the page")
     assert shown_robot["connected"] is False and shown_robot["connection"]["state"] == "lost"
     assert "Connection refused" in shown_robot["connection"]["error"]
+
+    browser = Browser(tmp_path / "chromium")
+    try:  # what the operator sees beside the robot's name
+        browser.open(web.url + "/")
+        section = '[data-robot="pepper"]'
+        browser.wait(lambda: browser.text(f"{section} .robot-rate") == "0 frames/s", "pepper's 0 frames/s")
+        assert browser.text(f"{section} .robot-connection") == "not connected: lost"
+        assert "Connection refused" in browser.attribute(f"{section} .robot-connection", "title")
+    finally:
+        browser.quit()
 
 
 def test_commands_are_refused_not_connected_and_stop_says_it_did_not_reach_the_robot(net, unreachable):
