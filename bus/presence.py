@@ -68,6 +68,7 @@ class Presence:
         self.warned: dict[str, str] = {}     # robot → the state its silence was explained with
         self.unsaid: set[str] = set()        # robots on the bus whose state the sink has not been told yet
         self.said: dict[str, tuple[str, float | None]] = {}  # robot → (state, owner's t) of the last connection event
+        self.checked: dict[str, float] = {}  # silent robot → when its state was last asked (monotonic)
         self._lock = threading.Lock()
         self._entities = [watch_robots(bus, self._changed)]
 
@@ -81,6 +82,7 @@ class Presence:
             self.on_bus.pop(robot, None)
             self.heard.pop(robot, None)
             self.warned.pop(robot, None)
+            self.checked.pop(robot, None)
             self.unsaid.discard(robot)
         self._tell(robot, {"t": time.time(), "state": "lost", "source": "presence"})
 
@@ -139,7 +141,11 @@ class Presence:
                 unsaid = sorted(self.unsaid)
             for robot in unsaid:
                 self._say_state(robot)
-            for robot in self.silent():
+            now = time.monotonic()
+            for robot in self.silent(now):
+                if robot in self.warned and now - self.checked.get(robot, -SILENCE_S) < SILENCE_S:
+                    continue  # (warned already: its state is asked again only every SILENCE_S)
+                self.checked[robot] = now
                 connection = self._connection(robot)
                 if connection is None:  # its owner does not serve its info (yet): it is still starting
                     continue
@@ -190,8 +196,8 @@ def silence_hint(node: str, robot: str, state: dict[str, Any] | None = None) -> 
                        f"(`sonibus info {robot}` shows its owner and state; check the robot, its network and the "
                        f"owner's log); if it connects and data still does not come: ")
     else:
-        robot_cause = (f"(1) not the robot: its owner says it is connected and publishes "
-                       f"{connection.rate({'connection': state}):.0f} frames/s (`sonibus info {robot}`); so ")
+        rate = f" and publishes {state['frames_per_s']:.0f} frames/s" if "frames_per_s" in state else ""
+        robot_cause = f"(1) not the robot: its owner says it is connected{rate} (`sonibus info {robot}`); so "
     return (f"{node}: robot '{robot}' is on the bus but none of its data arrived in {SILENCE_S:g} s — likely, in "
             f"order: {robot_cause}(2) access control on the robot's machine refuses this machine's user the keys "
             f"'{robot}/frame' or '{robot}/joints/*' (check its access_control rules and this machine's user; "
