@@ -30,6 +30,8 @@ from typing import Any
 from .errors import CommandError
 
 STATES = ("connecting", "connected", "not_answering", "lost", "standby")
+SAID = STATES[:4]
+"""The states a ``connection`` event carries (``standby`` is in the info only: the owner speaks for the robot)."""
 REFUSALS = {"connecting": "not_connected", "lost": "not_connected", "not_answering": "not_answering"}
 """The code a command gets in each state that is not ``connected`` (``standby``: ``conflict``, by the ownership)."""
 UNREACHED = frozenset(REFUSALS.values())
