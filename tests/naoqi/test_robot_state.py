@@ -24,6 +24,7 @@ from sonibus.adapters.midi import MidiSink, MidiSinkConfig
 from sonibus.adapters.osc import OscSink, OscSinkConfig
 from sonibus.adapters.web import WebConfig, WebPages
 from sonibus.bus import CommandError, presence, robot_info, send_command
+from sonibus.bus.cli.top import GONE, TopApp, robot_cells
 from sonibus.bus.monitor import Monitor
 
 from ..conftest import free_port, run_cli, wait_for
@@ -61,6 +62,12 @@ def test_nodes_info_monitor_and_the_web_page_say_not_connected_and_0_frames(net,
         robot = wait_for(lambda: next((r for r in monitor.snapshot().robots if r.name == "pepper"
                                        and r.connection), None), what="pepper's state in the monitor")
         assert robot.connection["state"] == "lost" and not robot.connected and robot.rate_hz == 0
+        cells = robot_cells(robot)
+        assert cells[-1].plain.startswith("NOT CONNECTED: lost (") and str(cells[-1].style) == GONE
+        assert cells[3].plain == "0"  # frames/s
+        TopApp(monitor)._replied("pepper", send_command(unreachable.bus, "pepper", "stop", {}))  # top's `s`
+        [stop] = [e for e in monitor.snapshot().events if e.kind == "stop"]
+        assert stop.alarm and stop.text.startswith("NOT REACHED: ") and "sent when it answers again" in stop.text
 
     web = net.start(WebPages(WebConfig(listen="127.0.0.1:0"), name="web"))
     page = websocket(web.url.replace("http://", "ws://") + "/ws")
@@ -76,6 +83,8 @@ def test_nodes_info_monitor_and_the_web_page_say_not_connected_and_0_frames(net,
         browser.wait(lambda: browser.text(f"{section} .robot-rate") == "0 frames/s", "pepper's 0 frames/s")
         assert browser.text(f"{section} .robot-connection") == "not connected: lost"
         assert "Connection refused" in browser.attribute(f"{section} .robot-connection", "title")
+        browser.js("sonibus.stop()")  # the page's STOP: taken, and said not to have reached the robot
+        browser.wait(lambda: "✗ pepper: not reached" in (browser.text("#status") or ""), "the STOP's outcome")
     finally:
         browser.quit()
 
