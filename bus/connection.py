@@ -147,6 +147,17 @@ class Connection:
         if self.state == "not_answering":
             self.set("connected")
 
+    def answered_since(self, since: float, stopping: threading.Event | None = None) -> bool:
+        """Whether the robot answered (a frame came) after ``since`` (monotonic), waiting for it
+        ``answer_s`` at most: a call sent without waiting for its answer (NAOqi's ``say``,
+        which returns once spoken) is known to have reached a robot that answers."""
+        deadline = since + (self.answer_s or 0.0)
+        while self._answered <= since:
+            if time.monotonic() >= deadline or (stopping is not None and stopping.is_set()):
+                return False
+            time.sleep(0.005)
+        return True
+
     def published(self, now: float) -> None:
         """A frame went out on the bus (counted in ``frames_per_s``)."""
         self.rate.add(now)

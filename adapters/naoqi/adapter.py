@@ -61,10 +61,12 @@ class NaoqiRobot(RobotAdapter):
         self.read_times = ReadTimes()
         self.events = RobotEvents(self.publish_event)
         self.link = Link(self.config, self._lost, self.stopping)
-        self.connection.answer_s = self.config.answer_timeout_s
+        # (three frames at least: a robot read once a second is not silent between its frames)
+        self.connection.answer_s = max(self.config.answer_timeout_s, 3.0 / self.config.rate_hz)
         self.connection.details = {"url": self.link.url}  # (in the first event, "connecting", too)
         self.verbs = NaoqiCommands(self.link, self.events, lambda: self.model, self._down,
-                                   lambda: self.connection.state == "connected")
+                                   lambda: self.connection.state == "connected",
+                                   lambda since: self.connection.answered_since(since, self.stopping))
         self.facts: Robot | None = None
         self.frames_skipped = 0
         self._pacer: Pacer | None = None  # the streaming run going on

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import logging
 import threading
+import time
 from collections.abc import Callable, Sequence
 from typing import Any
 
@@ -65,8 +66,10 @@ class NaoqiCommands:
     """Carries out validated commands on the robot behind ``link``."""
 
     def __init__(self, link: Link, events: RobotEvents, model: Callable[[], RobotModel],
-                 down: Callable[[str], CommandError], answering: Callable[[], bool] = lambda: True) -> None:
+                 down: Callable[[str], CommandError], answering: Callable[[], bool] = lambda: True,
+                 answered_since: Callable[[float], bool] = lambda since: True) -> None:
         self.link, self.events, self.model, self.down, self.answering = link, events, model, down, answering
+        self.answered_since = answered_since  # (whether the robot answered anything after a time, waiting a bit)
         self._stop_wanted = False          # a stop was asked and the robot has not done it yet
         self._stop_sent: list[Any] = []    # ... its calls, sent to a robot that did not answer them (futures)
         self.postures = Postures(events.publish)
@@ -146,10 +149,19 @@ class NaoqiCommands:
         return {}
 
     def posture(self, name: str, speed: float) -> dict[str, Any]:
+        sent = time.monotonic()
         future = self._send("posture", "ALRobotPosture", "goToPosture", name, float(speed))
         token = self.postures.begin(name)
         future.then(lambda done: self._posture_done(name, token, done))
+        self._heard_after("posture", sent)
         return {"name": name}
+
+    def _heard_after(self, verb: str, sent: float) -> None:
+        """A call sent and not waited for (it returns once done) is answered ok only once the
+        robot answered something after it: one that froze a moment ago gets ``not_answering``."""
+        if not self.answered_since(sent):
+            raise CommandError("not_answering", f"{verb}: sent, but the robot has not answered anything since: it "
+                                                f"does not answer (it may still do it if it answers again)")
 
     def _posture_done(self, name: str, token: object, future: Any) -> None:
         if future.hasError():
@@ -163,12 +175,14 @@ class NaoqiCommands:
                 self._call("say", "ALTextToSpeech", method, *(("speed",) if key == "speed" else ()), float(wanted))
                 self._voice[key] = float(wanted)
         ahead = self.events.speech.queue(text)
+        sent = time.monotonic()
         try:
             future = self._send("say", "ALTextToSpeech", "say", text)
         except CommandError:
             self.events.speech.forget(text)
             raise
         future.then(lambda done: self._said(text, done))
+        self._heard_after("say", sent)
         return {"queued": ahead}
 
     def _said(self, text: str, future: Any) -> None:
