@@ -5,25 +5,32 @@ from __future__ import annotations
 import argparse
 import contextlib
 import socket
+from collections.abc import Callable
 from dataclasses import replace
 
 from .. import config, runner
+from ..adapter import Adapter
 from ..node import Bus
 from ..session import open_session
 from .api import Command, Environment, Exit, add_bus_arguments, bus_config
 
 
-def _run_arguments(p: argparse.ArgumentParser) -> None:
+def run_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("config", metavar="CONFIG.toml")
     p.add_argument("--only", nargs="+", metavar="NODE", help="run only these nodes")
     p.add_argument("--host", help="run the nodes of this host (default: this machine's name)")
     add_bus_arguments(p, installation=False)
 
 
-def _run(args: argparse.Namespace, env: Environment) -> Exit:
+def run_installation(args: argparse.Namespace, env: Environment,
+                     prepare: Callable[[list[Adapter]], None] | None = None) -> Exit:
+    """``sonibus run``; ``prepare`` sees the adapters built before they start (``sonibus rehearse``
+    sets its shows' clocks)."""
     installation = config.load(args.config)
     host = args.host or socket.gethostname()
     adapters = runner.build(installation, args.only, host)
+    if prepare is not None:
+        prepare(adapters)
     names = ", ".join(f"{a.name} ({a.kind})" for a in adapters)
 
     def started(bus: Bus) -> None:
@@ -38,7 +45,7 @@ def _run(args: argparse.Namespace, env: Environment) -> Exit:
     return Exit.INTERRUPTED
 
 
-RUN = Command("run", "run the nodes of an installation file", _run_arguments, _run)
+RUN = Command("run", "run the nodes of an installation file", run_arguments, run_installation)
 
 
 def _router(args: argparse.Namespace, env: Environment) -> Exit:
