@@ -46,6 +46,9 @@ from .robot import Lost, Robot, Stopping, matching
 log = logging.getLogger(__name__)
 
 SLICE_S = 0.25  # a wait looks at the node's stopping, the robot and the requests at least this often
+# After a behavior or a sentence ends, what else the robot says is waited for this long before the next step:
+# an operator's stop ends a behavior with the behavior's own event, and its command event follows just after
+SETTLE_S = 0.2
 
 
 class StepFailed(Exception):
@@ -198,7 +201,7 @@ class Director:
         with self._lock:
             request, self.pending = self.pending, None
         if request is not None:
-            self._abort(request, 0, f"robot '{self.robot.name}' lost before it started ({self.robot.why})")
+            self._abort(request, 1, f"robot '{self.robot.name}' lost before it started ({self.robot.why})")
 
     def _wait_back(self) -> None:
         while not self.robot.available:
@@ -240,7 +243,7 @@ class Director:
         self.node.count("scenarios")
         self._event("scenario", name=scenario.name, state="started", **by)
         log.info("%s: scenario %s started%s", self.node.name, scenario.name, f" by {request.by}" if by else "")
-        index = 0  # the step under way
+        index = 1  # the step under way (1: the first)
         try:
             for step in scenario.steps:
                 self._step(step)
@@ -263,7 +266,7 @@ class Director:
 
     def _abort(self, request: Request, index: int, reason: str) -> None:
         self.node.count("aborted")
-        log.warning("%s: scenario %s aborted at step %d: %s", self.node.name, request.scenario.name, index + 1, reason)
+        log.warning("%s: scenario %s aborted at step %d: %s", self.node.name, request.scenario.name, index, reason)
         self._event("scenario", name=request.scenario.name, state="aborted", reason=reason, step=index,
                     **({"by": request.by} if request.by else {}))
 
@@ -278,9 +281,10 @@ class Director:
             finally:
                 self.budget.ended(self.clock.seconds())
         elif step.say:
-            self._send("say", {"text": step.say})
+            self._send("say", {"text": step.say}, interruptible=True)
             if self._wait(timeout, matching("speech", text=step.say, state="done"), interruptible=True) is None:
                 raise StepFailed(f"say {step.say[:40]!r}: not done within {timeout:g} s", stop=True)
+            self._wait(SETTLE_S, interruptible=True)
         elif step.posture:
             self._posture(step.posture, step.speed, timeout, interruptible=True)
         else:
@@ -289,27 +293,31 @@ class Director:
     # -- commands and their ends -------------------------------------------------------------------
 
     def _behavior(self, name: str, timeout: float) -> None:
-        self._send("behavior/run", {"name": name})
+        self._send("behavior/run", {"name": name}, interruptible=True)
         end = self._wait(timeout, matching("behavior", name=name, state=("stopped", "failed")), interruptible=True)
         if end is None:
             raise StepFailed(f"behavior {name}: no end heard within {timeout:g} s", stop=True)
         if end.event and end.event.get("state") == "failed":
             raise StepFailed(f"behavior {name} failed: {end.event.get('error', 'the robot says so')}")
+        self._wait(SETTLE_S, interruptible=True)
 
     def _posture(self, name: str, speed: float, timeout: float, interruptible: bool = False) -> None:
-        self._send("posture", {"name": name, **({"speed": speed} if speed else {})})
+        self._send("posture", {"name": name, **({"speed": speed} if speed else {})}, interruptible)
         end = self._wait(timeout, matching("posture", name=name, state=("reached", "interrupted")), interruptible)
         if end is None:
             raise StepFailed(f"posture {name}: not reached within {timeout:g} s", stop=True)
         if end.event and end.event.get("state") == "interrupted":
             raise StepFailed(f"posture {name} was interrupted")
 
-    def _send(self, verb: str, args: dict[str, Any] | None = None) -> dict[str, Any]:
-        """One command, answered; what came before it is no news of it (events already queued are taken first)."""
+    def _send(self, verb: str, args: dict[str, Any] | None = None, interruptible: bool = False) -> dict[str, Any]:
+        """One command, answered; what came before it is no news of it (events already queued are taken first:
+        with ``interruptible``, a stop from elsewhere among them ends what the show is doing, ``Interrupted``)."""
         while len(self.robot.queue):
             self._take(self.robot.next(0.0))
         if not self.robot.available:
             raise Lost(self.robot.why)
+        if interruptible and self.interrupted:
+            raise Interrupted
         self._own_stops += verb == "stop"
         try:
             return self.robot.command(verb, args)
