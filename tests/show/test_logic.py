@@ -3,6 +3,7 @@ cap, the order of idle behaviors, the rehearsal clock. No bus, no robot."""
 
 from __future__ import annotations
 
+import itertools
 from datetime import datetime, timedelta
 from zoneinfo import ZoneInfo
 
@@ -99,9 +100,9 @@ def test_a_gesture_waits_for_the_rest_after_the_end_of_the_previous_one():
 
 def test_the_cap_counts_starts_in_a_sliding_hour():
     budget = Budget(rest_s=0, per_hour=3)
-    for start in (0.0, 100.0, 200.0):
-        budget.started(start)
-        budget.ended(start + 5)
+    for began in (0.0, 100.0, 200.0):
+        budget.started(began)
+        budget.ended(began + 5)
     assert budget.next_at(300.0) == HOUR_S              # the first of the three leaves the hour then
     budget.started(HOUR_S)
     assert budget.next_at(HOUR_S + 10) == HOUR_S + 100  # then the second
@@ -120,7 +121,7 @@ def test_a_day_of_idle_stays_within_the_cap_where_autoplay_made_thousands():
         budget.ended(now)
     starts.pop()  # (the last one is past the day)
     assert len(starts) <= 8 * 15
-    assert all(b - a >= 123.0 for a, b in zip(starts, starts[1:], strict=False))
+    assert all(b - a >= 123.0 for a, b in itertools.pairwise(starts))
     assert all(sum(1 for s in starts if t - HOUR_S < s <= t) <= 15 for t in starts)
     assert 24 * 3600 / 20 > 4300 > len(starts) * 30
 
@@ -136,7 +137,7 @@ def test_in_order_cycles_and_random_plays_each_once_a_round_never_twice_in_a_row
     played = [order.next() for _ in range(40)]
     for round_ in range(10):
         assert sorted(played[4 * round_:4 * round_ + 4]) == names
-    assert all(a != b for a, b in zip(played, played[1:], strict=False))
+    assert all(a != b for a, b in itertools.pairwise(played))
 
 
 def test_the_random_order_is_the_dates_so_a_rehearsal_plays_the_days_order():
@@ -184,7 +185,7 @@ def test_rehearsal_options_are_read_or_refused_in_one_line():
     assert start("9:55", PARIS, today=at("2025-06-03 00:00").date()) == at("2025-06-03 09:55")
     assert start("2025-06-03 09:55", PARIS) == at("2025-06-03 09:55")
     for bad in ("ten minutes", "0s", "25h"):
-        with pytest.raises(ValueError, match="duration|between"):
+        with pytest.raises(ValueError, match=r"duration|between"):
             speed_of(bad)
     with pytest.raises(ValueError, match="not a time like 09:55"):
         start("tomorrow", PARIS)
