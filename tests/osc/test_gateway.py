@@ -18,8 +18,8 @@ from pythonosc.osc_message_builder import OscMessageBuilder
 
 from sonibus import schemas
 from sonibus.adapters.osc import routes
-from sonibus.adapters.show import Show, ShowConfig
 from sonibus.adapters.osc.gateway import OscGateway, OscGatewayConfig
+from sonibus.adapters.show import Show, ShowConfig
 from sonibus.bus import ConfigError, codec, robot_info
 from sonibus.bus.commands import ok_reply
 from sonibus.bus.options import from_mapping
