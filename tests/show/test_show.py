@@ -13,7 +13,7 @@ import pytest
 
 from sonibus.adapters.show import Show, ShowConfig
 from sonibus.adapters.show.clock import start
-from sonibus.bus import client
+from sonibus.bus import client, codec
 from sonibus.bus.errors import CommandError, OwnershipError
 
 from ..conftest import wait_for
@@ -86,10 +86,13 @@ def test_what_a_show_refuses_is_said_in_one_line_and_nothing_moves(net):
     ]:
         refused = ask(rig, verb, args)
         assert isinstance(refused, CommandError) and (refused.code, words in refused.message) == (code, True), refused
+    garbage = rig.bus.session.get("pepper/program/scenario", payload=b"\xc1\xff", timeout=5.0)
+    answer = codec.decode(next(iter(garbage)).ok.payload)  # undecodable: refused in one line, the node stays up
+    assert answer["error"]["code"] == "bad_request" and "scenario:" in answer["error"]["message"]
     status = ask(rig, "status", {})
     assert status["open"] and status["available"] and status["node"] == "show" and status["running"] == ""
     assert len(rig.events.find("command")) == before
-    assert show.stats["requests_refused"] == 5
+    assert show.stats["requests_refused"] == 6 and show.stats["bad"] == 1 and show.state == "running"
 
 
 def test_a_closed_show_rests_the_robot_with_stiffness_off_and_refuses_scenarios(net):
@@ -168,3 +171,18 @@ def test_a_second_show_for_the_same_robot_refuses_to_start_naming_the_first(net)
     start_show(net, rig)
     with pytest.raises(OwnershipError, match="robot 'pepper' already has a show: node 'show' on"):
         start_show(net, rig, name="show2", taken=False)
+
+
+def test_a_scenario_accepted_just_before_closing_is_aborted_when_the_show_closes_behind_a_gesture(net):
+    """Its gesture ends after closing time: the robot goes to rest, not into the scenario."""
+    rig = connect(net)
+    show = Show(ShowConfig(robot="pepper", timezone="Europe/Paris", hours=["daily 10:00-10:01"],
+                           idle={"behaviors": [HEY]}, scenarios=SCENARIOS), name="show")
+    show.rehearse(10.0, start("2025-06-03 10:00:30", show.config.zone))  # the 3.1 s gesture spans 10:01
+    net.start(show)
+    wait_for(lambda: ("behavior/run", HEY) in commands(rig), 10, "the idle gesture")
+    assert ask(rig, "scenario", {"name": "hello"}) == {"name": "hello", "state": "accepted"}
+    wait_for(lambda: "aborted" in scenario_events(rig, "hello")(), 10, "the scenario aborted")
+    assert rig.events.find("scenario", state="aborted")[0]["reason"] == "the show closed before it started"
+    wait_for(lambda: commands(rig)[-1:] == [("stiffness", 0.0)], 10, "the robot at rest")
+    assert commands(rig)[-3:] == [("behavior/run", HEY), ("posture", "Crouch"), ("stiffness", 0.0)]
