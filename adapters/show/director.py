@@ -177,7 +177,11 @@ class Director:
             return False
         with self._lock:
             self.open = now_open
+            request = None if now_open else self.pending
+            self.pending = self.pending if now_open else None
         self._announce(changed=True)
+        if request is not None:  # (accepted just before closing, behind a gesture that ended after it)
+            self._abort(request, 1, "the show closed before it started")
         return True
 
     def _enter(self) -> None:
@@ -204,6 +208,7 @@ class Director:
             self._abort(request, 1, f"robot '{self.robot.name}' lost before it started ({self.robot.why})")
 
     def _wait_back(self) -> None:
+        log.info("%s: waiting for robot '%s' (%s)", self.node.name, self.robot.name, self.robot.why)
         while not self.robot.available:
             if self.node.stopping.is_set():
                 raise Stopping("the show stops")

@@ -182,7 +182,11 @@ def test_a_scenario_accepted_just_before_closing_is_aborted_when_the_show_closes
     net.start(show)
     wait_for(lambda: ("behavior/run", HEY) in commands(rig), 10, "the idle gesture")
     assert ask(rig, "scenario", {"name": "hello"}) == {"name": "hello", "state": "accepted"}
-    wait_for(lambda: "aborted" in scenario_events(rig, "hello")(), 10, "the scenario aborted")
+    wait_for(lambda: "aborted" in scenario_events(rig, "hello")(), 10, "the scenario aborted",
+             lambda: "\n".join(str(e) for e in rig.events.find() if e["kind"] != "motion"))
     assert rig.events.find("scenario", state="aborted")[0]["reason"] == "the show closed before it started"
     wait_for(lambda: commands(rig)[-1:] == [("stiffness", 0.0)], 10, "the robot at rest")
     assert commands(rig)[-3:] == [("behavior/run", HEY), ("posture", "Crouch"), ("stiffness", 0.0)]
+    refused = ask(rig, "scenario", {"name": "hello"})
+    assert isinstance(refused, CommandError) and refused.code == "closed"
+    assert scenario_events(rig, "hello")() == ["aborted"] and ask(rig, "status", {})["pending"] == ""
