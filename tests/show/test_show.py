@@ -58,6 +58,13 @@ def scenario_events(rig: Rig, name: str) -> Callable[[], list[str]]:
     return lambda: [e["state"] for e in rig.events.find("scenario", name=name)]
 
 
+def aborted(rig: Rig, name: str) -> dict[str, Any]:
+    """The ``aborted`` event of scenario ``name``, waited for."""
+    found = wait_for(lambda: rig.events.find("scenario", name=name, state="aborted"), 10, f"{name} aborted",
+                     lambda: "\n".join(str(e) for e in rig.events.find() if e["kind"] != "motion"))
+    return found[0]
+
+
 def test_a_scenario_runs_its_steps_in_order_one_at_a_time_and_says_when_it_starts_and_ends(net):
     rig = connect(net)
     start_show(net, rig)
@@ -113,10 +120,8 @@ def test_a_refused_step_aborts_its_scenario_with_the_reason_and_nothing_after_it
     rig = connect(net)
     start_show(net, rig)
     ask(rig, "scenario", {"name": "missing"})
-    wait_for(lambda: "aborted" in scenario_events(rig, "missing")(), 10, "the scenario aborted")
-    aborted = rig.events.find("scenario", state="aborted")[0]
-    assert aborted["step"] == 2 and "behavior/run refused: unknown behavior 'animations/Not/There_1'" in \
-        aborted["reason"]
+    end = aborted(rig, "missing")
+    assert end["step"] == 2 and "behavior/run refused: unknown behavior 'animations/Not/There_1'" in end["reason"]
     ask(rig, "scenario", {"name": "hello"})  # (the next command shows what came after the refusal: nothing)
     wait_for(lambda: len(commands(rig, 3)) > 2, 5, "the next scenario's first command")
     assert commands(rig, 3)[:3] == [("say", "One"), ("behavior/run", "animations/Not/There_1"), ("say", "Hello there")]
@@ -126,13 +131,12 @@ def test_an_end_that_never_comes_aborts_at_the_steps_timeout_and_stops_what_may_
     rig = connect(net)
     start_show(net, rig)
     ask(rig, "scenario", {"name": "hurried"})
-    wait_for(lambda: "aborted" in scenario_events(rig, "hurried")(), 10, "the scenario aborted")
-    aborted = rig.events.find("scenario", state="aborted")[0]
-    assert (aborted["step"], aborted["reason"]) == (1, f"behavior {HEY}: no end heard within 0.3 s")
+    end = aborted(rig, "hurried")
+    assert (end["step"], end["reason"]) == (1, f"behavior {HEY}: no end heard within 0.3 s")
     wait_for(lambda: commands(rig, 3) == [("behavior/run", HEY), ("stop", None)], 5, "the stop after it")
     stop = rig.events.find("command", verb="stop")[-1]
     stopped = wait_for(lambda: rig.events.find("behavior", name=HEY, state="stopped"), 5, "the behavior's end")
-    assert stopped[0]["t"] - stop["t"] < 1.0  # ended by that stop, not 3.1 s after it started
+    assert stopped[0]["t"] <= stop["t"]  # ended by that stop (the sim says so within it), not 3.1 s after its start
     assert ("say", "Never said") not in commands(rig)
 
 
@@ -142,9 +146,8 @@ def test_a_robot_lost_mid_scenario_aborts_it_and_once_back_is_stopped_and_made_r
     ask(rig, "scenario", {"name": "wave"})
     wait_for(lambda: ("behavior/run", HEY) in commands(rig), 5, "the scenario's behavior")
     rig.sim.stop()  # its owner leaves the bus: its token goes at once
-    wait_for(lambda: "aborted" in scenario_events(rig, "wave")(), 10, "the scenario aborted")
-    aborted = rig.events.find("scenario", name="wave", state="aborted")[0]
-    assert aborted["step"] == 1 and "robot 'pepper' lost" in aborted["reason"]
+    end = aborted(rig, "wave")
+    assert end["step"] == 1 and "robot 'pepper' lost" in end["reason"]
     refused = ask(rig, "scenario", {"name": "hello"})
     assert isinstance(refused, CommandError) and refused.code == "unavailable"
     before = len(rig.events.find("command"))
@@ -161,8 +164,7 @@ def test_an_operators_stop_ends_the_scenario_and_the_show_does_not_move_the_robo
     ask(rig, "scenario", {"name": "wave"})
     wait_for(lambda: ("behavior/run", HEY) in commands(rig), 5, "the scenario's behavior")
     client.send_command(rig.bus, "pepper", "stop")
-    wait_for(lambda: "aborted" in scenario_events(rig, "wave")(), 10, "the scenario aborted")
-    assert rig.events.find("scenario", state="aborted")[0]["reason"] == "stopped by a stop command from elsewhere"
+    assert aborted(rig, "wave")["reason"] == "stopped by a stop command from elsewhere"
     assert commands(rig, 3) == [("behavior/run", HEY), ("stop", None)]  # the operator's, and nothing after
 
 
@@ -182,9 +184,7 @@ def test_a_scenario_accepted_just_before_closing_is_aborted_when_the_show_closes
     net.start(show)
     wait_for(lambda: ("behavior/run", HEY) in commands(rig), 10, "the idle gesture")
     assert ask(rig, "scenario", {"name": "hello"}) == {"name": "hello", "state": "accepted"}
-    wait_for(lambda: "aborted" in scenario_events(rig, "hello")(), 10, "the scenario aborted",
-             lambda: "\n".join(str(e) for e in rig.events.find() if e["kind"] != "motion"))
-    assert rig.events.find("scenario", state="aborted")[0]["reason"] == "the show closed before it started"
+    assert aborted(rig, "hello")["reason"] == "the show closed before it started"
     wait_for(lambda: commands(rig)[-1:] == [("stiffness", 0.0)], 10, "the robot at rest")
     assert commands(rig)[-3:] == [("behavior/run", HEY), ("posture", "Crouch"), ("stiffness", 0.0)]
     refused = ask(rig, "scenario", {"name": "hello"})
