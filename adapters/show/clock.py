@@ -31,7 +31,7 @@ from datetime import time as TimeOfDay
 from datetime import tzinfo as TzInfo
 
 DAY_S = 86400.0
-_DURATION = re.compile(r"^\s*(\d+(?:\.\d+)?)\s*(s|m|min|h)?\s*$")
+_DURATION = re.compile(r"^\s*(\d+(?:\.\d+)?)\s*(s|m|min|h)\s*$")  # (a unit always: is "10" s or min?)
 
 
 class ShowClock:
@@ -96,7 +96,7 @@ def speed_of(day: str) -> float:
     match = _DURATION.match(day)
     if match is None:
         raise ValueError(f"'{day}' is not a duration like 10m, 90s or 1h")
-    seconds = float(match[1]) * {"s": 1, None: 1, "m": 60, "min": 60, "h": 3600}[match[2]]
+    seconds = float(match[1]) * {"s": 1, "m": 60, "min": 60, "h": 3600}[match[2]]
     if not 1 <= seconds <= DAY_S:
         raise ValueError(f"a day of {day} must last between 1 s and 24 h")
     return DAY_S / seconds

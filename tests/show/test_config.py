@@ -10,6 +10,8 @@ import pytest
 from sonibus.bus import config, runner
 from sonibus.bus.errors import ConfigError
 
+from ..conftest import run_cli
+
 ROOT = Path(__file__).resolve().parents[2]
 SHOW = '''
 [nodes.show]
@@ -78,3 +80,20 @@ def test_an_inline_robot_tables_mistake_names_its_line():
     line = next(i for i, t in enumerate(wrong.splitlines(), 1) if "autoplay_s = 20 }" in t)
     with pytest.raises(ConfigError, match=rf"museum.toml \[nodes.robot\] line {line}: unknown key 'autoplay_s'"):
         runner.build(config.parse(wrong, "museum.toml"))
+
+
+def test_the_show_pages_first_example_builds():
+    text = (ROOT / "docs" / "show.md").read_text(encoding="utf-8")
+    example = text.split("```toml\n", 1)[1].split("```", 1)[0]
+    assert [a.kind for a in build(example)] == ["sim", "show"]
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--day", "10"], "rehearse: '10' is not a duration like 10m, 90s or 1h"),
+    (["--from", "25:00"], "rehearse: --from: '25:00' is not a time like 09:55"),
+    (["--only", "robot"], "no show node among robot — a rehearsal speeds up the clock of the show nodes"),
+])
+def test_a_rehearsal_that_cannot_run_says_why_in_one_line_and_starts_nothing(args, message):
+    done = run_cli("rehearse", str(ROOT / "examples" / "museum.toml"), "--no-multicast", *args)
+    lines = done.stderr.strip().splitlines()
+    assert done.returncode == 2 and len(lines) == 1 and lines[0].startswith("sonibus: error: ") and message in lines[0]

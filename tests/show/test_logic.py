@@ -184,7 +184,7 @@ def test_rehearsal_options_are_read_or_refused_in_one_line():
     assert speed_of("10m") == 144 and speed_of("1h") == 24 and speed_of("90s") == 960
     assert start("9:55", PARIS, today=at("2025-06-03 00:00").date()) == at("2025-06-03 09:55")
     assert start("2025-06-03 09:55", PARIS) == at("2025-06-03 09:55")
-    for bad in ("ten minutes", "0s", "25h"):
+    for bad in ("ten minutes", "10", "0s", "25h"):
         with pytest.raises(ValueError, match=r"duration|between"):
             speed_of(bad)
     with pytest.raises(ValueError, match="not a time like 09:55"):
