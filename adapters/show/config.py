@@ -143,7 +143,8 @@ class ShowConfig:
                 raise bad(key, f"{getattr(self, key):g} must be in [{low:g}, {high:g}] seconds")
         for key in ("rest_posture", "ready_posture"):
             if not getattr(self, key):
-                raise bad(key, "is empty — name a posture of the robot (sonibus info shows them), e.g. \"Crouch\"")
+                raise bad(key, "is empty — name a posture of the robot, e.g. \"Crouch\" (Pepper: Crouch, Stand, "
+                               "StandInit, StandZero)")
         object.__setattr__(self, "gestures", _table(Idle, self.idle, "idle"))
         object.__setattr__(self, "program", {name: _scenario(name, table) for name, table in self.scenarios.items()})
 

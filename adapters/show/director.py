@@ -138,6 +138,7 @@ class Director:
                     continue
                 if not self.taken:
                     self.clock.begin()  # (a rehearsal's clock waits for the robot)
+                    self._check_names()
                     self._send("stop")
                     self._enter()
                     self.taken = True
@@ -146,6 +147,22 @@ class Director:
                 self._lost()
             except Stopping:
                 return
+
+    def _check_names(self) -> None:
+        """Say which behaviors and postures of the show the robot's info does not list (said, not refused:
+        one may be installed later; its step fails meanwhile, saying so)."""
+        cfg, info = self.config, self.robot.info
+        wanted = {"behaviors": {*cfg.gestures.behaviors, *(s.behavior for c in cfg.program.values() for s in c.steps)},
+                  "postures": {cfg.rest_posture, cfg.ready_posture,
+                               *(s.posture for c in cfg.program.values() for s in c.steps)}}
+        for kind, names in wanted.items():
+            known = info.get(kind)
+            missing = sorted(n for n in names - {""} if isinstance(known, list) and n not in known)
+            if missing:
+                listed = (f"its info lists {len(known)}: `sonibus send {self.robot.name} behavior/list`"
+                          if kind == "behaviors" else f"its postures: {', '.join(map(str, known))}")
+                self.node.warn(f"no {kind}", f"{kind} of the show not on robot '{self.robot.name}': "
+                                             f"{', '.join(missing)} — {listed}")
 
     def _tick(self) -> None:
         if self._schedule():

@@ -116,9 +116,10 @@ def test_a_closed_show_rests_the_robot_with_stiffness_off_and_refuses_scenarios(
     assert isinstance(refused, CommandError) and refused.code == "closed" and "opens Tue 10:00" in refused.message
 
 
-def test_a_refused_step_aborts_its_scenario_with_the_reason_and_nothing_after_it_runs(net):
+def test_a_refused_step_aborts_its_scenario_with_the_reason_and_nothing_after_it_runs(net, caplog):
     rig = connect(net)
     start_show(net, rig)
+    assert "behaviors of the show not on robot 'pepper': animations/Not/There_1 — its info lists 8" in caplog.text
     ask(rig, "scenario", {"name": "missing"})
     end = aborted(rig, "missing")
     assert end["step"] == 2 and "behavior/run refused: unknown behavior 'animations/Not/There_1'" in end["reason"]
