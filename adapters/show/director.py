@@ -139,7 +139,7 @@ class Director:
                 if not self.taken:
                     self.clock.begin()  # (a rehearsal's clock waits for the robot)
                     self._check_names()
-                    self._send("stop")
+                    self._quietly(lambda: self._send("stop"))  # (a stop refused in part: the rest goes on)
                     self._enter()
                     self.taken = True
                 self._tick()
