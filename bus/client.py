@@ -41,7 +41,7 @@ def ask_program(bus: Bus, robot: str, verb: str, args: dict[str, Any], done: Cal
     ``CommandError`` (``program_not_found`` when nothing serves the key), exactly once."""
     key = keys.program(robot, verb)
     nobody = CommandError("program_not_found", f"{verb}: no program drives robot '{robot}' ({key} is served by "
-                                               f"nothing) — start its show node (docs/show.md)")
+                                               f"nothing) — start the node that does, on the same bus")
     _send(bus, key, args, _Pending(robot, verb, done, timeout, nobody))
 
 
