@@ -23,12 +23,29 @@ from .ownership import Claim, claims, owners
 
 Outcome = dict[str, Any] | CommandError
 
+UNANSWERED = ("timeout", "not_connected", "not_answering")
+"""Codes of a command the robot did not carry out because it could not be reached:
+``timeout`` (no reply in time: this module's), ``not_connected`` and ``not_answering``
+(the owner's: its robot is not connected, or does not answer; ``bus/connection.py``).
+``sonibus send`` exits 5 for them, as for a ``stop`` whose result says ``reached: false``."""
+
+
+def unreached(result: dict[str, Any]) -> bool:
+    """Whether a command's result says it did not reach the robot (a ``stop`` is never
+    refused: it is taken, and says so).
+
+    >>> unreached({"reached": False, "connection": "lost"}), unreached({})
+    (True, False)
+    """
+    return result.get("reached") is False
+
 
 def ask(bus: Bus, robot: str, verb: str, args: dict[str, Any], done: Callable[[Outcome], None],
         timeout: float = 5.0, owner: Claim | None = None) -> None:
     """Send ``verb`` to ``robot``'s ``owner`` alone (default: the earliest claim this
     session has seen, if any; see ``owner_of``); ``done`` gets the result or a
-    ``CommandError`` (``robot_not_found``, ``timeout``, or the robot's refusal), exactly once."""
+    ``CommandError`` (``robot_not_found``, ``timeout``, or the owner's refusal:
+    ``not_connected``, ``not_answering``, ``bad_request``...), exactly once."""
     pending = _Pending(robot, verb, done, timeout)
     owner = owner if owner is not None else owners(bus).owner(robot)
     _send(bus, keys.command(robot, verb) + (f"?owner={owner.address}" if owner is not None else ""), args, pending)

@@ -27,7 +27,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from typing import Any
 
-from . import codec, keys, messages
+from . import codec, connection, keys, messages
 from .info import InfoRequests
 from .node import Bus, Reply
 from .ownership import Claim
@@ -70,7 +70,8 @@ class JointView:
 class RobotView:
     """A robot: who owns it (``host/node``; ``standby``: other claims), its model,
     frames over the last second, latency (median of now − ``t``, ms), frames missing
-    by ``seq``, and whether its owner's token went (``gone``)."""
+    by ``seq``, whether its owner's token went (``gone``) and its connection state as
+    its owner says it (``connection``: state, error..., ``bus/connection.py``)."""
 
     name: str
     owner: str = ""
@@ -82,6 +83,11 @@ class RobotView:
     frames: int = 0
     gone: bool = False
     joints: tuple[JointView, ...] = ()
+    connection: dict[str, Any] = field(default_factory=dict)  # (empty: not known yet)
+
+    @property
+    def connected(self) -> bool:
+        return self.connection.get("state") == "connected"
 
 
 @dataclass(frozen=True)
@@ -147,6 +153,8 @@ class _Robot:
         self.seq: int | None = None
         self.gaps = 0
         self.frames = 0
+        self.connection: dict[str, Any] | None = None  # its latest state (its info's, then its events')
+        self.connection_t = -math.inf                 # when its owner said it (its clock)
 
 
 class _Node:
@@ -248,6 +256,7 @@ class Monitor:
                 robot.claims.pop(claim.key, None)
                 if not robot.claims:
                     robot.info = None  # asked again if it comes back: another owner may differ
+                    robot.connection, robot.connection_t = None, -math.inf
             if robot.claimed and was != bool(robot.claims):
                 text = f"on the bus again, owned by {claim}" if alive else "left the bus: its owner's claim went"
                 self._listed(EventView(time.time(), claim.robot, "connection", text, not alive))
@@ -258,6 +267,7 @@ class Monitor:
             entry = self._robots.get(robot)
             if entry is not None and entry.claims:
                 entry.info = info
+                self._connection(entry, connection.state_of(info))
 
     def _on_bad_info(self, robot: str, reason: str) -> None:
         self._refused(reason)
@@ -341,9 +351,19 @@ class Monitor:
 
     def _event(self, robot: str, kind: str, message: dict[str, Any]) -> None:
         alarm = (kind == "conflict" or (kind == "command" and not message.get("ok", True))
-                 or message.get("state") in ("failed", "lost"))
+                 or message.get("state") in ("failed", "lost", "not_answering"))
         with self._lock:
             self._listed(EventView(float(message["t"]), robot, kind, describe_event(kind, message), alarm))
+            entry = self._robots.get(robot) if kind == "connection" else None
+            if entry is not None and entry.claims:
+                self._connection(entry, {**connection.state_of({"connection": message}), "since": message["t"]})
+
+    @staticmethod
+    def _connection(robot: _Robot, state: dict[str, Any]) -> None:
+        """(Under the lock.) ``robot``'s state, unless its owner said a newer one already."""
+        since = state.get("since", -math.inf)
+        if since >= robot.connection_t:
+            robot.connection, robot.connection_t = state, since
 
     def _node_event(self, message: dict[str, Any]) -> None:
         host, node = str(message.get("host", "?")), str(message.get("node", "?"))
@@ -429,7 +449,7 @@ def _robot_view(name: str, robot: _Robot, now: float) -> RobotView:
     return RobotView(name, f"{claims[0].host}/{claims[0].node}" if claims else "",
                      tuple(f"{c.host}/{c.node}" for c in claims[1:]), str(info.get("model", "")),
                      len(robot.recent) / WINDOW_S, latency, robot.gaps, robot.frames,
-                     robot.claimed and not claims, joints)
+                     robot.claimed and not claims, joints, robot.connection or {})
 
 
 def _node_view(host_node: tuple[str, str], node: _Node, now: float) -> NodeView:
@@ -470,6 +490,9 @@ def describe_event(kind: str, message: dict[str, Any]) -> str:
         return f"{message.get('state', '?')}, owner {owner.get('node', '?')} on {owner.get('host', '?')}"
     if kind == "speech":
         return f"{message.get('state', '?')} '{message.get('text', '')}'"
+    if kind == "connection":  # (its error says why it is not connected)
+        error = message.get("error")
+        return f"{message.get('state', '?')}: {error}" if error else str(message.get("state", "?"))
     if kind in ("behavior", "posture"):  # (the state first: a long name is what a narrow view cuts)
         return f"{message.get('state', '?')} {message.get('name', '?')}"
     return " ".join(f"{k}={v}" for k, v in message.items() if k not in ("t", "kind"))

@@ -11,6 +11,12 @@ A subclass names the class that carries out its commands (``Verbs``, a
 adapter), connects and sets ``self.model`` and ``self.verbs`` (an instance of
 ``Verbs``) in ``_open()``, and runs its frame loop in ``_acquire()`` (calling
 ``publish_frame`` per frame until ``self.stopping`` is set).
+
+The robot's connection state (``bus/connection.py``) is the owner's too: it starts
+as ``first_state`` ("connected", or "connecting" for an adapter that dials its robot
+after ``_open``), a subclass says each change with ``self.connection.set(...)``,
+and the owner serves it in the info, sends it as ``connection`` events and refuses
+commands (but ``stop``) while the robot is not connected.
 """
 
 from __future__ import annotations
@@ -25,6 +31,7 @@ import zenoh
 from .. import schemas
 from . import codec, commands, keys, messages
 from .adapter import Adapter
+from .connection import UNREACHED, Connection
 from .errors import CommandError
 from .robot import RobotModel
 from .verbs import RobotVerbs, bind
@@ -40,6 +47,11 @@ class RobotAdapter(Adapter):
     model: RobotModel
     verbs: RobotVerbs
     rate_hz: float = 100.0
+    first_state: ClassVar[str] = "connected"
+    """The robot's connection state once ``_open()`` returned: an adapter that reaches its robot
+    later (NAOqi's) starts "connecting" and says each change (``self.connection.set``)."""
+    stop_pending = False
+    """True while a ``stop`` that did not reach the robot waits to be sent to it (an adapter that does so)."""
 
     @property
     def robot(self) -> str:
@@ -53,7 +65,9 @@ class RobotAdapter(Adapter):
 
     def _start(self) -> None:
         self._claim()
+        self.connection = Connection(lambda fields: self.publish_event("connection", **fields), self.first_state)
         self._open()
+        self.connection.announce()  # from the first second: sinks know at once whether the robot is there
         declared = getattr(self, "Verbs", None)
         if declared is None or not isinstance(getattr(self, "verbs", None), declared):
             raise TypeError(f"{type(self).__name__}: _open() must set self.verbs to an instance of its Verbs class "
@@ -64,6 +78,12 @@ class RobotAdapter(Adapter):
         self.own(self.bus.serve(keys.info(self.robot), self._serve_info))
         self.own(self.bus.serve(keys.command(self.robot), self._serve_command))
         self.spawn(self._acquire, "acquire")
+        if self.connection.answer_s is not None:
+            self.spawn(self._watch_answers, "answers")
+
+    def _watch_answers(self) -> None:
+        while not self.stopping.wait(0.1):
+            self.connection.check(time.monotonic())
 
     def _claim(self) -> None:
         self.ownership = self.claim_robot(self.robot)
@@ -92,7 +112,10 @@ class RobotAdapter(Adapter):
             self.count("joints_left_out", len(left_out))
             self.warn("values", f"{self.robot}: {', '.join(left_out)} left out of frame {seq}: "
                                 f"not a finite value within ±{messages.MAX_VALUE:g}")
+        now = time.monotonic()
+        self.connection.answered(now)
         if self.ownership.publish_frame(message):  # nothing while another owner keeps the robot
+            self.connection.published(now)
             self.count("sent")
             self.record_latency(time.time() - t)  # acquisition to publish
 
@@ -105,6 +128,10 @@ class RobotAdapter(Adapter):
         """Names of the behaviors the robot can run (hook)."""
         return ()
 
+    def connection_hint(self) -> str:
+        """What to check when the robot is not connected (hook: "check it is on and reachable at ...")."""
+        return ""
+
     def robot_info(self) -> dict[str, Any]:
         return {
             "robot": self.robot, "model": self.model.name,
@@ -113,6 +140,7 @@ class RobotAdapter(Adapter):
             "postures": sorted(self.model.postures), "adapter": self.kind,
             "schema_version": schemas.VERSION,
             "owner": {"host": self.bus.host, "node": self.name},
+            "connection": self.connection.info(standing_by=not self.ownership.active),
         }
 
     # -- serving ----------------------------------------------------------------
@@ -149,9 +177,26 @@ class RobotAdapter(Adapter):
 
     def execute(self, verb: str, args: Any) -> dict[str, Any]:
         """Validate and run one command; ``stop`` runs whatever its arguments. A node that
-        stands by for another owner runs none (``conflict``)."""
+        stands by for another owner runs none (``conflict``), nor does one whose robot is
+        not connected (``not_connected``, ``not_answering``)."""
         self.ownership.check(verb)
         if verb == "stop":
-            return self._run["stop"]()
+            return self._stop_robot()
         command = commands.validate(verb, args, self.model, self.behaviors())
+        refusal = self.connection.refusal(verb, self.robot, self.connection_hint())
+        if refusal is not None:
+            raise refusal
         return self._run[verb](**command.args)
+
+    def _stop_robot(self) -> dict[str, Any]:
+        """``stop`` is never refused for the robot's state, and never says it stopped a robot
+        it did not reach: then its result says so (``reached`` false, the ``connection``
+        state, the ``error``, and whether the owner sends it once the robot answers again,
+        ``pending``)."""
+        try:
+            return self._run["stop"]()
+        except CommandError as exc:
+            if exc.code not in UNREACHED:
+                raise
+            return {"reached": False, "connection": self.connection.state, "error": exc.message,
+                    "pending": self.stop_pending}

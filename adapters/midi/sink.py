@@ -130,7 +130,8 @@ class MidiSink(Adapter):
         if message.source.section in ("frame", "joints"):
             self._presence.heard_from(message.source.robot)
         if message.event is not None:
-            self._event(message.source, message.event)
+            if self._presence.passes(message.source.robot, message.event):
+                self._event(message.source, message.event)
             return
         for sample in message.joints:
             self._sample(sample.source, sample.values[0], now)
@@ -258,7 +259,7 @@ class MidiSink(Adapter):
         cfg: MidiSinkConfig = self.config
         kind, state = str(message.get("kind") or source.name), str(message.get("state", ""))
         robot = self._robot(source.robot)
-        if kind == "connection" and state == "lost":
+        if kind == "connection" and state != "connected":  # lost, not answering...: no note may hang
             self._notes_off()
             return
         if not cfg.notes or kind not in ("behavior", "speech"):

@@ -138,7 +138,8 @@ class OscSink(Adapter):
         if message.source.section in ("frame", "joints"):
             self._presence.heard_from(message.source.robot)
         if message.event is not None:
-            self._event(message.source, message.event)
+            if self._presence.passes(message.source.robot, message.event):  # (a repeated connection state: not)
+                self._event(message.source, message.event)
             return
         max_age = self.config.max_age_ms / 1000.0
         age = time.time() - message.t

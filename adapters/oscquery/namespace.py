@@ -28,6 +28,7 @@ from typing import Any
 from sonibus import schemas
 from sonibus.adapters.osc import routes
 from sonibus.adapters.osc.profiles import EVENT_ARGS
+from sonibus.bus import connection
 
 Node = dict[str, Any]  # the OSCQuery attributes of one method (FULL_PATH and CONTENTS are the tree's)
 
@@ -35,13 +36,13 @@ READ, WRITE = 1, 2  # ACCESS
 # What an event kind's state argument can be (docs/osc.md, "Events"); its other strings are free.
 EVENT_STATES: dict[str, tuple[str, ...]] = {
     "behavior": ("started", "stopped", "failed"), "speech": ("started", "done"),
-    "posture": ("started", "reached", "interrupted"), "connection": ("connected", "lost"),
+    "posture": ("started", "reached", "interrupted"), "connection": connection.SAID,
     "motion": ("onset", "offset"), "conflict": ("standby", "owner"),
     "show": ("open", "closed"), "scenario": ("started", "ended", "aborted"),
 }
 EVENT_HELP = {
     "behavior": "a behavior started or ended: name, state", "speech": "speech: text, state",
-    "posture": "a posture: name, state", "connection": "the owner lost or found the robot: state",
+    "posture": "a posture: name, state", "connection": "the robot's state as its owner says it: state",
     "command": "the owner answered a command: verb, 1 (ok) or 0 (refused)",
     "motion": "a chain started or stopped moving (a features node): chain, seq, state",
     "conflict": "two owners of the robot met: state (standby, or owner again)",

@@ -24,7 +24,7 @@ from typing import Any
 
 import zenoh
 
-from sonibus.bus import keys
+from sonibus.bus import connection, keys
 from sonibus.bus.adapter import Adapter
 from sonibus.bus.info import InfoRequests
 from sonibus.bus.ownership import owners
@@ -110,9 +110,12 @@ class WebPages(Adapter):
             else:
                 self._present.discard(robot)
                 self._latest.pop(robot, None)
-            changed = robot in self._robots and self._robots[robot]["connected"] != alive
-            if changed:
-                self._robots[robot] = {**self._robots[robot], "connected": alive}
+            shown = self._robots.get(robot)
+            changed = False
+            if shown is not None:  # (back: its state as before until its info, asked below, says it anew)
+                state = shown["connection"] if alive else {"state": "lost", "error": "its owner left the bus"}
+                self._robots[robot] = _with_state(shown, alive, state)
+                changed = self._robots[robot] != shown
             robots = dict(self._robots)
         if changed:
             self.pages.robots(robots)
@@ -141,8 +144,9 @@ class WebPages(Adapter):
                             for j in info.get("joints", ())],
                  "behaviors": list(info.get("behaviors", ())), "postures": list(info.get("postures", ())),
                  "rate_hz": info.get("rate_hz")}
+        state = {k: v for k, v in connection.state_of(info).items() if k in ("state", "error")}
         with self._lock:
-            shown["connected"] = robot in self._present
+            shown = _with_state(shown, robot in self._present, state)
             if self._robots.get(robot) == shown:
                 return
             self._robots[robot] = shown
@@ -168,7 +172,20 @@ class WebPages(Adapter):
                 self._nodes[(stats["host"], stats["node"])] = (time.monotonic(), stats)
         elif message.event is not None:
             robot, kind = source.robot, source.name
+            if kind == "connection":
+                self._connection(robot, message.event)
             self.pages.event(robot, kind, message.event, self._shows(robot) or robot == "sonibus")
+
+    def _connection(self, robot: str, event: dict[str, Any]) -> None:
+        """A robot's new state, shown at once (its info says it too, but only when asked again)."""
+        state = {k: v for k, v in connection.state_of({"connection": event}).items() if k in ("state", "error")}
+        with self._lock:
+            shown = self._robots.get(robot)
+            if shown is None or shown["connection"] == state:
+                return
+            self._robots[robot] = _with_state(shown, robot in self._present, state)
+            robots = dict(self._robots)
+        self.pages.robots(robots)
 
     def _push(self) -> None:
         next_stats = time.monotonic()
@@ -191,6 +208,12 @@ class WebPages(Adapter):
             self._nodes = {k: v for k, v in self._nodes.items() if now - v[0] < FORGET_AFTER_S}
             nodes = sorted(self._nodes.items())
         return [{**stats, "gone": now - heard > GONE_AFTER_S} for _, (heard, stats) in nodes]
+
+
+def _with_state(shown: dict[str, Any], present: bool, state: dict[str, Any]) -> dict[str, Any]:
+    """A robot as the ``robots`` message shows it, with its ``connection`` (state, error) and
+    ``connected``: on the bus, and connected to its robot."""
+    return {**shown, "connection": state, "connected": present and state.get("state") == "connected"}
 
 
 def _frame(robot: str, frame: dict[str, Any]) -> str:

@@ -33,9 +33,10 @@ COMMAND_GROUP = "sonibus.commands"
 
 class Exit(enum.IntEnum):
     """Exit statuses: 1 error, 2 usage or configuration (a bad flag, file, table or
-    key), 3 robot not found, 4 command refused, 5 timeout, 130 interrupted (Ctrl-C,
-    SIGTERM), 141 the output was closed (``sonibus info F | head -1``: quiet, as a Unix
-    tool killed by SIGPIPE)."""
+    key), 3 robot not found, 4 command refused, 5 the robot did not answer (a timeout,
+    a robot that is not connected or does not answer, a stop that did not reach it),
+    130 interrupted (Ctrl-C, SIGTERM), 141 the output was closed (``sonibus info F |
+    head -1``: quiet, as a Unix tool killed by SIGPIPE)."""
 
     OK = 0
     ERROR = 1

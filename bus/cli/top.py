@@ -27,6 +27,7 @@ from textual.containers import Horizontal, Vertical
 from textual.screen import ModalScreen
 from textual.widgets import DataTable, Footer, Static
 
+from .. import connection
 from ..client import Outcome, ask
 from ..errors import CommandError, ConfigError, SonibusError
 from ..monitor import EventView, JointView, Monitor, NodeView, RobotView, Snapshot
@@ -212,6 +213,9 @@ class TopApp(App[int]):
         """(On a Zenoh thread: the monitor takes it, the next redraw shows it.)"""
         if isinstance(outcome, CommandError):
             self.monitor.note(robot, "stop", f"refused: {outcome.code}: {outcome.message}", alarm=True)
+        elif outcome.get("reached") is False:  # (taken, but the robot could not be reached: said, not hidden)
+            later = "; sent when it answers again" if outcome.get("pending") else ""
+            self.monitor.note(robot, "stop", f"NOT REACHED: {outcome.get('error', '')}{later}", alarm=True)
         else:
             self.monitor.note(robot, "stop", "ok: stopped")
 
@@ -237,9 +241,12 @@ def _fill(table: DataTable[Text], rows: Iterable[tuple[str, list[Text]]]) -> Non
 
 
 def robot_cells(robot: RobotView) -> list[Text]:
-    """A robot's row: red once its owner left, yellow while another claim stands by."""
-    style = GONE if robot.gone else WARNING if robot.standby else ""
-    state = "gone" if robot.gone else f"CONFLICT: {', '.join(robot.standby)} stands by" if robot.standby else "on bus"
+    """A robot's row: red once its owner left or while it is not connected, yellow while
+    another claim stands by; its state as its owner says it (``bus/connection.py``)."""
+    unreached = bool(robot.connection) and not robot.connected
+    style = GONE if robot.gone or unreached else WARNING if robot.standby else ""
+    state = ("gone" if robot.gone else f"CONFLICT: {', '.join(robot.standby)} stands by" if robot.standby
+             else connection.describe(robot.connection) if robot.connection else "on bus")
     latency = f"{robot.latency_ms:.1f} ms" if robot.latency_ms is not None else "-"
     gaps = Text(f"{robot.gaps:,}", style=style or (WARNING if robot.gaps else ""))
     return [Text(robot.name, style=style), Text(robot.owner or "?", style=style), Text(robot.model or "?", style=style),

@@ -79,7 +79,8 @@ def test_commands_carry_the_robots_choices_and_the_schemas_bounds(served):
     for verb in ("stop", "behavior/stop", "behavior/list"):
         assert served.json(f"/pepper/cmd/{verb}")["TYPE"] == "N"
         assert served.json(f"/pepper/cmd/{verb}")["VALUE"] == [None]
-    assert served.json("/pepper/events/connection")["RANGE"] == [{"VALS": ["connected", "lost"]}]
+    assert served.json("/pepper/events/connection")["RANGE"] == [{"VALS": ["connecting", "connected", "not_answering",
+                                                                          "lost"]}]
     assert served.json("/pepper/events/command")["TYPE"] == "si"
 
 
