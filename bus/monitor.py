@@ -30,7 +30,7 @@ from typing import Any
 from . import codec, keys, messages
 from .info import InfoRequests
 from .node import Bus, Reply
-from .ownership import Claim
+from .ownership import MAX_RIVALS, Claim
 from .queue import SampleQueue
 from .stats import Counters
 
@@ -237,11 +237,19 @@ class Monitor:
         claim = Claim.parse(key)
         if claim is None:
             return
+        why = claim.refusal(self.bus.limits.max_future_s) if alive else ""
+        if why:  # (not a robot on the bus: said, and counted as bad input)
+            self._refused(f"{key}: {why}")
+            return
         with self._lock:
             robot = self._robot(claim.robot)
             if robot is None:
                 return
             was = bool(robot.claims)
+            if alive and claim.key not in robot.claims and len(robot.claims) >= MAX_RIVALS:
+                self.counters.add("bad")
+                self._problem = f"{key}: not shown: already {MAX_RIVALS} claims of robot '{claim.robot}'"
+                return
             if alive:
                 robot.claims[claim.key] = claim
             else:
@@ -254,10 +262,13 @@ class Monitor:
             robot.claimed = robot.claimed or alive
 
     def _on_info(self, robot: str, info: dict[str, Any]) -> None:
+        # only what a view shows (an info may be 1 MiB of behaviors, times every robot listed)
+        kept = {"model": info.get("model", ""),
+                "joints": [{k: j[k] for k in ("name", "min", "max", "unit") if k in j} for j in info.get("joints", ())]}
         with self._lock:
             entry = self._robots.get(robot)
             if entry is not None and entry.claims:
-                entry.info = info
+                entry.info = kept
 
     def _on_bad_info(self, robot: str, reason: str) -> None:
         self._refused(reason)
@@ -309,9 +320,12 @@ class Monitor:
             self._frame(parsed.robot, message)
         elif parsed.section == "stats":
             host, _, node = parsed.name.partition("/")
+            kept = {k: message[k] for k in ("adapter", "state", "uptime_s") if k in message}  # (what a view shows)
+            kept["counters"] = {k: message["counters"][k] for k in LOSSES if k in message["counters"]}
+            kept["rates"] = {k: message["rates"][k] for k in ("received", "sent", *LOSSES) if k in message["rates"]}
             with self._lock:
                 if (entry := self._node(host, node)) is not None:
-                    entry.stats, entry.stats_at = message, time.monotonic()
+                    entry.stats, entry.stats_at = kept, time.monotonic()
         elif key == keys.NODE_EVENTS:
             self._node_event(message)
         elif parsed.section == "events":

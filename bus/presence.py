@@ -18,37 +18,63 @@ import zenoh
 
 from . import codec, keys
 from .node import Bus
-from .ownership import Claim
+from .ownership import MAX_RIVALS, MAX_ROBOTS, Claim
 from .queue import SampleQueue
+from .text import printable
 
 log = logging.getLogger(__name__)
 
 SILENCE_S = 3.0  # a robot on the bus whose frames do not arrive for this long is worth a warning
+PROBES_PER_ROUND = 8  # silent robots whose owner is asked whether it is up, per half second (claims can be made up)
 
 
-def watch_robots(bus: Bus, on_change: Callable[[str, bool], None]) -> zenoh.Subscriber:
+def watch_robots(bus: Bus, on_change: Callable[[str, bool], None],
+                 capped: Callable[[str], None] | None = None) -> zenoh.Subscriber:
     """Call ``on_change(robot, alive)`` (on a Zenoh thread) for every robot already
     on the bus and whenever one leaves or comes back (its first claim appears, its
-    last one goes)."""
+    last one goes). Claims whose time makes no sense are no robot (``Claim.refusal``);
+    at most ``MAX_ROBOTS`` robots of ``MAX_RIVALS`` claims each are followed, a claim
+    past that told to ``capped`` (a line saying so) and left out."""
     held: dict[str, set[str]] = {}
     lock = threading.Lock()
 
     def changed(key: str, alive: bool) -> None:
-        claim = Claim.parse(key)
+        claim = Claim.credible(key, bus.limits.max_future_s) if alive else Claim.parse(key)
         if claim is None:
             return
         with lock:
-            claims = held.setdefault(claim.robot, set())
+            claims = held.get(claim.robot)
+            full = alive and (len(held) >= MAX_ROBOTS if claims is None else len(claims) >= MAX_RIVALS)
+            if claims is None and not full:
+                claims = held[claim.robot] = set()
             before = bool(claims)
-            if alive:
-                claims.add(claim.key)
-            else:
-                claims.discard(claim.key)
+            if claims is not None and not full:
+                if alive:
+                    claims.add(claim.key)
+                else:
+                    claims.discard(claim.key)
+                    if not claims:
+                        del held[claim.robot]
             after = bool(claims)
-        if before != after:
+        if full:
+            (capped or _said)(f"robot '{printable(claim.robot)}' (claim of node '{printable(claim.node)}' on "
+                   f"'{printable(claim.host)}') not followed: already {MAX_ROBOTS} robots, or {MAX_RIVALS} claims "
+                   "of it")
+        elif before != after:
             on_change(claim.robot, after)
 
     return bus.watch_tokens(keys.robot_token(), changed)
+
+
+_last_said = [-1e18]
+
+
+def _said(what: str) -> None:
+    """A line for a caller that has no node of its own to count with: at most one every 10 s."""
+    now = time.monotonic()
+    if now - _last_said[0] >= 10.0:
+        _last_said[0] = now
+        log.warning("%s", what)
 
 
 class Presence:
@@ -56,7 +82,8 @@ class Presence:
     tells it of each robot's data that passed its gate (``heard_from``) and runs
     ``watch`` on a worker of its own (``Adapter.spawn``)."""
 
-    def __init__(self, bus: Bus, queue: SampleQueue, patterns: Sequence[str]) -> None:
+    def __init__(self, bus: Bus, queue: SampleQueue, patterns: Sequence[str],
+                 capped: Callable[[str], None] | None = None) -> None:
         self.bus, self.queue = bus, queue
         self.wanted = [zenoh.KeyExpr(keys.expr(p)) for p in patterns]
         self.frames = sorted({frame for p in patterns if (frame := _frame_key(p))})
@@ -64,7 +91,7 @@ class Presence:
         self.heard: dict[str, float] = {}    # robot on the bus → its last data (monotonic)
         self.warned: set[str] = set()
         self._lock = threading.Lock()
-        self._entities = [watch_robots(bus, self._changed)]
+        self._entities = [watch_robots(bus, self._changed, capped)]
 
     def _changed(self, robot: str, alive: bool) -> None:
         with self._lock:
@@ -103,11 +130,14 @@ class Presence:
         """Warn once of each robot that is silent (``silence_hint``) until ``stopping`` is set."""
         if not self.frames:
             return
+        probed: dict[str, float] = {}  # robot → when its owner was last asked (the longest unasked go first)
         while not stopping.wait(0.5):
-            for robot in self.silent():
-                with self._lock:
-                    if robot in self.warned:
-                        continue
+            silent = self.silent()
+            with self._lock:
+                waiting = [r for r in silent if r not in self.warned]
+                probed = {r: at for r, at in probed.items() if r in self.on_bus}
+            for robot in sorted(waiting, key=lambda r: probed.get(r, -1.0))[:PROBES_PER_ROUND]:
+                probed[robot] = time.monotonic()
                 if not self._serving(robot):  # its owner is still connecting to the robot (NAOqi can take a while)
                     continue
                 with self._lock:
@@ -152,7 +182,8 @@ def _frame_key(pattern: str) -> str:
     return ""
 
 
-def connection_events(bus: Bus, queue: SampleQueue, patterns: Sequence[str]) -> Presence:
+def connection_events(bus: Bus, queue: SampleQueue, patterns: Sequence[str],
+                      capped: Callable[[str], None] | None = None) -> Presence:
     """Feed ``queue`` (a sink's) a ``connection`` event, as if the robot's owner had
     sent it, when a robot leaves (``lost``) or comes back (``connected``) — for the
     robots whose events ``patterns`` select. A sink then reacts to a vanished robot
@@ -160,5 +191,6 @@ def connection_events(bus: Bus, queue: SampleQueue, patterns: Sequence[str]) -> 
     It also warns once (``silence_hint``) when a robot whose joints ``patterns``
     select is on the bus and its owner up (it answers ``<robot>/info``) but none of
     its data reaches the sink for ``SILENCE_S``: the sink calls ``heard_from`` for
-    what passes its gate and spawns ``watch``."""
-    return Presence(bus, queue, patterns)
+    what passes its gate and spawns ``watch``. A robot past ``MAX_ROBOTS`` is not
+    followed, and told to ``capped`` (a sink's ``Adapter.capped``)."""
+    return Presence(bus, queue, patterns, capped)

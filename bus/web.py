@@ -230,7 +230,9 @@ class WebServer:
 class WebClient:
     """One WebSocket client: text and binary messages wait in a bounded backlog, sent in
     order by one task (``send_all``); a client ``CLIENT_BACKLOG`` behind loses the oldest,
-    each one told to ``on_drop``."""
+    each one told to ``on_drop``. Messages pushed ``kept`` (a reply to what the client
+    asked) are never dropped and go out before the backlog: whoever pushes them bounds
+    their number (the web pages' server stops reading a client whose replies pile up)."""
 
     def __init__(self, ws: web.WebSocketResponse, on_drop: Callable[[], None],
                  transport: asyncio.BaseTransport | None = None) -> None:
@@ -238,20 +240,24 @@ class WebClient:
         self.on_drop = on_drop
         self.transport = transport  # cut by close_clients if the client never takes the close
         self.backlog: deque[str | bytes] = deque(maxlen=CLIENT_BACKLOG)
+        self.kept: deque[str | bytes] = deque()
         self.waiting = asyncio.Event()
 
-    def push(self, message: str | bytes) -> None:
-        if len(self.backlog) == self.backlog.maxlen:
-            self.on_drop()
-        self.backlog.append(message)
+    def push(self, message: str | bytes, kept: bool = False) -> None:
+        if kept:
+            self.kept.append(message)
+        else:
+            if len(self.backlog) == self.backlog.maxlen:
+                self.on_drop()
+            self.backlog.append(message)
         self.waiting.set()
 
     async def send_all(self) -> None:
         while not self.ws.closed:
             await self.waiting.wait()
             self.waiting.clear()
-            while self.backlog and not self.ws.closed:
-                message = self.backlog.popleft()
+            while (self.kept or self.backlog) and not self.ws.closed:
+                message = self.kept.popleft() if self.kept else self.backlog.popleft()
                 try:
                     if isinstance(message, bytes):
                         await self.ws.send_bytes(message)

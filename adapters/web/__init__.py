@@ -27,11 +27,13 @@ import zenoh
 from sonibus.bus import keys
 from sonibus.bus.adapter import Adapter
 from sonibus.bus.info import InfoRequests
+from sonibus.bus.monitor import LOSSES
 from sonibus.bus.ownership import owners
 from sonibus.bus.pacing import Pacer
 from sonibus.bus.presence import watch_robots
 from sonibus.bus.queue import SampleQueue
 from sonibus.bus.streams import Incoming, Streams
+from sonibus.bus.text import printable
 from sonibus.bus.web import WebServer
 
 from .config import WebConfig
@@ -45,6 +47,11 @@ INFO_EVERY_S = 2.0   # how often each robot's info is asked again (behaviors ins
 GONE_AFTER_S = 3.0   # a node whose stats have not come for this long is shown gone
 FORGET_AFTER_S = 60.0  # ... and left out after this
 STATS_EVERY_S = 1.0    # how often the pages get the nodes' stats
+# Names from the bus the node keeps (made-up ones must not grow it, nor what every page gets each second):
+MAX_SHOWN = 32         # robots shown on the operator's page
+MAX_NODES = 128        # nodes whose stats are shown
+MAX_FIGURES = 64       # counters, and rates, shown of one node
+MAX_BEHAVIORS = 1000   # behaviors (and postures) of one robot shown
 
 
 class WebPages(Adapter):
@@ -52,7 +59,7 @@ class WebPages(Adapter):
 
     Config = WebConfig
     counters = ("clients", "commands", "refused", "frames_pushed", "frames_coalesced", "commands_coalesced",
-                "buttons_timed_out")
+                "commands_dropped", "buttons_timed_out", "capped")
 
     def _start(self) -> None:
         cfg: WebConfig = self.config
@@ -63,7 +70,7 @@ class WebPages(Adapter):
         self._nodes: dict[tuple[str, str], tuple[float, dict[str, Any]]] = {}  # latest stats, when heard
         self._shown = [zenoh.KeyExpr(keys.expr(r)) for r in cfg.robots]
         self.web = WebServer(self, cfg.host, cfg.port, key="listen")
-        self.pages = Pages(self, self.web, cfg, self._on_bus)
+        self.pages = Pages(self, self.web, cfg)
         self._info = InfoRequests(self.bus, self._take_info, lambda robot, text: self.warn("info", text),
                                   INFO_EVERY_S)
         self.web.start()
@@ -78,7 +85,7 @@ class WebPages(Adapter):
         self.spawn(self._feed, "feed")
         self.own(self._streams)
         owners(self.bus)  # (the view of robots' owners a command names, kept from now: the first one too)
-        self.own(watch_robots(self.bus, self._robot_changed))
+        self.own(watch_robots(self.bus, self._robot_changed, self.capped))
         self.spawn(self._push, "push")
         self.spawn(self._refresh, "info")
 
@@ -100,6 +107,7 @@ class WebPages(Adapter):
     def _on_bus(self) -> list[str]:
         with self._lock:
             return list(self._present)
+
 
     # -- robots --------------------------------------------------------------------------
 
@@ -139,14 +147,19 @@ class WebPages(Adapter):
         shown = {"owner": f"{owner.get('host', '?')}/{owner.get('node', '?')}", "model": info.get("model", ""),
                  "joints": [{"name": j["name"], "min": j["min"], "max": j["max"], "unit": j.get("unit", "rad")}
                             for j in info.get("joints", ())],
-                 "behaviors": list(info.get("behaviors", ())), "postures": list(info.get("postures", ())),
-                 "rate_hz": info.get("rate_hz")}
+                 "behaviors": list(info.get("behaviors", ()))[:MAX_BEHAVIORS],
+                 "postures": list(info.get("postures", ()))[:MAX_BEHAVIORS], "rate_hz": info.get("rate_hz")}
         with self._lock:
             shown["connected"] = robot in self._present
             if self._robots.get(robot) == shown:
                 return
-            self._robots[robot] = shown
+            full = robot not in self._robots and len(self._robots) >= MAX_SHOWN
+            if not full:
+                self._robots[robot] = shown
             robots = dict(self._robots)
+        if full:
+            self.capped(f"robot '{robot}' not shown: already {MAX_SHOWN} robots on the page")
+            return
         self.pages.robots(robots)
 
     # -- what comes off the bus ---------------------------------------------------------
@@ -159,13 +172,21 @@ class WebPages(Adapter):
         source = message.source
         if source.section == "frame":
             with self._lock:
+                if source.robot not in self._robots:  # (a page shows the frames of the robots it was told of)
+                    return
                 if source.robot in self._latest:
                     self.count("frames_coalesced")
                 self._latest[source.robot] = message.message  # (made JSON when pushed: most are replaced first)
         elif source.section == "stats":
             stats = message.message
+            node = (stats["host"], stats["node"])
             with self._lock:
-                self._nodes[(stats["host"], stats["node"])] = (time.monotonic(), stats)
+                full = node not in self._nodes and len(self._nodes) >= MAX_NODES
+                if not full:
+                    self._nodes[node] = (time.monotonic(), _shown_stats(stats))
+            if full:
+                self.capped(f"the stats of node '{printable(node[1][:64])}' on '{printable(node[0][:64])}' "
+                             f"not shown: already {MAX_NODES} nodes listed")
         elif message.event is not None:
             robot, kind = source.robot, source.name
             self.pages.event(robot, kind, message.event, self._shows(robot) or robot == "sonibus")
@@ -191,6 +212,26 @@ class WebPages(Adapter):
             self._nodes = {k: v for k, v in self._nodes.items() if now - v[0] < FORGET_AFTER_S}
             nodes = sorted(self._nodes.items())
         return [{**stats, "gone": now - heard > GONE_AFTER_S} for _, (heard, stats) in nodes]
+
+
+SHOWN_FIRST = ("received", "sent", *LOSSES)  # the figures a page shows of every node
+
+
+def _shown_stats(stats: dict[str, Any]) -> dict[str, Any]:
+    """What the pages get of a node's stats (checked by the gate): its schema's fields but its
+    adapter's own ``metrics``, names cut at 100 characters, at most ``MAX_FIGURES`` counters
+    and rates (those the page shows first): a few KB a node, whatever it made up."""
+    shown: dict[str, Any] = {k: stats[k] for k in ("t", "uptime_s", "interval_s") if k in stats}
+    shown.update({k: stats[k][:100] for k in ("host", "node", "adapter", "state") if k in stats})
+    for table in ("counters", "rates"):
+        figures = stats.get(table, {})
+        first = [k for k in SHOWN_FIRST if k in figures] + [k for k in figures if k not in SHOWN_FIRST]
+        shown[table] = {k[:100]: figures[k] for k in first[:MAX_FIGURES]}
+    for table, fields in (("latency_ms", ("p50", "p99", "samples")), ("process", ("pid", "cpu_percent",
+                                                                                   "rss_bytes"))):
+        if table in stats:
+            shown[table] = {k: stats[table][k] for k in fields if k in stats[table]}
+    return shown
 
 
 def _frame(robot: str, frame: dict[str, Any]) -> str:
