@@ -211,7 +211,10 @@ class Ownership:
                 time.sleep(0.1)
                 rivals = self._rivals_now()
         if rivals:
-            raise OwnershipError(f"robot '{self.robot}' is already owned by {rivals[0]}; {self.hint}")
+            elsewhere = "" if rivals[0].host == self.bus.host else (
+                " — another installation on this network? Keep yours to itself with a namespace of its own "
+                "([bus] namespace = \"<yours>\", or --namespace NAME: README \"Installations\")")
+            raise OwnershipError(f"robot '{self.robot}' is already owned by {rivals[0]}; {self.hint}{elsewhere}")
         with self._lock:  # (together: a rival's change seen meanwhile must not find a claim yet inactive)
             self.claim = Claim(self.robot, time.time_ns() // 1_000_000, self.bus.host, self.bus.node)
             self.active = True
