@@ -27,6 +27,7 @@ import zenoh
 from sonibus.bus import keys
 from sonibus.bus.adapter import Adapter
 from sonibus.bus.info import InfoRequests
+from sonibus.bus.messages import Gate
 from sonibus.bus.monitor import LOSSES
 from sonibus.bus.ownership import owners
 from sonibus.bus.pacing import Pacer
@@ -52,6 +53,7 @@ MAX_SHOWN = 32         # robots shown on the operator's page
 MAX_NODES = 128        # nodes whose stats are shown
 MAX_FIGURES = 64       # counters, and rates, shown of one node
 MAX_BEHAVIORS = 1000   # behaviors (and postures) of one robot shown
+STATS_QUEUE = 256      # nodes' stats waiting (each up to 64 KiB); past this the oldest are dropped
 
 
 class WebPages(Adapter):
@@ -80,10 +82,17 @@ class WebPages(Adapter):
         self.address = f"operator page {self.url}/{token}, kiosk {self.url}/kiosk{kiosk}"
         log.info("%s: %s", self.name, self.address)
         self._queue = self.own(SampleQueue(cfg.queue))
-        patterns = [f"{robot}/joints/*" for robot in cfg.robots] + ["*/events/*", keys.NODE_STATS]
+        patterns = [f"{robot}/joints/*" for robot in cfg.robots] + ["*/events/*"]
         self._streams = Streams(self.bus, patterns, self._queue)
         self.spawn(self._feed, "feed")
         self.own(self._streams)
+        # nodes' stats wait in a queue of their own, short: a node says one a second, and a flood of
+        # made-up nodes' (each up to 64 KiB) must not fill the frames' queue, nor the memory
+        # (and a node not listed when the list is full is left out before its message is even checked)
+        self._stats_queue = self.own(SampleQueue(STATS_QUEUE))
+        self._gate = Gate(self.bus.limits)
+        self.own(self.bus.subscribe(keys.NODE_STATS, queue=self._stats_queue, skip=self._unlisted)[0])
+        self.spawn(self._take_stats, "stats")
         owners(self.bus)  # (the view of robots' owners a command names, kept from now: the first one too)
         self.own(watch_robots(self.bus, self._robot_changed, self.capped))
         self.spawn(self._push, "push")
@@ -177,19 +186,35 @@ class WebPages(Adapter):
                 if source.robot in self._latest:
                     self.count("frames_coalesced")
                 self._latest[source.robot] = message.message  # (made JSON when pushed: most are replaced first)
-        elif source.section == "stats":
-            stats = message.message
-            node = (stats["host"], stats["node"])
-            with self._lock:
-                full = node not in self._nodes and len(self._nodes) >= MAX_NODES
-                if not full:
-                    self._nodes[node] = (time.monotonic(), _shown_stats(stats))
-            if full:
-                self.capped(f"the stats of node '{printable(node[1][:64])}' on '{printable(node[0][:64])}' "
-                             f"not shown: already {MAX_NODES} nodes listed")
         elif message.event is not None:
             robot, kind = source.robot, source.name
             self.pages.event(robot, kind, message.event, self._shows(robot) or robot == "sonibus")
+
+    def _unlisted(self, key: str) -> bool:
+        """Whether ``key``'s stats are left out (on a Zenoh thread, before they are queued, and
+        again when taken): its node is not listed and the list is full (``MAX_NODES``): said,
+        and counted ``capped``."""
+        node = tuple(key.split("/")[2:4])
+        with self._lock:
+            full = node not in self._nodes and len(self._nodes) >= MAX_NODES
+        if full:
+            self.capped(f"the stats on '{printable(key[:140])}' not shown: already {MAX_NODES} nodes listed")
+        return full
+
+    def _take_stats(self) -> None:
+        while not self.stopping.is_set():
+            for key, payload in self._stats_queue.drain(timeout=0.2):
+                self.count("received")
+                if self._unlisted(key):
+                    continue
+                try:
+                    stats = self._gate.check(keys.Key.parse(key), payload)
+                except ValueError as exc:  # messages.BadMessage
+                    self.count("bad")
+                    self.warn("bad", f"message on '{printable(key[:140])}' refused: {exc}")
+                    continue
+                with self._lock:  # (listed by this worker alone: the check above still holds)
+                    self._nodes[tuple(key.split("/")[2:4])] = (time.monotonic(), _shown_stats(stats))
 
     def _push(self) -> None:
         next_stats = time.monotonic()
