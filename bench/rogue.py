@@ -84,7 +84,7 @@ class Page:
 
 def node_stats(i: int) -> dict[str, Any]:
     counters = {name: 0 for name in ("received", "sent", "dropped", "stale", "bad", "errors")}
-    counters.update({f"made_up_{k:04d}": k for k in range(700)})
+    counters.update({f"a_counter_made_up_on_the_bus_{k:04d}": k for k in range(250)})  # (the schema's most: 256)
     return {"t": time.time(), "host": f"host{i}", "node": f"node{i}", "adapter": "fake", "state": "running",
             "uptime_s": 1.0, "interval_s": 1.0, "counters": counters, "rates": {k: 0.0 for k in counters},
             "process": {"pid": 1, "cpu_percent": 0.0, "rss_bytes": 1}}

@@ -183,8 +183,9 @@ class Monitor:
     def start(self) -> Monitor:
         if self._worker is not None:
             raise RuntimeError(f"{self!r} is started already")
-        for pattern in (keys.frame(), keys.event("*", "*"), keys.NODE_STATS):
+        for pattern in (keys.frame(), keys.event("*", "*")):
             self._entities.append(self.bus.subscribe(pattern, queue=self._queue)[0])
+        self._entities.append(self.bus.subscribe(keys.NODE_STATS, queue=self._queue, skip=self._skip_stats)[0])
         self._entities.append(self.bus.watch_tokens(f"{keys.NODES}/*/*", self._node_token))
         self._entities.append(self.bus.watch_tokens(keys.robot_token(), self._robot_token))
         self._worker = threading.Thread(target=self._work, name="monitor", daemon=True)
@@ -260,6 +261,19 @@ class Monitor:
                 text = f"on the bus again, owned by {claim}" if alive else "left the bus: its owner's claim went"
                 self._listed(EventView(time.time(), claim.robot, "connection", text, not alive))
             robot.claimed = robot.claimed or alive
+
+    def _skip_stats(self, key: str) -> bool:
+        """(On a Zenoh thread.) Stats left out before they are queued and checked (a schema check
+        takes ms): a node's that came less than half a second after its last (a node says them
+        once a second), or of a node not listed when the list is full."""
+        host, _, node = key[len(keys.STATS) + 1:].partition("/")
+        with self._lock:
+            entry = self._nodes.get((host, node))
+            if entry is None and len(self._nodes) >= self.most:
+                self.counters.add("bad")
+                self._problem = f"node '{node}' on '{host}' not shown: already {self.most} listed"
+                return True
+        return entry is not None and time.monotonic() - entry.stats_at < 0.5
 
     def _on_info(self, robot: str, info: dict[str, Any]) -> None:
         # only what a view shows (an info may be 1 MiB of behaviors, times every robot listed)

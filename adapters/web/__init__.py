@@ -51,7 +51,7 @@ STATS_EVERY_S = 1.0    # how often the pages get the nodes' stats
 # Names from the bus the node keeps (made-up ones must not grow it, nor what every page gets each second):
 MAX_SHOWN = 32         # robots shown on the operator's page
 MAX_NODES = 128        # nodes whose stats are shown
-MAX_FIGURES = 64       # counters, and rates, shown of one node
+MAX_FIGURES = 32        # counters, and rates, shown of one node (the page shows 6 of them)
 MAX_BEHAVIORS = 1000   # behaviors (and postures) of one robot shown
 STATS_QUEUE = 256      # nodes' stats waiting (each up to 64 KiB); past this the oldest are dropped
 
@@ -192,14 +192,16 @@ class WebPages(Adapter):
 
     def _unlisted(self, key: str) -> bool:
         """Whether ``key``'s stats are left out (on a Zenoh thread, before they are queued, and
-        again when taken): its node is not listed and the list is full (``MAX_NODES``): said,
-        and counted ``capped``."""
+        again when taken), before their message is even checked (a schema check takes ms):
+        a node that said its stats less than ``STATS_EVERY_S / 2`` ago (a node says them once a
+        second), or one not listed while the list is full (``MAX_NODES``: said, counted ``capped``)."""
         node = tuple(key.split("/")[2:4])
         with self._lock:
-            full = node not in self._nodes and len(self._nodes) >= MAX_NODES
+            heard = self._nodes.get(node)
+            full = heard is None and len(self._nodes) >= MAX_NODES
         if full:
             self.capped(f"the stats on '{printable(key[:140])}' not shown: already {MAX_NODES} nodes listed")
-        return full
+        return full or (heard is not None and time.monotonic() - heard[0] < STATS_EVERY_S / 2)
 
     def _take_stats(self) -> None:
         while not self.stopping.is_set():

@@ -44,10 +44,10 @@ def test_the_pages_stop_is_one_query_whatever_the_robots_made_up(stage, websocke
     assert stage.node.stats["capped"] > 0 and stage.node.state == "running"
 
 
-def node_stats(host: str, node: str, size: int = 16_000) -> dict:
-    """A valid ``node_stats`` message of about ``size`` bytes (its counters made up)."""
+def node_stats(host: str, node: str) -> dict:
+    """A valid ``node_stats`` message of about 16 KB (as many counters as the schema allows, made up)."""
     counters = {name: 0 for name in ("received", "sent", "dropped", "stale", "bad", "errors")}
-    counters.update({f"made_up_{i:04d}": i for i in range(size // 22)})
+    counters.update({f"a_counter_made_up_on_the_bus_{i:04d}": i for i in range(250)})
     message = {"t": time.time(), "host": host, "node": node, "adapter": "fake", "state": "running", "uptime_s": 1.0,
                "interval_s": 1.0, "counters": counters, "rates": {k: 0.0 for k in counters},
                "process": {"pid": 1, "cpu_percent": 0.0, "rss_bytes": 1}}
