@@ -27,17 +27,14 @@ import argparse
 import asyncio
 import json
 import os
-import subprocess
-import tempfile
 import threading
 import time
 from pathlib import Path
 from typing import Any
 
 import aiohttp
-from common import free_port, latency_stats, write
-from sink_throughput import SONIBUS, stop_process
-from web import SHOW
+from common import latency_stats, write
+from web import web_show
 
 
 def rss(pid: int) -> int:
@@ -155,29 +152,10 @@ def main() -> None:
     parser.add_argument("--burst", type=int, default=1000)
     parser.add_argument("--trials", type=int, default=20)
     args = parser.parse_args()
-    from sonibus.bus import Bus, BusConfig, open_session, robot_info
-
     machine = f"{os.cpu_count()} cores, load {os.getloadavg()[0]:.2f}"
-    endpoint, port = f"tcp/127.0.0.1:{free_port()}", free_port()
-    with tempfile.TemporaryDirectory() as folder:
-        config = Path(folder) / "show.toml"
-        config.write_text(SHOW.format(port=port))
-        show = subprocess.Popen([SONIBUS, "run", str(config), "--no-multicast", "--listen", endpoint],
-                                stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, start_new_session=True)
-        session = None
-        try:
-            session = open_session(BusConfig(multicast=False, connect=(endpoint,)))
-            bus = Bus(session, node="bench-rogue")
-            deadline = time.monotonic() + 30
-            while robot_info(bus, "pepper", timeout=0.5) is None:
-                if show.poll() is not None or time.monotonic() > deadline:
-                    raise RuntimeError(f"the show did not come up: {show.stderr.read()[-1000:]}")
-            time.sleep(2.0)  # pepper's info at the web node
-            found = asyncio.run(measure(f"ws://127.0.0.1:{port}/ws", bus, show.pid, args))
-        finally:
-            if session is not None:
-                session.close()
-            stop_process(show)
+    with web_show("bench-rogue") as (show, bus, url):
+        time.sleep(2.0)  # pepper's info at the web node
+        found = asyncio.run(measure(url, bus, show.pid, args))
     alone, fakes = latency_stats(found["stop_alone_s"]), latency_stats(found["stop_with_fakes_s"])
     flood = latency_stats(found["stop_during_flood_s"])
     result = {"machine": machine, **{k: v for k, v in vars(args).items()}, "stop_alone": alone,
