@@ -59,7 +59,7 @@ class OscQuery(Adapter):
     def _start(self) -> None:
         cfg: OscQueryConfig = self.config
         self.live = Live(normalized=cfg.values == "normalized")
-        self.web = WebServer(self, cfg.host, cfg.port, key="listen")
+        self.web = WebServer(self, cfg.host, cfg.port, key="listen", limits=cfg.limits, browsers=True)
         self.server = QueryServer(self, self.web, self.live, self._host_info())
         self._present: set[str] = set()
         self._left_out: dict[str, int] = {}  # robot → a fingerprint of the unusable info it was left out for

@@ -71,7 +71,7 @@ class WebPages(Adapter):
         self._latest: dict[str, dict[str, Any]] = {}  # robot → its newest frame, not yet pushed
         self._nodes: dict[tuple[str, str], tuple[float, dict[str, Any]]] = {}  # latest stats, when heard
         self._shown = [zenoh.KeyExpr(keys.expr(r)) for r in cfg.robots]
-        self.web = WebServer(self, cfg.host, cfg.port, key="listen")
+        self.web = WebServer(self, cfg.host, cfg.port, key="listen", limits=cfg.limits)
         self.pages = Pages(self, self.web, cfg)
         self._info = InfoRequests(self.bus, self._take_info, lambda robot, text: self.warn("info", text),
                                   INFO_EVERY_S)

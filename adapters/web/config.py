@@ -29,6 +29,7 @@ from sonibus.adapters.osc.gateway import parse_endpoint
 from sonibus.bus import keys
 from sonibus.bus.errors import ConfigError
 from sonibus.bus.options import bad, from_mapping
+from sonibus.bus.web import Limits
 
 MAX_SAY = 500  # characters of a say button's text (the say verb's bound)
 _BUTTON_ID = re.compile(r"[A-Za-z0-9_-]{1,64}")
@@ -95,6 +96,7 @@ class WebConfig:
     speed: float = 0.2               # fraction of max speed of a joints/set that names none
     timeout: float = 5.0             # seconds a robot has to answer a command
     queue: int = 4096                # messages from the bus waiting; past this the oldest are dropped
+    limits: Limits = field(default_factory=Limits)  # [nodes.<name>.limits]: connections, clients (pages), timeout_s
     kiosk: dict[str, Any] = field(default_factory=dict)  # [nodes.<name>.kiosk]: robot, [[...buttons]]
     host: str = field(init=False, repr=False, compare=False)
     port: int = field(init=False, repr=False, compare=False)

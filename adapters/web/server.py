@@ -11,20 +11,19 @@ as a ``reply``. The adapter hands the bus's news to ``robots``, ``frames``, ``st
 from __future__ import annotations
 
 import asyncio
-import contextlib
 import functools
 import json
 import re
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from aiohttp import WSMsgType, web
+from aiohttp import WSMessage, WSMsgType, web
 
 from sonibus.bus import client as bus_client
 from sonibus.bus import commands
 from sonibus.bus.errors import CommandError
 from sonibus.bus.text import printable
-from sonibus.bus.web import CLOSE_WAIT_S, WebClient, WebServer, close_clients
+from sonibus.bus.web import WebClient, WebServer, close_clients
 
 from . import protocol
 from .auth import Guard
@@ -136,28 +135,23 @@ class Pages:
 
     async def _websocket(self, role: str, request: web.Request) -> web.StreamResponse:
         self.guard.check(request, role)
-        ws = web.WebSocketResponse(timeout=CLOSE_WAIT_S, max_msg_size=MAX_WS_MESSAGE, heartbeat=HEARTBEAT_S)
-        await ws.prepare(request)
-        client = Client(ws, role, self.adapter, request.transport)
-        group = self.operators if role == "operator" else self.kiosks
-        group.add(client)
-        self.adapter.count("clients")
-        self._greet(client)
-        sender = asyncio.create_task(client.send_all())
-        try:
-            async for message in ws:
-                await client.room()
-                if message.type == WSMsgType.TEXT:
-                    self._take(client, message.data)
-                elif message.type == WSMsgType.BINARY:
-                    self._bad(client, None, f"a binary message of {len(message.data)} bytes (the pages send "
-                                            "JSON text)")
-        finally:
-            group.discard(client)
-            sender.cancel()
-            with contextlib.suppress(asyncio.CancelledError):
-                await sender
+        async with self.web.accept(request, max_msg_size=MAX_WS_MESSAGE, heartbeat=HEARTBEAT_S) as ws:
+            client = Client(ws, role, self.adapter, request.transport)
+            group = self.operators if role == "operator" else self.kiosks
+            group.add(client)
+            self.adapter.count("clients")
+            self._greet(client)
+            try:
+                await self.web.serve_client(ws, client, functools.partial(self._receive, client), client.room)
+            finally:
+                group.discard(client)
         return ws
+
+    def _receive(self, client: Client, message: WSMessage) -> None:
+        if message.type == WSMsgType.TEXT:
+            self._take(client, message.data)
+        elif message.type == WSMsgType.BINARY:
+            self._bad(client, None, f"a binary message of {len(message.data)} bytes (the pages send JSON text)")
 
     def _greet(self, client: Client) -> None:
         cfg = self.config
