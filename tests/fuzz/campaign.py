@@ -73,14 +73,12 @@ def _after(fuzzer: Fuzzer, report: checks.Report, before: dict[str, float], fami
 def _rogue_floods(fuzzer: Fuzzer, report: checks.Report, before: dict[str, float], count: int) -> None:
     """Issue 26's floods: ``count`` made-up robots claimed at once (STOP still answered while
     they are), and ``count`` made-up nodes' stats of ~16 KB."""
-    claimed = claim_flood(count)
+    claimed, flooded = claim_flood(count), stats_flood(count)
     fuzzer.burst(claimed, len(claimed))
     checks.stop_works(fuzzer, report, f"with {len(claimed)} made-up robots claimed")
-    _after(fuzzer, report, before, f"{len(claimed)} made-up robots")
-    flooded = stats_flood(count)
-    fuzzer.burst(flooded, len(flooded))
-    checks.stop_works(fuzzer, report, f"after {len(flooded)} made-up nodes' stats")
-    _after(fuzzer, report, before, f"{len(flooded)} made-up nodes' stats")
+    fuzzer.burst(flooded, len(flooded))  # (the robots still claimed)
+    checks.stop_works(fuzzer, report, f"with {len(flooded)} made-up nodes' stats too")
+    _after(fuzzer, report, before, f"{count} made-up robots and nodes")
 
 
 def campaign(show: Show, plan: Plan, out: Path) -> checks.Report:
