@@ -72,6 +72,12 @@ def is_concrete(key: str) -> bool:
     return "*" not in key and "$" not in key
 
 
+def program(robot: str, verb: str = "**") -> str:
+    """Where a program that drives ``robot`` through its commands (a show) takes requests
+    of its own (``pepper/program/scenario``): a queryable that program serves, never the owner."""
+    return f"{robot}/program/{verb}"
+
+
 def info(robot: str) -> str:
     return f"{robot}/info"
 
