@@ -4,6 +4,7 @@
 uses it so that a slow robot never stalls its receive loop; queries leave in
 the order they were asked); ``send_command`` waits for it. ``ask_program``
 asks the program that drives a robot (a show's ``scenario``) the same way.
+``stop_all`` stops every robot of the bus with one query, whatever their number.
 
 >>> send_command(bus, "pepper", "say", {"text": "hello"})   # doctest: +SKIP
 {'duration': 0.6, 'queued': 0}
@@ -19,9 +20,10 @@ from typing import Any
 from . import codec, keys
 from .errors import CommandError, RobotNotFound
 from .node import Bus, Reply
-from .ownership import Claim, claims, owners
+from .ownership import MAX_ROBOTS, Claim, claims, owners
 
 Outcome = dict[str, Any] | CommandError
+STOP_ALL = keys.command("*", "stop")  # one query every owner of the bus serves: no robot waits behind another
 
 UNANSWERED = ("timeout", "not_connected", "not_answering")
 """Codes of a command the robot did not carry out because it could not be reached:
@@ -91,20 +93,11 @@ class _Pending:
         if reply.payload is None:
             self.error = reply.error
             return
-        try:
-            message = codec.decode(reply.payload)
-        except codec.DecodeError as exc:
-            message = {"ok": False, "error": {"code": "internal", "message": f"{self.verb}: bad reply: {exc}"}}
-        if message.get("ok") is True:
-            self.finish(message.get("result") or {})
-            return
-        error = message.get("error") or {}
-        refusal = CommandError(str(error.get("code", "internal")),
-                               str(error.get("message", f"robot '{self.robot}' refused '{self.verb}'")))
-        if refusal.code == "conflict":
-            self.standing_by = refusal
+        outcome = _outcome(reply.payload, self.robot, self.verb)
+        if isinstance(outcome, CommandError) and outcome.code == "conflict":
+            self.standing_by = outcome
         else:
-            self.finish(refusal)
+            self.finish(outcome)
 
     def on_end(self) -> None:
         if self.standing_by is not None:
@@ -143,6 +136,62 @@ def send_command(bus: Bus, robot: str, verb: str, args: dict[str, Any] | None = 
     if isinstance(outcomes[0], CommandError):
         raise outcomes[0]
     return outcomes[0]
+
+
+def stop_all(bus: Bus, done: Callable[[str, Outcome], None], silent: Callable[[list[str], CommandError], None],
+             timeout: float = 5.0) -> None:
+    """Stop every robot of this bus (of its namespace: this installation) at once: one query
+    on ``*/cmd/stop`` reaches every owner together (a robot owner runs ``stop`` whatever its
+    claim state), so its time does not grow with the number of robots, nor with claims
+    that no owner stands behind. ``done(robot, outcome)`` for each robot that answered (its
+    first answer; at most ``MAX_ROBOTS``), then ``silent(robots, error)`` once, when the
+    query is over, with the robots on the bus (their claims seen) that did not answer (maybe
+    none): ``robot_not_found`` when the query ended at once (nothing serves their commands),
+    ``timeout`` after ``timeout``."""
+    answered: set[str] = set()
+    lock = threading.Lock()
+    started = time.monotonic()
+    on_bus = owners(bus)  # (made before the query: the robots it knows when the query ends)
+
+    def on_reply(reply: Reply) -> None:
+        robot = reply.key.partition("/")[0]
+        if reply.payload is None or keys.command_verb(reply.key) != "stop" or not keys.is_concrete(robot):
+            return  # (Zenoh's own error reply, or an answer naming no robot: nothing to report it under)
+        with lock:
+            if robot in answered or len(answered) >= MAX_ROBOTS:
+                return
+            answered.add(robot)
+        done(robot, _outcome(reply.payload, robot, "stop"))
+
+    def on_end() -> None:
+        with lock:
+            left = [robot for robot in on_bus.robots() if robot not in answered]
+        if time.monotonic() - started >= timeout * 0.9:
+            error = CommandError("timeout", f"no answer within {timeout:g} s")
+        else:
+            error = CommandError("robot_not_found", "nothing serves their commands: a claim without an owner "
+                                                    "that answers (a node still connecting, or one made up)")
+        silent(left, error)
+
+    try:
+        bus.ask(STOP_ALL, on_reply, on_end, message={}, timeout=timeout, every_answer=True)
+    except Exception as exc:  # a closed session
+        silent(on_bus.robots(), CommandError("internal", f"the bus refused the query: {exc}"))
+
+
+def _outcome(payload: bytes, robot: str, verb: str) -> Outcome:
+    """A reply's payload as a result, or the robot's refusal (``CommandError``)."""
+    try:
+        message = codec.decode(payload)
+    except codec.DecodeError as exc:
+        return CommandError("internal", f"{verb}: bad reply: {exc}")
+    if not isinstance(message, dict):
+        return CommandError("internal", f"{verb}: bad reply: not a map")
+    if message.get("ok") is True:
+        return message.get("result") or {}
+    error = message.get("error") or {}
+    return CommandError(str(error.get("code", "internal")), str(error.get("message", f"robot '{robot}' refused "
+                                                                                       f"'{verb}'")))
 
 
 def owner_of(bus: Bus, robot: str, timeout: float = 2.0) -> Claim | None:

@@ -30,7 +30,7 @@ from typing import Any
 from . import codec, connection, keys, messages
 from .info import InfoRequests
 from .node import Bus, Reply
-from .ownership import Claim
+from .ownership import MAX_RIVALS, Claim
 from .queue import SampleQueue
 from .stats import Counters
 
@@ -191,8 +191,9 @@ class Monitor:
     def start(self) -> Monitor:
         if self._worker is not None:
             raise RuntimeError(f"{self!r} is started already")
-        for pattern in (keys.frame(), keys.event("*", "*"), keys.NODE_STATS):
+        for pattern in (keys.frame(), keys.event("*", "*")):
             self._entities.append(self.bus.subscribe(pattern, queue=self._queue)[0])
+        self._entities.append(self.bus.subscribe(keys.NODE_STATS, queue=self._queue, skip=self._skip_stats)[0])
         self._entities.append(self.bus.watch_tokens(f"{keys.NODES}/*/*", self._node_token))
         self._entities.append(self.bus.watch_tokens(keys.robot_token(), self._robot_token))
         self._worker = threading.Thread(target=self._work, name="monitor", daemon=True)
@@ -245,11 +246,19 @@ class Monitor:
         claim = Claim.parse(key)
         if claim is None:
             return
+        why = claim.refusal(self.bus.limits.max_future_s) if alive else ""
+        if why:  # (not a robot on the bus: said, and counted as bad input)
+            self._refused(f"{key}: {why}")
+            return
         with self._lock:
             robot = self._robot(claim.robot)
             if robot is None:
                 return
             was = bool(robot.claims)
+            if alive and claim.key not in robot.claims and len(robot.claims) >= MAX_RIVALS:
+                self.counters.add("bad")
+                self._problem = f"{key}: not shown: already {MAX_RIVALS} claims of robot '{claim.robot}'"
+                return
             if alive:
                 robot.claims[claim.key] = claim
             else:
@@ -262,11 +271,27 @@ class Monitor:
                 self._listed(EventView(time.time(), claim.robot, "connection", text, not alive))
             robot.claimed = robot.claimed or alive
 
+    def _skip_stats(self, key: str) -> bool:
+        """(On a Zenoh thread.) Stats left out before they are queued and checked (a schema check
+        takes ms): a node's that came less than half a second after its last (a node says them
+        once a second), or of a node not listed when the list is full."""
+        host, _, node = key[len(keys.STATS) + 1:].partition("/")
+        with self._lock:
+            entry = self._nodes.get((host, node))
+            if entry is None and len(self._nodes) >= self.most:
+                self.counters.add("bad")
+                self._problem = f"node '{node}' on '{host}' not shown: already {self.most} listed"
+                return True
+        return entry is not None and time.monotonic() - entry.stats_at < 0.5
+
     def _on_info(self, robot: str, info: dict[str, Any]) -> None:
+        # only what a view shows (an info may be 1 MiB of behaviors, times every robot listed)
+        kept = {"model": info.get("model", ""),
+                "joints": [{k: j[k] for k in ("name", "min", "max", "unit") if k in j} for j in info.get("joints", ())]}
         with self._lock:
             entry = self._robots.get(robot)
             if entry is not None and entry.claims:
-                entry.info = info
+                entry.info = kept
                 self._connection(entry, connection.state_of(info))
 
     def _on_bad_info(self, robot: str, reason: str) -> None:
@@ -319,9 +344,12 @@ class Monitor:
             self._frame(parsed.robot, message)
         elif parsed.section == "stats":
             host, _, node = parsed.name.partition("/")
+            kept = {k: message[k] for k in ("adapter", "state", "uptime_s") if k in message}  # (what a view shows)
+            kept["counters"] = {k: message["counters"][k] for k in LOSSES if k in message["counters"]}
+            kept["rates"] = {k: message["rates"][k] for k in ("received", "sent", *LOSSES) if k in message["rates"]}
             with self._lock:
                 if (entry := self._node(host, node)) is not None:
-                    entry.stats, entry.stats_at = message, time.monotonic()
+                    entry.stats, entry.stats_at = kept, time.monotonic()
         elif key == keys.NODE_EVENTS:
             self._node_event(message)
         elif parsed.section == "events":

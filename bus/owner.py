@@ -87,6 +87,22 @@ class RobotAdapter(Adapter):
 
     def _claim(self) -> None:
         self.ownership = self.claim_robot(self.robot)
+        self.ownership.on_standby = self._stand_by
+
+    def _stand_by(self) -> None:
+        """Another owner keeps the robot from now: stop this one first (nobody may command it
+        but with stop), on a worker of its own (a robot's stop may take a moment: not on Zenoh's thread)."""
+        if getattr(self, "_run", None) is None:  # (not connected to the robot yet: nothing of it moves)
+            return
+
+        def stop() -> None:
+            try:
+                self._stop_robot()  # (a robot not reached: said in its result, and sent once it answers)
+            except Exception as exc:  # said and counted; the node stands by all the same
+                self.count("errors")
+                self.warn("standby", f"robot '{self.robot}': its stop on going to stand by failed: "
+                                     f"{type(exc).__name__}: {exc}")
+        self.spawn(stop, "standby-stop")
 
     def _open(self) -> None:
         """Hook: connect to the robot and set ``self.model``, ``self.verbs`` (and ``self.rate_hz``)."""
@@ -120,7 +136,7 @@ class RobotAdapter(Adapter):
             self.record_latency(time.time() - t)  # acquisition to publish
 
     def publish_event(self, kind: str, **fields: Any) -> None:
-        if not self.ownership.active:  # standing by for another owner: it speaks for the robot
+        if not self.ownership.speaks:  # standing by for another owner: it speaks for the robot
             return
         self.bus.put(keys.event(self.robot, kind), {"t": time.time(), "kind": kind, **fields})
 
@@ -149,13 +165,17 @@ class RobotAdapter(Adapter):
         query.reply(keys.info(self.robot), codec.encode(self.robot_info()), encoding=codec.ENCODING)
 
     def _serve_command(self, query: zenoh.Query) -> None:
-        verb = str(query.key_expr)[len(keys.command(self.robot, "")):]
+        asked = str(query.key_expr)
+        verb = keys.command_verb(asked)
+        # a query for many robots (``*/cmd/stop``: ``client.stop_all``) is answered on this robot's own
+        # key, so the asker knows who answered
+        answer_on = keys.command(self.robot, verb) if verb and keys.is_concrete(verb) else asked
         args: Any = {}
         self.count("received")
         try:
             try:
                 payload = query.payload.to_bytes() if query.payload is not None else b""
-                args = self._gate.check(keys.Key.parse(str(query.key_expr)), payload)
+                args = self._gate.check(keys.Key.parse(answer_on), payload)
             except ValueError as exc:  # messages.BadMessage
                 args = {}
                 self.count("bad")
@@ -168,7 +188,7 @@ class RobotAdapter(Adapter):
         except Exception as exc:
             log.exception("%s: command %s failed", self.name, verb)
             reply = commands.error_reply(verb, CommandError("failed", f"{verb} failed: {exc}"))
-        query.reply(query.key_expr, codec.encode(reply), encoding=codec.ENCODING)
+        query.reply(answer_on, codec.encode(reply), encoding=codec.ENCODING)
         if verb in commands.verbs():
             event = {"verb": verb, "args": args if isinstance(args, dict) else {}, "ok": reply["ok"]}
             if not reply["ok"]:
@@ -176,9 +196,9 @@ class RobotAdapter(Adapter):
             self.publish_event("command", **event)
 
     def execute(self, verb: str, args: Any) -> dict[str, Any]:
-        """Validate and run one command; ``stop`` runs whatever its arguments. A node that
-        stands by for another owner runs none (``conflict``), nor does one whose robot is
-        not connected (``not_connected``, ``not_answering``)."""
+        """Validate and run one command; ``stop`` runs whatever its arguments and whatever
+        the claims say. A node that stands by for another owner runs no other (``conflict``),
+        nor does one whose robot is not connected (``not_connected``, ``not_answering``)."""
         self.ownership.check(verb)
         if verb == "stop":
             return self._stop_robot()

@@ -19,38 +19,64 @@ import zenoh
 
 from . import codec, connection, keys
 from .node import Bus
-from .ownership import Claim
+from .ownership import MAX_RIVALS, MAX_ROBOTS, Claim
 from .queue import SampleQueue
+from .text import printable
 
 log = logging.getLogger(__name__)
 
 SILENCE_S = 3.0  # a robot on the bus whose frames do not arrive for this long is worth a warning
-MAX_ROBOTS = 1024  # connection states remembered of robots not on the bus (names from events can be made up)
+MAX_REMEMBERED = 1024  # connection states remembered of robots not on the bus (names from events can be made up)
+PROBES_PER_ROUND = 8  # robots whose owner is asked for its state, per half second (claims can be made up)
 
 
-def watch_robots(bus: Bus, on_change: Callable[[str, bool], None]) -> zenoh.Subscriber:
+def watch_robots(bus: Bus, on_change: Callable[[str, bool], None],
+                 capped: Callable[[str], None] | None = None) -> zenoh.Subscriber:
     """Call ``on_change(robot, alive)`` (on a Zenoh thread) for every robot already
     on the bus and whenever one leaves or comes back (its first claim appears, its
-    last one goes)."""
+    last one goes). Claims whose time makes no sense are no robot (``Claim.refusal``);
+    at most ``MAX_ROBOTS`` robots of ``MAX_RIVALS`` claims each are followed, a claim
+    past that told to ``capped`` (a line saying so) and left out."""
     held: dict[str, set[str]] = {}
     lock = threading.Lock()
 
     def changed(key: str, alive: bool) -> None:
-        claim = Claim.parse(key)
+        claim = Claim.credible(key, bus.limits.max_future_s) if alive else Claim.parse(key)
         if claim is None:
             return
         with lock:
-            claims = held.setdefault(claim.robot, set())
+            claims = held.get(claim.robot)
+            full = alive and (len(held) >= MAX_ROBOTS if claims is None else len(claims) >= MAX_RIVALS)
+            if claims is None and not full:
+                claims = held[claim.robot] = set()
             before = bool(claims)
-            if alive:
-                claims.add(claim.key)
-            else:
-                claims.discard(claim.key)
+            if claims is not None and not full:
+                if alive:
+                    claims.add(claim.key)
+                else:
+                    claims.discard(claim.key)
+                    if not claims:
+                        del held[claim.robot]
             after = bool(claims)
-        if before != after:
+        if full:
+            (capped or _said)(f"robot '{printable(claim.robot)}' (claim of node '{printable(claim.node)}' on "
+                   f"'{printable(claim.host)}') not followed: already {MAX_ROBOTS} robots, or {MAX_RIVALS} claims "
+                   "of it")
+        elif before != after:
             on_change(claim.robot, after)
 
     return bus.watch_tokens(keys.robot_token(), changed)
+
+
+_last_said = [-1e18]
+
+
+def _said(what: str) -> None:
+    """A line for a caller that has no node of its own to count with: at most one every 10 s."""
+    now = time.monotonic()
+    if now - _last_said[0] >= 10.0:
+        _last_said[0] = now
+        log.warning("%s", what)
 
 
 class Presence:
@@ -59,7 +85,8 @@ class Presence:
     whether an event goes on (``passes``) and runs ``watch`` on a worker of its own
     (``Adapter.spawn``)."""
 
-    def __init__(self, bus: Bus, queue: SampleQueue, patterns: Sequence[str]) -> None:
+    def __init__(self, bus: Bus, queue: SampleQueue, patterns: Sequence[str],
+                 capped: Callable[[str], None] | None = None) -> None:
         self.bus, self.queue = bus, queue
         self.wanted = [zenoh.KeyExpr(keys.expr(p)) for p in patterns]
         self.frames = sorted({frame for p in patterns if (frame := _frame_key(p))})
@@ -70,7 +97,7 @@ class Presence:
         self.said: dict[str, tuple[str, float | None]] = {}  # robot → (state, owner's t) of the last connection event
         self.checked: dict[str, float] = {}  # silent robot → when its state was last asked (monotonic)
         self._lock = threading.Lock()
-        self._entities = [watch_robots(bus, self._changed)]
+        self._entities = [watch_robots(bus, self._changed, capped)]
 
     def _changed(self, robot: str, alive: bool) -> None:
         with self._lock:
@@ -107,7 +134,7 @@ class Presence:
             last = self.said.get(robot)
             if last is not None and (state == last[0] or (t is not None and last[1] is not None and t < last[1])):
                 return False
-            if robot in self.on_bus or len(self.said) < MAX_ROBOTS:  # (names can be made up: bounded)
+            if robot in self.on_bus or len(self.said) < MAX_REMEMBERED:  # (names can be made up: bounded)
                 self.said[robot] = (str(state), t)
         return True
 
@@ -136,15 +163,19 @@ class Presence:
         (``silence_hint``: once, and again if its state changes while it stays silent)."""
         if not self.frames and not self._wants_events("*"):
             return
+        probed: dict[str, float] = {}  # robot → when its owner was last asked (the longest unasked go first)
         while not stopping.wait(0.5):
-            with self._lock:
-                unsaid = sorted(self.unsaid)
-            for robot in unsaid:
-                self._say_state(robot)
             now = time.monotonic()
-            for robot in self.silent(now):
-                if robot in self.warned and now - self.checked.get(robot, -SILENCE_S) < SILENCE_S:
-                    continue  # (warned already: its state is asked again only every SILENCE_S)
+            with self._lock:
+                unsaid = list(self.unsaid)
+                probed = {r: at for r, at in probed.items() if r in self.on_bus}
+            for robot in sorted(unsaid, key=lambda r: probed.get(r, -1.0))[:PROBES_PER_ROUND]:
+                probed[robot] = now
+                self._say_state(robot)
+            silent = [r for r in self.silent(now)  # (warned already: its state is asked again only every SILENCE_S)
+                      if not (r in self.warned and now - self.checked.get(r, -SILENCE_S) < SILENCE_S)]
+            for robot in sorted(silent, key=lambda r: probed.get(r, -1.0))[:PROBES_PER_ROUND]:
+                probed[robot] = now
                 self.checked[robot] = now
                 connection = self._connection(robot)
                 if connection is None:  # its owner does not serve its info (yet): it is still starting
@@ -218,16 +249,15 @@ def _frame_key(pattern: str) -> str:
     return ""
 
 
-def connection_events(bus: Bus, queue: SampleQueue, patterns: Sequence[str]) -> Presence:
-    """Feed ``queue`` (a sink's) ``connection`` events, as if the robot's owner had sent
-    them, for the robots whose events ``patterns`` select: when a robot leaves
-    (``lost``), and when one is on the bus, its state as its owner's info says it
-    (``connecting``, ``connected``, ``lost``...: a sink that starts after the owner,
-    or a robot that never connected, is told from the first second). A sink then
-    reacts to a vanished robot the same way whatever the cause (a killed process, a
-    cut link, a robot's fall); ``passes`` keeps each change to one event. It also
-    warns (``silence_hint``) when a robot whose joints ``patterns`` select is on the
-    bus and its owner up (it answers ``<robot>/info``) but none of its data reaches
-    the sink for ``SILENCE_S``, naming the robot's own state first: the sink calls
-    ``heard_from`` for what passes its gate and spawns ``watch``."""
-    return Presence(bus, queue, patterns)
+def connection_events(bus: Bus, queue: SampleQueue, patterns: Sequence[str],
+                      capped: Callable[[str], None] | None = None) -> Presence:
+    """Feed ``queue`` (a sink's) a ``connection`` event, as if the robot's owner had
+    sent it, when a robot leaves (``lost``) or comes back (``connected``) — for the
+    robots whose events ``patterns`` select. A sink then reacts to a vanished robot
+    the same way whatever the cause (a killed process, a cut link, a robot's fall).
+    It also warns once (``silence_hint``) when a robot whose joints ``patterns``
+    select is on the bus and its owner up (it answers ``<robot>/info``) but none of
+    its data reaches the sink for ``SILENCE_S``: the sink calls ``heard_from`` for
+    what passes its gate and spawns ``watch``. A robot past ``MAX_ROBOTS`` is not
+    followed, and told to ``capped`` (a sink's ``Adapter.capped``)."""
+    return Presence(bus, queue, patterns, capped)

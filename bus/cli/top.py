@@ -28,7 +28,7 @@ from textual.screen import ModalScreen
 from textual.widgets import DataTable, Footer, Static
 
 from .. import connection
-from ..client import Outcome, ask
+from ..client import Outcome, stop_all
 from ..errors import CommandError, ConfigError, SonibusError
 from ..monitor import EventView, JointView, Monitor, NodeView, RobotView, Snapshot
 from ..ownership import owners
@@ -128,7 +128,7 @@ class TopApp(App[int]):
             self.nodes.add_column(name, key=name)
         self.robots.focus()
         self.events.border_title = "events"
-        owners(self.monitor.bus)  # the claims, followed from now: a stop is sent to each robot's owner alone
+        owners(self.monitor.bus)  # the claims, followed from now: those a stop reports as silent
         if self.signals:
             loop = asyncio.get_running_loop()
             for sig in (signal.SIGINT, signal.SIGTERM):
@@ -193,20 +193,14 @@ class TopApp(App[int]):
             return
         self.push_screen(ConfirmStop(robots), lambda yes: self._stop(robots) if yes else self._cancelled())
 
-    def _on_bus_now(self, asked: list[str]) -> list[str]:
-        """The robots asked about and those on the bus now (one may have come while the stop was asked)."""
-        snap = self.snapshot = self.monitor.snapshot()
-        return asked + [r.name for r in snap.robots if not r.gone and r.name not in asked]
-
     def _cancelled(self) -> None:
         self.monitor.note("top", "stop", "cancelled: nothing sent")
         self.redraw()
 
     def _stop(self, asked: list[str]) -> None:
-        for robot in self._on_bus_now(asked):
-            self.monitor.note(robot, "stop", "sent")
-            ask(self.monitor.bus, robot, "stop", {}, lambda outcome, r=robot: self._replied(r, outcome),
-                timeout=STOP_TIMEOUT_S)
+        """Every robot of the bus at once (``stop_all``: also one that came while the stop was asked)."""
+        self.monitor.note("top", "stop", f"sent to every robot ({len(asked)} shown)")
+        stop_all(self.monitor.bus, self._replied, self._silent, timeout=STOP_TIMEOUT_S)
         self.redraw()
 
     def _replied(self, robot: str, outcome: Outcome) -> None:
@@ -218,6 +212,12 @@ class TopApp(App[int]):
             self.monitor.note(robot, "stop", f"NOT REACHED: {outcome.get('error', '')}{later}", alarm=True)
         else:
             self.monitor.note(robot, "stop", "ok: stopped")
+
+    def _silent(self, robots: list[str], error: CommandError) -> None:
+        """(On a Zenoh thread.) The robots on the bus that did not answer the stop, in one line."""
+        if robots:
+            named = ", ".join(robots[:10]) + (f", … ({len(robots)} in all)" if len(robots) > 10 else "")
+            self.monitor.note("top", "stop", f"no answer from {named}: {error.code}: {error.message}", alarm=True)
 
     def action_quit_top(self) -> None:
         self.exit(int(Exit.OK))

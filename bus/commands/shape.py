@@ -41,6 +41,7 @@ say: argument 3 (speed) must be a number, got string 'fast' — give a number, e
 from __future__ import annotations
 
 import difflib
+import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from functools import cache
@@ -243,7 +244,7 @@ def _from_text(verb: str, arg: Argument, text: str, item: int) -> Any:
     kind = arg.items if item else arg.kind
     try:
         if kind == "number":
-            return float(text)
+            return _finite(verb, arg, float(text), item)
         if kind == "integer":
             return int(text)
     except ValueError:
@@ -261,7 +262,7 @@ def _from_value(verb: str, arg: Argument, value: Any, item: int) -> Any:
     number = _is_number(value)
     try:
         if kind == "number" and number:
-            return float(value)
+            return _finite(verb, arg, float(value), item)
         if kind == "integer" and number and float(value).is_integer():
             return int(value)
     except OverflowError:  # an integer too big for a float
@@ -271,6 +272,15 @@ def _from_value(verb: str, arg: Argument, value: Any, item: int) -> Any:
     if kind == "boolean" and (isinstance(value, bool) or (number and value in (0, 1))):
         return bool(value)
     raise _wrong(verb, arg, value, item)
+
+
+def _finite(verb: str, arg: Argument, value: float, item: int) -> float:
+    """``value`` if it is a finite number: NaN and ±inf are refused while the request is shaped,
+    by every surface alike (a browser's ``NaN``, OSC's, the word ``nan``), before anything holds it."""
+    if not math.isfinite(value):
+        which = f" item {item}" if item else ""
+        raise _bad(f"{verb}: argument {arg.place} ({arg.name}){which} must be a finite number, got {shown(value)}")
+    return value
 
 
 def _joint_pairs(verb: str, args: Sequence[Any]) -> dict[str, Any]:

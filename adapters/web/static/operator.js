@@ -124,9 +124,10 @@
     for (const view of views.values()) view.dropHeldMoves();  // nothing of this page moves a robot after a stop
     const answers = [];  // one reply per robot on the bus
     const sent = link.send({type: "stop"}, "stop", (reply) => {
-      if (!reply.robot) return false;  // ("stop: no robot on the bus": shown as it is)
+      if (!reply.robot && !reply.robots) return false;  // ("stop: no robot on the bus": shown as it is)
       const unreached = reply.ok && reply.result && reply.result.reached === false;  // taken, but not carried out
-      answers.push(reply.ok && !unreached ? `✓ ${reply.robot}`
+      if (reply.robots) answers.push(`✗ ${reply.error}`);  // (those on the bus that did not answer, in one)
+      else answers.push(reply.ok && !unreached ? `✓ ${reply.robot}`
         : `✗ ${reply.robot}: ${unreached ? `not reached: ${reply.result.error}` : reply.error || "refused"}`);
       status(`STOP: ${answers.join(", ")}`, answers.some((a) => a.startsWith("✗")) ? "error" : "ok");
       return true;
