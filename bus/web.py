@@ -17,8 +17,9 @@ WebSocket client from any thread (a bus worker, a Zenoh callback).
 Nothing on the network can take it down (``Limits``, docs/design.md): connections past
 ``connections`` get a 503 and are closed; WebSocket clients past ``clients`` a 503; a
 connection without a whole request ``timeout_s`` after it opened (a half-sent request,
-a slowloris) or after its last answer (an idle keep-alive) is closed (aiohttp's
-``keepalive_timeout``, which runs from the connection's start); request lines and
+a slowloris: counted ``timed_out``) or after its last answer (an idle keep-alive: counted
+``idle_closed``) is closed (aiohttp's ``keepalive_timeout``, which runs from the
+connection's start); request lines and
 headers are bounded (aiohttp's ``max_line_size``, ``max_field_size``, ``max_headers``:
 400 past them); running out of file descriptors (EMFILE on accept) is counted
 ``accept_failed`` and warned about, and asyncio accepts again a second later; each
@@ -48,6 +49,7 @@ from urllib.parse import urlsplit
 
 from aiohttp import WSCloseCode, web
 from aiohttp.http_exceptions import HttpProcessingError
+from aiohttp.web_protocol import RequestHandler
 
 from .options import bad
 
@@ -118,7 +120,8 @@ class WebServer:
         self._crash: BaseException | None = None
         adapter.stats.follow("dropped", lambda: self.dropped)  # the node's stats count them too
         # what the limits refused (below), shown at zero
-        adapter.stats.declare(("connections_refused", "clients_refused", "accept_failed", "refused"))
+        adapter.stats.declare(("connections_refused", "clients_refused", "accept_failed", "refused", "timed_out",
+                               "idle_closed"))
 
     @property
     def url(self) -> str:
@@ -275,7 +278,7 @@ class WebServer:
         one that answers 503 and closes (counted ``connections_refused``)."""
         if self._open < self._cap:
             self._open += 1
-            return self._handlers()
+            return _Handler(self._handlers, self._timed_out, loop=self._handlers._loop, **self._handlers._kwargs)
         self.adapter.count("connections_refused")
         self.adapter.warn("connections", f"web server on {self.url}: {self._cap} connections open, the most it "
                                          "takes ([limits] connections): new ones get 503 and are closed "
@@ -285,6 +288,11 @@ class WebServer:
 
     def _dropped(self) -> None:
         self.dropped += 1
+
+    def _timed_out(self, requests: int) -> None:
+        """A connection closed by ``limits.timeout_s``: before a whole request came (``timed_out``:
+        a half-sent request, a slowloris, a connection that never sent) or idle after its answers."""
+        self.adapter.count("timed_out" if requests == 0 else "idle_closed")
 
     def _push(self, text: str) -> None:
         for client in self._clients:
@@ -367,6 +375,24 @@ class WebServer:
                                          f"{request.remote}: {reason}")
             raise web.HTTPForbidden(text=f"403 forbidden: {reason}\n")
         return await handler(request)
+
+
+class _Handler(RequestHandler):
+    """aiohttp's connection handler (what ``web_server.Server()`` makes), telling ``on_timeout``
+    when its keep-alive timeout (here the header timeout too) closes it, with how many requests
+    it had taken."""
+
+    __slots__ = ("on_timeout",)
+
+    def __init__(self, manager: Any, on_timeout: Callable[[int], None], **kwargs: Any) -> None:
+        super().__init__(manager, **kwargs)
+        self.on_timeout = on_timeout
+
+    def _process_keepalive(self) -> None:  # (aiohttp's timer: it closes the connection if it is idle)
+        was_open = not self._force_close
+        super()._process_keepalive()
+        if was_open and self._force_close:
+            self.on_timeout(self._request_count)
 
 
 class _Refused(asyncio.Protocol):

@@ -78,17 +78,25 @@ def server(request: pytest.FixtureRequest, net: Network) -> Callable[..., Any]:
     return start
 
 
-def test_a_half_sent_request_and_a_slowloris_are_closed_after_the_timeout(server):
+def test_a_half_sent_request_and_a_slowloris_are_closed_after_the_timeout_and_counted(server):
+    """Closed by the timeout: counted ``timed_out`` (no whole request came) or ``idle_closed``
+    (a keep-alive connection idle after its answer): they were not counted at all."""
     node = server(timeout_s=1.0)
-    with half_sent(node.web.port, 1) as (half,), socket.create_connection(("127.0.0.1", node.web.port)) as slow:
+    with half_sent(node.web.port, 1) as (half,), socket.create_connection(("127.0.0.1", node.web.port)) as slow, \
+            socket.create_connection(("127.0.0.1", node.web.port)) as idle:
+        idle.sendall(b"GET / HTTP/1.1\r\nHost: 127.0.0.1\r\n\r\n")  # a whole request, kept alive after it
         started = time.monotonic()
         for byte in HALF:  # one byte every 0.1 s: data that trickles in never pushes the timeout back
             slow.sendall(bytes([byte]))
             time.sleep(0.1)
             if closed(slow):
                 break
-        wait_for(lambda: closed(half) and closed(slow), 5, "both connections closed by the server")
+        wait_for(lambda: closed(half) and closed(slow) and closed(idle), 5, "the three connections closed by "
+                 "the server")
     assert time.monotonic() - started < 5
+    wait_for(lambda: node.stats["timed_out"] == 2 and node.stats["idle_closed"] == 1, 5,
+             "two connections counted timed_out and one idle_closed",
+             lambda: f"timed_out {node.stats['timed_out']}, idle_closed {node.stats['idle_closed']}")
     assert requests.get(f"{node.web.url}/", timeout=5).status_code in (200, 400, 404)  # (foxglove: 400, no upgrade)
 
 
