@@ -24,8 +24,8 @@ headers are bounded (aiohttp's ``max_line_size``, ``max_field_size``, ``max_head
 400 past them); running out of file descriptors (EMFILE on accept) is counted
 ``accept_failed`` and warned about, and asyncio accepts again a second later; each
 client's backlog is bounded in messages and bytes. With ``browsers``, a request from a
-page of another site (``Origin``) or under a name that is not this machine's (``Host``:
-DNS rebinding) is refused with 403 (``check_browser``).
+page of another site (``Origin``) or under a name this server does not answer to (``Host``:
+DNS rebinding) is refused with 403 (``bus/browser.py``).
 """
 
 from __future__ import annotations
@@ -34,7 +34,6 @@ import asyncio
 import concurrent.futures
 import contextlib
 import errno
-import ipaddress
 import json
 import logging
 import os
@@ -45,12 +44,12 @@ from collections import deque
 from collections.abc import AsyncIterator, Awaitable, Callable, Coroutine, Iterable
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
-from urllib.parse import urlsplit
 
 from aiohttp import WSCloseCode, web
 from aiohttp.http_exceptions import HttpProcessingError
 from aiohttp.web_protocol import RequestHandler
 
+from .browser import OWN, check_browser
 from .options import bad
 
 if TYPE_CHECKING:
@@ -95,16 +94,17 @@ class Limits:
 class WebServer:
     """An aiohttp ``app`` served on ``host:port`` (0: any free port) while ``adapter`` runs,
     within ``limits``; ``browsers``: every request passes ``check_browser`` (pages of ``origins``
-    may read it too: ``"*"``, any)."""
+    may read it too: ``"*"``, any; ``names``: the ``Host`` names it answers to, ``bus/browser.py``)."""
 
     def __init__(self, adapter: Adapter, host: str = "127.0.0.1", port: int = 0, key: str = "",
-                 limits: Limits = Limits(), browsers: bool = False, origins: tuple[str, ...] = ()) -> None:
+                 limits: Limits = Limits(), browsers: bool = False, origins: tuple[str, ...] = (),
+                 names: str = OWN) -> None:
         self.adapter = adapter
         self.key = key  # the configuration key of host:port ("listen"); "": keys 'host' and 'port'
         self.host = host
         self.port = port                   # the bound port once started
         self.limits = limits
-        self.origins = origins
+        self.origins, self.names = origins, names
         self.app = web.Application(middlewares=[self._errors, *([self._browsers] if browsers else [])])
         self.latest: Any = None            # the last value broadcast (a new WebSocket client gets it first)
         self.dropped = 0                   # messages a slow client missed
@@ -368,7 +368,7 @@ class WebServer:
     @web.middleware
     async def _browsers(self, request: web.Request, handler: Handler) -> web.StreamResponse:
         """``check_browser`` on every request: a refusal is a 403, counted ``refused``."""
-        reason = check_browser(request, self.origins)
+        reason = check_browser(request, self.origins, self.names)
         if reason:
             self.adapter.count("refused")
             self.adapter.warn("refused", f"web server: refused {request.method} {request.path[:80]} from "
@@ -404,41 +404,6 @@ class _Refused(asyncio.Protocol):
         transport.write(b"HTTP/1.1 503 Service Unavailable\r\nConnection: close\r\nContent-Type: text/plain\r\n"
                         b"Content-Length: %d\r\n\r\n%s" % (len(text), text))
         transport.close()  # (after the write is flushed; what the client sends is ignored)
-
-
-def check_browser(request: web.Request, origins: tuple[str, ...] = ()) -> str:
-    """Why ``request`` may come from a web page that must not read this server ("" if
-    none): an ``Origin`` that is not this server (a page of another site: browsers let
-    any page open a WebSocket, and send ``Origin`` with it), or a ``Host`` that names this
-    machine by a name that is not its own (a site that renamed itself to this machine's
-    address: DNS rebinding). Programs that send no ``Origin`` pass, and pages of ``origins``
-    (``"*"``: any); an address, ``localhost``, ``*.local`` (mDNS) and this machine's host name
-    are its own names."""
-    origin = request.headers.get("Origin")
-    if origin is not None and urlsplit(origin).netloc.lower() != request.host.lower() \
-            and origin not in origins and "*" not in origins:
-        return (f"a page of another site ({origin[:80]}) may not read this server (a site to let in goes in the "
-                "node's `origins`)" if origins else f"a page of another site ({origin[:80]}) may not read this "
-                "server")
-    if "Host" in request.headers and not own_name(request.host):
-        return (f"{request.host[:80]!r} is not a name of this machine (a web site that renames itself to this "
-                "address?) — open it by its address or host name")
-    return ""
-
-
-def own_name(host: str) -> bool:
-    """Whether a ``Host`` header names this machine: an address, ``localhost``, a ``.local``
-    name, or its host name."""
-    name = (urlsplit(f"//{host}").hostname or "").rstrip(".")
-    if name == "localhost" or name.endswith((".localhost", ".local")):
-        return True
-    try:
-        ipaddress.ip_address(name.split("%")[0])
-        return True
-    except ValueError:
-        pass
-    mine = socket.gethostname().lower()
-    return name in (mine, mine.partition(".")[0])
 
 
 class WebClient:
