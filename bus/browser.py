@@ -29,6 +29,8 @@ from urllib.parse import urlsplit
 
 from aiohttp import web
 
+from .text import printable
+
 OWN, LOOPBACK, ANY = "own", "loopback", "any"
 
 
@@ -37,24 +39,42 @@ def check_browser(request: web.Request, origins: tuple[str, ...] = (), names: st
     an ``Origin`` that is not this server nor in ``origins`` (``"*"``: any), or a ``Host``
     that is not one of ``names`` (``OWN``, ``LOOPBACK``, ``ANY``)."""
     origin = request.headers.get("Origin")
-    if origin is not None and urlsplit(origin).netloc.lower() != request.host.lower() \
-            and origin not in origins and "*" not in origins:
-        return (f"a page of another site ({origin[:80]}) may not read this server (a site to let in goes in the "
-                "node's `origins`)" if origins else f"a page of another site ({origin[:80]}) may not read this "
+    if origin is not None and _netloc(origin) != request.host.lower() and origin not in origins \
+            and "*" not in origins:
+        return (f"a page of another site ({_shown(origin)}) may not read this server (a site to let in goes in the "
+                "node's `origins`)" if origins else f"a page of another site ({_shown(origin)}) may not read this "
                 "server")
     if names == ANY or "Host" not in request.headers:
         return ""
     if names == LOOPBACK and not loopback_name(request.host):
-        return (f"this server answers to loopback names only, not {request.host[:80]!r} (a web site that renames "
+        return (f"this server answers to loopback names only, not '{_shown(request.host)}' (a web site that renames "
                 "itself to this address?) — open http://127.0.0.1:<port>/")
     if names == OWN and not own_name(request.host):
-        return (f"{request.host[:80]!r} is not a name of this machine (a web site that renames itself to this "
+        return (f"'{_shown(request.host)}' is not a name of this machine (a web site that renames itself to this "
                 "address?) — open it by its address or host name")
     return ""
 
 
+def _shown(text: str) -> str:
+    """At most 80 characters of a header, safe to log and to answer with (a header that is not
+    UTF-8 comes with surrogates, which an answer cannot encode: 500)."""
+    return printable(text[:80].encode("utf-8", "backslashreplace").decode("utf-8"))
+
+
+def _netloc(origin: str) -> str | None:
+    """The ``host:port`` of an ``Origin``, None if it does not parse (``http://[x``)."""
+    try:
+        return urlsplit(origin).netloc.lower()
+    except ValueError:
+        return None
+
+
 def _name(host: str) -> str:
-    return (urlsplit(f"//{host}").hostname or "").rstrip(".")
+    """The name in a ``Host`` header ("" if it does not parse: ``[::1``)."""
+    try:
+        return (urlsplit(f"//{host}").hostname or "").rstrip(".")
+    except ValueError:
+        return ""
 
 
 def own_name(host: str) -> bool:

@@ -311,7 +311,7 @@ class WebServer:
             refused = isinstance(exc, HttpProcessingError)
             if refused:  # (a handler's own failure was counted by the _errors middleware on its way out)
                 self.adapter.count("bad")
-            what = f"{type(exc).__name__}: {str(exc).splitlines()[0][:120] if str(exc) else ''}" if exc else ""
+            what = f"{type(exc).__name__}: {' '.join(str(exc).split())[:160]}" if exc else ""  # (aiohttp's: lines)
             self.adapter.warn("http-refused" if refused else "http",
                               f"web server: {record.getMessage()}{f': {what}' if what else ''}")
             return False

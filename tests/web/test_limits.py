@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import logging
 import resource
 import socket
 import subprocess
@@ -204,3 +205,34 @@ def test_running_out_of_files_on_accept_is_counted_and_warned_and_the_server_ser
     assert state == "running" and int(failed) >= 1, err
     assert "web: web server on http://127.0.0.1:" in err and "cannot accept a connection: Too many open files" \
         in err, err
+
+
+@pytest.mark.parametrize("header", [b"Host: [::1", b"Origin: \xff\xfe", b"Host: \xc3\x28:80",
+                                    b"Origin: http://[x"])
+def test_a_host_or_origin_that_does_not_parse_is_refused_not_a_500(server, header):
+    """Found by the fuzz suite (tests/fuzz/server_http.py): the browser check raised on a
+    ``Host`` that is half an IPv6 address, and the 403 could not be written for an ``Origin``
+    that is not UTF-8 (its reason quoted it): 500, counted as the server's own error."""
+    node = server()
+    host = b"" if header.startswith(b"Host") else b"Host: 127.0.0.1\r\n"
+    with socket.create_connection(("127.0.0.1", node.web.port), timeout=5) as sock:
+        sock.sendall(b"GET / HTTP/1.1\r\n" + host + header + b"\r\nConnection: close\r\n\r\n")
+        answer = b""
+        while chunk := sock.recv(65536):
+            answer += chunk
+    assert answer.startswith(b"HTTP/1.1 403"), answer[:300]
+    assert b"\n" not in answer.partition(b"\r\n\r\n")[2].rstrip(b"\n")  # one line
+    assert node.stats["errors"] == 0 and node.stats["refused"] == 1
+
+
+def test_a_request_aiohttp_cannot_parse_is_one_warning_that_says_what_was_wrong(server, caplog):
+    """aiohttp's reason spans lines ('400, message:' then the reason): the warning showed only
+    the first, which says nothing (found reading the fuzz suite's log)."""
+    node = server()
+    caplog.set_level(logging.WARNING, logger="sonibus")
+    with socket.create_connection(("127.0.0.1", node.web.port), timeout=5) as sock:
+        sock.sendall(b"BR\x01W / HTTP/1.1\r\nHost: 127.0.0.1\r\n\r\n")
+        assert sock.recv(100).split(b" ")[1] == b"400"
+    wait_for(lambda: node.stats["bad"] == 1, 5, "the request counted bad")
+    lines = [r.getMessage() for r in caplog.records if "BadHttpMethod" in r.getMessage()]
+    assert len(lines) == 1 and "Invalid method" in lines[0] and "\n" not in lines[0], lines
