@@ -19,7 +19,8 @@ Nothing on the network can take it down (``Limits``, docs/design.md): connection
 connection without a whole request ``timeout_s`` after it opened (a half-sent request,
 a slowloris: counted ``timed_out``) or after its last answer (an idle keep-alive: counted
 ``idle_closed``) is closed (aiohttp's ``keepalive_timeout``, which runs from the
-connection's start); request lines and
+connection's start), and one that reads nothing of what it is sent for ``timeout_s`` is cut
+(``stalled``: it would hold its place for ever); request lines and
 headers are bounded (aiohttp's ``max_line_size``, ``max_field_size``, ``max_headers``:
 400 past them); running out of file descriptors (EMFILE on accept) is counted
 ``accept_failed`` and warned about, and asyncio accepts again a second later; each
@@ -45,7 +46,7 @@ from collections.abc import AsyncIterator, Awaitable, Callable, Coroutine, Itera
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
-from aiohttp import WSCloseCode, web
+from aiohttp import WSCloseCode, web, web_fileresponse
 from aiohttp.http_exceptions import HttpProcessingError
 from aiohttp.web_protocol import RequestHandler
 
@@ -71,6 +72,11 @@ FILES_SHARE = 8         # one server holds at most 1/8 of the files the process 
                         # the recorder's, the other servers' (1,100 connections under `ulimit -n 1024` ended the show)
 
 Handler = Callable[[web.Request], Awaitable[web.StreamResponse]]
+
+# Files (the web node's pages) go through the transport, not sendfile(): a client that reads
+# nothing is then seen (the transport pauses writing) and cut after timeout_s; sendfile would
+# wait on the socket for ever. The files served are small.
+web_fileresponse.NOSENDFILE = True  # type: ignore[misc]
 
 
 @dataclass(frozen=True)
@@ -121,7 +127,7 @@ class WebServer:
         adapter.stats.follow("dropped", lambda: self.dropped)  # the node's stats count them too
         # what the limits refused (below), shown at zero
         adapter.stats.declare(("connections_refused", "clients_refused", "accept_failed", "refused", "timed_out",
-                               "idle_closed"))
+                               "idle_closed", "stalled"))
 
     @property
     def url(self) -> str:
@@ -278,7 +284,8 @@ class WebServer:
         one that answers 503 and closes (counted ``connections_refused``)."""
         if self._open < self._cap:
             self._open += 1
-            return _Handler(self._handlers, self._timed_out, loop=self._handlers._loop, **self._handlers._kwargs)
+            return _Handler(self._handlers, self._timed_out, self._stalled, self.limits.timeout_s,
+                            loop=self._handlers._loop, **self._handlers._kwargs)
         self.adapter.count("connections_refused")
         self.adapter.warn("connections", f"web server on {self.url}: {self._cap} connections open, the most it "
                                          "takes ([limits] connections): new ones get 503 and are closed "
@@ -293,6 +300,11 @@ class WebServer:
         """A connection closed by ``limits.timeout_s``: before a whole request came (``timed_out``:
         a half-sent request, a slowloris, a connection that never sent) or idle after its answers."""
         self.adapter.count("timed_out" if requests == 0 else "idle_closed")
+
+    def _stalled(self) -> None:
+        self.adapter.count("stalled")
+        self.adapter.warn("stalled", f"web server on {self.url}: a client that read nothing of what it was sent for "
+                                     f"{self.limits.timeout_s:g} s cut ([limits] timeout_s)")
 
     def _push(self, text: str) -> None:
         for client in self._clients:
@@ -380,13 +392,40 @@ class WebServer:
 class _Handler(RequestHandler):
     """aiohttp's connection handler (what ``web_server.Server()`` makes), telling ``on_timeout``
     when its keep-alive timeout (here the header timeout too) closes it, with how many requests
-    it had taken."""
+    it had taken; and cutting the connection when what it writes makes no progress for
+    ``stall_s`` (a client that never reads: aiohttp would wait to write for ever), told to
+    ``on_stall``."""
 
-    __slots__ = ("on_timeout",)
+    __slots__ = ("_stall", "on_stall", "on_timeout", "stall_s")
 
-    def __init__(self, manager: Any, on_timeout: Callable[[int], None], **kwargs: Any) -> None:
+    def __init__(self, manager: Any, on_timeout: Callable[[int], None], on_stall: Callable[[], None],
+                 stall_s: float, **kwargs: Any) -> None:
         super().__init__(manager, **kwargs)
-        self.on_timeout = on_timeout
+        self.on_timeout, self.on_stall, self.stall_s = on_timeout, on_stall, stall_s
+        self._stall: asyncio.TimerHandle | None = None
+
+    def pause_writing(self) -> None:  # (the transport's buffer is full: the client reads nothing)
+        super().pause_writing()
+        if self._stall is None:
+            self._stall = self._loop.call_later(self.stall_s, self._stalled)
+
+    def resume_writing(self) -> None:
+        super().resume_writing()
+        if self._stall is not None:
+            self._stall.cancel()
+            self._stall = None
+
+    def _stalled(self) -> None:
+        self._stall = None
+        if self.transport is not None:
+            self.on_stall()
+            self.transport.abort()  # (close() would wait for the buffer to be read: never)
+
+    def connection_lost(self, exc: BaseException | None) -> None:
+        if self._stall is not None:
+            self._stall.cancel()
+            self._stall = None
+        super().connection_lost(exc)
 
     def _process_keepalive(self) -> None:  # (aiohttp's timer: it closes the connection if it is idle)
         was_open = not self._force_close

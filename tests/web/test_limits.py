@@ -8,9 +8,11 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import json
 import logging
 import resource
 import socket
+import struct
 import subprocess
 import sys
 import time
@@ -236,3 +238,46 @@ def test_a_request_aiohttp_cannot_parse_is_one_warning_that_says_what_was_wrong(
     wait_for(lambda: node.stats["bad"] == 1, 5, "the request counted bad")
     lines = [r.getMessage() for r in caplog.records if "BadHttpMethod" in r.getMessage()]
     assert len(lines) == 1 and "Invalid method" in lines[0] and "\n" not in lines[0], lines
+
+
+def never_reads(port: int, request: bytes) -> socket.socket:
+    """A client that sends ``request`` (as much of it as the server reads) and reads nothing."""
+    sock = socket.socket()
+    sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)
+    sock.connect(("127.0.0.1", port))
+    sock.setblocking(False)
+    with contextlib.suppress(BlockingIOError):
+        sock.send(request)
+    return sock
+
+
+def test_clients_that_never_read_what_they_are_sent_are_cut_and_the_server_serves_again(server, net):
+    """Found by the server fuzz families: a connection that pipelines requests and never reads
+    the answers held its place for ever (the server waiting to write; no timeout ran, and the
+    web node's files went by sendfile(), which waits on the socket), so as many as the cap locked
+    everyone out with 503. Now one that reads nothing of what it is sent for timeout_s is cut,
+    counted ``stalled``. (Foxglove's HTTP answers are a few bytes: its client subscribes to every
+    channel of a robot at 200 Hz over its WebSocket instead.)"""
+    node = server(connections=4, timeout_s=1.0)
+    port, kind = node.web.port, node.kind_name
+    if kind != "web":
+        net.sim("pepper", rate_hz=200)
+        wait_for(lambda: requests.get(f"{node.web.url}/pepper", timeout=5).status_code == 200, 10, "pepper served") \
+            if kind == "oscquery" else wait_for(lambda: node.metrics()["channels"] >= 20, 10, "pepper's channels")
+    if kind == "foxglove":
+        subscribe = json.dumps({"op": "subscribe", "subscriptions": [{"id": i, "channelId": i} for i in range(1, 40)]})
+        request = (b"GET / HTTP/1.1\r\nHost: 127.0.0.1\r\nUpgrade: websocket\r\nConnection: Upgrade\r\n"
+                   b"Sec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\nSec-WebSocket-Version: 13\r\n"
+                   b"Sec-WebSocket-Protocol: foxglove.websocket.v1\r\n\r\n")
+        request += bytes([0x81, 0xFE]) + struct.pack(">H", len(subscribe)) + b"\0\0\0\0" + subscribe.encode()
+    else:
+        request = f"GET {'/static/robot.js' if kind == 'web' else '/'} HTTP/1.1\r\nHost: 127.0.0.1\r\n\r\n".encode() \
+            * 20_000
+    socks = [never_reads(port, request) for _ in range(4)]
+    try:
+        wait_for(lambda: node.stats["stalled"] == 4, 20, "the four connections that never read cut",
+                 lambda: f"stalled {node.stats['stalled']}, {node.web.connections} open")
+        assert requests.get(f"{node.web.url}/", timeout=5).status_code in (200, 400)  # (foxglove: 400, no upgrade)
+    finally:
+        for sock in socks:
+            sock.close()
