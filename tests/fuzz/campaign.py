@@ -17,6 +17,9 @@ from hypothesis import strategies as st
 from . import checks
 from .families import FAMILIES, ROBOT, VALID, Input, bursts, flood, huge_frame, issue_inputs, pack, signature
 from .fuzzer import BURST_RATE, Fuzzer
+from .server_http import HttpFamily
+from .server_ws import WebSocketFamily
+from .serving import no_server_errors, serving
 from .show import Show
 
 # Commands that undo what valid fuzz commands may have left (a posture or a joint held, a
@@ -39,7 +42,8 @@ class Plan:
 
 
 CI = Plan(examples={"frame": 300, "joint": 200, "derived": 150, "event": 150, "command": 150, "info": 60,
-                    "osc": 300}, huge_flood=300)
+                    "osc": 300, "http": 150, "websocket": 150}, huge_flood=300)
+SERVER_FAMILIES = (HttpFamily, WebSocketFamily)  # the web pages', OSCQuery's and Foxglove's servers
 
 
 def _run(fuzzer: Fuzzer, strategy: st.SearchStrategy[Any], examples: int, derandomize: bool,
@@ -60,10 +64,12 @@ def _reset(fuzzer: Fuzzer) -> None:
 
 
 def _after(fuzzer: Fuzzer, report: checks.Report, before: dict[str, float], family: str) -> None:
-    """After a family: alive, every node running, data flowing again to the OSC targets and MIDI."""
+    """After a family: alive, every node running, each server serving a new client, data flowing
+    again to the OSC targets and MIDI."""
     _reset(fuzzer)
     ended = time.monotonic()
     checks.alive(fuzzer.show, report, f"after {family}")
+    serving(fuzzer.show, report, f"after {family}")  # (within the wait of flowing's window)
     checks.flowing(fuzzer.show, report, before, ended, f"after {family}")
 
 
@@ -74,6 +80,7 @@ def campaign(show: Show, plan: Plan, out: Path) -> checks.Report:
     started = time.monotonic()
     try:
         checks.alive(show, report, "start")
+        serving(show, report, "start")
         before = checks.baseline(show)
         rss_before = show.rss.now() if show.rss else 0
         fuzz_started = time.monotonic()
@@ -87,6 +94,11 @@ def campaign(show: Show, plan: Plan, out: Path) -> checks.Report:
                     _after(fuzzer, report, before, f"{family} input of {item.note}")
                 _run(fuzzer, strategy(), plan.examples[family], plan.derandomize, fuzzer.send)
                 _after(fuzzer, report, before, family)
+            for server_family in SERVER_FAMILIES:
+                with server_family(fuzzer, report) as each:
+                    _run(fuzzer, each.strategy(), plan.examples[each.name], plan.derandomize, each.send)
+                    each.scripted()
+                _after(fuzzer, report, before, each.name)
             for _ in range(plan.huge_frames):
                 fuzzer.send(huge_frame())
             _after(fuzzer, report, before, "huge frames")
@@ -111,6 +123,7 @@ def campaign(show: Show, plan: Plan, out: Path) -> checks.Report:
     finally:
         fuzzer.close()
     checks.stopped(show, report)
+    no_server_errors(report)
     checks.recording(show, report)
     report.figures["total_s"] = round(time.monotonic() - started, 1)
     write(report, fuzzer, out)
@@ -121,7 +134,7 @@ def counts(fuzzer: Fuzzer, report: checks.Report) -> dict[str, Any]:
     """Per family: inputs tried by label, what came back, and what the nodes counted."""
     node_counters = report.figures.get("node_counters", {})
     refused = {node: {k: v for k, v in c.items() if k in ("bad", "malformed", "bad_args", "unknown_address",
-                                                          "stale", "late", "dropped", "busy")}
+                                                          "stale", "late", "dropped", "busy", *SERVER_COUNTERS)}
                for node, c in node_counters.items()}
     return {
         "tried": {family: dict(labels) | {"total": sum(labels.values())} for family, labels in fuzzer.tried.items()},
@@ -134,6 +147,10 @@ def counts(fuzzer: Fuzzer, report: checks.Report) -> dict[str, Any]:
         "counted_bad_by_node": refused,
         "recording_stats": (report.figures.get("recording") or {}).get("stats"),
     }
+
+
+SERVER_COUNTERS = ("refused", "timed_out", "idle_closed", "connections_refused", "clients_refused", "accept_failed",
+                   "errors", "ws_dropped", "dropped_for_clients")
 
 
 def write(report: checks.Report, fuzzer: Fuzzer, out: Path) -> None:
