@@ -279,7 +279,7 @@ class WebSocketFamily:
         elif server == "oscquery":
             valid = [json.dumps({"COMMAND": c, "DATA": f"/pepper/joints/{JOINTS[i % len(JOINTS)]}"})
                      for i in range(FLOOD) for c in ("LISTEN", "IGNORE")]
-            invalid = [json.dumps({"COMMAND": "LISTEN", "DATA": f"/made/up/{i}"}) for i in range(4200)]  # past 4096
+            invalid = [json.dumps({"COMMAND": "LISTEN", "DATA": f"/made/up/{i}"}) for i in range(FLOOD)]  # past 64
         else:
             channel = self._channels(client)[0]
             valid = [json.dumps({"op": op, **({"subscriptions": [{"id": i, "channelId": channel}]}
