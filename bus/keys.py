@@ -10,7 +10,7 @@ from .errors import ConfigError
 
 NODES = "sonibus/nodes"
 ROBOTS = "sonibus/robots"
-NODE_EVENTS = "sonibus/events/node"  # a node's state changes (a worker failed): an event like a robot's
+NODE_EVENTS = "sonibus/events/node"  # a node's state changes (a worker failed, a restart): an event like a robot's
 STATS = "sonibus/stats"
 NODE_STATS = f"{STATS}/*/*"  # every node's stats (bus/stats.py, bus/health.py)
 

@@ -448,10 +448,14 @@ def _node_view(host_node: tuple[str, str], node: _Node, now: float) -> NodeView:
         uptime = stats["uptime_s"] + (now - node.stats_at if node.alive is not False else 0.0)
     elif about.get("since"):
         uptime = max(0.0, time.time() - about["since"])
+    # why it is not running: a paused node (a recorder whose disk is full) says it in its latest stats; the
+    # description is asked once, so its reason is only for a node that is not running
+    why = str(stats.get("metrics", {}).get("paused", "")) if state == "paused" else ""
     return NodeView(host, name, str(stats.get("adapter") or about.get("adapter") or "?"), state, uptime,
                     float(rates.get("received", 0.0)), float(rates.get("sent", 0.0)),
                     {k: int(counters.get(k, 0)) for k in LOSSES},
-                    tuple(k for k in LOSSES if rates.get(k, 0) > 0), node.failed or str(about.get("failure", "")))
+                    tuple(k for k in LOSSES if rates.get(k, 0) > 0),
+                    node.failed or why or (str(about.get("failure", "")) if state != "running" else ""))
 
 
 def describe_event(kind: str, message: dict[str, Any]) -> str:

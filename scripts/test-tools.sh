@@ -16,6 +16,7 @@ tools=(
   "openssl openssl"
   "chromium chromium"
   "chromedriver chromium-driver"
+  "systemd-analyze systemd"
   "node nodejs"
   "npm npm"
 )

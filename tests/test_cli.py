@@ -589,7 +589,7 @@ def test_a_closed_stdout_in_process_is_141_without_an_error():
 
 # -- built-in commands are entry points; the demo is wired by demo.toml ------------------
 
-BUILT_IN = ("demo", "run", "router", "adapters", "nodes", "echo", "send", "top")
+BUILT_IN = ("demo", "run", "router", "service", "adapters", "nodes", "echo", "send", "top")
 
 
 def test_built_in_commands_are_registered_like_plugin_commands():

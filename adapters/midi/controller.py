@@ -50,7 +50,8 @@ class MidiController(Adapter):
         for robot in {m.robot for m in cfg.mappings("cc")}:
             self._info.ask(robot)
         self.spawn(self._work, "commands")
-        log.info("%s: MIDI in on %s", self.name, f"'{cfg.connect}'" if cfg.connect else f"virtual port '{cfg.port}'")
+        self.address = f"MIDI in on {f'{cfg.connect!r}' if cfg.connect else f'virtual port {cfg.port!r}'}"
+        log.info("%s: %s", self.name, self.address)
 
     def _receive(self, event: tuple[list[int], float], data: Any = None) -> None:
         self._queue.put(("midi", event[0]))   # rtmidi's thread: only enqueue

@@ -83,7 +83,8 @@ class MidiSink(Adapter):
         self._presence = self.own(presence.connection_events(self.bus, self._queue, cfg.subscribe))  # loss, return
         self.spawn(lambda: self._presence.watch(self.stopping), "silence")
         self.spawn(self._forward, "forward")
-        log.info("%s: MIDI out on %s", self.name, f"'{cfg.connect}'" if cfg.connect else f"virtual port '{cfg.port}'")
+        self.address = f"MIDI out on {f'{cfg.connect!r}' if cfg.connect else f'virtual port {cfg.port!r}'}"
+        log.info("%s: %s", self.name, self.address)
 
     @property
     def channels(self) -> dict[str, int]:

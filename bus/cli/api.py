@@ -26,7 +26,7 @@ from typing import Any, TextIO
 from .. import config
 from ..errors import ConfigError
 from ..node import Bus
-from ..session import MODES, BusConfig, check_endpoint, check_option, open_session
+from ..session import MODES, BusConfig, check_endpoint, check_option, default_listen, from_here, open_session
 
 COMMAND_GROUP = "sonibus.commands"
 
@@ -95,14 +95,14 @@ def add_bus_arguments(parser: argparse.ArgumentParser, installation: bool = True
     if installation:
         group = parser.add_argument_group("installation")
         group.add_argument("--config", dest="bus_file", metavar="CONFIG.toml",
-                           help="join the bus as the [bus] table of this installation file says")
+                           help="join the bus of this installation file, where its `sonibus run` listens")
         group.add_argument("--host", help="with --config: use its [bus.hosts.HOST] settings (default: this machine)")
 
 
 def bus_config(args: argparse.Namespace, base: BusConfig | None = None) -> BusConfig:
     """``base`` (or the ``--config`` file's, or defaults) with the command-line bus options applied."""
     if base is None and getattr(args, "bus_file", None):
-        base = config.load(args.bus_file).bus.for_host(args.host or socket.gethostname())
+        base = visiting(config.load(args.bus_file).bus.for_host(args.host or socket.gethostname()))
     cfg = base or BusConfig()
     changes: dict[str, Any] = {}
     if args.mode:
@@ -126,6 +126,21 @@ def bus_config(args: argparse.Namespace, base: BusConfig | None = None) -> BusCo
     except ConfigError as exc:  # "key 'namespace': ..." from BusConfig: name the flag instead
         flags = {"namespace": "--namespace", "options": "--zenoh", "mode": "--mode"}
         raise ConfigError(re.sub(r"^key '(\w+)'", lambda m: flags.get(m[1], m[0]), str(exc))) from None
+
+
+def visiting(cfg: BusConfig) -> BusConfig:
+    """How a command joins the machine whose ``sonibus run`` uses ``cfg``: it dials where
+    that process listens (from this machine: a wildcard as loopback) instead of listening
+    on the same port, and a router's machine is joined as the router's client.
+
+    >>> joined = visiting(BusConfig(multicast=False, listen=("tcp/0.0.0.0:7450",)))
+    >>> joined.connect, joined.listen
+    (('tcp/127.0.0.1:7450',), ())
+    """
+    listen = cfg.listen or (tuple(default_listen("router")) if cfg.mode == "router" else ())
+    here = tuple(from_here(e) for e in listen if not e.endswith(":0"))  # (a port 0: only `run` knows which)
+    return replace(cfg, mode="client" if cfg.mode == "router" else cfg.mode, listen=(),
+                   connect=tuple(dict.fromkeys(cfg.connect + here)))
 
 
 def _zenoh_options(items: list[str], options: dict[str, Any]) -> dict[str, Any]:

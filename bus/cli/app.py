@@ -102,6 +102,7 @@ def main(argv: Sequence[str] | None = None, env: Environment | None = None) -> i
     handler = logging.StreamHandler(env.stderr)
     handler.setFormatter(PrintableFormatter("sonibus: %(levelname)s: %(message)s"))
     logger = logging.getLogger("sonibus")
+    handler.setLevel(logging.WARNING)
     logger.addHandler(handler)
     logger.setLevel(logging.WARNING)
     try:
@@ -111,7 +112,9 @@ def main(argv: Sequence[str] | None = None, env: Environment | None = None) -> i
                 args = parser(found).parse_args(argv)
         except SystemExit as exc:  # argparse has printed its message
             return int(exc.code or 0)
-        logger.setLevel((logging.WARNING, logging.INFO, logging.DEBUG)[min(args.verbose, 2)])
+        level = (logging.WARNING, logging.INFO, logging.DEBUG)[min(args.verbose, 2)]
+        handler.setLevel(level)  # (its own level: a log file may take more, bus/logfile.py)
+        logger.setLevel(level)
         return _run(args, env, found[args.command].run)
     finally:
         logger.removeHandler(handler)
