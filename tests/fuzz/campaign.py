@@ -42,7 +42,7 @@ class Plan:
 
 
 CI = Plan(examples={"frame": 300, "joint": 200, "derived": 150, "event": 150, "command": 150, "info": 60,
-                    "osc": 300, "http": 100, "websocket": 100}, huge_flood=300)
+                    "osc": 300, "http": 80, "websocket": 60}, huge_flood=300)
 SERVER_FAMILIES = (HttpFamily, WebSocketFamily)  # the web pages', OSCQuery's and Foxglove's servers
 
 
