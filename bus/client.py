@@ -2,7 +2,8 @@
 
 ``ask`` sends at once and hands the outcome to a callback (the OSC gateway
 uses it so that a slow robot never stalls its receive loop; queries leave in
-the order they were asked); ``send_command`` waits for it.
+the order they were asked); ``send_command`` waits for it. ``ask_program``
+asks the program that drives a robot (a show's ``scenario``) the same way.
 
 >>> send_command(bus, "pepper", "say", {"text": "hello"})   # doctest: +SKIP
 {'duration': 0.6, 'queued': 0}
@@ -30,12 +31,26 @@ def ask(bus: Bus, robot: str, verb: str, args: dict[str, Any], done: Callable[[O
     ``CommandError`` (``robot_not_found``, ``timeout``, or the robot's refusal), exactly once."""
     pending = _Pending(robot, verb, done, timeout)
     owner = owner if owner is not None else owners(bus).owner(robot)
-    selector = keys.command(robot, verb) + (f"?owner={owner.address}" if owner is not None else "")
+    _send(bus, keys.command(robot, verb) + (f"?owner={owner.address}" if owner is not None else ""), args, pending)
+
+
+def ask_program(bus: Bus, robot: str, verb: str, args: dict[str, Any], done: Callable[[Outcome], None],
+                timeout: float = 5.0) -> None:
+    """Send ``verb`` to the program that drives ``robot`` (``<robot>/program/<verb>``: a
+    show's ``scenario``) as ``ask`` sends a command: ``done`` gets the result or a
+    ``CommandError`` (``program_not_found`` when nothing serves the key), exactly once."""
+    key = keys.program(robot, verb)
+    nobody = CommandError("program_not_found", f"{verb}: no program drives robot '{robot}' ({key} is served by "
+                                               f"nothing) — start the node that does, on the same bus")
+    _send(bus, key, args, _Pending(robot, verb, done, timeout, nobody))
+
+
+def _send(bus: Bus, selector: str, args: dict[str, Any], pending: _Pending) -> None:
     try:
         # Every answer, not one per key: a node standing by for the robot's owner answers too (``conflict``).
-        bus.ask(selector, pending.on_reply, pending.on_end, message=args, timeout=timeout, every_answer=True)
+        bus.ask(selector, pending.on_reply, pending.on_end, message=args, timeout=pending.timeout, every_answer=True)
     except Exception as exc:  # a closed session, a key Zenoh refuses
-        pending.finish(CommandError("internal", f"{verb}: the bus refused the query: {exc}"))
+        pending.finish(CommandError("internal", f"{pending.verb}: the bus refused the query: {exc}"))
 
 
 class _Pending:
@@ -45,8 +60,10 @@ class _Pending:
     "Timeout" as an error reply), else ``robot_not_found`` (nobody serves the key: it
     ends at once)."""
 
-    def __init__(self, robot: str, verb: str, done: Callable[[Outcome], None], timeout: float) -> None:
+    def __init__(self, robot: str, verb: str, done: Callable[[Outcome], None], timeout: float,
+                 nobody: CommandError | None = None) -> None:
         self.robot, self.verb, self.done, self.timeout = robot, verb, done, timeout
+        self.nobody = nobody or RobotNotFound(robot)  # what an answer that ends at once, unanswered, means
         self.started = time.monotonic()
         self.error = ""
         self.standing_by: CommandError | None = None
@@ -81,7 +98,7 @@ class _Pending:
         elif self.error:
             self.finish(CommandError("internal", f"{self.verb}: {self.error}"))
         else:
-            self.finish(RobotNotFound(self.robot))
+            self.finish(self.nobody)
 
     def finish(self, outcome: Outcome) -> None:
         with self._lock:

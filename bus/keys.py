@@ -55,6 +55,12 @@ def command(robot: str, verb: str = "**") -> str:
     return f"{robot}/cmd/{verb}"
 
 
+def program(robot: str, verb: str = "**") -> str:
+    """Where a program that drives ``robot`` through its commands (a show) takes requests
+    of its own (``pepper/program/scenario``): a queryable that program serves, never the owner."""
+    return f"{robot}/program/{verb}"
+
+
 def info(robot: str) -> str:
     return f"{robot}/info"
 

@@ -603,7 +603,8 @@ def test_built_in_commands_are_registered_like_plugin_commands():
     env = environment()
     assert main(["--help"], env) == Exit.OK
     listed = re.findall(r"^    (\S+) ", env.stdout.getvalue(), re.MULTILINE)
-    assert set(listed) == {*BUILT_IN, "record", "replay", "info", "recover", "export", "plot", "jsonl-count"}
+    assert set(listed) == {*BUILT_IN, "record", "replay", "info", "recover", "export", "plot", "rehearse",
+                           "jsonl-count"}
     assert listed[-1] == "jsonl-count", "sonibus's own first, then the plug-ins'"
 
 

@@ -26,7 +26,7 @@ from sonibus.bus.errors import CommandError
 from sonibus.bus.text import printable
 from sonibus.bus.web import WebClient, WebServer, close_clients
 
-from . import protocol
+from . import kiosk, protocol
 from .auth import Guard
 from .config import Button, WebConfig
 from .kiosk import Stand
@@ -223,12 +223,11 @@ class Pages:
             return
         press = self.stand.press(button)
         asyncio.get_running_loop().call_later(button.timeout_s, self._overdue, press)
-        verb, args = button.command
         self.adapter.count("commands")
 
         def done(outcome: bus_client.Outcome) -> None:
             self.web.call(self._pressed, client, request.id, button, press, outcome)
-        bus_client.ask(self.adapter.bus, self.config.stand.robot, verb, args, done, self.config.timeout)
+        kiosk.send(self.adapter.bus, self.config.stand.robot, button, done, self.config.timeout)
 
     def _overdue(self, press: int) -> None:
         button = self.stand.current

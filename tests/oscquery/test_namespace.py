@@ -88,7 +88,8 @@ def test_attribute_queries_and_errors(served):
     hand = load_model("pepper").joint("LHand")
     assert served.json("/pepper/joints/LHand?RANGE") == {"RANGE": [{"MIN": hand.min, "MAX": hand.max}]}
     assert served.json("/pepper/cmd/say?TYPE") == {"TYPE": "s"}
-    assert set(served.json("/pepper?CONTENTS")["CONTENTS"]) == {"joints", "events", "cmd"}
+    assert set(served.json("/pepper?CONTENTS")["CONTENTS"]) == {"joints", "events", "cmd", "program"}
+    assert served.json("/pepper/program/scenario?TYPE") == {"TYPE": "s"}  # (a show's scenarios, via the gateway)
     assert served.get("/pepper/cmd/stop?RANGE").status_code == 204      # a node without it
     assert served.get("/pepper/cmd/say?VALUE").status_code == 204        # write-only: no value to read
     assert served.json("/pepper/events/speech?VALUE") == {}               # no value yet
