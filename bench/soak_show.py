@@ -33,7 +33,6 @@ import argparse
 import contextlib
 import math
 import os
-import platform
 import shutil
 import signal
 import socket
@@ -358,7 +357,7 @@ def analyse(args: argparse.Namespace, show: Soak, process: Process, clients: Cli
     met = "yes" if slope is not None and slope <= GOAL_MB_H else "no"
     restarts = worker_restarts + (1 if show.ended_at is not None else 0)
     result: dict[str, Any] = {
-        "machine": f"{platform.node()} {platform.machine()}, load {os.getloadavg()[0]:.1f} at the end",
+        "machine": f"{os.cpu_count()} cores, load {os.getloadavg()[0]:.2f} at the end",
         "minutes": round(minutes, 1), "warmup_min": args.warmup_min, "show_program": show.show,
         "traced": args.trace is not None, "cycle_s": args.cycle_s, "away_s": args.away_s,
         "steady": steady, "phases": phases,
