@@ -58,6 +58,7 @@ HERE = Path(__file__).resolve().parent
 GOAL_MB_H = 2.0
 LONG_MIN = 60.0  # the goal is judged on a run at least this long
 MAPPINGS_EVERY_S = 300.0
+PARTIAL_EVERY_S = 300.0  # the results so far are written this often (marked partial)
 
 
 @dataclass
@@ -317,6 +318,7 @@ def soak(args: argparse.Namespace, tmp: Path) -> dict[str, Any]:
         end, leave = args.minutes * 60, args.leave_at * args.minutes * 60
         print(f"soak: {args.minutes:g} min, clients until {leave / 60:.1f} min, warm-up {args.warmup_min:g} min; "
               f"log and recordings in {tmp}", flush=True)
+        next_partial = time.monotonic() + PARTIAL_EVERY_S
         while (now := time.monotonic() - process.started) < end and show.run.alive:
             if now < leave:
                 clients.cycle(min(args.cycle_s, leave - now))
@@ -328,6 +330,10 @@ def soak(args: argparse.Namespace, tmp: Path) -> dict[str, Any]:
             if pause > 0:
                 with contextlib.suppress(subprocess.TimeoutExpired):
                     show.run.popen.wait(pause)  # (returns early if the run ends)
+            if time.monotonic() >= next_partial:  # what it found so far, should the soak be cut short
+                next_partial += PARTIAL_EVERY_S
+                log_now = "\n".join(text for _, text in show.run.err)
+                write(args.name, {**analyse(args, show, process, clients, None, log_now), "partial": True})
             last = process.samples[-1] if process.samples else None
             if last:
                 print(f"  {last[0] / 60:5.1f} min: rss {last[1]:.1f} MB, fds {last[2]}, threads {last[3]}, "
