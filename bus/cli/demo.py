@@ -13,6 +13,7 @@ of its adapters.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import re
 import tomllib
 from dataclasses import dataclass
@@ -23,6 +24,7 @@ from typing import Any
 from .. import config, runner
 from ..errors import ConfigError, OwnershipError
 from .api import Command, Environment, Exit, add_bus_arguments, bus_config
+from .run import stop_lines
 
 WHERE = "demo.toml [demo]"
 
@@ -115,10 +117,16 @@ def _demo(args: argparse.Namespace, env: Environment) -> Exit:
         raise ConfigError(blamed(str(exc), values)) from None
     for line in wiring().banner:
         env.say(filled(line, values))
+    names = ", ".join(f"{a.name} ({a.kind})" for a in adapters)
     try:
-        runner.run(adapters, bus_config(args, wired.bus), env.stop)
+        runner.run(adapters, bus_config(args, wired.bus), env.stop,
+                   on_started=lambda bus: env.say(f"sonibus: running {names} on {bus.host}"))
     except OwnershipError as exc:
         raise OwnershipError(blamed(str(exc), values, taken=True)) from None
+    finally:
+        with contextlib.suppress(OSError):  # (its output gone: nobody to tell)
+            for line in stop_lines(adapters):
+                env.say(line)
     return Exit.OK
 
 
