@@ -196,8 +196,9 @@ def _replay(args: argparse.Namespace, env: Environment) -> Exit:
 
     _run(replay, args, env, progress, replay.finished.is_set, args.status_every)
     gaps = f", {replay.stats['gaps']} gaps shortened" if replay.stats["gaps"] else ""
+    why = " (this machine was too busy to send them on time: its CPU)" if replay.stats["late"] else ""
     env.say(f"replayed {os.path.basename(args.file)}: {replay.stats['sent']} messages, "
-            f"{replay.stats['late']} skipped as late{gaps}")
+            f"{replay.stats['late']} skipped as late{why}{gaps}")
     return Exit.OK
 
 
