@@ -49,9 +49,7 @@ from .timeline import OFFSETS, Timeline
 log = logging.getLogger(__name__)
 T = TypeVar("T")
 
-# samples later than this are skipped (events never): no bursts of stale data; half a sink's default
-# max_age_ms (100), so what goes out is not already stale when it arrives (every sink would drop it, warning)
-MAX_LATE_S = 0.05
+MAX_LATE_S = 0.1  # samples later than this are skipped (events never): no bursts of stale data
 LEAD_S = 0.2      # between declaring the publishers and the first message: Zenoh settles its routes
 AHEAD = 512       # moments read and decoded ahead of the player (~5 s of a robot at 100 frames/s)
 GATHER_NS = 5_000_000  # a frame's joint samples reach a recorder within this of each other
@@ -94,8 +92,19 @@ class Replay(Adapter):
 
     def __init__(self, config: ReplayConfig, *, name: str = "") -> None:
         super().__init__(config, name=name)
-        self.position_s, self.window_s, self.loops = 0.0, 0.0, 0   # progress: seconds into the window, passes
-        self.finished = threading.Event()                          # set at the end of a replay without loop
+        self.window_s, self.loops = 0.0, 0        # progress: the window's length, passes done
+        self.finished = threading.Event()          # set at the end of a replay without loop
+        self._clock: tuple[float, float] | None = None  # the pass's start (monotonic) and the time cut from it
+
+    @property
+    def position_s(self) -> float:
+        """Seconds into the window the replay is now, by its clock: not the last message
+        sent, which a gap in the recording or the next pass's start held back (the
+        progress line showed 4.8/4.8 s with "loop 2", or stood still through a gap)."""
+        if self._clock is None:
+            return 0.0
+        start, cut_s = self._clock
+        return min(self.window_s, max(0.0, (time.monotonic() - start) * self.config.speed + cut_s))
 
     @classmethod
     def owned_robots(cls, config: ReplayConfig) -> tuple[str, ...]:
@@ -170,6 +179,7 @@ class Replay(Adapter):
             timeline.prime((m.publish_ns - m.log_ns) / 1e9 for m in ahead)
             if start is None:  # (after the first reading: its time must not make the first messages late)
                 start = time.monotonic() + LEAD_S
+            self._clock = (start, 0.0)
             for framed, moment in ReadAhead(_moments(self.recording.messages(self.keys, cfg.start, cfg.end)),
                                             self.stopping):
                 message = moment[0]
@@ -182,7 +192,7 @@ class Replay(Adapter):
                 due = start + offset_s / cfg.speed
                 if self.stopping.wait(max(0.0, due - time.monotonic())):
                     return
-                self.position_s = at_s
+                self._clock = (start, timeline.shift_s)
                 if message.key.endswith("/info"):
                     continue
                 seq = message.data.get("seq")
@@ -203,6 +213,7 @@ class Replay(Adapter):
             if not cfg.loop:
                 break
             start += (self.window_s - timeline.shift_s + self._gap_s) / cfg.speed
+            self._clock = (start, 0.0)
         self.finished.set()
         log.info("%s: replay of %s finished", self.name, cfg.path)
 
