@@ -51,7 +51,7 @@ from .conftest import Network, wait_for
 from .recorder.conftest import record_sim
 
 ROOT = Path(__file__).resolve().parent.parent
-DOCS = [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]
+DOCS = [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md")), *sorted((ROOT / "patches").glob("**/README.md"))]
 SKIP_MARK = "<!-- not a command -->"
 SHELL_FENCES = {"", "sh", "bash", "shell", "console"}
 PROGRAMS = {"sonibus", "make", "pip", "pip3", "pd"}
