@@ -9,6 +9,8 @@ import io
 import json
 import re
 import socket
+import subprocess
+import sys
 import threading
 from pathlib import Path
 
@@ -180,3 +182,19 @@ def test_each_node_says_what_it_counted_when_it_stops(command, tmp_path):
     counted = dict(re.findall(r"(\w+) ([\d,]+)", lines["sound"]))
     assert {"received", "sent", "dropped", "stale", "bad", "errors"} <= counted.keys(), lines["sound"]
     assert "sonibus: INFO" not in env.stderr.getvalue(), "at the default level, not with -v"
+
+
+# -- item 7: sonibus is on no package index ----------------------------------------------------
+
+
+def test_no_message_tells_users_to_install_sonibus_from_the_package_index(tmp_path):
+    """Issue 29, item 7: docs and the ros2 adapter's errors said `pip install 'sonibus[ros2]'`;
+    pip answers `from versions: none` (and would install someone else's package were the
+    name ever taken). A missing extra is named with where sonibus was installed from."""
+    lies = [f"{path.relative_to(ROOT)}:{n}" for folder in ("bus", "adapters") for path in (ROOT / folder).rglob("*.py")
+            for n, line in enumerate(path.read_text(encoding="utf-8").splitlines(), 1)
+            if re.search(r"install ['\"]sonibus\[", line)]
+    assert not lies
+    code = "from sonibus.bus import registry; print(registry.install_extra('ros2-dds', 'ros2'))"
+    shown = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=tmp_path, timeout=60)
+    assert shown.stdout.strip() == f"pip install -e '{ROOT}[ros2-dds]'", shown  # (make setup: an editable install)

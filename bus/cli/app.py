@@ -102,7 +102,8 @@ def main(argv: Sequence[str] | None = None, env: Environment | None = None) -> i
     handler = logging.StreamHandler(env.stderr)
     handler.setFormatter(PrintableFormatter("sonibus: %(levelname)s: %(message)s"))
     logger = logging.getLogger("sonibus")
-    handler.setLevel(logging.WARNING)
+    said = Said(logging.WARNING)
+    handler.addFilter(said)
     logger.addHandler(handler)
     logger.setLevel(logging.WARNING)
     try:
@@ -113,11 +114,27 @@ def main(argv: Sequence[str] | None = None, env: Environment | None = None) -> i
         except SystemExit as exc:  # argparse has printed its message
             return int(exc.code or 0)
         level = (logging.WARNING, logging.INFO, logging.DEBUG)[min(args.verbose, 2)]
-        handler.setLevel(level)  # (its own level: a log file may take more, bus/logfile.py)
+        said.level = level  # (its own level: a log file may take more, bus/logfile.py)
         logger.setLevel(level)
         return _run(args, env, found[args.command].run)
     finally:
         logger.removeHandler(handler)
+
+
+class Said(logging.Filter):
+    """What the terminal shows: records at ``level`` or above, and those of a logger set
+    to speak below it (the naoqi adapter's "connected to Pepper ..." line, said at INFO
+    without -v), however low a log file set the ``sonibus`` logger."""
+
+    def __init__(self, level: int) -> None:
+        super().__init__()
+        self.level = level
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        if record.levelno >= self.level:
+            return True
+        own = logging.getLogger(record.name).level
+        return own != logging.NOTSET and record.levelno >= own
 
 
 def _run(args: argparse.Namespace, env: Environment, run: Callable[[argparse.Namespace, Environment], int]) -> int:
