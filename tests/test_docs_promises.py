@@ -21,7 +21,7 @@ from sonibus.adapters.recorder.reading import Recording
 from sonibus.bus import robot_info
 from sonibus.bus.cli import Environment, Exit, main
 
-from .conftest import free_port, wait_for
+from .conftest import SONIBUS, free_port, wait_for
 from .osc.test_gateway import Client
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -198,3 +198,35 @@ def test_no_message_tells_users_to_install_sonibus_from_the_package_index(tmp_pa
     code = "from sonibus.bus import registry; print(registry.install_extra('ros2-dds', 'ros2'))"
     shown = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=tmp_path, timeout=60)
     assert shown.stdout.strip() == f"pip install -e '{ROOT}[ros2-dds]'", shown  # (make setup: an editable install)
+
+
+# -- docs/naoqi.md: the first connection's lines ---------------------------------------------
+
+
+def naoqi_doc_line(start: str) -> str:
+    """The line of docs/naoqi.md's first-connection checklist that starts with ``start``."""
+    text = (ROOT / "docs" / "naoqi.md").read_text(encoding="utf-8")
+    checklist = text.partition("## First connection to a real Pepper")[2].partition("\n## ")[0]
+    return next(line.strip().removeprefix("- `").split("`:")[0] for line in checklist.splitlines()
+                if line.strip().removeprefix("- `").startswith(start))
+
+
+def test_the_first_connection_says_what_docs_naoqi_says_it_says(net, spawn, tmp_path):
+    """The line that says it worked, and the one of a robot that does not answer, as
+    `sonibus run` prints them at the default level (against the fake robot)."""
+    url = f"tcp://127.0.0.1:{free_port()}"
+    show = tmp_path / "pepper.toml"
+    show.write_text(f'[nodes.fake]\nadapter = "naoqi-sim"\nlisten = "{url}"\nrobot_name = "Juliette"\n\n'
+                    f'[nodes.pepper]\nadapter = "naoqi"\nurl = "{url}"\n')
+    robot = spawn(SONIBUS, "run", str(show), *net.cli_args(), collect=True, merge=True)
+    said = naoqi_doc_line("sonibus: INFO: pepper: connected to").replace("tcp://192.168.1.20:9559", url)
+    wait_for(lambda: said in robot.lines, timeout=30, what=f"the line {said!r}", explain=lambda: "\n".join(robot.lines))
+    assert robot.stop()[0] == 130
+
+    closed = f"tcp://127.0.0.1:{free_port()}"  # (nothing listens there)
+    show.write_text(f'[nodes.pepper]\nadapter = "naoqi"\nurl = "{closed}"\n')
+    robot = spawn(SONIBUS, "run", str(show), *net.cli_args(), collect=True, merge=True)
+    said = naoqi_doc_line("sonibus: WARNING: pepper: robot 'pepper' is unreachable").replace(
+        "tcp://192.168.1.20:9559", closed)
+    wait_for(lambda: said in robot.lines, timeout=30, what=f"the line {said!r}", explain=lambda: "\n".join(robot.lines))
+    assert robot.stop()[0] == 130
