@@ -172,10 +172,22 @@ class Adapter:
         """Become the owner of ``robot`` until stopped; ``OwnershipError`` if it has one.
         The ``Ownership`` says whether this node may act (it stands by while an earlier
         claim of the robot is on the bus) and publishes its frames."""
-        ownership = self.own(Ownership(self.bus, robot, hint))
+        ownership = self.own(Ownership(self.bus, robot, hint, self._claim_refused))
         ownership.take()
         self.robots.append(robot)
         return ownership
+
+    def _claim_refused(self, key: str, why: str) -> None:
+        """A claim of a robot this node owns that it does not take (``Ownership``): counted, warned."""
+        self.count("claims_refused")
+        self.warn("claim", why)
+
+    def capped(self, what: str) -> None:
+        """A name from the bus (a robot, a node, a key) this node did not keep because a table
+        of its own is full: counted ``capped``, said at most once every ``WARN_EVERY_S``.
+        Every table keyed by names from the bus has a cap: names made up must not grow it."""
+        self.count("capped")
+        self.warn("capped", f"{what} — names made up on the bus must not grow what this node keeps")
 
     def count(self, kind: str, n: int = 1) -> None:
         """Add ``n`` to counter ``kind`` of ``stats`` (safe from any thread)."""

@@ -149,6 +149,8 @@ def parse(text: str, path: str = "<string>") -> Installation:
         adapter = options.pop("adapter", None)
         host = options.pop("host", "")
         lines = _lines(text, f"nodes.{name}", table)
+        if line and not lines:  # an inline table (robot = { adapter = "sim", ... }): every key is on its line
+            lines = {key: line for key in table}
         if not isinstance(adapter, str):
             raise ConfigError(f"{at_table}: missing key 'adapter' (a string: see `sonibus adapters`)")
         if not isinstance(host, str):

@@ -199,11 +199,15 @@ class WebServer:
             self._sockets.discard(ws)
 
     async def serve_client(self, ws: web.WebSocketResponse, client: WebClient,
-                           take: Callable[[Any], None] = lambda message: None) -> None:
-        """Run ``client``'s sender while ``ws`` is open, each message it sends to ``take``."""
+                           take: Callable[[Any], None] = lambda message: None,
+                           room: Callable[[], Awaitable[None]] | None = None) -> None:
+        """Run ``client``'s sender while ``ws`` is open, each message it sends to ``take``;
+        ``room`` (if given) is awaited before each: the client is not read meanwhile."""
         sender = asyncio.create_task(client.send_all())
         try:
             async for message in ws:
+                if room is not None:
+                    await room()
                 take(message)
         finally:
             sender.cancel()
@@ -418,7 +422,10 @@ def own_name(host: str) -> bool:
 class WebClient:
     """One WebSocket client: text and binary messages wait in a bounded backlog, sent in
     order by one task (``send_all``); a client ``CLIENT_BACKLOG`` messages (or
-    ``CLIENT_BACKLOG_BYTES``) behind loses the oldest, each one told to ``on_drop``."""
+    ``CLIENT_BACKLOG_BYTES``) behind loses the oldest, each one told to ``on_drop``.
+    Messages pushed ``kept`` (a reply to what the client asked) are never dropped and go
+    out before the backlog: whoever pushes them bounds their number (the web pages' server
+    stops reading a client whose replies pile up)."""
 
     def __init__(self, ws: web.WebSocketResponse, on_drop: Callable[[], None],
                  transport: asyncio.BaseTransport | None = None) -> None:
@@ -426,10 +433,15 @@ class WebClient:
         self.on_drop = on_drop
         self.transport = transport  # cut by close_clients if the client never takes the close
         self.backlog: deque[str | bytes] = deque()
-        self.size = 0  # bytes (characters) waiting
+        self.size = 0  # bytes (characters) waiting in the backlog
+        self.kept: deque[str | bytes] = deque()
         self.waiting = asyncio.Event()
 
-    def push(self, message: str | bytes) -> None:
+    def push(self, message: str | bytes, kept: bool = False) -> None:
+        if kept:
+            self.kept.append(message)
+            self.waiting.set()
+            return
         self.backlog.append(message)
         self.size += len(message)
         while len(self.backlog) > CLIENT_BACKLOG or (self.size > CLIENT_BACKLOG_BYTES and len(self.backlog) > 1):
@@ -441,9 +453,12 @@ class WebClient:
         while not self.ws.closed:
             await self.waiting.wait()
             self.waiting.clear()
-            while self.backlog and not self.ws.closed:
-                message = self.backlog.popleft()
-                self.size -= len(message)
+            while (self.kept or self.backlog) and not self.ws.closed:
+                if self.kept:
+                    message = self.kept.popleft()
+                else:
+                    message = self.backlog.popleft()
+                    self.size -= len(message)
                 try:
                     if isinstance(message, bytes):
                         await self.ws.send_bytes(message)

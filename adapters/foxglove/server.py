@@ -41,6 +41,7 @@ from .views import DERIVED_INFO, Views, joint_samples
 
 log = logging.getLogger(__name__)
 
+MAX_ROBOTS = 64  # robots served (names made up on the bus must not grow what is kept per robot)
 
 @dataclass(frozen=True)
 class FoxgloveConfig:
@@ -85,6 +86,7 @@ class FoxgloveServer(Adapter):
         self._infos: dict[str, dict[str, Any]] = {}  # info and info/derived keys → their latest message
         self._queue = self.own(SampleQueue(cfg.queue))
         self._info_seen: set[str] = set()
+        self._robots: set[str] = set()  # robots served: their messages pass, and their state is kept
         self._info = InfoRequests(self.bus, self._take_info, lambda robot, text: self.warn("info", text))
         self._views = Views(self.bus, self._take_derived_info)
         self._streams = Streams(self.bus, cfg.subscribe, self._queue, per_joint_keys=cfg.per_joint_keys)
@@ -134,6 +136,11 @@ class FoxgloveServer(Adapter):
         if incoming is None:
             return
         robot = incoming.source.robot
+        if robot not in self._robots:
+            if len(self._robots) >= MAX_ROBOTS:  # (its info, arms, views: per robot)
+                self.capped(f"robot '{robot}' not served: already {MAX_ROBOTS} robots")
+                return
+            self._robots.add(robot)
         if key.endswith("/info"):
             self._info_seen.add(robot)
             self._infos[key] = incoming.message

@@ -29,13 +29,15 @@ from ..node import Bus
 from ..session import MODES, BusConfig, check_endpoint, check_option, default_listen, from_here, open_session
 
 COMMAND_GROUP = "sonibus.commands"
+DEMO_BUS = "tcp/127.0.0.1:7448"  # where `sonibus demo` listens (adapters/demo.toml): this machine only
 
 
 class Exit(enum.IntEnum):
     """Exit statuses: 1 error, 2 usage or configuration (a bad flag, file, table or
-    key), 3 robot not found, 4 command refused, 5 timeout, 130 interrupted (Ctrl-C,
-    SIGTERM), 141 the output was closed (``sonibus info F | head -1``: quiet, as a Unix
-    tool killed by SIGPIPE)."""
+    key), 3 robot not found, 4 command refused, 5 the robot did not answer (a timeout,
+    a robot that is not connected or does not answer, a stop that did not reach it),
+    130 interrupted (Ctrl-C, SIGTERM), 141 the output was closed (``sonibus info F |
+    head -1``: quiet, as a Unix tool killed by SIGPIPE)."""
 
     OK = 0
     ERROR = 1
@@ -81,9 +83,10 @@ class Command:
     bus: bool = False
 
 
-def add_bus_arguments(parser: argparse.ArgumentParser, installation: bool = True) -> None:
+def add_bus_arguments(parser: argparse.ArgumentParser, installation: bool = True, demo: bool = True) -> None:
     """The options that say how to join the bus; with ``installation``, also
-    ``--config FILE`` and ``--host NAME`` (join as that machine of an installation file)."""
+    ``--config FILE`` and ``--host NAME`` (join as that machine of an installation file);
+    with ``demo``, ``--demo`` (join this machine's ``sonibus demo``)."""
     group = parser.add_argument_group("bus")
     group.add_argument("--mode", choices=MODES, help="Zenoh mode (default: peer)")
     group.add_argument("--connect", action="append", metavar="ENDPOINT", help="e.g. tcp/192.168.1.10:7447")
@@ -92,6 +95,9 @@ def add_bus_arguments(parser: argparse.ArgumentParser, installation: bool = True
     group.add_argument("--namespace", help="prefix that keeps this installation apart from others")
     group.add_argument("--zenoh", action="append", metavar="KEY=JSON", default=[],
                        help="raw Zenoh option, e.g. transport/link/tx/lease=2000")
+    if demo:
+        group.add_argument("--demo", action="store_true",
+                           help=f"join this machine's `sonibus demo` (private: no multicast, connect {DEMO_BUS})")
     if installation:
         group = parser.add_argument_group("installation")
         group.add_argument("--config", dest="bus_file", metavar="CONFIG.toml",
@@ -115,6 +121,8 @@ def bus_config(args: argparse.Namespace, base: BusConfig | None = None) -> BusCo
                 raise ConfigError(f"--{flag} {exc}") from None
         if getattr(args, flag):
             changes[flag] = tuple(getattr(args, flag))
+    if getattr(args, "demo", False):
+        changes.update(multicast=False, connect=(*changes.get("connect", ()), DEMO_BUS))
     if args.no_multicast:
         changes["multicast"] = False
     if args.namespace is not None:

@@ -16,6 +16,7 @@ from collections.abc import Callable, Sequence
 from importlib.metadata import EntryPoint, entry_points, version
 
 from .. import registry
+from ..client import UNANSWERED
 from ..errors import CommandError, ConfigError, OwnershipError, RobotNotFound, SonibusError
 from ..text import PrintableFormatter
 from .api import COMMAND_GROUP, Command, Environment, Exit, add_bus_arguments
@@ -102,8 +103,8 @@ def main(argv: Sequence[str] | None = None, env: Environment | None = None) -> i
     handler = logging.StreamHandler(env.stderr)
     handler.setFormatter(PrintableFormatter("sonibus: %(levelname)s: %(message)s"))
     logger = logging.getLogger("sonibus")
-    said = Said(logging.WARNING)
-    handler.addFilter(said)
+    shown = _Shown(logging.WARNING)
+    handler.addFilter(shown)
     logger.addHandler(handler)
     logger.setLevel(logging.WARNING)
     try:
@@ -114,17 +115,17 @@ def main(argv: Sequence[str] | None = None, env: Environment | None = None) -> i
         except SystemExit as exc:  # argparse has printed its message
             return int(exc.code or 0)
         level = (logging.WARNING, logging.INFO, logging.DEBUG)[min(args.verbose, 2)]
-        said.level = level  # (its own level: a log file may take more, bus/logfile.py)
+        shown.level = level  # (stderr's own threshold: a log file may take more, bus/logfile.py)
         logger.setLevel(level)
         return _run(args, env, found[args.command].run)
     finally:
         logger.removeHandler(handler)
 
 
-class Said(logging.Filter):
-    """What the terminal shows: records at ``level`` or above, and those of a logger set
-    to speak below it (the naoqi adapter's "connected to Pepper ..." line, said at INFO
-    without -v), however low a log file set the ``sonibus`` logger."""
+class _Shown(logging.Filter):
+    """What stderr shows: records at its ``level`` (``-v``), and those of a logger that asks
+    to be heard by a level of its own (naoqi's "connected to Pepper ..." line, said at the
+    default level: a threshold on the handler alone hid it)."""
 
     def __init__(self, level: int) -> None:
         super().__init__()
@@ -155,7 +156,7 @@ def _status(exc: Exception) -> Exit:
     if isinstance(exc, RobotNotFound):
         return Exit.NOT_FOUND
     if isinstance(exc, CommandError):
-        return Exit.TIMEOUT if exc.code == "timeout" else Exit.REFUSED
+        return Exit.TIMEOUT if exc.code in UNANSWERED else Exit.REFUSED
     if isinstance(exc, ConfigError | OwnershipError):  # (a robot already owned: a second owner configured)
         return Exit.USAGE
     return Exit.ERROR

@@ -16,13 +16,14 @@ import argparse
 import contextlib
 import re
 import tomllib
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import cache
 from importlib import resources
 from typing import Any
 
 from .. import config, runner
 from ..errors import ConfigError, OwnershipError
+from ..node import Bus
 from .api import Command, Environment, Exit, add_bus_arguments, bus_config
 from .run import stop_lines
 
@@ -92,7 +93,7 @@ def _arguments(p: argparse.ArgumentParser) -> None:
         p.add_argument(f"--{name}", dest=name, type=type(flag.default), default=flag.default,
                        help=f"{flag.help} (default: {shown})")
     p.add_argument("--quiet", action="store_true", help=wiring().quiet_help)
-    add_bus_arguments(p, installation=False)
+    add_bus_arguments(p, installation=False, demo=False)
 
 
 def installation(values: dict[str, Any], quiet: bool = False) -> tuple[config.Installation, list[str] | None]:
@@ -118,9 +119,20 @@ def _demo(args: argparse.Namespace, env: Environment) -> Exit:
     for line in wiring().banner:
         env.say(filled(line, values))
     names = ", ".join(f"{a.name} ({a.kind})" for a in adapters)
+
+    def started(bus: Bus) -> None:
+        env.say(f"sonibus: running {names} on {bus.host}")
+
+    config = bus_config(args, wired.bus)
     try:
-        runner.run(adapters, bus_config(args, wired.bus), env.stop,
-                   on_started=lambda bus: env.say(f"sonibus: running {names} on {bus.host}"))
+        try:
+            runner.run(adapters, config, env.stop, on_started=started)
+        except ConfigError as exc:
+            if "Address already in use" not in str(exc) or args.listen or args.connect:
+                raise
+            # another demo of this machine listens there: join its bus (still this machine's only)
+            env.say(f"  another demo runs on this machine ({', '.join(config.listen)}): joining its bus")
+            runner.run(adapters, replace(config, listen=(), connect=config.listen), env.stop, on_started=started)
     except OwnershipError as exc:
         raise OwnershipError(blamed(str(exc), values, taken=True)) from None
     finally:

@@ -7,6 +7,7 @@ import contextlib
 import logging
 import re
 import socket
+from collections.abc import Callable
 from dataclasses import replace
 
 from .. import config, runner
@@ -21,7 +22,7 @@ from ..watchdog import Watchdog
 from .api import Command, Environment, Exit, add_bus_arguments, bus_config
 
 
-def _run_arguments(p: argparse.ArgumentParser) -> None:
+def run_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("config", metavar="CONFIG.toml")
     p.add_argument("--only", nargs="+", metavar="NODE", help="run only these nodes")
     p.add_argument("--host", help="run the nodes of this host (default: this machine's name)")
@@ -30,10 +31,15 @@ def _run_arguments(p: argparse.ArgumentParser) -> None:
     add_bus_arguments(p, installation=False)
 
 
-def _run(args: argparse.Namespace, env: Environment) -> Exit:
+def run_installation(args: argparse.Namespace, env: Environment,
+                     prepare: Callable[[list[Adapter]], None] | None = None) -> Exit:
+    """``sonibus run``; ``prepare`` sees the adapters built before they start (``sonibus rehearse``
+    sets its shows' clocks)."""
     installation = config.load(args.config)
     host = args.host or socket.gethostname()
     adapters = runner.build(installation, args.only, host)
+    if prepare is not None:
+        prepare(adapters)
     cfg = bus_config(args, installation.bus.for_host(host))
     logging_to = replace(installation.log, file=args.log_file) if args.log_file else installation.log
     log_file = LogFile(logging_to) if logging_to.file else None
@@ -132,7 +138,7 @@ def _config_flags(args: argparse.Namespace, file: BusConfig, cfg: BusConfig, hos
     return f"--config {args.config}{named}"
 
 
-RUN = Command("run", "run the nodes of an installation file", _run_arguments, _run)
+RUN = Command("run", "run the nodes of an installation file", run_arguments, run_installation)
 
 
 def _router(args: argparse.Namespace, env: Environment) -> Exit:
