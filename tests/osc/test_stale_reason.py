@@ -36,8 +36,7 @@ def test_a_stale_warning_names_the_likely_cause_for_where_the_robot_runs(net, re
     script = net.bus("script")
     publisher = script.stream_publisher("pepper/frame")
     old = encode(messages.frame(time.time() - 0.5, 1, ["HeadYaw"], [0.1]))  # half a second old
-    wait_for(lambda: publisher.put(old) or sink.stats["stale"], what="an old frame dropped as stale")
-    [warning] = stale_warnings(caplog)
+    [warning] = wait_for(lambda: publisher.put(old) or stale_warnings(caplog), what="an old frame dropped, warned of")
     assert warning.partition("ms old: ")[2].startswith(cause.format(here=sink.bus.host)), warning
     assert "'pepper/frame'" in warning
 
