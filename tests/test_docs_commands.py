@@ -1,4 +1,8 @@
-"""Every command in README.md and docs/*.md works as written on a fresh clone.
+"""Every command in README.md, docs/*.md and patches/**/README.md works as written on
+a fresh clone (issue 29). It found, when written: docs/naoqi.md's and docs/ros2.md's
+`pip install 'sonibus[...]'` (sonibus is on no package index), the README's
+`pd -jack` without `-nojackconnect` (tests/test_docs_jack.py) and a listing line of
+design.md whose command ran into its description.
 
 What is a command: a line of a shell block (```sh, ```bash, ```console or a bare
 ```), a line of an indented code block, or an inline code span, that starts with
@@ -19,12 +23,13 @@ What is checked of each, with no robot and no sound card:
   without a path is a lie; every extra named must be one of pyproject.toml's.
 - ``pd ...``: every flag must be one ``pd -help`` lists.
 
-To keep a block out (a synopsis such as ``sonibus top [--every S]``, a line of
-several commands in one, a command for a robot you do not have that the parser
-would still refuse), put ``<!-- not a command -->`` on the line just before
-the block (or before the paragraph holding the inline span). A command that
-needs a robot or hardware needs no mark: only the commands listed above run,
-the others are only parsed.
+A usage line (a word in ``[...]``), a listing line (a command, two spaces or
+more, what it does) and an inline span in prose are taken as synopses: only
+their flags are checked. To keep a block out altogether (output that starts
+with ``sonibus``, a line of several commands in one: ``sonibus record | replay``),
+put ``<!-- not a command -->`` on the line just before the block (or before the
+paragraph holding the span). A command that needs a robot or hardware needs no
+mark: only the commands listed above run, the others are only parsed.
 """
 
 from __future__ import annotations
