@@ -9,7 +9,7 @@ the batches, and each one's ratio to rosbags'. Instructions (``--instructions``)
 contender ``--n`` times in turn under ``valgrind --tool=callgrind``, counted apart (the loop
 itself included, about a hundred instructions a call): deterministic, whatever the load.
 
-    .venv/bin/python bench/ros2_cdr.py [--joints 7 17 50] [--batches 400] [--instructions]
+    .venv/bin/python bench/ros2_cdr.py [--joints 7 17 50] [--batches 300] [--instructions 17]
 
 Writes bench/results/ros2_cdr.json and prints a table.
 """
@@ -26,6 +26,7 @@ import tempfile
 import time
 from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from common import write
@@ -106,13 +107,34 @@ def segments(joints: int, n: int) -> None:
     os.getppid()
 
 
+def summary(row: dict[str, Any]) -> list[dict[str, str]]:
+    """docs/performance.md's rows (bench/run.py) for one message size."""
+    s, n, out = row["seconds"], row["joints"], []
+    for kind, what in (("decode", "JointState decode"), ("encode", "JointTrajectory encode")):
+        ours, theirs = s[f"{kind}_ours"], s[f"{kind}_rosbags"]
+        counted = row.get("instructions")
+        base = f"{theirs['p50_us']:.1f} / {theirs['p99_us']:.1f} µs (rosbags)"
+        if kind == "decode":
+            base += f"; msgpack of our frame {s['decode_msgpack_frame']['p50_us']:.1f} µs"
+        ratio = f"{row[f'{kind}_ratio_p50']:.2f}× / {row[f'{kind}_ratio_p99']:.2f}×"
+        if counted:
+            ratio += f"; {row[f'{kind}_ratio_instructions']:.2f}× instructions"
+        out.append({"scenario": f"ROS 2 {what}, {n} joints, µs p50 / p99",
+                    "sonibus": f"{ours['p50_us']:.1f} / {ours['p99_us']:.1f} µs"
+                               + (f" ({counted[f'{kind}_ours'] / 1000:.0f}k instructions)" if counted else ""),
+                    "baseline": base, "ratio": ratio, "goal": "< 1× rosbags",
+                    "met": "yes" if row[f"{kind}_ratio_p50"] < 1 else "no"})
+    return out
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--joints", type=int, nargs="+", default=[7, 17, 50])
-    parser.add_argument("--batches", type=int, default=400)
-    parser.add_argument("--batch", type=int, default=50)
-    parser.add_argument("--instructions", action="store_true", help="also count instructions with callgrind")
-    parser.add_argument("--n", type=int, default=2000, help="calls per contender under callgrind")
+    parser.add_argument("--batches", type=int, default=300)
+    parser.add_argument("--batch", type=int, default=20)
+    parser.add_argument("--instructions", type=int, nargs="*", default=[], metavar="JOINTS",
+                        help="also count instructions with callgrind, for these of --joints")
+    parser.add_argument("--n", type=int, default=1000, help="calls per contender under callgrind")
     parser.add_argument("--segments", nargs=2, type=int, help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.segments:
@@ -129,13 +151,14 @@ def main() -> None:
             print(f"    {name:<21} {s[name]['p50_us']:7.2f} / {s[name]['p99_us']:7.2f}   {what}")
         print(f"    ours / rosbags: decode {row['decode_ratio_p50']:.2f} / {row['decode_ratio_p99']:.2f}, "
               f"encode {row['encode_ratio_p50']:.2f} / {row['encode_ratio_p99']:.2f}")
-        if args.instructions:
+        if joints in args.instructions:
             row["instructions"] = counts = instructions(joints, args.n)
             row["decode_ratio_instructions"] = counts["decode_ours"] / counts["decode_rosbags"]
             row["encode_ratio_instructions"] = counts["encode_ours"] / counts["encode_rosbags"]
             print("    instructions per call: " + ", ".join(f"{k} {v:,.0f}" for k, v in counts.items()))
         rows.append(row)
-    print(write("ros2_cdr", {"rows": rows}))
+    machine = f"{os.cpu_count()} cores, load {os.getloadavg()[0]:.2f}"
+    print(write("ros2_cdr", {"machine": machine, "rows": rows, "summary": [x for r in rows for x in summary(r)]}))
 
 
 if __name__ == "__main__":

@@ -93,7 +93,7 @@ def _outcome(payload: bytes) -> str:
         return f"CdrError: {exc}"
 
 
-@settings(max_examples=150, deadline=None)
+@settings(max_examples=100, deadline=None)
 @given(st.integers(0, 10**6), st.binary(min_size=1, max_size=4), st.booleans())
 def test_a_joint_state_with_bytes_overwritten_reads_the_same_whether_its_names_were_read_before(where, new, little):
     whole = _rosbags_state(cdr.Stamp(1, 2), "odd", ["a", "bcd", "ef"], [1.0, 2.0, 3.0], [], [4.0, 5.0, 6.0], little)
