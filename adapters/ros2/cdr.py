@@ -219,27 +219,32 @@ def _done(p: int, end: int, what: str) -> None:
         raise CdrError(f"{end - p} bytes left over after the {what}")
 
 
-def read_joint_state(payload: bytes) -> JointState:
-    """A ``sensor_msgs/JointState`` payload; ``CdrError`` if it is not one."""
+def _named(payload: bytes) -> tuple[bytes, _Order, tuple[Stamp, str, tuple[str, ...]], int]:
+    """What both joint messages start with, a Header and the joint names: the payload, its
+    byte order, (stamp, frame_id, names), and the byte after them."""
     buf, order = _begin(payload)
     end = len(buf)
     stamp, p = _stamp(buf, HEADER, end, order)
     frame_id, p = _string(buf, p, end, order)
     names, p = _strings(buf, p, end, order)
+    return buf, order, (stamp, frame_id, names), p
+
+
+def read_joint_state(payload: bytes) -> JointState:
+    """A ``sensor_msgs/JointState`` payload; ``CdrError`` if it is not one."""
+    buf, order, head, p = _named(payload)
+    end = len(buf)
     position, p = _doubles(buf, p, end, order)
     velocity, p = _doubles(buf, p, end, order)
     effort, p = _doubles(buf, p, end, order)
     _done(p, end, "JointState")
-    return _tuple(JointState, (stamp, frame_id, names, position, velocity, effort))
+    return _tuple(JointState, (*head, position, velocity, effort))
 
 
 def read_joint_trajectory(payload: bytes) -> JointTrajectory:
     """A ``trajectory_msgs/JointTrajectory`` payload (the simulated arm follows these)."""
-    buf, order = _begin(payload)
+    buf, order, head, p = _named(payload)
     end = len(buf)
-    stamp, p = _stamp(buf, HEADER, end, order)
-    frame_id, p = _string(buf, p, end, order)
-    names, p = _strings(buf, p, end, order)
     count, p = _count(buf, p, end, order, 4 * 4 + 8)
     points = []
     for _ in range(count):
@@ -250,7 +255,7 @@ def read_joint_trajectory(payload: bytes) -> JointTrajectory:
         duration, p = _stamp(buf, p, end, order)
         points.append(Point(positions, duration.seconds, velocities))
     _done(p, end, "JointTrajectory")
-    return JointTrajectory(stamp, frame_id, names, tuple(points))
+    return JointTrajectory(*head, tuple(points))
 
 
 def read_string(payload: bytes, limit: int) -> str:
