@@ -157,3 +157,28 @@ def test_a_count_beyond_the_payload_is_refused_before_it_is_believed():
         assert "longer than the payload" in str(exc)
     else:
         raise AssertionError("decoded")
+
+
+def test_every_padding_before_the_float64_runs_both_orders():
+    for frame_length in range(8):  # the names then start 0-3 bytes past a 4-byte boundary...
+        for name_length in range(1, 9):  # ...and the float64 run 0-7 bytes past an 8-byte one
+            for little in (True, False):
+                args = (cdr.Stamp(5, 6), "f" * frame_length, ["n" * name_length, "m"], [0.5, -0.5], [], [1.0, 2.0])
+                theirs = _rosbags_state(*args, little)
+                state = cdr.read_joint_state(theirs)
+                assert (state.frame_id, state.names, state.position, state.effort) == (args[1], tuple(args[2]),
+                                                                                       (0.5, -0.5), (1.0, 2.0))
+                if little:
+                    assert cdr.joint_state(args[0], args[2], args[3], args[4], args[5], args[1]) == theirs
+
+
+def test_what_the_decoder_keeps_for_lengths_and_names_from_the_network_is_bounded():
+    for n in range(1, cdr.MAX_STRUCTS + 40):  # float64 runs of as many lengths
+        cdr.read_joint_state(cdr.joint_state(cdr.Stamp(0, 0), [], [], effort=[0.0] * n))
+    assert all(len(order._floats) <= cdr.MAX_STRUCTS for order in cdr._ORDERS.values())
+    for n in range(3 * cdr.NAME_SEQUENCES):  # as many robots' names
+        cdr.read_joint_state(cdr.joint_state(cdr.Stamp(0, 0), [f"robot{n}_joint"], [0.0]))
+    assert len(cdr._NAMES) == cdr.NAME_SEQUENCES
+    huge = [f"j{i:0{cdr.MAX_STRING - 8}}" for i in range(20)]  # 80 KiB of names: read, not kept
+    assert cdr.read_joint_state(cdr.joint_state(cdr.Stamp(0, 0), huge, [0.0] * 20)).names == tuple(huge)
+    assert all(len(region) <= cdr.MAX_REMEMBERED for _, region, _ in cdr._NAMES)
