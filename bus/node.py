@@ -23,7 +23,7 @@ import zenoh.ext
 from . import codec, keys
 from .messages import Limits
 from .queue import SampleQueue
-from .session import discover, lease_s
+from .session import discover, lease_s, listening
 
 T = TypeVar("T")
 
@@ -224,6 +224,11 @@ class Bus:
     def discover(self) -> list[str]:
         """Wait until this session is really on the bus (``session.discover``); the ids it reached."""
         return discover(self.session)
+
+    @property
+    def listening(self) -> tuple[str, ...]:
+        """Where this session listens, each port as really bound (a listen on port 0 too)."""
+        return listening(self.session)
 
     @property
     def lease_s(self) -> float:

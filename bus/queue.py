@@ -7,6 +7,7 @@ only enqueue; the consumer works on its own thread and can be woken to stop.
 from __future__ import annotations
 
 import threading
+import time
 from collections import deque
 from typing import Any
 
@@ -21,11 +22,14 @@ class SampleQueue:
         self._ready = threading.Condition()
         self._closed = False
         self.dropped = 0
+        self._filled = self._taken = time.monotonic()  # when it last went from empty to not; last get/drain
 
     def put(self, item: Any) -> None:
         with self._ready:
             if len(self._items) == self._items.maxlen:
                 self.dropped += 1
+            elif not self._items:
+                self._filled = time.monotonic()
             self._items.append(item)
             if len(self._items) == 1:  # only an empty queue has someone to wake
                 self._ready.notify()
@@ -35,6 +39,7 @@ class SampleQueue:
         with self._ready:
             if not self._items and not self._closed:
                 self._ready.wait(timeout)
+            self._taken = time.monotonic()
             return self._items.popleft() if self._items else None
 
     def drain(self, timeout: float | None = None) -> list[Any]:
@@ -43,6 +48,7 @@ class SampleQueue:
         with self._ready:
             if not self._items and not self._closed:
                 self._ready.wait(timeout)
+            self._taken = time.monotonic()
             items = list(self._items)
             self._items.clear()
             return items
@@ -51,6 +57,14 @@ class SampleQueue:
         with self._ready:
             self._closed = True
             self._ready.notify_all()
+
+    def stalled_s(self) -> float:
+        """How long items have waited with nobody taking any (0 when none waits, or closed):
+        a consumer that is busy with one item, or hung, lets this grow."""
+        with self._ready:
+            if not self._items or self._closed:
+                return 0.0
+            return time.monotonic() - max(self._filled, self._taken)
 
     @property
     def closed(self) -> bool:

@@ -26,6 +26,7 @@ from .profiles import PROFILES, Rendered
 log = logging.getLogger(__name__)
 
 INFO_RETRY_S = 2.0
+MAX_ROBOTS = 1024  # robots whose info (ranges) is kept: names made up on the bus must not grow it
 UNDESCRIBED_WAIT_S = 3.0  # a derived value no info describes is held back this long at most, then sent raw
 
 
@@ -73,6 +74,7 @@ class OscSink(Adapter):
         self._info = InfoRequests(self.bus, self._take_info, lambda robot, text: self.warn("info", text),
                                   INFO_RETRY_S)
         self._links = [_Link(t, _resolve(t.to)) for t in cfg.resolved_targets()]
+        self.address = "OSC to " + ", ".join(f"udp {t.to} ({t.profile})" for t in cfg.resolved_targets())
         self._sample_links = [link for link in self._links if not link.target.framed]
         self._frame_links = [link for link in self._links if link.target.framed]
         self._assembler = FrameAssembler()
@@ -80,7 +82,8 @@ class OscSink(Adapter):
         self._socket = self.own(socket.socket(socket.AF_INET, socket.SOCK_DGRAM))
         self._queue = self.own(SampleQueue(cfg.queue))
         self._streams = Streams(self.bus, cfg.subscribe, self._queue, per_joint_keys=cfg.per_joint_keys)
-        self._presence = presence.connection_events(self.bus, self._queue, cfg.subscribe)  # a robot's loss, return
+        self._presence = presence.connection_events(self.bus, self._queue, cfg.subscribe,
+                                                    self.capped)  # a robot's loss, return
         self.spawn(self._forward, "forward")  # before anything else is declared: nothing waits in the queue
         self.own(self._streams)
         self.own(self._presence)
@@ -137,7 +140,8 @@ class OscSink(Adapter):
         if message.source.section in ("frame", "joints"):
             self._presence.heard_from(message.source.robot)
         if message.event is not None:
-            self._event(message.source, message.event)
+            if self._presence.passes(message.source.robot, message.event):  # (a repeated connection state: not)
+                self._event(message.source, message.event)
             return
         max_age = self.config.max_age_ms / 1000.0
         age = time.time() - message.t
@@ -263,6 +267,9 @@ class OscSink(Adapter):
             ranges = scale.ranges(info)
         except (KeyError, TypeError, ValueError) as exc:
             self.warn("info", f"{robot}/info unusable: {exc}")
+            return
+        if robot not in self._ranges and len(self._ranges) >= MAX_ROBOTS:
+            self.capped(f"robot '{robot}': its info not kept, already {MAX_ROBOTS} robots' (its values go out raw)")
             return
         self._ranges[robot] = ranges
         self._described[robot] = {str(d.get("name")) for d in info.get("derived", []) if isinstance(d, dict)}

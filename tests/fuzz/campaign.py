@@ -17,6 +17,7 @@ from hypothesis import strategies as st
 from . import checks
 from .families import FAMILIES, ROBOT, VALID, Input, bursts, flood, huge_frame, issue_inputs, pack, signature
 from .fuzzer import BURST_RATE, Fuzzer
+from .rogue import ROGUE_FAMILIES, claim_flood, stats_flood
 from .show import Show
 
 # Commands that undo what valid fuzz commands may have left (a posture or a joint held, a
@@ -32,6 +33,7 @@ class Plan:
     examples: dict[str, int]      # family → Hypothesis examples
     huge_frames: int = 10         # frames of 50,000 joints
     huge_flood: int = 0           # more of them, at up to BURST_RATE (about 1 MB each: the memory bound's test)
+    made_up: int = 1200           # robots claimed at once, and nodes' stats (past every cap: 1,024 robots, 128 nodes)
     bursts: int = 8               # bursts of 500-2000 inputs at up to 5000/s
     derandomize: bool = True      # the same inputs every run (CI)
     rounds: int = 1               # the whole sequence of families, at least this often
@@ -39,7 +41,7 @@ class Plan:
 
 
 CI = Plan(examples={"frame": 300, "joint": 200, "derived": 150, "event": 150, "command": 150, "info": 60,
-                    "osc": 300}, huge_flood=300)
+                    "osc": 300, "claim": 40, "stats": 40}, huge_flood=300)
 
 
 def _run(fuzzer: Fuzzer, strategy: st.SearchStrategy[Any], examples: int, derandomize: bool,
@@ -61,10 +63,22 @@ def _reset(fuzzer: Fuzzer) -> None:
 
 def _after(fuzzer: Fuzzer, report: checks.Report, before: dict[str, float], family: str) -> None:
     """After a family: alive, every node running, data flowing again to the OSC targets and MIDI."""
+    fuzzer.release()
     _reset(fuzzer)
     ended = time.monotonic()
     checks.alive(fuzzer.show, report, f"after {family}")
     checks.flowing(fuzzer.show, report, before, ended, f"after {family}")
+
+
+def _rogue_floods(fuzzer: Fuzzer, report: checks.Report, before: dict[str, float], count: int) -> None:
+    """Issue 26's floods: ``count`` made-up robots claimed at once (STOP still answered while
+    they are), and ``count`` made-up nodes' stats of ~16 KB."""
+    claimed, flooded = claim_flood(count), stats_flood(count)
+    fuzzer.burst(claimed, len(claimed))
+    checks.stop_works(fuzzer, report, f"with {len(claimed)} made-up robots claimed")
+    fuzzer.burst(flooded, len(flooded))  # (the robots still claimed)
+    checks.stop_works(fuzzer, report, f"with {len(flooded)} made-up nodes' stats too")
+    _after(fuzzer, report, before, f"{count} made-up robots and nodes")
 
 
 def campaign(show: Show, plan: Plan, out: Path) -> checks.Report:
@@ -81,7 +95,7 @@ def campaign(show: Show, plan: Plan, out: Path) -> checks.Report:
         rounds = 0
         while rounds < plan.rounds or time.monotonic() - fuzz_started < plan.seconds:
             rounds += 1
-            for family, strategy in FAMILIES.items():
+            for family, strategy in {**FAMILIES, **ROGUE_FAMILIES}.items():
                 for item in issue_inputs(family):  # each on its own: a later input must not mask an earlier one
                     fuzzer.send(item)
                     _after(fuzzer, report, before, f"{family} input of {item.note}")
@@ -93,6 +107,7 @@ def campaign(show: Show, plan: Plan, out: Path) -> checks.Report:
             if plan.huge_flood:
                 fuzzer.burst(huge_frame(), plan.huge_flood)
                 _after(fuzzer, report, before, f"a flood of {plan.huge_flood} huge frames")
+            _rogue_floods(fuzzer, report, before, plan.made_up)
             frames = flood()
             burst_rates.append(fuzzer.burst(frames, len(frames)))
             _after(fuzzer, report, before, f"a {frames[0].note} at {BURST_RATE}/s")

@@ -37,7 +37,7 @@ from sonibus.bus import BusConfig, open_session
 SONIBUS = str(Path(sys.executable).with_name("sonibus"))
 RATE_HZ = 50            # the simulated Pepper's frame rate
 PEPPER_JOINTS = 17
-NODES = ("sim", "osc", "gateway", "features", "recorder", "midi", "console")
+NODES = ("sim", "osc", "gateway", "features", "recorder", "midi", "console", "web")
 PROBE = "/fuzz/probe"
 
 
@@ -267,6 +267,10 @@ map = [{{key = "pepper/joints/HeadPitch", pitchbend = true, channel = 2}}]
 [nodes.console]
 adapter = "console"
 every_s = 0.5
+
+[nodes.web]
+adapter = "web"
+listen = "127.0.0.1:0"
 """
 
 
