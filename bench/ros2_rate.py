@@ -93,6 +93,7 @@ def publish_ros(endpoint: str, joints: int, rate: float, seconds: float, flowing
     names, gid = [f"j{i}" for i in range(joints)], bytes(range(16))
     ready.set()
     measured: list[float] = []
+    sent: list[int] = []
     window: list[float] = []  # [start, end] on this clock, once the chain flows
     stop = threading.Event()
 
@@ -109,7 +110,8 @@ def publish_ros(endpoint: str, joints: int, rate: float, seconds: float, flowing
             header=T["std_msgs/msg/Header"](stamp=T["builtin_interfaces/msg/Time"](sec=sec, nanosec=nanosec),
                                             frame_id=""),
             name=names, position=values, velocity=np.zeros(joints), effort=np.zeros(0)), kind)
-        publisher.put(bytes(payload), attachment=z_serialize((Int64(n + 1), Int64(time.time_ns()), gid)).to_bytes())
+        sent.append(n)  # (rmw_zenoh's sequence numbers count what was published: the pacer's skips are no gap)
+        publisher.put(bytes(payload), attachment=z_serialize((Int64(len(sent)), Int64(time.time_ns()), gid)).to_bytes())
         if window and now >= window[0]:
             measured.append(sec + nanosec * 1e-9)  # (the adapter's float of the stamp, to the bit)
 
@@ -130,7 +132,8 @@ def run_path(config: str, start_source: Any, joints: int, seconds: float, contex
     (folder / "robot.urdf").write_text(urdf(joints))
     (folder / "bench.toml").write_text(config.format(port=port, urdf=folder / "robot.urdf"))
     source, published = start_source(flowing)
-    node = subprocess.Popen([SONIBUS, "run", str(folder / "bench.toml")], stdout=subprocess.DEVNULL)
+    log = (folder / "sonibus.log").open("w")
+    node = subprocess.Popen([SONIBUS, "-v", "run", str(folder / "bench.toml")], stdout=subprocess.DEVNULL, stderr=log)
     try:
         if not flowing.wait(30):
             sys.exit(f"no OSC within 30 s of starting {folder / 'bench.toml'}")
@@ -147,7 +150,20 @@ def run_path(config: str, start_source: Any, joints: int, seconds: float, contex
         source()
     records = out.get(timeout=30)
     receiver.join(10)
-    return {"records": records, "record": record, "load": load}
+    log.close()
+    return {"records": records, "record": record, "load": load, "counters": counters(folder / "sonibus.log")}
+
+
+def counters(log: Path) -> dict[str, dict[str, int]]:
+    """Each node's counters as it said them when it stopped (where a loss happened: the
+    robot node's ``dropped``, the sink's ``stale``...)."""
+    said = {}
+    for line in log.read_text().splitlines():
+        if ": stopping; " in line:
+            name, _, rest = line.partition(": stopping; ")
+            said[name.rsplit(" ", 1)[-1]] = {k: int(v) for k, v in (f.split(" ") for f in rest.split(", "))
+                                             if v.isdigit()}
+    return said
 
 
 def ros2_run(joints: int, rate: float, seconds: float, context: Any) -> dict[str, Any]:
@@ -174,7 +190,7 @@ def ros2_run(joints: int, rate: float, seconds: float, context: Any) -> dict[str
     arrived = [r for r in got["records"] if r[1] in published]
     frames = {r[1] for r in arrived}
     wanted = len(published) * joints
-    return {"path": "ros2", "joints": joints, "rate_hz": rate, "load_1min": got["load"],
+    return {"path": "ros2", "joints": joints, "rate_hz": rate, "load_1min": got["load"], "counters": got["counters"],
             "published": len(published), "frames": len(frames), "achieved_hz": len(frames) / seconds,
             "lost_values": wanted - len(arrived), "loss": 1 - len(arrived) / wanted if wanted else 1.0,
             **latency_stats([r[3] - r[1] for r in arrived])}
@@ -217,6 +233,7 @@ def naoqi_run(rate: float, seconds: float, context: Any) -> dict[str, Any]:
     arrived = [r for r in got["records"] if r[1] in published]
     wanted = len(published) * NAOQI_JOINTS
     return {"path": "naoqi", "joints": NAOQI_JOINTS, "rate_hz": rate, "load_1min": got["load"],
+            "counters": got["counters"],
             "published": len(published), "frames": len({r[1] for r in arrived}),
             "achieved_hz": len({r[1] for r in arrived}) / seconds, "lost_values": wanted - len(arrived),
             "loss": 1 - len(arrived) / wanted if wanted else 1.0, **latency_stats([r[3] - r[1] for r in arrived])}
@@ -253,6 +270,10 @@ def main() -> None:
         print(f"{r['path']:<6} {r['joints']:>6} {r['rate_hz']:>5g} {r['published'] / args.seconds:>7.1f} "
               f"{r['achieved_hz']:>9.1f} {r['loss']:>7.2%} "
               f"{r['p50_us'] / 1000:>8.2f} {r['p99_us'] / 1000:>8.2f} {r['load_1min']:>5.1f}{ratios}")
+        if r["lost_values"]:
+            said = {f"{node} {k}": v for node, c in r["counters"].items() for k, v in c.items()
+                    if k in ("dropped", "stale", "bad", "ros_lost") and v}
+            print(f"       (lost: {said or 'no node counted a drop'})")
     machine = f"{os.cpu_count()} cores, load {os.getloadavg()[0]:.2f}"
     print(write("ros2_rate", {"seconds": args.seconds, "machine": machine, "runs": runs, "summary": summary}))
 
