@@ -17,14 +17,16 @@ WebSocket client from any thread (a bus worker, a Zenoh callback).
 Nothing on the network can take it down (``Limits``, docs/design.md): connections past
 ``connections`` get a 503 and are closed; WebSocket clients past ``clients`` a 503; a
 connection without a whole request ``timeout_s`` after it opened (a half-sent request,
-a slowloris) or after its last answer (an idle keep-alive) is closed (aiohttp's
-``keepalive_timeout``, which runs from the connection's start); request lines and
+a slowloris: counted ``timed_out``) or after its last answer (an idle keep-alive: counted
+``idle_closed``) is closed (aiohttp's ``keepalive_timeout``, which runs from the
+connection's start), and one that reads nothing of what it is sent for ``timeout_s`` is cut
+(``stalled``: it would hold its place for ever); request lines and
 headers are bounded (aiohttp's ``max_line_size``, ``max_field_size``, ``max_headers``:
 400 past them); running out of file descriptors (EMFILE on accept) is counted
 ``accept_failed`` and warned about, and asyncio accepts again a second later; each
 client's backlog is bounded in messages and bytes. With ``browsers``, a request from a
-page of another site (``Origin``) or under a name that is not this machine's (``Host``:
-DNS rebinding) is refused with 403 (``check_browser``).
+page of another site (``Origin``) or under a name this server does not answer to (``Host``:
+DNS rebinding) is refused with 403 (``bus/browser.py``).
 """
 
 from __future__ import annotations
@@ -33,7 +35,6 @@ import asyncio
 import concurrent.futures
 import contextlib
 import errno
-import ipaddress
 import json
 import logging
 import os
@@ -44,11 +45,12 @@ from collections import deque
 from collections.abc import AsyncIterator, Awaitable, Callable, Coroutine, Iterable
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
-from urllib.parse import urlsplit
 
-from aiohttp import WSCloseCode, web
+from aiohttp import WSCloseCode, web, web_fileresponse
 from aiohttp.http_exceptions import HttpProcessingError
+from aiohttp.web_protocol import RequestHandler
 
+from .browser import OWN, check_browser
 from .options import bad
 
 if TYPE_CHECKING:
@@ -70,6 +72,11 @@ FILES_SHARE = 8         # one server holds at most 1/8 of the files the process 
                         # the recorder's, the other servers' (1,100 connections under `ulimit -n 1024` ended the show)
 
 Handler = Callable[[web.Request], Awaitable[web.StreamResponse]]
+
+# Files (the web node's pages) go through the transport, not sendfile(): a client that reads
+# nothing is then seen (the transport pauses writing) and cut after timeout_s; sendfile would
+# wait on the socket for ever. The files served are small.
+web_fileresponse.NOSENDFILE = True  # type: ignore[misc]
 
 
 @dataclass(frozen=True)
@@ -93,16 +100,17 @@ class Limits:
 class WebServer:
     """An aiohttp ``app`` served on ``host:port`` (0: any free port) while ``adapter`` runs,
     within ``limits``; ``browsers``: every request passes ``check_browser`` (pages of ``origins``
-    may read it too: ``"*"``, any)."""
+    may read it too: ``"*"``, any; ``names``: the ``Host`` names it answers to, ``bus/browser.py``)."""
 
     def __init__(self, adapter: Adapter, host: str = "127.0.0.1", port: int = 0, key: str = "",
-                 limits: Limits = Limits(), browsers: bool = False, origins: tuple[str, ...] = ()) -> None:
+                 limits: Limits = Limits(), browsers: bool = False, origins: tuple[str, ...] = (),
+                 names: str = OWN) -> None:
         self.adapter = adapter
         self.key = key  # the configuration key of host:port ("listen"); "": keys 'host' and 'port'
         self.host = host
         self.port = port                   # the bound port once started
         self.limits = limits
-        self.origins = origins
+        self.origins, self.names = origins, names
         self.app = web.Application(middlewares=[self._errors, *([self._browsers] if browsers else [])])
         self.latest: Any = None            # the last value broadcast (a new WebSocket client gets it first)
         self.dropped = 0                   # messages a slow client missed
@@ -118,7 +126,8 @@ class WebServer:
         self._crash: BaseException | None = None
         adapter.stats.follow("dropped", lambda: self.dropped)  # the node's stats count them too
         # what the limits refused (below), shown at zero
-        adapter.stats.declare(("connections_refused", "clients_refused", "accept_failed", "refused"))
+        adapter.stats.declare(("connections_refused", "clients_refused", "accept_failed", "refused", "timed_out",
+                               "idle_closed", "stalled"))
 
     @property
     def url(self) -> str:
@@ -279,7 +288,8 @@ class WebServer:
         one that answers 503 and closes (counted ``connections_refused``)."""
         if self._open < self._cap:
             self._open += 1
-            return self._handlers()
+            return _Handler(self._handlers, self._timed_out, self._stalled, self.limits.timeout_s,
+                            loop=self._handlers._loop, **self._handlers._kwargs)
         self.adapter.count("connections_refused")
         self.adapter.warn("connections", f"web server on {self.url}: {self._cap} connections open, the most it "
                                          "takes ([limits] connections): new ones get 503 and are closed "
@@ -289,6 +299,16 @@ class WebServer:
 
     def _dropped(self) -> None:
         self.dropped += 1
+
+    def _timed_out(self, requests: int) -> None:
+        """A connection closed by ``limits.timeout_s``: before a whole request came (``timed_out``:
+        a half-sent request, a slowloris, a connection that never sent) or idle after its answers."""
+        self.adapter.count("timed_out" if requests == 0 else "idle_closed")
+
+    def _stalled(self) -> None:
+        self.adapter.count("stalled")
+        self.adapter.warn("stalled", f"web server on {self.url}: a client that read nothing of what it was sent for "
+                                     f"{self.limits.timeout_s:g} s cut ([limits] timeout_s)")
 
     def _push(self, text: str) -> None:
         for client in self._clients:
@@ -307,7 +327,7 @@ class WebServer:
             refused = isinstance(exc, HttpProcessingError)
             if refused:  # (a handler's own failure was counted by the _errors middleware on its way out)
                 self.adapter.count("bad")
-            what = f"{type(exc).__name__}: {str(exc).splitlines()[0][:120] if str(exc) else ''}" if exc else ""
+            what = f"{type(exc).__name__}: {' '.join(str(exc).split())[:160]}" if exc else ""  # (aiohttp's: lines)
             self.adapter.warn("http-refused" if refused else "http",
                               f"web server: {record.getMessage()}{f': {what}' if what else ''}")
             return False
@@ -364,13 +384,58 @@ class WebServer:
     @web.middleware
     async def _browsers(self, request: web.Request, handler: Handler) -> web.StreamResponse:
         """``check_browser`` on every request: a refusal is a 403, counted ``refused``."""
-        reason = check_browser(request, self.origins)
+        reason = check_browser(request, self.origins, self.names)
         if reason:
             self.adapter.count("refused")
             self.adapter.warn("refused", f"web server: refused {request.method} {request.path[:80]} from "
                                          f"{request.remote}: {reason}")
             raise web.HTTPForbidden(text=f"403 forbidden: {reason}\n")
         return await handler(request)
+
+
+class _Handler(RequestHandler):
+    """aiohttp's connection handler (what ``web_server.Server()`` makes), telling ``on_timeout``
+    when its keep-alive timeout (here the header timeout too) closes it, with how many requests
+    it had taken; and cutting the connection when what it writes makes no progress for
+    ``stall_s`` (a client that never reads: aiohttp would wait to write for ever), told to
+    ``on_stall``."""
+
+    __slots__ = ("_stall", "on_stall", "on_timeout", "stall_s")
+
+    def __init__(self, manager: Any, on_timeout: Callable[[int], None], on_stall: Callable[[], None],
+                 stall_s: float, **kwargs: Any) -> None:
+        super().__init__(manager, **kwargs)
+        self.on_timeout, self.on_stall, self.stall_s = on_timeout, on_stall, stall_s
+        self._stall: asyncio.TimerHandle | None = None
+
+    def pause_writing(self) -> None:  # (the transport's buffer is full: the client reads nothing)
+        super().pause_writing()
+        if self._stall is None:
+            self._stall = self._loop.call_later(self.stall_s, self._stalled)
+
+    def resume_writing(self) -> None:
+        super().resume_writing()
+        if self._stall is not None:
+            self._stall.cancel()
+            self._stall = None
+
+    def _stalled(self) -> None:
+        self._stall = None
+        if self.transport is not None:
+            self.on_stall()
+            self.transport.abort()  # (close() would wait for the buffer to be read: never)
+
+    def connection_lost(self, exc: BaseException | None) -> None:
+        if self._stall is not None:
+            self._stall.cancel()
+            self._stall = None
+        super().connection_lost(exc)
+
+    def _process_keepalive(self) -> None:  # (aiohttp's timer: it closes the connection if it is idle)
+        was_open = not self._force_close
+        super()._process_keepalive()
+        if was_open and self._force_close:
+            self.on_timeout(self._request_count)
 
 
 class _Refused(asyncio.Protocol):
@@ -382,41 +447,6 @@ class _Refused(asyncio.Protocol):
         transport.write(b"HTTP/1.1 503 Service Unavailable\r\nConnection: close\r\nContent-Type: text/plain\r\n"
                         b"Content-Length: %d\r\n\r\n%s" % (len(text), text))
         transport.close()  # (after the write is flushed; what the client sends is ignored)
-
-
-def check_browser(request: web.Request, origins: tuple[str, ...] = ()) -> str:
-    """Why ``request`` may come from a web page that must not read this server ("" if
-    none): an ``Origin`` that is not this server (a page of another site: browsers let
-    any page open a WebSocket, and send ``Origin`` with it), or a ``Host`` that names this
-    machine by a name that is not its own (a site that renamed itself to this machine's
-    address: DNS rebinding). Programs that send no ``Origin`` pass, and pages of ``origins``
-    (``"*"``: any); an address, ``localhost``, ``*.local`` (mDNS) and this machine's host name
-    are its own names."""
-    origin = request.headers.get("Origin")
-    if origin is not None and urlsplit(origin).netloc.lower() != request.host.lower() \
-            and origin not in origins and "*" not in origins:
-        return (f"a page of another site ({origin[:80]}) may not read this server (a site to let in goes in the "
-                "node's `origins`)" if origins else f"a page of another site ({origin[:80]}) may not read this "
-                "server")
-    if "Host" in request.headers and not own_name(request.host):
-        return (f"{request.host[:80]!r} is not a name of this machine (a web site that renames itself to this "
-                "address?) — open it by its address or host name")
-    return ""
-
-
-def own_name(host: str) -> bool:
-    """Whether a ``Host`` header names this machine: an address, ``localhost``, a ``.local``
-    name, or its host name."""
-    name = (urlsplit(f"//{host}").hostname or "").rstrip(".")
-    if name == "localhost" or name.endswith((".localhost", ".local")):
-        return True
-    try:
-        ipaddress.ip_address(name.split("%")[0])
-        return True
-    except ValueError:
-        pass
-    mine = socket.gethostname().lower()
-    return name in (mine, mine.partition(".")[0])
 
 
 class WebClient:

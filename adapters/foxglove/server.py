@@ -11,6 +11,8 @@ robot's ``<robot>/info``, and the views of ``views.py`` (``<robot>/frame``,
 advertised with its first message, which a subscription gets first (``hub.py``); a
 message is encoded only for channels a client subscribes to. Info and info/derived
 are sent again every ``info_every_s``, so a client that connects later gets them.
+When a robot leaves the bus (its owner's token goes) its channels are unadvertised, and
+advertised anew with its first messages when it comes back.
 
 Served on ``bus/web.py``'s ``WebServer``, not foxglove-sdk's server (docs/foxglove.md,
 "Why not foxglove-sdk's server"): that one refuses ``foxglove.websocket.v1`` clients,
@@ -22,7 +24,9 @@ from __future__ import annotations
 
 import logging
 import time
+from collections import deque
 from dataclasses import dataclass, field
+from importlib.metadata import version
 from typing import Any
 
 from sonibus.adapters.osc.gateway import parse_endpoint
@@ -31,6 +35,7 @@ from sonibus.bus import codec, keys
 from sonibus.bus.adapter import Adapter
 from sonibus.bus.info import InfoRequests
 from sonibus.bus.options import bad
+from sonibus.bus.presence import watch_robots
 from sonibus.bus.queue import SampleQueue
 from sonibus.bus.streams import Streams, without_audio
 from sonibus.bus.web import Limits, WebServer
@@ -42,6 +47,8 @@ from .views import DERIVED_INFO, Views, joint_samples
 log = logging.getLogger(__name__)
 
 MAX_ROBOTS = 64  # robots served (names made up on the bus must not grow what is kept per robot)
+MAX_GONE = 1024  # robots remembered as gone (names from the bus: a claim storm must not grow it for ever)
+
 
 @dataclass(frozen=True)
 class FoxgloveConfig:
@@ -82,7 +89,7 @@ class FoxgloveServer(Adapter):
         cfg: FoxgloveConfig = self.config
         host, port = parse_endpoint("listen", cfg.listen)
         self.web = WebServer(self, host, port, key="listen", limits=cfg.limits, browsers=True, origins=cfg.origins)
-        self.hub = Hub(self, self.web, cfg.name, to_json)
+        self.hub = Hub(self, self.web, cfg.name, to_json, {"sonibus": version("sonibus")})
         self._infos: dict[str, dict[str, Any]] = {}  # info and info/derived keys → their latest message
         self._queue = self.own(SampleQueue(cfg.queue))
         self._info_seen: set[str] = set()
@@ -90,6 +97,9 @@ class FoxgloveServer(Adapter):
         self._info = InfoRequests(self.bus, self._take_info, lambda robot, text: self.warn("info", text))
         self._views = Views(self.bus, self._take_derived_info)
         self._streams = Streams(self.bus, cfg.subscribe, self._queue, per_joint_keys=cfg.per_joint_keys)
+        self._comings: deque[tuple[str, bool]] = deque(maxlen=4096)  # robots come or gone (a Zenoh thread)
+        self._gone: dict[str, None] = {}  # robots gone and not back: what of them is still in flight is dropped
+        self.own(watch_robots(self.bus, lambda robot, alive: self._comings.append((robot, alive)), self.capped))
         self.web.start()
         self.port = self.web.port
         self.address = (f"Foxglove → Open connection → ws://"
@@ -115,12 +125,31 @@ class FoxgloveServer(Adapter):
     def _serve(self) -> None:
         again = time.monotonic() + self.config.info_every_s
         while not self.stopping.is_set():
+            while self._comings:  # (before the messages: those of a robot gone are dropped, not advertised again)
+                self._robot_changed(*self._comings.popleft())
             for key, payload in self._queue.drain(timeout=0.2):
-                self._take(key, payload)
+                if key.partition("/")[0] not in self._gone:
+                    self._take(key, payload)
             if time.monotonic() >= again:
                 again = time.monotonic() + self.config.info_every_s
                 for key, message in list(self._infos.items()):
                     self._log(key, message)
+
+    def _robot_changed(self, robot: str, alive: bool) -> None:
+        """A robot gone: its channels unadvertised, what was kept of it forgotten (its info is asked
+        for again when it comes back)."""
+        if alive:
+            self._gone.pop(robot, None)
+            return
+        if len(self._gone) >= MAX_GONE:
+            del self._gone[next(iter(self._gone))]
+        self._gone[robot] = None
+        self._robots.discard(robot)  # (its place among the MAX_ROBOTS served is free again)
+        self._info_seen.discard(robot)
+        self._views.derived_seen.discard(robot)
+        self._infos = {k: v for k, v in self._infos.items() if k.partition("/")[0] != robot}
+        forgotten = self.hub.forget(f"{robot}/")
+        log.info("%s: robot '%s' left the bus: %d channels unadvertised", self.name, robot, forgotten)
 
     def _take(self, key: str, payload: bytes) -> None:
         if key.endswith("/" + DERIVED_INFO):

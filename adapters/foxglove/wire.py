@@ -2,11 +2,14 @@
 no sockets (``hub.py`` serves them). The protocol is ws-protocol's ``foxglove.websocket.v1``
 (docs/spec.md of github.com/foxglove/ws-protocol), which Foxglove's SDK serves unchanged as
 ``foxglove.sdk.v1``: both names are accepted. Only what a viewer needs: ``serverInfo``,
-``advertise``, ``status``, and messages (binary opcode 1) of the subscriptions a client asks
-for; no capability is advertised, so a client sends only ``subscribe`` and ``unsubscribe``.
+``advertise``, ``unadvertise``, ``status``, and messages (binary opcode 1) of the
+subscriptions a client asks for; no capability is advertised (so no ``time`` message: a
+viewer keeps its own clock), so a client sends only ``subscribe`` and ``unsubscribe``.
 
->>> server_info("sonibus", "s1")["capabilities"]
-[]
+>>> server_info("sonibus", "s1", {"sonibus": "1.0"})
+{'op': 'serverInfo', 'name': 'sonibus', 'capabilities': [], 'metadata': {'sonibus': '1.0'}, 'sessionId': 's1'}
+>>> unadvertise([3, 4])
+{'op': 'unadvertise', 'channelIds': [3, 4]}
 >>> message_data(7, 1_500_000_000, b'{"v":1}').hex(" ")
 '01 07 00 00 00 00 2f 68 59 00 00 00 00 7b 22 76 22 3a 31 7d'
 >>> parse('{"op": "subscribe", "subscriptions": [{"id": 1, "channelId": 3}]}')
@@ -28,7 +31,7 @@ from typing import Any
 
 SUBPROTOCOLS = ("foxglove.sdk.v1", "foxglove.websocket.v1")  # the SDK's name, and ws-protocol's (Lichtblick)
 MESSAGE_DATA = 1     # the server's binary opcode of a message
-ERROR = 2            # a status message's level (0 info, 1 warning)
+WARNING, ERROR = 1, 2  # a status message's levels (0: info)
 MAX_ID = 2**32 - 1   # ids are uint32
 _HEADER = struct.Struct("<BIQ")
 
@@ -49,16 +52,20 @@ class Channel:
     schema_encoding: str
 
 
-def server_info(name: str, session_id: str) -> dict[str, Any]:
-    """The first message to every client."""
-    return {"op": "serverInfo", "name": name, "capabilities": [], "supportedEncodings": [], "metadata": {},
-            "sessionId": session_id}
+def server_info(name: str, session_id: str, metadata: dict[str, str]) -> dict[str, Any]:
+    """The first message to every client (``supportedEncodings`` left out: the spec sets it only
+    for client publishing and services, which are not served)."""
+    return {"op": "serverInfo", "name": name, "capabilities": [], "metadata": metadata, "sessionId": session_id}
 
 
 def advertise(channels: list[Channel]) -> dict[str, Any]:
     return {"op": "advertise", "channels": [
         {"id": c.id, "topic": c.topic, "encoding": c.encoding, "schemaName": c.schema_name, "schema": c.schema,
          "schemaEncoding": c.schema_encoding} for c in channels]}
+
+
+def unadvertise(ids: list[int]) -> dict[str, Any]:
+    return {"op": "unadvertise", "channelIds": ids}
 
 
 def status(message: str, level: int = ERROR) -> dict[str, Any]:

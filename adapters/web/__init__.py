@@ -37,6 +37,7 @@ from sonibus.bus.streams import Incoming, Streams
 from sonibus.bus.text import printable
 from sonibus.bus.web import WebServer
 
+from . import auth
 from .config import WebConfig
 from .server import Pages
 
@@ -71,7 +72,8 @@ class WebPages(Adapter):
         self._latest: dict[str, dict[str, Any]] = {}  # robot → its newest frame, not yet pushed
         self._nodes: dict[tuple[str, str], tuple[float, dict[str, Any]]] = {}  # latest stats, when heard
         self._shown = [zenoh.KeyExpr(keys.expr(r)) for r in cfg.robots]
-        self.web = WebServer(self, cfg.host, cfg.port, key="listen", limits=cfg.limits)
+        self.web = WebServer(self, cfg.host, cfg.port, key="listen", limits=cfg.limits, browsers=True,
+                             names=auth.names(cfg.token))
         self.pages = Pages(self, self.web, cfg)
         self._info = InfoRequests(self.bus, self._take_info, lambda robot, text: self.warn("info", text),
                                   INFO_EVERY_S)

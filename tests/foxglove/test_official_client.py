@@ -116,3 +116,37 @@ def test_no_subscription_is_refused_over_many_sessions_of_channels_made_while_co
     figure("official client sessions, each with 10 channels made while it connected, none refused", sessions)
     figure("time for 30 sessions", time.monotonic() - started, "s")
     assert server.stats["bad"] == 0
+
+
+def test_a_robot_that_leaves_is_unadvertised_and_when_it_comes_back_the_official_client_follows_it(
+        net: Network, official):
+    """Robots come and go during a show: the channels of one that leaves are unadvertised (they
+    stayed advertised, frozen at their last message, which a client that connected later still got
+    as the channel's latest), and advertised anew when it comes back; the client, unsubscribing as
+    Lichtblick does on ``unadvertise`` and subscribing again to the new channel, hears no error.
+    Message log times are the server's clock, in nanoseconds; serverInfo names no capability."""
+    server = net.start(FoxgloveServer(FoxgloveConfig(listen="127.0.0.1:0"), name="foxglove"))
+    client = official(server.port, "^pepper/frame$")
+    wait_for(lambda: client.of("serverInfo"), 15, "the official client connected", lambda: str(client.events))
+    info = client.of("serverInfo")[0]
+    assert info["capabilities"] == [] and "supportedEncodings" not in info and "ROS_DISTRO" not in info["metadata"]
+    before = time.time_ns()
+    robot = net.sim("pepper", rate_hz=20)
+    wait_for(lambda: client.of("message"), 15, "pepper/frame's messages", lambda: str(client.events)[-2000:])
+    first = client.of("message")[0]
+    assert first["topic"] == "pepper/frame" and before <= int(first["logTime"]) <= time.time_ns()
+    frame_id = next(a["id"] for a in client.of("advertise") if a["topic"] == "pepper/frame")
+    robot.stop()
+    wait_for(lambda: client.of("unadvertise"), 10, "pepper's channels unadvertised", lambda: str(client.events)[-2000:])
+    advertised = {a["id"] for a in client.of("advertise") if a["topic"].startswith("pepper/")}
+    assert set(client.of("unadvertise")[0]["ids"]) == advertised and frame_id in advertised
+    assert server.metrics()["channels"] == 0
+    mark = len(client.events)
+    net.sim("pepper", rate_hz=20)
+    wait_for(lambda: client.of("message", mark), 15, "pepper/frame's messages again",
+             lambda: str(client.events[mark:])[-2000:])
+    again = next(a["id"] for a in client.of("advertise", mark) if a["topic"] == "pepper/frame")
+    assert again != frame_id  # (a new channel: a viewer never takes it for the old one's cached schema)
+    assert not client.of("status") and not client.of("error"), [e for e in client.events if e["ev"] in ("status",
+                                                                                                          "error")]
+    assert server.stats["bad"] == 0

@@ -246,3 +246,48 @@ def test_bad_subscriptions_and_clients_that_vanish_say_a_few_lines_not_thousands
     lines = [r.getMessage() for r in caplog.records if r.name.startswith("sonibus") and r.levelno >= logging.WARNING]
     assert len(lines) <= 2, lines
     assert served.state == "running"
+
+
+
+def test_every_bad_request_is_answered_with_a_status_and_an_unsubscribe_ends_the_messages(served):
+    """What the spec asks of a server: a ``status`` for each request it does not take (an error,
+    or a warning for an unsubscribe of nothing: it was ignored before, without a word), and no
+    message of a subscription once its ``unsubscribe`` is taken (another subscription's messages
+    keep the time)."""
+    async def read(ws: aiohttp.ClientWebSocketResponse, done: Any) -> list[Any]:
+        got: list[Any] = []  # status dicts and subscription ids of messages, in order
+        while not done(got):
+            message = await ws.receive(timeout=10)
+            if message.type == aiohttp.WSMsgType.BINARY:
+                got.append(struct.unpack_from("<I", message.data, 1)[0])
+            elif message.type == aiohttp.WSMsgType.TEXT and (data := json.loads(message.data))["op"] == "status":
+                got.append(data)
+        return got
+
+    def statuses(got: list[Any]) -> list[dict[str, Any]]:
+        return [g for g in got if isinstance(g, dict)]
+
+    async def scenario() -> tuple[list[Any], list[Any]]:
+        async with aiohttp.ClientSession() as session:
+            client = await connect(session, served.port)
+            await client.until(lambda _: {"pepper/frame", "pepper/joints/HeadYaw"} <= client.channels.keys())
+            frame = client.channels["pepper/frame"]["id"]
+            await client.subscribe({7: "pepper/frame", 3: "pepper/joints/HeadYaw"})
+            for request in [{"op": "subscribe", "subscriptions": [{"id": 7, "channelId": frame}]},   # id used
+                            {"op": "subscribe", "subscriptions": [{"id": 8, "channelId": frame}]},   # subscribed
+                            {"op": "subscribe", "subscriptions": [{"id": 9, "channelId": 99999}]},   # no channel
+                            {"op": "unsubscribe", "subscriptionIds": [12345]},                     # nothing
+                            {"op": "getParameters", "parameterNames": []},                          # not served
+                            {"op": "subscribe", "subscriptions": [{"id": -1, "channelId": frame}]},  # no id
+                            {"op": "unsubscribe", "subscriptionIds": [7]},                         # taken
+                            {"op": "unsubscribe", "subscriptionIds": [7]}]:                        # nothing now
+                await client.ws.send_str(json.dumps(request))
+            answers = await read(client.ws, lambda got: len(statuses(got)) == 7)
+            after = await read(client.ws, lambda got: got.count(3) >= 10)  # 10 of HeadYaw: 0.2 s at 50 Hz
+            return answers, after
+
+    answers, after = run(scenario())
+    assert [s["level"] for s in statuses(answers)] == [2, 2, 2, 1, 2, 2, 1], statuses(answers)
+    assert "Unknown subscription ID: 12345" in statuses(answers)[3]["message"]
+    assert 7 not in after, after
+    assert served.stats["bad"] == 7 and served.state == "running"

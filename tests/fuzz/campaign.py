@@ -18,6 +18,9 @@ from . import checks
 from .families import FAMILIES, ROBOT, VALID, Input, bursts, flood, huge_frame, issue_inputs, pack, signature
 from .fuzzer import BURST_RATE, Fuzzer
 from .rogue import ROGUE_FAMILIES, claim_flood, stats_flood
+from .server_http import HttpFamily
+from .server_ws import WebSocketFamily
+from .serving import no_server_errors, serving
 from .show import Show
 
 # Commands that undo what valid fuzz commands may have left (a posture or a joint held, a
@@ -41,7 +44,8 @@ class Plan:
 
 
 CI = Plan(examples={"frame": 300, "joint": 200, "derived": 150, "event": 150, "command": 150, "info": 60,
-                    "osc": 300, "claim": 40, "stats": 40}, huge_flood=300)
+                    "osc": 300, "claim": 40, "stats": 40, "http": 80, "websocket": 60}, huge_flood=300)
+SERVER_FAMILIES = (HttpFamily, WebSocketFamily)  # the web pages', OSCQuery's and Foxglove's servers
 
 
 def _run(fuzzer: Fuzzer, strategy: st.SearchStrategy[Any], examples: int, derandomize: bool,
@@ -62,11 +66,13 @@ def _reset(fuzzer: Fuzzer) -> None:
 
 
 def _after(fuzzer: Fuzzer, report: checks.Report, before: dict[str, float], family: str) -> None:
-    """After a family: alive, every node running, data flowing again to the OSC targets and MIDI."""
+    """After a family: alive, every node running, each server serving a new client, data flowing
+    again to the OSC targets and MIDI."""
     fuzzer.release()
     _reset(fuzzer)
     ended = time.monotonic()
     checks.alive(fuzzer.show, report, f"after {family}")
+    serving(fuzzer.show, report, f"after {family}")  # (within the wait of flowing's window)
     checks.flowing(fuzzer.show, report, before, ended, f"after {family}")
 
 
@@ -88,6 +94,7 @@ def campaign(show: Show, plan: Plan, out: Path) -> checks.Report:
     started = time.monotonic()
     try:
         checks.alive(show, report, "start")
+        serving(show, report, "start")
         before = checks.baseline(show)
         rss_before = show.rss.now() if show.rss else 0
         fuzz_started = time.monotonic()
@@ -101,6 +108,14 @@ def campaign(show: Show, plan: Plan, out: Path) -> checks.Report:
                     _after(fuzzer, report, before, f"{family} input of {item.note}")
                 _run(fuzzer, strategy(), plan.examples[family], plan.derandomize, fuzzer.send)
                 _after(fuzzer, report, before, family)
+            for server_family in SERVER_FAMILIES:
+                family_started = time.monotonic()
+                with server_family(fuzzer, report) as each:
+                    _run(fuzzer, each.strategy(), plan.examples[each.name], plan.derandomize, each.send)
+                    each.scripted()
+                _after(fuzzer, report, before, each.name)
+                spent = report.figures.setdefault("server_families_s", {})
+                spent[each.name] = round(spent.get(each.name, 0.0) + time.monotonic() - family_started, 1)
             for _ in range(plan.huge_frames):
                 fuzzer.send(huge_frame())
             _after(fuzzer, report, before, "huge frames")
@@ -126,6 +141,7 @@ def campaign(show: Show, plan: Plan, out: Path) -> checks.Report:
     finally:
         fuzzer.close()
     checks.stopped(show, report)
+    no_server_errors(report)
     checks.recording(show, report)
     report.figures["total_s"] = round(time.monotonic() - started, 1)
     write(report, fuzzer, out)
@@ -136,7 +152,7 @@ def counts(fuzzer: Fuzzer, report: checks.Report) -> dict[str, Any]:
     """Per family: inputs tried by label, what came back, and what the nodes counted."""
     node_counters = report.figures.get("node_counters", {})
     refused = {node: {k: v for k, v in c.items() if k in ("bad", "malformed", "bad_args", "unknown_address",
-                                                          "stale", "late", "dropped", "busy")}
+                                                          "stale", "late", "dropped", "busy", *SERVER_COUNTERS)}
                for node, c in node_counters.items()}
     return {
         "tried": {family: dict(labels) | {"total": sum(labels.values())} for family, labels in fuzzer.tried.items()},
@@ -149,6 +165,10 @@ def counts(fuzzer: Fuzzer, report: checks.Report) -> dict[str, Any]:
         "counted_bad_by_node": refused,
         "recording_stats": (report.figures.get("recording") or {}).get("stats"),
     }
+
+
+SERVER_COUNTERS = ("refused", "timed_out", "idle_closed", "connections_refused", "clients_refused", "accept_failed",
+                   "errors", "ws_dropped", "dropped_for_clients")
 
 
 def write(report: checks.Report, fuzzer: Fuzzer, out: Path) -> None:

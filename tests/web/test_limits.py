@@ -8,8 +8,11 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import json
+import logging
 import resource
 import socket
+import struct
 import subprocess
 import sys
 import time
@@ -78,17 +81,25 @@ def server(request: pytest.FixtureRequest, net: Network) -> Callable[..., Any]:
     return start
 
 
-def test_a_half_sent_request_and_a_slowloris_are_closed_after_the_timeout(server):
+def test_a_half_sent_request_and_a_slowloris_are_closed_after_the_timeout_and_counted(server):
+    """Closed by the timeout: counted ``timed_out`` (no whole request came) or ``idle_closed``
+    (a keep-alive connection idle after its answer): they were not counted at all."""
     node = server(timeout_s=1.0)
-    with half_sent(node.web.port, 1) as (half,), socket.create_connection(("127.0.0.1", node.web.port)) as slow:
+    with half_sent(node.web.port, 1) as (half,), socket.create_connection(("127.0.0.1", node.web.port)) as slow, \
+            socket.create_connection(("127.0.0.1", node.web.port)) as idle:
+        idle.sendall(b"GET / HTTP/1.1\r\nHost: 127.0.0.1\r\n\r\n")  # a whole request, kept alive after it
         started = time.monotonic()
         for byte in HALF:  # one byte every 0.1 s: data that trickles in never pushes the timeout back
             slow.sendall(bytes([byte]))
             time.sleep(0.1)
             if closed(slow):
                 break
-        wait_for(lambda: closed(half) and closed(slow), 5, "both connections closed by the server")
+        wait_for(lambda: closed(half) and closed(slow) and closed(idle), 5, "the three connections closed by "
+                 "the server")
     assert time.monotonic() - started < 5
+    wait_for(lambda: node.stats["timed_out"] == 2 and node.stats["idle_closed"] == 1, 5,
+             "two connections counted timed_out and one idle_closed",
+             lambda: f"timed_out {node.stats['timed_out']}, idle_closed {node.stats['idle_closed']}")
     assert requests.get(f"{node.web.url}/", timeout=5).status_code in (200, 400, 404)  # (foxglove: 400, no upgrade)
 
 
@@ -196,3 +207,77 @@ def test_running_out_of_files_on_accept_is_counted_and_warned_and_the_server_ser
     assert state == "running" and int(failed) >= 1, err
     assert "web: web server on http://127.0.0.1:" in err and "cannot accept a connection: Too many open files" \
         in err, err
+
+
+@pytest.mark.parametrize("header", [b"Host: [::1", b"Origin: \xff\xfe", b"Host: \xc3\x28:80",
+                                    b"Origin: http://[x"])
+def test_a_host_or_origin_that_does_not_parse_is_refused_not_a_500(server, header):
+    """Found by the fuzz suite (tests/fuzz/server_http.py): the browser check raised on a
+    ``Host`` that is half an IPv6 address, and the 403 could not be written for an ``Origin``
+    that is not UTF-8 (its reason quoted it): 500, counted as the server's own error."""
+    node = server()
+    host = b"" if header.startswith(b"Host") else b"Host: 127.0.0.1\r\n"
+    with socket.create_connection(("127.0.0.1", node.web.port), timeout=5) as sock:
+        sock.sendall(b"GET / HTTP/1.1\r\n" + host + header + b"\r\nConnection: close\r\n\r\n")
+        answer = b""
+        while chunk := sock.recv(65536):
+            answer += chunk
+    assert answer.startswith(b"HTTP/1.1 403"), answer[:300]
+    assert b"\n" not in answer.partition(b"\r\n\r\n")[2].rstrip(b"\n")  # one line
+    assert node.stats["errors"] == 0 and node.stats["refused"] == 1
+
+
+def test_a_request_aiohttp_cannot_parse_is_one_warning_that_says_what_was_wrong(server, caplog):
+    """aiohttp's reason spans lines ('400, message:' then the reason): the warning showed only
+    the first, which says nothing (found reading the fuzz suite's log)."""
+    node = server()
+    caplog.set_level(logging.WARNING, logger="sonibus")
+    with socket.create_connection(("127.0.0.1", node.web.port), timeout=5) as sock:
+        sock.sendall(b"BR\x01W / HTTP/1.1\r\nHost: 127.0.0.1\r\n\r\n")
+        assert sock.recv(100).split(b" ")[1] == b"400"
+    wait_for(lambda: node.stats["bad"] == 1, 5, "the request counted bad")
+    lines = [r.getMessage() for r in caplog.records if "BadHttpMethod" in r.getMessage()]
+    assert len(lines) == 1 and "Invalid method" in lines[0] and "\n" not in lines[0], lines
+
+
+def never_reads(port: int, request: bytes) -> socket.socket:
+    """A client that sends ``request`` (as much of it as the server reads) and reads nothing."""
+    sock = socket.socket()
+    sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)
+    sock.connect(("127.0.0.1", port))
+    sock.setblocking(False)
+    with contextlib.suppress(BlockingIOError):
+        sock.send(request)
+    return sock
+
+
+def test_clients_that_never_read_what_they_are_sent_are_cut_and_the_server_serves_again(server, net):
+    """Found by the server fuzz families: a connection that pipelines requests and never reads
+    the answers held its place for ever (the server waiting to write; no timeout ran, and the
+    web node's files went by sendfile(), which waits on the socket), so as many as the cap locked
+    everyone out with 503. Now one that reads nothing of what it is sent for timeout_s is cut,
+    counted ``stalled``. (Foxglove's HTTP answers are a few bytes: its client subscribes to every
+    channel of a robot at 200 Hz over its WebSocket instead.)"""
+    node = server(connections=4, timeout_s=1.0)
+    port, kind = node.web.port, node.kind_name
+    if kind != "web":
+        net.sim("pepper", rate_hz=200)
+        wait_for(lambda: requests.get(f"{node.web.url}/pepper", timeout=5).status_code == 200, 10, "pepper served") \
+            if kind == "oscquery" else wait_for(lambda: node.metrics()["channels"] >= 20, 10, "pepper's channels")
+    if kind == "foxglove":
+        subscribe = json.dumps({"op": "subscribe", "subscriptions": [{"id": i, "channelId": i} for i in range(1, 40)]})
+        request = (b"GET / HTTP/1.1\r\nHost: 127.0.0.1\r\nUpgrade: websocket\r\nConnection: Upgrade\r\n"
+                   b"Sec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\nSec-WebSocket-Version: 13\r\n"
+                   b"Sec-WebSocket-Protocol: foxglove.websocket.v1\r\n\r\n")
+        request += bytes([0x81, 0xFE]) + struct.pack(">H", len(subscribe)) + b"\0\0\0\0" + subscribe.encode()
+    else:
+        request = f"GET {'/static/robot.js' if kind == 'web' else '/'} HTTP/1.1\r\nHost: 127.0.0.1\r\n\r\n".encode() \
+            * 20_000
+    socks = [never_reads(port, request) for _ in range(4)]
+    try:
+        wait_for(lambda: node.stats["stalled"] == 4, 20, "the four connections that never read cut",
+                 lambda: f"stalled {node.stats['stalled']}, {node.web.connections} open")
+        assert requests.get(f"{node.web.url}/", timeout=5).status_code in (200, 400)  # (foxglove: 400, no upgrade)
+    finally:
+        for sock in socks:
+            sock.close()

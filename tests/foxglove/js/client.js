@@ -6,8 +6,10 @@
 //
 // Each session connects, subscribes to every advertised channel whose topic matches as soon
 // as it is advertised (as a panel does), and prints one JSON line per event: open (with the
-// subprotocol agreed), advertise, message (topic and text), status, close. A line on stdin
-// ends the session; the next one connects. It exits after SESSIONS sessions (default 1).
+// subprotocol agreed), advertise, unadvertise, message (topic and text), status, close. As
+// Lichtblick does, it unsubscribes from a channel that is unadvertised (and subscribes again
+// when its topic is advertised anew). A line on stdin ends the session; the next one connects.
+// It exits after SESSIONS sessions (default 1).
 "use strict";
 
 const readline = require("readline");
@@ -28,17 +30,28 @@ function session(index) {
     const client = new FoxgloveClient({ ws });
     const bySubscription = new Map();
     client.on("open", () => say({ ev: "open", session: index, protocol: ws.protocol }));
-    client.on("serverInfo", (info) => say({ ev: "serverInfo", name: info.name }));
+    client.on("serverInfo", (info) => say({ ev: "serverInfo", ...info }));
     client.on("advertise", (channels) => {
       for (const channel of channels) {
         say({ ev: "advertise", topic: channel.topic, id: channel.id });
         if (topics.test(channel.topic)) {
-          bySubscription.set(client.subscribe(channel.id), channel.topic);
+          bySubscription.set(client.subscribe(channel.id), { id: channel.id, topic: channel.topic });
         }
       }
     });
-    client.on("message", ({ subscriptionId, data }) => {
-      say({ ev: "message", topic: bySubscription.get(subscriptionId), text: decoder.decode(data) });
+    client.on("unadvertise", (ids) => {
+      say({ ev: "unadvertise", ids });
+      for (const [subscription, channel] of bySubscription) {
+        if (ids.includes(channel.id)) {
+          client.unsubscribe(subscription);
+          bySubscription.delete(subscription);
+        }
+      }
+    });
+    client.on("message", ({ subscriptionId, data, timestamp }) => {
+      const channel = bySubscription.get(subscriptionId);
+      say({ ev: "message", topic: channel && channel.topic, text: decoder.decode(data),
+            logTime: String(timestamp) });
     });
     client.on("status", (status) => say({ ev: "status", level: status.level, message: status.message }));
     client.on("error", (error) => say({ ev: "error", message: String(error && error.message) }));
