@@ -121,6 +121,14 @@ def install_line(ep: EntryPoint, extra: str) -> str:
     return f"pip install {editable}'{urllib.parse.unquote(url.path)}[{extra}]'"
 
 
+def install_extra(extra: str, adapter: str = "sim") -> str:
+    """How to add sonibus's own ``extra`` as sonibus was installed (the line of
+    ``install_line``), for an adapter that needs it only once it runs (``ros2``'s DDS);
+    ``adapter`` names one of sonibus's entry points to find its distribution by."""
+    found = [ep for ep in entry_points(group=GROUP) if ep.name == adapter]
+    return install_line(found[0], extra) if found else f"pip install -e '.[{extra}]' (in sonibus's clone)"
+
+
 def extra_of(ep: EntryPoint, module: str) -> str | None:
     """The extra of ``ep``'s distribution that installs ``module`` (``qi`` → ``naoqi``)."""
     for requirement in (ep.dist.requires or ()) if ep.dist is not None else ():

@@ -17,7 +17,7 @@ from importlib.metadata import EntryPoint, entry_points, version
 
 from .. import registry
 from ..client import UNANSWERED
-from ..errors import CommandError, ConfigError, RobotNotFound, SonibusError
+from ..errors import CommandError, ConfigError, OwnershipError, RobotNotFound, SonibusError
 from ..text import PrintableFormatter
 from .api import COMMAND_GROUP, Command, Environment, Exit, add_bus_arguments
 
@@ -157,7 +157,7 @@ def _status(exc: Exception) -> Exit:
         return Exit.NOT_FOUND
     if isinstance(exc, CommandError):
         return Exit.TIMEOUT if exc.code in UNANSWERED else Exit.REFUSED
-    if isinstance(exc, ConfigError):
+    if isinstance(exc, ConfigError | OwnershipError):  # (a robot already owned: a second owner configured)
         return Exit.USAGE
     return Exit.ERROR
 
