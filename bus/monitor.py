@@ -347,6 +347,9 @@ class Monitor:
             kept = {k: message[k] for k in ("adapter", "state", "uptime_s") if k in message}  # (what a view shows)
             kept["counters"] = {k: message["counters"][k] for k in LOSSES if k in message["counters"]}
             kept["rates"] = {k: message["rates"][k] for k in ("received", "sent", *LOSSES) if k in message["rates"]}
+            metrics = message.get("metrics")
+            if isinstance(metrics, dict) and isinstance(paused := metrics.get("paused"), str) and paused:
+                kept["metrics"] = {"paused": paused}  # (why a paused node is not running: _node_view says it)
             with self._lock:
                 if (entry := self._node(host, node)) is not None:
                     entry.stats, entry.stats_at = kept, time.monotonic()

@@ -9,7 +9,7 @@ import time
 from collections.abc import Callable, Sequence
 from typing import Any
 
-from sonibus.bus import presence
+from sonibus.bus import lateness, presence
 from sonibus.bus.adapter import Adapter
 from sonibus.bus.errors import ConfigError
 from sonibus.bus.frames import Frame, FrameAssembler
@@ -84,6 +84,7 @@ class OscSink(Adapter):
         self._streams = Streams(self.bus, cfg.subscribe, self._queue, per_joint_keys=cfg.per_joint_keys)
         self._presence = presence.connection_events(self.bus, self._queue, cfg.subscribe,
                                                     self.capped)  # a robot's loss, return
+        lateness.follow(self.bus)  # (where each robot's node runs: a stale sample's warning names the likely cause)
         self.spawn(self._forward, "forward")  # before anything else is declared: nothing waits in the queue
         self.own(self._streams)
         self.own(self._presence)
@@ -148,7 +149,7 @@ class OscSink(Adapter):
         if max_age and age > max_age:
             self.count("stale")
             self.warn("stale", f"samples older than max_age_ms = {self.config.max_age_ms:g} dropped ('{key}' was "
-                               f"{age * 1000:.0f} ms old: a stalled publisher or link, or clocks not in step)")
+                               f"{age * 1000:.0f} ms old: {lateness.why_late(self.bus, message.source.robot)})")
             return
         samples = message.joints
         if not samples:
