@@ -17,11 +17,12 @@ import json
 import random
 import socket
 import struct
+import subprocess
+import sys
 import threading
 import time
 from collections import Counter
 from dataclasses import dataclass
-from typing import Any
 
 import aiohttp
 
@@ -90,7 +91,10 @@ class Clients:
             for receiver in receivers:
                 self.counts["osc_received"] += receiver.close()
             if midi is not None:
-                self.counts["midi_received"] += midi.close()
+                try:
+                    self.counts["midi_received"] += midi.close()
+                except RuntimeError as exc:
+                    self._error(exc)
         self.counts["cycles"] += 1
 
     def _error(self, exc: BaseException) -> None:
@@ -259,28 +263,53 @@ class _Receiver:
         return self.received
 
 
-class _MidiReader:
-    def __init__(self, midi: Any) -> None:
-        self.midi, self.received = midi, 0
-        midi.set_callback(self._take)
+_MIDI_CHILD = r"""
+import os, sys, rtmidi
+midi = rtmidi.MidiIn(rtmidi.API_UNIX_JACK, "soak-reader")
+wanted = [i for i, name in enumerate(midi.get_ports()) if sys.argv[1] in name]
+if not wanted:
+    print("none", flush=True)
+    os._exit(0)
+count = [0]
+midi.set_callback(lambda event, data: count.__setitem__(0, count[0] + 1))
+midi.open_port(wanted[0], "in")
+print("ready", flush=True)
+sys.stdin.read()  # (until the soak closes it)
+print(count[0], flush=True)
+midi.close_port()
+midi.delete()
+"""
 
-    def _take(self, event: Any, data: Any) -> None:
-        self.received += 1
+
+class _MidiReader:
+    """A JACK MIDI input (python-rtmidi) in a process of its own: rtmidi's JACK backend
+    crashed the soak itself (SIGSEGV in _rtmidi, a callback thread, 24 minutes into a
+    long form) — a client's crash must cost one cycle's count, not the run."""
+
+    def __init__(self, port: str) -> None:
+        self.child = subprocess.Popen([sys.executable, "-c", _MIDI_CHILD, port], stdin=subprocess.PIPE,
+                                      stdout=subprocess.PIPE, text=True)
+        assert self.child.stdout is not None
+        self.ready = self.child.stdout.readline().strip()  # "ready", "none" (no such port), "" (it died)
 
     def close(self) -> int:
-        self.midi.close_port()
-        self.midi.delete()
-        return self.received
+        """The events it read; an exception if it did not end well."""
+        try:
+            out, _ = self.child.communicate("", timeout=10)
+        except subprocess.TimeoutExpired:
+            self.child.kill()
+            self.child.wait()
+            raise RuntimeError("midi reader: not ended 10 s after its stdin closed (killed)") from None
+        if self.child.returncode != 0 or not out.strip().isdigit():
+            raise RuntimeError(f"midi reader: exit {self.child.returncode}, said {out.strip()[-200:]!r}")
+        return int(out.strip())
 
 
 def _midi_reader(port: str) -> _MidiReader | None:
     """A JACK MIDI input connected to ``port``, or None when the port is not there."""
-    import rtmidi
-    midi = rtmidi.MidiIn(rtmidi.API_UNIX_JACK, "soak-reader")
-    wanted = [i for i, name in enumerate(midi.get_ports()) if port in name]
-    if not wanted:
-        midi.delete()
-        return None
-    reader = _MidiReader(midi)
-    midi.open_port(wanted[0], "in")
-    return reader
+    reader = _MidiReader(port)
+    if reader.ready == "ready":
+        return reader
+    with contextlib.suppress(RuntimeError):
+        reader.close()
+    return None
