@@ -18,10 +18,9 @@ from typing import Any
 import zenoh
 
 from . import codec, connection, keys
+from .claimwatch import Watching, owners
 from .node import Bus
-from .ownership import MAX_RIVALS, MAX_ROBOTS, Claim
 from .queue import SampleQueue
-from .text import printable
 
 log = logging.getLogger(__name__)
 
@@ -31,41 +30,14 @@ PROBES_PER_ROUND = 8  # robots whose owner is asked for its state, per half seco
 
 
 def watch_robots(bus: Bus, on_change: Callable[[str, bool], None],
-                 capped: Callable[[str], None] | None = None) -> zenoh.Subscriber:
-    """Call ``on_change(robot, alive)`` (on a Zenoh thread) for every robot already
-    on the bus and whenever one leaves or comes back (its first claim appears, its
-    last one goes). Claims whose time makes no sense are no robot (``Claim.refusal``);
-    at most ``MAX_ROBOTS`` robots of ``MAX_RIVALS`` claims each are followed, a claim
-    past that told to ``capped`` (a line saying so) and left out."""
-    held: dict[str, set[str]] = {}
-    lock = threading.Lock()
-
-    def changed(key: str, alive: bool) -> None:
-        claim = Claim.credible(key, bus.limits.max_future_s) if alive else Claim.parse(key)
-        if claim is None:
-            return
-        with lock:
-            claims = held.get(claim.robot)
-            full = alive and (len(held) >= MAX_ROBOTS if claims is None else len(claims) >= MAX_RIVALS)
-            if claims is None and not full:
-                claims = held[claim.robot] = set()
-            before = bool(claims)
-            if claims is not None and not full:
-                if alive:
-                    claims.add(claim.key)
-                else:
-                    claims.discard(claim.key)
-                    if not claims:
-                        del held[claim.robot]
-            after = bool(claims)
-        if full:
-            (capped or _said)(f"robot '{printable(claim.robot)}' (claim of node '{printable(claim.node)}' on "
-                   f"'{printable(claim.host)}') not followed: already {MAX_ROBOTS} robots, or {MAX_RIVALS} claims "
-                   "of it")
-        elif before != after:
-            on_change(claim.robot, after)
-
-    return bus.watch_tokens(keys.robot_token(), changed)
+                 capped: Callable[[str], None] | None = None) -> Watching:
+    """Call ``on_change(robot, alive)`` for every robot already on the bus and whenever
+    one leaves or comes back (its first claim appears, its last one goes), from the
+    session's one view of the claims (``bus/claimwatch.py``, on its worker: store or
+    enqueue, never wait). Claims whose time makes no sense are no robot
+    (``Claim.refusal``); at most ``MAX_ROBOTS`` robots of ``MAX_RIVALS`` claims each are
+    followed, a claim past that told to ``capped`` (a line saying so) and left out."""
+    return owners(bus).watch(bus, on_change, capped or _said)
 
 
 _last_said = [-1e18]
