@@ -78,12 +78,16 @@ class Presence:
                 if self._wants_events(robot):
                     self.unsaid.add(robot)  # (its state comes from its info: ``watch``)
                 return
+            # a robot the sink was never told of (no state said, no data heard: a made-up claim)
+            # leaves without a word: a thousand of them were a thousand events ahead of real frames
+            known = robot in self.said or robot in self.heard
             self.on_bus.pop(robot, None)
             self.heard.pop(robot, None)
             self.warned.pop(robot, None)
             self.checked.pop(robot, None)
             self.unsaid.discard(robot)
-        self._tell(robot, {"t": time.time(), "state": "lost", "source": "presence"})
+        if known:
+            self._tell(robot, {"t": time.time(), "state": "lost", "source": "presence"})
 
     def _tell(self, robot: str, fields: dict[str, Any]) -> None:
         """Feed the sink a ``connection`` event of ``robot``, as if its owner had sent it."""
@@ -224,9 +228,10 @@ def _frame_key(pattern: str) -> str:
 def connection_events(bus: Bus, queue: SampleQueue, patterns: Sequence[str],
                       capped: Callable[[str], None] | None = None) -> Presence:
     """Feed ``queue`` (a sink's) a ``connection`` event, as if the robot's owner had
-    sent it, when a robot leaves (``lost``) or comes back (``connected``) — for the
-    robots whose events ``patterns`` select. A sink then reacts to a vanished robot
-    the same way whatever the cause (a killed process, a cut link, a robot's fall).
+    sent it, when a robot leaves (``lost``: of a robot the sink was told of, its state or
+    its data) or comes back (``connected``) — for the robots whose events ``patterns``
+    select. A sink then reacts to a vanished robot the same way whatever the cause (a
+    killed process, a cut link, a robot's fall).
     It also warns once (``silence_hint``) when a robot whose joints ``patterns``
     select is on the bus and its owner up (it answers ``<robot>/info``) but none of
     its data reaches the sink for ``SILENCE_S``: the sink calls ``heard_from`` for
