@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import logging
 import threading
+import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
@@ -38,6 +39,7 @@ from .text import printable
 log = logging.getLogger(__name__)
 
 CHANNEL = 16384  # claim changes held for the worker; past that the oldest are dropped and the table re-read
+SAY_EVERY_S = 10.0  # the line that says the claims were read again, at most this often
 RESYNC_TIMEOUT_S = 2.0  # the liveliness query that re-reads the claims after the channel overflowed
 
 
@@ -67,6 +69,7 @@ class ClaimWatch:
         self.max_future_s = bus.limits.max_future_s
         self.ignored = 0  # claims left out: no room (``MAX_ROBOTS``, ``MAX_RIVALS``)
         self.resyncs = 0  # times the channel overflowed and the claims were read again
+        self._said = -1e18
         self._claims: dict[str, dict[str, Claim]] = {}
         self._listeners: list[_Listener] = []
         self._table = threading.Lock()     # the claims (read by any thread)
@@ -175,8 +178,10 @@ class ClaimWatch:
         except Exception as exc:  # a closing session
             log.debug("claims: re-reading them: %s", exc)
             return
-        log.warning("claims: more than %d changes of robots' claims at once: some were lost, read again "
-                    "(%d alive)", self.channel // 2, len(alive))
+        if self.resyncs == 1 or time.monotonic() - self._said >= SAY_EVERY_S:  # (a flood: not a line each)
+            self._said = time.monotonic()
+            log.warning("claims: %d or more changes of robots' claims at once: some were lost in the channel, "
+                        "read again (%d alive; %d times so far)", self.channel // 2, len(alive), self.resyncs)
         with self._table:
             held = {key for claims in self._claims.values() for key in claims}
         for key in sorted(held - alive):

@@ -208,9 +208,20 @@ class Bus:
         return self.session.liveliness().declare_token(key)
 
     def alive(self, keyexpr: str, timeout: float = 1.0) -> list[str]:
-        """Keys of the liveliness tokens alive under ``keyexpr``."""
-        replies = self.session.liveliness().get(keyexpr, timeout=timeout)
-        return sorted(str(r.ok.key_expr) for r in replies if r.ok is not None)
+        """Keys of the liveliness tokens alive under ``keyexpr`` (at most ``MAX_ALIVE``)."""
+        found: list[str] = []
+        done = threading.Event()
+
+        def take(reply: zenoh.Reply) -> None:
+            if reply.ok is not None and len(found) < MAX_ALIVE:
+                found.append(str(reply.ok.key_expr))
+        # Not the default channel of 256 replies: Zenoh hands over the tokens it knows inside
+        # ``get`` itself, before anyone reads the channel, so a 257th token blocked it for ever
+        # (a recorder asking with 1,200 made-up claims on the bus hung)
+        self.session.liveliness().get(keyexpr, zenoh.handlers.Callback(take, done.set, indirect=False),
+                                      timeout=timeout)
+        done.wait(timeout + 1.0)
+        return sorted(found)
 
     def watch_tokens(self, keyexpr: str, changed: Callable[[str, bool], None]) -> zenoh.Subscriber:
         """Call ``changed(key, alive)`` for every token under ``keyexpr`` alive now and
@@ -293,6 +304,7 @@ class Bus:
         return f"<Bus node={self.node!r} host={self.host!r} zid={self.session.zid()}>"
 
 
+MAX_ALIVE = 65536  # tokens ``Bus.alive`` returns
 MAX_ANSWERS = 65536  # answers to ``ask`` waiting for the worker; past that, answers (never ends) are dropped
 
 

@@ -12,6 +12,7 @@ claims took 1-4 s or got no answer within ``PROMPT_S``; with it, 5-60 ms."""
 
 from __future__ import annotations
 
+import threading
 import time
 
 from sonibus.adapters.console import ConsoleView
@@ -22,6 +23,7 @@ from sonibus.adapters.oscquery.config import OscQueryConfig
 from sonibus.adapters.web import WebPages
 from sonibus.adapters.web.config import WebConfig
 from sonibus.bus import keys
+from sonibus.bus.claimwatch import ClaimWatch
 
 from .conftest import wait_for
 
@@ -62,3 +64,38 @@ def _stop(asker, timeout: float) -> tuple[bool, float]:
     started = time.monotonic()
     replies = asker.query(keys.command("pepper", "stop"), {}, timeout=timeout)
     return any(r.get("ok") for r in replies), time.monotonic() - started
+
+
+def test_the_watcher_of_claims_reads_them_again_when_its_channel_overflows_and_tells_late_listeners(net):
+    """A ring channel of 8 changes and 300 claims at once: the oldest changes are lost in Zenoh,
+    so the worker reads the claims again; a listener added then is told every robot at once."""
+    rogue = net.bus("rogue")
+    watcher = ClaimWatch(net.bus("watcher"), channel=8)
+    since = int(time.time() * 1000)
+    tokens = [rogue.token(f"{keys.ROBOTS}/r{i:03d}/{since}/rogue/x") for i in range(300)]
+    wait_for(lambda: len(watcher.robots()) == 300, timeout=20.0, what="every claim, the lost ones read again",
+             explain=lambda: f"{len(watcher.robots())} robots, {watcher.resyncs} re-reads")
+    assert watcher.resyncs >= 1
+    told: list[tuple[str, bool]] = []
+    late = watcher.watch(watcher.bus, lambda robot, alive: told.append((robot, alive)))
+    assert sorted(told) == [(f"r{i:03d}", True) for i in range(300)]
+    for token in tokens:
+        token.undeclare()
+    wait_for(lambda: not watcher.robots(), timeout=20.0, what="every claim gone",
+             explain=lambda: f"{len(watcher.robots())} robots left")
+    wait_for(lambda: sum(1 for _, alive in told if not alive) == 300, timeout=5.0, what="each departure told")
+    late.undeclare()
+
+
+def test_the_claims_alive_are_read_whatever_their_number(net):
+    """``Bus.alive`` with 300 tokens on the bus: the default channel (256 replies) blocked Zenoh
+    inside ``get`` for ever (a recorder that asked with 1,200 made-up claims on the bus hung)."""
+    rogue = net.bus("rogue")
+    since = int(time.time() * 1000)
+    tokens = [rogue.token(f"{keys.ROBOTS}/r{i:03d}/{since}/rogue/x") for i in range(300)]  # noqa: F841 (held)
+    asker = net.bus("asker")
+    found: list[list[str]] = []
+    reader = threading.Thread(target=lambda: found.append(asker.alive(keys.robot_token(), timeout=2.0)), daemon=True)
+    reader.start()
+    reader.join(10.0)
+    assert found and len(found[0]) == 300, "Bus.alive did not return (or missed claims) with 300 tokens alive"
