@@ -109,9 +109,10 @@ def websocket() -> Iterator[Callable[[str], Socket]]:
     yield from opener(Socket)
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope="session")
 def browser(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Browser]:
-    """One Chromium for the module (each test opens its own page of its own server)."""
+    """One Chromium for every page test (each opens its own page of its own server, in the
+    window size it asks for: ``Browser.open``)."""
     chromium = Browser(tmp_path_factory.mktemp("chromium-profile"))
     try:
         yield chromium
