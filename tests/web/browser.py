@@ -5,11 +5,9 @@ screenshots checked not to be blank."""
 from __future__ import annotations
 
 import base64
-import hashlib
 import os
 import shutil
 import struct
-import zlib
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -26,8 +24,6 @@ CHROMEDRIVER = "/usr/bin/chromedriver"
 WAIT_S = 10.0            # generous: a busy 2-core machine
 SIZE = (1280, 900)       # the window, unless a test asks for another
 SCREENSHOTS = "SONIBUS_SCREENSHOTS"  # a folder the screenshots are also written to (docs/img for the README)
-PAGES = Path(__file__).resolve().parents[2] / "adapters" / "web" / "static"
-STAMP = b"sonibus-pages"  # a published screenshot's tEXt chunk: the pages' files it shows (pages_digest)
 
 # The screenshot, decoded by Chromium itself (no PIL here): how many colours, and the
 # share of pixels unlike the most common one, over every 3rd pixel.
@@ -144,8 +140,9 @@ class Browser:
 
     def screenshot(self, name: str, folder: Path, publish: bool = False) -> Shot:
         """Save the window as ``folder/name`` (and, if ``publish``, in $SONIBUS_SCREENSHOTS when set)."""
-        png = stamped(self.driver.get_screenshot_as_png(), pages_digest())
-        width, height = png_size(png)
+        png = self.driver.get_screenshot_as_png()
+        assert png[:8] == b"\x89PNG\r\n\x1a\n", "the screenshot is not a PNG"
+        width, height = struct.unpack(">II", png[16:24])  # the IHDR chunk comes first
         paths = [folder / name]
         if publish and os.environ.get(SCREENSHOTS):
             paths.append(Path(os.environ[SCREENSHOTS]) / name)
@@ -156,42 +153,3 @@ class Browser:
         assert seen is not None, f"Chromium could not decode its own screenshot {paths[0]}"
         return Shot(paths[0], width, height, seen["colours"], seen["other"])
 
-
-# -- published screenshots say which pages they show -----------------------------------------
-
-
-def pages_digest() -> str:
-    """SHA-256 of the pages' shipped files (names and bytes): what a screenshot shows."""
-    digest = hashlib.sha256()
-    for path in sorted(PAGES.iterdir()):
-        if path.is_file():
-            digest.update(path.name.encode() + b"\0" + path.read_bytes() + b"\0")
-    return digest.hexdigest()
-
-
-def png_size(png: bytes) -> tuple[int, int]:
-    assert png[:8] == b"\x89PNG\r\n\x1a\n", "not a PNG"
-    width, height = struct.unpack(">II", png[16:24])  # the IHDR chunk comes first
-    return width, height
-
-
-def stamped(png: bytes, digest: str) -> bytes:
-    """``png`` with a tEXt chunk ``sonibus-pages`` = ``digest`` after its IHDR."""
-    png_size(png)
-    body = b"tEXt" + STAMP + b"\0" + digest.encode("ascii")
-    chunk = struct.pack(">I", len(body) - 4) + body + struct.pack(">I", zlib.crc32(body))
-    end_of_header = 8 + 4 + 4 + 13 + 4  # signature, IHDR's length, type, data and CRC
-    return png[:end_of_header] + chunk + png[end_of_header:]
-
-
-def stamp_of(png: bytes) -> str | None:
-    """The ``sonibus-pages`` text of ``png`` (None: it has none)."""
-    png_size(png)
-    at = 8
-    while at + 8 <= len(png):
-        length, kind = struct.unpack(">I4s", png[at:at + 8])
-        data = png[at + 8:at + 8 + length]
-        if kind == b"tEXt" and data.startswith(STAMP + b"\0"):
-            return data[len(STAMP) + 1:].decode("ascii")
-        at += 12 + length
-    return None

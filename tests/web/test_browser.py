@@ -125,7 +125,7 @@ def test_a_behavior_click_runs_on_the_robot_and_shows_running_then_done(stage, b
     watch.wait_event("behavior", "the robot to start the behavior", name=NOD, state="started")
     browser.wait(lambda: "running" in states_of(browser, NOD), "the button to show running")
     browser.wait(lambda: browser.text("#status") == "✓ pepper behavior/run", "the reply (after the event, maybe)")
-    shot = browser.screenshot("web-operator.png", tmp_path, publish=True)  # mid-behavior: the docs' picture
+    shot = browser.screenshot("web-operator.png", tmp_path)  # (the docs' pictures: test_show_size.py)
     watch.wait_event("behavior", "the robot to end the behavior", name=NOD, state="stopped")
     browser.wait(lambda: browser.attribute(button, "data-state") == "done", "the button to show done")
     states = states_of(browser, NOD)
@@ -321,7 +321,7 @@ def test_the_kiosk_has_only_its_buttons_and_follows_the_robot(stage, browser, tm
     watch.wait_event("behavior", "the robot to run the wave", name=WAVE, state="started")
     browser.wait(lambda: browser.attribute('[data-button="wave"]', "data-state") == "running", "wave running")
     assert not browser.find('[data-button="hello"]').is_enabled()  # one scenario at a time
-    shot = browser.screenshot("web-kiosk.png", tmp_path, publish=True)
+    shot = browser.screenshot("web-kiosk.png", tmp_path)
     watch.wait_event("behavior", "the wave to end", name=WAVE, state="stopped")
     browser.wait(lambda: browser.attribute('[data-button="wave"]', "data-state") == "done", "wave done")
     assert states_of(browser, "wave") == ["running", "done"]
@@ -337,15 +337,16 @@ def test_the_kiosk_has_only_its_buttons_and_follows_the_robot(stage, browser, tm
 
 def test_the_kiosk_disables_its_buttons_while_disconnected(still_stage, browser):
     browser.open(still_stage.kiosk_url)
-    browser.wait(lambda: browser.attribute("#connection", "data-state") == "connected", "the kiosk connected")
+    browser.wait(lambda: browser.js("return sonibus.link.connected"), "the kiosk connected")
     assert browser.find('[data-button="wave"]').is_enabled()
     port = still_stage.node.web.port
     still_stage.node.stop()
-    browser.wait(lambda: browser.attribute("#connection", "data-state") == "disconnected", "disconnected shown")
+    browser.wait(lambda: browser.text("#notice"), "the kiosk's notice")
     assert not any(button.is_enabled() for button in browser.all("[data-button]"))
     start_web(still_stage.net, name="web2", listen=f"127.0.0.1:{port}", token=TOKEN, kiosk_token=KIOSK_TOKEN,
               kiosk={"robot": "pepper", "buttons": BUTTONS})
-    browser.wait(lambda: browser.attribute("#connection", "data-state") == "connected", "reconnected", timeout=20)
+    browser.wait(lambda: browser.js("return sonibus.link.connected"), "reconnected", timeout=20)
+    assert not browser.text("#notice")
     browser.wait(lambda: all(button.is_enabled() for button in browser.all("[data-button]")), "buttons usable again")
     assert len(browser.all("[data-button]")) == len(BUTTONS)
 
@@ -377,7 +378,7 @@ def test_from_another_address_the_pages_work_with_their_token_only(net, browser,
     browser.wait(lambda: browser.attribute("#connection", "data-state") == "connected", "connected over the LAN")
     browser.wait(lambda: browser.all('[data-robot="pepper"] [data-joint="HeadYaw"]'), "pepper shown")
     browser.open(f"{base}/kiosk?token={KIOSK_TOKEN}")
-    browser.wait(lambda: browser.attribute("#connection", "data-state") == "connected", "the kiosk connected")
+    browser.wait(lambda: browser.js("return sonibus.link.connected"), "the kiosk connected")
     loaded = "const i = document.querySelector('[data-button=\"wave\"] img'); return i && i.complete && i.naturalWidth"
     assert browser.wait(lambda: browser.js(loaded), "the wave button's image") > 0
     assert browser.errors() == []
