@@ -33,6 +33,7 @@ TOKEN = "operator-secret-1"
 KIOSK_TOKEN = "kiosk-secret-2"
 WAVE = "animations/Stand/Gestures/Hey_1"  # a sim behavior of about 3 s
 HELLO = "Hello, visitors!"
+NOTICE_SHOWN = "return document.getElementById('notice').checkVisibility()"  # (the kiosk's "One moment")
 BUTTONS = [{"id": "wave", "label": "Wave hello", "behavior": WAVE},
            {"id": "hello", "label": "Say hello", "say": HELLO}]
 

@@ -16,7 +16,19 @@ from sonibus.bus.errors import CommandError, RobotNotFound
 
 from ..conftest import Network, wait_for
 from .browser import Browser
-from .conftest import BUTTONS, HELLO, KIOSK_TOKEN, RATE, TOKEN, WAVE, Stage, Watch, open_operator, start_web
+from .conftest import (
+    BUTTONS,
+    HELLO,
+    KIOSK_TOKEN,
+    NOTICE_SHOWN,
+    RATE,
+    TOKEN,
+    WAVE,
+    Stage,
+    Watch,
+    open_operator,
+    start_web,
+)
 from .test_server import non_loopback_address
 
 NOD = "animations/Stand/Gestures/Yes_1"            # a short behavior: about 1.7 s
@@ -51,7 +63,6 @@ def still_stage(net: Network) -> Stage:
     node = start_web(net, token=TOKEN, kiosk_token=KIOSK_TOKEN, kiosk={"robot": "pepper", "buttons": BUTTONS})
     wait_for(lambda: "pepper" in node.shown_robots(), 10, "pepper's info at the web node")
     return Stage(net, sim, node)
-
 
 def states_of(browser: Browser, name: str) -> list[str]:
     return [state for who, state in browser.js("return window.seenStates") if who == name]
@@ -341,12 +352,12 @@ def test_the_kiosk_disables_its_buttons_while_disconnected(still_stage, browser)
     assert browser.find('[data-button="wave"]').is_enabled()
     port = still_stage.node.web.port
     still_stage.node.stop()
-    browser.wait(lambda: browser.text("#notice"), "the kiosk's notice")
+    browser.wait(lambda: browser.js(NOTICE_SHOWN), "the kiosk's notice")
     assert not any(button.is_enabled() for button in browser.all("[data-button]"))
     start_web(still_stage.net, name="web2", listen=f"127.0.0.1:{port}", token=TOKEN, kiosk_token=KIOSK_TOKEN,
               kiosk={"robot": "pepper", "buttons": BUTTONS})
     browser.wait(lambda: browser.js("return sonibus.link.connected"), "reconnected", timeout=20)
-    assert not browser.text("#notice")
+    assert not browser.js(NOTICE_SHOWN)
     browser.wait(lambda: all(button.is_enabled() for button in browser.all("[data-button]")), "buttons usable again")
     assert len(browser.all("[data-button]")) == len(BUTTONS)
 

@@ -18,7 +18,7 @@ from sonibus.bus import send_command
 
 from ..conftest import Network, wait_for
 from .browser import Browser
-from .conftest import BUTTONS, KIOSK_TOKEN, RATE, TOKEN, WAVE, Stage, Watch, start_web
+from .conftest import BUTTONS, KIOSK_TOKEN, NOTICE_SHOWN, RATE, TOKEN, WAVE, Stage, Watch, start_web
 
 NOD = "animations/Stand/Gestures/Yes_1"   # a short behavior: about 1.7 s
 LONG = "animations/Stand/Gestures/Enthusiastic_4"  # about 2.9 s
@@ -209,6 +209,7 @@ def test_the_kiosk_shows_visitors_its_buttons_only_never_an_operators_status(two
         assert not browser.all("[role=status]:not([hidden]), #status, #connection")
     # Gone: a calm word and buttons that wait (the reason in the console, for whoever looks).
     two_robots.node.stop()
-    browser.wait(lambda: browser.text("#notice") == "One moment, please…", "the kiosk's notice")
+    browser.wait(lambda: browser.js(NOTICE_SHOWN), "the kiosk's notice")
+    assert browser.text("#notice") == "One moment, please…"
     assert not any(button.is_enabled() for button in browser.all("[data-button]"))
     assert any("disconnected" in entry["message"] for entry in browser.read_console())
