@@ -142,7 +142,7 @@ def test_the_awareness_checkbox_shows_the_robots_awareness_and_follows_it(two_ro
 # -- item 4: two robots, each in a line at the top -------------------------------------------
 
 
-@pytest.mark.parametrize("size", [(1600, 1000), (1280, 800)])
+@pytest.mark.parametrize("size", SHOW_SIZES)
 def test_a_line_per_robot_says_what_each_runs_and_a_click_shows_its_controls_above_the_fold(
         two_robots, browser, tmp_path, size):
     """NAO's panel first (25 joints): pepper's controls were below it, out of sight."""
@@ -171,6 +171,9 @@ def test_a_line_per_robot_says_what_each_runs_and_a_click_shows_its_controls_abo
                       for slider in browser.attributes('[data-robot="pepper"] [data-slider]', "data-slider"))):
         where = box(browser, control)
         assert where["top"] >= 0 and where["bottom"] <= where["height"], (control, size, where)
+    rates = "return [...document.querySelectorAll('.summary-rate')].every((e) => e.textContent)"
+    browser.wait(lambda: browser.js(rates) and len(browser.all("#nodes tr[data-node]")) == 3,
+                 "each robot's frames/s and the three nodes (for the picture)")
     shot = browser.screenshot(f"web-operator-{size[0]}x{size[1]}.png", tmp_path, publish=True)
     assert (shot.width, shot.height) == size and not shot.blank, shot
     browser.wait(lambda: browser.attribute(summary("pepper"), "data-idle") == "true",
