@@ -166,7 +166,8 @@ class Watch:
 
 
 def open_operator(browser: Browser, stage: Stage) -> None:
-    browser.open(stage.operator_url)
+    """The operator page with pepper's panel shown (with other robots, the first by name would be)."""
+    browser.open(f"{stage.operator_url}#pepper")
     browser.wait(lambda: browser.attribute("#connection", "data-state") == "connected", "the page connected")
     browser.wait(lambda: (browser.text('[data-robot="pepper"] [data-joint="HeadYaw"]') or "–") != "–",
                  "pepper's HeadYaw shown")
