@@ -18,7 +18,7 @@ from sonibus.bus import send_command
 
 from ..conftest import Network, wait_for
 from .browser import Browser
-from .conftest import BUTTONS, KIOSK_TOKEN, NOTICE_SHOWN, RATE, TOKEN, WAVE, Stage, Watch, start_web
+from .conftest import BUTTONS, HELLO, KIOSK_TOKEN, NOTICE_SHOWN, RATE, TOKEN, WAVE, Stage, Watch, start_web
 
 NOD = "animations/Stand/Gestures/Yes_1"   # a short behavior: about 1.7 s
 LONG = "animations/Stand/Gestures/Enthusiastic_4"  # about 2.9 s
@@ -195,21 +195,36 @@ def test_a_robot_that_leaves_is_said_in_its_line_and_its_controls_wait(two_robot
 
 
 def test_the_kiosk_shows_visitors_its_buttons_only_never_an_operators_status(two_robots, browser, tmp_path):
+    """Before, a blue status bar said "✓ Wave hello" (the operator's reply) under the buttons."""
     watch = Watch(two_robots.net.bus("watch"))
-    for size in ((1920, 1080), (1280, 800)):
+
+    def press(size: tuple[int, int], button: str) -> None:
         browser.open(two_robots.kiosk_url, size)
         browser.wait(lambda: browser.all("[data-button]") and browser.js("return sonibus.link.connected"),
                      "the kiosk connected")
-        browser.find('[data-button="wave"]').click()
-        watch.wait_event("behavior", "the wave to start", name=WAVE, state="started")
-        browser.wait(lambda: browser.attribute('[data-button="wave"]', "data-state") == "running", "wave running")
+        browser.find(f'[data-button="{button}"]').click()
+        browser.wait(lambda: browser.attribute(f'[data-button="{button}"]', "data-state") == "running",
+                     f"{button} running")
         shot = browser.screenshot(f"web-kiosk-{size[0]}x{size[1]}.png", tmp_path, publish=True)
         assert (shot.width, shot.height) == size and not shot.blank, shot
-        browser.wait(lambda: browser.attribute('[data-button="wave"]', "data-state") == "done", "wave done",
-                     timeout=15)
-        # What a visitor reads: the buttons, their state; no reply, no status line, no banner.
-        assert browser.find("body").text.split("\n") == ["Wave hello", "done", "Say hello"]
-        assert not browser.all("[role=status]:not([hidden]), #status, #connection")
+
+    def read() -> list[str]:
+        """What a visitor reads: the buttons and their state; never a reply, a status line, a banner."""
+        text = browser.find("body").text.split("\n")
+        assert not browser.all("[role=status]:not([hidden]), #status, #connection"), f"visitors read {text}"
+        return text
+
+    press((1920, 1080), "hello")
+    watch.wait_event("speech", "the robot to say hello", text=HELLO, state="done")
+    browser.wait(lambda: browser.attribute('[data-button="hello"]', "data-state") == "done", "hello done")
+    assert read() == ["Wave hello", "Say hello", "done"]
+    # A failure is a kind word; its reason is the button's tooltip, for the operator.
+    press((1280, 800), "wave")
+    watch.wait_event("behavior", "the wave to start", name=WAVE, state="started")
+    two_robots.sim.stop()
+    browser.wait(lambda: browser.attribute('[data-button="wave"]', "data-state") == "failed", "wave failed")
+    assert read() == ["Wave hello", "sorry, not now", "Say hello", "done"]
+    assert "pepper" in browser.attribute('[data-button="wave"]', "title")
     # Gone: a calm word and buttons that wait (the reason in the console, for whoever looks).
     two_robots.node.stop()
     browser.wait(lambda: browser.js(NOTICE_SHOWN), "the kiosk's notice")
