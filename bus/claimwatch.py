@@ -38,7 +38,7 @@ from .text import printable
 
 log = logging.getLogger(__name__)
 
-CHANNEL = 16384  # claim changes held for the worker; past that the oldest are dropped and the table re-read
+CHANNEL = 4096  # claim changes held for the worker; past that the oldest are dropped and the table re-read
 SAY_EVERY_S = 10.0  # the line that says the claims were read again, at most this often
 RESYNC_TIMEOUT_S = 2.0  # the liveliness query that re-reads the claims after the channel overflowed
 
@@ -122,7 +122,7 @@ class ClaimWatch:
                 log.debug("claims of %s: %s", self.bus, exc)
                 return
             if sample is None:  # the channel ran empty
-                if run >= self.channel // 2:  # it may have overflowed: changes lost
+                if run >= self.channel:  # it was full: changes may have been lost (only then can they be)
                     self._resync()
                 run = 0
                 continue
@@ -180,8 +180,8 @@ class ClaimWatch:
             return
         if self.resyncs == 1 or time.monotonic() - self._said >= SAY_EVERY_S:  # (a flood: not a line each)
             self._said = time.monotonic()
-            log.warning("claims: %d or more changes of robots' claims at once: some were lost in the channel, "
-                        "read again (%d alive; %d times so far)", self.channel // 2, len(alive), self.resyncs)
+            log.warning("claims: %d or more changes of robots' claims at once: some may have been lost in the "
+                        "channel, read again (%d alive; %d times so far)", self.channel, len(alive), self.resyncs)
         with self._table:
             held = {key for claims in self._claims.values() for key in claims}
         for key in sorted(held - alive):
