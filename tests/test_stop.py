@@ -13,8 +13,9 @@ import time
 import pytest
 
 from sonibus.bus import CommandError, decode, keys, send_command
+from sonibus.bus.claimwatch import owners
 from sonibus.bus.client import stop_all
-from sonibus.bus.ownership import BUS_EPOCH_MS, MAX_ROBOTS, Claim, owners
+from sonibus.bus.ownership import BUS_EPOCH_MS, MAX_ROBOTS, Claim
 
 from .conftest import wait_for
 

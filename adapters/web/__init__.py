@@ -27,10 +27,10 @@ import zenoh
 
 from sonibus.bus import connection, keys
 from sonibus.bus.adapter import Adapter
+from sonibus.bus.claimwatch import owners
 from sonibus.bus.info import InfoRequests
 from sonibus.bus.messages import Gate
 from sonibus.bus.monitor import LOSSES
-from sonibus.bus.ownership import owners
 from sonibus.bus.pacing import Pacer
 from sonibus.bus.presence import watch_robots
 from sonibus.bus.queue import SampleQueue
