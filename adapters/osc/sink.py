@@ -63,7 +63,7 @@ class OscSink(Adapter):
     """Forwards joints, derived values and events to OSC receivers (Pd, Max, SuperCollider) over UDP."""
 
     Config = OscSinkConfig
-    counters = ("unencodable", "late", "waiting_info", "send_errors")
+    counters = ("unencodable", "late", "waiting_info", "send_errors", "skipped")
 
     def _start(self) -> None:
         cfg: OscSinkConfig = self.config
