@@ -80,10 +80,13 @@ def plan(patterns: Iterable[str], per_joint_keys: bool = False) -> Plan:
 
 class Selected(NamedTuple):
     """The joints a sink's patterns take out of one robot's frames with one joint list:
-    their ``sources`` (keys), at ``indices`` in the frame (None: all of them, in order)."""
+    their ``sources``, at ``indices`` in the frame (None: all of them, in order), and
+    their ``keys``. Made once per joint list and kept: a sink may key what it works out
+    for these frames by its identity."""
 
     sources: tuple[keys.Key, ...]
     indices: tuple[int, ...] | None
+    keys: frozenset[str]
 
 
 class Incoming(NamedTuple):
@@ -163,8 +166,9 @@ class Selection:
                 self._frames.clear()
             prefix = f"{robot}/joints/"
             indices = tuple(i for i, name in enumerate(names) if self.accepts(prefix + name))
-            found = self._frames[signature] = Selected(tuple(self._key(prefix + names[i]) for i in indices),
-                                                       None if len(indices) == len(names) else indices)
+            sources = tuple(self._key(prefix + names[i]) for i in indices)
+            found = self._frames[signature] = Selected(sources, None if len(indices) == len(names) else indices,
+                                                       frozenset(source.key for source in sources))
         return found
 
     def take(self, key: str, payload: bytes, count: Callable[[str, int], None],

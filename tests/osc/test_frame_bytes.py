@@ -5,16 +5,23 @@ through ``sample`` and ``frame``, sends — for every profile and option."""
 from __future__ import annotations
 
 import struct
+import time
 
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from sonibus import schemas
+from sonibus.adapters.osc import OscSink, OscSinkConfig
 from sonibus.adapters.osc.config import Target
 from sonibus.adapters.osc.encode import NTP_OFFSET, EncodeError
 from sonibus.adapters.osc.profiles import PROFILES
+from sonibus.bus import encode
 from sonibus.bus.keys import Key
-from sonibus.bus.messages import MAX_VALUE
+from sonibus.bus.messages import MAX_VALUE, frame
+
+from ..conftest import wait_for
+from .test_sink_delivery import messages
 
 settings.register_profile("osc", deadline=None)
 settings.load_profile("osc")
@@ -63,3 +70,78 @@ def test_a_frame_s_precomputed_bytes_are_the_general_path_s(target, names, data,
             compiled.render(t, seq, values, interval)
     else:
         assert compiled.render(t, seq, values, interval) == expected
+
+
+# -- the sink, both ways -------------------------------------------------------------------------
+
+NAMES_OF_TOY = ["A", "B", "C", "D", "Unranged"]
+RANGES = [("A", -2.0, 2.0), ("B", 0.0, 10.0), ("C", -1.0, 1.0), ("D", 5.0, 5.0)]  # D: an empty range
+CONFIGS = {
+    "messages": {},
+    "t and seq": {"extra": ("t", "seq")},
+    "bundle": {"bundle": True, "latency_ms": 25.0, "extra": ("seq",)},
+    "pepperosc": {"profile": "pepperosc"},
+    "normalized": {"values": "normalized", "extra": ("seq",)},
+    "normalized bundle": {"values": "normalized", "bundle": True, "extra": ("seq",)},
+}
+
+
+def toy_info() -> dict:
+    joints = [{"name": name, "unit": "rad", "min": low, "max": high, "max_velocity": 1.0} for name, low, high in RANGES]
+    return {"robot": "toy", "model": "toy", "rate_hz": 100.0, "behaviors": [], "postures": [], "adapter": "test",
+            "schema_version": schemas.VERSION, "owner": {"host": "h", "node": "toy"}, "joints": joints}
+
+
+def seqs(receiver, first: int) -> list[bytes]:
+    """The datagrams whose messages all carry a seq (their last argument) from ``first`` on."""
+    from pythonosc.osc_packet import OscPacket
+    return [d for d in receiver.data() if all(m.message.params[-1] >= first for m in OscPacket(d).messages)]
+
+
+@pytest.mark.parametrize("options", CONFIGS.values(), ids=CONFIGS.keys())
+def test_the_sink_sends_the_same_bytes_through_its_plans_as_through_the_general_path(net, receivers, options):
+    """Two sinks take the same frames in their queues, as their subscription puts them: one
+    through its plans, one made to take the general path for every frame."""
+    queryable = net.bus("toy").serve("toy/info", lambda query: query.reply(query.key_expr, encode(toy_info())))
+    planned, general_path = receivers(), receivers()
+    config = {"subscribe": "toy/joints/*", "max_age_ms": 0, **options}
+    fast = net.start(OscSink(OscSinkConfig(targets=(planned.target,), **config), name="planned"))
+    slow = net.start(OscSink(OscSinkConfig(targets=(general_path.target,), **config), name="general"))
+    slow._planned = lambda link, message, now: False  # (every frame through sample/frame, one joint at a time)
+    took: list[bool] = []
+    plan = fast._planned
+    fast._planned = lambda link, message, now: took.append(plan(link, message, now)) or took[-1]
+    base = time.time()
+
+    def put(seq: int) -> None:
+        """One frame into both queues, taken by both before the next (frames put at once are a burst)."""
+        values = [0.5 * seq - 3.0, 2.5 * seq, -4.0 + seq, 5.0 + 0.1 * seq, 1e5 - seq]
+        payload = encode(frame(base + 1e-4 * seq, seq, NAMES_OF_TOY, values))
+        before = [sink.stats["received"] for sink in (fast, slow)]
+        for sink in (fast, slow):
+            sink._queue.put(("toy/frame", payload))
+        wait_for(lambda: fast.stats["received"] > before[0] and slow.stats["received"] > before[1],
+                 what=f"frame {seq} taken by both sinks")
+
+    first = 0
+    if options.get("values") == "normalized":  # the robot's info, asked for at its first frame, in both sinks
+        wait_for(lambda: put(first) or (planned.data() and general_path.data()), what="both sinks knowing toy's ranges")
+        first = 1_000
+    for seq in range(first, first + 8):
+        put(seq)
+    per_frame = 1 if options.get("bundle") else len(NAMES_OF_TOY) + (options.get("profile") == "pepperosc")
+    if first:
+        wait_for(lambda: len(seqs(planned, first)) == len(seqs(general_path, first)) == 8 * per_frame,
+                 what="the eight frames at both targets")
+        assert seqs(planned, first) == seqs(general_path, first)
+    else:
+        wait_for(lambda: len(planned.data()) == len(general_path.data()) == 8 * per_frame,
+                 what="the eight frames at both targets")
+        assert planned.data() == general_path.data()
+        assert fast.stats["sent"] == slow.stats["sent"]  # (counted once a frame, or once a datagram)
+    assert any(took), "the plans were never used"
+    assert fast.stats["unencodable"] == slow.stats["unencodable"] == 0
+    if options.get("values") == "normalized":
+        values = [p for a, p in messages(planned) if a == "/toy/joints/Unranged"]
+        assert values[-1][0] == 1e5 - (first + 7)  # a joint the info has no range for goes raw
+    queryable.undeclare()
