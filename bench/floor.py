@@ -117,8 +117,8 @@ def _zenoh_config(**endpoints: str) -> Any:
 # -- processes ------------------------------------------------------------------------------
 
 
-def publish(endpoint: str, case: Case, seconds: float, ready: Any, out: Any) -> None:
-    """A publisher per robot on ``robot<r>/frame``, 100 frames/s each, for ``seconds``."""
+def publish(endpoint: str, case: Case, seconds: float, ready: Any, out: Any, rate_hz: float = RATE_HZ) -> None:
+    """A publisher per robot on ``robot<r>/frame``, ``rate_hz`` frames/s each, for ``seconds``."""
     import msgpack
     import zenoh
     session = zenoh.open(_zenoh_config(connect=endpoint))
@@ -130,7 +130,7 @@ def publish(endpoint: str, case: Case, seconds: float, ready: Any, out: Any) -> 
         time.sleep(0.02)
     names = [f"J{j}" for j in range(case.joints)]
     ready.set()
-    period, start, frame, put = 1.0 / RATE_HZ, time.monotonic(), 0, 0
+    period, start, frame, put = 1.0 / rate_hz, time.monotonic(), 0, 0
     while time.monotonic() - start < seconds:
         for r, publisher in enumerate(publishers):
             t = time.time()
