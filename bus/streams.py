@@ -219,11 +219,18 @@ class Streams(Selection):
     a stalled link or process — never go out as a burst: after a stall they are spaced
     by ``pacing.Spacing``. One goes, the newest of the rest waits in ``queue`` for its
     turn, the others are skipped and counted (``skipped``). ``max_age_ms`` and the like
-    only drop what is old; this keeps what is young from arriving all at once."""
+    only drop what is old; this keeps what is young from arriving all at once.
+
+    ``direct``: a sink that takes frames where they arrive (on the subscription's callback
+    thread, guarding its state with a lock of its own) is given each frame there, as
+    ``direct(key, payload)``, instead of through ``queue`` (what it returns False for goes
+    into ``queue``); everything else still comes through ``queue``. It saves a thread
+    hand-off per frame (docs/performance.md, "The queue hop"), but a sink that falls
+    behind there holds up the Zenoh session's callbacks: only for what is quick."""
 
     def __init__(self, bus: Bus, patterns: Iterable[str], queue: SampleQueue, *,
                  per_joint_keys: bool = False, stamped: bool = False, limits: messages.Limits | None = None,
-                 pace: bool = True) -> None:
+                 pace: bool = True, direct: Callable[[str, Any], bool] | None = None) -> None:
         super().__init__(patterns := tuple(patterns), limits or bus.limits)
         if pace and stamped:
             raise ValueError("stamped items cannot be paced: a held item would lose its stamp")
@@ -235,7 +242,8 @@ class Streams(Selection):
         if self.plan.frames:  # said once: what a user asked for is not the key subscribed to
             log.info("%s: %s served from whole frames on %s (per_joint_keys = true for publishers of "
                      "joint keys only)", bus.node, ", ".join(patterns), ", ".join(self.plan.frames))
-        self.subscribers = [bus.subscribe(k, queue=queue, stamped=stamped)[0] for k in self.plan.frames]
+        into = _Direct(queue, direct) if direct is not None else queue
+        self.subscribers = [bus.subscribe(k, queue=into, stamped=stamped)[0] for k in self.plan.frames]
         self.subscribers += [bus.subscribe(k, queue=queue, stamped=stamped, skip=_skip(k, keys.is_frame))[0]
                              for k in self.plan.keys]
         self.subscribers += [bus.subscribe(k, queue=queue, stamped=stamped, skip=_skip(k, _from_frames))[0]
@@ -289,6 +297,20 @@ class Streams(Selection):
         for subscriber in self.subscribers:
             subscriber.undeclare()
         self.subscribers.clear()
+
+
+class _Direct(SampleQueue):
+    """What a sink's frame subscriptions put into when it takes frames where they arrive:
+    ``take(key, payload)`` on the subscription's callback thread; what it gives back
+    (False) goes into the sink's ``queue``."""
+
+    def __init__(self, queue: SampleQueue, take: Callable[[str, Any], bool]) -> None:
+        super().__init__(1)  # (holds nothing itself)
+        self.queue, self.take = queue, take
+
+    def put(self, item: Any) -> None:
+        if not self.take(item[0], item[1]):
+            self.queue.put(item)
 
 
 def _from_frames(key: str) -> bool:

@@ -6,6 +6,7 @@ import logging
 import math
 import socket
 import struct
+import threading
 import time
 from collections.abc import Callable, Sequence
 from typing import Any, NamedTuple
@@ -96,9 +97,13 @@ class OscSink(Adapter):
         self.stats.follow("late", lambda: self._assembler.late)
         self._socket = self.own(socket.socket(socket.AF_INET, socket.SOCK_DGRAM))
         self._queue = self.own(SampleQueue(cfg.queue))
-        self._streams = Streams(self.bus, cfg.subscribe, self._queue, per_joint_keys=cfg.per_joint_keys)
         self._presence = presence.connection_events(self.bus, self._queue, cfg.subscribe)  # a robot's loss, return
-        self.spawn(self._forward, "forward")  # before anything else is declared: nothing waits in the queue
+        # Frames are taken where they arrive (a thread hand-off less: docs/performance.md), the rest
+        # from the queue by the forward worker; one lock between them guards the sink's state.
+        self._state = threading.Lock()
+        self._streams = Streams(self.bus, cfg.subscribe, self._queue, per_joint_keys=cfg.per_joint_keys,
+                                direct=self._direct)
+        self.spawn(self._forward, "forward")
         self.own(self._streams)
         self.own(self._presence)
         self.spawn(lambda: self._presence.watch(self.stopping), "silence")
@@ -121,9 +126,16 @@ class OscSink(Adapter):
         while not self.stopping.is_set():
             items = self._queue.drain(timeout=self._wait())
             now = time.monotonic()
-            for item in items:
-                self._take(*item, now)
-            self._tick(now)
+            with self._state:
+                for item in items:
+                    self._take(*item, now)
+                self._tick(now)
+
+    def _direct(self, key: str, payload: Any) -> bool:
+        """A frame, on its subscription's callback thread (``Streams``' ``direct``)."""
+        with self._state:
+            self._take(key, payload, time.monotonic())
+        return True
 
     def _wait(self) -> float:
         soonest = [0.2]
@@ -368,10 +380,11 @@ class OscSink(Adapter):
         except (KeyError, TypeError, ValueError) as exc:
             self.warn("info", f"{robot}/info unusable: {exc}")
             return
-        self._ranges[robot] = ranges
-        self._described[robot] = {str(d.get("name")) for d in info.get("derived", []) if isinstance(d, dict)}
-        for link in self._links:  # (worked out again with these ranges)
-            link.plans = {}
+        with self._state:
+            self._ranges[robot] = ranges
+            self._described[robot] = {str(d.get("name")) for d in info.get("derived", []) if isinstance(d, dict)}
+            for link in self._links:  # (worked out again with these ranges)
+                link.plans = {}
 
 
 def _resolve(target: str) -> tuple[str, int]:
