@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import struct
 from collections.abc import Callable, Iterable, Sequence
+from operator import itemgetter
 from typing import Any, TypeVar
 
 from sonibus.bus.keys import Key
@@ -74,7 +75,10 @@ class FrameBytes:
                  shape: str, latency_s: float = 0.0, last: bytes = b"") -> None:
         self._prefixes = prefixes  # per joint: its address and type tags (with its size first, in a bundle)
         self._pack = pack          # the arguments of one message
-        self._extra = extra        # "t", "seq" after the value
+        # what follows the value, picked out of (t, seq as int32) in the order of extra ("t", "seq")
+        picks = [0 if e == "t" else 1 for e in extra]
+        self._extra = (itemgetter(*picks) if len(picks) > 1 else lambda both, i=picks[0]: (both[i],)) \
+            if picks else None
         self._shape = shape        # "messages", "bundle" or "pepperosc"
         self._latency_s = latency_s
         self._last = last          # PepperOSC: the prefix of its /latency message
@@ -82,7 +86,7 @@ class FrameBytes:
     def render(self, t: float, seq: int, values: Sequence[float], interval: float = 0.0) -> list[bytes]:
         pack = self._pack
         if self._extra:
-            tail = tuple(t if e == "t" else seq & SEQ_MASK for e in self._extra)
+            tail = self._extra((t, seq & SEQ_MASK))
             out = [prefix + pack(v, *tail) for prefix, v in zip(self._prefixes, values, strict=True)]
         else:
             out = [prefix + pack(v) for prefix, v in zip(self._prefixes, values, strict=True)]
