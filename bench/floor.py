@@ -388,7 +388,7 @@ def summary_rows(cases: list[dict[str, Any]]) -> list[dict[str, str]]:
         cpu = c["cpu_per_robot_pct"]
         ratio = c["ratio_to_floor"]
         shape = f"{c['robots']} robot(s) × {c['joints']} × 100 Hz → OSC" + (" (bundle = true)" if c["bundle"] else "")
-        stale = c["sink"].get("stale", "?")
+        stale, skipped = c["sink"].get("stale", "?"), c["sink"].get("skipped", "?")
         goal, met = "", ""
         if c["bundle"] and c["robots"] == 2:
             goal = "CPU ≤ 2 %/robot, p50 ≤ 2× no bus"
@@ -402,7 +402,7 @@ def summary_rows(cases: list[dict[str, Any]]) -> list[dict[str, str]]:
         rows.append({
             "scenario": f"(floor) {shape}: sink CPU per robot, p50 / p99",
             "sonibus": f"{cpu['sonibus']:.2f} %, {bus['p50_us']:,.0f} / {bus['p99_us']:,.0f} µs, "
-                       f"{100 * bus['delivered']:.1f} % delivered, stale {stale}",
+                       f"{100 * bus['delivered']:.1f} % delivered, stale {stale}, skipped {skipped}",
             "baseline": f"floor {cpu['floor']:.2f} %, {floor['p50_us']:,.0f} / {floor['p99_us']:,.0f} µs; "
                         f"no bus {direct['p50_us']:,.0f} / {direct['p99_us']:,.0f} µs",
             "ratio": f"CPU {ratio['cpu_pct']:.2f}×, p50 {ratio['p50_us']:.2f}× / p99 {ratio['p99_us']:.2f}× floor; "
