@@ -111,7 +111,7 @@ async def _read(ws: aiohttp.ClientWebSocketResponse, counts: dict[str, int], nam
             counts[name] = counts.get(name, 0) + 1
 
 
-async def _clients(ports: dict[str, int], counts: dict[str, int], stop: asyncio.Event) -> None:
+async def _clients(ports: dict[str, int], counts: dict[str, int], stop: asyncio.Event, ready: Any) -> None:
     """A page on the web node, an OSCQuery client LISTENing to every joint, a Foxglove client
     subscribed to every channel; each reads all it is sent until ``stop``."""
     async with aiohttp.ClientSession() as session:
@@ -146,6 +146,7 @@ async def _clients(ports: dict[str, int], counts: dict[str, int], stop: asyncio.
 
         tasks = [asyncio.create_task(_read(web, counts, "web")),
                  asyncio.create_task(_read(oscquery, counts, "oscquery")), asyncio.create_task(foxglove_reader())]
+        ready.set()
         await stop.wait()
         for ws in (web, oscquery, foxglove):
             await ws.close()
@@ -171,9 +172,11 @@ def clients(ports: dict[str, int], counts: dict[str, int], ready: Any, done: Any
 
     async def main() -> None:
         stop = asyncio.Event()
-        task = asyncio.create_task(_clients(ports, counts, stop))
-        ready.set()
-        await asyncio.to_thread(done.wait)
+        task = asyncio.create_task(_clients(ports, counts, stop, ready))
+        await asyncio.wait([task, asyncio.create_task(asyncio.to_thread(done.wait))],
+                           return_when=asyncio.FIRST_COMPLETED)
+        if task.done():  # (the clients failed: said by the caller, which finds nothing received)
+            task.result()
         stop.set()
         await task
 
@@ -231,12 +234,15 @@ def measure_show(folder: Path, seconds: float, split: bool) -> dict[str, float]:
         client = CONTEXT.Process(target=clients, args=(ports, counts, ready, done), daemon=True)
         client.start()
         if not ready.wait(60):
-            raise RuntimeError("the clients did not start")
+            raise RuntimeError("the clients did not connect")
+        deadline = time.monotonic() + 30  # (every client fed before the warm-up: a busy machine starts slowly)
+        while min(counts.get(name, 0) for name in ("osc", "web", "oscquery", "foxglove")) == 0:
+            if time.monotonic() > deadline or not client.is_alive():
+                logs = {name: (folder / f"{name}.log").read_text(errors="replace")[-600:] for name in processes}
+                raise RuntimeError(f"a client received nothing: {dict(counts)}; {logs}")
+            time.sleep(0.2)
         time.sleep(WARMUP_S)
-        cpu = window({name: p.pid for name, p in processes.items()}, seconds)
-        if min(counts.get(name, 0) for name in ("osc", "web", "oscquery", "foxglove")) == 0:
-            raise RuntimeError(f"a client received nothing: {dict(counts)}")
-        return cpu
+        return window({name: p.pid for name, p in processes.items()}, seconds)
     finally:
         done.set()
         if client is not None:
