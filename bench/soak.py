@@ -1,10 +1,11 @@
 """A soak of the bus under bad input: the fuzz suite of ``tests/fuzz`` (every
 family — frames, joint samples, derived values, events, commands, info queries
-and garbage info replies, OSC packets — valid, malformed and hostile, the huge
-frames of issue 13, a flood of 300 of them each round, and bursts at up to 5000
-inputs/s) against one ``sonibus run`` holding every built-in node, again and again
-with fresh random inputs for ``--minutes``, then the same checks as the test: every
-node running after each family, data flowing again at its normal rate to every
+and garbage info replies, OSC packets, HTTP and WebSocket to the three servers —
+valid, malformed and hostile, the huge frames of issue 13, a flood of 300 of them
+each round, and bursts at up to 5000 inputs/s) against one ``sonibus run`` holding
+every built-in node, again and again with fresh random inputs for ``--minutes``,
+then the same checks as the test: every node running and every server serving a
+new client after each family, data flowing again at its normal rate to every
 sink, no command from invalid input, RSS growth under 150 MB, and the recording
 passing ``info``, ``export``, a full read and ``replay``.
 

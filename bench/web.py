@@ -17,12 +17,14 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import contextlib
 import json
 import os
 import signal
 import subprocess
 import tempfile
 import time
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -74,13 +76,13 @@ async def page_trials(url: str, trials: int, bus: Any) -> dict[str, list[float]]
     return times
 
 
-def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--trials", type=int, default=500)
-    args = parser.parse_args()
+@contextlib.contextmanager
+def web_show(node: str) -> Iterator[tuple[subprocess.Popen[str], Any, str]]:
+    """``SHOW`` in a ``sonibus run`` of its own on a loopback bus, and a bus session of this
+    process (named ``node``) on it: the process, the ``Bus`` and the page's WebSocket URL,
+    once pepper answers; everything ended on the way out."""
     from sonibus.bus import Bus, BusConfig, open_session, robot_info
 
-    machine = f"{os.cpu_count()} cores, load {os.getloadavg()[0]:.2f}"
     endpoint, port = f"tcp/127.0.0.1:{free_port()}", free_port()
     with tempfile.TemporaryDirectory() as folder:
         config = Path(folder) / "show.toml"
@@ -90,16 +92,26 @@ def main() -> None:
         session = None
         try:
             session = open_session(BusConfig(multicast=False, connect=(endpoint,)))
-            bus = Bus(session, node="bench-web")
+            bus = Bus(session, node=node)
             deadline = time.monotonic() + 30
             while robot_info(bus, "pepper", timeout=0.5) is None:
                 if show.poll() is not None or time.monotonic() > deadline:
                     raise RuntimeError(f"the show did not come up: {show.stderr.read()[-1000:]}")
-            times = asyncio.run(page_trials(f"ws://127.0.0.1:{port}/ws", args.trials, bus))
+            yield show, bus, f"ws://127.0.0.1:{port}/ws"
         finally:
             if session is not None:
                 session.close()
             stop_process(show)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--trials", type=int, default=500)
+    args = parser.parse_args()
+
+    machine = f"{os.cpu_count()} cores, load {os.getloadavg()[0]:.2f}"
+    with web_show("bench-web") as (_, bus, url):
+        times = asyncio.run(page_trials(url, args.trials, bus))
     rows = {name: latency_stats(values) for name, values in times.items()}
     page, stop, base = rows["page_list"], rows["page_stop"], rows["bus_list"]
     result = {"trials": args.trials, "machine": machine, "page_behavior_list_rtt": page, "page_stop_rtt": stop,

@@ -45,6 +45,7 @@ WARN_EVERY_S = 10.0  # at most one warning of a kind in this time
 RESTART_AFTER_S = 1.0  # a restartable worker that failed runs again after this
 STATS_EVERY_S = 1.0    # how often a node publishes its stats
 STATS_QOS = Qos(priority="DATA_LOW", drop=True)  # never in the way of data; a lost second is only a gap
+HANG_S = 20.0  # a worker that takes nothing from its waiting queue this long (or a stats worker this still) hangs
 
 
 @dataclass(frozen=True)
@@ -74,6 +75,7 @@ class Adapter:
         self.address = ""                 # where a person reaches it once started (a page's URL), said by `run`
         self.stats = Counters(BASE + self.counters)  # what it did (count() adds; dropped: its queues')
         self.failure = ""                 # why the node failed (a worker died), once it has
+        self.restarts = 0                 # times its process was restarted by a supervisor (set by the runner)
         self._stats_report = Report(self.stats)
         self._stats_last: dict[str, Any] | None = None
         self._lock = threading.Lock()     # guards warnings and failing across threads
@@ -81,6 +83,8 @@ class Adapter:
         self._bus: Bus | None = None
         self._threads: list[threading.Thread] = []
         self._entities: list[Any] = []
+        self._queues: list[SampleQueue] = []  # whose consumers must keep taking (see health)
+        self._stats_beat = 0.0            # when the stats worker last went round (monotonic)
 
     @property
     def bus(self) -> Bus:
@@ -145,14 +149,45 @@ class Adapter:
             described["failure"] = self.failure
         return described
 
+    def health(self) -> str:
+        """Why this node is not healthy, or "" when it is: running (or paused: a recorder whose
+        disk is nearly full must not have the show restarted), not failed, and not hung
+        (its stats worker goes round every second; every queue it owns with items waiting
+        is taken from within ``HANG_S``). ``sonibus run`` feeds a supervisor's watchdog
+        only while every node is healthy. Safe from any thread."""
+        if self.failure:
+            return f"failed: {self.failure}"
+        if self.state not in ("running", "paused"):  # (paused: waiting, by design, for what it needs to come back)
+            return self.state
+        still = time.monotonic() - self._stats_beat
+        if still > HANG_S:
+            return f"hung: its stats worker has not gone round for {still:.0f} s"
+        for queue in self._queues:
+            stalled = queue.stalled_s()
+            if stalled > HANG_S:
+                return f"hung: a worker has taken nothing from its queue for {stalled:.0f} s ({len(queue)} waiting)"
+        return ""
+
     def claim_robot(self, robot: str, hint: str = "stop that node or give this robot another name") -> Ownership:
         """Become the owner of ``robot`` until stopped; ``OwnershipError`` if it has one.
         The ``Ownership`` says whether this node may act (it stands by while an earlier
         claim of the robot is on the bus) and publishes its frames."""
-        ownership = self.own(Ownership(self.bus, robot, hint))
+        ownership = self.own(Ownership(self.bus, robot, hint, self._claim_refused))
         ownership.take()
         self.robots.append(robot)
         return ownership
+
+    def _claim_refused(self, key: str, why: str) -> None:
+        """A claim of a robot this node owns that it does not take (``Ownership``): counted, warned."""
+        self.count("claims_refused")
+        self.warn("claim", why)
+
+    def capped(self, what: str) -> None:
+        """A name from the bus (a robot, a node, a key) this node did not keep because a table
+        of its own is full: counted ``capped``, said at most once every ``WARN_EVERY_S``.
+        Every table keyed by names from the bus has a cap: names made up must not grow it."""
+        self.count("capped")
+        self.warn("capped", f"{what} — names made up on the bus must not grow what this node keeps")
 
     def count(self, kind: str, n: int = 1) -> None:
         """Add ``n`` to counter ``kind`` of ``stats`` (safe from any thread)."""
@@ -220,6 +255,7 @@ class Adapter:
         ``SampleQueue``'s drops count as the node's ``dropped``."""
         if isinstance(entity, SampleQueue):
             self.stats.follow("dropped", lambda: entity.dropped)
+            self._queues.append(entity)
         self._entities.append(entity)
         return entity
 
@@ -232,12 +268,14 @@ class Adapter:
 
         def report() -> None:
             while not self.stopping.wait(STATS_EVERY_S):
+                self._stats_beat = time.monotonic()  # (health: a metrics() that hangs stops the beat)
                 try:
                     self._stats_last = self._stats_report.next(self._stats_identity(), self.metrics())
                     publisher.put(codec.encode(self._stats_last))
                 except Exception as exc:  # a metrics() that raised, a closing session: the next second
                     if not self.stopping.is_set():
                         self.warn("stats", f"stats not sent: {type(exc).__name__}: {_first_line(exc)}")
+        self._stats_beat = time.monotonic()  # (before its thread runs: the node is healthy from its start)
         self.spawn(report, "stats", restart=True)
 
     def _serve_stats(self, key: str, query: Any) -> None:
@@ -253,7 +291,7 @@ class Adapter:
 
     def _stats_identity(self) -> dict[str, Any]:
         return {"host": self.bus.host, "node": self.name, "adapter": self.kind, "state": self.state,
-                "since": self.since}
+                "since": self.since, "restarts": self.restarts}
 
     def _guard(self, target: Callable[[], None], name: str, restart: bool) -> Callable[[], None]:
         def run() -> None:

@@ -2,7 +2,9 @@
 
 ``ask`` sends at once and hands the outcome to a callback (the OSC gateway
 uses it so that a slow robot never stalls its receive loop; queries leave in
-the order they were asked); ``send_command`` waits for it.
+the order they were asked); ``send_command`` waits for it. ``ask_program``
+asks the program that drives a robot (a show's ``scenario``) the same way.
+``stop_all`` stops every robot of the bus with one query, whatever their number.
 
 >>> send_command(bus, "pepper", "say", {"text": "hello"})   # doctest: +SKIP
 {'duration': 0.6, 'queued': 0}
@@ -18,24 +20,56 @@ from typing import Any
 from . import codec, keys
 from .errors import CommandError, RobotNotFound
 from .node import Bus, Reply
-from .ownership import Claim, claims, owners
+from .ownership import MAX_ROBOTS, Claim, claims, owners
 
 Outcome = dict[str, Any] | CommandError
+STOP_ALL = keys.command("*", "stop")  # one query every owner of the bus serves: no robot waits behind another
+
+UNANSWERED = ("timeout", "not_connected", "not_answering")
+"""Codes of a command the robot did not carry out because it could not be reached:
+``timeout`` (no reply in time: this module's), ``not_connected`` and ``not_answering``
+(the owner's: its robot is not connected, or does not answer; ``bus/connection.py``).
+``sonibus send`` exits 5 for them, as for a ``stop`` whose result says ``reached: false``."""
+
+
+def unreached(result: dict[str, Any]) -> bool:
+    """Whether a command's result says it did not reach the robot (a ``stop`` is never
+    refused: it is taken, and says so).
+
+    >>> unreached({"reached": False, "connection": "lost"}), unreached({})
+    (True, False)
+    """
+    return result.get("reached") is False
 
 
 def ask(bus: Bus, robot: str, verb: str, args: dict[str, Any], done: Callable[[Outcome], None],
         timeout: float = 5.0, owner: Claim | None = None) -> None:
     """Send ``verb`` to ``robot``'s ``owner`` alone (default: the earliest claim this
     session has seen, if any; see ``owner_of``); ``done`` gets the result or a
-    ``CommandError`` (``robot_not_found``, ``timeout``, or the robot's refusal), exactly once."""
+    ``CommandError`` (``robot_not_found``, ``timeout``, or the owner's refusal:
+    ``not_connected``, ``not_answering``, ``bad_request``...), exactly once."""
     pending = _Pending(robot, verb, done, timeout)
     owner = owner if owner is not None else owners(bus).owner(robot)
-    selector = keys.command(robot, verb) + (f"?owner={owner.address}" if owner is not None else "")
+    _send(bus, keys.command(robot, verb) + (f"?owner={owner.address}" if owner is not None else ""), args, pending)
+
+
+def ask_program(bus: Bus, robot: str, verb: str, args: dict[str, Any], done: Callable[[Outcome], None],
+                timeout: float = 5.0) -> None:
+    """Send ``verb`` to the program that drives ``robot`` (``<robot>/program/<verb>``: a
+    show's ``scenario``) as ``ask`` sends a command: ``done`` gets the result or a
+    ``CommandError`` (``program_not_found`` when nothing serves the key), exactly once."""
+    key = keys.program(robot, verb)
+    nobody = CommandError("program_not_found", f"{verb}: no program drives robot '{robot}' ({key} is served by "
+                                               f"nothing) — start the node that does, on the same bus")
+    _send(bus, key, args, _Pending(robot, verb, done, timeout, nobody))
+
+
+def _send(bus: Bus, selector: str, args: dict[str, Any], pending: _Pending) -> None:
     try:
         # Every answer, not one per key: a node standing by for the robot's owner answers too (``conflict``).
-        bus.ask(selector, pending.on_reply, pending.on_end, message=args, timeout=timeout, every_answer=True)
+        bus.ask(selector, pending.on_reply, pending.on_end, message=args, timeout=pending.timeout, every_answer=True)
     except Exception as exc:  # a closed session, a key Zenoh refuses
-        pending.finish(CommandError("internal", f"{verb}: the bus refused the query: {exc}"))
+        pending.finish(CommandError("internal", f"{pending.verb}: the bus refused the query: {exc}"))
 
 
 class _Pending:
@@ -45,8 +79,10 @@ class _Pending:
     "Timeout" as an error reply), else ``robot_not_found`` (nobody serves the key: it
     ends at once)."""
 
-    def __init__(self, robot: str, verb: str, done: Callable[[Outcome], None], timeout: float) -> None:
+    def __init__(self, robot: str, verb: str, done: Callable[[Outcome], None], timeout: float,
+                 nobody: CommandError | None = None) -> None:
         self.robot, self.verb, self.done, self.timeout = robot, verb, done, timeout
+        self.nobody = nobody or RobotNotFound(robot)  # what an answer that ends at once, unanswered, means
         self.started = time.monotonic()
         self.error = ""
         self.standing_by: CommandError | None = None
@@ -57,20 +93,11 @@ class _Pending:
         if reply.payload is None:
             self.error = reply.error
             return
-        try:
-            message = codec.decode(reply.payload)
-        except codec.DecodeError as exc:
-            message = {"ok": False, "error": {"code": "internal", "message": f"{self.verb}: bad reply: {exc}"}}
-        if message.get("ok") is True:
-            self.finish(message.get("result") or {})
-            return
-        error = message.get("error") or {}
-        refusal = CommandError(str(error.get("code", "internal")),
-                               str(error.get("message", f"robot '{self.robot}' refused '{self.verb}'")))
-        if refusal.code == "conflict":
-            self.standing_by = refusal
+        outcome = _outcome(reply.payload, self.robot, self.verb)
+        if isinstance(outcome, CommandError) and outcome.code == "conflict":
+            self.standing_by = outcome
         else:
-            self.finish(refusal)
+            self.finish(outcome)
 
     def on_end(self) -> None:
         if self.standing_by is not None:
@@ -81,7 +108,7 @@ class _Pending:
         elif self.error:
             self.finish(CommandError("internal", f"{self.verb}: {self.error}"))
         else:
-            self.finish(RobotNotFound(self.robot))
+            self.finish(self.nobody)
 
     def finish(self, outcome: Outcome) -> None:
         with self._lock:
@@ -109,6 +136,62 @@ def send_command(bus: Bus, robot: str, verb: str, args: dict[str, Any] | None = 
     if isinstance(outcomes[0], CommandError):
         raise outcomes[0]
     return outcomes[0]
+
+
+def stop_all(bus: Bus, done: Callable[[str, Outcome], None], silent: Callable[[list[str], CommandError], None],
+             timeout: float = 5.0) -> None:
+    """Stop every robot of this bus (of its namespace: this installation) at once: one query
+    on ``*/cmd/stop`` reaches every owner together (a robot owner runs ``stop`` whatever its
+    claim state), so its time does not grow with the number of robots, nor with claims
+    that no owner stands behind. ``done(robot, outcome)`` for each robot that answered (its
+    first answer; at most ``MAX_ROBOTS``), then ``silent(robots, error)`` once, when the
+    query is over, with the robots on the bus (their claims seen) that did not answer (maybe
+    none): ``robot_not_found`` when the query ended at once (nothing serves their commands),
+    ``timeout`` after ``timeout``."""
+    answered: set[str] = set()
+    lock = threading.Lock()
+    started = time.monotonic()
+    on_bus = owners(bus)  # (made before the query: the robots it knows when the query ends)
+
+    def on_reply(reply: Reply) -> None:
+        robot = reply.key.partition("/")[0]
+        if reply.payload is None or keys.command_verb(reply.key) != "stop" or not keys.is_concrete(robot):
+            return  # (Zenoh's own error reply, or an answer naming no robot: nothing to report it under)
+        with lock:
+            if robot in answered or len(answered) >= MAX_ROBOTS:
+                return
+            answered.add(robot)
+        done(robot, _outcome(reply.payload, robot, "stop"))
+
+    def on_end() -> None:
+        with lock:
+            left = [robot for robot in on_bus.robots() if robot not in answered]
+        if time.monotonic() - started >= timeout * 0.9:
+            error = CommandError("timeout", f"no answer within {timeout:g} s")
+        else:
+            error = CommandError("robot_not_found", "nothing serves their commands: a claim without an owner "
+                                                    "that answers (a node still connecting, or one made up)")
+        silent(left, error)
+
+    try:
+        bus.ask(STOP_ALL, on_reply, on_end, message={}, timeout=timeout, every_answer=True)
+    except Exception as exc:  # a closed session
+        silent(on_bus.robots(), CommandError("internal", f"the bus refused the query: {exc}"))
+
+
+def _outcome(payload: bytes, robot: str, verb: str) -> Outcome:
+    """A reply's payload as a result, or the robot's refusal (``CommandError``)."""
+    try:
+        message = codec.decode(payload)
+    except codec.DecodeError as exc:
+        return CommandError("internal", f"{verb}: bad reply: {exc}")
+    if not isinstance(message, dict):
+        return CommandError("internal", f"{verb}: bad reply: not a map")
+    if message.get("ok") is True:
+        return message.get("result") or {}
+    error = message.get("error") or {}
+    return CommandError(str(error.get("code", "internal")), str(error.get("message", f"robot '{robot}' refused "
+                                                                                       f"'{verb}'")))
 
 
 def owner_of(bus: Bus, robot: str, timeout: float = 2.0) -> Claim | None:

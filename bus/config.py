@@ -16,10 +16,11 @@ from typing import Any
 from .adapter import Adapter
 from .errors import ConfigError
 from .keys import check_name
+from .logfile import LogConfig
 from .options import from_mapping, located
 from .session import BusConfig
 
-TOP_LEVEL = ("bus", "nodes", "demo")  # [demo]: what the flags of `sonibus demo` set (bus/cli/demo.py)
+TOP_LEVEL = ("bus", "nodes", "log", "demo")  # [demo]: what the flags of `sonibus demo` set (bus/cli/demo.py)
 
 
 @dataclass(frozen=True)
@@ -57,6 +58,7 @@ class Installation:
     bus: BusConfig
     nodes: dict[str, NodeSpec]
     path: str = ""
+    log: LogConfig = field(default_factory=LogConfig)  # [log]: a rotating log file (bus/logfile.py)
 
     def select(self, only: list[str] | None = None, host: str | None = None) -> list[NodeSpec]:
         """The nodes named in ``only``; else those for ``host`` (nodes pinned to it
@@ -147,12 +149,18 @@ def parse(text: str, path: str = "<string>") -> Installation:
         adapter = options.pop("adapter", None)
         host = options.pop("host", "")
         lines = _lines(text, f"nodes.{name}", table)
+        if line and not lines:  # an inline table (robot = { adapter = "sim", ... }): every key is on its line
+            lines = {key: line for key in table}
         if not isinstance(adapter, str):
             raise ConfigError(f"{at_table}: missing key 'adapter' (a string: see `sonibus adapters`)")
         if not isinstance(host, str):
             raise ConfigError(f"{located(where, lines, 'host')}: key 'host': {host!r} is not a string")
         nodes[name] = NodeSpec(name, adapter, options, where, lines, host, line)
-    return Installation(bus, nodes, path)
+    log_table = data.get("log", {})
+    if not isinstance(log_table, dict):
+        raise ConfigError(f"{path}: 'log' must be a table")
+    log = from_mapping(LogConfig, log_table, f"{path} [log]", _lines(text, "log", log_table))
+    return Installation(bus, nodes, path, log.relative_to(Path(path).resolve().parent))
 
 
 def _lines(text: str, table: str, keys: Any) -> dict[str, int]:

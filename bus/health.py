@@ -40,7 +40,8 @@ def latest(bus: Bus, timeout: float = 1.0) -> dict[tuple[str, str], dict[str, An
 
 def summary(stats: dict[str, Any]) -> str:
     """One line of a node's stats: receive and send rates, drops, bad input, p99 latency
-    (where the node measures it), errors (if any), the process's CPU and memory."""
+    (where the node measures it), errors (if any), the process's CPU and memory, and how many
+    times a supervisor restarted it (if it did)."""
     rates, counters = stats.get("rates", {}), stats.get("counters", {})
     parts = [f"rx {rates.get('received', 0):,.0f}/s", f"tx {rates.get('sent', 0):,.0f}/s",
              f"drop {counters.get('dropped', 0):,}", f"bad {counters.get('bad', 0):,}"]
@@ -52,4 +53,6 @@ def summary(stats: dict[str, Any]) -> str:
     process = stats.get("process", {})
     if process:
         parts.append(f"cpu {process['cpu_percent']:.0f}% {process['rss_bytes'] / 1e6:.0f} MB")
+        if process.get("restarts"):
+            parts.append(f"restarts {process['restarts']:,}")
     return " ".join(parts)

@@ -32,23 +32,35 @@ class InfoRequests:
                  on_error: Callable[[str, str], None], retry_s: float = 2.0) -> None:
         self.bus, self.on_info, self.on_error, self.retry_s = bus, on_info, on_error, retry_s
         self._asked: dict[str, float] = {}
+        self._misses: dict[str, int] = {}  # robot → queries in a row nobody answered
         self._gate = messages.Gate(bus.limits)
 
     def ask(self, robot: str) -> None:
         now = time.monotonic()
         if now - self._asked.get(robot, -math.inf) < self.retry_s:
             return
-        if len(self._asked) >= MAX_ROBOTS:  # robot names made up on the fly must not grow it for ever
+        if robot not in self._asked and len(self._asked) >= MAX_ROBOTS:  # names made up must not grow it for ever
             self._asked = {r: at for r, at in self._asked.items() if now - at < self.retry_s}
+            self._misses = {r: n for r, n in self._misses.items() if r in self._asked}
+            if len(self._asked) >= MAX_ROBOTS:  # (all asked just now: this one waits for room)
+                return
         self._asked[robot] = now
-        merge = _Merge(robot, self.on_info, self.on_error, self._gate, self._unanswered)
+        merge = _Merge(robot, self._answered, self.on_error, self._gate, self._unanswered)
         self.bus.ask(keys.info(robot) + "/**", merge.take, merge.finish, timeout=self.retry_s)
+
+    def _answered(self, robot: str, info: dict[str, Any]) -> None:
+        self._misses.pop(robot, None)
+        self.on_info(robot, info)
 
     def _unanswered(self, robot: str) -> None:
         # an owner claims its robot before it serves the info (it is still connecting): asked again after
-        # UNANSWERED_RETRY_S, not retry_s (a page showed a robot's frames 2.7 s before its controls)
+        # UNANSWERED_RETRY_S, not retry_s (a page showed a robot's frames 2.7 s before its controls), then
+        # twice as late each time nobody answers, up to retry_s (a claim nobody stands behind: a made-up
+        # robot asked 4 times a second, times a thousand of them, is a flood of queries of our own)
         if robot in self._asked:
-            self._asked[robot] = min(self._asked[robot], time.monotonic() - self.retry_s + UNANSWERED_RETRY_S)
+            misses = self._misses[robot] = self._misses.get(robot, 0) + 1
+            wait = min(self.retry_s, UNANSWERED_RETRY_S * 2 ** min(misses - 1, 16))
+            self._asked[robot] = min(self._asked[robot], time.monotonic() - self.retry_s + wait)
 
 
 class _Merge:

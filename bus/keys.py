@@ -10,7 +10,7 @@ from .errors import ConfigError
 
 NODES = "sonibus/nodes"
 ROBOTS = "sonibus/robots"
-NODE_EVENTS = "sonibus/events/node"  # a node's state changes (a worker failed): an event like a robot's
+NODE_EVENTS = "sonibus/events/node"  # a node's state changes (a worker failed, a restart): an event like a robot's
 STATS = "sonibus/stats"
 NODE_STATS = f"{STATS}/*/*"  # every node's stats (bus/stats.py, bus/health.py)
 
@@ -53,6 +53,29 @@ def audio(robot: str, stream: str) -> str:
 
 def command(robot: str, verb: str = "**") -> str:
     return f"{robot}/cmd/{verb}"
+
+
+def command_verb(key: str) -> str:
+    """The verb of a command key (``pepper/cmd/joints/set`` → ``joints/set``; ``*/cmd/stop``, a
+    query for every robot, → ``stop``); "" when ``key`` names no verb.
+
+    >>> command_verb("*/cmd/stop"), command_verb("pepper/cmd/joints/set"), command_verb("**")
+    ('stop', 'joints/set', '')
+    """
+    _, _, rest = str(key).partition("/")
+    section, _, verb = rest.partition("/")
+    return verb if section == "cmd" else ""
+
+
+def is_concrete(key: str) -> bool:
+    """Whether ``key`` names one key (no ``*``, ``$*`` or ``**`` in it)."""
+    return "*" not in key and "$" not in key
+
+
+def program(robot: str, verb: str = "**") -> str:
+    """Where a program that drives ``robot`` through its commands (a show) takes requests
+    of its own (``pepper/program/scenario``): a queryable that program serves, never the owner."""
+    return f"{robot}/program/{verb}"
 
 
 def info(robot: str) -> str:

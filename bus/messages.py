@@ -40,6 +40,8 @@ MAX_JOINTS: int = _FRAME["names"]["maxItems"]          # joints in one frame
 MAX_VALUE: float = _FRAME["v"]["items"]["maximum"]     # |v| of any joint or derived value (a physical bound)
 MAX_SEQ: int = _FRAME["seq"]["maximum"]
 MAX_DERIVED_SIZE: int = schemas.load("derived_sample")["properties"]["v"]["oneOf"][1]["maxItems"]
+MAX_STATS_ENTRIES: dict[str, int] = {name: table["maxProperties"] for name, table in
+                                     schemas.load("node_stats")["properties"].items() if "maxProperties" in table}
 MAX_DEPTH = 8                                          # nesting of lists and maps in an event
 EVENT_KINDS = {rule["if"]["properties"]["kind"]["const"]: jsonschema.Draft202012Validator(rule["then"])
                for rule in schemas.load("event")["allOf"]}  # kind → its fields' rules, as the schema defines them
@@ -194,6 +196,10 @@ class Gate:
         json_like(message, "arguments")
 
     def node_stats(self, key: Key, message: dict[str, Any]) -> None:
+        for table, most in MAX_STATS_ENTRIES.items():  # (first, and cheaply: a schema check of a big one takes ms)
+            found = message.get(table)
+            if isinstance(found, dict) and len(found) > most:
+                raise BadMessage(f"{table}: {len(found)} entries, at most {most}")
         json_like(message, "stats")
         _schema_check(schemas.validator("node_stats"), "node stats", message)
 
@@ -244,6 +250,9 @@ SECTIONS: dict[str, Section] = {section.name: section for section in (
     Section("events", "event", Gate.event),
     Section("info", "robot_info", Gate.info),            # <robot>/info/derived: derived_info
     Section("cmd", None, Gate.command),
+    # <robot>/program/<verb>: requests to a program that drives the robot (a show), checked like a command's
+    # arguments; queries, never data: a sink takes none unless a pattern names the section
+    Section("program", None, Gate.command, by_name=True),
     Section("audio", "audio_chunk", Gate.audio, by_name=True),  # <robot>/audio/mic, <robot>/audio/speaker
     Section("stats", "node_stats", Gate.node_stats, by_name=True),  # sonibus/stats/<host>/<node>: about the bus
 )}

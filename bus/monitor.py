@@ -27,10 +27,10 @@ from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from typing import Any
 
-from . import codec, keys, messages
+from . import codec, connection, keys, messages
 from .info import InfoRequests
 from .node import Bus, Reply
-from .ownership import Claim
+from .ownership import MAX_RIVALS, Claim
 from .queue import SampleQueue
 from .stats import Counters
 
@@ -70,7 +70,8 @@ class JointView:
 class RobotView:
     """A robot: who owns it (``host/node``; ``standby``: other claims), its model,
     frames over the last second, latency (median of now − ``t``, ms), frames missing
-    by ``seq``, and whether its owner's token went (``gone``)."""
+    by ``seq``, whether its owner's token went (``gone``) and its connection state as
+    its owner says it (``connection``: state, error..., ``bus/connection.py``)."""
 
     name: str
     owner: str = ""
@@ -82,6 +83,11 @@ class RobotView:
     frames: int = 0
     gone: bool = False
     joints: tuple[JointView, ...] = ()
+    connection: dict[str, Any] = field(default_factory=dict)  # (empty: not known yet)
+
+    @property
+    def connected(self) -> bool:
+        return self.connection.get("state") == "connected"
 
 
 @dataclass(frozen=True)
@@ -147,6 +153,8 @@ class _Robot:
         self.seq: int | None = None
         self.gaps = 0
         self.frames = 0
+        self.connection: dict[str, Any] | None = None  # its latest state (its info's, then its events')
+        self.connection_t = -math.inf                 # when its owner said it (its clock)
 
 
 class _Node:
@@ -183,8 +191,9 @@ class Monitor:
     def start(self) -> Monitor:
         if self._worker is not None:
             raise RuntimeError(f"{self!r} is started already")
-        for pattern in (keys.frame(), keys.event("*", "*"), keys.NODE_STATS):
+        for pattern in (keys.frame(), keys.event("*", "*")):
             self._entities.append(self.bus.subscribe(pattern, queue=self._queue)[0])
+        self._entities.append(self.bus.subscribe(keys.NODE_STATS, queue=self._queue, skip=self._skip_stats)[0])
         self._entities.append(self.bus.watch_tokens(f"{keys.NODES}/*/*", self._node_token))
         self._entities.append(self.bus.watch_tokens(keys.robot_token(), self._robot_token))
         self._worker = threading.Thread(target=self._work, name="monitor", daemon=True)
@@ -237,27 +246,53 @@ class Monitor:
         claim = Claim.parse(key)
         if claim is None:
             return
+        why = claim.refusal(self.bus.limits.max_future_s) if alive else ""
+        if why:  # (not a robot on the bus: said, and counted as bad input)
+            self._refused(f"{key}: {why}")
+            return
         with self._lock:
             robot = self._robot(claim.robot)
             if robot is None:
                 return
             was = bool(robot.claims)
+            if alive and claim.key not in robot.claims and len(robot.claims) >= MAX_RIVALS:
+                self.counters.add("bad")
+                self._problem = f"{key}: not shown: already {MAX_RIVALS} claims of robot '{claim.robot}'"
+                return
             if alive:
                 robot.claims[claim.key] = claim
             else:
                 robot.claims.pop(claim.key, None)
                 if not robot.claims:
                     robot.info = None  # asked again if it comes back: another owner may differ
+                    robot.connection, robot.connection_t = None, -math.inf
             if robot.claimed and was != bool(robot.claims):
                 text = f"on the bus again, owned by {claim}" if alive else "left the bus: its owner's claim went"
                 self._listed(EventView(time.time(), claim.robot, "connection", text, not alive))
             robot.claimed = robot.claimed or alive
 
+    def _skip_stats(self, key: str) -> bool:
+        """(On a Zenoh thread.) Stats left out before they are queued and checked (a schema check
+        takes ms): a node's that came less than half a second after its last (a node says them
+        once a second), or of a node not listed when the list is full."""
+        host, _, node = key[len(keys.STATS) + 1:].partition("/")
+        with self._lock:
+            entry = self._nodes.get((host, node))
+            if entry is None and len(self._nodes) >= self.most:
+                self.counters.add("bad")
+                self._problem = f"node '{node}' on '{host}' not shown: already {self.most} listed"
+                return True
+        return entry is not None and time.monotonic() - entry.stats_at < 0.5
+
     def _on_info(self, robot: str, info: dict[str, Any]) -> None:
+        # only what a view shows (an info may be 1 MiB of behaviors, times every robot listed)
+        kept = {"model": info.get("model", ""),
+                "joints": [{k: j[k] for k in ("name", "min", "max", "unit") if k in j} for j in info.get("joints", ())]}
         with self._lock:
             entry = self._robots.get(robot)
             if entry is not None and entry.claims:
-                entry.info = info
+                entry.info = kept
+                self._connection(entry, connection.state_of(info))
 
     def _on_bad_info(self, robot: str, reason: str) -> None:
         self._refused(reason)
@@ -309,9 +344,12 @@ class Monitor:
             self._frame(parsed.robot, message)
         elif parsed.section == "stats":
             host, _, node = parsed.name.partition("/")
+            kept = {k: message[k] for k in ("adapter", "state", "uptime_s") if k in message}  # (what a view shows)
+            kept["counters"] = {k: message["counters"][k] for k in LOSSES if k in message["counters"]}
+            kept["rates"] = {k: message["rates"][k] for k in ("received", "sent", *LOSSES) if k in message["rates"]}
             with self._lock:
                 if (entry := self._node(host, node)) is not None:
-                    entry.stats, entry.stats_at = message, time.monotonic()
+                    entry.stats, entry.stats_at = kept, time.monotonic()
         elif key == keys.NODE_EVENTS:
             self._node_event(message)
         elif parsed.section == "events":
@@ -341,9 +379,19 @@ class Monitor:
 
     def _event(self, robot: str, kind: str, message: dict[str, Any]) -> None:
         alarm = (kind == "conflict" or (kind == "command" and not message.get("ok", True))
-                 or message.get("state") in ("failed", "lost"))
+                 or message.get("state") in ("failed", "lost", "not_answering"))
         with self._lock:
             self._listed(EventView(float(message["t"]), robot, kind, describe_event(kind, message), alarm))
+            entry = self._robots.get(robot) if kind == "connection" else None
+            if entry is not None and entry.claims:
+                self._connection(entry, {**connection.state_of({"connection": message}), "since": message["t"]})
+
+    @staticmethod
+    def _connection(robot: _Robot, state: dict[str, Any]) -> None:
+        """(Under the lock.) ``robot``'s state, unless its owner said a newer one already."""
+        since = state.get("since", -math.inf)
+        if since >= robot.connection_t:
+            robot.connection, robot.connection_t = state, since
 
     def _node_event(self, message: dict[str, Any]) -> None:
         host, node = str(message.get("host", "?")), str(message.get("node", "?"))
@@ -429,7 +477,7 @@ def _robot_view(name: str, robot: _Robot, now: float) -> RobotView:
     return RobotView(name, f"{claims[0].host}/{claims[0].node}" if claims else "",
                      tuple(f"{c.host}/{c.node}" for c in claims[1:]), str(info.get("model", "")),
                      len(robot.recent) / WINDOW_S, latency, robot.gaps, robot.frames,
-                     robot.claimed and not claims, joints)
+                     robot.claimed and not claims, joints, robot.connection or {})
 
 
 def _node_view(host_node: tuple[str, str], node: _Node, now: float) -> NodeView:
@@ -448,10 +496,14 @@ def _node_view(host_node: tuple[str, str], node: _Node, now: float) -> NodeView:
         uptime = stats["uptime_s"] + (now - node.stats_at if node.alive is not False else 0.0)
     elif about.get("since"):
         uptime = max(0.0, time.time() - about["since"])
+    # why it is not running: a paused node (a recorder whose disk is full) says it in its latest stats; the
+    # description is asked once, so its reason is only for a node that is not running
+    why = str(stats.get("metrics", {}).get("paused", "")) if state == "paused" else ""
     return NodeView(host, name, str(stats.get("adapter") or about.get("adapter") or "?"), state, uptime,
                     float(rates.get("received", 0.0)), float(rates.get("sent", 0.0)),
                     {k: int(counters.get(k, 0)) for k in LOSSES},
-                    tuple(k for k in LOSSES if rates.get(k, 0) > 0), node.failed or str(about.get("failure", "")))
+                    tuple(k for k in LOSSES if rates.get(k, 0) > 0),
+                    node.failed or why or (str(about.get("failure", "")) if state != "running" else ""))
 
 
 def describe_event(kind: str, message: dict[str, Any]) -> str:
@@ -466,6 +518,9 @@ def describe_event(kind: str, message: dict[str, Any]) -> str:
         return f"{message.get('state', '?')}, owner {owner.get('node', '?')} on {owner.get('host', '?')}"
     if kind == "speech":
         return f"{message.get('state', '?')} '{message.get('text', '')}'"
+    if kind == "connection":  # (its error says why it is not connected)
+        error = message.get("error")
+        return f"{message.get('state', '?')}: {error}" if error else str(message.get("state", "?"))
     if kind in ("behavior", "posture"):  # (the state first: a long name is what a narrow view cuts)
         return f"{message.get('state', '?')} {message.get('name', '?')}"
     return " ".join(f"{k}={v}" for k, v in message.items() if k not in ("t", "kind"))

@@ -18,11 +18,12 @@ from dataclasses import dataclass
 from typing import Any, NamedTuple, TypeVar
 
 import zenoh
+import zenoh.ext
 
 from . import codec, keys
 from .messages import Limits
 from .queue import SampleQueue
-from .session import discover, lease_s
+from .session import discover, lease_s, listening
 
 T = TypeVar("T")
 
@@ -122,9 +123,18 @@ class Bus:
 
     # -- publishing -------------------------------------------------------------------
 
-    def stream_publisher(self, key: str, qos: Qos = STREAM) -> zenoh.Publisher:
-        """A publisher of msgpack payloads on ``key`` (default: high-rate data, ``STREAM``)."""
-        return self.session.declare_publisher(key, encoding=codec.ENCODING, **qos.options())
+    def stream_publisher(self, key: str, qos: Qos = STREAM, encoding: str | None = codec.ENCODING,
+                         cache: int = 0) -> Any:
+        """A publisher of msgpack payloads on ``key`` (default: high-rate data, ``STREAM``).
+        Another protocol's payloads (a ROS 2 message) take their ``encoding`` (None: Zenoh's
+        default); ``cache`` > 0 keeps that many last samples for late subscribers that ask for
+        history (zenoh-ext's advanced publisher: what rmw_zenoh does for transient local)."""
+        options = {**qos.options(), **({"encoding": encoding} if encoding else {})}
+        if cache:
+            return zenoh.ext.declare_advanced_publisher(  # sequenced by number: no session timestamping needed
+                self.session, key, cache=zenoh.ext.CacheConfig(max_samples=cache),
+                sample_miss_detection=zenoh.ext.MissDetectionConfig(), publisher_detection=True, **options)
+        return self.session.declare_publisher(key, **options)
 
     def put(self, key: str, message: dict[str, Any], qos: Qos = EVENTS) -> None:
         """Send one message (default: reliably, ``EVENTS``: events are few and must not be lost)."""
@@ -143,28 +153,42 @@ class Bus:
 
     def subscribe(self, keyexpr: str, maxlen: int = 1024, queue: SampleQueue | None = None,
                   stamped: bool = False, skip: Callable[[str], bool] | None = None,
-                  ) -> tuple[zenoh.Subscriber, SampleQueue]:
+                  attachment: bool = False, history: bool = False, max_payload: int | None = None,
+                  ) -> tuple[Any, SampleQueue]:
         """Samples of ``keyexpr`` as ``(key, payload bytes)`` in a bounded queue
         (``(key, payload, time.monotonic_ns())`` of arrival if ``stamped``). A payload
         over the gate's size limit is queued as ``codec.Oversize`` (its size only).
 
         ``keyexpr`` may use globs inside a chunk (``pepper/joints/R*``); a bad one
         raises ``ConfigError``. Pass ``queue`` to feed several subscriptions into one,
-        ``skip`` to leave out the keys it returns True for."""
+        ``skip`` to leave out the keys it returns True for. For another protocol's
+        traffic (ROS 2 over rmw_zenoh): ``attachment`` queues each sample's attachment
+        (bytes, or None) after its payload, ``history`` asks publishers with a cache for
+        what they hold, late joiners too (zenoh-ext's advanced subscriber), and
+        ``max_payload`` replaces the gate's size limit."""
         keyexpr = keys.expr(keyexpr)
         queue = queue if queue is not None else SampleQueue(maxlen)
 
         def enqueue(sample: zenoh.Sample) -> None:
             key = str(sample.key_expr)
             if skip is None or not skip(key):
-                payload = self._kept(key, sample.payload)
-                queue.put((key, payload, time.monotonic_ns()) if stamped else (key, payload))
+                item: tuple[Any, ...] = (key, self._kept(key, sample.payload, max_payload))
+                if attachment:
+                    item += (sample.attachment.to_bytes() if sample.attachment is not None else None,)
+                queue.put((*item, time.monotonic_ns()) if stamped else item)
 
-        return self.session.declare_subscriber(keyexpr, self.guarded(enqueue, f"subscriber to {keyexpr}")), queue
+        callback = self.guarded(enqueue, f"subscriber to {keyexpr}")
+        if history:
+            return zenoh.ext.declare_advanced_subscriber(
+                self.session, keyexpr, callback,
+                history=zenoh.ext.HistoryConfig(detect_late_publishers=True)), queue
+        return self.session.declare_subscriber(keyexpr, callback), queue
 
-    def _kept(self, key: str, payload: zenoh.ZBytes) -> bytes | codec.Oversize:
-        """The bytes of ``payload``, or only its size when it is over the gate's limit."""
+    def _kept(self, key: str, payload: zenoh.ZBytes, limit: int | None = None) -> bytes | codec.Oversize:
+        """The bytes of ``payload``, or only its size when it is over the gate's limit (or ``limit``)."""
         size = len(payload)
+        if limit is not None:
+            return payload.to_bytes() if size <= limit else codec.Oversize(size)
         if size > self.limits.max_payload:
             try:
                 section = keys.Key.parse(key).section
@@ -192,9 +216,19 @@ class Bus:
             keyexpr, self.guarded(lambda s: changed(str(s.key_expr), s.kind == zenoh.SampleKind.PUT),
                                   f"watcher of {keyexpr}"), history=True)
 
+    @property
+    def zid(self) -> str:
+        """This session's Zenoh id (another protocol's graph names it: rmw_zenoh's liveliness tokens)."""
+        return str(self.session.zid())
+
     def discover(self) -> list[str]:
         """Wait until this session is really on the bus (``session.discover``); the ids it reached."""
         return discover(self.session)
+
+    @property
+    def listening(self) -> tuple[str, ...]:
+        """Where this session listens, each port as really bound (a listen on port 0 too)."""
+        return listening(self.session)
 
     @property
     def lease_s(self) -> float:

@@ -91,6 +91,10 @@ def coerce(value: Any, tp: Any, where: str) -> Any:
         return value
     if tp is Any:
         return value
+    if dataclasses.is_dataclass(tp) and isinstance(tp, type) and not isinstance(value, tp):  # [nodes.web.limits]
+        if not isinstance(value, dict):
+            raise ConfigError(f"{where}: {value!r} is not a table")
+        return from_mapping(tp, value, where)
     if tp is float and isinstance(value, int) and not isinstance(value, bool):
         return float(value)
     if tp in (int, float) and isinstance(value, bool):

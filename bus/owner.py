@@ -11,6 +11,12 @@ A subclass names the class that carries out its commands (``Verbs``, a
 adapter), connects and sets ``self.model`` and ``self.verbs`` (an instance of
 ``Verbs``) in ``_open()``, and runs its frame loop in ``_acquire()`` (calling
 ``publish_frame`` per frame until ``self.stopping`` is set).
+
+The robot's connection state (``bus/connection.py``) is the owner's too: it starts
+as ``first_state`` ("connected", or "connecting" for an adapter that dials its robot
+after ``_open``), a subclass says each change with ``self.connection.set(...)``,
+and the owner serves it in the info, sends it as ``connection`` events and refuses
+commands (but ``stop``) while the robot is not connected.
 """
 
 from __future__ import annotations
@@ -25,6 +31,7 @@ import zenoh
 from .. import schemas
 from . import codec, commands, keys, messages
 from .adapter import Adapter
+from .connection import UNREACHED, Connection
 from .errors import CommandError
 from .robot import RobotModel
 from .verbs import RobotVerbs, bind
@@ -40,6 +47,11 @@ class RobotAdapter(Adapter):
     model: RobotModel
     verbs: RobotVerbs
     rate_hz: float = 100.0
+    first_state: ClassVar[str] = "connected"
+    """The robot's connection state once ``_open()`` returned: an adapter that reaches its robot
+    later (NAOqi's) starts "connecting" and says each change (``self.connection.set``)."""
+    stop_pending = False
+    """True while a ``stop`` that did not reach the robot waits to be sent to it (an adapter that does so)."""
 
     @property
     def robot(self) -> str:
@@ -53,7 +65,9 @@ class RobotAdapter(Adapter):
 
     def _start(self) -> None:
         self._claim()
+        self.connection = Connection(lambda fields: self.publish_event("connection", **fields), self.first_state)
         self._open()
+        self.connection.announce()  # from the first second: sinks know at once whether the robot is there
         declared = getattr(self, "Verbs", None)
         if declared is None or not isinstance(getattr(self, "verbs", None), declared):
             raise TypeError(f"{type(self).__name__}: _open() must set self.verbs to an instance of its Verbs class "
@@ -64,9 +78,31 @@ class RobotAdapter(Adapter):
         self.own(self.bus.serve(keys.info(self.robot), self._serve_info))
         self.own(self.bus.serve(keys.command(self.robot), self._serve_command))
         self.spawn(self._acquire, "acquire")
+        if self.connection.answer_s is not None:
+            self.spawn(self._watch_answers, "answers")
+
+    def _watch_answers(self) -> None:
+        while not self.stopping.wait(0.1):
+            self.connection.check(time.monotonic())
 
     def _claim(self) -> None:
         self.ownership = self.claim_robot(self.robot)
+        self.ownership.on_standby = self._stand_by
+
+    def _stand_by(self) -> None:
+        """Another owner keeps the robot from now: stop this one first (nobody may command it
+        but with stop), on a worker of its own (a robot's stop may take a moment: not on Zenoh's thread)."""
+        if getattr(self, "_run", None) is None:  # (not connected to the robot yet: nothing of it moves)
+            return
+
+        def stop() -> None:
+            try:
+                self._stop_robot()  # (a robot not reached: said in its result, and sent once it answers)
+            except Exception as exc:  # said and counted; the node stands by all the same
+                self.count("errors")
+                self.warn("standby", f"robot '{self.robot}': its stop on going to stand by failed: "
+                                     f"{type(exc).__name__}: {exc}")
+        self.spawn(stop, "standby-stop")
 
     def _open(self) -> None:
         """Hook: connect to the robot and set ``self.model``, ``self.verbs`` (and ``self.rate_hz``)."""
@@ -92,18 +128,25 @@ class RobotAdapter(Adapter):
             self.count("joints_left_out", len(left_out))
             self.warn("values", f"{self.robot}: {', '.join(left_out)} left out of frame {seq}: "
                                 f"not a finite value within ±{messages.MAX_VALUE:g}")
+        now = time.monotonic()
+        self.connection.answered(now)
         if self.ownership.publish_frame(message):  # nothing while another owner keeps the robot
+            self.connection.published(now)
             self.count("sent")
             self.record_latency(time.time() - t)  # acquisition to publish
 
     def publish_event(self, kind: str, **fields: Any) -> None:
-        if not self.ownership.active:  # standing by for another owner: it speaks for the robot
+        if not self.ownership.speaks:  # standing by for another owner: it speaks for the robot
             return
         self.bus.put(keys.event(self.robot, kind), {"t": time.time(), "kind": kind, **fields})
 
     def behaviors(self) -> Sequence[str]:
         """Names of the behaviors the robot can run (hook)."""
         return ()
+
+    def connection_hint(self) -> str:
+        """What to check when the robot is not connected (hook: "check it is on and reachable at ...")."""
+        return ""
 
     def robot_info(self) -> dict[str, Any]:
         return {
@@ -113,6 +156,7 @@ class RobotAdapter(Adapter):
             "postures": sorted(self.model.postures), "adapter": self.kind,
             "schema_version": schemas.VERSION,
             "owner": {"host": self.bus.host, "node": self.name},
+            "connection": self.connection.info(standing_by=not self.ownership.active),
         }
 
     # -- serving ----------------------------------------------------------------
@@ -121,13 +165,17 @@ class RobotAdapter(Adapter):
         query.reply(keys.info(self.robot), codec.encode(self.robot_info()), encoding=codec.ENCODING)
 
     def _serve_command(self, query: zenoh.Query) -> None:
-        verb = str(query.key_expr)[len(keys.command(self.robot, "")):]
+        asked = str(query.key_expr)
+        verb = keys.command_verb(asked)
+        # a query for many robots (``*/cmd/stop``: ``client.stop_all``) is answered on this robot's own
+        # key, so the asker knows who answered
+        answer_on = keys.command(self.robot, verb) if verb and keys.is_concrete(verb) else asked
         args: Any = {}
         self.count("received")
         try:
             try:
                 payload = query.payload.to_bytes() if query.payload is not None else b""
-                args = self._gate.check(keys.Key.parse(str(query.key_expr)), payload)
+                args = self._gate.check(keys.Key.parse(answer_on), payload)
             except ValueError as exc:  # messages.BadMessage
                 args = {}
                 self.count("bad")
@@ -140,7 +188,7 @@ class RobotAdapter(Adapter):
         except Exception as exc:
             log.exception("%s: command %s failed", self.name, verb)
             reply = commands.error_reply(verb, CommandError("failed", f"{verb} failed: {exc}"))
-        query.reply(query.key_expr, codec.encode(reply), encoding=codec.ENCODING)
+        query.reply(answer_on, codec.encode(reply), encoding=codec.ENCODING)
         if verb in commands.verbs():
             event = {"verb": verb, "args": args if isinstance(args, dict) else {}, "ok": reply["ok"]}
             if not reply["ok"]:
@@ -148,10 +196,27 @@ class RobotAdapter(Adapter):
             self.publish_event("command", **event)
 
     def execute(self, verb: str, args: Any) -> dict[str, Any]:
-        """Validate and run one command; ``stop`` runs whatever its arguments. A node that
-        stands by for another owner runs none (``conflict``)."""
+        """Validate and run one command; ``stop`` runs whatever its arguments and whatever
+        the claims say. A node that stands by for another owner runs no other (``conflict``),
+        nor does one whose robot is not connected (``not_connected``, ``not_answering``)."""
         self.ownership.check(verb)
         if verb == "stop":
-            return self._run["stop"]()
+            return self._stop_robot()
         command = commands.validate(verb, args, self.model, self.behaviors())
+        refusal = self.connection.refusal(verb, self.robot, self.connection_hint())
+        if refusal is not None:
+            raise refusal
         return self._run[verb](**command.args)
+
+    def _stop_robot(self) -> dict[str, Any]:
+        """``stop`` is never refused for the robot's state, and never says it stopped a robot
+        it did not reach: then its result says so (``reached`` false, the ``connection``
+        state, the ``error``, and whether the owner sends it once the robot answers again,
+        ``pending``)."""
+        try:
+            return self._run["stop"]()
+        except CommandError as exc:
+            if exc.code not in UNREACHED:
+                raise
+            return {"reached": False, "connection": self.connection.state, "error": exc.message,
+                    "pending": self.stop_pending}

@@ -17,14 +17,24 @@ again after the owner left says so (``state`` "owner").
 Claim(robot='pepper', since_ms=1700000000000, host='laptop', node='sim')
 >>> Claim("pepper", 1, "b", "x").rank < Claim("pepper", 2, "a", "x").rank
 True
+>>> Claim("pepper", 0, "rogue", "x").refusal(max_future_s=5.0)
+'claimed at 0 ms since the epoch, before any sonibus bus existed (2025-01-01)'
+
+A claim whose time makes no sense — before ``BUS_EPOCH_MS`` (no sonibus bus existed then:
+"claimed at time 0" is made up to win the rule), or further in this machine's future than
+the clock-skew tolerance ``[bus] max_future_s`` — is no claim: an owner refuses it in one
+line (counted ``claims_refused``) and keeps its robot; commands and views leave it out.
+``stop`` runs whatever the claims say: an owner standing by runs it too, and a node that
+goes to stand by first stops its robot (``on_standby``).
 """
 
 from __future__ import annotations
 
 import logging
+import re
 import threading
 import time
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from typing import Any
 
@@ -32,10 +42,16 @@ from . import keys
 from .errors import CommandError, OwnershipError
 from .node import Bus
 from .publishers import FramePublishers
+from .text import printable
 
 log = logging.getLogger(__name__)
 
 CHECK_TIMEOUT_S = 1.0  # a liveliness query for the robot's claims
+BUS_EPOCH_MS = 1_735_689_600_000  # 2025-01-01T00:00Z: no sonibus bus existed before; an earlier claim is made up
+MAX_RIVALS = 64        # other claims of one robot an owner keeps (the earliest): names made up must not grow it
+MAX_ROBOTS = 1024      # robots a session's ``Owners`` view keeps
+STANDBY_EVENTS_S = 3.0  # after going to stand by, the robot's events still go out this long: the end of what it did
+_SINCE = re.compile(r"[0-9]{1,15}")  # ms since the epoch (15 digits: the year 33658), ASCII only
 
 
 @dataclass(frozen=True)
@@ -58,11 +74,35 @@ class Claim:
 
     @classmethod
     def parse(cls, key: str) -> Claim | None:
-        """The claim a token key stands for; None for any other key."""
+        """The claim a token key stands for; None for any other key (a wrong number of
+        chunks, a time that is not a plain number, a name that is no plain chunk)."""
         chunks = str(key).split("/")
-        if len(chunks) != 6 or "/".join(chunks[:2]) != keys.ROBOTS or not chunks[3].isdigit():
+        if len(chunks) != 6 or "/".join(chunks[:2]) != keys.ROBOTS or not _SINCE.fullmatch(chunks[3]):
+            return None
+        try:
+            for kind, name in (("robot", chunks[2]), ("host", chunks[4]), ("node", chunks[5])):
+                keys.check_name(kind, name)
+        except ValueError:
             return None
         return cls(chunks[2], int(chunks[3]), chunks[4], chunks[5])
+
+    @classmethod
+    def credible(cls, key: str, max_future_s: float) -> Claim | None:
+        """The claim of ``key`` if it is one and its time makes sense (see ``refusal``), else None."""
+        claim = cls.parse(key)
+        return claim if claim is not None and not claim.refusal(max_future_s) else None
+
+    def refusal(self, max_future_s: float, now_ms: int | None = None) -> str:
+        """Why this claim's time makes no sense, "" if it does: before ``BUS_EPOCH_MS``, or more
+        than ``max_future_s`` ahead of this machine's clock (``now_ms``, default now)."""
+        now_ms = time.time_ns() // 1_000_000 if now_ms is None else now_ms
+        if self.since_ms < BUS_EPOCH_MS:
+            return f"claimed at {self.since_ms} ms since the epoch, before any sonibus bus existed (2025-01-01)"
+        ahead = (self.since_ms - now_ms) / 1000
+        if ahead > max_future_s:
+            return (f"claimed {ahead:,.0f} s ahead of this machine's clock, beyond [bus] max_future_s = "
+                    f"{max_future_s:g} s (a clock out of step: NTP on every machine)")
+        return ""
 
     @property
     def address(self) -> str:
@@ -76,11 +116,12 @@ class Claim:
         return f"node '{self.node}' on host '{self.host}'"
 
 
-def claims(keys_: Iterable[str]) -> dict[str, list[Claim]]:
-    """Token keys → each robot's claims, earliest (the owner) first."""
+def claims(keys_: Iterable[str], max_future_s: float = 5.0) -> dict[str, list[Claim]]:
+    """Token keys → each robot's claims, earliest (the owner) first; claims whose time
+    makes no sense (``Claim.refusal``) left out."""
     found: dict[str, list[Claim]] = {}
     for key in keys_:
-        claim = Claim.parse(key)
+        claim = Claim.credible(key, max_future_s)
         if claim is not None:
             found.setdefault(claim.robot, []).append(claim)
     return {robot: sorted(cs, key=lambda c: c.rank) for robot, cs in sorted(found.items())}
@@ -93,18 +134,31 @@ class Owners:
     def __init__(self, bus: Bus) -> None:
         self._claims: dict[str, dict[str, Claim]] = {}
         self._lock = threading.Lock()
+        self.max_future_s = bus.limits.max_future_s
+        self.ignored = 0  # claims left out: no room (``MAX_ROBOTS``, ``MAX_RIVALS``)
         self._subscriber = bus.watch_tokens(keys.robot_token(), self._changed)
 
     def _changed(self, key: str, alive: bool) -> None:
-        claim = Claim.parse(key)
+        claim = Claim.credible(key, self.max_future_s) if alive else Claim.parse(key)
         if claim is None:
             return
         with self._lock:
-            held = self._claims.setdefault(claim.robot, {})
-            if alive:
-                held[claim.key] = claim
-            else:
-                held.pop(claim.key, None)
+            held = self._claims.get(claim.robot)
+            if not alive:
+                if held is not None:
+                    held.pop(claim.key, None)
+                    if not held:
+                        del self._claims[claim.robot]
+                return
+            if (held is None and len(self._claims) >= MAX_ROBOTS) or (held is not None and len(held) >= MAX_RIVALS):
+                self.ignored += 1
+                return
+            self._claims.setdefault(claim.robot, {})[claim.key] = claim
+
+    def robots(self) -> list[str]:
+        """The robots with a claim seen now."""
+        with self._lock:
+            return sorted(self._claims)
 
     def owner(self, robot: str) -> Claim | None:
         """The earliest claim of ``robot`` seen so far (None: none yet)."""
@@ -124,14 +178,19 @@ class Ownership:
     ``undeclare`` gives the robot up. Owners publish frames through ``publish_frame``
     (``FramePublishers``: also the per-joint keys while anyone subscribes to them)."""
 
-    def __init__(self, bus: Bus, robot: str, hint: str) -> None:
+    def __init__(self, bus: Bus, robot: str, hint: str,
+                 on_refused: Callable[[str, str], None] | None = None) -> None:
         self.bus, self.robot, self.hint = bus, robot, hint
         self.claim = Claim(robot, 0, bus.host, bus.node)
         self.active = False
         self.owner: Claim | None = None       # the claim this node stands by for
+        self.on_standby: Callable[[], None] | None = None  # called (on a Zenoh thread) when it goes to stand by
+        # a claim refused (``key``, why): its owner's node counts and warns; by default a log line
+        self.on_refused = on_refused or (lambda key, why: log.warning("%s: %s", self.bus.node, why))
         self._rivals: dict[str, Claim] = {}
         self._gone: set[str] = set()           # claims withdrawn: a query's late answer must not revive one
         self._told: set[str] = set()           # later claims this owner has logged
+        self._standby_at = -1e18               # when it last went to stand by (monotonic)
         self._lock = threading.Lock()
         self._entities: list[Any] = []
         self._publishers: FramePublishers | None = None
@@ -152,7 +211,10 @@ class Ownership:
                 time.sleep(0.1)
                 rivals = self._rivals_now()
         if rivals:
-            raise OwnershipError(f"robot '{self.robot}' is already owned by {rivals[0]}; {self.hint}")
+            elsewhere = "" if rivals[0].host == self.bus.host else (
+                " — another installation on this network? Keep yours to itself with a namespace of its own "
+                "([bus] namespace = \"<yours>\", or --namespace NAME: README \"Installations\")")
+            raise OwnershipError(f"robot '{self.robot}' is already owned by {rivals[0]}; {self.hint}{elsewhere}")
         with self._lock:  # (together: a rival's change seen meanwhile must not find a claim yet inactive)
             self.claim = Claim(self.robot, time.time_ns() // 1_000_000, self.bus.host, self.bus.node)
             self.active = True
@@ -170,26 +232,55 @@ class Ownership:
         return (claim.host, claim.node) == (self.bus.host, self.bus.node)
 
     def _changed(self, key: str, alive: bool) -> None:
-        claim = Claim.parse(key)
+        claim = self._sensible(key) if alive else Claim.parse(key)
         if claim is None or claim == self.claim:
             return
         with self._lock:
             if alive:
-                self._rivals[claim.key] = claim
+                self._add(claim)
                 self._gone.discard(claim.key)
             else:
                 self._rivals.pop(claim.key, None)
                 self._told.discard(claim.key)
-                self._gone.add(claim.key)
+                if not self.claim.since_ms:  # (only a query's late answer before the claim needs them)
+                    self._gone.add(claim.key)
         if self.claim.since_ms:
             self._decide()
 
     def _seen(self, found: Iterable[str]) -> None:
-        with self._lock:
-            for key in found:
-                claim = Claim.parse(key)
+        for key in found:
+            claim = self._sensible(key)
+            with self._lock:
                 if claim is not None and claim != self.claim and claim.key not in self._gone:
-                    self._rivals[claim.key] = claim
+                    self._add(claim)
+
+    def _sensible(self, key: str) -> Claim | None:
+        """The claim of ``key``, or None: refused (``on_refused``) when it is no claim or its
+        time makes no sense, so a made-up claim never takes the robot from its owner."""
+        claim = Claim.parse(key)
+        why = claim.refusal(self.bus.limits.max_future_s) if claim is not None else "not a claim key"
+        if claim is not None and claim.robot != self.robot:
+            return None
+        if why:
+            self.on_refused(key, f"robot '{self.robot}': refused the claim {printable(key)[:200]!r}: {why}; "
+                                 "it takes nothing from this node")
+            return None
+        return claim
+
+    def _add(self, claim: Claim) -> None:
+        """(Under the lock.) Keep ``claim`` among the rivals: the earliest ``MAX_RIVALS`` of them."""
+        if claim.key in self._rivals or len(self._rivals) < MAX_RIVALS:
+            self._rivals[claim.key] = claim
+            return
+        latest = max(self._rivals.values(), key=lambda c: c.rank)
+        kept = claim if claim.rank < latest.rank else latest
+        dropped = latest if kept is claim else claim
+        if kept is claim:
+            del self._rivals[latest.key]
+            self._told.discard(latest.key)
+            self._rivals[claim.key] = claim
+        self.on_refused(dropped.key, f"robot '{self.robot}': more than {MAX_RIVALS} claims of it at once; "
+                                     f"the latest, {dropped}, is left out")
 
     def _decide(self) -> None:
         """Apply the rule; log (and tell sinks) what changed."""
@@ -201,9 +292,12 @@ class Ownership:
             self._told.update(c.key for c in new)
         name = f"{self.bus.node}: robot '{self.robot}'"
         if was and first is not None:
-            log.warning("%s is also owned by %s, which claimed it first: this node stands by (publishes nothing, "
-                        "refuses commands) until that one leaves", name, first)
+            self._standby_at = time.monotonic()
+            log.warning("%s is also owned by %s, which claimed it first: this node stands by (it stops its "
+                        "robot, publishes nothing, refuses every command but stop) until that one leaves", name, first)
             self._event("standby", first, self.claim)
+            if self.on_standby is not None:
+                self.on_standby()
         elif not was and first is None:
             log.warning("%s: its owner left; this node owns it again", name)
             self._event("owner", self.claim)
@@ -222,10 +316,19 @@ class Ownership:
         except Exception as exc:  # a closing session: the log line remains
             log.debug("%s: conflict event not sent: %s", self.bus.node, exc)
 
+    @property
+    def speaks(self) -> bool:
+        """Whether the robot's events go out: while it owns the robot, and for ``STANDBY_EVENTS_S``
+        after it went to stand by (the end of the motion its stop cut short)."""
+        return self.active or time.monotonic() - self._standby_at < STANDBY_EVENTS_S
+
     def check(self, verb: str, addressed: str | None = None) -> None:
         """``CommandError`` (``conflict``) while this node stands by for another owner, or
         when the command is ``addressed`` to another owner (the one its sender sees first:
-        while two owners have not yet seen each other, only that one runs it)."""
+        while two owners have not yet seen each other, only that one runs it). ``stop``
+        always runs: whatever the claims say, a robot must stop when asked."""
+        if verb == "stop":
+            return
         owner = self.owner
         if not self.active and owner is not None:
             raise CommandError("conflict", f"{verb}: robot '{self.robot}' is owned by {owner}; node "

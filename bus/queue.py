@@ -35,11 +35,14 @@ class SampleQueue:
         self._ready = threading.Condition()
         self._closed = False
         self.dropped = 0
+        self._filled = self._taken = time.monotonic()  # when it last went from empty to not; last get/drain
 
     def put(self, item: Any) -> None:
         with self._ready:
             if len(self._items) == self._items.maxlen:
                 self.dropped += 1
+            elif not self._items:
+                self._filled = time.monotonic()
             self._items.append(item)
             if len(self._items) == 1:  # only an empty queue has someone to wake
                 self._ready.notify()
@@ -63,6 +66,7 @@ class SampleQueue:
         with self._ready:
             if not self._items and not self._closed:
                 self._ready.wait(self._until(timeout))
+            self._taken = time.monotonic()
             if self._held:
                 due = self._due(1)
                 if due:
@@ -76,6 +80,7 @@ class SampleQueue:
         with self._ready:
             if not self._items and not self._closed:
                 self._ready.wait(self._until(timeout))
+            self._taken = time.monotonic()
             items = self._due() if self._held else []
             items += self._items
             self._items.clear()
@@ -98,6 +103,14 @@ class SampleQueue:
         with self._ready:
             self._closed = True
             self._ready.notify_all()
+
+    def stalled_s(self) -> float:
+        """How long items have waited with nobody taking any (0 when none waits, or closed):
+        a consumer that is busy with one item, or hung, lets this grow."""
+        with self._ready:
+            if not self._items or self._closed:
+                return 0.0
+            return time.monotonic() - max(self._filled, self._taken)
 
     @property
     def closed(self) -> bool:

@@ -6,15 +6,19 @@ import contextlib
 import logging
 import re
 import threading
+import time
 from collections.abc import Callable
 
-from . import registry
+from . import keys, registry
 from .adapter import Adapter
 from .config import Installation
 from .errors import AdapterError, ConfigError, NodeFailed
 from .messages import Limits
 from .node import Bus
+from .notify import Notifier
+from .restarts import Restart
 from .session import BusConfig, open_session
+from .watchdog import Watchdog
 
 log = logging.getLogger(__name__)
 
@@ -47,31 +51,74 @@ def _owned_robots(installation: Installation) -> dict[str, tuple[str, ...]]:
 
 
 def run(adapters: list[Adapter], bus_config: BusConfig, stop: threading.Event,
-        on_started: Callable[[Bus], None] | None = None, host: str | None = None) -> None:
+        on_started: Callable[[Bus], None] | None = None, host: str | None = None,
+        watchdog: Watchdog | None = None, restart: Restart | None = None) -> None:
     """Open one session, start ``adapters`` in order, wait for ``stop``, stop them in
     reverse order and close the session — also on Ctrl-C or an error. ``host`` names
     this machine on the bus (default: its hostname). A node that fails (a worker
-    died) stops them all too, and ``NodeFailed`` says which and why."""
-    with contextlib.closing(open_session(bus_config, wait=True)) as session:
+    died) stops them all too, and ``NodeFailed`` says which and why: the process ends
+    with an error, and its supervisor restarts it.
+
+    ``watchdog`` tells a supervisor (systemd) how it goes: joining, each node starting,
+    ready, healthy or not (``bus/watchdog.py``). ``restart`` (``bus/restarts.py``): when
+    this process is a supervisor's restart, every node reports it in its stats and a
+    ``node`` event with state ``restarted`` says so, once every node has started."""
+    watchdog = watchdog or Watchdog(Notifier({}), adapters)
+    restart = restart or Restart()
+    with contextlib.ExitStack() as closing:
+        with watchdog.joining(f"joining the bus ({_joining(bus_config)})"):
+            session = closing.enter_context(contextlib.closing(open_session(bus_config, wait=True)))
         bus = Bus(session, host=host, limits=Limits(max_future_s=bus_config.max_future_s))
         started: list[Adapter] = []
+        why = "stopped"
         try:
             for adapter in adapters:
+                watchdog.status(f"starting node '{adapter.name}' ({adapter.kind})")
+                adapter.restarts = restart.count
                 try:
                     adapter.start(bus)
                 except ConfigError as exc:
                     raise _located(adapter, exc) from None
                 started.append(adapter)
                 log.info("started %r", adapter)
+            if restart.count:
+                _announce(bus, started, restart)
             if on_started is not None:
                 on_started(bus)
+            watchdog.ready(f"running {', '.join(a.name for a in started)} on {bus.host}"
+                           + (f" (restart {restart.count})" if restart.count else ""))
             while not stop.wait(0.1):
                 failed = [a for a in started if a.failure]
                 if failed:
-                    raise NodeFailed("; ".join(f"node '{a.name}': {a.failure}" for a in failed))
+                    why = "; ".join(f"node '{a.name}': {a.failure}" for a in failed)
+                    raise NodeFailed(why)
+                watchdog.check()
+        except BaseException as exc:
+            if not isinstance(exc, KeyboardInterrupt | NodeFailed):
+                why = f"{type(exc).__name__}: {exc}"
+            raise
         finally:
+            watchdog.stopping(why)
             for adapter in reversed(started):
                 adapter.stop()
+
+
+def _joining(cfg: BusConfig) -> str:
+    """How a session of ``cfg`` joins, for the supervisor's status line while it waits."""
+    if cfg.mode == "client":
+        return f"a client: waiting for a router at {', '.join(cfg.connect) or 'any address (multicast)'}"
+    return f"{cfg.mode}" + (f", connecting to {', '.join(cfg.connect)}" if cfg.connect else "")
+
+
+def _announce(bus: Bus, started: list[Adapter], restart: Restart) -> None:
+    """A ``node`` event per node: this process is a supervisor's restart (and the log says so)."""
+    log.warning("%s", restart)
+    for adapter in started:
+        event = {"t": time.time(), "kind": "node", "host": bus.host, "node": adapter.name, "adapter": adapter.kind,
+                 "state": "restarted", "restarts": restart.count}
+        if restart.previous:
+            event["previous"] = restart.previous
+        bus.put(keys.NODE_EVENTS, event)
 
 
 def _located(adapter: Adapter, error: ConfigError) -> ConfigError:

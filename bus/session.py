@@ -12,8 +12,12 @@ from __future__ import annotations
 import ipaddress
 import json
 import logging
+import os
 import queue
 import re
+import socket
+import sys
+import threading
 import time
 from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
@@ -268,11 +272,12 @@ def _host_problem(host: str) -> str:
 
 @dataclass(frozen=True)
 class _Joined:
-    """What ``discover`` needs to know of an open session's configuration."""
+    """What ``discover`` and ``listening`` need to know of an open session."""
 
     window_s: float
     settle_s: float
     lease_s: float
+    bound: tuple[str, ...] = ()
 
 
 _JOINED: dict[str, _Joined] = {}  # by session id
@@ -321,6 +326,12 @@ def find_router(config: BusConfig, timeout_s: float) -> tuple[str, ...]:
     return tuple(sorted(endpoints, key=lambda e: "[" in e))  # IPv4 first
 
 
+def listening(session: zenoh.Session) -> tuple[str, ...]:
+    """The endpoints ``session`` listens on, each with the port it really bound: a listen
+    on port 0 (and a peer's default, ``tcp/[::]:0``) as ``tcp/[::]:41234``."""
+    return _JOINED.get(str(session.zid()), _Joined(0, 0, 0)).bound
+
+
 def lease_s(session: zenoh.Session) -> float:
     """The transport lease of ``session`` (how long a vanished peer's tokens last), in s."""
     return _JOINED.get(str(session.zid()), _Joined(0, 0, 10.0)).lease_s
@@ -341,7 +352,10 @@ def open_session(config: BusConfig, wait: bool = False) -> zenoh.Session:
         joined = _router_found(config, wait)
         if joined is not None:
             try:
-                session = zenoh.open(joined.to_zenoh())
+                with _OPENING:  # (the sockets that appear while it opens are its own)
+                    before = _sockets()
+                    session = zenoh.open(joined.to_zenoh())
+                    after = _sockets()
                 break
             except ConfigError:
                 raise
@@ -358,11 +372,108 @@ def open_session(config: BusConfig, wait: bool = False) -> zenoh.Session:
         if not warned:
             log.warning("waiting for a router at %s", ", ".join(config.connect) or "any address (multicast scouting)")
             warned = True
+    bound = _bound(joined, {inode: where for inode, where in after.items() if inode not in before})
     searched = config.mode != "client" and (config.multicast or config.connect)
     _JOINED[str(session.zid())] = _Joined(DISCOVERY_S if searched else 0.0,
                                           (SETTLE_S if config.multicast else LINK_SETTLE_S) if searched else 0.0,
-                                          config.options.get("transport/link/tx/lease", config.lease_ms) / 1000)
+                                          config.options.get("transport/link/tx/lease", config.lease_ms) / 1000,
+                                          bound)
     return session
+
+
+_OPENING = threading.Lock()
+
+
+def _bound(config: BusConfig, new: dict[str, str]) -> tuple[str, ...]:
+    """The endpoints ``config`` listens on, a port 0 replaced by the one bound: found among
+    ``new``, the sockets that appeared as the session opened (``_sockets``)."""
+    listen = config.entries().get("listen/endpoints") or default_listen(config.mode)
+    free = dict(new)
+    out = []
+    for endpoint in listen:
+        protocol, _, address = endpoint.partition("/")
+        host, _, port = re.split(r"[?#]", address, maxsplit=1)[0].rpartition(":")
+        if port == "0" and protocol in ("tcp", "udp"):
+            wanted = _addresses(host.strip("[]"))
+            found = next((inode for inode, bound in free.items() if bound.startswith(protocol + "/")
+                          and bound.rpartition(":")[0].partition("/")[2].strip("[]") in wanted), None)
+            if found is not None:
+                endpoint = free.pop(found)
+        out.append(endpoint)
+    return tuple(out)
+
+
+def from_here(endpoint: str) -> str:
+    """``endpoint`` as another process of this machine dials it: a listen on every
+    interface (``0.0.0.0``, ``[::]``) as loopback.
+
+    >>> from_here("tcp/0.0.0.0:7447"), from_here("tcp/[::]:7447"), from_here("tcp/10.0.0.2:7447")
+    ('tcp/127.0.0.1:7447', 'tcp/[::1]:7447', 'tcp/10.0.0.2:7447')
+    """
+    protocol, _, address = endpoint.partition("/")
+    host, colon, port = address.rpartition(":")
+    return f"{protocol}/{_WILDCARDS.get(host, host)}{colon}{port}"
+
+
+_WILDCARDS = {"0.0.0.0": "127.0.0.1", "[::]": "[::1]"}
+
+
+def default_listen(mode: str) -> list[str]:
+    """Where Zenoh listens in ``mode`` when the config says nothing (a peer: ``tcp/[::]:0``)."""
+    default = json.loads(zenoh.Config().get_json("listen/endpoints"))
+    return list(default.get(mode, []) if isinstance(default, dict) else default)
+
+
+def _addresses(host: str) -> set[str]:
+    """The IP addresses a listen host stands for (a name: what it resolves to)."""
+    try:
+        return {str(ipaddress.ip_address(host))}
+    except ValueError:
+        pass
+    try:
+        return {str(ipaddress.ip_address(info[4][0])) for info in socket.getaddrinfo(host, None)}
+    except (OSError, ValueError):
+        return set()
+
+
+def _sockets() -> dict[str, str]:
+    """This process's bound TCP listeners and UDP sockets, by inode: ``{"20634": "tcp/[::]:34865"}``
+    (Linux's ``/proc``; empty elsewhere, where a port 0 stays 0 in ``listening``)."""
+    try:
+        fds = os.listdir("/proc/self/fd")
+    except OSError:
+        return {}
+    inodes = {link[8:-1] for fd in fds if (link := _readlink(f"/proc/self/fd/{fd}")).startswith("socket:[")}
+    found = {}
+    for table, protocol, state in (("tcp", "tcp", "0A"), ("tcp6", "tcp", "0A"), ("udp", "udp", "07"),
+                                   ("udp6", "udp", "07")):
+        try:
+            with open(f"/proc/self/net/{table}", encoding="ascii") as rows:
+                lines = rows.read().splitlines()[1:]
+        except OSError:
+            continue
+        for line in lines:
+            fields_ = line.split()
+            if len(fields_) > 9 and fields_[3] == state and fields_[9] in inodes:
+                found[fields_[9]] = f"{protocol}/{_address_of(fields_[1])}"
+    return found
+
+
+def _readlink(path: str) -> str:
+    try:
+        return os.readlink(path)
+    except OSError:  # (an fd closed while listed)
+        return ""
+
+
+def _address_of(local: str) -> str:
+    """``0100007F:1D27`` → ``127.0.0.1:7463``; an IPv6 one in brackets (``/proc/net/tcp6``)."""
+    address, port = local.split(":")
+    raw = bytes.fromhex(address)
+    if sys.byteorder == "little":  # each 32-bit word is in the host's order
+        raw = b"".join(raw[i:i + 4][::-1] for i in range(0, len(raw), 4))
+    ip = ipaddress.ip_address(raw)
+    return f"[{ip}]:{int(port, 16)}" if ip.version == 6 else f"{ip}:{int(port, 16)}"
 
 
 def _router_found(config: BusConfig, wait: bool) -> BusConfig | None:

@@ -134,7 +134,7 @@ class Report:
 
     def next(self, node: dict[str, Any], metrics: dict[str, Any], advance: bool = True) -> dict[str, Any]:
         """The message for the interval that ends now (with ``advance=False``: so far, and the
-        interval goes on); ``node`` gives host, node, adapter, state and since; ``metrics`` the
+        interval goes on); ``node`` gives host, node, adapter, state, since and restarts; ``metrics`` the
         adapter's own figures."""
         now, cpu, counts = time.monotonic(), time.process_time(), dict(self.counters)
         interval = max(now - self._wall, 1e-9)
@@ -144,7 +144,7 @@ class Report:
             "interval_s": round(interval, 3), "counters": counts,
             "rates": {k: round((v - self._last.get(k, 0)) / interval, 2) for k, v in counts.items()},
             "process": {"pid": os.getpid(), "cpu_percent": round(100.0 * (cpu - self._cpu) / interval, 1),
-                        "rss_bytes": rss_bytes()},
+                        "rss_bytes": rss_bytes(), "restarts": node.get("restarts", 0)},
         }
         latency = self.latencies.take() if advance else None
         if latency is not None:

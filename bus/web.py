@@ -13,6 +13,20 @@ WebSocket client from any thread (a bus worker, a Zenoh callback).
     self.web.app.router.add_get("/ws", self.web.websocket)
     self.web.start()
     self.web.broadcast({"v": 0.5})      # from any thread
+
+Nothing on the network can take it down (``Limits``, docs/design.md): connections past
+``connections`` get a 503 and are closed; WebSocket clients past ``clients`` a 503; a
+connection without a whole request ``timeout_s`` after it opened (a half-sent request,
+a slowloris: counted ``timed_out``) or after its last answer (an idle keep-alive: counted
+``idle_closed``) is closed (aiohttp's ``keepalive_timeout``, which runs from the
+connection's start), and one that reads nothing of what it is sent for ``timeout_s`` is cut
+(``stalled``: it would hold its place for ever); request lines and
+headers are bounded (aiohttp's ``max_line_size``, ``max_field_size``, ``max_headers``:
+400 past them); running out of file descriptors (EMFILE on accept) is counted
+``accept_failed`` and warned about, and asyncio accepts again a second later; each
+client's backlog is bounded in messages and bytes. With ``browsers``, a request from a
+page of another site (``Origin``) or under a name this server does not answer to (``Host``:
+DNS rebinding) is refused with 403 (``bus/browser.py``).
 """
 
 from __future__ import annotations
@@ -24,47 +38,96 @@ import errno
 import json
 import logging
 import os
+import resource
 import socket
 import threading
 from collections import deque
-from collections.abc import Awaitable, Callable, Coroutine, Iterable
+from collections.abc import AsyncIterator, Awaitable, Callable, Coroutine, Iterable
+from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
-from aiohttp import WSCloseCode, web
+from aiohttp import WSCloseCode, web, web_fileresponse
 from aiohttp.http_exceptions import HttpProcessingError
+from aiohttp.web_protocol import RequestHandler
 
+from .browser import OWN, check_browser
 from .options import bad
 
 if TYPE_CHECKING:
     from .adapter import Adapter
+
+log = logging.getLogger(__name__)
 
 START_TIMEOUT_S = 5.0   # binding the port takes milliseconds; this only guards a wedged loop
 CLOSE_WAIT_S = 0.5      # how long a WebSocket client has to answer the server's close
 SHUTDOWN_S = 0.5        # how long running handlers have to finish before they are cancelled
 STOP_POLL_S = 0.05      # ``adapter.stopping`` is a threading.Event: the loop looks at it this often
 CLIENT_BACKLOG = 256    # messages waiting for a slow client; past this its oldest are dropped
+CLIENT_BACKLOG_BYTES = 8 << 20  # and bytes: 256 large messages must not hold a gigabyte for one client
+LISTEN_BACKLOG = 128    # connections the kernel holds before accept (aiohttp's default)
+MAX_HEADERS = 64        # header lines of one request (aiohttp's default 128); each at most 8190 bytes
+# accept() errors that say the process or the machine is out of something: asyncio retries a second later
+OUT_OF_RESOURCES = frozenset({errno.EMFILE, errno.ENFILE, errno.ENOBUFS, errno.ENOMEM})
+FILES_SHARE = 8         # one server holds at most 1/8 of the files the process may open: the rest is the bus's,
+                        # the recorder's, the other servers' (1,100 connections under `ulimit -n 1024` ended the show)
 
 Handler = Callable[[web.Request], Awaitable[web.StreamResponse]]
 
+# Files (the web node's pages) go through the transport, not sendfile(): a client that reads
+# nothing is then seen (the transport pauses writing) and cut after timeout_s; sendfile would
+# wait on the socket for ever. The files served are small.
+web_fileresponse.NOSENDFILE = True  # type: ignore[misc]
+
+
+@dataclass(frozen=True)
+class Limits:
+    """What one server takes at once (``[nodes.<name>.limits]`` of the nodes that serve)."""
+
+    connections: int = 128   # TCP connections open at once (requests, pages, WebSockets); past it: 503, closed
+    clients: int = 32        # WebSocket clients at once (within connections); past it: 503
+    timeout_s: float = 5.0   # no whole request this long after a connection opened or was last answered: closed
+
+    def __post_init__(self) -> None:
+        if not 1 <= self.connections <= 60000:
+            raise bad("connections", f"{self.connections} must be in [1, 60000] (and below the process's limit "
+                                     "of open files, `ulimit -n`)")
+        if not 1 <= self.clients <= 60000:
+            raise bad("clients", f"{self.clients} must be in [1, 60000] (each is a connection too)")
+        if not 0.1 <= self.timeout_s <= 3600:
+            raise bad("timeout_s", f"{self.timeout_s:g} must be in [0.1, 3600] (seconds)")
+
 
 class WebServer:
-    """An aiohttp ``app`` served on ``host:port`` (0: any free port) while ``adapter`` runs."""
+    """An aiohttp ``app`` served on ``host:port`` (0: any free port) while ``adapter`` runs,
+    within ``limits``; ``browsers``: every request passes ``check_browser`` (pages of ``origins``
+    may read it too: ``"*"``, any; ``names``: the ``Host`` names it answers to, ``bus/browser.py``)."""
 
-    def __init__(self, adapter: Adapter, host: str = "127.0.0.1", port: int = 0, key: str = "") -> None:
+    def __init__(self, adapter: Adapter, host: str = "127.0.0.1", port: int = 0, key: str = "",
+                 limits: Limits = Limits(), browsers: bool = False, origins: tuple[str, ...] = (),
+                 names: str = OWN) -> None:
         self.adapter = adapter
         self.key = key  # the configuration key of host:port ("listen"); "": keys 'host' and 'port'
         self.host = host
         self.port = port                   # the bound port once started
-        self.app = web.Application(middlewares=[self._errors])
+        self.limits = limits
+        self.origins, self.names = origins, names
+        self.app = web.Application(middlewares=[self._errors, *([self._browsers] if browsers else [])])
         self.latest: Any = None            # the last value broadcast (a new WebSocket client gets it first)
         self.dropped = 0                   # messages a slow client missed
         self._latest_text: str | None = None
         self._clients: set[WebClient] = set()
+        self._sockets: set[web.WebSocketResponse] = set()  # every route's WebSocket clients (limits.clients)
+        self._handlers: Any = None         # aiohttp's protocol factory (web_server.Server)
+        self._open = 0                     # connections handed to aiohttp and not lost yet
+        self._cap = limits.connections     # limits.connections, within the process's files (FILES_SHARE)
         self._loop: asyncio.AbstractEventLoop | None = None
         self._ready = threading.Event()
         self._start_error: BaseException | None = None
         self._crash: BaseException | None = None
         adapter.stats.follow("dropped", lambda: self.dropped)  # the node's stats count them too
+        # what the limits refused (below), shown at zero
+        adapter.stats.declare(("connections_refused", "clients_refused", "accept_failed", "refused", "timed_out",
+                               "idle_closed", "stalled"))
 
     @property
     def url(self) -> str:
@@ -75,6 +138,11 @@ class WebServer:
     def clients(self) -> int:
         """How many clients a ``websocket`` route has connected now."""
         return len(self._clients)
+
+    @property
+    def connections(self) -> int:
+        """How many TCP connections are open now (refused ones aside)."""
+        return self._open
 
     def start(self) -> None:
         """Serve ``app`` on a worker thread of the adapter; return once listening.
@@ -120,24 +188,53 @@ class WebServer:
             raise RuntimeError(f"the web server of {self.adapter.name!r} is not running")
         return asyncio.run_coroutine_threadsafe(coro, self._loop)
 
-    async def websocket(self, request: web.Request) -> web.WebSocketResponse:
-        """A route handler: the client gets the latest value, then every broadcast;
-        what it sends is ignored."""
-        ws = web.WebSocketResponse(timeout=CLOSE_WAIT_S)
+    @contextlib.asynccontextmanager
+    async def accept(self, request: web.Request, **options: Any) -> AsyncIterator[web.WebSocketResponse]:
+        """The WebSocket of ``request`` (``options``: ``web.WebSocketResponse``'s), prepared, for
+        the ``with`` block; past ``limits.clients`` a 503 instead (counted ``clients_refused``)."""
+        if len(self._sockets) >= self.limits.clients:
+            self.adapter.count("clients_refused")
+            self.adapter.warn("clients", f"web server on {self.url}: a WebSocket client from {request.remote} "
+                                         f"refused (503): {self.limits.clients} connected already, the most "
+                                         "[limits] clients allows")
+            raise web.HTTPServiceUnavailable(text=f"503: {self.limits.clients} WebSocket clients connected "
+                                                  "already, the most this server takes\n")
+        ws = web.WebSocketResponse(timeout=CLOSE_WAIT_S, **options)
         await ws.prepare(request)
-        client = WebClient(ws, self._dropped, request.transport)
-        self._clients.add(client)
-        if self._latest_text is not None:
-            client.push(self._latest_text)
+        self._sockets.add(ws)
+        try:
+            yield ws
+        finally:
+            self._sockets.discard(ws)
+
+    async def serve_client(self, ws: web.WebSocketResponse, client: WebClient,
+                           take: Callable[[Any], None] = lambda message: None,
+                           room: Callable[[], Awaitable[None]] | None = None) -> None:
+        """Run ``client``'s sender while ``ws`` is open, each message it sends to ``take``;
+        ``room`` (if given) is awaited before each: the client is not read meanwhile."""
         sender = asyncio.create_task(client.send_all())
         try:
-            async for _ in ws:
-                pass
+            async for message in ws:
+                if room is not None:
+                    await room()
+                take(message)
         finally:
-            self._clients.discard(client)
             sender.cancel()
             with contextlib.suppress(asyncio.CancelledError):
                 await sender  # a bug of send_all raises here, not lost in a task nobody reads
+
+    async def websocket(self, request: web.Request) -> web.WebSocketResponse:
+        """A route handler: the client gets the latest value, then every broadcast;
+        what it sends is ignored."""
+        async with self.accept(request) as ws:
+            client = WebClient(ws, self._dropped, request.transport)
+            self._clients.add(client)
+            if self._latest_text is not None:
+                client.push(self._latest_text)
+            try:
+                await self.serve_client(ws, client)
+            finally:
+                self._clients.discard(client)
         return ws
 
     # -- on the loop's thread ---------------------------------------------------------
@@ -150,18 +247,31 @@ class WebServer:
     async def _main(self) -> None:
         loop = asyncio.get_running_loop()
         loop.set_exception_handler(self._on_loop_error)
+        # keepalive_timeout runs from a connection's start and is not pushed back by bytes that
+        # come: it is the header timeout too (aiohttp >= 3.10)
         runner = web.AppRunner(self.app, handle_signals=False, access_log=None, shutdown_timeout=SHUTDOWN_S,
-                               logger=self._request_log())
+                               logger=self._request_log(), keepalive_timeout=self.limits.timeout_s,
+                               max_headers=MAX_HEADERS)
+        listener: asyncio.Server | None = None
         try:
             await runner.setup()
-            site = web.TCPSite(runner, self.host, self.port)
-            await site.start()
+            self._handlers = runner.server
+            lost = self._handlers.connection_lost
+
+            def connection_lost(handler: Any, exc: BaseException | None = None) -> None:
+                self._open -= 1  # (counted here, not from aiohttp's list: that one is made a loop turn later)
+                lost(handler, exc)
+            self._handlers.connection_lost = connection_lost
+            # (not aiohttp's TCPSite: a connection past the cap must get a protocol of its own)
+            listener = await loop.create_server(self._connection, self.host, self.port, backlog=LISTEN_BACKLOG,
+                                                reuse_address=True)
         except Exception as exc:  # start() raises it in the adapter's thread
             self._start_error = exc
             self._ready.set()
             await runner.cleanup()
             return
-        self.port = runner.addresses[0][1]
+        self.port = listener.sockets[0].getsockname()[1]
+        self._cap = self._connection_cap()
         self._loop = loop
         self._ready.set()
         try:
@@ -169,11 +279,36 @@ class WebServer:
                 await asyncio.sleep(STOP_POLL_S)
         finally:
             self._loop = None
+            listener.close()
             await close_clients(self._clients)
             await runner.cleanup()
 
+    def _connection(self) -> asyncio.Protocol:
+        """The protocol of a connection just accepted: aiohttp's, or past ``limits.connections``
+        one that answers 503 and closes (counted ``connections_refused``)."""
+        if self._open < self._cap:
+            self._open += 1
+            return _Handler(self._handlers, self._timed_out, self._stalled, self.limits.timeout_s,
+                            loop=self._handlers._loop, **self._handlers._kwargs)
+        self.adapter.count("connections_refused")
+        self.adapter.warn("connections", f"web server on {self.url}: {self._cap} connections open, the most it "
+                                         "takes ([limits] connections): new ones get 503 and are closed "
+                                         f"(a connection without a whole request is closed after "
+                                         f"{self.limits.timeout_s:g} s)")
+        return _Refused()
+
     def _dropped(self) -> None:
         self.dropped += 1
+
+    def _timed_out(self, requests: int) -> None:
+        """A connection closed by ``limits.timeout_s``: before a whole request came (``timed_out``:
+        a half-sent request, a slowloris, a connection that never sent) or idle after its answers."""
+        self.adapter.count("timed_out" if requests == 0 else "idle_closed")
+
+    def _stalled(self) -> None:
+        self.adapter.count("stalled")
+        self.adapter.warn("stalled", f"web server on {self.url}: a client that read nothing of what it was sent for "
+                                     f"{self.limits.timeout_s:g} s cut ([limits] timeout_s)")
 
     def _push(self, text: str) -> None:
         for client in self._clients:
@@ -192,7 +327,7 @@ class WebServer:
             refused = isinstance(exc, HttpProcessingError)
             if refused:  # (a handler's own failure was counted by the _errors middleware on its way out)
                 self.adapter.count("bad")
-            what = f"{type(exc).__name__}: {str(exc).splitlines()[0][:120] if str(exc) else ''}" if exc else ""
+            what = f"{type(exc).__name__}: {' '.join(str(exc).split())[:160]}" if exc else ""  # (aiohttp's: lines)
             self.adapter.warn("http-refused" if refused else "http",
                               f"web server: {record.getMessage()}{f': {what}' if what else ''}")
             return False
@@ -200,8 +335,28 @@ class WebServer:
         requests.addFilter(one_line)
         return requests
 
+    def _connection_cap(self) -> int:
+        """``limits.connections``, lowered (and said) past 1/``FILES_SHARE`` of the files the
+        process may open: connections must never take the files the rest of the show needs."""
+        soft, _ = resource.getrlimit(resource.RLIMIT_NOFILE)
+        share = max(4, soft // FILES_SHARE) if soft != resource.RLIM_INFINITY else self.limits.connections
+        if self.limits.connections <= share:
+            return self.limits.connections
+        log.warning("%s: web server on %s: [limits] connections = %d lowered to %d: this process may open %d "
+                    "files (ulimit -n), and one server takes at most 1/%d of them — raise the limit to take more",
+                    self.adapter.name, self.url, self.limits.connections, share, soft, FILES_SHARE)
+        return share
+
     def _on_loop_error(self, loop: asyncio.AbstractEventLoop, context: dict[str, Any]) -> None:
         exc = context.get("exception")
+        if isinstance(exc, OSError) and exc.errno in OUT_OF_RESOURCES:  # accept(): asyncio tries again in 1 s
+            self.adapter.count("accept_failed")
+            soft, _ = resource.getrlimit(resource.RLIMIT_NOFILE)
+            self.adapter.warn("accept", f"web server on {self.url}: cannot accept a connection: {exc.strerror} "
+                                        f"({self.connections} connections open here, the process may open {soft} "
+                                        "files) — retrying every second; raise the limit (ulimit -n) or lower "
+                                        "[limits] connections")
+            return
         if not isinstance(exc, Exception) or self.adapter.stopping.is_set():
             # a message without an exception ("Unclosed client session"), or noise of a stop: said, not fatal
             self.adapter.count("errors")
@@ -226,32 +381,114 @@ class WebServer:
             self.adapter.warn("http", f"{request.method} {request.path} failed: {type(exc).__name__}: {exc}")
             raise web.HTTPInternalServerError() from None
 
+    @web.middleware
+    async def _browsers(self, request: web.Request, handler: Handler) -> web.StreamResponse:
+        """``check_browser`` on every request: a refusal is a 403, counted ``refused``."""
+        reason = check_browser(request, self.origins, self.names)
+        if reason:
+            self.adapter.count("refused")
+            self.adapter.warn("refused", f"web server: refused {request.method} {request.path[:80]} from "
+                                         f"{request.remote}: {reason}")
+            raise web.HTTPForbidden(text=f"403 forbidden: {reason}\n")
+        return await handler(request)
+
+
+class _Handler(RequestHandler):
+    """aiohttp's connection handler (what ``web_server.Server()`` makes), telling ``on_timeout``
+    when its keep-alive timeout (here the header timeout too) closes it, with how many requests
+    it had taken; and cutting the connection when what it writes makes no progress for
+    ``stall_s`` (a client that never reads: aiohttp would wait to write for ever), told to
+    ``on_stall``."""
+
+    __slots__ = ("_stall", "on_stall", "on_timeout", "stall_s")
+
+    def __init__(self, manager: Any, on_timeout: Callable[[int], None], on_stall: Callable[[], None],
+                 stall_s: float, **kwargs: Any) -> None:
+        super().__init__(manager, **kwargs)
+        self.on_timeout, self.on_stall, self.stall_s = on_timeout, on_stall, stall_s
+        self._stall: asyncio.TimerHandle | None = None
+
+    def pause_writing(self) -> None:  # (the transport's buffer is full: the client reads nothing)
+        super().pause_writing()
+        if self._stall is None:
+            self._stall = self._loop.call_later(self.stall_s, self._stalled)
+
+    def resume_writing(self) -> None:
+        super().resume_writing()
+        if self._stall is not None:
+            self._stall.cancel()
+            self._stall = None
+
+    def _stalled(self) -> None:
+        self._stall = None
+        if self.transport is not None:
+            self.on_stall()
+            self.transport.abort()  # (close() would wait for the buffer to be read: never)
+
+    def connection_lost(self, exc: BaseException | None) -> None:
+        if self._stall is not None:
+            self._stall.cancel()
+            self._stall = None
+        super().connection_lost(exc)
+
+    def _process_keepalive(self) -> None:  # (aiohttp's timer: it closes the connection if it is idle)
+        was_open = not self._force_close
+        super()._process_keepalive()
+        if was_open and self._force_close:
+            self.on_timeout(self._request_count)
+
+
+class _Refused(asyncio.Protocol):
+    """A connection past the cap: told so, then closed."""
+
+    def connection_made(self, transport: asyncio.BaseTransport) -> None:
+        text = b"503: too many connections to this server at once; try again\n"
+        assert isinstance(transport, asyncio.WriteTransport)
+        transport.write(b"HTTP/1.1 503 Service Unavailable\r\nConnection: close\r\nContent-Type: text/plain\r\n"
+                        b"Content-Length: %d\r\n\r\n%s" % (len(text), text))
+        transport.close()  # (after the write is flushed; what the client sends is ignored)
+
 
 class WebClient:
     """One WebSocket client: text and binary messages wait in a bounded backlog, sent in
-    order by one task (``send_all``); a client ``CLIENT_BACKLOG`` behind loses the oldest,
-    each one told to ``on_drop``."""
+    order by one task (``send_all``); a client ``CLIENT_BACKLOG`` messages (or
+    ``CLIENT_BACKLOG_BYTES``) behind loses the oldest, each one told to ``on_drop``.
+    Messages pushed ``kept`` (a reply to what the client asked) are never dropped and go
+    out before the backlog: whoever pushes them bounds their number (the web pages' server
+    stops reading a client whose replies pile up)."""
 
     def __init__(self, ws: web.WebSocketResponse, on_drop: Callable[[], None],
                  transport: asyncio.BaseTransport | None = None) -> None:
         self.ws = ws
         self.on_drop = on_drop
         self.transport = transport  # cut by close_clients if the client never takes the close
-        self.backlog: deque[str | bytes] = deque(maxlen=CLIENT_BACKLOG)
+        self.backlog: deque[str | bytes] = deque()
+        self.size = 0  # bytes (characters) waiting in the backlog
+        self.kept: deque[str | bytes] = deque()
         self.waiting = asyncio.Event()
 
-    def push(self, message: str | bytes) -> None:
-        if len(self.backlog) == self.backlog.maxlen:
-            self.on_drop()
+    def push(self, message: str | bytes, kept: bool = False) -> None:
+        if kept:
+            self.kept.append(message)
+            self.waiting.set()
+            return
         self.backlog.append(message)
+        self.size += len(message)
+        while len(self.backlog) > CLIENT_BACKLOG or (self.size > CLIENT_BACKLOG_BYTES and len(self.backlog) > 1):
+            self.size -= len(self.backlog.popleft())
+            self.on_drop()
         self.waiting.set()
 
     async def send_all(self) -> None:
         while not self.ws.closed:
             await self.waiting.wait()
             self.waiting.clear()
-            while self.backlog and not self.ws.closed:
-                message = self.backlog.popleft()
+            while (self.kept or self.backlog) and not self.ws.closed:
+                if self.kept:
+                    message = self.kept.popleft()
+                else:
+                    message = self.backlog.popleft()
+                    self.size -= len(message)
                 try:
                     if isinstance(message, bytes):
                         await self.ws.send_bytes(message)

@@ -4,6 +4,8 @@
 >>> schemas.validate("joint_sample", {"t": 1.0, "seq": 0, "v": 0.1})
 >>> schemas.command_verbs()[:2]
 ('awareness', 'behavior/list')
+>>> schemas.program_verbs()
+('scenario', 'status')
 """
 
 from __future__ import annotations
@@ -17,7 +19,10 @@ import jsonschema
 
 VERSION = 1
 
-__all__ = ["VERSION", "command_schema", "command_verbs", "load", "validate", "validator"]
+__all__ = ["REQUESTS", "VERSION", "command_schema", "command_verbs", "load", "program_schema", "program_verbs",
+           "request_schema", "request_verbs", "validate", "validator"]
+
+REQUESTS = ("cmd", "program")  # the sections whose keys take requests: a robot's commands, a program's
 
 
 def _root() -> Any:
@@ -27,9 +32,10 @@ def _root() -> Any:
 @cache
 def load(name: str) -> dict[str, Any]:
     """The schema called ``name``: ``joint_sample``, ``event``, ``robot_info``,
-    ``command_reply`` or ``cmd/<verb>`` (e.g. ``cmd/joints/set``)."""
-    if name.startswith("cmd/"):
-        path = _root().joinpath("cmd", name[4:].replace("/", ".") + ".json")
+    ``command_reply``, ``cmd/<verb>`` (e.g. ``cmd/joints/set``) or ``program/<verb>``."""
+    section, _, verb = name.partition("/")
+    if section in REQUESTS and verb:
+        path = _root().joinpath(section, verb.replace("/", ".") + ".json")
     else:
         path = _root().joinpath(name + ".json")
     if not path.is_file():
@@ -48,11 +54,29 @@ def validate(name: str, message: Any) -> None:
 
 
 @cache
-def command_verbs() -> tuple[str, ...]:
-    """Every command verb that has a request schema, sorted."""
-    files = _root().joinpath("cmd").iterdir()
+def request_verbs(section: str) -> tuple[str, ...]:
+    """Every verb of ``section`` (``cmd``, ``program``) that has a request schema, sorted."""
+    files = _root().joinpath(section).iterdir()
     return tuple(sorted(f.name[:-5].replace(".", "/") for f in files if f.name.endswith(".json")))
 
 
+def request_schema(section: str, verb: str) -> dict[str, Any]:
+    return load(f"{section}/{verb}")
+
+
+def command_verbs() -> tuple[str, ...]:
+    """Every command verb (what a robot's owner serves) that has a request schema, sorted."""
+    return request_verbs("cmd")
+
+
 def command_schema(verb: str) -> dict[str, Any]:
-    return load("cmd/" + verb)
+    return request_schema("cmd", verb)
+
+
+def program_verbs() -> tuple[str, ...]:
+    """Every verb a program that drives a robot (a show) serves on ``<robot>/program/<verb>``, sorted."""
+    return request_verbs("program")
+
+
+def program_schema(verb: str) -> dict[str, Any]:
+    return request_schema("program", verb)

@@ -16,14 +16,23 @@ tools=(
   "openssl openssl"
   "chromium chromium"
   "chromedriver chromium-driver"
+  "systemd-analyze systemd"
+  "node nodejs"
+  "npm npm"
 )
+
+# the official Foxglove client (tests/foxglove/test_official_client.py), from the npm registry
+install_js() {
+  local dir="$(dirname "$0")/../tests/foxglove/js"
+  [ -d "$dir/node_modules/@foxglove/ws-protocol" ] || npm ci --prefix "$dir" --no-audit --no-fund --loglevel=error
+}
 
 missing=()
 for entry in "${tools[@]}"; do
   read -r tool package <<<"$entry"
   command -v "$tool" >/dev/null 2>&1 || missing+=("$package")
 done
-[ ${#missing[@]} -eq 0 ] && exit 0
+if [ ${#missing[@]} -eq 0 ]; then install_js; exit 0; fi
 mapfile -t missing < <(printf '%s\n' "${missing[@]}" | sort -u)
 
 if [ "$(id -u)" -eq 0 ] && command -v apt-get >/dev/null 2>&1; then
@@ -35,3 +44,4 @@ else
   echo "the tests need: ${missing[*]} — install with: sudo apt-get install ${missing[*]}" >&2
   exit 1
 fi
+install_js

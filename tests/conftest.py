@@ -3,6 +3,7 @@ simulated robot, external tools that must exist, and waiting on conditions."""
 
 from __future__ import annotations
 
+import importlib.util
 import os
 import shutil
 import signal
@@ -16,11 +17,24 @@ from pathlib import Path
 from typing import Any
 
 import pytest
+import zenoh
 
 from sonibus.adapters.sim import SimConfig, SimRobot
 from sonibus.bus import Bus, BusConfig, open_session
 
 SONIBUS = str(Path(sys.executable).with_name("sonibus"))
+
+# Nothing the tests start scouts this machine's own network by multicast (only the network
+# namespaces they make): tests/nomulticast/sitecustomize.py guards every Python process they
+# start, and this one.
+NO_MULTICAST = Path(__file__).resolve().parent / "nomulticast"
+os.environ.setdefault("SONIBUS_TEST_NETNS", os.readlink("/proc/self/ns/net"))
+os.environ["PYTHONPATH"] = os.pathsep.join(p for p in (str(NO_MULTICAST), os.environ.get("PYTHONPATH")) if p)
+_guard = importlib.util.spec_from_file_location("sonibus_no_multicast", NO_MULTICAST / "sitecustomize.py")
+assert _guard is not None and _guard.loader is not None
+_guarding = importlib.util.module_from_spec(_guard)
+_guard.loader.exec_module(_guarding)
+_guarding.guard(zenoh)
 
 
 def free_port(kind: int = socket.SOCK_STREAM) -> int:

@@ -164,7 +164,7 @@ def test_info_of_a_live_robot_prints_its_table(net):
     result = wait_for(lambda: (r := run_cli("info", "pepper", *args)).returncode == 0
                       and "derived values (" in r.stdout and r, timeout=15, what="pepper's table with derived values")
     lines = result.stdout.splitlines()
-    assert lines[0].startswith("pepper: pepper, 100 frames/s, owned by sim-pepper on ")
+    assert re.match(r"pepper: pepper, connected, \d+ frames/s.*, owned by sim-pepper on ", lines[0]), lines[0]
     head = next(line.split() for line in lines if line.split()[:1] == ["HeadYaw"])
     assert head[:4] == ["HeadYaw", "rad", "-2.0857", "2.0857"] and head[-1] == "Head"
     assert "    animations/Stand/Gestures/Hey_1" in lines
@@ -589,7 +589,7 @@ def test_a_closed_stdout_in_process_is_141_without_an_error():
 
 # -- built-in commands are entry points; the demo is wired by demo.toml ------------------
 
-BUILT_IN = ("demo", "run", "router", "adapters", "nodes", "echo", "send", "top")
+BUILT_IN = ("demo", "run", "router", "service", "adapters", "nodes", "echo", "send", "top")
 
 
 def test_built_in_commands_are_registered_like_plugin_commands():
@@ -603,7 +603,8 @@ def test_built_in_commands_are_registered_like_plugin_commands():
     env = environment()
     assert main(["--help"], env) == Exit.OK
     listed = re.findall(r"^    (\S+) ", env.stdout.getvalue(), re.MULTILINE)
-    assert set(listed) == {*BUILT_IN, "record", "replay", "info", "recover", "export", "plot", "jsonl-count"}
+    assert set(listed) == {*BUILT_IN, "record", "replay", "info", "recover", "export", "plot", "rehearse",
+                           "jsonl-count"}
     assert listed[-1] == "jsonl-count", "sonibus's own first, then the plug-ins'"
 
 

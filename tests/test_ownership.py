@@ -241,8 +241,9 @@ def test_a_restarted_owner_waits_out_its_own_previous_claim(net, pepper):
 
 
 def test_claims_name_robots_owners_first():
-    found = claims(["sonibus/robots/pepper/20/b/late", "sonibus/robots/pepper/10/a/early",
-                    "sonibus/robots/nao/5/c/one", "sonibus/nodes/a/early", "sonibus/robots/old"])
+    now = int(time.time() * 1000)
+    found = claims([f"sonibus/robots/pepper/{now - 10}/b/late", f"sonibus/robots/pepper/{now - 20}/a/early",
+                    f"sonibus/robots/nao/{now - 30}/c/one", "sonibus/nodes/a/early", "sonibus/robots/old"])
     assert [c.node for c in found["pepper"]] == ["early", "late"]
     assert list(found) == ["nao", "pepper"]
     assert Claim.parse(found["nao"][0].key) == found["nao"][0]

@@ -16,6 +16,8 @@ from sonibus.bus.streams import Streams
 
 __all__ = ["ConsoleConfig", "ConsoleView"]
 
+MAX_ROBOTS = 32  # robots shown, a line each per interval (names made up on the bus must not add lines)
+
 
 @dataclass(frozen=True)
 class ConsoleConfig:
@@ -43,7 +45,7 @@ class ConsoleView(Adapter):
         self._values: dict[str, dict[str, float]] = {}
         self._seqs: dict[str, set[int]] = {}
         self._left: collections.deque[str] = collections.deque()  # robots gone from the bus, from Zenoh's threads
-        self.own(watch_robots(self.bus, lambda robot, alive: alive or self._left.append(robot)))
+        self.own(watch_robots(self.bus, lambda robot, alive: alive or self._left.append(robot), self.capped))
         self.spawn(self._run, "view")
 
     def _run(self) -> None:
@@ -62,9 +64,13 @@ class ConsoleView(Adapter):
             return
         source = message.source
         if source.section in ("joints", "frame"):
+            if source.robot not in self._values and len(self._values) >= MAX_ROBOTS:
+                self.capped(f"robot '{source.robot}' not shown: already {MAX_ROBOTS} robots, a line each")
+                return
             values = self._values.setdefault(source.robot, {})
             for sample in message.joints:
-                values[sample.source.name] = sample.values[0]
+                if sample.source.name in self.config.joints:  # (only those shown: joint names can be made up)
+                    values[sample.source.name] = sample.values[0]
             self._seqs.setdefault(source.robot, set()).add(message.seq)
         elif message.event is not None and self.config.events and source.name != "command":
             details = " ".join(f"{k}={v}" for k, v in message.event.items() if k not in ("t", "kind"))

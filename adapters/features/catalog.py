@@ -27,14 +27,14 @@ import numpy as np
 from sonibus.bus import keys, messages
 
 from .config import FeaturesConfig
-from .kinematics import load_arms
+from .kinematics import Arms
 from .motion import weights
 from .table import Robot
 
 
 @cache
-def _reach(model: str, limits: tuple[tuple[tuple[float, float], ...], ...]) -> tuple[np.ndarray, np.ndarray]:
-    return load_arms(model).reach_boxes(limits)
+def _reach(arms: Arms, limits: tuple[tuple[tuple[float, float], ...], ...]) -> tuple[np.ndarray, np.ndarray]:
+    return arms.reach_boxes(limits)
 
 
 def _entry(robot: str, feature: str, name: str, unit: str, low: float | None, high: float | None,
@@ -87,20 +87,21 @@ def _hands(robot: Robot, config: FeaturesConfig) -> list[dict[str, Any]]:
     arms, index = robot.arms, robot.arm_joints
     if arms is None or index is None:
         return []
-    joints = [[robot.joints[i] for i in arm] for arm in index]
+    joints = [[robot.joints[i] for i in arm[:len(names)]] for arm, names in zip(index, arms.joints, strict=True)]
     out = []
     if config.publishes("hand"):
         limits = tuple(tuple((j.min if j.min is not None else -np.pi, j.max if j.max is not None else np.pi)
                              for j in arm) for arm in joints)
-        low, high = _reach(robot.model, limits)
+        low, high = _reach(arms, limits)
         out += [_entry(robot.name, "hand", side, "m", low[a].min(), high[a].max(), 3, axes=["x", "y", "z"],
-                       frame="Torso", box={"min": low[a].tolist(), "max": high[a].tolist()})
+                       frame=arms.frame, box={"min": low[a].tolist(), "max": high[a].tolist()})
                 for a, side in enumerate(arms.sides)]
     if config.publishes("hand_speed"):
         levers = arms.lever_arms()
         for a, side in enumerate(arms.sides):
             bound = None
             if all(j.max_velocity for j in joints[a]):
-                bound = np.ceil(sum(j.max_velocity * r for j, r in zip(joints[a], levers[a], strict=True)) * 10) / 10
+                arm_levers = levers[a][:len(joints[a])]  # (a shorter chain's padding moves nothing)
+                bound = np.ceil(sum(j.max_velocity * r for j, r in zip(joints[a], arm_levers, strict=True)) * 10) / 10
             out.append(_entry(robot.name, "hand_speed", side, "m/s", 0.0 if bound else None, bound))
     return out

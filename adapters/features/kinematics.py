@@ -1,11 +1,14 @@
-"""Forward kinematics of Pepper's and NAO's arms, with numpy, from ``arm_chain``
-in ``robots.json`` (the robots' URDFs): metres in the Torso frame, x forward,
-y left, z up.
+"""Forward kinematics of a robot's arms (kinematic chains), with numpy: Pepper's and
+NAO's from ``arm_chain`` in ``robots.json`` (the robots' URDFs; metres in the Torso
+frame, x forward, y left, z up), any other robot's from the ``kinematics`` its
+owner's info carries (a ROS robot's chains from its URDF, ``adapters/ros2``).
 
 A joint's frame is its parent's, moved by the joint's origin (translation, then
-roll-pitch-yaw rotation) and turned by the joint angle about its axis; the hand
-point is the origin of the ``LHand``/``RHand`` joint frame (the hand's opening
-turns nothing). Both arms are stacked, so one call computes both hands.
+roll-pitch-yaw rotation) and then turned by the joint angle about its axis (a
+prismatic joint slides along it instead); the hand point is the origin of the last
+link of each chain (Pepper's ``LHand``/``RHand`` joint frame: the hand's opening
+turns nothing). The chains are stacked, so one call computes every hand; a shorter
+chain is padded with joints that have no axis and so never move.
 
 >>> arms = load_arms("pepper")
 >>> arms.hands({"RShoulderPitch": 1.5708}).round(3).tolist()   # right arm down, left arm forward
@@ -25,6 +28,7 @@ from sonibus.bus.robot import reference
 
 SIDES = ("L", "R")
 EYE = np.eye(3)
+GRID_POINTS = 20_000  # hand points computed per arm for its reach box
 
 
 def rpy_matrix(roll: float, pitch: float, yaw: float) -> np.ndarray:
@@ -37,29 +41,38 @@ def rpy_matrix(roll: float, pitch: float, yaw: float) -> np.ndarray:
 
 @dataclass(frozen=True, eq=False)
 class Arms:
-    """Arms of as many turning joints each (shoulder to wrist): per arm and joint the
-    origin in the parent frame and the axis; the last origin is the hand point's."""
+    """Arms (kinematic chains) of up to ``n`` joints each: per arm and joint the origin in
+    the parent frame and the axis (zero: a padding joint); the last origin is the hand point's."""
 
     sides: tuple[str, ...]
     joints: tuple[tuple[str, ...], ...]
     translations: np.ndarray  # (arms, n + 1, 3)
     rotations: np.ndarray     # (arms, n + 1, 3, 3)
-    axes: np.ndarray          # (arms, n, 3), unit vectors
+    axes: np.ndarray          # (arms, n, 3), unit vectors (zero for padding)
+    sliding: np.ndarray | None = None  # (arms, n): 1.0 where the joint is prismatic (None: none is)
+    frame: str = "Torso"      # the frame the chains start from
+    guaranteed: bool = False  # reach boxes widened to hold every point, not only the grid's (see reach_boxes)
 
     def __post_init__(self) -> None:
         x, y, z = (self.axes[..., i] for i in range(3))
         zero = np.zeros_like(x)
         cross = np.stack([np.stack([zero, -z, y], -1), np.stack([z, zero, -x], -1), np.stack([-y, x, zero], -1)], -2)
-        object.__setattr__(self, "_cross", cross)  # Rodrigues: R = cos·I + sin·[a]× + (1 − cos)·a aᵀ
-        object.__setattr__(self, "_outer", self.axes[..., :, None] * self.axes[..., None, :])
+        sliding = np.zeros(self.axes.shape[:2]) if self.sliding is None else np.asarray(self.sliding, dtype=float)
+        object.__setattr__(self, "sliding", sliding)
+        object.__setattr__(self, "_cross", cross)  # Rodrigues: R = I + sin·[a]× + (1 − cos)·[a]×² (I for a = 0)
+        object.__setattr__(self, "_square", cross @ cross)
 
     def points(self, q: np.ndarray, upto: int | None = None) -> np.ndarray:
         """Positions ``(..., arms, 3)`` of frame ``upto`` of each arm (default: the hand;
         ``0`` is the first joint's) for angles ``q`` of shape ``(..., arms, n)``."""
         q = np.asarray(q, dtype=float)
-        c, s = np.cos(q)[..., None, None], np.sin(q)[..., None, None]
-        turns = c * EYE + s * self._cross + (1.0 - c) * self._outer  # type: ignore[attr-defined]
+        sliding = self.sliding
+        angle = q * (1.0 - sliding)  # type: ignore[operator]
+        c, s = np.cos(angle)[..., None, None], np.sin(angle)[..., None, None]
+        turns = EYE + s * self._cross + (1.0 - c) * self._square  # type: ignore[attr-defined]
         offsets = turns @ self.translations[:, 1:, :, None]  # each joint's child origin, turned
+        if sliding.any():  # type: ignore[union-attr]
+            offsets = offsets + ((q * sliding)[..., None] * self.axes)[..., None]  # slid along its axis
         turns = turns @ self.rotations[:, 1:]
         position = self.translations[:, 0] + np.zeros((*q.shape[:-1], 3))
         rotation = self.rotations[:, 0]
@@ -70,34 +83,76 @@ class Arms:
 
     def hands(self, angles: Mapping[str, float]) -> np.ndarray:
         """Each arm's hand point ``(arms, 3)`` for joint angles by name (a joint not given is at 0)."""
-        return self.points(np.array([[float(angles.get(j, 0.0)) for j in arm] for arm in self.joints]))
+        n = self.axes.shape[1]
+        return self.points(np.array([[float(angles.get(j, 0.0)) for j in arm] + [0.0] * (n - len(arm))
+                                     for arm in self.joints]))
 
     def reach_boxes(self, limits: Sequence[Sequence[tuple[float, float]]], steps: int = 7,
                     margin_m: float = 0.01) -> tuple[np.ndarray, np.ndarray]:
         """Per arm a box ``(low, high)``, each ``(arms, 3)``, holding every hand point: the hands over
-        a grid of ``steps`` angles per joint between its limits (``limits[arm][joint]``), widened by
-        ``margin_m`` and rounded outward to centimetres."""
-        per_arm = []
-        for arm_limits in limits:
-            grids = np.meshgrid(*[np.linspace(low, high, steps) for low, high in arm_limits], indexing="ij")
-            per_arm.append(np.stack([g.ravel() for g in grids], axis=-1))
-        points = self.points(np.stack(per_arm, axis=1))
-        low, high = points.min(axis=0) - margin_m, points.max(axis=0) + margin_m
+        a grid of ``steps`` angles per joint between its limits (``limits[arm][joint]``; fewer steps
+        when more than ``GRID_POINTS`` would be needed), widened by ``margin_m`` and rounded outward
+        to centimetres. With ``guaranteed`` (chains from a robot's info: any URDF, however coarse
+        its grid) each box is widened further by Σ lever × step / 2 over the arm's joints, a bound
+        on how far any configuration's hand is from the nearest grid point's, so that features
+        never clamp a real position into a box too small for it."""
+        n = self.axes.shape[1]
+        levers = self.lever_arms()
+        low, high = np.zeros((len(limits), 3)), np.zeros((len(limits), 3))
+        for a, arm_limits in enumerate(limits):
+            moving = sum(1 for lo, hi in arm_limits if hi > lo)
+            count = max(2, min(steps, int(GRID_POINTS ** (1 / max(moving, 1)))))
+            axes = [np.linspace(lo, hi, count if hi > lo else 1) for lo, hi in arm_limits]
+            grids = np.meshgrid(*axes, *([np.zeros(1)] * (n - len(arm_limits))), indexing="ij")
+            q = np.zeros((grids[0].size, len(limits), n))
+            q[:, a] = np.stack([g.ravel() for g in grids], axis=-1)
+            points = self.points(q)[:, a]
+            widen = margin_m
+            if self.guaranteed:
+                widen += sum(levers[a, i] * (hi - lo) / (2 * (count - 1)) for i, (lo, hi) in enumerate(arm_limits))
+            low[a], high[a] = points.min(axis=0) - widen, points.max(axis=0) + widen
         return np.floor(low * 100) / 100, np.ceil(high * 100) / 100
 
     def lever_arms(self) -> np.ndarray:
         """Per arm and joint ``(arms, n)``, a bound on the hand's distance from the joint's axis
-        (the length of the chain after it): a joint turning at ω moves the hand at most ω times this."""
+        (the length of the chain after it): a joint turning at ω moves the hand at most ω times this
+        (a sliding joint moving at v moves it at v: 1)."""
         lengths = np.linalg.norm(self.translations, axis=-1)
-        return np.array([[arm[i + 1:].sum() for i in range(self.axes.shape[1])] for arm in lengths])
+        levers = np.array([[arm[i + 1:].sum() for i in range(self.axes.shape[1])] for arm in lengths])
+        return np.where(self.sliding > 0, 1.0, levers)  # type: ignore[operator]
 
 
-def _links(links: list[dict[str, Any]]) -> tuple[tuple[str, ...], np.ndarray, np.ndarray, np.ndarray]:
-    turning = links[:-1]
-    return (tuple(link["joint"] for link in turning),
-            np.array([link["origin_xyz_m"] for link in links], dtype=float),
-            np.array([rpy_matrix(*link["origin_rpy_rad"]) for link in links]),
-            np.array([np.asarray(link["axis"], dtype=float) / np.linalg.norm(link["axis"]) for link in turning]))
+def chains(sides: Sequence[str], links: Sequence[Sequence[Mapping[str, Any]]], frame: str = "Torso") -> Arms:
+    """Arms from chains of links, each ``{"joint", "origin_xyz_m", "origin_rpy_rad", "axis", "type"?}``
+    (``revolute``, ``prismatic``; the last link is the hand point whatever its type)."""
+    n = max(len(chain) - 1 for chain in links)
+    translations, rotations = np.zeros((len(links), n + 1, 3)), np.tile(EYE, (len(links), n + 1, 1, 1))
+    axes, sliding = np.zeros((len(links), n, 3)), np.zeros((len(links), n))
+    for a, chain in enumerate(links):
+        moving, point = chain[:-1], chain[-1]
+        for i, link in enumerate([*moving, point]):
+            slot = i if i < len(moving) else n  # the hand point's origin goes last, after any padding
+            translations[a, slot] = link["origin_xyz_m"]
+            rotations[a, slot] = rpy_matrix(*link["origin_rpy_rad"])
+        for i, link in enumerate(moving):
+            axes[a, i] = np.asarray(link["axis"], dtype=float) / np.linalg.norm(link["axis"])
+            sliding[a, i] = link.get("type") == "prismatic"
+    return Arms(tuple(sides), tuple(tuple(link["joint"] for link in chain[:-1]) for chain in links),
+                translations, rotations, axes, sliding, frame)
+
+
+def from_info(kinematics: Mapping[str, Any]) -> Arms:
+    """The arms of a robot info's ``kinematics`` (``{"root", "chains": {name: [link, ...]}}``);
+    ``ValueError`` saying what is wrong."""
+    try:
+        named = dict(kinematics["chains"])
+        if not named or any(len(chain) < 2 for chain in named.values()):
+            raise ValueError("a chain needs a joint and its end point")
+        arms = chains(tuple(named), list(named.values()), str(kinematics["root"]))
+        object.__setattr__(arms, "guaranteed", True)
+        return arms
+    except (KeyError, TypeError, ValueError, ZeroDivisionError) as exc:
+        raise ValueError(f"its info's kinematics are unusable: {type(exc).__name__}: {exc}") from None
 
 
 def arm_chain(model: str) -> dict[str, list[dict[str, Any]]]:
@@ -113,8 +168,7 @@ def arm_chain(model: str) -> dict[str, list[dict[str, Any]]]:
 def load_arms(model: str) -> Arms:
     """Both arms of ``model``, left then right; ``KeyError`` if sonibus has no kinematics for it."""
     chain = arm_chain(model)
-    left, right = _links(chain["left"]), _links(chain["right"])
-    return Arms(SIDES, (left[0], right[0]), *(np.stack([a, b]) for a, b in zip(left[1:], right[1:], strict=True)))
+    return chains(SIDES, [chain["left"], chain["right"]])
 
 
 def fk_vectors(model: str) -> dict[str, dict[str, Any]]:

@@ -27,6 +27,7 @@ from .config import FeaturesConfig
 
 log = logging.getLogger(__name__)
 
+MAX_ROBOTS = 64  # robots whose features are worked out (names made up on the bus must not grow it)
 INFO = "\0info"  # queue items carrying a robot's info, so only the worker touches state
 
 
@@ -124,6 +125,9 @@ class Features(Adapter):
         ~0.1 s, and frames queued meanwhile would come out late (and be dropped as stale
         by every sink); until then its frames are skipped as ``waiting_info``."""
         if robot in self.robot_features or robot in self._learning:
+            return
+        if len(self.robot_features) + len(self._learning) >= MAX_ROBOTS:
+            self.capped(f"robot '{robot}': no features, already {MAX_ROBOTS} robots (a thread and a filter each)")
             return
         self._learning.add(robot)
         self.spawn(lambda: self._describe(robot, info), f"learn-{robot}")

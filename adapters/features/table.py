@@ -1,5 +1,6 @@
 """The robot a processor works for, as its owner describes it on ``<robot>/info``:
-the joint table, its chains, and the arms' kinematics — or why there are none.
+the joint table, its chains, and the arms' kinematics (the chains its info carries,
+else its model's) — or why there are none.
 
 >>> from sonibus.bus.robot import load_model
 >>> pepper = describe("pepper", {"model": "pepper", "joints": [j.to_info() for j in load_model("pepper").joints]})
@@ -17,7 +18,7 @@ from typing import Any
 
 import numpy as np
 
-from .kinematics import Arms, load_arms
+from .kinematics import Arms, from_info, load_arms
 
 
 @dataclass(frozen=True)
@@ -89,12 +90,13 @@ def describe(name: str, info: dict[str, Any]) -> Robot:
         if joint.chain:
             chains[joint.chain] = (*chains.get(joint.chain, ()), joint.name)
     index = {j.name: i for i, j in enumerate(table)}
-    try:
-        arms = load_arms(model)
-    except KeyError as exc:
+    try:  # the chains the owner describes (a URDF robot's), else the model's own (Pepper, NAO)
+        arms = from_info(info["kinematics"]) if "kinematics" in info else load_arms(model)
+    except (KeyError, ValueError) as exc:
         return Robot(name, model, table, chains, None, None, str(exc.args[0]))
     missing = [j for arm in arms.joints for j in arm if j not in index]
     if missing:
         return Robot(name, model, table, chains, None, None, f"the joint table has no '{missing[0]}'")
-    arm_joints = np.array([[index[j] for j in arm] for arm in arms.joints])
+    n = arms.axes.shape[1]  # a shorter chain's padding joints never move: any index will do
+    arm_joints = np.array([[index[j] for j in arm] + [index[arm[0]]] * (n - len(arm)) for arm in arms.joints])
     return Robot(name, model, table, chains, arms, arm_joints)

@@ -4,8 +4,8 @@ bus live in it (docs/foxglove.md).
 - ``convert``: events as ``foxglove.Log``, frames as ``foxglove.FrameTransforms`` (pure).
 - ``views``: the channels made for Foxglove beside the bus's keys (``<robot>/frame``,
   ``/log``, ``/tf``, ``/info/derived``), shared by the recorder and the live adapter.
-- ``server``: the ``foxglove`` adapter, ``FoxgloveServer`` (needs the ``foxglove``
-  extra, foxglove-sdk; nothing else here does, so it is not imported here).
+- ``wire``: Foxglove's WebSocket protocol, the server's side (pure); ``hub``: its channels
+  and clients on ``bus/web.py``'s server; ``server``: the ``foxglove`` adapter, ``FoxgloveServer``.
 """
 
 __all__: list[str] = []

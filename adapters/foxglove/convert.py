@@ -107,59 +107,84 @@ def multiply(a: Quaternion, b: Quaternion) -> Quaternion:
 
 @dataclass(frozen=True)
 class Link:
-    """One joint of an arm chain: its parent joint (None: the torso), its origin
-    in the parent's frame, and the axis it turns about (None: a point that does
-    not turn with its value, the hand)."""
+    """One joint of an arm chain: its parent joint (None: the root frame), its origin
+    in the parent's frame, the axis it turns about (None: a point that does not turn
+    with its value, the hand), and whether it slides along that axis instead (prismatic)."""
 
     joint: str
     parent: str | None
     xyz: tuple[float, float, float]
     rpy: Quaternion
     axis: tuple[float, float, float] | None
+    slides: bool = False
 
 
 @dataclass(frozen=True)
 class ArmFrames:
-    """The arm chains of a robot model (``arm_chain`` in robots.json, from its URDF)."""
+    """The arm chains of a robot: its model's (``arm_chain`` in robots.json, from its URDF),
+    or those its info carries (``kinematics``: a ROS robot's chains from its URDF)."""
 
     model: str
     links: tuple[Link, ...]
+    root: str = ROOT
 
     @staticmethod
     @cache
     def of(model: str) -> ArmFrames:
         """The chains of ``model``; ``KeyError`` if sonibus has no kinematics for it."""
         chain = arm_chain(model)
-        links = []
-        for side in ("left", "right"):
-            parent = None
-            for i, link in enumerate(chain[side]):
-                turns = i < len(chain[side]) - 1  # the last (the hand) is a point: its value opens the hand
-                axis = tuple(float(a) for a in link["axis"])
-                norm = math.sqrt(sum(a * a for a in axis))
-                links.append(Link(link["joint"], parent, tuple(float(c) for c in link["origin_xyz_m"]),  # type: ignore[arg-type]
-                                  rpy_quaternion(*link["origin_rpy_rad"]),
-                                  tuple(a / norm for a in axis) if turns else None))  # type: ignore[arg-type]
-                parent = link["joint"]
-        return ArmFrames(model, tuple(links))
+        return ArmFrames(model, _links([chain["left"], chain["right"]]))
+
+    @staticmethod
+    def described(model: str, kinematics: Mapping[str, Any]) -> ArmFrames:
+        """The chains of a robot info's ``kinematics``; ``ValueError`` if they are unusable."""
+        try:
+            return ArmFrames(model, _links(list(dict(kinematics["chains"]).values())), str(kinematics["root"]))
+        except (KeyError, TypeError, ValueError, IndexError, ZeroDivisionError) as exc:
+            raise ValueError(f"unusable kinematics: {type(exc).__name__}: {exc}") from None
 
     def transforms(self, robot: str, frame: Mapping[str, Any]) -> dict[str, Any]:
         """A frame as ``foxglove.FrameTransforms``: one transform per arm joint, parent
-        frame to joint frame, named ``<robot>/<Joint>`` under ``<robot>/Torso``
+        frame to joint frame, named ``<robot>/<Joint>`` under ``<robot>/<root>``
         (a joint the frame does not hold is at 0)."""
         angles = dict(zip(frame["names"], frame["v"], strict=True))
         stamp = timestamp(frame["t"])
         out = []
         for link in self.links:
-            rotation = link.rpy
-            if link.axis is not None:
+            rotation, (x, y, z) = link.rpy, link.xyz
+            if link.axis is not None and link.slides:  # along the axis, in the frame the origin turned to
+                x, y, z = (a + b for a, b in zip((x, y, z), rotate(link.rpy, tuple(  # type: ignore[assignment]
+                    c * float(angles.get(link.joint, 0.0)) for c in link.axis)), strict=True))
+            elif link.axis is not None:
                 rotation = multiply(rotation, axis_quaternion(link.axis, float(angles.get(link.joint, 0.0))))
-            x, y, z = link.xyz
             qx, qy, qz, qw = rotation
-            out.append({"timestamp": stamp, "parent_frame_id": f"{robot}/{link.parent or ROOT}",
+            out.append({"timestamp": stamp, "parent_frame_id": f"{robot}/{link.parent or self.root}",
                         "child_frame_id": f"{robot}/{link.joint}", "translation": {"x": x, "y": y, "z": z},
                         "rotation": {"x": qx, "y": qy, "z": qz, "w": qw}})
         return {"transforms": out}
+
+
+def rotate(q: Quaternion, v: Sequence[float]) -> tuple[float, float, float]:
+    """Vector ``v`` turned by the unit quaternion ``q``."""
+    x, y, z, _ = multiply(multiply(q, (v[0], v[1], v[2], 0.0)), (-q[0], -q[1], -q[2], q[3]))
+    return x, y, z
+
+
+def _links(chains: Sequence[Sequence[Mapping[str, Any]]]) -> tuple[Link, ...]:
+    """The links of every chain, each joint once (chains that share a start share its frames)."""
+    links: dict[str, Link] = {}
+    for chain in chains:
+        parent = None
+        for i, link in enumerate(chain):
+            turns = i < len(chain) - 1  # the last (the hand) is a point: its value opens the hand
+            axis = tuple(float(a) for a in link["axis"])
+            norm = math.sqrt(sum(a * a for a in axis))
+            links.setdefault(link["joint"], Link(
+                link["joint"], parent, tuple(float(c) for c in link["origin_xyz_m"]),  # type: ignore[arg-type]
+                rpy_quaternion(*link["origin_rpy_rad"]), tuple(a / norm for a in axis) if turns else None,  # type: ignore[arg-type]
+                turns and link.get("type") == "prismatic"))
+            parent = link["joint"]
+    return tuple(links.values())
 
 
 def arm_frames(info: Mapping[str, Any] | None) -> ArmFrames | None:
@@ -169,6 +194,8 @@ def arm_frames(info: Mapping[str, Any] | None) -> ArmFrames | None:
     if not isinstance(model, str):
         return None
     try:
+        if isinstance(info, Mapping) and "kinematics" in info:
+            return ArmFrames.described(model, info["kinematics"])
         return ArmFrames.of(model)
-    except KeyError:
+    except (KeyError, ValueError):
         return None

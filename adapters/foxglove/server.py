@@ -1,4 +1,4 @@
-"""``foxglove``: the bus live in Foxglove, over its WebSocket protocol (foxglove-sdk).
+"""``foxglove``: the bus live in Foxglove, over its WebSocket protocol (``wire.py``).
 
     [nodes.foxglove]
     adapter = "foxglove"
@@ -8,43 +8,46 @@ It serves what a recording holds (unless made with ``foxglove = false``), as cha
 their keys: the joints, derived values and events ``subscribe`` selects, each
 robot's ``<robot>/info``, and the views of ``views.py`` (``<robot>/frame``,
 ``<robot>/log``, ``<robot>/tf``, ``<robot>/info/derived``). A channel is
-advertised with its first message; a message is encoded only for channels a
-client subscribes to. Info and info/derived are sent again every
-``info_every_s``, so a client that connects later gets them.
+advertised with its first message, which a subscription gets first (``hub.py``); a
+message is encoded only for channels a client subscribes to. Info and info/derived
+are sent again every ``info_every_s``, so a client that connects later gets them.
+When a robot leaves the bus (its owner's token goes) its channels are unadvertised, and
+advertised anew with its first messages when it comes back.
 
-The only module of sonibus that imports foxglove-sdk (the ``foxglove`` extra).
+Served on ``bus/web.py``'s ``WebServer``, not foxglove-sdk's server (docs/foxglove.md,
+"Why not foxglove-sdk's server"): that one refuses ``foxglove.websocket.v1`` clients,
+advertises a channel before it can be subscribed to, stops accepting for good on the
+first failed ``accept`` (EMFILE), and has no limits, timeouts or ``Origin`` check.
 """
 
 from __future__ import annotations
 
 import logging
 import time
-from dataclasses import dataclass
+from collections import deque
+from dataclasses import dataclass, field
+from importlib.metadata import version
 from typing import Any
-
-try:
-    import foxglove
-except ModuleNotFoundError as exc:  # named by its distribution, which the registry maps to the extra to install
-    if exc.name != "foxglove":
-        raise
-    raise ModuleNotFoundError("No module named 'foxglove' (the foxglove-sdk distribution)", name="foxglove_sdk") \
-        from None
 
 from sonibus.adapters.osc.gateway import parse_endpoint
 from sonibus.adapters.recorder.channels import MESSAGE_ENCODING, SCHEMA_ENCODING, channel_schema, to_json
 from sonibus.bus import codec, keys
 from sonibus.bus.adapter import Adapter
-from sonibus.bus.errors import ConfigError
 from sonibus.bus.info import InfoRequests
 from sonibus.bus.options import bad
+from sonibus.bus.presence import watch_robots
 from sonibus.bus.queue import SampleQueue
 from sonibus.bus.streams import Streams, without_audio
+from sonibus.bus.web import Limits, WebServer
 
+from . import wire
+from .hub import MAX_CHANNELS, Hub
 from .views import DERIVED_INFO, Views, joint_samples
 
 log = logging.getLogger(__name__)
 
-MAX_CHANNELS = 4096  # channels advertised at most (keys made up on the fly must not grow it for ever)
+MAX_ROBOTS = 64  # robots served (names made up on the bus must not grow what is kept per robot)
+MAX_GONE = 1024  # robots remembered as gone (names from the bus: a claim storm must not grow it for ever)
 
 
 @dataclass(frozen=True)
@@ -57,6 +60,8 @@ class FoxgloveConfig:
     per_joint_keys: bool = False              # joints from <robot>/joints/* instead of <robot>/frame
     queue: int = 4096                         # messages waiting to be served; past this the oldest are dropped
     info_every_s: float = 5.0                 # info and info/derived sent again this often (later clients)
+    limits: Limits = field(default_factory=Limits)  # [nodes.<name>.limits]: connections, clients, timeout_s
+    origins: tuple[str, ...] = ("https://app.foxglove.dev",)  # web pages that may connect (browsers send Origin)
 
     def __post_init__(self) -> None:
         parse_endpoint("listen", self.listen)
@@ -72,7 +77,9 @@ class FoxgloveServer(Adapter):
     """Robots live in Foxglove: joints, frames, arm transforms and events as logs, over its WebSocket protocol."""
 
     Config = FoxgloveConfig
-    counters = ("sent",)
+    # sent: messages to clients (one per subscriber); clients: connections so far; dropped_for_clients: lost by a
+    # client that does not read
+    counters = ("sent", "clients", "dropped_for_clients")
 
     def __init__(self, config: FoxgloveConfig | None = None, *, name: str = "") -> None:
         super().__init__(config, name=name)
@@ -81,25 +88,20 @@ class FoxgloveServer(Adapter):
     def _start(self) -> None:
         cfg: FoxgloveConfig = self.config
         host, port = parse_endpoint("listen", cfg.listen)
-        self._context = foxglove.Context()  # this node's channels only (tests run several servers)
-        try:
-            self.server = foxglove.start_server(name=cfg.name, host=host, port=port, context=self._context)
-        except RuntimeError as exc:
-            reason = str(exc).removeprefix("FoxgloveError: ")
-            raise ConfigError(f"node '{self.name}': key 'listen': cannot listen on {cfg.listen}: {reason} — "
-                              "choose a free port (0: any) on an address of this machine") from None
-        self.port = self.server.port
-        self._channels: dict[str, foxglove.Channel] = {}
+        self.web = WebServer(self, host, port, key="listen", limits=cfg.limits, browsers=True, origins=cfg.origins)
+        self.hub = Hub(self, self.web, cfg.name, to_json, {"sonibus": version("sonibus")})
         self._infos: dict[str, dict[str, Any]] = {}  # info and info/derived keys → their latest message
         self._queue = self.own(SampleQueue(cfg.queue))
         self._info_seen: set[str] = set()
-        self._info = InfoRequests(self.bus, self._take_info, lambda robot, text: log.warning("%s", text))
+        self._robots: set[str] = set()  # robots served: their messages pass, and their state is kept
+        self._info = InfoRequests(self.bus, self._take_info, lambda robot, text: self.warn("info", text))
         self._views = Views(self.bus, self._take_derived_info)
-        try:
-            self._streams = Streams(self.bus, cfg.subscribe, self._queue, per_joint_keys=cfg.per_joint_keys)
-        except BaseException:
-            self.server.stop()
-            raise
+        self._streams = Streams(self.bus, cfg.subscribe, self._queue, per_joint_keys=cfg.per_joint_keys)
+        self._comings: deque[tuple[str, bool]] = deque(maxlen=4096)  # robots come or gone (a Zenoh thread)
+        self._gone: dict[str, None] = {}  # robots gone and not back: what of them is still in flight is dropped
+        self.own(watch_robots(self.bus, lambda robot, alive: self._comings.append((robot, alive)), self.capped))
+        self.web.start()
+        self.port = self.web.port
         self.address = (f"Foxglove → Open connection → ws://"
                         f"{'localhost' if host in ('127.0.0.1', '0.0.0.0') else host}:{self.port}")
         log.info("%s: %s", self.name, self.address)
@@ -108,12 +110,11 @@ class FoxgloveServer(Adapter):
     def _stop(self) -> None:
         if hasattr(self, "_streams"):
             self._streams.undeclare()
-        if hasattr(self, "server"):
-            self.server.stop()
 
     def metrics(self) -> dict[str, Any]:
-        """The port and the channels advertised."""
-        return {"port": self.port, "channels": len(getattr(self, "_channels", ()))}
+        """The port, the channels advertised and the clients connected."""
+        hub = getattr(self, "hub", None)
+        return {"port": self.port, "channels": hub.channels if hub else 0, "clients": hub.clients if hub else 0}
 
     def _take_info(self, robot: str, info: dict[str, Any]) -> None:  # on a Zenoh thread
         self._queue.put((keys.info(robot), codec.encode(info)))
@@ -124,12 +125,31 @@ class FoxgloveServer(Adapter):
     def _serve(self) -> None:
         again = time.monotonic() + self.config.info_every_s
         while not self.stopping.is_set():
+            while self._comings:  # (before the messages: those of a robot gone are dropped, not advertised again)
+                self._robot_changed(*self._comings.popleft())
             for key, payload in self._queue.drain(timeout=0.2):
-                self._take(key, payload)
+                if key.partition("/")[0] not in self._gone:
+                    self._take(key, payload)
             if time.monotonic() >= again:
                 again = time.monotonic() + self.config.info_every_s
                 for key, message in list(self._infos.items()):
                     self._log(key, message)
+
+    def _robot_changed(self, robot: str, alive: bool) -> None:
+        """A robot gone: its channels unadvertised, what was kept of it forgotten (its info is asked
+        for again when it comes back)."""
+        if alive:
+            self._gone.pop(robot, None)
+            return
+        if len(self._gone) >= MAX_GONE:
+            del self._gone[next(iter(self._gone))]
+        self._gone[robot] = None
+        self._robots.discard(robot)  # (its place among the MAX_ROBOTS served is free again)
+        self._info_seen.discard(robot)
+        self._views.derived_seen.discard(robot)
+        self._infos = {k: v for k, v in self._infos.items() if k.partition("/")[0] != robot}
+        forgotten = self.hub.forget(f"{robot}/")
+        log.info("%s: robot '%s' left the bus: %d channels unadvertised", self.name, robot, forgotten)
 
     def _take(self, key: str, payload: bytes) -> None:
         if key.endswith("/" + DERIVED_INFO):
@@ -145,6 +165,11 @@ class FoxgloveServer(Adapter):
         if incoming is None:
             return
         robot = incoming.source.robot
+        if robot not in self._robots:
+            if len(self._robots) >= MAX_ROBOTS:  # (its info, arms, views: per robot)
+                self.capped(f"robot '{robot}' not served: already {MAX_ROBOTS} robots")
+                return
+            self._robots.add(robot)
         if key.endswith("/info"):
             self._info_seen.add(robot)
             self._infos[key] = incoming.message
@@ -155,21 +180,19 @@ class FoxgloveServer(Adapter):
             self._log(channel_key, message)
 
     def _log(self, key: str, message: dict[str, Any]) -> None:
-        """``message`` on the channel of ``key`` (advertised now if new), when a client listens."""
-        channel = self._channels.get(key)
-        if channel is None:
-            if len(self._channels) >= MAX_CHANNELS:
-                self.warn("channels", f"'{key}' not served: {MAX_CHANNELS} channels already")
-                return
-            found = channel_schema(key)
-            schema = foxglove.Schema(name=found[0], encoding=SCHEMA_ENCODING, data=found[1]) if found else None
-            channel = self._channels[key] = foxglove.Channel(key, schema=schema, message_encoding=MESSAGE_ENCODING,
-                                                             context=self._context)
-        if channel.has_sinks():
-            try:
-                channel.log(to_json(message), log_time=time.time_ns())
-            except ValueError as exc:  # (past the gate: rare) not strict JSON
-                self.count("bad")
-                self.warn("unsendable", f"message on '{key}' not sent: {exc}")
-                return
-            self.count("sent")
+        """``message`` on the channel of ``key`` (advertised now if new), to the clients subscribed."""
+        try:
+            made = self.hub.log(key, message, time.time_ns(), lambda id_: _describe(id_, key))
+        except (ValueError, TypeError) as exc:  # (past the gate: rare) not strict JSON
+            self.count("bad")
+            self.warn("unsendable", f"message on '{key}' not sent: {exc}")
+            return
+        if not made:
+            self.warn("channels", f"'{key}' not served: {MAX_CHANNELS} channels already")
+
+
+def _describe(id_: int, key: str) -> wire.Channel:
+    """The channel of ``key``: its schema when sonibus has one (a JSON Schema), else none (any JSON)."""
+    found = channel_schema(key)
+    name, schema = (found[0], found[1].decode()) if found else ("", "")
+    return wire.Channel(id_, key, MESSAGE_ENCODING, name, schema, SCHEMA_ENCODING if found else "")

@@ -76,8 +76,9 @@ class JackBridge(Adapter):
         self._client.activate()
         jack_client.connect(self._client, self._inputs, cfg.connect_inputs, "connect_inputs")
         jack_client.connect(self._client, self._outputs, cfg.connect_outputs, "connect_outputs")
-        log.info("%s: JACK client '%s' on server '%s' at %d Hz: %s", self.name, self.client_name,
-                 jack_client.server_name(cfg.server), self.rate, ", ".join(self.ports))
+        self.address = (f"JACK client '{self.client_name}' on server '{jack_client.server_name(cfg.server)}' at "
+                        f"{self.rate} Hz: {', '.join(self.ports)}")
+        log.info("%s: %s", self.name, self.address)
         if self._ring is not None:
             self.spawn(self._publish, "publish")
         if self._buffer is not None:

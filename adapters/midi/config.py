@@ -165,11 +165,13 @@ class CcMapping:
 
 @dataclass(frozen=True, kw_only=True)
 class NoteMapping:
-    """``{note = 60, channel = 1, robot = "pepper", behavior = "animations/Stand/Gestures/Hey_1"}``"""
+    """``{note = 60, channel = 1, robot = "pepper", behavior = "animations/Stand/Gestures/Hey_1"}``,
+    or ``scenario = "hello"``: a scenario of the robot's show (docs/show.md)."""
 
     note: int
     robot: str
-    behavior: str
+    behavior: str = ""
+    scenario: str = ""
     channel: int = 1
     stop_on_release: bool = False     # note off → behavior/stop
 
@@ -177,8 +179,11 @@ class NoteMapping:
         _range("note", self.note, 0, 127)
         _range("channel", self.channel, 1, 16)
         _robot(self.robot)
-        if not self.behavior:
-            raise bad("behavior", "is empty — name a behavior (sonibus send ROBOT behavior/list)")
+        if bool(self.behavior) == bool(self.scenario):
+            raise bad("behavior", "give exactly one of behavior (a behavior to run: sonibus send ROBOT "
+                                  "behavior/list) and scenario (a scenario of the robot's show)")
+        if self.scenario and self.stop_on_release:
+            raise bad("stop_on_release", "is for behaviors: a scenario runs to its end (a stop mapping stops it)")
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -224,7 +229,7 @@ class MidiControllerConfig:
     connect: str = ""                   # instead: an existing port, by name or part of it
     api: Api = "auto"
     cc: tuple[dict[str, Any], ...] = ()       # CcMapping: fader → joints/set
-    notes: tuple[dict[str, Any], ...] = ()    # NoteMapping: key → behavior/run
+    notes: tuple[dict[str, Any], ...] = ()    # NoteMapping: key → behavior/run, or a show's scenario
     program: tuple[dict[str, Any], ...] = ()  # ProgramMapping: program change → posture
     stop: tuple[dict[str, Any], ...] = ()     # StopMapping: note or CC → stop
     rate_hz: float = 20.0               # joints/set per robot per second at most (the newest values)

@@ -1,6 +1,7 @@
 """MIDI controller (adapter ``midi-in``): faders, keys and program changes from a
 MIDI input become robot commands, always through ``sonibus.bus.client.ask`` (so the
-robot validates them). Fader moves are coalesced to ``rate_hz`` per robot, sending
+robot validates them); a key mapped to a scenario asks the robot's show for it
+(``client.ask_program``). Fader moves are coalesced to ``rate_hz`` per robot, sending
 the newest value of every fader moved since the last command."""
 
 from __future__ import annotations
@@ -9,10 +10,11 @@ import logging
 import math
 import threading
 import time
+from collections.abc import Callable
 from typing import Any
 
 from sonibus.bus.adapter import Adapter
-from sonibus.bus.client import Outcome, ask
+from sonibus.bus.client import Outcome, ask, ask_program
 from sonibus.bus.errors import CommandError
 from sonibus.bus.info import InfoRequests
 from sonibus.bus.queue import SampleQueue
@@ -28,6 +30,8 @@ INFO = "\0info"
 
 class MidiController(Adapter):
     """A MIDI controller or a DAW drives robots: CC → joints, notes → behaviors, programs → postures.
+
+    A note may start a scenario of the robot's show instead of a behavior.
 
     A panic note or CC sends stop."""
 
@@ -50,7 +54,8 @@ class MidiController(Adapter):
         for robot in {m.robot for m in cfg.mappings("cc")}:
             self._info.ask(robot)
         self.spawn(self._work, "commands")
-        log.info("%s: MIDI in on %s", self.name, f"'{cfg.connect}'" if cfg.connect else f"virtual port '{cfg.port}'")
+        self.address = f"MIDI in on {f'{cfg.connect!r}' if cfg.connect else f'virtual port {cfg.port!r}'}"
+        log.info("%s: %s", self.name, self.address)
 
     def _receive(self, event: tuple[list[int], float], data: Any = None) -> None:
         self._queue.put(("midi", event[0]))   # rtmidi's thread: only enqueue
@@ -93,7 +98,10 @@ class MidiController(Adapter):
             handled = on and self._stop_robots(channel, note=message[1])
             for m in cfg.mappings("notes"):
                 if m.channel == channel and m.note == message[1]:
-                    if on:
+                    if on and m.scenario:
+                        self._command(f"note {m.note}", m.robot, "scenario", {"name": m.scenario, "by": "midi"},
+                                      ask_program)
+                    elif on:
                         self._command(f"note {m.note}", m.robot, "behavior/run", {"name": m.behavior})
                     elif m.stop_on_release:
                         self._command(f"note {m.note}", m.robot, "behavior/stop", {"name": m.behavior})
@@ -142,7 +150,9 @@ class MidiController(Adapter):
 
     # -- commands and info ------------------------------------------------------------
 
-    def _command(self, what: str, robot: str, verb: str, args: dict[str, Any]) -> None:
+    def _command(self, what: str, robot: str, verb: str, args: dict[str, Any],
+                 send: Callable[..., None] = ask) -> None:
+        """``verb`` to ``robot`` (``send``: ``ask_program`` for its show's scenarios)."""
         self.count("commands")
 
         def done(outcome: Outcome) -> None:
@@ -151,7 +161,7 @@ class MidiController(Adapter):
             else:
                 self.count("ok")
 
-        ask(self.bus, robot, verb, args, done, self.config.timeout)
+        send(self.bus, robot, verb, args, done, self.config.timeout)
 
     def _fail(self, what: str, message: str) -> None:
         self.count("errors")

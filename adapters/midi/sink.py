@@ -23,6 +23,8 @@ log = logging.getLogger(__name__)
 
 INFO_RETRY_S = 2.0
 HARDWARE_MESSAGES_PER_S = 1000   # 31250 baud / 30 bits per 3-byte message ≈ 1041
+MAX_ROBOTS = 64                  # robots played (16 channels): names made up on the bus must not grow the tables
+MAX_CONTROLLERS = 4096           # keys mapped (or found unmappable) at most
 INFO = "\0info"                  # queue items carrying a robot's info, so only the worker touches state
 
 
@@ -80,10 +82,12 @@ class MidiSink(Adapter):
         self._info = InfoRequests(self.bus, lambda robot, info: self._queue.put((INFO, (robot, info))),
                                   lambda robot, text: self.warn("info", text), INFO_RETRY_S)
         self._streams = self.own(Streams(self.bus, cfg.subscribe, self._queue, per_joint_keys=cfg.per_joint_keys))
-        self._presence = self.own(presence.connection_events(self.bus, self._queue, cfg.subscribe))  # loss, return
+        self._presence = self.own(presence.connection_events(self.bus, self._queue, cfg.subscribe,
+                                                             self.capped))  # loss, return
         self.spawn(lambda: self._presence.watch(self.stopping), "silence")
         self.spawn(self._forward, "forward")
-        log.info("%s: MIDI out on %s", self.name, f"'{cfg.connect}'" if cfg.connect else f"virtual port '{cfg.port}'")
+        self.address = f"MIDI out on {f'{cfg.connect!r}' if cfg.connect else f'virtual port {cfg.port!r}'}"
+        log.info("%s: %s", self.name, self.address)
 
     @property
     def channels(self) -> dict[str, int]:
@@ -126,10 +130,14 @@ class MidiSink(Adapter):
         message = self._streams.take(key, payload, self.count, self.warn)
         if message is None:
             return
+        if message.source.robot not in self._robots and len(self._robots) >= MAX_ROBOTS:
+            self.capped(f"robot '{message.source.robot}' not played: already {MAX_ROBOTS} robots (16 channels)")
+            return
         if message.source.section in ("frame", "joints"):
             self._presence.heard_from(message.source.robot)
         if message.event is not None:
-            self._event(message.source, message.event)
+            if self._presence.passes(message.source.robot, message.event):
+                self._event(message.source, message.event)
             return
         for sample in message.joints:
             self._sample(sample.source, sample.values[0], now)
@@ -189,6 +197,9 @@ class MidiSink(Adapter):
     def _controller(self, source: Key, robot: _Robot) -> _Controller | None:
         if source.key in self._controllers:
             return self._controllers[source.key]
+        if len(self._controllers) >= MAX_CONTROLLERS:
+            self.capped(f"key '{source.key}' not played: already {MAX_CONTROLLERS} keys mapped or not")
+            return None
         cfg: MidiSinkConfig = self.config
         entry = cfg.entries.get(source.key)
         controller = None
@@ -216,6 +227,8 @@ class MidiSink(Adapter):
         return controller
 
     def _learn(self, name: str, info: dict[str, Any]) -> None:
+        if name not in self._robots:  # (asked only of robots it took data of: it left meanwhile, or was capped)
+            return
         robot = self._robot(name)
         try:
             robot.ranges = {j["name"]: (float(j["min"]), float(j["max"])) for j in info.get("joints", [])}
@@ -257,7 +270,7 @@ class MidiSink(Adapter):
         cfg: MidiSinkConfig = self.config
         kind, state = str(message.get("kind") or source.name), str(message.get("state", ""))
         robot = self._robot(source.robot)
-        if kind == "connection" and state == "lost":
+        if kind == "connection" and state != "connected":  # lost, not answering...: no note may hang
             self._notes_off()
             return
         if not cfg.notes or kind not in ("behavior", "speech"):

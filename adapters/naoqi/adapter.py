@@ -3,8 +3,10 @@
 ``start()`` returns at once; the acquisition thread connects (retrying with
 backoff, one log line per outage), learns the robot (``discover``), then reads
 every joint once per frame until the link breaks or the node stops, and
-connects again. ``connection`` events say ``connected``/``lost``; a ``status``
-event every ``status_every_s`` gives the achieved rate and read latency.
+connects again. Its connection state (``bus/connection.py``) goes from
+``connecting`` to ``connected``, ``not_answering`` (no frame read for
+``answer_timeout_s``) and ``lost``; a ``status`` event every
+``status_every_s`` gives the achieved rate and read latency.
 With ``audio`` (and a robot that has ALAudioDevice) its microphones go to
 ``<robot>/audio/mic`` while anyone listens (``microphones``) and
 ``<robot>/audio/speaker`` is played on it (``speaker``)."""
@@ -51,6 +53,7 @@ class NaoqiRobot(RobotAdapter):
     Verbs = NaoqiCommands
     verbs: NaoqiCommands
     counters = ("mic_chunks", "mic_refused", *SPEAKER_COUNTERS)
+    first_state = "connecting"  # (the acquisition thread dials the robot once the node runs)
 
     def _open(self) -> None:
         self.model = load_model(self.config.model_name)  # until the robot tells its own
@@ -58,13 +61,17 @@ class NaoqiRobot(RobotAdapter):
         self.read_times = ReadTimes()
         self.events = RobotEvents(self.publish_event)
         self.link = Link(self.config, self._lost, self.stopping)
-        self.verbs = NaoqiCommands(self.link, self.events, lambda: self.model, self._down)
+        # (three frames at least: a robot read once a second is not silent between its frames)
+        self.connection.answer_s = max(self.config.answer_timeout_s, 3.0 / self.config.rate_hz)
+        self.connection.details = {"url": self.link.url}  # (in the first event, "connecting", too)
+        self.verbs = NaoqiCommands(self.link, self.events, lambda: self.model, self._down,
+                                   lambda: self.connection.state == "connected",
+                                   lambda since: self.connection.answered_since(since, self.stopping))
         self.facts: Robot | None = None
         self.frames_skipped = 0
         self._pacer: Pacer | None = None  # the streaming run going on
         self._halt = threading.Event()       # ends the current streaming run
         self._error = "not connected yet"
-        self._announced = ""                 # connection state last published
         self._seq, self._lost_at = -1, 0.0
         self.audio_present = False  # the robot connected now has ALAudioDevice
         self.microphones: Microphones | None = None
@@ -135,6 +142,7 @@ class NaoqiRobot(RobotAdapter):
         reader = self._reader(robot, polled)
         robot = dataclasses.replace(robot, source=reader.source)
         self.verbs.connected(robot.behaviors)
+        self.verbs.send_pending_stop()
         if self.microphones is not None:
             self._audio(self._has_audio())
         if self.config.pause_awareness:
@@ -201,14 +209,18 @@ class NaoqiRobot(RobotAdapter):
             self.count("mic_chunks")
 
     def _announce(self, state: str) -> None:
-        if state != self._announced:
-            self._announced = state
-            self.publish_event("connection", state=state, url=self.link.url,
-                               **({"error": self._error} if state == "lost" else {}))
+        self.connection.set(state, self._error if state == "lost" else "", url=self.link.url)
 
     def _down(self, what: str) -> CommandError:
-        return CommandError("failed", f"robot '{self.robot}' is not connected ({what}; last error: {self._error}); "
-                            f"retrying — check the robot is on and reachable at {self.link.url}")
+        return CommandError("not_connected", f"{what}: robot '{self.robot}' is not connected (last error: "
+                                             f"{self._error}) — {self.connection_hint()}")
+
+    def connection_hint(self) -> str:
+        return f"its owner retries; check the robot is on and reachable at {self.link.url}"
+
+    @property
+    def stop_pending(self) -> bool:  # type: ignore[override]  # (the verbs keep it)
+        return self.verbs.stop_pending
 
     # -- streaming --------------------------------------------------------------------
 

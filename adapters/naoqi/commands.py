@@ -4,12 +4,15 @@ arrive validated (``RobotAdapter``); what can block on the robot (``say``,
 most the connect timeout.
 
 Errors: a robot that refuses → ``failed`` with its message on one line; no
-robot → ``failed`` saying so."""
+robot → ``not_connected``; a call it did not answer in time → ``not_answering``.
+A ``stop`` that could not reach the robot is kept (``stop_pending``) and sent as
+soon as the robot answers again (``send_pending_stop``, on the next connection)."""
 
 from __future__ import annotations
 
 import logging
 import threading
+import time
 from collections.abc import Callable, Sequence
 from typing import Any
 
@@ -25,6 +28,7 @@ log = logging.getLogger(__name__)
 STOP_CALLS = (("ALBehaviorManager", "stopAllBehaviors"), ("ALMotion", "killAll"), ("ALMotion", "stopMove"),
               ("ALTextToSpeech", "stopAll"))
 RESTORE_TIMEOUT_MS = 800  # on stop: the node must end within about a second
+UNANSWERED_STOP_MS = 1000  # a stop sent to a robot that does not answer waits this long for it, not the connect timeout
 
 
 class Postures:
@@ -62,14 +66,25 @@ class NaoqiCommands:
     """Carries out validated commands on the robot behind ``link``."""
 
     def __init__(self, link: Link, events: RobotEvents, model: Callable[[], RobotModel],
-                 down: Callable[[str], CommandError]) -> None:
-        self.link, self.events, self.model, self.down = link, events, model, down
+                 down: Callable[[str], CommandError], answering: Callable[[], bool] = lambda: True,
+                 answered_since: Callable[[float], bool] = lambda since: True) -> None:
+        self.link, self.events, self.model, self.down, self.answering = link, events, model, down, answering
+        self.answered_since = answered_since  # (whether the robot answered anything after a time, waiting a bit)
+        self._stop_wanted = False          # a stop was asked and the robot has not done it yet
+        self._stop_sent: list[Any] = []    # ... its calls, sent to a robot that did not answer them (futures)
         self.postures = Postures(events.publish)
         self.installed: tuple[str, ...] = ()  # behaviors, as the robot last listed them
         self.voice_defaults: dict[str, float] = {}
         self._voice: dict[str, float] = {}
         self._awareness_paused = False   # by this adapter, to be resumed on stop
         self._paused_before: bool | None = None
+
+    @property
+    def stop_pending(self) -> bool:
+        """A stop that did not reach the robot: sent again on the next connection (``send_pending_stop``),
+        unless the robot answered its calls meanwhile (it was frozen, not gone)."""
+        sent = self._stop_sent
+        return self._stop_wanted and not (sent and all(f.isFinished() and not f.hasError() for f in sent))
 
     def connected(self, behaviors: Sequence[str]) -> None:
         """A (new) connection: its behaviors, and the voice settings it has now (the first ones are the defaults)."""
@@ -94,7 +109,9 @@ class NaoqiCommands:
         except LinkDown as exc:
             if not self.link.connected:
                 raise self.down(f"{verb}: {exc}") from None
-            raise CommandError("failed", f"{verb}: {exc}") from None  # e.g. a slow answer on a live link
+            if "no answer within" in str(exc):  # a live link, a robot that does not answer
+                raise CommandError("not_answering", f"{verb}: robot does not answer: {exc}") from None
+            raise CommandError("failed", f"{verb}: {exc}") from None
         except RemoteError as exc:
             raise CommandError("failed", f"{verb}: {exc}") from None
 
@@ -132,10 +149,19 @@ class NaoqiCommands:
         return {}
 
     def posture(self, name: str, speed: float) -> dict[str, Any]:
+        sent = time.monotonic()
         future = self._send("posture", "ALRobotPosture", "goToPosture", name, float(speed))
         token = self.postures.begin(name)
         future.then(lambda done: self._posture_done(name, token, done))
+        self._heard_after("posture", sent)
         return {"name": name}
+
+    def _heard_after(self, verb: str, sent: float) -> None:
+        """A call sent and not waited for (it returns once done) is answered ok only once the
+        robot answered something after it: one that froze a moment ago gets ``not_answering``."""
+        if not self.answered_since(sent):
+            raise CommandError("not_answering", f"{verb}: sent, but the robot has not answered anything since: it "
+                                                f"does not answer (it may still do it if it answers again)")
 
     def _posture_done(self, name: str, token: object, future: Any) -> None:
         if future.hasError():
@@ -149,12 +175,14 @@ class NaoqiCommands:
                 self._call("say", "ALTextToSpeech", method, *(("speed",) if key == "speed" else ()), float(wanted))
                 self._voice[key] = float(wanted)
         ahead = self.events.speech.queue(text)
+        sent = time.monotonic()
         try:
             future = self._send("say", "ALTextToSpeech", "say", text)
         except CommandError:
             self.events.speech.forget(text)
             raise
         future.then(lambda done: self._said(text, done))
+        self._heard_after("say", sent)
         return {"queued": ahead}
 
     def _said(self, text: str, future: Any) -> None:
@@ -176,10 +204,13 @@ class NaoqiCommands:
         return {"enabled": enabled, "previous": previous}
 
     def stop(self) -> dict[str, Any]:
-        """Every part is sent at once and each is waited for, whatever the others do."""
+        """Every part is sent at once and each is waited for, whatever the others do (at most
+        ``UNANSWERED_STOP_MS`` on a robot that does not answer). Not reached: kept for later."""
         self.events.speech.forget()
         self.postures.interrupt()
-        sent, failures = [], []
+        self._stop_wanted, self._stop_sent = True, []  # (until the robot has done every part)
+        wait_ms = None if self.answering() else UNANSWERED_STOP_MS
+        sent, failures, unanswered = [], [], []
         for service, method in STOP_CALLS:
             try:
                 sent.append((f"{service}.{method}", self.link.start(service, method)))
@@ -187,14 +218,34 @@ class NaoqiCommands:
                 failures.append(f"{service}.{method}: {exc}")
         for what, future in sent:
             try:
-                self.link.wait(future, what)
-            except (LinkDown, RemoteError) as exc:
+                self.link.wait(future, what, wait_ms)
+            except LinkDown as exc:
+                unanswered.append(str(exc))
+            except RemoteError as exc:
                 failures.append(str(exc))
         if not self.link.connected:
             raise self.down("stop")
+        if unanswered:  # sent: the robot does them if it answers again, else they go again on the next connection
+            self._stop_sent = [future for _, future in sent]
+            raise CommandError("not_answering", f"stop: robot does not answer: {'; '.join(unanswered)}")
+        self._stop_wanted = False
         if failures:
             raise CommandError("failed", f"stop: {'; '.join(failures)} (the other parts were done)")
         return {}
+
+    def send_pending_stop(self) -> None:
+        """On a new connection: the stop asked for while the robot could not be reached."""
+        if not self.stop_pending:
+            return
+        failures = []
+        for service, method in STOP_CALLS:
+            try:
+                self.link.call(service, method)
+            except (LinkDown, RemoteError) as exc:
+                failures.append(f"{service}.{method}: {exc}")
+        self._stop_wanted, self._stop_sent = bool(failures) and not self.link.connected, []
+        log.warning("sent the stop asked for while the robot could not be reached%s",
+                    f" — failed: {'; '.join(failures)}" if failures else "")
 
     # -- awareness held paused while the adapter runs ---------------------------------
 

@@ -39,6 +39,7 @@ class NaoqiConfig:
     extra: tuple[Quantity, ...] = ()    # more fields per joint sample: cmd, cur, temp
     pause_awareness: bool = False       # pause basic awareness while running, restore it on stop
     connect_timeout_s: float = 5.0      # a connect, or any call, that takes longer means the link is down
+    answer_timeout_s: float = 1.0       # no frame read for this long: "not answering", commands refused until one is
     retry_max_s: float = 10.0           # reconnect backoff grows from 0.25 s up to this
     status_every_s: float = 5.0         # a ``status`` event (achieved rate, read latency) this often
     audio: bool = True                  # <robot>/audio/mic and /speaker, if the robot has ALAudioDevice
@@ -62,7 +63,7 @@ class NaoqiConfig:
             raise bad("password", f"a password needs tcps://host:9503 (NAOqi 2.9), not {self.url}")
         if len(set(self.extra)) != len(self.extra):
             raise bad("extra", f"{list(self.extra)} names a quantity twice")
-        for key in ("connect_timeout_s", "retry_max_s", "status_every_s"):
+        for key in ("connect_timeout_s", "answer_timeout_s", "retry_max_s", "status_every_s"):
             if not getattr(self, key) > 0:
                 raise bad(key, f"{getattr(self, key):g} must be more than 0")
         if self.mic_rate not in MIC_RATES:

@@ -1,6 +1,7 @@
 """OSC command gateway (adapter ``osc-gateway``): ``/<robot>/cmd/<verb> args...`` over
-UDP (and TCP) becomes a command on the bus; the answer goes back to the sender as
-``/<robot>/reply/<verb> 1 "<result JSON>"`` or ``... 0 "<code>" "<message>"``.
+UDP (and TCP) becomes a command on the bus, ``/<robot>/program/<verb> args...`` a
+request to the robot's show (``/pepper/program/scenario "story"``); the answer goes
+back to the sender as ``/<robot>/reply/<verb> 1 "<result JSON>"`` or ``... 0 "<code>" "<message>"``.
 
 Packets are read as strictly as liblo reads them (``wire.messages``): nothing in a
 malformed packet runs, and each command in it is answered ``bad_request``.
@@ -22,7 +23,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from sonibus.bus.adapter import Adapter
-from sonibus.bus.client import Outcome, ask
+from sonibus.bus.client import Outcome, ask, ask_program
 from sonibus.bus.errors import CommandError, ConfigError
 from sonibus.bus.options import bad
 from sonibus.bus.queue import SampleQueue
@@ -209,7 +210,8 @@ class OscGateway(Adapter):
         found = routes.match(address)
         if found is None:
             self.count("unknown_address")
-            self.warn("unknown_address", f"ignored OSC {address[:80]}: not /<robot>/cmd/<verb>")
+            self.warn("unknown_address", f"ignored OSC {address[:80]}: not /<robot>/cmd/<verb> or "
+                                         "/<robot>/program/<verb>")
             return
         robot, verb = found.robot, found.sent
         try:
@@ -231,7 +233,10 @@ class OscGateway(Adapter):
                 self._pending -= 1
             self._answer(robot, verb, peer, outcome)
 
-        ask(self.bus, robot, found.route.verb, request, done, self.config.timeout)
+        if found.route.section == "program":  # a request to the robot's show (a scenario), said to come from OSC
+            ask_program(self.bus, robot, found.route.verb, {"by": "osc", **request}, done, self.config.timeout)
+        else:
+            ask(self.bus, robot, found.route.verb, request, done, self.config.timeout)
 
     def _command_failed(self, robot: str, verb: str, peer: Peer, error: CommandError) -> None:
         self.count("bad_args")

@@ -28,6 +28,7 @@ from .config import Target
 EVENT_ARGS: dict[str, tuple[str, ...]] = {
     "behavior": ("name", "state"), "speech": ("text", "state"), "posture": ("name", "state"),
     "connection": ("state",), "command": ("verb", "ok"),
+    "show": ("state",), "scenario": ("name", "state"),  # a show's (adapters/show): open/closed; a scenario's course
 }
 
 

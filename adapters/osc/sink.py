@@ -28,6 +28,7 @@ from .profiles import PROFILES, FrameBytes, Rendered
 log = logging.getLogger(__name__)
 
 INFO_RETRY_S = 2.0
+MAX_ROBOTS = 1024  # robots whose info (ranges) is kept: names made up on the bus must not grow it
 UNDESCRIBED_WAIT_S = 3.0  # a derived value no info describes is held back this long at most, then sent raw
 HEARD_EVERY_S = 0.5       # how often a robot's data is told to presence (its silence is warned of after 3 s)
 MAX_PLANS = 1024          # frame plans kept per target (joint lists come from the network)
@@ -91,13 +92,15 @@ class OscSink(Adapter):
         self._info = InfoRequests(self.bus, self._take_info, lambda robot, text: self.warn("info", text),
                                   INFO_RETRY_S)
         self._links = [_Link(t, _resolve(t.to)) for t in cfg.resolved_targets()]
+        self.address = "OSC to " + ", ".join(f"udp {t.to} ({t.profile})" for t in cfg.resolved_targets())
         self._sample_links = [link for link in self._links if not link.target.framed]
         self._frame_links = [link for link in self._links if link.target.framed]
         self._assembler = FrameAssembler()
         self.stats.follow("late", lambda: self._assembler.late)
         self._socket = self.own(socket.socket(socket.AF_INET, socket.SOCK_DGRAM))
         self._queue = self.own(SampleQueue(cfg.queue))
-        self._presence = presence.connection_events(self.bus, self._queue, cfg.subscribe)  # a robot's loss, return
+        self._presence = presence.connection_events(self.bus, self._queue, cfg.subscribe,
+                                                    self.capped)  # a robot's loss, return
         # Frames are taken where they arrive (a thread hand-off less: docs/performance.md), the rest
         # from the queue by the forward worker; one lock between them guards the sink's state.
         self._state = threading.Lock()
@@ -170,7 +173,8 @@ class OscSink(Adapter):
             self._heard[source.robot] = now
             self._presence.heard_from(source.robot)
         if message.event is not None:
-            self._event(source, message.event)
+            if self._presence.passes(source.robot, message.event):  # (a repeated connection state: not)
+                self._event(source, message.event)
             return
         max_age = self.config.max_age_ms / 1000.0
         age = time.time() - message.t
@@ -381,6 +385,10 @@ class OscSink(Adapter):
             self.warn("info", f"{robot}/info unusable: {exc}")
             return
         with self._state:
+            if robot not in self._ranges and len(self._ranges) >= MAX_ROBOTS:
+                self.capped(f"robot '{robot}': its info not kept, already {MAX_ROBOTS} robots' (its values go out "
+                            "raw)")
+                return
             self._ranges[robot] = ranges
             self._described[robot] = {str(d.get("name")) for d in info.get("derived", []) if isinstance(d, dict)}
             for link in self._links:  # (worked out again with these ranges)

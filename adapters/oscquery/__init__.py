@@ -39,6 +39,7 @@ __all__ = ["OscQuery", "OscQueryConfig"]
 log = logging.getLogger(__name__)
 
 SUBSCRIBE = ("*/joints/*", "*/derived/**", "*/events/*")
+MAX_SERVED = 64  # robots in the namespace (names made up on the bus must not grow it, nor its rebuilds)
 INFO_EVERY_S = 2.0  # how often the info of each robot on the bus is asked again (behaviors installed...)
 # The spec's optional attributes and notifications, and whether this server gives them.
 EXTENSIONS = {"ACCESS": True, "VALUE": True, "RANGE": True, "DESCRIPTION": True, "UNIT": True,
@@ -58,10 +59,10 @@ class OscQuery(Adapter):
     def _start(self) -> None:
         cfg: OscQueryConfig = self.config
         self.live = Live(normalized=cfg.values == "normalized")
-        self.web = WebServer(self, cfg.host, cfg.port, key="listen")
+        self.web = WebServer(self, cfg.host, cfg.port, key="listen", limits=cfg.limits, browsers=True)
         self.server = QueryServer(self, self.web, self.live, self._host_info())
         self._present: set[str] = set()
-        self._left_out: dict[str, dict[str, Any]] = {}  # robot → the unusable info it was left out for
+        self._left_out: dict[str, int] = {}  # robot → a fingerprint of the unusable info it was left out for
         self._present_lock = threading.Lock()
         self._info = InfoRequests(self.bus, self._take_info, lambda robot, text: self.warn("info", text),
                                   INFO_EVERY_S)
@@ -73,7 +74,7 @@ class OscQuery(Adapter):
         self._streams = Streams(self.bus, SUBSCRIBE, self._queue)
         self.spawn(self._forward, "forward")  # before anything else is declared: nothing waits in the queue
         self.own(self._streams)
-        self.own(watch_robots(self.bus, self._robot_changed))
+        self.own(watch_robots(self.bus, self._robot_changed, self.capped))
         self.spawn(self._refresh, "info")
         if cfg.mdns:
             self._advertise(cfg)
@@ -137,11 +138,15 @@ class OscQuery(Adapter):
         with self._present_lock:
             if robot not in self._present:  # it left while its info was on the way
                 return
+            if robot not in self.live.robots and len(self.live.robots) >= MAX_SERVED:
+                self.capped(f"robot '{robot}' not served: already {MAX_SERVED} robots in the namespace")
+                return
             try:
                 change = self.live.set_robot(robot, info)
             except (KeyError, TypeError, ValueError) as exc:
-                if self._left_out.get(robot) != info:  # (counted once per robot, until its info changes)
-                    self._left_out[robot] = info
+                fingerprint = hash(repr(info))  # (not the info itself: up to 1 MiB, for each robot on the bus)
+                if self._left_out.get(robot) != fingerprint:  # (counted once per robot, until its info changes)
+                    self._left_out[robot] = fingerprint
                     self.count("robots_left_out")
                 self.warn(f"info:{robot}", f"robot '{robot}' left out of the namespace: its info is unusable "
                                            f"({type(exc).__name__}: {exc})")

@@ -20,6 +20,7 @@ from sonibus.adapters.osc.config import parse_target
 from sonibus.adapters.osc.gateway import parse_endpoint
 from sonibus.bus.errors import ConfigError
 from sonibus.bus.options import bad
+from sonibus.bus.web import Limits
 
 MAX_NAME_BYTES = 63  # an mDNS instance name is one DNS label
 
@@ -35,6 +36,7 @@ class OscQueryConfig:
     mdns: bool = True                          # advertise _oscjson._tcp and the gateway's _osc._udp
     interfaces: tuple[str, ...] = ()           # IPv4 addresses mDNS binds to and advertises (default: the listen host)
     queue: int = 4096                          # samples waiting to be taken; past this the oldest are dropped
+    limits: Limits = field(default_factory=Limits)  # [nodes.<name>.limits]: connections, clients, timeout_s
     # ``listen`` and ``gateway`` as (IP address, port), their names resolved
     listen_address: tuple[str, int] = field(init=False, repr=False, compare=False)
     gateway_address: tuple[str, int] = field(init=False, repr=False, compare=False)

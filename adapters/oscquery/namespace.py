@@ -11,7 +11,7 @@ methods, and a ``Tree`` of those methods renders any node as the spec's JSON.
 ([{'VALS': ['Hey_1']}], 'N')
 >>> tree = Tree(methods)
 >>> sorted(tree.node("/pepper")["CONTENTS"])
-['cmd', 'events', 'joints']
+['cmd', 'events', 'joints', 'program']
 >>> set_ = tree.node("/pepper/cmd/joints/set")   # a method with methods below it: a container
 >>> set_["TYPE"], set_["ACCESS"], list(set_["CONTENTS"])
 ('sf', 0, ['HeadYaw'])
@@ -28,6 +28,7 @@ from typing import Any
 from sonibus import schemas
 from sonibus.adapters.osc import routes
 from sonibus.adapters.osc.profiles import EVENT_ARGS
+from sonibus.bus import connection
 
 Node = dict[str, Any]  # the OSCQuery attributes of one method (FULL_PATH and CONTENTS are the tree's)
 
@@ -35,15 +36,18 @@ READ, WRITE = 1, 2  # ACCESS
 # What an event kind's state argument can be (docs/osc.md, "Events"); its other strings are free.
 EVENT_STATES: dict[str, tuple[str, ...]] = {
     "behavior": ("started", "stopped", "failed"), "speech": ("started", "done"),
-    "posture": ("started", "reached", "interrupted"), "connection": ("connected", "lost"),
+    "posture": ("started", "reached", "interrupted"), "connection": connection.SAID,
     "motion": ("onset", "offset"), "conflict": ("standby", "owner"),
+    "show": ("open", "closed"), "scenario": ("started", "ended", "aborted"),
 }
 EVENT_HELP = {
     "behavior": "a behavior started or ended: name, state", "speech": "speech: text, state",
-    "posture": "a posture: name, state", "connection": "the owner lost or found the robot: state",
+    "posture": "a posture: name, state", "connection": "the robot's state as its owner says it: state",
     "command": "the owner answered a command: verb, 1 (ok) or 0 (refused)",
     "motion": "a chain started or stopped moving (a features node): chain, seq, state",
     "conflict": "two owners of the robot met: state (standby, or owner again)",
+    "show": "the robot's show opened or closed (a show node): state",
+    "scenario": "a scenario of the robot's show started, ended or was aborted: name, state",
 }
 # The spec's names (OSCQueryProposal's units.md) for the units robots and processors give; a unit it has no
 # name for ("fraction", "rad/s") is served as it is.
@@ -51,7 +55,8 @@ SPEC_UNITS = {"rad": "angle.radian", "deg": "angle.degree", "m": "distance.m", "
               "mm": "distance.mm", "m/s": "speed.m/s", "km/h": "speed.km/h", "s": "time.second", "ms": "time.ms",
               "Hz": "time.hz"}
 SECTION_HELP = {"joints": "joint angles", "derived": "derived values (a features node)", "events": "events",
-                "cmd": "commands, sent to the OSC gateway's port (OSC_PORT)"}
+                "cmd": "commands, sent to the OSC gateway's port (OSC_PORT)",
+                "program": "requests to the robot's show (a scenario), sent to the OSC gateway's port (OSC_PORT)"}
 _TAGS = {bool: "i", int: "i", float: "f", str: "s"}  # (bools go as 0/1: event_args sends them so)
 _ACCEPTS = {"s": (str,), "i": (int,), "f": (int, float)}  # the Python types a served value of a tag may have
 

@@ -7,6 +7,12 @@ port takes the same queries as text (``/path?ATTR``, answered as text, as liboss
 clients ask) and ``{"COMMAND": "LISTEN"|"IGNORE", "DATA": path}``: a listened path's values
 go to that client as binary OSC messages, and every client hears ``PATH_ADDED``,
 ``PATH_REMOVED`` and ``PATH_CHANGED`` (``{"COMMAND": ..., "DATA": path}``).
+
+Within the ``WebServer``'s limits (connections, clients, timeouts) and its browser
+check (a page of another site, or a name that is not this machine's, gets 403: a web
+page the operator opens must not read the robots' values). A client may listen to
+``MAX_LISTENS`` paths, of which ``MAX_UNSERVED`` not served (yet): a path the namespace
+serves is held once (interned) whoever listens, so clients cost little and give it back.
 """
 
 from __future__ import annotations
@@ -16,12 +22,13 @@ import contextlib
 import functools
 import json
 import re
+import sys
 from collections.abc import Iterable
 from typing import TYPE_CHECKING, Any
 
-from aiohttp import WSMsgType, web
+from aiohttp import WSMessage, WSMsgType, web
 
-from sonibus.bus.web import CLOSE_WAIT_S, WebClient, WebServer, close_clients
+from sonibus.bus.web import WebClient, WebServer, close_clients
 
 from .live import Live
 
@@ -33,6 +40,7 @@ ATTRIBUTES = frozenset({"FULL_PATH", "CONTENTS", "TYPE", "ACCESS", "VALUE", "RAN
 MAX_WS_TEXT = 4096        # characters of one client command; longer ones are refused (counted as bad)
 MAX_WS_MESSAGE = 1 << 20  # bytes; aiohttp closes a connection that sends more in one message (code 1009)
 MAX_LISTENS = 4096        # paths one client may listen to
+MAX_UNSERVED = 64         # of which not served when LISTENed (each held for that client alone)
 MAX_ADDRESS = 1024        # characters of a LISTENed path
 HEARTBEAT_S = 10.0        # a ping this often; a client that does not answer within half of it is dropped
 # A LISTENed path: printable ASCII without space or '#' (OSC reserves it for bundles); no control character
@@ -99,26 +107,23 @@ class QueryServer:
         return 200, {attribute: node[attribute]}
 
     async def _websocket(self, request: web.Request) -> web.WebSocketResponse:
-        ws = web.WebSocketResponse(timeout=CLOSE_WAIT_S, max_msg_size=MAX_WS_MESSAGE, heartbeat=HEARTBEAT_S)
-        await ws.prepare(request)
-        client = _Client(ws, request.transport, self.adapter)
-        self._clients.add(client)
-        self.adapter.count("ws_clients")
-        sender = asyncio.create_task(client.send_all())
-        try:
-            async for message in ws:
-                if message.type == WSMsgType.TEXT:
-                    self._command(client, message.data)
-                elif message.type == WSMsgType.BINARY:
-                    self._bad(f"a binary WebSocket message of {len(message.data)} bytes (values are set "
-                              "through the gateway's UDP port, OSC_PORT in HOST_INFO)")
-        finally:
-            self._clients.discard(client)
-            self._ignore(client, list(client.listens))
-            sender.cancel()
-            with contextlib.suppress(asyncio.CancelledError):
-                await sender
+        async with self.web.accept(request, max_msg_size=MAX_WS_MESSAGE, heartbeat=HEARTBEAT_S) as ws:
+            client = _Client(ws, request.transport, self.adapter)
+            self._clients.add(client)
+            self.adapter.count("ws_clients")
+            try:
+                await self.web.serve_client(ws, client, lambda message: self._receive(client, message))
+            finally:
+                self._clients.discard(client)
+                self._ignore(client, list(client.listens))
         return ws
+
+    def _receive(self, client: _Client, message: WSMessage) -> None:
+        if message.type == WSMsgType.TEXT:
+            self._command(client, message.data)
+        elif message.type == WSMsgType.BINARY:
+            self._bad(f"a binary WebSocket message of {len(message.data)} bytes (values are set through the "
+                      "gateway's UDP port, OSC_PORT in HOST_INFO)")
 
     def _command(self, client: _Client, text: str) -> None:
         if len(text) > MAX_WS_TEXT:
@@ -151,19 +156,30 @@ class QueryServer:
         if name == "IGNORE":
             self._ignore(client, [path])
         elif path not in client.listens:
-            if len(client.listens) >= MAX_LISTENS:
-                self._bad(f"LISTEN {path[:80]!r}: a client may listen to at most {MAX_LISTENS} paths")
+            self._listen(client, path)
+
+    def _listen(self, client: _Client, path: str) -> None:
+        if len(client.listens) >= MAX_LISTENS:
+            self._bad(f"LISTEN {path[:80]!r}: a client may listen to at most {MAX_LISTENS} paths")
+            return
+        if path not in self.live:  # kept: it streams once a robot serves it
+            if len(client.unserved) >= MAX_UNSERVED:
+                self._bad(f"LISTEN {path[:80]!r}: not served, and this client already listens to "
+                          f"{MAX_UNSERVED} paths that were not")
                 return
-            if path not in self.live:  # kept: it streams once a robot serves it
-                self.adapter.warn("listen", f"LISTEN {path[:80]!r}: no such node (yet); its values come when "
-                                            "it is served")
-            client.listens.add(path)
-            self.listened[path] = self.listened.get(path, 0) + 1
+            self.adapter.warn("listen", f"LISTEN {path[:80]!r}: no such node (yet); its values come when it is "
+                                        "served")
+            client.unserved.add(path)
+        else:
+            path = sys.intern(path)  # (one string per served path, however many clients listen)
+        client.listens.add(path)
+        self.listened[path] = self.listened.get(path, 0) + 1
 
     def _ignore(self, client: _Client, paths: Iterable[str]) -> None:
         for path in paths:
             if path in client.listens:
                 client.listens.discard(path)
+                client.unserved.discard(path)
                 left = self.listened.get(path, 1) - 1
                 if left:
                     self.listened[path] = left
@@ -195,3 +211,4 @@ class _Client(WebClient):
     def __init__(self, ws: web.WebSocketResponse, transport: asyncio.Transport | None, adapter: Adapter) -> None:
         super().__init__(ws, lambda: adapter.count("ws_dropped"), transport)
         self.listens: set[str] = set()
+        self.unserved: set[str] = set()  # those not served when LISTENed (at most MAX_UNSERVED)

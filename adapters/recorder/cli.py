@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import os
 import threading
@@ -13,12 +14,15 @@ from collections.abc import Callable
 from sonibus.bus import keys, runner
 from sonibus.bus.cli import robot as live_robot
 from sonibus.bus.cli.api import Command, Environment, Exit, bus_config
+from sonibus.bus.cli.hints import reach_hint
 from sonibus.bus.errors import ConfigError
+from sonibus.bus.node import Bus
+from sonibus.bus.session import links
 
 from .export import export_csv
 from .plot import plot
-from .reading import Recording, RecordingError, recover
-from .recorder import Recorder, RecorderConfig, describe
+from .reading import Recording, RecordingError, StillRecording, head, recover
+from .recorder import EVERYTHING, MICROPHONES, Recorder, RecorderConfig, describe
 from .replay import Replay, ReplayConfig
 from .wav import audio_keys, export_wav
 
@@ -46,13 +50,18 @@ def _while_running(env: Environment, line: Callable[[], str], done: Callable[[],
 
 
 def _run(adapter: Recorder | Replay, args: argparse.Namespace, env: Environment,
-         line: Callable[[], str], done: Callable[[], bool] = lambda: False, every_s: float = 1.0) -> None:
+         line: Callable[[], str], done: Callable[[], bool] = lambda: False, every_s: float = 1.0,
+         on_bus: Callable[[Bus], None] = lambda bus: None) -> None:
     """Run ``adapter`` with a status line until it is ``done()`` or stopped; Ctrl-C
     and SIGTERM are the normal way to end it (the caller reports what was done)."""
     status: list[threading.Thread] = []
+
+    def started(bus: Bus) -> None:
+        on_bus(bus)
+        status.append(_while_running(env, line, done, every_s))
+
     try:
-        runner.run([adapter], bus_config(args), env.stop,
-                   on_started=lambda bus: status.append(_while_running(env, line, done, every_s)))
+        runner.run([adapter], bus_config(args), env.stop, on_started=started)
     except KeyboardInterrupt:
         pass
     finally:
@@ -67,9 +76,17 @@ def _run(adapter: Recorder | Replay, args: argparse.Namespace, env: Environment,
 def _record_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("file", metavar="FILE.mcap")
     p.add_argument("keyexpr", nargs="*", metavar="KEYEXPR",
-                   help="what to record (default: joints, derived values and events of every robot)")
+                   help=f"what to record (default: {' '.join(EVERYTHING)}: joints, derived values and events of "
+                        "every robot, and each robot's info; no audio: microphones only when named, e.g. "
+                        f"'{MICROPHONES}')")
     p.add_argument("--force", action="store_true", help="overwrite FILE if it exists")
     p.add_argument("--duration", type=float, metavar="S", help="stop after S seconds")
+    p.add_argument("--rotate-s", type=float, default=0.0, metavar="S",
+                   help="a new file every S seconds (FILE needs {time}, e.g. show-{time}.mcap)")
+    p.add_argument("--rotate-mb", type=float, default=0.0, metavar="MB",
+                   help="a new file once one holds MB megabytes (FILE needs {time})")
+    p.add_argument("--min-free-mb", type=float, default=RecorderConfig.min_free_mb, metavar="MB",
+                   help="stop, the file finished, when the disk has less free (default: %(default)g; 0: never)")
     p.add_argument("--per-joint-keys", action="store_true",
                    help="record joint keys as published, not from frames (for publishers that put no frames)")
     p.add_argument("--no-foxglove", dest="foxglove", action="store_false",
@@ -80,16 +97,43 @@ def _record_arguments(p: argparse.ArgumentParser) -> None:
 
 def _record(args: argparse.Namespace, env: Environment) -> Exit:
     options = {"subscribe": tuple(args.keyexpr)} if args.keyexpr else {}
+    flags = {"rotate_s": "--rotate-s", "rotate_mb": "--rotate-mb", "min_free_mb": "--min-free-mb"}
     try:
         config = RecorderConfig(path=args.file, overwrite=args.force, status_every_s=0,
-                                per_joint_keys=args.per_joint_keys, foxglove=args.foxglove, **options)
-    except ConfigError as exc:  # named as the node would be at start
-        raise ConfigError(f"node 'record': {exc}") from None
+                                per_joint_keys=args.per_joint_keys, foxglove=args.foxglove, rotate_s=args.rotate_s,
+                                rotate_mb=args.rotate_mb, min_free_mb=args.min_free_mb,
+                                warn_free_mb=max(RecorderConfig.warn_free_mb, args.min_free_mb), **options)
+    except ConfigError as exc:  # named as the node would be at start, or by its flag
+        key, _, problem = str(exc).removeprefix("key '").partition("': ")
+        raise ConfigError(f"{flags[key]} {problem}" if key in flags else f"node 'record': {exc}") from None
     recorder = Recorder(config, name="record")
     deadline = time.monotonic() + args.duration if args.duration else None
-    _run(recorder, args, env, lambda: "recording " + describe(recorder.status()),
-         lambda: deadline is not None and time.monotonic() >= deadline, args.status_every)
-    env.say("recorded " + describe(recorder.status()))
+    bus: list[Bus] = []
+    reached: list[str] = []
+
+    def done() -> bool:
+        if bus:
+            reached[:] = links(bus[0].session)  # (for the hint, should nothing come)
+        return bool(recorder.paused) or (deadline is not None and time.monotonic() >= deadline)
+
+    _run(recorder, args, env, lambda: "recording " + describe(recorder.status()), done, args.status_every,
+         on_bus=bus.append)
+    status = recorder.status()
+    if recorder.paused:  # the disk: the file is finished (or only closed) as far as it got
+        env.say("recorded " + describe({**status, "paused": ""}))
+        print(f"sonibus: error: node 'record': {recorder.paused}", file=env.stderr, flush=True)
+        return Exit.ERROR
+    if status["messages"] == 0:  # a recording that heard nothing is no recording: said, and not left behind
+        for path in recorder.files:
+            with contextlib.suppress(OSError):
+                os.unlink(path)
+        print(f"sonibus: error: recorded nothing in {status['duration_s']:.1f} s: no message on "
+              f"{' '.join(config.subscribe)}; {recorder.path} removed", file=env.stderr, flush=True)
+        env.hint(reach_hint(bus_config(args), reached, "nothing came") if not reached else
+                 f"this command reached {len(reached)} peer(s)/router(s): is a robot's node running there (sonibus "
+                 "nodes)? A robot that is not connected sends nothing; or name what it publishes (KEYEXPR)")
+        return Exit.NOT_FOUND
+    env.say("recorded " + describe(status))
     return Exit.OK
 
 
@@ -171,7 +215,11 @@ def _info_arguments(p: argparse.ArgumentParser) -> None:
 def _info(args: argparse.Namespace, env: Environment) -> Exit:
     if _robot_name(args.file):
         return live_robot.show(args.file, args, env, args.json, args.timeout)
-    with Recording(args.file) as recording:
+    try:
+        recording = Recording(args.file)
+    except StillRecording as live:
+        return _info_live(live, args, env)
+    with recording:
         infos = recording.infos()
         facts = {
             "file": args.file, "bytes": os.path.getsize(args.file),
@@ -190,7 +238,9 @@ def _info(args: argparse.Namespace, env: Environment) -> Exit:
     env.say(f"{args.file}: {facts['bytes'] / 1e6:.2f} MB, {facts['messages']} messages, "
             f"{facts['duration_s']:.2f} s from {started}")
     if facts["recorder"]:
-        env.say(f"  recorded by {facts['recorder'].get('node', '?')} on {facts['recorder'].get('host', '?')}, "
+        about = facts["recorder"]
+        part = f", file {about['part']} (after {about['previous']})" if about.get("previous") else ""
+        env.say(f"  recorded by {about.get('node', '?')} on {about.get('host', '?')}{part}, "
                 f"dropped {facts['stats'].get('dropped', '?')}")
     for robot, about in facts["robots"].items():
         rate = f"{about['rate_hz']:g} frames/s" if about["rate_hz"] else "no info"
@@ -198,6 +248,20 @@ def _info(args: argparse.Namespace, env: Environment) -> Exit:
     width = max(len(k) for k in facts["keys"])
     for key, about in facts["keys"].items():
         env.say(f"    {key:<{width}}  {about['messages']:>8}  {about['rate_hz']:8.1f}/s")
+    return Exit.OK
+
+
+def _info_live(live: StillRecording, args: argparse.Namespace, env: Environment) -> Exit:
+    """``info`` on a file a recorder is writing: who writes it, since when; no summary yet."""
+    about = head(live.path)
+    if args.json:
+        env.say(json.dumps({"file": live.path, "bytes": live.size, "being_written": True, "recorder": about},
+                           indent=2))
+        return Exit.OK
+    by = f", by {about.get('node', '?')} on {about.get('host', '?')} since {about['started']}" \
+        if "started" in about else ""
+    env.say(f"{live.path}: being written{by}, {live.size / 1e6:.2f} MB so far (a recorder that is running holds "
+            "it); its summary comes when the recorder closes it, at its next file or when it stops")
     return Exit.OK
 
 

@@ -40,6 +40,7 @@ from mcap.stream_reader import StreamReader, get_chunk_data_stream
 from sonibus.bus import keys
 from sonibus.bus.errors import SonibusError
 
+from . import lock
 from .channels import AUDIO_ENCODING, MESSAGE_ENCODING, from_data, is_view
 from .writer import METADATA_RECORDING, BadRecord, RecordingWriter
 
@@ -50,6 +51,17 @@ DAMAGE = (McapError, ValueError, EOFError, MemoryError, OverflowError, struct.er
 
 class RecordingError(SonibusError):
     """A file that is not a usable recording; the message says why and what to do."""
+
+
+class StillRecording(RecordingError):
+    """A file a recorder is writing now (it holds the file's lock, ``lock.py``): whole
+    once it is closed, not torn."""
+
+    def __init__(self, path: str, size: int) -> None:
+        super().__init__(f"{path} is being written: a recorder that is running holds it ({size / 1e6:.2f} MB so "
+                         "far); it can be read once the recorder closes it (at its next file, or when it stops) — "
+                         f"'sonibus recover {path} -o COPY.mcap' copies what it holds so far")
+        self.path, self.size = path, size
 
 
 @dataclass(frozen=True)
@@ -179,7 +191,24 @@ def _check_file(path: str) -> None:
     if not MAGIC.startswith(head):  # (a file cut inside its magic is truncated, not foreign)
         raise RecordingError(f"{path} is not an MCAP file (it starts with {head[:8]!r})")
     if tail != MAGIC or size < 2 * len(MAGIC):
+        if lock.held(path):
+            raise StillRecording(path, size)
         raise RecordingError(f"{path} is truncated: " + _RECOVER.format(path=path))
+
+
+def head(path: str) -> dict[str, str]:
+    """The ``sonibus.recording`` metadata at the start of ``path`` (who writes it, since
+    when), read without the summary a file being written does not have yet; {} if none."""
+    try:
+        with open(path, "rb") as f:
+            for record in StreamReader(f, skip_magic=False, emit_chunks=True).records:
+                if isinstance(record, Metadata) and record.name == METADATA_RECORDING:
+                    return dict(record.metadata)
+                if isinstance(record, Chunk):
+                    break
+    except (OSError, *DAMAGE):
+        pass
+    return {}
 
 
 def _message(channel: Channel, message: McapMessage) -> Message:

@@ -131,6 +131,7 @@ class Replay(Adapter):
         self.spawn(self._play, "play")
 
     def _info(self, info: dict[str, Any], name: str) -> dict[str, Any]:
+        info = {k: v for k, v in info.items() if k != "connection"}  # (the recorded owner's state: not this one's)
         return {**info, "robot": name, "owner": {"host": self.bus.host, "node": self.name},
                 "replay": {"file": os.path.basename(self.config.path), "robot": info.get("robot", name),
                            "speed": self.config.speed}}

@@ -39,6 +39,7 @@ from mcap.writer import CompressionType, Writer
 
 from sonibus.bus.errors import SonibusError
 
+from . import lock
 from .channels import AUDIO_ENCODING, PROFILE, SCHEMA_ENCODING, channel_schema, encoding_of, to_data
 
 METADATA_RECORDING = "sonibus.recording"
@@ -66,11 +67,12 @@ class RecordingWriter:
         self.messages = 0
         self.closed = False
         self.failed = False  # a WriteError happened: the file is only closed, never finished
-        self._file: BinaryIO = self._do(open, path, "wb")
+        self._file: BinaryIO = self._do(_open_locked, path)
         self._writer = Writer(self._file, chunk_size=chunk_bytes, compression=CompressionType.ZSTD)
         self._do(self._writer.start, profile=PROFILE, library=f"sonibus {version('sonibus')}")
         if metadata is not None:
             self.add_metadata(METADATA_RECORDING, metadata)
+        self._do(self._file.flush)  # (the head is on disk at once: `sonibus info` says who writes the file)
         self._schemas: dict[str | None, int] = {None: 0}
         self._channels: dict[str, int] = {}
         self._sequence: dict[int, int] = {}
@@ -161,6 +163,21 @@ class RecordingWriter:
 
     def __exit__(self, *exc: object) -> None:
         self.close()
+
+
+def _open_locked(path: str) -> BinaryIO:
+    """``path`` opened for writing from its start, under the writer's lock (``lock.py``),
+    taken before the file is emptied: a file another recorder writes is left alone."""
+    fd = os.open(path, os.O_WRONLY | os.O_CREAT, 0o644)
+    try:
+        if not lock.hold(fd):
+            raise WriteError(f"cannot write {path}: another recorder is writing it (it holds the file's lock) — "
+                             "give this one another path")
+        os.ftruncate(fd, 0)
+        return os.fdopen(fd, "wb")
+    except BaseException:
+        os.close(fd)
+        raise
 
 
 def _data(key: str, message: Any) -> bytes:

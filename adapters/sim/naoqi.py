@@ -13,10 +13,13 @@ robot, and test the ``naoqi`` adapter against it.
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import random
 import threading
 import time
+from collections import Counter
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from typing import Any, Literal
 
@@ -32,6 +35,7 @@ from .naoqi_services import MEMORY, QUANTITIES, SERVICES, ALBehaviorManager, ALM
 log = logging.getLogger(__name__)
 
 BODY_TYPES = {"pepper": "Pepper", "nao": "Nao"}
+DRAIN_S = 2.0  # the stop waits this long at most for the calls in flight to return
 
 
 @dataclass(frozen=True)
@@ -91,6 +95,8 @@ class FakeNaoqi:
         self._thread: threading.Thread | None = None
         self._session: Any = None
         self.services: dict[str, Any] = {}
+        self._calls: Counter[str] = Counter()  # calls in flight, by method (``serving``)
+        self._calls_changed = threading.Condition()
 
     @property
     def url(self) -> str:
@@ -127,25 +133,62 @@ class FakeNaoqi:
     def resume(self) -> None:
         self.answering.set()
 
-    def wait_answering(self) -> None:
-        """Hold a call while the robot is frozen (until it resumes or stops)."""
+    def wait_answering(self) -> bool:
+        """Hold a call while the robot is frozen: True once it answers, False once it stops."""
         while not self.answering.wait(0.1) and not self._stop.is_set():
             pass
+        return not self._stop.is_set()
+
+    def until(self, finished: Callable[[], bool], what: str) -> None:
+        """Hold a blocking call (``say`` until the text is spoken) until ``finished()``;
+        ``RuntimeError`` once the robot stops: its engine no longer moves, so a wait
+        for it would never end, and a call that libqi's thread still runs when the
+        interpreter exits crashes the process."""
+        while not finished():
+            if self._stop.wait(0.01):
+                self._check_running(what)
+
+    def _check_running(self, what: str) -> None:
+        if self._stop.is_set():
+            raise RuntimeError(f"{what}: NAOqi is shutting down")
+
+    @contextlib.contextmanager
+    def serving(self, method: str) -> Iterator[None]:
+        """Count a call in flight (see ``stop``); ``RuntimeError`` at once for one that comes after the stop."""
+        with self._calls_changed:
+            self._check_running(method)
+            self._calls[method] += 1
+        try:
+            yield
+        finally:
+            with self._calls_changed:
+                self._calls[method] -= 1
+                self._calls_changed.notify_all()
 
     def stop(self) -> None:
-        self._stop.set()
+        """Stop the robot, close its session and wait (``DRAIN_S`` at most) for the calls in
+        flight to return: each ends at once (``until``, ``wait_answering``). A blocking call
+        left running in one of libqi's threads (a ``say`` sent before Ctrl-C, a call held by
+        a freeze) went on into the interpreter's exit, and the process ended with a
+        segmentation fault or "FATAL: exception not rethrown" (issue 25)."""
+        with self._calls_changed:
+            self._stop.set()
         self.answering.set()
         if self._thread is not None:
             self._thread.join(2.0)
         audio: ALAudioDevice | None = self.services.get("ALAudioDevice")
         if audio is not None:
             audio.stop()
-            if self.config.played_wav:
-                log.info("fake NAOqi at %s: %d frames played, written to %s", self.url,
-                         audio.dumpPlayed(self.config.played_wav), self.config.played_wav)
         if self._session is not None:
-            self._session.close()
-            self._session = None
+            self._session.close()  # no call comes in any more
+        with self._calls_changed:
+            if not self._calls_changed.wait_for(lambda: not +self._calls, DRAIN_S):
+                log.warning("fake NAOqi at %s: calls still running %g s after its stop: %s", self.url, DRAIN_S,
+                            ", ".join(f"{m} ×{n}" for m, n in (+self._calls).items()))
+        self._session = None  # (freed only now: no call runs on it any more)
+        if audio is not None and self.config.played_wav:
+            log.info("fake NAOqi at %s: %d frames played, written to %s", self.url,
+                     audio.dump(self.config.played_wav), self.config.played_wav)
         self.services.clear()  # services hold qi signals: alive at interpreter exit, libqi aborts
 
     def memory_value(self, key: str) -> Any:

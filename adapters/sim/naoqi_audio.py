@@ -124,7 +124,8 @@ class ALAudioDevice(_Service):
         period = frames_48k / OUTPUT_RATE
 
         def tick(_: int) -> None:
-            self.fake.wait_answering()
+            if not self.fake.wait_answering():
+                return
             stamp = time.time() + self.fake.config.clock_offset_s - period  # the buffer's first sample
             speeds = self.engine.speeds()
             with self._lock:
@@ -184,6 +185,11 @@ class ALAudioDevice(_Service):
     @delayed
     def dumpPlayed(self, path: str) -> int:
         """Write what it played to ``path`` (WAV, 48 kHz, 16-bit stereo); the frames written."""
+        return self.dump(path)
+
+    @qi.nobind
+    def dump(self, path: str) -> int:
+        """``dumpPlayed``, called in this process (by the fake's stop, when no call is taken any more)."""
         samples = self.played()
         with wave.open(str(path), "wb") as out:
             out.setnchannels(OUTPUT_CHANNELS)

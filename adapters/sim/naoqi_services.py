@@ -27,16 +27,20 @@ def f32(value: float) -> float:
 
 def delayed(method: Callable[..., Any]) -> Callable[..., Any]:
     """Every call costs the endpoint's simulated network delay (and waits while it is frozen);
-    engine refusals become remote errors."""
+    engine refusals become remote errors. Counted while in flight (``FakeNaoqi.serving``): the
+    fake's stop waits for them, since a call libqi's threads are still running in Python when
+    the interpreter exits crashes the process."""
     @functools.wraps(method)
     def call(self: Any, *args: Any) -> Any:
-        self.fake.wait_answering()
-        if self.fake.delay_s:
-            time.sleep(self.fake.delay_s)
-        try:
-            return method(self, *args)
-        except CommandError as exc:
-            raise RuntimeError(exc.message) from None
+        with self.fake.serving(method.__qualname__):
+            if not self.fake.wait_answering():
+                raise RuntimeError(f"{method.__qualname__}: NAOqi is shutting down")
+            if self.fake.delay_s:
+                time.sleep(self.fake.delay_s)
+            try:
+                return method(self, *args)
+            except CommandError as exc:
+                raise RuntimeError(exc.message) from None
     return call
 
 
@@ -111,8 +115,7 @@ class ALMotion(_Service):
     def angleInterpolationWithSpeed(self, names: Any, angles: Any, fraction: float) -> None:
         names = _listed(names)
         self.engine.joints_set(names, _listed(angles), fraction)
-        while self.engine.body.moving(names):
-            time.sleep(0.01)
+        self.fake.until(lambda: not self.engine.body.moving(names), "ALMotion::angleInterpolationWithSpeed")
 
     @delayed
     def setStiffnesses(self, names: Any, value: Any) -> None:
@@ -152,9 +155,8 @@ class ALRobotPosture(_Service):
         if name not in self.engine.model.postures:
             raise RuntimeError(f"ALRobotPosture::goToPosture: unknown posture {name}")
         self.engine.posture(name, speed)
-        while (reached := self.engine.posture_done(name)) is None:
-            time.sleep(0.01)
-        return reached  # False when interrupted, as NAOqi answers
+        self.fake.until(lambda: self.engine.posture_done(name) is not None, "ALRobotPosture::goToPosture")
+        return bool(self.engine.posture_done(name))  # False when interrupted, as NAOqi answers
 
     @delayed
     def stopMove(self) -> None:
@@ -194,8 +196,7 @@ class ALBehaviorManager(_Service):
     @delayed
     def runBehavior(self, name: str) -> None:
         self.startBehavior(name)
-        while self.engine.running_behavior == name:
-            time.sleep(0.01)
+        self.fake.until(lambda: self.engine.running_behavior != name, "ALBehaviorManager::runBehavior")
 
     @delayed
     def stopBehavior(self, name: str) -> None:
@@ -216,8 +217,8 @@ class ALTextToSpeech(_Service):
     @delayed
     def say(self, text: str) -> None:
         utterance = self.engine.speak(text, self.volume, self.parameters["speed"])
-        while self.engine.still_to_say(utterance):  # returns when this text is spoken, as NAOqi does
-            time.sleep(0.01)
+        # returns when this text is spoken, as NAOqi does
+        self.fake.until(lambda: not self.engine.still_to_say(utterance), "ALTextToSpeech::say")
 
     @delayed
     def setVolume(self, volume: float) -> None:

@@ -24,16 +24,20 @@ from typing import Any
 
 import zenoh
 
-from sonibus.bus import keys
+from sonibus.bus import connection, keys
 from sonibus.bus.adapter import Adapter
 from sonibus.bus.info import InfoRequests
+from sonibus.bus.messages import Gate
+from sonibus.bus.monitor import LOSSES
 from sonibus.bus.ownership import owners
 from sonibus.bus.pacing import Pacer
 from sonibus.bus.presence import watch_robots
 from sonibus.bus.queue import SampleQueue
 from sonibus.bus.streams import Incoming, Streams
+from sonibus.bus.text import printable
 from sonibus.bus.web import WebServer
 
+from . import auth
 from .config import WebConfig
 from .server import Pages
 
@@ -45,6 +49,12 @@ INFO_EVERY_S = 2.0   # how often each robot's info is asked again (behaviors ins
 GONE_AFTER_S = 3.0   # a node whose stats have not come for this long is shown gone
 FORGET_AFTER_S = 60.0  # ... and left out after this
 STATS_EVERY_S = 1.0    # how often the pages get the nodes' stats
+# Names from the bus the node keeps (made-up ones must not grow it, nor what every page gets each second):
+MAX_SHOWN = 32         # robots shown on the operator's page
+MAX_NODES = 128        # nodes whose stats are shown
+MAX_FIGURES = 32        # counters, and rates, shown of one node (the page shows 6 of them)
+MAX_BEHAVIORS = 1000   # behaviors (and postures) of one robot shown
+STATS_QUEUE = 256      # nodes' stats waiting (each up to 64 KiB); past this the oldest are dropped
 
 
 class WebPages(Adapter):
@@ -52,7 +62,7 @@ class WebPages(Adapter):
 
     Config = WebConfig
     counters = ("clients", "commands", "refused", "frames_pushed", "frames_coalesced", "commands_coalesced",
-                "buttons_timed_out")
+                "commands_dropped", "buttons_timed_out", "capped")
 
     def _start(self) -> None:
         cfg: WebConfig = self.config
@@ -62,8 +72,9 @@ class WebPages(Adapter):
         self._latest: dict[str, dict[str, Any]] = {}  # robot → its newest frame, not yet pushed
         self._nodes: dict[tuple[str, str], tuple[float, dict[str, Any]]] = {}  # latest stats, when heard
         self._shown = [zenoh.KeyExpr(keys.expr(r)) for r in cfg.robots]
-        self.web = WebServer(self, cfg.host, cfg.port, key="listen")
-        self.pages = Pages(self, self.web, cfg, self._on_bus)
+        self.web = WebServer(self, cfg.host, cfg.port, key="listen", limits=cfg.limits, browsers=True,
+                             names=auth.names(cfg.token))
+        self.pages = Pages(self, self.web, cfg)
         self._info = InfoRequests(self.bus, self._take_info, lambda robot, text: self.warn("info", text),
                                   INFO_EVERY_S)
         self.web.start()
@@ -73,12 +84,19 @@ class WebPages(Adapter):
         self.address = f"operator page {self.url}/{token}, kiosk {self.url}/kiosk{kiosk}"
         log.info("%s: %s", self.name, self.address)
         self._queue = self.own(SampleQueue(cfg.queue))
-        patterns = [f"{robot}/joints/*" for robot in cfg.robots] + ["*/events/*", keys.NODE_STATS]
+        patterns = [f"{robot}/joints/*" for robot in cfg.robots] + ["*/events/*"]
         self._streams = Streams(self.bus, patterns, self._queue)
         self.spawn(self._feed, "feed")
         self.own(self._streams)
+        # nodes' stats wait in a queue of their own, short: a node says one a second, and a flood of
+        # made-up nodes' (each up to 64 KiB) must not fill the frames' queue, nor the memory
+        # (and a node not listed when the list is full is left out before its message is even checked)
+        self._stats_queue = self.own(SampleQueue(STATS_QUEUE))
+        self._gate = Gate(self.bus.limits)
+        self.own(self.bus.subscribe(keys.NODE_STATS, queue=self._stats_queue, skip=self._unlisted)[0])
+        self.spawn(self._take_stats, "stats")
         owners(self.bus)  # (the view of robots' owners a command names, kept from now: the first one too)
-        self.own(watch_robots(self.bus, self._robot_changed))
+        self.own(watch_robots(self.bus, self._robot_changed, self.capped))
         self.spawn(self._push, "push")
         self.spawn(self._refresh, "info")
 
@@ -101,6 +119,7 @@ class WebPages(Adapter):
         with self._lock:
             return list(self._present)
 
+
     # -- robots --------------------------------------------------------------------------
 
     def _robot_changed(self, robot: str, alive: bool) -> None:
@@ -110,9 +129,12 @@ class WebPages(Adapter):
             else:
                 self._present.discard(robot)
                 self._latest.pop(robot, None)
-            changed = robot in self._robots and self._robots[robot]["connected"] != alive
-            if changed:
-                self._robots[robot] = {**self._robots[robot], "connected": alive}
+            shown = self._robots.get(robot)
+            changed = False
+            if shown is not None:  # (back: its state as before until its info, asked below, says it anew)
+                state = shown["connection"] if alive else {"state": "lost", "error": "its owner left the bus"}
+                self._robots[robot] = _with_state(shown, alive, state)
+                changed = self._robots[robot] != shown
             robots = dict(self._robots)
         if changed:
             self.pages.robots(robots)
@@ -139,14 +161,20 @@ class WebPages(Adapter):
         shown = {"owner": f"{owner.get('host', '?')}/{owner.get('node', '?')}", "model": info.get("model", ""),
                  "joints": [{"name": j["name"], "min": j["min"], "max": j["max"], "unit": j.get("unit", "rad")}
                             for j in info.get("joints", ())],
-                 "behaviors": list(info.get("behaviors", ())), "postures": list(info.get("postures", ())),
-                 "rate_hz": info.get("rate_hz")}
+                 "behaviors": list(info.get("behaviors", ()))[:MAX_BEHAVIORS],
+                 "postures": list(info.get("postures", ()))[:MAX_BEHAVIORS], "rate_hz": info.get("rate_hz")}
+        state = {k: v for k, v in connection.state_of(info).items() if k in ("state", "error")}
         with self._lock:
-            shown["connected"] = robot in self._present
+            shown = _with_state(shown, robot in self._present, state)
             if self._robots.get(robot) == shown:
                 return
-            self._robots[robot] = shown
+            full = robot not in self._robots and len(self._robots) >= MAX_SHOWN
+            if not full:
+                self._robots[robot] = shown
             robots = dict(self._robots)
+        if full:
+            self.capped(f"robot '{robot}' not shown: already {MAX_SHOWN} robots on the page")
+            return
         self.pages.robots(robots)
 
     # -- what comes off the bus ---------------------------------------------------------
@@ -159,16 +187,55 @@ class WebPages(Adapter):
         source = message.source
         if source.section == "frame":
             with self._lock:
+                if source.robot not in self._robots:  # (a page shows the frames of the robots it was told of)
+                    return
                 if source.robot in self._latest:
                     self.count("frames_coalesced")
                 self._latest[source.robot] = message.message  # (made JSON when pushed: most are replaced first)
-        elif source.section == "stats":
-            stats = message.message
-            with self._lock:
-                self._nodes[(stats["host"], stats["node"])] = (time.monotonic(), stats)
         elif message.event is not None:
             robot, kind = source.robot, source.name
+            if kind == "connection":
+                self._connection(robot, message.event)
             self.pages.event(robot, kind, message.event, self._shows(robot) or robot == "sonibus")
+
+    def _connection(self, robot: str, event: dict[str, Any]) -> None:
+        """A robot's new state, shown at once (its info says it too, but only when asked again)."""
+        state = {k: v for k, v in connection.state_of({"connection": event}).items() if k in ("state", "error")}
+        with self._lock:
+            shown = self._robots.get(robot)
+            if shown is None or shown["connection"] == state:
+                return
+            self._robots[robot] = _with_state(shown, robot in self._present, state)
+            robots = dict(self._robots)
+        self.pages.robots(robots)
+
+    def _unlisted(self, key: str) -> bool:
+        """Whether ``key``'s stats are left out (on a Zenoh thread, before they are queued, and
+        again when taken), before their message is even checked (a schema check takes ms):
+        a node that said its stats less than ``STATS_EVERY_S / 2`` ago (a node says them once a
+        second), or one not listed while the list is full (``MAX_NODES``: said, counted ``capped``)."""
+        node = tuple(key.split("/")[2:4])
+        with self._lock:
+            heard = self._nodes.get(node)
+            full = heard is None and len(self._nodes) >= MAX_NODES
+        if full:
+            self.capped(f"the stats on '{printable(key[:140])}' not shown: already {MAX_NODES} nodes listed")
+        return full or (heard is not None and time.monotonic() - heard[0] < STATS_EVERY_S / 2)
+
+    def _take_stats(self) -> None:
+        while not self.stopping.is_set():
+            for key, payload in self._stats_queue.drain(timeout=0.2):
+                self.count("received")
+                if self._unlisted(key):
+                    continue
+                try:
+                    stats = self._gate.check(keys.Key.parse(key), payload)
+                except ValueError as exc:  # messages.BadMessage
+                    self.count("bad")
+                    self.warn("bad", f"message on '{printable(key[:140])}' refused: {exc}")
+                    continue
+                with self._lock:  # (listed by this worker alone: the check above still holds)
+                    self._nodes[tuple(key.split("/")[2:4])] = (time.monotonic(), _shown_stats(stats))
 
     def _push(self) -> None:
         next_stats = time.monotonic()
@@ -191,6 +258,32 @@ class WebPages(Adapter):
             self._nodes = {k: v for k, v in self._nodes.items() if now - v[0] < FORGET_AFTER_S}
             nodes = sorted(self._nodes.items())
         return [{**stats, "gone": now - heard > GONE_AFTER_S} for _, (heard, stats) in nodes]
+
+
+def _with_state(shown: dict[str, Any], present: bool, state: dict[str, Any]) -> dict[str, Any]:
+    """A robot as the ``robots`` message shows it, with its ``connection`` (state, error) and
+    ``connected``: on the bus, and connected to its robot."""
+    return {**shown, "connection": state, "connected": present and state.get("state") == "connected"}
+
+
+SHOWN_FIRST = ("received", "sent", *LOSSES)  # the figures a page shows of every node
+
+
+def _shown_stats(stats: dict[str, Any]) -> dict[str, Any]:
+    """What the pages get of a node's stats (checked by the gate): its schema's fields but its
+    adapter's own ``metrics``, names cut at 100 characters, at most ``MAX_FIGURES`` counters
+    and rates (those the page shows first): a few KB a node, whatever it made up."""
+    shown: dict[str, Any] = {k: stats[k] for k in ("t", "uptime_s", "interval_s") if k in stats}
+    shown.update({k: stats[k][:100] for k in ("host", "node", "adapter", "state") if k in stats})
+    for table in ("counters", "rates"):
+        figures = stats.get(table, {})
+        first = [k for k in SHOWN_FIRST if k in figures] + [k for k in figures if k not in SHOWN_FIRST]
+        shown[table] = {k[:100]: figures[k] for k in first[:MAX_FIGURES]}
+    for table, fields in (("latency_ms", ("p50", "p99", "samples")), ("process", ("pid", "cpu_percent",
+                                                                                   "rss_bytes", "restarts"))):
+        if table in stats:
+            shown[table] = {k: stats[table][k] for k in fields if k in stats[table]}
+    return shown
 
 
 def _frame(robot: str, frame: dict[str, Any]) -> str:

@@ -4,28 +4,35 @@ A request carries its token as ``?token=`` or ``Authorization: Bearer <token>``.
 Operator routes take the operator token only; kiosk routes take the kiosk token or the
 operator's; the shipped code and kiosk images take none. With no token configured
 every route is served to this machine alone (the server then listens on loopback:
-``WebConfig`` refuses anything else, and a kiosk token without an operator token), and
-only under a loopback name: a web site the operator visits that renames itself to
-127.0.0.1 (DNS rebinding) is refused. A WebSocket opened by a page of another site
-(its ``Origin`` is not this server) is refused too: browsers let any page open one.
+``WebConfig`` refuses anything else, and a kiosk token without an operator token).
 A refusal is a 403 with one plain line, counted ``refused``, and warned about once per
 client address.
+
+Pages of other sites (``Origin``) and names that are not this server's (``Host``: DNS
+rebinding) are refused before the token is looked at, by the rule of every server
+(``bus/browser.py``, run by ``WebServer``): ``names`` says which names this node answers to.
 """
 
 from __future__ import annotations
 
 import hmac
-import ipaddress
 import logging
 from collections.abc import Callable
 from typing import NoReturn
-from urllib.parse import urlsplit
 
 from aiohttp import web
+
+from sonibus.bus.browser import ANY, LOOPBACK, loopback_address
 
 log = logging.getLogger(__name__)
 
 MAX_WARNED = 1024  # client addresses remembered as warned about (a scan of the LAN must not grow it for ever)
+
+
+def names(token: str) -> str:
+    """The ``Host`` names a web node answers to: with a token any (a site that renamed itself
+    to this machine's address does not have it), without one loopback names only."""
+    return ANY if token else LOOPBACK
 
 
 class Guard:
@@ -40,15 +47,9 @@ class Guard:
         """Return if ``request`` may use a route of ``role`` ("operator", "kiosk", or "asset":
         shipped files and kiosk images, public where a token is configured); else raise a 403."""
         peer = request.remote or ""
-        if role != "asset" and not _same_origin(request):
-            self._refuse(peer, request, f"a page of another site ({request.headers['Origin'][:80]}) may not "
-                                        "open this server's WebSocket")
         if not self.token:  # (no kiosk token either: WebConfig wants the operator's first)
-            if not _loopback(peer):
+            if not loopback_address(peer):
                 self._refuse(peer, request, "this server has no token and serves this machine only")
-            if not _loopback_name(request.host):
-                self._refuse(peer, request, f"this server has no token and answers to loopback names only, "
-                                            f"not {request.host[:80]!r} — open http://127.0.0.1:<port>/")
             return
         if role == "asset":  # the shipped code and kiosk images: no secret, and a page cannot pass tokens on
             return
@@ -79,25 +80,3 @@ def _token(request: web.Request) -> str | None:
 
 def _same(given: str, token: str) -> bool:
     return hmac.compare_digest(given.encode(), token.encode())
-
-
-def _same_origin(request: web.Request) -> bool:
-    """Whether a WebSocket request comes from a page of this server (or from no page:
-    a program sends no ``Origin``)."""
-    origin = request.headers.get("Origin")
-    if origin is None:
-        return True
-    return urlsplit(origin).netloc.lower() == request.host.lower()
-
-
-def _loopback_name(host: str) -> bool:
-    """Whether a ``Host`` header names this machine by a loopback name or address."""
-    name = urlsplit(f"//{host}").hostname or ""
-    return name == "localhost" or name.endswith(".localhost") or _loopback(name)
-
-
-def _loopback(address: str) -> bool:
-    try:
-        return ipaddress.ip_address(address.split("%")[0]).is_loopback
-    except ValueError:  # (a Unix socket, or nothing: not this machine's loopback)
-        return False

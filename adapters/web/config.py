@@ -13,7 +13,7 @@
     id = "wave"
     label = "Say hello"
     image = "images/wave.png"     # optional, served at /kiosk/image/<id>
-    behavior = "wave"             # or: say = "Hello, visitors!"
+    behavior = "wave"             # or: say = "Hello, visitors!", or: scenario = "hello" (a show's, docs/show.md)
 """
 
 from __future__ import annotations
@@ -29,6 +29,7 @@ from sonibus.adapters.osc.gateway import parse_endpoint
 from sonibus.bus import keys
 from sonibus.bus.errors import ConfigError
 from sonibus.bus.options import bad, from_mapping
+from sonibus.bus.web import Limits
 
 MAX_SAY = 500  # characters of a say button's text (the say verb's bound)
 _BUTTON_ID = re.compile(r"[A-Za-z0-9_-]{1,64}")
@@ -36,13 +37,14 @@ _BUTTON_ID = re.compile(r"[A-Za-z0-9_-]{1,64}")
 
 @dataclass(frozen=True)
 class Button:
-    """One kiosk button: a behavior to run or a text to say."""
+    """One kiosk button: a behavior to run, a text to say, or a scenario of the robot's show."""
 
     id: str                # [A-Za-z0-9_-], unique: what the page sends in "press"
     label: str
     image: str = ""        # a file, served at /kiosk/image/<id>
-    behavior: str = ""     # exactly one of behavior and say
+    behavior: str = ""     # exactly one of behavior, say and scenario
     say: str = ""
+    scenario: str = ""     # asked of the show that drives the robot (<robot>/program/scenario)
     timeout_s: float = 120.0  # no end heard from the robot by then: the button fails and the kiosk is free again
 
     def __post_init__(self) -> None:
@@ -50,9 +52,9 @@ class Button:
             raise bad("id", f"{self.id!r} must be 1..64 letters, digits, '_' or '-'")
         if not self.label.strip():
             raise bad("label", "must not be blank: it is what the visitor reads")
-        if bool(self.behavior) == bool(self.say):
-            raise bad("behavior", f"button {self.id!r} needs exactly one of 'behavior' (a behavior to run) "
-                                  "and 'say' (a text to say)")
+        if sum(map(bool, (self.behavior, self.say, self.scenario))) != 1:
+            raise bad("behavior", f"button {self.id!r} needs exactly one of 'behavior' (a behavior to run), "
+                                  "'say' (a text to say) and 'scenario' (a scenario of the robot's show)")
         if not 0 < self.timeout_s <= 3600:
             raise bad("timeout_s", f"button {self.id!r}: {self.timeout_s:g} must be in (0, 3600] seconds "
                                    "(longer than the scenario takes: a button without an end frees the kiosk then)")
@@ -66,11 +68,13 @@ class Button:
 
     @property
     def kind(self) -> str:
-        return "behavior" if self.behavior else "say"
+        return "behavior" if self.behavior else "say" if self.say else "scenario"
 
     @property
     def command(self) -> tuple[str, dict[str, Any]]:
-        """The verb and arguments a press sends to the kiosk's robot."""
+        """The verb and arguments a press sends to the kiosk's robot (a scenario: to its show)."""
+        if self.scenario:
+            return "scenario", {"name": self.scenario, "by": "kiosk"}
         return ("behavior/run", {"name": self.behavior}) if self.behavior else ("say", {"text": self.say})
 
 
@@ -95,6 +99,7 @@ class WebConfig:
     speed: float = 0.2               # fraction of max speed of a joints/set that names none
     timeout: float = 5.0             # seconds a robot has to answer a command
     queue: int = 4096                # messages from the bus waiting; past this the oldest are dropped
+    limits: Limits = field(default_factory=Limits)  # [nodes.<name>.limits]: connections, clients (pages), timeout_s
     kiosk: dict[str, Any] = field(default_factory=dict)  # [nodes.<name>.kiosk]: robot, [[...buttons]]
     host: str = field(init=False, repr=False, compare=False)
     port: int = field(init=False, repr=False, compare=False)

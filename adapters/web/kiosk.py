@@ -1,9 +1,11 @@
 """The kiosk's buttons: one scenario at a time, followed from the robot's events.
 
 A press is refused while a button is under way (``busy``). A pressed button is
-``running`` once its robot accepted the command, then ``done`` when the robot's
-behavior event says ``stopped`` (a say button: its speech event ``done``) or the
-robot was stopped (its ``command`` event of a ``stop``), or
+``running`` once its robot accepted the command (a scenario button: the robot's
+show accepted the scenario, ``send``), then ``done`` when the robot's behavior
+event says ``stopped`` (a say button: its speech event ``done``; a scenario button:
+the show's ``scenario`` event ``ended``) or the robot was stopped (its ``command``
+event of a ``stop``; for a scenario, the show says ``aborted``), or
 ``failed`` (refused, a behavior event ``failed``, the robot gone, or no end heard within
 the button's ``timeout_s``: an event lost must not keep the kiosk busy for the rest of
 the show). Every change goes
@@ -16,9 +18,18 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import Any
 
+from sonibus.bus import client
 from sonibus.bus.errors import CommandError
+from sonibus.bus.node import Bus
 
 from .config import Button, Kiosk
+
+
+def send(bus: Bus, robot: str, button: Button, done: Callable[[client.Outcome], None], timeout: float) -> None:
+    """Send what ``button`` asks of ``robot``: its command, or its scenario to the robot's show."""
+    verb, args = button.command
+    ask = client.ask_program if button.scenario else client.ask
+    ask(bus, robot, verb, args, done, timeout)
 
 
 class Stand:
@@ -98,6 +109,11 @@ class Stand:
 def _end_of(button: Button, kind: str, event: dict[str, Any]) -> dict[str, str] | None:
     """How ``event`` ends ``button``'s scenario (``state``, ``error``), or None if it does not."""
     state = event.get("state")
+    if button.scenario:  # (its show says how it ends: a stop of the show's own ends nothing)
+        if kind == "scenario" and event.get("name") == button.scenario and state in ("ended", "aborted"):
+            return {"state": "done"} if state == "ended" else {
+                "state": "failed", "error": str(event.get("reason") or f"scenario '{button.scenario}' aborted")}
+        return None
     if kind == "behavior" and button.behavior and event.get("name") == button.behavior:
         if state == "stopped":
             return {"state": "done"}

@@ -68,15 +68,18 @@ def parse(text: str) -> Request:
     if len(text) > MAX_MESSAGE:
         raise BadMessage(f"a message of {len(text):,} characters (at most {MAX_MESSAGE:,})")
     try:
-        message = json.loads(text)
+        message = json.loads(text, parse_constant=_NotJson)
     except (ValueError, RecursionError) as exc:
         raise BadMessage(f"not JSON: {str(exc).splitlines()[0][:80]}") from None
     if not isinstance(message, dict):
         raise BadMessage(f"a message must be a JSON object, got {type(message).__name__}")
     raw_id = message.get("id")
-    id_: Id = raw_id if isinstance(raw_id, str | int) and not isinstance(raw_id, bool) else None
+    id_: Id = raw_id if isinstance(raw_id, str | int) and not isinstance(raw_id, bool | _NotJson) else None
     if isinstance(id_, str):
         id_ = id_[:64]
+    constant = _not_json(message)
+    if constant:
+        raise BadMessage(f"{constant} is not a JSON number: JSON carries finite numbers only", id_)
     kind = message.get("type")
     if kind not in TYPES:
         raise BadMessage(f"unknown message type {str(kind)[:40]!r} — a page sends {', '.join(TYPES[:-1])} "
@@ -92,6 +95,27 @@ def parse(text: str) -> Request:
     except ValueError as exc:
         raise BadMessage(f"command: {exc}", id_) from None
     return Command(id_, robot, verb, message.get("args", {}))
+
+
+class _NotJson(str):
+    """``NaN``, ``Infinity`` or ``-Infinity`` where a page sent it: Python's reader takes them,
+    JSON has none, and a NaN angle must not even be held as a slider move (it was answered
+    ``coalesced``). Kept as a marker so the refusal can carry the message's id."""
+
+
+def _not_json(value: Any) -> str:
+    """The first ``_NotJson`` constant in ``value`` ("" if none); a loop, not a recursion (a
+    message nested as deep as the JSON reader allows must not overflow the stack here)."""
+    stack = [value]
+    while stack:
+        item = stack.pop()
+        if isinstance(item, _NotJson):
+            return str(item)
+        if isinstance(item, dict):
+            stack.extend(item.values())
+        elif isinstance(item, list):
+            stack.extend(item)
+    return ""
 
 
 def _name(message: dict[str, Any], field: str, id_: Id) -> str:
@@ -115,3 +139,14 @@ def reply(id_: Id, outcome: dict[str, Any] | CommandError | str, robot: str = ""
         return {**message, "ok": True, "result": outcome}
     error = outcome.message if isinstance(outcome, CommandError) else outcome
     return {**message, "ok": False, "error": " ".join(str(error).split())}  # one line, whatever came
+
+
+SILENT_NAMED = 10  # robots a stop's reply names in its text (``robots`` has them all)
+
+
+def silent(id_: Id, robots: list[str], error: CommandError) -> dict[str, Any]:
+    """The last ``reply`` of a stop: the robots on the bus that did not answer it, and why
+    (``robots``: their names; one reply for all, however many they are)."""
+    named = ", ".join(robots[:SILENT_NAMED]) + (f", … ({len(robots)} in all)" if len(robots) > SILENT_NAMED else "")
+    return {"type": "reply", "id": id_, "ok": False, "robots": robots,
+            "error": f"stop: {len(robots)} robot(s) on the bus did not answer ({error.message}): {named}"}

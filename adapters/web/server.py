@@ -11,23 +11,21 @@ as a ``reply``. The adapter hands the bus's news to ``robots``, ``frames``, ``st
 from __future__ import annotations
 
 import asyncio
-import contextlib
 import functools
 import json
 import re
-from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from aiohttp import WSMsgType, web
+from aiohttp import WSMessage, WSMsgType, web
 
 from sonibus.bus import client as bus_client
 from sonibus.bus import commands
 from sonibus.bus.errors import CommandError
 from sonibus.bus.text import printable
-from sonibus.bus.web import CLOSE_WAIT_S, WebClient, WebServer, close_clients
+from sonibus.bus.web import WebClient, WebServer, close_clients
 
-from . import protocol
+from . import kiosk, protocol
 from .auth import Guard
 from .config import Button, WebConfig
 from .kiosk import Stand
@@ -43,27 +41,41 @@ _FILE = re.compile(r"[A-Za-z0-9_-][A-Za-z0-9_.-]{0,99}")
 HEADERS = {"Cache-Control": "no-store", "Referrer-Policy": "no-referrer", "X-Frame-Options": "DENY",
            "X-Content-Type-Options": "nosniff"}  # (the token is in the page's URL: never sent on, never cached)
 _dumps = functools.partial(json.dumps, allow_nan=False)
+MAX_ASKING = 256           # commands of one page waiting for their robots' answers; past this: "dropped"
+MAX_ANSWERS_WAITING = 1024  # answers waiting for a page to read them; past this its requests are not read
+ROOM_POLL_S = 0.02
 
 
 class Client(WebClient):
-    """A page's WebSocket: ``role`` "operator" or "kiosk"."""
+    """A page's WebSocket: ``role`` "operator" or "kiosk". Every request it sends is
+    answered (``answer``: kept, never dropped, ahead of frames and stats); ``asking``
+    counts its commands waiting for a robot's answer."""
 
     def __init__(self, ws: web.WebSocketResponse, role: str, adapter: Adapter,
                  transport: asyncio.BaseTransport | None) -> None:
         super().__init__(ws, lambda: adapter.count("dropped"), transport)
         self.role = role
+        self.asking = 0
 
     def send(self, message: dict[str, Any]) -> None:
         self.push(_dumps(message))
+
+    def answer(self, message: dict[str, Any]) -> None:
+        """A ``reply`` (or a kiosk button's state): never dropped, sent before what the bus says."""
+        self.push(_dumps(message), kept=True)
+
+    async def room(self) -> None:
+        """Return once fewer than ``MAX_ANSWERS_WAITING`` answers wait to be sent: a page that
+        does not read what it asked for is not read either (its requests wait in TCP)."""
+        while len(self.kept) >= MAX_ANSWERS_WAITING and not self.ws.closed:
+            await asyncio.sleep(ROOM_POLL_S)
 
 
 class Pages:
     """The pages' routes on ``web`` (a ``WebServer`` not started yet) for ``adapter``."""
 
-    def __init__(self, adapter: Adapter, web_server: WebServer, config: WebConfig,
-                 robots_on_bus: Callable[[], list[str]]) -> None:
+    def __init__(self, adapter: Adapter, web_server: WebServer, config: WebConfig) -> None:
         self.adapter, self.web, self.config = adapter, web_server, config
-        self.robots_on_bus = robots_on_bus  # every robot on the bus now (a stop reaches them all)
         self.guard = Guard(config.token, config.kiosk_token, adapter.name, adapter.count)
         self.operators: set[Client] = set()
         self.kiosks: set[Client] = set()
@@ -123,27 +135,23 @@ class Pages:
 
     async def _websocket(self, role: str, request: web.Request) -> web.StreamResponse:
         self.guard.check(request, role)
-        ws = web.WebSocketResponse(timeout=CLOSE_WAIT_S, max_msg_size=MAX_WS_MESSAGE, heartbeat=HEARTBEAT_S)
-        await ws.prepare(request)
-        client = Client(ws, role, self.adapter, request.transport)
-        group = self.operators if role == "operator" else self.kiosks
-        group.add(client)
-        self.adapter.count("clients")
-        self._greet(client)
-        sender = asyncio.create_task(client.send_all())
-        try:
-            async for message in ws:
-                if message.type == WSMsgType.TEXT:
-                    self._take(client, message.data)
-                elif message.type == WSMsgType.BINARY:
-                    self._bad(client, None, f"a binary message of {len(message.data)} bytes (the pages send "
-                                            "JSON text)")
-        finally:
-            group.discard(client)
-            sender.cancel()
-            with contextlib.suppress(asyncio.CancelledError):
-                await sender
+        async with self.web.accept(request, max_msg_size=MAX_WS_MESSAGE, heartbeat=HEARTBEAT_S) as ws:
+            client = Client(ws, role, self.adapter, request.transport)
+            group = self.operators if role == "operator" else self.kiosks
+            group.add(client)
+            self.adapter.count("clients")
+            self._greet(client)
+            try:
+                await self.web.serve_client(ws, client, functools.partial(self._receive, client), client.room)
+            finally:
+                group.discard(client)
         return ws
+
+    def _receive(self, client: Client, message: WSMessage) -> None:
+        if message.type == WSMsgType.TEXT:
+            self._take(client, message.data)
+        elif message.type == WSMsgType.BINARY:
+            self._bad(client, None, f"a binary message of {len(message.data)} bytes (the pages send JSON text)")
 
     def _greet(self, client: Client) -> None:
         cfg = self.config
@@ -181,13 +189,19 @@ class Pages:
     def _bad(self, client: Client, id_: protocol.Id, what: str) -> None:
         self.adapter.count("bad")
         self.adapter.warn("ws", f"WebSocket ({client.role}): refused {printable(what)}")
-        client.send(protocol.reply(id_, what))
+        client.answer(protocol.reply(id_, what))
 
     def _command(self, client: Client, request: protocol.Command) -> None:
         try:
             args = commands.from_json(request.verb, request.args)
         except CommandError as exc:
-            client.send(protocol.reply(request.id, exc))
+            client.answer(protocol.reply(request.id, exc))
+            return
+        if client.asking >= MAX_ASKING:  # (said, never silently lost: the page may send it again)
+            self.adapter.count("commands_dropped")
+            client.answer(protocol.reply(request.id, f"dropped: too many at once — {client.asking} commands of "
+                                                     f"this page wait for their robots' answers (at most "
+                                                     f"{MAX_ASKING}); send it again once some are answered"))
             return
         item = (client, request.id, request.robot, request.verb, args)
         if request.verb != "joints/set":
@@ -197,24 +211,38 @@ class Pages:
         superseded = self.sliders.offer((request.robot, tuple(args.get("names", ()))), item)
         if superseded is not None:
             self.adapter.count("commands_coalesced")
-            superseded[0].send(protocol.reply(superseded[1], {"coalesced": True}))
+            superseded[0].answer(protocol.reply(superseded[1], {"coalesced": True}))
 
     def _stop(self, client: Client, id_: protocol.Id) -> None:
+        """Stop every robot of the bus at once (``client.stop_all``: one query, never queued
+        behind anything); one reply per robot that answered, then one naming those on the bus
+        that did not."""
         for held in self.sliders.cancel():
-            held[0].send(protocol.reply(held[1], "cancelled: a stop came first"))
-        robots = sorted(self.robots_on_bus())
-        if not robots:
-            client.send(protocol.reply(id_, "stop: no robot on the bus"))
-        for robot in robots:
-            self._ask(client, id_, robot, "stop", {}, robot)
-
-    def _ask(self, client: Client, id_: protocol.Id, robot: str, verb: str, args: dict[str, Any],
-             named: str = "") -> None:
+            held[0].answer(protocol.reply(held[1], "cancelled: a stop came first"))
         self.adapter.count("commands")
 
-        def done(outcome: bus_client.Outcome) -> None:
-            self.web.call(client.send, protocol.reply(id_, outcome, named))
-        bus_client.ask(self.adapter.bus, robot, verb, args, done, self.config.timeout)
+        answered: list[str] = []
+
+        def done(robot: str, outcome: bus_client.Outcome) -> None:
+            answered.append(robot)
+            self.web.call(client.answer, protocol.reply(id_, outcome, robot))
+
+        def silent(robots: list[str], error: CommandError) -> None:
+            if robots:
+                self.web.call(client.answer, protocol.silent(id_, robots, error))
+            elif not answered:
+                self.web.call(client.answer, protocol.reply(id_, "stop: no robot on the bus"))
+        bus_client.stop_all(self.adapter.bus, done, silent, self.config.timeout)
+
+    def _ask(self, client: Client, id_: protocol.Id, robot: str, verb: str, args: dict[str, Any]) -> None:
+        self.adapter.count("commands")
+        client.asking += 1
+
+        def answered(outcome: bus_client.Outcome) -> None:
+            client.asking -= 1
+            client.answer(protocol.reply(id_, outcome))
+        bus_client.ask(self.adapter.bus, robot, verb, args, lambda outcome: self.web.call(answered, outcome),
+                       self.config.timeout)
 
     def _press(self, client: Client, request: protocol.Press) -> None:
         button = self.config.button(request.button)
@@ -224,16 +252,15 @@ class Pages:
             return
         busy = self.stand.busy()
         if busy:
-            client.send(protocol.reply(request.id, busy))
+            client.answer(protocol.reply(request.id, busy))
             return
         press = self.stand.press(button)
         asyncio.get_running_loop().call_later(button.timeout_s, self._overdue, press)
-        verb, args = button.command
         self.adapter.count("commands")
 
         def done(outcome: bus_client.Outcome) -> None:
             self.web.call(self._pressed, client, request.id, button, press, outcome)
-        bus_client.ask(self.adapter.bus, self.config.stand.robot, verb, args, done, self.config.timeout)
+        kiosk.send(self.adapter.bus, self.config.stand.robot, button, done, self.config.timeout)
 
     def _overdue(self, press: int) -> None:
         button = self.stand.current
@@ -244,7 +271,7 @@ class Pages:
 
     def _pressed(self, client: Client, id_: protocol.Id, button: Button, press: int,
                  outcome: bus_client.Outcome) -> None:
-        client.send(protocol.reply(id_, outcome))
+        client.answer(protocol.reply(id_, outcome))
         self.stand.answered(button, outcome, press)
 
     # -- what the bus says (on the loop) ---------------------------------------------

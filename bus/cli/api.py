@@ -26,16 +26,18 @@ from typing import Any, TextIO
 from .. import config
 from ..errors import ConfigError
 from ..node import Bus
-from ..session import MODES, BusConfig, check_endpoint, check_option, open_session
+from ..session import MODES, BusConfig, check_endpoint, check_option, default_listen, from_here, open_session
 
 COMMAND_GROUP = "sonibus.commands"
+DEMO_BUS = "tcp/127.0.0.1:7448"  # where `sonibus demo` listens (adapters/demo.toml): this machine only
 
 
 class Exit(enum.IntEnum):
     """Exit statuses: 1 error, 2 usage or configuration (a bad flag, file, table or
-    key), 3 robot not found, 4 command refused, 5 timeout, 130 interrupted (Ctrl-C,
-    SIGTERM), 141 the output was closed (``sonibus info F | head -1``: quiet, as a Unix
-    tool killed by SIGPIPE)."""
+    key), 3 robot not found, 4 command refused, 5 the robot did not answer (a timeout,
+    a robot that is not connected or does not answer, a stop that did not reach it),
+    130 interrupted (Ctrl-C, SIGTERM), 141 the output was closed (``sonibus info F |
+    head -1``: quiet, as a Unix tool killed by SIGPIPE)."""
 
     OK = 0
     ERROR = 1
@@ -81,9 +83,10 @@ class Command:
     bus: bool = False
 
 
-def add_bus_arguments(parser: argparse.ArgumentParser, installation: bool = True) -> None:
+def add_bus_arguments(parser: argparse.ArgumentParser, installation: bool = True, demo: bool = True) -> None:
     """The options that say how to join the bus; with ``installation``, also
-    ``--config FILE`` and ``--host NAME`` (join as that machine of an installation file)."""
+    ``--config FILE`` and ``--host NAME`` (join as that machine of an installation file);
+    with ``demo``, ``--demo`` (join this machine's ``sonibus demo``)."""
     group = parser.add_argument_group("bus")
     group.add_argument("--mode", choices=MODES, help="Zenoh mode (default: peer)")
     group.add_argument("--connect", action="append", metavar="ENDPOINT", help="e.g. tcp/192.168.1.10:7447")
@@ -92,17 +95,20 @@ def add_bus_arguments(parser: argparse.ArgumentParser, installation: bool = True
     group.add_argument("--namespace", help="prefix that keeps this installation apart from others")
     group.add_argument("--zenoh", action="append", metavar="KEY=JSON", default=[],
                        help="raw Zenoh option, e.g. transport/link/tx/lease=2000")
+    if demo:
+        group.add_argument("--demo", action="store_true",
+                           help=f"join this machine's `sonibus demo` (private: no multicast, connect {DEMO_BUS})")
     if installation:
         group = parser.add_argument_group("installation")
         group.add_argument("--config", dest="bus_file", metavar="CONFIG.toml",
-                           help="join the bus as the [bus] table of this installation file says")
+                           help="join the bus of this installation file, where its `sonibus run` listens")
         group.add_argument("--host", help="with --config: use its [bus.hosts.HOST] settings (default: this machine)")
 
 
 def bus_config(args: argparse.Namespace, base: BusConfig | None = None) -> BusConfig:
     """``base`` (or the ``--config`` file's, or defaults) with the command-line bus options applied."""
     if base is None and getattr(args, "bus_file", None):
-        base = config.load(args.bus_file).bus.for_host(args.host or socket.gethostname())
+        base = visiting(config.load(args.bus_file).bus.for_host(args.host or socket.gethostname()))
     cfg = base or BusConfig()
     changes: dict[str, Any] = {}
     if args.mode:
@@ -115,6 +121,8 @@ def bus_config(args: argparse.Namespace, base: BusConfig | None = None) -> BusCo
                 raise ConfigError(f"--{flag} {exc}") from None
         if getattr(args, flag):
             changes[flag] = tuple(getattr(args, flag))
+    if getattr(args, "demo", False):
+        changes.update(multicast=False, connect=(*changes.get("connect", ()), DEMO_BUS))
     if args.no_multicast:
         changes["multicast"] = False
     if args.namespace is not None:
@@ -126,6 +134,21 @@ def bus_config(args: argparse.Namespace, base: BusConfig | None = None) -> BusCo
     except ConfigError as exc:  # "key 'namespace': ..." from BusConfig: name the flag instead
         flags = {"namespace": "--namespace", "options": "--zenoh", "mode": "--mode"}
         raise ConfigError(re.sub(r"^key '(\w+)'", lambda m: flags.get(m[1], m[0]), str(exc))) from None
+
+
+def visiting(cfg: BusConfig) -> BusConfig:
+    """How a command joins the machine whose ``sonibus run`` uses ``cfg``: it dials where
+    that process listens (from this machine: a wildcard as loopback) instead of listening
+    on the same port, and a router's machine is joined as the router's client.
+
+    >>> joined = visiting(BusConfig(multicast=False, listen=("tcp/0.0.0.0:7450",)))
+    >>> joined.connect, joined.listen
+    (('tcp/127.0.0.1:7450',), ())
+    """
+    listen = cfg.listen or (tuple(default_listen("router")) if cfg.mode == "router" else ())
+    here = tuple(from_here(e) for e in listen if not e.endswith(":0"))  # (a port 0: only `run` knows which)
+    return replace(cfg, mode="client" if cfg.mode == "router" else cfg.mode, listen=(),
+                   connect=tuple(dict.fromkeys(cfg.connect + here)))
 
 
 def _zenoh_options(items: list[str], options: dict[str, Any]) -> dict[str, Any]:

@@ -16,6 +16,7 @@ from collections.abc import Callable, Sequence
 from importlib.metadata import EntryPoint, entry_points, version
 
 from .. import registry
+from ..client import UNANSWERED
 from ..errors import CommandError, ConfigError, RobotNotFound, SonibusError
 from ..text import PrintableFormatter
 from .api import COMMAND_GROUP, Command, Environment, Exit, add_bus_arguments
@@ -102,6 +103,8 @@ def main(argv: Sequence[str] | None = None, env: Environment | None = None) -> i
     handler = logging.StreamHandler(env.stderr)
     handler.setFormatter(PrintableFormatter("sonibus: %(levelname)s: %(message)s"))
     logger = logging.getLogger("sonibus")
+    shown = _Shown(logging.WARNING)
+    handler.addFilter(shown)
     logger.addHandler(handler)
     logger.setLevel(logging.WARNING)
     try:
@@ -111,10 +114,28 @@ def main(argv: Sequence[str] | None = None, env: Environment | None = None) -> i
                 args = parser(found).parse_args(argv)
         except SystemExit as exc:  # argparse has printed its message
             return int(exc.code or 0)
-        logger.setLevel((logging.WARNING, logging.INFO, logging.DEBUG)[min(args.verbose, 2)])
+        level = (logging.WARNING, logging.INFO, logging.DEBUG)[min(args.verbose, 2)]
+        shown.level = level  # (stderr's own threshold: a log file may take more, bus/logfile.py)
+        logger.setLevel(level)
         return _run(args, env, found[args.command].run)
     finally:
         logger.removeHandler(handler)
+
+
+class _Shown(logging.Filter):
+    """What stderr shows: records at its ``level`` (``-v``), and those of a logger that asks
+    to be heard by a level of its own (naoqi's "connected to Pepper ..." line, said at the
+    default level: a threshold on the handler alone hid it)."""
+
+    def __init__(self, level: int) -> None:
+        super().__init__()
+        self.level = level
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        if record.levelno >= self.level:
+            return True
+        own = logging.getLogger(record.name).level
+        return own != logging.NOTSET and record.levelno >= own
 
 
 def _run(args: argparse.Namespace, env: Environment, run: Callable[[argparse.Namespace, Environment], int]) -> int:
@@ -135,7 +156,7 @@ def _status(exc: Exception) -> Exit:
     if isinstance(exc, RobotNotFound):
         return Exit.NOT_FOUND
     if isinstance(exc, CommandError):
-        return Exit.TIMEOUT if exc.code == "timeout" else Exit.REFUSED
+        return Exit.TIMEOUT if exc.code in UNANSWERED else Exit.REFUSED
     if isinstance(exc, ConfigError):
         return Exit.USAGE
     return Exit.ERROR

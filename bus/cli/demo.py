@@ -15,7 +15,7 @@ from __future__ import annotations
 import argparse
 import re
 import tomllib
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import cache
 from importlib import resources
 from typing import Any
@@ -90,7 +90,7 @@ def _arguments(p: argparse.ArgumentParser) -> None:
         p.add_argument(f"--{name}", dest=name, type=type(flag.default), default=flag.default,
                        help=f"{flag.help} (default: {shown})")
     p.add_argument("--quiet", action="store_true", help=wiring().quiet_help)
-    add_bus_arguments(p, installation=False)
+    add_bus_arguments(p, installation=False, demo=False)
 
 
 def installation(values: dict[str, Any], quiet: bool = False) -> tuple[config.Installation, list[str] | None]:
@@ -115,8 +115,16 @@ def _demo(args: argparse.Namespace, env: Environment) -> Exit:
         raise ConfigError(blamed(str(exc), values)) from None
     for line in wiring().banner:
         env.say(filled(line, values))
+    bus = bus_config(args, wired.bus)
     try:
-        runner.run(adapters, bus_config(args, wired.bus), env.stop)
+        try:
+            runner.run(adapters, bus, env.stop)
+        except ConfigError as exc:
+            if "Address already in use" not in str(exc) or args.listen or args.connect:
+                raise
+            # another demo of this machine listens there: join its bus (still this machine's only)
+            env.say(f"  another demo runs on this machine ({', '.join(bus.listen)}): joining its bus")
+            runner.run(adapters, replace(bus, listen=(), connect=bus.listen), env.stop)
     except OwnershipError as exc:
         raise OwnershipError(blamed(str(exc), values, taken=True)) from None
     return Exit.OK

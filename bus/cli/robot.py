@@ -4,9 +4,9 @@ joints with limits and units, behaviors, postures, derived values.
 >>> info = {"robot": "toy", "model": "pepper", "rate_hz": 50.0, "adapter": "sim", "behaviors": ["wave"],
 ...         "postures": [], "owner": {"host": "pc", "node": "sim-toy"},
 ...         "joints": [{"name": "HeadYaw", "unit": "rad", "min": -2.0857, "max": 2.0857, "max_velocity": 7.34,
-...                     "chain": "Head"}]}
+...                     "chain": "Head"}], "connection": {"state": "connected", "frames_per_s": 49.8}}
 >>> print("\\n".join(table(info)))
-toy: pepper, 50 frames/s, owned by sim-toy on pc (adapter sim)
+toy: pepper, connected, 50 frames/s, owned by sim-toy on pc (adapter sim)
   joint           unit            min        max  max speed  chain
   HeadYaw         rad         -2.0857     2.0857     7.34/s  Head
   behaviors (1):
@@ -22,6 +22,7 @@ import json
 import queue
 from typing import Any
 
+from .. import connection
 from ..errors import RobotNotFound
 from ..info import InfoRequests
 from .api import Environment, Exit, bus_config, joined
@@ -31,8 +32,11 @@ from .hints import reach_hint, robots_hint
 def table(info: dict[str, Any]) -> list[str]:
     """The lines of a robot's info (merged with its derived values, ``bus/info.py``)."""
     owner = info.get("owner", {})
-    lines = [f"{info['robot']}: {info['model']}, {info['rate_hz']:g} frames/s, owned by {owner.get('node', '?')} "
-             f"on {owner.get('host', '?')} (adapter {info.get('adapter', '?')})",
+    state = connection.state_of(info)
+    rate = connection.rate(info)
+    asked = f" (of {info['rate_hz']:g} asked)" if state["state"] != "connected" or rate < 0.9 * info["rate_hz"] else ""
+    lines = [f"{info['robot']}: {info['model']}, {connection.describe(state)}, {rate:.0f} frames/s{asked}, owned by "
+             f"{owner.get('node', '?')} on {owner.get('host', '?')} (adapter {info.get('adapter', '?')})",
              f"  {'joint':<15} {'unit':<8} {'min':>10} {'max':>10} {'max speed':>10}  chain"]
     for joint in info["joints"]:
         lines.append(f"  {joint['name']:<15} {joint['unit']:<8} {joint['min']:>10.5g} {joint['max']:>10.5g} "

@@ -4,41 +4,120 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import logging
+import re
 import socket
+from collections.abc import Callable
 from dataclasses import replace
 
 from .. import config, runner
+from ..adapter import Adapter
+from ..logfile import LogFile
 from ..node import Bus
-from ..session import open_session
+from ..notify import Notifier
+from ..restarts import STOPPED, RunState
+from ..session import BusConfig, from_here, listening, open_session
+from ..watchdog import Watchdog
 from .api import Command, Environment, Exit, add_bus_arguments, bus_config
 
 
-def _run_arguments(p: argparse.ArgumentParser) -> None:
+def run_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("config", metavar="CONFIG.toml")
     p.add_argument("--only", nargs="+", metavar="NODE", help="run only these nodes")
     p.add_argument("--host", help="run the nodes of this host (default: this machine's name)")
+    p.add_argument("--log-file", metavar="PATH",
+                   help="also log to this file, rotated (default: [log] file; [log] max_mb and keep size it)")
     add_bus_arguments(p, installation=False)
 
 
-def _run(args: argparse.Namespace, env: Environment) -> Exit:
+def run_installation(args: argparse.Namespace, env: Environment,
+                     prepare: Callable[[list[Adapter]], None] | None = None) -> Exit:
+    """``sonibus run``; ``prepare`` sees the adapters built before they start (``sonibus rehearse``
+    sets its shows' clocks)."""
     installation = config.load(args.config)
     host = args.host or socket.gethostname()
     adapters = runner.build(installation, args.only, host)
+    if prepare is not None:
+        prepare(adapters)
+    cfg = bus_config(args, installation.bus.for_host(host))
+    logging_to = replace(installation.log, file=args.log_file) if args.log_file else installation.log
+    log_file = LogFile(logging_to) if logging_to.file else None
+    state = RunState.for_run(args.config, host, args.only)
+    notifier = Notifier()
     names = ", ".join(f"{a.name} ({a.kind})" for a in adapters)
 
-    def started(bus: Bus) -> None:
-        env.say(f"sonibus: running {names} on {bus.host}")
-        for adapter in adapters:
-            if adapter.address:
-                env.say(f"sonibus: {adapter.name}: {adapter.address}")
+    def say(text: str) -> None:
+        env.say(text)
+        if log_file is not None:
+            log_file.note(text)
 
-    runner.run(adapters, bus_config(args, installation.bus.for_host(host)), env.stop, on_started=started, host=host)
+    try:
+        restart = state.begin()
+        if log_file is not None:
+            say(f"sonibus: logging to {log_file.path} (rotated at {logging_to.max_mb:g} MB, {logging_to.keep} kept)")
+        if restart.previous and not restart.count:  # (a start by hand after a crash, a power cut...)
+            logging.getLogger(__name__).warning("the previous run %s", restart.previous)
+
+        def started(bus: Bus) -> None:
+            say(f"sonibus: running {names} on {bus.host}" + (f" — {restart}" if restart.count else ""))
+            for line in reached(bus, adapters, cfg, _config_flags(args, installation.bus.for_host(host), cfg, host)):
+                say(f"sonibus: {line}")
+
+        runner.run(adapters, cfg, env.stop, on_started=started, host=host, watchdog=Watchdog(notifier, adapters),
+                   restart=restart)
+    except BaseException as exc:
+        how = STOPPED if isinstance(exc, KeyboardInterrupt) else f"failed: {' '.join(str(exc).split())}"
+        state.end(how)
+        if log_file is not None and how != STOPPED:
+            log_file.note(f"sonibus: error: {how.removeprefix('failed: ')}", level=logging.ERROR)
+        raise
+    else:
+        state.end(STOPPED)
+    finally:
+        notifier.close()
+        if log_file is not None:
+            log_file.close()
     # it returns only once a signal set env.stop (its KeyboardInterrupt, which says 130, may be lost on the way:
     # twice in CI it exited 0 on a SIGINT sent while the nodes were starting)
     return Exit.INTERRUPTED
 
 
-RUN = Command("run", "run the nodes of an installation file", _run_arguments, _run)
+def reached(bus: Bus, adapters: list[Adapter], cfg: BusConfig, config_flags: str = "") -> list[str]:
+    """Where this process and each of its nodes are reached: the bus (its endpoints with
+    the ports really bound, and how another command joins it from this machine), then
+    every node's ``address`` (pages, OSC targets, ports, files)."""
+    how = f"{cfg.mode}, multicast {'on' if cfg.multicast else 'off'}"
+    if cfg.namespace:
+        how += f", namespace '{cfg.namespace}'"
+    if cfg.connect:
+        how += f", connecting to {', '.join(cfg.connect)}"
+    listening = bus.listening
+    line = f"bus: {how}" + (f", listening on {', '.join(listening)}" if listening else "")
+    joins = [flags for flags in (config_flags, _connect_flags(listening, cfg)) if flags]
+    if joins:
+        line += " — join from this machine with " + ", or ".join(joins)
+    return [line] + [f"{a.name}: {a.address}" for a in adapters if a.address]
+
+
+def _connect_flags(listening: tuple[str, ...], cfg: BusConfig) -> str:
+    """``--connect ENDPOINT`` to this process from this machine (a wildcard as loopback)."""
+    for endpoint in listening:
+        if re.fullmatch(r"(tcp|udp|tls|quic)/.+:\d+", endpoint) and not endpoint.endswith(":0"):
+            return f"--connect {from_here(endpoint)}" + ("" if cfg.multicast else " --no-multicast")
+    return ""
+
+
+def _config_flags(args: argparse.Namespace, file: BusConfig, cfg: BusConfig, host: str) -> str:
+    """``--config FILE [--host NAME]``, when a one-shot command with them reaches this
+    process: the command line changed nothing of the file's bus, and every endpoint it
+    listens on has a fixed port (or multicast finds it)."""
+    if cfg != file or not (cfg.multicast or (cfg.listen and all(not e.endswith(":0") for e in cfg.listen))):
+        return ""
+    named = "" if host == socket.gethostname() else f" --host {host}"
+    return f"--config {args.config}{named}"
+
+
+RUN = Command("run", "run the nodes of an installation file", run_arguments, run_installation)
 
 
 def _router(args: argparse.Namespace, env: Environment) -> Exit:
@@ -46,7 +125,7 @@ def _router(args: argparse.Namespace, env: Environment) -> Exit:
     if not cfg.listen:
         cfg = replace(cfg, listen=("tcp/0.0.0.0:7447",))
     with contextlib.closing(open_session(cfg)) as session:
-        env.say(f"sonibus router {session.zid()} listening on {', '.join(cfg.listen)}")
+        env.say(f"sonibus router {session.zid()} listening on {', '.join(listening(session))}")
         while not env.stop.wait(0.25):
             pass
     return Exit.OK

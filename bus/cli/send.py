@@ -8,7 +8,7 @@ from collections.abc import Sequence
 from typing import Any
 
 from ... import schemas
-from ..client import owner_of, send_command
+from ..client import owner_of, send_command, unreached
 from ..commands import from_words
 from ..errors import CommandError, ConfigError, RobotNotFound
 from .api import Command, Environment, Exit, bus_config, joined
@@ -53,6 +53,10 @@ def _send(args: argparse.Namespace, env: Environment) -> Exit:
             exc.args = (exc.message,)
             raise
     env.say(json.dumps(result))
+    if unreached(result):  # (a stop is taken whatever the robot's state: its result says what came of it)
+        env.hint(f"{args.verb} did not reach robot '{args.robot}' ({result.get('connection', '?')})"
+                 + ("; its owner sends it as soon as the robot answers again" if result.get("pending") else ""))
+        return Exit.TIMEOUT
     return Exit.OK
 
 

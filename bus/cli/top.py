@@ -27,7 +27,8 @@ from textual.containers import Horizontal, Vertical
 from textual.screen import ModalScreen
 from textual.widgets import DataTable, Footer, Static
 
-from ..client import Outcome, ask
+from .. import connection
+from ..client import Outcome, stop_all
 from ..errors import CommandError, ConfigError, SonibusError
 from ..monitor import EventView, JointView, Monitor, NodeView, RobotView, Snapshot
 from ..ownership import owners
@@ -127,7 +128,7 @@ class TopApp(App[int]):
             self.nodes.add_column(name, key=name)
         self.robots.focus()
         self.events.border_title = "events"
-        owners(self.monitor.bus)  # the claims, followed from now: a stop is sent to each robot's owner alone
+        owners(self.monitor.bus)  # the claims, followed from now: those a stop reports as silent
         if self.signals:
             loop = asyncio.get_running_loop()
             for sig in (signal.SIGINT, signal.SIGTERM):
@@ -192,28 +193,31 @@ class TopApp(App[int]):
             return
         self.push_screen(ConfirmStop(robots), lambda yes: self._stop(robots) if yes else self._cancelled())
 
-    def _on_bus_now(self, asked: list[str]) -> list[str]:
-        """The robots asked about and those on the bus now (one may have come while the stop was asked)."""
-        snap = self.snapshot = self.monitor.snapshot()
-        return asked + [r.name for r in snap.robots if not r.gone and r.name not in asked]
-
     def _cancelled(self) -> None:
         self.monitor.note("top", "stop", "cancelled: nothing sent")
         self.redraw()
 
     def _stop(self, asked: list[str]) -> None:
-        for robot in self._on_bus_now(asked):
-            self.monitor.note(robot, "stop", "sent")
-            ask(self.monitor.bus, robot, "stop", {}, lambda outcome, r=robot: self._replied(r, outcome),
-                timeout=STOP_TIMEOUT_S)
+        """Every robot of the bus at once (``stop_all``: also one that came while the stop was asked)."""
+        self.monitor.note("top", "stop", f"sent to every robot ({len(asked)} shown)")
+        stop_all(self.monitor.bus, self._replied, self._silent, timeout=STOP_TIMEOUT_S)
         self.redraw()
 
     def _replied(self, robot: str, outcome: Outcome) -> None:
         """(On a Zenoh thread: the monitor takes it, the next redraw shows it.)"""
         if isinstance(outcome, CommandError):
             self.monitor.note(robot, "stop", f"refused: {outcome.code}: {outcome.message}", alarm=True)
+        elif outcome.get("reached") is False:  # (taken, but the robot could not be reached: said, not hidden)
+            later = "; sent when it answers again" if outcome.get("pending") else ""
+            self.monitor.note(robot, "stop", f"NOT REACHED: {outcome.get('error', '')}{later}", alarm=True)
         else:
             self.monitor.note(robot, "stop", "ok: stopped")
+
+    def _silent(self, robots: list[str], error: CommandError) -> None:
+        """(On a Zenoh thread.) The robots on the bus that did not answer the stop, in one line."""
+        if robots:
+            named = ", ".join(robots[:10]) + (f", … ({len(robots)} in all)" if len(robots) > 10 else "")
+            self.monitor.note("top", "stop", f"no answer from {named}: {error.code}: {error.message}", alarm=True)
 
     def action_quit_top(self) -> None:
         self.exit(int(Exit.OK))
@@ -237,9 +241,12 @@ def _fill(table: DataTable[Text], rows: Iterable[tuple[str, list[Text]]]) -> Non
 
 
 def robot_cells(robot: RobotView) -> list[Text]:
-    """A robot's row: red once its owner left, yellow while another claim stands by."""
-    style = GONE if robot.gone else WARNING if robot.standby else ""
-    state = "gone" if robot.gone else f"CONFLICT: {', '.join(robot.standby)} stands by" if robot.standby else "on bus"
+    """A robot's row: red once its owner left or while it is not connected, yellow while
+    another claim stands by; its state as its owner says it (``bus/connection.py``)."""
+    unreached = bool(robot.connection) and not robot.connected
+    style = GONE if robot.gone or unreached else WARNING if robot.standby else ""
+    state = ("gone" if robot.gone else f"CONFLICT: {', '.join(robot.standby)} stands by" if robot.standby
+             else connection.describe(robot.connection) if robot.connection else "on bus")
     latency = f"{robot.latency_ms:.1f} ms" if robot.latency_ms is not None else "-"
     gaps = Text(f"{robot.gaps:,}", style=style or (WARNING if robot.gaps else ""))
     return [Text(robot.name, style=style), Text(robot.owner or "?", style=style), Text(robot.model or "?", style=style),

@@ -8,7 +8,7 @@ import json
 import time
 from typing import Any
 
-from .. import codec, health, keys, ownership, registry
+from .. import codec, connection, health, keys, ownership, registry
 from ..client import robot_info
 from ..node import Bus
 from ..presence import SILENCE_S
@@ -54,14 +54,28 @@ def _nodes(args: argparse.Namespace, env: Environment) -> Exit:
                 env.say(f"        {found if isinstance(found, str) else health.summary(found)}")
         env.say(f"{len(robots)} robot(s)")
         for name, claims in robots.items():
-            info = robot_info(bus, name, timeout=args.timeout) or {}
-            owner, standing_by = claims[0], claims[1:]
-            conflict = "".join(f"  CONFLICT: {c.node} on {c.host} stands by" for c in standing_by)
-            env.say(f"  robot {name:<16} {info.get('model', '?'):<8} {info.get('rate_hz', 0):g} frames/s  "
-                    f"owned by {owner.node} on {owner.host}{conflict}")
+            info = robot_info(bus, name, timeout=args.timeout)
+            env.say(robot_line(name, info, claims))
         if not nodes:
             env.hint(reach_hint(cfg, reached, "no node answered"))
     return Exit.OK
+
+
+def robot_line(name: str, info: dict[str, Any] | None, claims: list[ownership.Claim]) -> str:
+    """One robot of ``sonibus nodes``: model, the frames per second its owner really
+    publishes (0 when none), its connection state, its owner (and who stands by).
+
+    >>> claim = ownership.Claim("pepper", 1, "laptop", "pepper")
+    >>> print(robot_line("pepper", {"model": "pepper", "rate_hz": 50, "connection": {"state": "lost",
+    ...       "error": "connect: Connection refused", "frames_per_s": 0.0}}, [claim]))  # doctest: +NORMALIZE_WHITESPACE
+    robot pepper pepper 0 frames/s NOT CONNECTED: lost (connect: Connection refused) owned by pepper on laptop
+    """
+    owner, standing_by = claims[0], claims[1:]
+    conflict = "".join(f"  CONFLICT: {c.node} on {c.host} stands by" for c in standing_by)
+    state = connection.describe(connection.state_of(info)) if info is not None else "no info: its owner did not answer"
+    model = (info or {}).get("model", "?")
+    return (f"  robot {name:<16} {model:<8} {connection.rate(info):.0f} frames/s  {state}  "
+            f"owned by {owner.node} on {owner.host}{conflict}")
 
 
 def node_line(host: str, node: str, about: dict[str, Any], now: float) -> str:

@@ -10,11 +10,15 @@ A verb without a schema is passed on with no arguments (its robot answers
 ``unknown_verb`` with the list), and a verb whose schema takes anything (``stop``)
 ignores what it is given (a button's 1.0). Only the shape is checked here; ranges,
 joints, behaviors and postures are the robot owner's (``commands.validate``).
+Requests to a program that drives a robot (``section="program"``: a show's
+``scenario``) are shaped the same way from their schemas in ``schemas/v1/program/``.
 
 >>> from_words("say", ["hello", "there", "volume=0.5"])
 {'text': 'hello there', 'volume': 0.5}
 >>> from_words("say", ["1+1=2"])
 {'text': '1+1=2'}
+>>> from_osc("scenario", ["hello"], section="program")
+{'name': 'hello'}
 >>> from_osc("say", ["hello", "there", 0.5])
 {'text': 'hello there', 'volume': 0.5}
 >>> from_json("say", {"volume": 0.5, "text": "hello there"})
@@ -37,6 +41,7 @@ say: argument 3 (speed) must be a number, got string 'fast' — give a number, e
 from __future__ import annotations
 
 import difflib
+import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from functools import cache
@@ -93,11 +98,13 @@ class Signature:
 
 
 @cache
-def signature(verb: str) -> Signature | None:
-    """The arguments ``verb`` takes; None for a verb with no request schema."""
-    if verb not in schemas.command_verbs():
+def signature(verb: str, section: str = "cmd") -> Signature | None:
+    """The arguments ``verb`` takes (a robot's command; ``section="program"``: a request
+    to a program that drives the robot, such as a show's ``scenario``); None for a verb
+    with no request schema."""
+    if verb not in schemas.request_verbs(section):
         return None
-    schema = schemas.command_schema(verb)
+    schema = schemas.request_schema(section, verb)
     props = schema.get("properties", {})
     required = set(schema.get("required", ()))
     arguments = tuple(
@@ -123,10 +130,10 @@ def _example(prop: dict[str, Any]) -> str:
 # -- the three surfaces --------------------------------------------------------------
 
 
-def from_words(verb: str, words: Sequence[str]) -> dict[str, Any]:
+def from_words(verb: str, words: Sequence[str], section: str = "cmd") -> dict[str, Any]:
     """The request of command-line words: ``NAME=VALUE``, loose words for the main
     value, comma-separated lists (``names=HeadYaw,HeadPitch``)."""
-    sig = signature(verb)
+    sig = signature(verb, section)
     if sig is None or sig.takes_any:
         return {}
     main = sig.positional
@@ -161,11 +168,11 @@ def _is_named(sig: Signature, word: str) -> bool:
     return False
 
 
-def from_osc(verb: str, args: Sequence[Any]) -> dict[str, Any]:
+def from_osc(verb: str, args: Sequence[Any], section: str = "cmd") -> dict[str, Any]:
     """The request of an OSC message's arguments, in the order of the verb's
     arguments; an array (and the main string) takes a run of strings, joints/set
     takes ``"Joint" angle`` pairs and an optional speed."""
-    sig = signature(verb)
+    sig = signature(verb, section)
     if sig is None or sig.takes_any:
         return {}
     if verb == "joints/set":
@@ -191,10 +198,10 @@ def from_osc(verb: str, args: Sequence[Any]) -> dict[str, Any]:
     return _request(sig, values, _from_value)
 
 
-def from_json(verb: str, value: Any) -> dict[str, Any]:
+def from_json(verb: str, value: Any, section: str = "cmd") -> dict[str, Any]:
     """The request of a decoded JSON object, its types checked strictly: numbers
     are numbers (not strings, not booleans), lists are lists."""
-    sig = signature(verb)
+    sig = signature(verb, section)
     if sig is None or sig.takes_any:
         return {}
     if not isinstance(value, dict):
@@ -237,7 +244,7 @@ def _from_text(verb: str, arg: Argument, text: str, item: int) -> Any:
     kind = arg.items if item else arg.kind
     try:
         if kind == "number":
-            return float(text)
+            return _finite(verb, arg, float(text), item)
         if kind == "integer":
             return int(text)
     except ValueError:
@@ -255,7 +262,7 @@ def _from_value(verb: str, arg: Argument, value: Any, item: int) -> Any:
     number = _is_number(value)
     try:
         if kind == "number" and number:
-            return float(value)
+            return _finite(verb, arg, float(value), item)
         if kind == "integer" and number and float(value).is_integer():
             return int(value)
     except OverflowError:  # an integer too big for a float
@@ -265,6 +272,15 @@ def _from_value(verb: str, arg: Argument, value: Any, item: int) -> Any:
     if kind == "boolean" and (isinstance(value, bool) or (number and value in (0, 1))):
         return bool(value)
     raise _wrong(verb, arg, value, item)
+
+
+def _finite(verb: str, arg: Argument, value: float, item: int) -> float:
+    """``value`` if it is a finite number: NaN and ±inf are refused while the request is shaped,
+    by every surface alike (a browser's ``NaN``, OSC's, the word ``nan``), before anything holds it."""
+    if not math.isfinite(value):
+        which = f" item {item}" if item else ""
+        raise _bad(f"{verb}: argument {arg.place} ({arg.name}){which} must be a finite number, got {shown(value)}")
+    return value
 
 
 def _joint_pairs(verb: str, args: Sequence[Any]) -> dict[str, Any]:

@@ -26,7 +26,7 @@ from sonibus.bus.robot import RobotModel
 
 PATCHES = Path(__file__).resolve().parents[1]
 SLIDERS = ("HeadYaw", "HeadPitch", "LShoulderPitch", "RShoulderPitch")
-EVENTS = ("behavior", "speech", "posture", "command", "connection")  # docs/osc.md, "Events"
+EVENTS = ("behavior", "speech", "posture", "command", "connection", "show", "scenario")  # docs/osc.md, "Events"
 ROW = 30.0
 
 

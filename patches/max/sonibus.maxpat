@@ -80,8 +80,10 @@
 					"linecount": 2,
 					"maxclass": "newobj",
 					"numinlets": 2,
-					"numoutlets": 6,
+					"numoutlets": 8,
 					"outlettype": [
+						"",
+						"",
 						"",
 						"",
 						"",
@@ -92,10 +94,10 @@
 					"patching_rect": [
 						30.0,
 						178.0,
-						600.0,
+						800.0,
 						36.0
 					],
-					"text": "route /pepper/events/behavior /pepper/events/speech /pepper/events/posture /pepper/events/command /pepper/events/connection"
+					"text": "route /pepper/events/behavior /pepper/events/speech /pepper/events/posture /pepper/events/command /pepper/events/connection /pepper/events/show /pepper/events/scenario"
 				}
 			},
 			{
@@ -120,7 +122,7 @@
 					"numinlets": 1,
 					"numoutlets": 0,
 					"patching_rect": [
-						148.0,
+						142.9,
 						223.0,
 						96.0,
 						22.0
@@ -135,7 +137,7 @@
 					"numinlets": 1,
 					"numoutlets": 0,
 					"patching_rect": [
-						266.0,
+						255.7,
 						223.0,
 						103.0,
 						22.0
@@ -150,7 +152,7 @@
 					"numinlets": 1,
 					"numoutlets": 0,
 					"patching_rect": [
-						384.0,
+						368.6,
 						223.0,
 						103.0,
 						22.0
@@ -165,7 +167,7 @@
 					"numinlets": 1,
 					"numoutlets": 0,
 					"patching_rect": [
-						502.0,
+						481.4,
 						223.0,
 						124.0,
 						22.0
@@ -176,6 +178,36 @@
 			{
 				"box": {
 					"id": "obj-9",
+					"maxclass": "newobj",
+					"numinlets": 1,
+					"numoutlets": 0,
+					"patching_rect": [
+						594.3,
+						223.0,
+						82.0,
+						22.0
+					],
+					"text": "print show"
+				}
+			},
+			{
+				"box": {
+					"id": "obj-10",
+					"maxclass": "newobj",
+					"numinlets": 1,
+					"numoutlets": 0,
+					"patching_rect": [
+						707.1,
+						223.0,
+						110.0,
+						22.0
+					],
+					"text": "print scenario"
+				}
+			},
+			{
+				"box": {
+					"id": "obj-11",
 					"maxclass": "newobj",
 					"numinlets": 1,
 					"numoutlets": 2,
@@ -194,7 +226,7 @@
 			},
 			{
 				"box": {
-					"id": "obj-10",
+					"id": "obj-12",
 					"maxclass": "newobj",
 					"numinlets": 1,
 					"numoutlets": 3,
@@ -214,7 +246,7 @@
 			},
 			{
 				"box": {
-					"id": "obj-11",
+					"id": "obj-13",
 					"maxclass": "button",
 					"numinlets": 1,
 					"numoutlets": 1,
@@ -232,7 +264,7 @@
 			},
 			{
 				"box": {
-					"id": "obj-12",
+					"id": "obj-14",
 					"maxclass": "comment",
 					"numinlets": 1,
 					"numoutlets": 0,
@@ -247,7 +279,7 @@
 			},
 			{
 				"box": {
-					"id": "obj-13",
+					"id": "obj-15",
 					"maxclass": "button",
 					"numinlets": 1,
 					"numoutlets": 1,
@@ -265,7 +297,7 @@
 			},
 			{
 				"box": {
-					"id": "obj-14",
+					"id": "obj-16",
 					"maxclass": "comment",
 					"numinlets": 1,
 					"numoutlets": 0,
@@ -280,7 +312,7 @@
 			},
 			{
 				"box": {
-					"id": "obj-15",
+					"id": "obj-17",
 					"linecount": 2,
 					"maxclass": "newobj",
 					"numinlets": 2,
@@ -301,7 +333,7 @@
 			},
 			{
 				"box": {
-					"id": "obj-16",
+					"id": "obj-18",
 					"linecount": 2,
 					"maxclass": "newobj",
 					"numinlets": 2,
@@ -326,7 +358,7 @@
 			},
 			{
 				"box": {
-					"id": "obj-17",
+					"id": "obj-19",
 					"linecount": 2,
 					"maxclass": "newobj",
 					"numinlets": 2,
@@ -348,7 +380,7 @@
 			},
 			{
 				"box": {
-					"id": "obj-18",
+					"id": "obj-20",
 					"linecount": 2,
 					"maxclass": "newobj",
 					"numinlets": 2,
@@ -374,7 +406,7 @@
 			{
 				"box": {
 					"format": 6,
-					"id": "obj-19",
+					"id": "obj-21",
 					"maxclass": "flonum",
 					"numinlets": 1,
 					"numoutlets": 2,
@@ -394,7 +426,7 @@
 			{
 				"box": {
 					"fontsize": 10.0,
-					"id": "obj-20",
+					"id": "obj-22",
 					"maxclass": "comment",
 					"numinlets": 1,
 					"numoutlets": 0,
@@ -410,7 +442,7 @@
 			{
 				"box": {
 					"format": 6,
-					"id": "obj-21",
+					"id": "obj-23",
 					"maxclass": "flonum",
 					"numinlets": 1,
 					"numoutlets": 2,
@@ -430,7 +462,7 @@
 			{
 				"box": {
 					"fontsize": 10.0,
-					"id": "obj-22",
+					"id": "obj-24",
 					"maxclass": "comment",
 					"numinlets": 1,
 					"numoutlets": 0,
@@ -446,7 +478,7 @@
 			{
 				"box": {
 					"format": 6,
-					"id": "obj-23",
+					"id": "obj-25",
 					"maxclass": "flonum",
 					"numinlets": 1,
 					"numoutlets": 2,
@@ -466,7 +498,7 @@
 			{
 				"box": {
 					"fontsize": 10.0,
-					"id": "obj-24",
+					"id": "obj-26",
 					"maxclass": "comment",
 					"numinlets": 1,
 					"numoutlets": 0,
@@ -482,7 +514,7 @@
 			{
 				"box": {
 					"format": 6,
-					"id": "obj-25",
+					"id": "obj-27",
 					"maxclass": "flonum",
 					"numinlets": 1,
 					"numoutlets": 2,
@@ -502,7 +534,7 @@
 			{
 				"box": {
 					"fontsize": 10.0,
-					"id": "obj-26",
+					"id": "obj-28",
 					"maxclass": "comment",
 					"numinlets": 1,
 					"numoutlets": 0,
@@ -518,7 +550,7 @@
 			{
 				"box": {
 					"format": 6,
-					"id": "obj-27",
+					"id": "obj-29",
 					"maxclass": "flonum",
 					"numinlets": 1,
 					"numoutlets": 2,
@@ -538,7 +570,7 @@
 			{
 				"box": {
 					"fontsize": 10.0,
-					"id": "obj-28",
+					"id": "obj-30",
 					"maxclass": "comment",
 					"numinlets": 1,
 					"numoutlets": 0,
@@ -554,7 +586,7 @@
 			{
 				"box": {
 					"format": 6,
-					"id": "obj-29",
+					"id": "obj-31",
 					"maxclass": "flonum",
 					"numinlets": 1,
 					"numoutlets": 2,
@@ -574,7 +606,7 @@
 			{
 				"box": {
 					"fontsize": 10.0,
-					"id": "obj-30",
+					"id": "obj-32",
 					"maxclass": "comment",
 					"numinlets": 1,
 					"numoutlets": 0,
@@ -590,7 +622,7 @@
 			{
 				"box": {
 					"format": 6,
-					"id": "obj-31",
+					"id": "obj-33",
 					"maxclass": "flonum",
 					"numinlets": 1,
 					"numoutlets": 2,
@@ -610,7 +642,7 @@
 			{
 				"box": {
 					"fontsize": 10.0,
-					"id": "obj-32",
+					"id": "obj-34",
 					"maxclass": "comment",
 					"numinlets": 1,
 					"numoutlets": 0,
@@ -626,7 +658,7 @@
 			{
 				"box": {
 					"format": 6,
-					"id": "obj-33",
+					"id": "obj-35",
 					"maxclass": "flonum",
 					"numinlets": 1,
 					"numoutlets": 2,
@@ -646,7 +678,7 @@
 			{
 				"box": {
 					"fontsize": 10.0,
-					"id": "obj-34",
+					"id": "obj-36",
 					"maxclass": "comment",
 					"numinlets": 1,
 					"numoutlets": 0,
@@ -662,7 +694,7 @@
 			{
 				"box": {
 					"format": 6,
-					"id": "obj-35",
+					"id": "obj-37",
 					"maxclass": "flonum",
 					"numinlets": 1,
 					"numoutlets": 2,
@@ -682,7 +714,7 @@
 			{
 				"box": {
 					"fontsize": 10.0,
-					"id": "obj-36",
+					"id": "obj-38",
 					"maxclass": "comment",
 					"numinlets": 1,
 					"numoutlets": 0,
@@ -698,7 +730,7 @@
 			{
 				"box": {
 					"format": 6,
-					"id": "obj-37",
+					"id": "obj-39",
 					"maxclass": "flonum",
 					"numinlets": 1,
 					"numoutlets": 2,
@@ -718,7 +750,7 @@
 			{
 				"box": {
 					"fontsize": 10.0,
-					"id": "obj-38",
+					"id": "obj-40",
 					"maxclass": "comment",
 					"numinlets": 1,
 					"numoutlets": 0,
@@ -734,7 +766,7 @@
 			{
 				"box": {
 					"format": 6,
-					"id": "obj-39",
+					"id": "obj-41",
 					"maxclass": "flonum",
 					"numinlets": 1,
 					"numoutlets": 2,
@@ -754,7 +786,7 @@
 			{
 				"box": {
 					"fontsize": 10.0,
-					"id": "obj-40",
+					"id": "obj-42",
 					"maxclass": "comment",
 					"numinlets": 1,
 					"numoutlets": 0,
@@ -770,7 +802,7 @@
 			{
 				"box": {
 					"format": 6,
-					"id": "obj-41",
+					"id": "obj-43",
 					"maxclass": "flonum",
 					"numinlets": 1,
 					"numoutlets": 2,
@@ -790,7 +822,7 @@
 			{
 				"box": {
 					"fontsize": 10.0,
-					"id": "obj-42",
+					"id": "obj-44",
 					"maxclass": "comment",
 					"numinlets": 1,
 					"numoutlets": 0,
@@ -806,7 +838,7 @@
 			{
 				"box": {
 					"format": 6,
-					"id": "obj-43",
+					"id": "obj-45",
 					"maxclass": "flonum",
 					"numinlets": 1,
 					"numoutlets": 2,
@@ -826,7 +858,7 @@
 			{
 				"box": {
 					"fontsize": 10.0,
-					"id": "obj-44",
+					"id": "obj-46",
 					"maxclass": "comment",
 					"numinlets": 1,
 					"numoutlets": 0,
@@ -842,7 +874,7 @@
 			{
 				"box": {
 					"format": 6,
-					"id": "obj-45",
+					"id": "obj-47",
 					"maxclass": "flonum",
 					"numinlets": 1,
 					"numoutlets": 2,
@@ -862,7 +894,7 @@
 			{
 				"box": {
 					"fontsize": 10.0,
-					"id": "obj-46",
+					"id": "obj-48",
 					"maxclass": "comment",
 					"numinlets": 1,
 					"numoutlets": 0,
@@ -878,7 +910,7 @@
 			{
 				"box": {
 					"format": 6,
-					"id": "obj-47",
+					"id": "obj-49",
 					"maxclass": "flonum",
 					"numinlets": 1,
 					"numoutlets": 2,
@@ -898,7 +930,7 @@
 			{
 				"box": {
 					"fontsize": 10.0,
-					"id": "obj-48",
+					"id": "obj-50",
 					"maxclass": "comment",
 					"numinlets": 1,
 					"numoutlets": 0,
@@ -914,7 +946,7 @@
 			{
 				"box": {
 					"format": 6,
-					"id": "obj-49",
+					"id": "obj-51",
 					"maxclass": "flonum",
 					"numinlets": 1,
 					"numoutlets": 2,
@@ -934,7 +966,7 @@
 			{
 				"box": {
 					"fontsize": 10.0,
-					"id": "obj-50",
+					"id": "obj-52",
 					"maxclass": "comment",
 					"numinlets": 1,
 					"numoutlets": 0,
@@ -950,7 +982,7 @@
 			{
 				"box": {
 					"format": 6,
-					"id": "obj-51",
+					"id": "obj-53",
 					"maxclass": "flonum",
 					"numinlets": 1,
 					"numoutlets": 2,
@@ -970,7 +1002,7 @@
 			{
 				"box": {
 					"fontsize": 10.0,
-					"id": "obj-52",
+					"id": "obj-54",
 					"maxclass": "comment",
 					"numinlets": 1,
 					"numoutlets": 0,
@@ -985,7 +1017,7 @@
 			},
 			{
 				"box": {
-					"id": "obj-53",
+					"id": "obj-55",
 					"maxclass": "comment",
 					"numinlets": 1,
 					"numoutlets": 0,
@@ -1000,7 +1032,7 @@
 			},
 			{
 				"box": {
-					"id": "obj-54",
+					"id": "obj-56",
 					"maxclass": "newobj",
 					"numinlets": 6,
 					"numoutlets": 1,
@@ -1018,7 +1050,7 @@
 			},
 			{
 				"box": {
-					"id": "obj-55",
+					"id": "obj-57",
 					"maxclass": "message",
 					"numinlets": 2,
 					"numoutlets": 1,
@@ -1036,7 +1068,7 @@
 			},
 			{
 				"box": {
-					"id": "obj-56",
+					"id": "obj-58",
 					"maxclass": "newobj",
 					"numinlets": 2,
 					"numoutlets": 2,
@@ -1055,7 +1087,7 @@
 			},
 			{
 				"box": {
-					"id": "obj-57",
+					"id": "obj-59",
 					"maxclass": "newobj",
 					"numinlets": 2,
 					"numoutlets": 1,
@@ -1073,7 +1105,7 @@
 			},
 			{
 				"box": {
-					"id": "obj-58",
+					"id": "obj-60",
 					"maxclass": "newobj",
 					"numinlets": 2,
 					"numoutlets": 1,
@@ -1091,7 +1123,7 @@
 			},
 			{
 				"box": {
-					"id": "obj-59",
+					"id": "obj-61",
 					"maxclass": "ezdac~",
 					"numinlets": 2,
 					"numoutlets": 0,
@@ -1105,7 +1137,7 @@
 			},
 			{
 				"box": {
-					"id": "obj-60",
+					"id": "obj-62",
 					"linecount": 9,
 					"maxclass": "comment",
 					"numinlets": 1,
@@ -1121,7 +1153,7 @@
 			},
 			{
 				"box": {
-					"id": "obj-61",
+					"id": "obj-63",
 					"maxclass": "message",
 					"numinlets": 2,
 					"numoutlets": 1,
@@ -1139,7 +1171,7 @@
 			},
 			{
 				"box": {
-					"id": "obj-62",
+					"id": "obj-64",
 					"maxclass": "message",
 					"numinlets": 2,
 					"numoutlets": 1,
@@ -1157,7 +1189,7 @@
 			},
 			{
 				"box": {
-					"id": "obj-63",
+					"id": "obj-65",
 					"maxclass": "message",
 					"numinlets": 2,
 					"numoutlets": 1,
@@ -1175,7 +1207,7 @@
 			},
 			{
 				"box": {
-					"id": "obj-64",
+					"id": "obj-66",
 					"maxclass": "message",
 					"numinlets": 2,
 					"numoutlets": 1,
@@ -1193,7 +1225,7 @@
 			},
 			{
 				"box": {
-					"id": "obj-65",
+					"id": "obj-67",
 					"maxclass": "message",
 					"numinlets": 2,
 					"numoutlets": 1,
@@ -1211,7 +1243,7 @@
 			},
 			{
 				"box": {
-					"id": "obj-66",
+					"id": "obj-68",
 					"maxclass": "message",
 					"numinlets": 2,
 					"numoutlets": 1,
@@ -1236,7 +1268,7 @@
 						1.0
 					],
 					"fontsize": 24.0,
-					"id": "obj-67",
+					"id": "obj-69",
 					"maxclass": "message",
 					"numinlets": 2,
 					"numoutlets": 1,
@@ -1254,7 +1286,7 @@
 			},
 			{
 				"box": {
-					"id": "obj-68",
+					"id": "obj-70",
 					"maxclass": "comment",
 					"numinlets": 1,
 					"numoutlets": 0,
@@ -1269,7 +1301,7 @@
 			},
 			{
 				"box": {
-					"id": "obj-69",
+					"id": "obj-71",
 					"maxclass": "comment",
 					"numinlets": 1,
 					"numoutlets": 0,
@@ -1285,7 +1317,7 @@
 			{
 				"box": {
 					"floatoutput": 1,
-					"id": "obj-70",
+					"id": "obj-72",
 					"maxclass": "slider",
 					"numinlets": 1,
 					"numoutlets": 1,
@@ -1304,7 +1336,7 @@
 			},
 			{
 				"box": {
-					"id": "obj-71",
+					"id": "obj-73",
 					"maxclass": "newobj",
 					"numinlets": 6,
 					"numoutlets": 1,
@@ -1322,7 +1354,7 @@
 			},
 			{
 				"box": {
-					"id": "obj-72",
+					"id": "obj-74",
 					"maxclass": "newobj",
 					"numinlets": 1,
 					"numoutlets": 1,
@@ -1340,7 +1372,7 @@
 			},
 			{
 				"box": {
-					"id": "obj-73",
+					"id": "obj-75",
 					"maxclass": "comment",
 					"numinlets": 1,
 					"numoutlets": 0,
@@ -1356,7 +1388,7 @@
 			{
 				"box": {
 					"floatoutput": 1,
-					"id": "obj-74",
+					"id": "obj-76",
 					"maxclass": "slider",
 					"numinlets": 1,
 					"numoutlets": 1,
@@ -1375,7 +1407,7 @@
 			},
 			{
 				"box": {
-					"id": "obj-75",
+					"id": "obj-77",
 					"maxclass": "newobj",
 					"numinlets": 6,
 					"numoutlets": 1,
@@ -1393,7 +1425,7 @@
 			},
 			{
 				"box": {
-					"id": "obj-76",
+					"id": "obj-78",
 					"maxclass": "newobj",
 					"numinlets": 1,
 					"numoutlets": 1,
@@ -1411,7 +1443,7 @@
 			},
 			{
 				"box": {
-					"id": "obj-77",
+					"id": "obj-79",
 					"maxclass": "comment",
 					"numinlets": 1,
 					"numoutlets": 0,
@@ -1427,7 +1459,7 @@
 			{
 				"box": {
 					"floatoutput": 1,
-					"id": "obj-78",
+					"id": "obj-80",
 					"maxclass": "slider",
 					"numinlets": 1,
 					"numoutlets": 1,
@@ -1446,7 +1478,7 @@
 			},
 			{
 				"box": {
-					"id": "obj-79",
+					"id": "obj-81",
 					"maxclass": "newobj",
 					"numinlets": 6,
 					"numoutlets": 1,
@@ -1464,7 +1496,7 @@
 			},
 			{
 				"box": {
-					"id": "obj-80",
+					"id": "obj-82",
 					"maxclass": "newobj",
 					"numinlets": 1,
 					"numoutlets": 1,
@@ -1482,7 +1514,7 @@
 			},
 			{
 				"box": {
-					"id": "obj-81",
+					"id": "obj-83",
 					"maxclass": "comment",
 					"numinlets": 1,
 					"numoutlets": 0,
@@ -1498,7 +1530,7 @@
 			{
 				"box": {
 					"floatoutput": 1,
-					"id": "obj-82",
+					"id": "obj-84",
 					"maxclass": "slider",
 					"numinlets": 1,
 					"numoutlets": 1,
@@ -1517,7 +1549,7 @@
 			},
 			{
 				"box": {
-					"id": "obj-83",
+					"id": "obj-85",
 					"maxclass": "newobj",
 					"numinlets": 6,
 					"numoutlets": 1,
@@ -1535,7 +1567,7 @@
 			},
 			{
 				"box": {
-					"id": "obj-84",
+					"id": "obj-86",
 					"maxclass": "newobj",
 					"numinlets": 1,
 					"numoutlets": 1,
@@ -1553,7 +1585,7 @@
 			},
 			{
 				"box": {
-					"id": "obj-85",
+					"id": "obj-87",
 					"maxclass": "newobj",
 					"numinlets": 1,
 					"numoutlets": 0,
@@ -1648,7 +1680,7 @@
 					],
 					"source": [
 						"obj-3",
-						0
+						5
 					]
 				}
 			},
@@ -1659,8 +1691,8 @@
 						0
 					],
 					"source": [
-						"obj-9",
-						1
+						"obj-3",
+						6
 					]
 				}
 			},
@@ -1671,8 +1703,20 @@
 						0
 					],
 					"source": [
-						"obj-10",
+						"obj-3",
 						0
+					]
+				}
+			},
+			{
+				"patchline": {
+					"destination": [
+						"obj-12",
+						0
+					],
+					"source": [
+						"obj-11",
+						1
 					]
 				}
 			},
@@ -1683,32 +1727,20 @@
 						0
 					],
 					"source": [
-						"obj-10",
+						"obj-12",
+						0
+					]
+				}
+			},
+			{
+				"patchline": {
+					"destination": [
+						"obj-15",
+						0
+					],
+					"source": [
+						"obj-12",
 						1
-					]
-				}
-			},
-			{
-				"patchline": {
-					"destination": [
-						"obj-15",
-						0
-					],
-					"source": [
-						"obj-3",
-						5
-					]
-				}
-			},
-			{
-				"patchline": {
-					"destination": [
-						"obj-16",
-						0
-					],
-					"source": [
-						"obj-15",
-						2
 					]
 				}
 			},
@@ -1719,8 +1751,8 @@
 						0
 					],
 					"source": [
-						"obj-16",
-						6
+						"obj-3",
+						7
 					]
 				}
 			},
@@ -1732,7 +1764,7 @@
 					],
 					"source": [
 						"obj-17",
-						3
+						2
 					]
 				}
 			},
@@ -1743,8 +1775,20 @@
 						0
 					],
 					"source": [
-						"obj-15",
+						"obj-18",
+						6
+					]
+				}
+			},
+			{
+				"patchline": {
+					"destination": [
+						"obj-20",
 						0
+					],
+					"source": [
+						"obj-19",
+						3
 					]
 				}
 			},
@@ -1755,8 +1799,8 @@
 						0
 					],
 					"source": [
-						"obj-15",
-						1
+						"obj-17",
+						0
 					]
 				}
 			},
@@ -1767,8 +1811,8 @@
 						0
 					],
 					"source": [
-						"obj-16",
-						0
+						"obj-17",
+						1
 					]
 				}
 			},
@@ -1779,8 +1823,8 @@
 						0
 					],
 					"source": [
-						"obj-16",
-						1
+						"obj-18",
+						0
 					]
 				}
 			},
@@ -1791,8 +1835,8 @@
 						0
 					],
 					"source": [
-						"obj-16",
-						2
+						"obj-18",
+						1
 					]
 				}
 			},
@@ -1803,8 +1847,8 @@
 						0
 					],
 					"source": [
-						"obj-16",
-						3
+						"obj-18",
+						2
 					]
 				}
 			},
@@ -1815,8 +1859,8 @@
 						0
 					],
 					"source": [
-						"obj-16",
-						4
+						"obj-18",
+						3
 					]
 				}
 			},
@@ -1827,8 +1871,8 @@
 						0
 					],
 					"source": [
-						"obj-16",
-						5
+						"obj-18",
+						4
 					]
 				}
 			},
@@ -1839,8 +1883,8 @@
 						0
 					],
 					"source": [
-						"obj-17",
-						0
+						"obj-18",
+						5
 					]
 				}
 			},
@@ -1851,8 +1895,8 @@
 						0
 					],
 					"source": [
-						"obj-17",
-						1
+						"obj-19",
+						0
 					]
 				}
 			},
@@ -1863,8 +1907,8 @@
 						0
 					],
 					"source": [
-						"obj-17",
-						2
+						"obj-19",
+						1
 					]
 				}
 			},
@@ -1875,8 +1919,8 @@
 						0
 					],
 					"source": [
-						"obj-18",
-						0
+						"obj-19",
+						2
 					]
 				}
 			},
@@ -1887,8 +1931,8 @@
 						0
 					],
 					"source": [
-						"obj-18",
-						1
+						"obj-20",
+						0
 					]
 				}
 			},
@@ -1899,8 +1943,8 @@
 						0
 					],
 					"source": [
-						"obj-18",
-						2
+						"obj-20",
+						1
 					]
 				}
 			},
@@ -1911,8 +1955,8 @@
 						0
 					],
 					"source": [
-						"obj-18",
-						3
+						"obj-20",
+						2
 					]
 				}
 			},
@@ -1923,8 +1967,8 @@
 						0
 					],
 					"source": [
-						"obj-18",
-						4
+						"obj-20",
+						3
 					]
 				}
 			},
@@ -1935,7 +1979,19 @@
 						0
 					],
 					"source": [
-						"obj-18",
+						"obj-20",
+						4
+					]
+				}
+			},
+			{
+				"patchline": {
+					"destination": [
+						"obj-53",
+						0
+					],
+					"source": [
+						"obj-20",
 						5
 					]
 				}
@@ -1943,35 +1999,11 @@
 			{
 				"patchline": {
 					"destination": [
-						"obj-54",
-						0
-					],
-					"source": [
-						"obj-15",
-						0
-					]
-				}
-			},
-			{
-				"patchline": {
-					"destination": [
-						"obj-55",
-						0
-					],
-					"source": [
-						"obj-54",
-						0
-					]
-				}
-			},
-			{
-				"patchline": {
-					"destination": [
 						"obj-56",
 						0
 					],
 					"source": [
-						"obj-55",
+						"obj-17",
 						0
 					]
 				}
@@ -2015,11 +2047,35 @@
 			{
 				"patchline": {
 					"destination": [
+						"obj-60",
+						0
+					],
+					"source": [
 						"obj-59",
+						0
+					]
+				}
+			},
+			{
+				"patchline": {
+					"destination": [
+						"obj-61",
+						0
+					],
+					"source": [
+						"obj-60",
+						0
+					]
+				}
+			},
+			{
+				"patchline": {
+					"destination": [
+						"obj-61",
 						1
 					],
 					"source": [
-						"obj-58",
+						"obj-60",
 						0
 					]
 				}
@@ -2027,95 +2083,95 @@
 			{
 				"patchline": {
 					"destination": [
-						"obj-71",
+						"obj-73",
 						0
 					],
 					"source": [
-						"obj-70",
-						0
-					]
-				}
-			},
-			{
-				"patchline": {
-					"destination": [
 						"obj-72",
 						0
-					],
-					"source": [
-						"obj-71",
-						0
 					]
 				}
 			},
 			{
 				"patchline": {
 					"destination": [
-						"obj-75",
-						0
-					],
-					"source": [
 						"obj-74",
 						0
+					],
+					"source": [
+						"obj-73",
+						0
 					]
 				}
 			},
 			{
 				"patchline": {
 					"destination": [
+						"obj-77",
+						0
+					],
+					"source": [
 						"obj-76",
 						0
-					],
-					"source": [
-						"obj-75",
-						0
 					]
 				}
 			},
 			{
 				"patchline": {
 					"destination": [
-						"obj-79",
-						0
-					],
-					"source": [
 						"obj-78",
 						0
+					],
+					"source": [
+						"obj-77",
+						0
 					]
 				}
 			},
 			{
 				"patchline": {
 					"destination": [
+						"obj-81",
+						0
+					],
+					"source": [
 						"obj-80",
 						0
-					],
-					"source": [
-						"obj-79",
-						0
 					]
 				}
 			},
 			{
 				"patchline": {
 					"destination": [
-						"obj-83",
-						0
-					],
-					"source": [
 						"obj-82",
 						0
+					],
+					"source": [
+						"obj-81",
+						0
 					]
 				}
 			},
 			{
 				"patchline": {
 					"destination": [
+						"obj-85",
+						0
+					],
+					"source": [
 						"obj-84",
 						0
+					]
+				}
+			},
+			{
+				"patchline": {
+					"destination": [
+						"obj-86",
+						0
 					],
 					"source": [
-						"obj-83",
+						"obj-85",
 						0
 					]
 				}
@@ -2123,31 +2179,7 @@
 			{
 				"patchline": {
 					"destination": [
-						"obj-85",
-						0
-					],
-					"source": [
-						"obj-61",
-						0
-					]
-				}
-			},
-			{
-				"patchline": {
-					"destination": [
-						"obj-85",
-						0
-					],
-					"source": [
-						"obj-62",
-						0
-					]
-				}
-			},
-			{
-				"patchline": {
-					"destination": [
-						"obj-85",
+						"obj-87",
 						0
 					],
 					"source": [
@@ -2159,7 +2191,7 @@
 			{
 				"patchline": {
 					"destination": [
-						"obj-85",
+						"obj-87",
 						0
 					],
 					"source": [
@@ -2171,7 +2203,7 @@
 			{
 				"patchline": {
 					"destination": [
-						"obj-85",
+						"obj-87",
 						0
 					],
 					"source": [
@@ -2183,7 +2215,7 @@
 			{
 				"patchline": {
 					"destination": [
-						"obj-85",
+						"obj-87",
 						0
 					],
 					"source": [
@@ -2195,7 +2227,7 @@
 			{
 				"patchline": {
 					"destination": [
-						"obj-85",
+						"obj-87",
 						0
 					],
 					"source": [
@@ -2207,11 +2239,11 @@
 			{
 				"patchline": {
 					"destination": [
-						"obj-85",
+						"obj-87",
 						0
 					],
 					"source": [
-						"obj-72",
+						"obj-68",
 						0
 					]
 				}
@@ -2219,11 +2251,11 @@
 			{
 				"patchline": {
 					"destination": [
-						"obj-85",
+						"obj-87",
 						0
 					],
 					"source": [
-						"obj-76",
+						"obj-69",
 						0
 					]
 				}
@@ -2231,11 +2263,11 @@
 			{
 				"patchline": {
 					"destination": [
-						"obj-85",
+						"obj-87",
 						0
 					],
 					"source": [
-						"obj-80",
+						"obj-74",
 						0
 					]
 				}
@@ -2243,11 +2275,35 @@
 			{
 				"patchline": {
 					"destination": [
-						"obj-85",
+						"obj-87",
 						0
 					],
 					"source": [
-						"obj-84",
+						"obj-78",
+						0
+					]
+				}
+			},
+			{
+				"patchline": {
+					"destination": [
+						"obj-87",
+						0
+					],
+					"source": [
+						"obj-82",
+						0
+					]
+				}
+			},
+			{
+				"patchline": {
+					"destination": [
+						"obj-87",
+						0
+					],
+					"source": [
+						"obj-86",
 						0
 					]
 				}

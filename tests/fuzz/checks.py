@@ -102,6 +102,13 @@ def alive(show: Show, report: Report, when: str) -> None:
                                                       f"{states.get(node, 'nothing (no reply on its node key)')!r}")
 
 
+def stop_works(fuzzer: Any, report: Report, when: str) -> None:
+    """``stop`` to pepper is answered ok (whatever claims of it the bus holds)."""
+    outcome = fuzzer.stop()
+    report.figures.setdefault("stop", {})[when] = outcome
+    report.check(outcome == "ok", f"{when}: stop to pepper: {outcome}")
+
+
 def flow(show: Show, report: Report, before: dict[str, float], ended: float) -> None:
     """In [ended + 1 s, ended + 2 s] every sink gets at least ``FLOW_FRACTION`` of ``before``."""
     wait = ended + 2.0 + 1.2 - time.monotonic()

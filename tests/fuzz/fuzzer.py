@@ -15,7 +15,7 @@ from typing import Any
 import msgpack
 import zenoh
 
-from .families import GHOSTS, ROBOT, Input, Oracle, ghost_reply
+from .families import GHOSTS, ROBOT, VALID, Input, Oracle, ghost_reply, signature
 from .show import Show
 
 QUERY_TIMEOUT_S = 5.0
@@ -39,6 +39,7 @@ class Fuzzer:
         self.osc.bind(("127.0.0.1", 0))
         self.osc.settimeout(0.2)
         self.osc_replies: Counter[str] = Counter()
+        self.tokens: list[Any] = []  # claims held until ``release``
         self._done = threading.Event()
         self._reader = threading.Thread(target=self._read_replies, daemon=True)
         self._reader.start()
@@ -81,6 +82,8 @@ class Fuzzer:
         self.first.setdefault(f"{item.family}/{item.label}/{item.note}", item)
         if item.how in ("put", "ghost"):
             self._put(item)
+        elif item.how == "token":
+            self._token(item)
         elif item.how == "query":
             self._query(item)
         else:
@@ -103,6 +106,27 @@ class Fuzzer:
             self.session.put(item.key, item.payload)
         except zenoh.ZError as exc:  # a key Zenoh itself refuses never reaches a node
             self.outcomes[item.family][f"zenoh refused: {str(exc)[:60]}"] += 1
+
+    def _token(self, item: Input) -> None:
+        try:
+            self.tokens.append(self.session.liveliness().declare_token(item.key))
+        except zenoh.ZError as exc:  # a key Zenoh itself refuses never reaches a node
+            self.outcomes[item.family][f"zenoh refused: {str(exc)[:60]}"] += 1
+
+    def release(self) -> None:
+        """Withdraw every claim ``send`` declared."""
+        for token in self.tokens:
+            with contextlib.suppress(Exception):
+                token.undeclare()
+        self.tokens.clear()
+
+    def stop(self) -> str:
+        """``stop`` to pepper, as any asker sends it (a valid command): "ok", or what came instead."""
+        with self._lock:
+            self.oracle.sent(Input("command", VALID, "query", f"{ROBOT}/cmd/stop", b"", signature("stop", {})))
+        replies = [r for r in self.session.get(f"{ROBOT}/cmd/stop", timeout=QUERY_TIMEOUT_S) if r.ok is not None]
+        answers = [msgpack.unpackb(r.ok.payload.to_bytes(), raw=False) for r in replies]
+        return "ok" if any(a.get("ok") for a in answers if isinstance(a, dict)) else f"no ok among {answers}"
 
     def _query(self, item: Input) -> None:
         try:
@@ -139,6 +163,7 @@ class Fuzzer:
                 return
 
     def close(self) -> None:
+        self.release()
         self._done.set()
         self._reader.join(1.0)
         self.osc.close()

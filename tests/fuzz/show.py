@@ -3,7 +3,8 @@
 ``Show`` starts a private JACK server (dummy driver), two ``oscdump`` receivers,
 then ``sonibus -v run show.toml`` on a private bus (multicast off, listening on
 loopback) with ``sim``, ``osc`` (a plain and a bundle target), ``osc-gateway``,
-``features``, ``recorder``, ``midi`` and ``console``; it reads the MIDI port
+``features``, ``recorder``, ``midi``, ``console`` and the three servers ``web``,
+``oscquery`` and ``foxglove`` (small limits: ``serving.py``); it reads the MIDI port
 back through JACK, samples the process's RSS from /proc, and opens a Zenoh
 session of its own for the fuzzer. Everything is ended on ``close()``, also
 after a failure, each process by its own process group.
@@ -34,11 +35,14 @@ import rtmidi
 
 from sonibus.bus import BusConfig, open_session
 
+from .serving import CLIENTS, CONNECTIONS, TIMEOUT_S
+
 SONIBUS = str(Path(sys.executable).with_name("sonibus"))
 RATE_HZ = 50            # the simulated Pepper's frame rate
 PEPPER_JOINTS = 17
-NODES = ("sim", "osc", "gateway", "features", "recorder", "midi", "console")
+NODES = ("sim", "osc", "gateway", "features", "recorder", "midi", "console", "web", "oscquery", "foxglove")
 PROBE = "/fuzz/probe"
+LIMITS = f"{{connections = {CONNECTIONS}, clients = {CLIENTS}, timeout_s = {TIMEOUT_S}}}"  # each server's
 
 
 class ShowError(Exception):
@@ -223,6 +227,9 @@ class Ports:
     gateway: int = field(default_factory=lambda: free_port(socket.SOCK_DGRAM))
     plain: int = field(default_factory=lambda: free_port(socket.SOCK_DGRAM))
     bundle: int = field(default_factory=lambda: free_port(socket.SOCK_DGRAM))
+    web: int = field(default_factory=free_port)
+    oscquery: int = field(default_factory=free_port)
+    foxglove: int = field(default_factory=free_port)
 
     @property
     def endpoint(self) -> str:
@@ -267,6 +274,23 @@ map = [{{key = "pepper/joints/HeadPitch", pitchbend = true, channel = 2}}]
 [nodes.console]
 adapter = "console"
 every_s = 0.5
+
+[nodes.web]
+adapter = "web"
+listen = "127.0.0.1:{ports.web}"
+limits = {LIMITS}
+
+[nodes.oscquery]
+adapter = "oscquery"
+listen = "127.0.0.1:{ports.oscquery}"
+gateway = "127.0.0.1:{ports.gateway}"
+mdns = false
+limits = {LIMITS}
+
+[nodes.foxglove]
+adapter = "foxglove"
+listen = "127.0.0.1:{ports.foxglove}"
+limits = {LIMITS}
 """
 
 

@@ -1,10 +1,12 @@
 """The whole bus under bad input: Hypothesis sends frames, joint samples, derived
-values, events, commands, info queries (and garbage info replies) and OSC packets —
-valid, malformed, hostile, some in bursts of thousands a second — at one ``sonibus
-run`` holding every built-in node. Afterwards the process and every node run,
-valid data flows again at its normal rate to every sink, no command from invalid
-input ran, memory stayed bounded, and the recording passes ``info``, ``export``,
-a full read and ``replay``. Counts per family go to ``fuzz.json`` in the test's
+values, events, commands, info queries (and garbage info replies), OSC packets, and
+HTTP and WebSocket to the web pages', OSCQuery's and Foxglove's servers — valid,
+malformed, hostile, some in bursts of thousands a second — at one ``sonibus run``
+holding every built-in node. After each family the process and every node run, each
+server serves a new well-behaved client, and valid data flows again at its normal
+rate; at the end no command from invalid input ran, memory stayed bounded, no server
+counted an error of its own, and the recording passes ``info``, ``export``, a full
+read and ``replay``. Counts per family go to ``fuzz.json`` in the test's
 directory and a one-line summary to stdout (``-s``)."""
 
 from __future__ import annotations

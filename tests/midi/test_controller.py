@@ -8,6 +8,7 @@ import time
 import pytest
 
 from sonibus.adapters.midi import MidiController, MidiControllerConfig
+from sonibus.adapters.show import Show, ShowConfig
 from sonibus.bus import ConfigError, decode, load_model
 
 from ..conftest import wait_for
@@ -75,6 +76,26 @@ def test_a_key_runs_a_behavior_and_its_release_stops_it(net, writer):
     wait_for(lambda: state("started"), what="the behavior started")
     writer.send_message([0x80, 60, 0])
     wait_for(lambda: state("stopped"), what="the behavior stopped on release")
+
+
+def test_a_key_mapped_to_a_scenario_asks_the_robots_show_for_it(net, writer):
+    net.sim("pepper", rate_hz=50, words_per_minute=600)
+    net.start(Show(ShowConfig(robot="pepper", scenarios={"hello": {"steps": [{"say": "Hello"}]}}), name="show"))
+    _, events = net.bus("watch").subscribe("pepper/events/scenario")
+    surface = controller(net, notes=({"note": 61, "robot": "pepper", "scenario": "hello"},))
+    got: list[dict] = []
+
+    def seen(state):
+        while (item := events.get(timeout=0)) is not None:
+            got.append(decode(item[1]))
+        return any(e["name"] == "hello" and e["state"] == state and e["by"] == "midi" for e in got)
+
+    asker = net.bus("ask")
+    wait_for(lambda: [r for r in asker.query("pepper/program/status", {}) if r["result"]["available"]], 10,
+             "the show to take the robot")
+    writer.send_message([0x90, 61, 100])
+    wait_for(lambda: seen("ended"), 10, "the scenario asked by the key, to its end")
+    assert surface.stats["ok"] == 1
 
 
 def test_program_change_picks_a_posture_and_the_panic_key_stops(net, writer):

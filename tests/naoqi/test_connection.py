@@ -33,15 +33,18 @@ def test_unreachable_at_start_then_the_robot_appears(net, fakes):
     info = robot_info(r.bus, "pepper")
     schemas.validate("robot_info", info)
     assert info["naoqi"]["connected"] is False and info["model"] == "pepper"  # the reference model until then
-    for verb, args in (("say", {"text": "hello"}), ("behavior/run", {"name": NOD}), ("stop", {})):
+    for verb, args in (("say", {"text": "hello"}), ("behavior/run", {"name": NOD})):
         error = refused(r, verb, args)
-        assert error.code == "failed", (verb, error)
+        assert error.code == "not_connected", (verb, error)
         assert "not connected" in error.message and str(port) in error.message and "\n" not in error.message
+    stop = send_command(r.bus, "pepper", "stop", {})  # never refused, never said done when it was not
+    assert stop["reached"] is False and stop["connection"] == "lost" and stop["pending"] is True, stop
+    assert str(port) in stop["error"]
     assert refused(r, "joints/set", {"names": ["HeadYaw"], "angles": [9.0]}).code == "out_of_range"
     fakes(port)
     r.events.wait("connection", timeout=5.0, state="connected")
     wait_for(r.joints.complete, what="frames once the robot is there")
-    assert [e["state"] for e in r.events.find("connection")] == ["lost", "connected"]
+    assert [e["state"] for e in r.events.find("connection")] == ["connecting", "lost", "connected"]
     assert send_command(r.bus, "pepper", "behavior/run", {"name": NOD}) == {"name": NOD}
 
 
@@ -65,7 +68,7 @@ def test_robot_lost_mid_stream_and_back_on_the_same_port(net, fakes):
     r.joints.wait_pose({"HeadYaw": 0.4}, tol=1e-6)
     send_command(r.bus, "pepper", "behavior/run", {"name": NOD})  # signals are connected again too
     r.events.wait("behavior", name=NOD, state="started")
-    assert [e["state"] for e in r.events.find("connection")] == ["connected", "lost", "connected"]
+    assert [e["state"] for e in r.events.find("connection")] == ["connecting", "connected", "lost", "connected"]
 
 
 def test_stop_is_prompt_connected_retrying_and_mid_connect(net, fakes, caplog):

@@ -22,6 +22,7 @@ crashed run (their owner pid is gone) are deleted by ``remove_stale``.
 from __future__ import annotations
 
 import contextlib
+import json
 import os
 import re
 import signal
@@ -265,6 +266,18 @@ class Host:
             self.call("oscsend", "127.0.0.1", str(port), PROBE, timeout=5.0)
             time.sleep(0.05)
         return dump
+
+    def sent_packets(self, interface: str = "eth0") -> int:
+        """Packets this host has sent out of ``interface`` so far (the kernel's counter)."""
+        done = ip("-n", self.ns, "-s", "-j", "link", "show", interface)
+        return int(json.loads(done.stdout)[0]["stats64"]["tx"]["packets"])
+
+    def without_ipv6(self) -> None:
+        """No IPv6 on this host: the kernel then sends nothing by itself (router solicitations,
+        multicast listener reports), so what leaves ``eth0`` is what its processes sent."""
+        for setting in ("net.ipv6.conf.all.disable_ipv6=1", "net.ipv6.conf.default.disable_ipv6=1",
+                        "net.ipv6.conf.eth0.disable_ipv6=1"):
+            self.topology._sysctl(self.ns, setting)
 
     def __repr__(self) -> str:
         return f"<Host {self.name} {self.ns} {' '.join(self.addresses)}>"

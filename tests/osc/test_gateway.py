@@ -19,6 +19,7 @@ from pythonosc.osc_message_builder import OscMessageBuilder
 from sonibus import schemas
 from sonibus.adapters.osc import routes
 from sonibus.adapters.osc.gateway import OscGateway, OscGatewayConfig
+from sonibus.adapters.show import Show, ShowConfig
 from sonibus.bus import ConfigError, codec, robot_info
 from sonibus.bus.commands import ok_reply
 from sonibus.bus.options import from_mapping
@@ -169,7 +170,8 @@ def test_one_joint_per_address_for_a_fader(net, client):
 def test_every_route_accepts_the_arguments_it_declares(net, client):
     """What OSCQuery tells a client to send (each route's type tags, values in its ranges and
     choices) the gateway takes: ``N`` (no argument) included, which behavior/list and
-    behavior/stop refused as 'nil has no place'."""
+    behavior/stop refused as 'nil has no place'. The scenario route asks pepper's show."""
+    net.start(Show(ShowConfig(robot="pepper", scenarios={"hello": {"steps": [{"say": "Hello"}]}}), name="show"))
     info = robot_info(net.bus("info"), "pepper")
     limits = {j["name"]: (j["min"], j["max"]) for j in info["joints"]}
     choices = {"behaviors": info["behaviors"][0], "postures": "Stand", "joints": "HeadYaw", "stiffness": "Head"}
@@ -188,7 +190,7 @@ def test_every_route_accepts_the_arguments_it_declares(net, client):
             args = [None]  # a client that sends what TYPE "N" says: one nil
         address = route.address("pepper", joint="HeadYaw")
         reply, values = client.ask(address, *args)
-        assert (reply, values[0]) == (address.replace("/cmd/", "/reply/"), 1), (address, args, values)
+        assert (reply, values[0]) == (address.replace(f"/{route.section}/", "/reply/"), 1), (address, args, values)
 
 
 ERRORS = [
@@ -358,9 +360,10 @@ def test_a_port_in_use_is_a_clear_error(net):
 def test_the_doc_and_the_routes_cover_every_verb():
     text = (DOCS / "osc-gateway.md").read_text(encoding="utf-8")
     assert all(f"/cmd/{verb}" in text for verb in schemas.command_verbs())
-    assert {r.verb for r in routes.ROUTES} == set(schemas.command_verbs())
+    assert {r.verb for r in routes.ROUTES if r.section == "cmd"} == set(schemas.command_verbs())
+    assert all(f"/program/{r.verb}" in text for r in routes.ROUTES if r.section == "program")
     for route in routes.ROUTES:  # what OSCQuery declares is what the gateway takes
-        schema = schemas.command_schema(route.verb)
+        schema = schemas.request_schema(route.section, route.verb)
         assert {s.name for s in route.slots} <= set(schema.get("properties", {})), route.path
         given_by_address = {"names"} if route is routes.PER_JOINT else set()
         assert {s.name for s in route.slots} | given_by_address >= set(schema.get("required", ())), route.path

@@ -65,6 +65,7 @@ def test_a_browser_on_the_lan_finds_both_services_and_reads_the_tree(topology, t
     script.write_text(BROWSE, encoding="utf-8")
     browse = other.run(sys.executable, str(script), "15")
     until(topology, lambda: browse.lines or not browse.running, 30, "the browser's answer")
+    assert browse.lines, "\n".join(browse.errors[-30:]) + "\nSERVER:" + "\n".join(running.errors[-30:])
     found = json.loads(browse.lines[-1])
     assert found["oscjson"] == ["robots._oscjson._tcp.local."]  # not "local", bound to the server's loopback
     assert found["osc"] == [["robots._osc._udp.local.", 9001]]

@@ -79,7 +79,8 @@ def test_commands_carry_the_robots_choices_and_the_schemas_bounds(served):
     for verb in ("stop", "behavior/stop", "behavior/list"):
         assert served.json(f"/pepper/cmd/{verb}")["TYPE"] == "N"
         assert served.json(f"/pepper/cmd/{verb}")["VALUE"] == [None]
-    assert served.json("/pepper/events/connection")["RANGE"] == [{"VALS": ["connected", "lost"]}]
+    assert served.json("/pepper/events/connection")["RANGE"] == [{"VALS": ["connecting", "connected", "not_answering",
+                                                                          "lost"]}]
     assert served.json("/pepper/events/command")["TYPE"] == "si"
 
 
@@ -88,7 +89,8 @@ def test_attribute_queries_and_errors(served):
     hand = load_model("pepper").joint("LHand")
     assert served.json("/pepper/joints/LHand?RANGE") == {"RANGE": [{"MIN": hand.min, "MAX": hand.max}]}
     assert served.json("/pepper/cmd/say?TYPE") == {"TYPE": "s"}
-    assert set(served.json("/pepper?CONTENTS")["CONTENTS"]) == {"joints", "events", "cmd"}
+    assert set(served.json("/pepper?CONTENTS")["CONTENTS"]) == {"joints", "events", "cmd", "program"}
+    assert served.json("/pepper/program/scenario?TYPE") == {"TYPE": "s"}  # (a show's scenarios, via the gateway)
     assert served.get("/pepper/cmd/stop?RANGE").status_code == 204      # a node without it
     assert served.get("/pepper/cmd/say?VALUE").status_code == 204        # write-only: no value to read
     assert served.json("/pepper/events/speech?VALUE") == {}               # no value yet

@@ -194,10 +194,11 @@ def test_a_robot_whose_info_is_unusable_is_left_out_with_a_warning(served, caplo
         query.reply("liar2/info", codec.encode(info))
     info = {**served.net.bus("asker").query("pepper/info")[0], "robot": "liar2", "owner": {"host": "h", "node": "n"},
             "derived": [{"name": "hand/L", "key": "liar2/derived/hand/L", "unit": "m", "size": 65}]}
+    since = int(time.time() * 1000)  # (a claim's time must make sense: bus/ownership.py)
     entities = [bus.serve("liar/info", lambda q: q.reply("liar/info", b"\xc1 not msgpack")),
-                bus.token("sonibus/robots/liar/1/h/n"),
+                bus.token(f"sonibus/robots/liar/{since}/h/n"),
                 bus.serve("liar2/info", answer),
-                bus.token("sonibus/robots/liar2/1/h/n")]
+                bus.token(f"sonibus/robots/liar2/{since}/h/n")]
     try:
         wait_for(lambda: served.node.stats["robots_left_out"] >= 1, 10, "liar2 left out")
         wait_for(lambda: any("liar/info unusable" in r.getMessage() for r in caplog.records), 10, "liar warned")

@@ -3,7 +3,12 @@ recorded by the recorder for a couple of seconds."""
 
 from __future__ import annotations
 
+import contextlib
+import os
+import subprocess
+import tempfile
 import time
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -73,3 +78,16 @@ def recorded(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, list[tuple
     finally:
         network.close()
     return path, reference
+
+
+@contextlib.contextmanager
+def tmpfs(size: str) -> Iterator[str]:
+    """A file system of ``size`` (``256k``, ``2m``) of its own, a real one (tmpfs) that
+    fills for real, unmounted whatever happens."""
+    folder = tempfile.mkdtemp(prefix="sonibus-disk-")
+    subprocess.run(["mount", "-t", "tmpfs", "-o", f"size={size}", "tmpfs", folder], check=True)
+    try:
+        yield folder
+    finally:
+        subprocess.run(["umount", "-l", folder], check=False)
+        os.rmdir(folder)

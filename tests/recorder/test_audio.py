@@ -44,7 +44,8 @@ def chunk(seq: int, stream: tuple[int, int, int], t0: float) -> AudioChunk:
 
 def test_recorded_audio_exports_to_wav_with_its_rate_channels_and_length(net, tmp_path):
     path = tmp_path / "audio.mcap"
-    recorder = net.start(Recorder(RecorderConfig(path=str(path), foxglove=False), name="logger"))
+    recorder = net.start(Recorder(RecorderConfig(path=str(path), foxglove=False, subscribe=("*/audio/*",)),
+                                  name="logger"))
     robot = net.bus("robot")
     mic = robot.stream_publisher(keys.audio("pepper", "mic"), AUDIO)
     speaker = robot.stream_publisher(keys.audio("pepper", "speaker"), AUDIO)

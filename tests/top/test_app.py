@@ -37,7 +37,7 @@ def test_joint_values_change_on_screen(net, figure):
         assert shown(app, "joints").splitlines()[0].startswith("HeadYaw ")
         cells = await until(pilot, lambda: (r := row(app, "robots", "pepper")) and r[2].plain == "pepper" and r,
                             what="pepper's model in its row")
-        assert [str(c) for c in cells][-1] == "on bus"
+        assert [str(c) for c in cells][-1] == "connected"  # (its owner's state, bus/connection.py)
         started = time.perf_counter()
         for _ in range(20):
             app.redraw()
@@ -59,7 +59,7 @@ def test_a_killed_node_turns_red_and_gone_within_the_lease_and_stays_listed(net,
     async def scenario(app, pilot):
         await until(pilot, lambda: (r := row(app, "nodes", nodes)) and r[4].plain == "running"
                     and r[0].plain == "sim", timeout=20, what="the run's node listed, running, its adapter known")
-        await until(pilot, lambda: (r := row(app, "robots", "nao")) and r[-1].plain == "on bus",
+        await until(pilot, lambda: (r := row(app, "robots", "nao")) and r[-1].plain == "connected",
                     what="its robot listed")
         process.kill()  # SIGKILL: no goodbye, only the lease tells
         killed = time.monotonic()
@@ -127,7 +127,7 @@ def test_y_also_stops_a_robot_that_came_while_the_stop_was_asked(net):
         await until(pilot, lambda: row(app, "robots", "pepper"), what="pepper listed")
         await ask_to_stop(app, pilot)
         net.sim("nao", rate_hz=50)  # (the operator reads the question; a robot joins the show)
-        await until(pilot, lambda: (r := row(app, "robots", "nao")) and r[-1].plain == "on bus", what="nao listed")
+        await until(pilot, lambda: (r := row(app, "robots", "nao")) and r[-1].plain == "connected", what="nao listed")
         await pilot.press("y")
         await until(pilot, lambda: commands(heard_nao, "stop"), what="nao's stop")
 

@@ -9,6 +9,7 @@ from sonibus.adapters.web.kiosk import Stand
 from sonibus.bus.errors import CommandError
 
 SAY = Button("hello", "Say hello", say="Hello, visitors!")
+STORY = Button("story", "A story", scenario="story")
 STOPPED = {"t": 1.0, "kind": "command", "verb": "stop", "args": {}, "ok": True}
 
 
@@ -62,3 +63,26 @@ def test_a_late_answer_to_a_press_that_timed_out_ends_nothing_of_the_next_press(
     assert states == ["failed"] and kiosk.busy(), "a late answer ended the press after it"
     kiosk.answered(SAY, {"duration": 1.8, "queued": 0}, second)
     assert states == ["failed", "running"] and kiosk.busy()
+
+
+def scenario(state: str, **fields: object) -> dict[str, object]:
+    return {"t": 2.0, "kind": "scenario", "name": "story", "state": state, "by": "kiosk", **fields}
+
+
+def test_a_scenario_button_is_done_when_the_show_says_ended_and_failed_with_its_reason_when_aborted():
+    assert STORY.command == ("scenario", {"name": "story", "by": "kiosk"})
+    states: list[str] = []
+    kiosk = Stand(Kiosk("pepper", (SAY, STORY)), lambda m: states.append(m["state"]))
+    kiosk.press(STORY)
+    kiosk.answered(STORY, {"name": "story", "state": "accepted"})
+    kiosk.event("pepper", "scenario", scenario("started"))
+    kiosk.event("pepper", "command", STOPPED)  # the show's own stops (a robot taken back) end nothing
+    kiosk.event("pepper", "behavior", {"t": 2.0, "kind": "behavior", "name": "x", "state": "stopped"})
+    assert states == ["running"] and kiosk.busy()
+    kiosk.event("pepper", "scenario", scenario("ended"))
+    assert states == ["running", "done"] and not kiosk.busy()
+    kiosk.press(STORY)
+    kiosk.answered(STORY, {"name": "story", "state": "accepted"})
+    kiosk.event("pepper", "scenario", scenario("aborted", reason="robot 'pepper' lost (its owner left the bus)"))
+    assert states == ["running", "done", "running", "failed"]
+    assert kiosk.states["story"]["error"] == "robot 'pepper' lost (its owner left the bus)"

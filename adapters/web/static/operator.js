@@ -41,8 +41,8 @@
     for (const name of Object.keys(robots).sort()) {
       const info = {joints: [], ...robots[name]};
       const view = views.get(name);
-      const key = JSON.stringify({...info, connected: undefined});
-      if (view && JSON.stringify({...view.info, connected: undefined}) === key) {
+      const key = JSON.stringify({...info, connected: undefined, connection: undefined});
+      if (view && JSON.stringify({...view.info, connected: undefined, connection: undefined}) === key) {
         view.update(info);
         continue;
       }
@@ -124,8 +124,11 @@
     for (const view of views.values()) view.dropHeldMoves();  // nothing of this page moves a robot after a stop
     const answers = [];  // one reply per robot on the bus
     const sent = link.send({type: "stop"}, "stop", (reply) => {
-      if (!reply.robot) return false;  // ("stop: no robot on the bus": shown as it is)
-      answers.push(reply.ok ? `✓ ${reply.robot}` : `✗ ${reply.robot}: ${reply.error || "refused"}`);
+      if (!reply.robot && !reply.robots) return false;  // ("stop: no robot on the bus": shown as it is)
+      const unreached = reply.ok && reply.result && reply.result.reached === false;  // taken, but not carried out
+      if (reply.robots) answers.push(`✗ ${reply.error}`);  // (those on the bus that did not answer, in one)
+      else answers.push(reply.ok && !unreached ? `✓ ${reply.robot}`
+        : `✗ ${reply.robot}: ${unreached ? `not reached: ${reply.result.error}` : reply.error || "refused"}`);
       status(`STOP: ${answers.join(", ")}`, answers.some((a) => a.startsWith("✗")) ? "error" : "ok");
       return true;
     });

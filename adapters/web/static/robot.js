@@ -17,6 +17,8 @@
     ["Body", () => true],
   ];
   const SLIDER_GROUPS = new Set(["Head", "Left arm", "Right arm"]);
+  const STATES = {connected: "connected", connecting: "not connected: connecting", lost: "not connected: lost",
+    not_answering: "not answering", standby: "standby: another owner keeps it"};  // (bus/connection.py)
 
   function groupOf(name) {
     return GROUPS.find(([, test]) => test(name))[0];
@@ -75,9 +77,11 @@
 
     update(info) {
       this.info = info;
-      const connected = info.connected !== false;
-      this.connection.textContent = connected ? "connected" : "not connected";
-      this.connection.dataset.state = connected ? "connected" : "lost";
+      const state = (info.connection || {}).state || (info.connected === false ? "lost" : "connected");
+      const error = (info.connection || {}).error;
+      this.connection.textContent = STATES[state] || state;
+      this.connection.title = error || "";
+      this.connection.dataset.state = state;
     }
 
     chart(group, members) {

@@ -1,0 +1,231 @@
+"""The channels the ``foxglove`` adapter serves and the clients that read them, on
+``bus/web.py``'s ``WebServer`` (so within its limits, timeouts and browser check).
+
+A channel exists before it is advertised: ``log`` makes it under the lock, then the
+advertisement goes out on the server's loop, so a client that subscribes as soon as it
+hears of a channel always finds it. Each channel keeps its latest message (as logged,
+not yet JSON) and a subscription gets it first, as a latched topic: the first message of
+a channel made while a client is connected (a robot's first event, ``<robot>/log``) is
+not lost to the client's subscribing a moment later. A message is made JSON only for
+channels someone subscribes to.
+
+``forget`` unadvertises the channels of a robot that left (and their latest messages go):
+a viewer drops those topics, and subscribes again when they are advertised anew (new ids)
+as the robot comes back. A subscription to a channel unadvertised since is kept, inert,
+until the client unsubscribes it, as Lichtblick does on ``unadvertise``: that unsubscribe
+is no error.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from threading import Lock
+from typing import TYPE_CHECKING, Any
+
+from aiohttp import WSMessage, WSMsgType, web
+
+from sonibus.bus.web import WebClient, WebServer, close_clients
+
+from . import wire
+
+if TYPE_CHECKING:
+    from sonibus.bus.adapter import Adapter
+
+MAX_CHANNELS = 4096         # channels advertised at most (keys made up on the fly must not grow it for ever)
+MAX_SUBSCRIPTIONS = MAX_CHANNELS  # one client's, inert ones (their channel gone) included
+MAX_WS_MESSAGE = 1 << 20    # bytes of one client message; aiohttp closes a connection that sends more (1009)
+HEARTBEAT_S = 10.0          # a ping this often; a client that does not answer within half of it is dropped
+
+
+@dataclass
+class _Channel:
+    described: wire.Channel
+    latest: tuple[Any, int] | None = None            # (message, log time ns), as logged
+    subscribers: dict[_Client, int] = field(default_factory=dict)  # client → its subscription id
+
+
+class _Client(WebClient):
+    """A client and its subscriptions (subscription id → channel id)."""
+
+    def __init__(self, ws: web.WebSocketResponse, on_drop: Callable[[], None], transport: Any) -> None:
+        super().__init__(ws, on_drop, transport)
+        self.subscriptions: dict[int, int] = {}
+        self.advertised: set[int] = set()  # channel ids told to it (an advertisement never goes twice)
+
+
+class Hub:
+    """Channels by topic, served to Foxglove clients on ``web`` (routes added here; the
+    adapter starts the server); ``to_json`` turns a logged message into the payload;
+    ``metadata`` goes in ``serverInfo``."""
+
+    def __init__(self, adapter: Adapter, web_server: WebServer, name: str, to_json: Callable[[Any], bytes],
+                 metadata: dict[str, str] | None = None) -> None:
+        self.adapter, self.web, self.name, self.to_json = adapter, web_server, name, to_json
+        self.metadata = metadata or {}  # serverInfo's (never ROS_DISTRO: a viewer would load ROS's types)
+        self.session = str(time.time_ns())  # (a viewer that reconnects to a new session starts afresh)
+        self._channels: dict[str, _Channel] = {}
+        self._by_id: dict[int, _Channel] = {}
+        self._clients: set[_Client] = set()
+        self._last_id = 0  # channel ids are never given twice (a viewer caches a channel's schema by its id)
+        self._lock = Lock()  # channels, latest messages, subscribers: the adapter's thread and the loop
+        web_server.app.router.add_get("/{path:.*}", self._websocket)  # (a client may name any path)
+        web_server.app.on_shutdown.append(lambda app: close_clients(list(self._clients)))
+
+    @property
+    def channels(self) -> int:
+        return len(self._channels)
+
+    @property
+    def clients(self) -> int:
+        return len(self._clients)
+
+    def log(self, topic: str, message: Any, log_time_ns: int, describe: Callable[[int], wire.Channel]) -> bool:
+        """``message`` on the channel of ``topic`` (made, by ``describe(id)``, and advertised if
+        new), to its subscribers; False if the channel cannot be made (``MAX_CHANNELS``).
+        From any thread; what ``to_json`` raises (not strict JSON) reaches the caller."""
+        with self._lock:
+            channel = self._channels.get(topic)
+            if channel is None:
+                if len(self._channels) >= MAX_CHANNELS:
+                    return False
+                self._last_id += 1
+                channel = _Channel(describe(self._last_id))
+                self._channels[topic] = self._by_id[channel.described.id] = channel
+                self.web.call(self._advertise, channel.described)
+            channel.latest = (message, log_time_ns)
+            subscribers = list(channel.subscribers.items())
+        if subscribers:
+            payload = self.to_json(message)
+            self.web.call(self._send, subscribers, payload, log_time_ns)
+            self.adapter.count("sent", len(subscribers))
+        return True
+
+    def forget(self, prefix: str) -> int:
+        """Unadvertise every channel whose topic starts with ``prefix`` (``"pepper/"``: a robot
+        gone), its latest message with it; how many. From any thread."""
+        with self._lock:
+            gone = [c for topic, c in self._channels.items() if topic.startswith(prefix)]
+            for channel in gone:
+                del self._channels[channel.described.topic], self._by_id[channel.described.id]
+        if gone:
+            self.web.call(self._unadvertise, {c.described.id for c in gone})
+        return len(gone)
+
+    # -- on the server's loop ------------------------------------------------------------
+
+    async def _websocket(self, request: web.Request) -> web.StreamResponse:
+        offered = [p.strip() for p in request.headers.get("Sec-WebSocket-Protocol", "").split(",")]
+        if not set(offered) & set(wire.SUBPROTOCOLS):
+            self._bad(f"a connection from {request.remote} offering {offered[:4] if any(offered) else 'no'} "
+                      f"WebSocket subprotocol refused (400): it must offer {' or '.join(wire.SUBPROTOCOLS)}")
+            raise web.HTTPBadRequest(text=f"400: offer the WebSocket subprotocol {' or '.join(wire.SUBPROTOCOLS)} "
+                                          "(Foxglove's WebSocket protocol)\n")
+        async with self.web.accept(request, protocols=wire.SUBPROTOCOLS, max_msg_size=MAX_WS_MESSAGE,
+                                   heartbeat=HEARTBEAT_S) as ws:
+            client = _Client(ws, lambda: self.adapter.count("dropped_for_clients"), request.transport)
+            client.push(json.dumps(wire.server_info(self.name, self.session, self.metadata)))
+            with self._lock:
+                known = [c.described for c in self._channels.values()]
+                self._clients.add(client)
+            client.advertised.update(c.id for c in known)
+            if known:
+                client.push(json.dumps(wire.advertise(known)))
+            self.adapter.count("clients")
+            try:
+                await self.web.serve_client(ws, client, lambda message: self._receive(client, message))
+            finally:
+                with self._lock:
+                    self._clients.discard(client)
+                    for channel_id in client.subscriptions.values():
+                        if (channel := self._by_id.get(channel_id)) is not None:  # (None: unadvertised since)
+                            channel.subscribers.pop(client, None)
+        return ws
+
+    def _advertise(self, channel: wire.Channel) -> None:
+        text = json.dumps(wire.advertise([channel]))
+        for client in list(self._clients):
+            if channel.id not in client.advertised:
+                client.advertised.add(channel.id)
+                client.push(text)
+
+    def _unadvertise(self, ids: set[int]) -> None:
+        for client in list(self._clients):
+            told = sorted(ids & client.advertised)
+            if told:  # (a viewer takes the unadvertising of a channel it was never told of for an error)
+                client.advertised.difference_update(told)
+                client.push(json.dumps(wire.unadvertise(told)))
+
+    def _send(self, subscribers: list[tuple[_Client, int]], payload: bytes, log_time_ns: int) -> None:
+        for client, subscription in subscribers:
+            client.push(wire.message_data(subscription, log_time_ns, payload))
+
+    def _receive(self, client: _Client, message: WSMessage) -> None:
+        if message.type == WSMsgType.BINARY:
+            self._refuse(client, f"a binary message of {len(message.data)} bytes (client publishing is not served)")
+            return
+        if message.type != WSMsgType.TEXT:
+            return
+        try:
+            op, items = wire.parse(message.data)
+        except wire.Refused as exc:
+            self._refuse(client, str(exc))
+            return
+        if op == "subscribe":
+            for subscription, channel_id in items:
+                self._subscribe(client, subscription, channel_id)
+        else:
+            for subscription in items:
+                self._unsubscribe(client, subscription)
+
+    def _unsubscribe(self, client: _Client, subscription: int) -> None:
+        with self._lock:
+            channel_id = client.subscriptions.pop(subscription, None)
+            channel = self._by_id.get(channel_id) if channel_id is not None else None
+            if channel is not None:
+                channel.subscribers.pop(client, None)
+        if channel_id is None:
+            self._refuse(client, f"Unknown subscription ID: {subscription} (not subscribed, or unsubscribed "
+                                 "already)", wire.WARNING)
+
+    def _subscribe(self, client: _Client, subscription: int, channel_id: int) -> None:
+        latest = None
+        with self._lock:
+            channel = self._by_id.get(channel_id)
+            if len(client.subscriptions) >= MAX_SUBSCRIPTIONS:
+                client.subscriptions = {s: c for s, c in client.subscriptions.items() if c in self._by_id}
+            if subscription in client.subscriptions:
+                problem = f"Subscription ID was already used: {subscription}"
+            elif channel is None and channel_id in client.advertised:
+                problem = ""  # unadvertised a moment ago, which the client is about to hear: inert till unsubscribed
+                client.subscriptions[subscription] = channel_id
+            elif channel is None or channel_id not in client.advertised:
+                problem = f"Unknown channel ID: {channel_id}"
+            elif client in channel.subscribers:
+                problem = f"Client is already subscribed to channel: {channel_id}"
+            elif len(client.subscriptions) >= MAX_SUBSCRIPTIONS:
+                problem = f"Too many subscriptions: {MAX_SUBSCRIPTIONS} already"
+            else:
+                problem = ""
+                client.subscriptions[subscription] = channel_id
+                channel.subscribers[client] = subscription
+                latest = channel.latest
+        if problem:
+            self._refuse(client, problem)
+        elif latest is not None:  # (latched: the client hears the channel's latest message first)
+            try:
+                payload = self.to_json(latest[0])
+            except (ValueError, TypeError):
+                return  # (said by log's caller when it was logged)
+            client.push(wire.message_data(subscription, latest[1], payload))
+            self.adapter.count("sent")
+
+    def _refuse(self, client: _Client, problem: str, level: int = wire.ERROR) -> None:
+        client.push(json.dumps(wire.status(problem, level)))
+        self._bad(f"a client's message refused: {problem}")
+
+    def _bad(self, what: str) -> None:
+        self.adapter.count("bad")
+        self.adapter.warn("client", f"Foxglove server: {what}")

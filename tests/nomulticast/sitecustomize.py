@@ -1,0 +1,76 @@
+"""Test-only guard: no Zenoh multicast scouting from this machine's own network, only from
+the network namespaces the tests make (``tests/net/netns.py``).
+
+``tests/conftest.py`` puts this folder on ``PYTHONPATH`` and names its network namespace in
+``SONIBUS_TEST_NETNS``, so every Python process the tests start (``sonibus run``, ``demo``,
+``send``; a wheel's own interpreter) imports this module at start-up. Once a process imports
+``zenoh``, ``zenoh.open`` with multicast scouting on (Zenoh's default) and ``zenoh.scout``
+raise in a process of that namespace: a test that forgot ``--no-multicast`` or ``multicast =
+false`` fails, naming the fix, instead of scouting the LAN it runs on. A process started in a
+namespace of the tests' own (``ip netns exec``) is in another namespace, and scouts freely.
+"""
+
+from __future__ import annotations
+
+import importlib.abc
+import importlib.util
+import os
+import sys
+from typing import Any
+
+REFUSED = ("multicast scouting from the machine's own network (the test suite sends nothing off loopback): "
+           "give --no-multicast, multicast = false or BusConfig(multicast=False), or run it in a network "
+           "namespace (tests/net/netns.py)")
+
+
+def _in_root_namespace() -> bool:
+    root = os.environ.get("SONIBUS_TEST_NETNS")
+    try:
+        return bool(root) and os.readlink("/proc/self/ns/net") == root
+    except OSError:
+        return False
+
+
+def guard(zenoh: Any) -> None:
+    """Wrap ``zenoh.open`` and ``zenoh.scout`` (once)."""
+    if getattr(zenoh, "_sonibus_guarded", False):
+        return
+    opener, scouter = zenoh.open, zenoh.scout
+
+    def open(config: Any, *args: Any, **kwargs: Any) -> Any:
+        if _in_root_namespace() and config.get_json("scouting/multicast/enabled") != "false":
+            raise RuntimeError(f"zenoh.open: {REFUSED}")
+        return opener(config, *args, **kwargs)
+
+    def scout(*args: Any, **kwargs: Any) -> Any:
+        if _in_root_namespace():
+            raise RuntimeError(f"zenoh.scout: {REFUSED}")
+        return scouter(*args, **kwargs)
+
+    zenoh.open, zenoh.scout, zenoh._sonibus_guarded = open, scout, True
+
+
+class _OnImport(importlib.abc.MetaPathFinder):
+    """Guards ``zenoh`` right after it is imported (importing it here would slow every process)."""
+
+    def find_spec(self, name: str, path: Any, target: Any = None) -> Any:
+        if name != "zenoh":
+            return None
+        sys.meta_path.remove(self)
+        spec = importlib.util.find_spec(name)
+        if spec is None or spec.loader is None:
+            return spec
+        run = spec.loader.exec_module
+
+        def exec_module(module: Any) -> None:
+            run(module)
+            guard(module)
+        spec.loader.exec_module = exec_module  # type: ignore[method-assign]
+        return spec
+
+
+if os.environ.get("SONIBUS_TEST_NETNS"):
+    if "zenoh" in sys.modules:
+        guard(sys.modules["zenoh"])
+    else:
+        sys.meta_path.insert(0, _OnImport())

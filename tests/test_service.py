@@ -1,0 +1,93 @@
+"""``sonibus service`` writes a systemd unit that systemd itself accepts (``systemd-analyze
+verify``, Debian's systemd: it parses units without systemd running as PID 1)."""
+
+from __future__ import annotations
+
+import io
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from sonibus.bus.cli import Environment, main
+from sonibus.bus.cli import service as service_module
+
+from .conftest import require_tool
+
+SHOW = '[bus]\nmulticast = false\n\n[nodes.pepper]\nadapter = "sim"\nhost = "stage"\n\n' \
+       '[nodes.sound]\nadapter = "osc"\nhost = "sound-pc"\n'
+
+
+def cli(*args: str) -> tuple[int, str, str]:
+    env = Environment(stdout=io.StringIO(), stderr=io.StringIO())
+    code = main(list(args), env)
+    return code, env.stdout.getvalue(), env.stderr.getvalue()
+
+
+def verify(unit: Path) -> subprocess.CompletedProcess[str]:
+    tool = require_tool("systemd-analyze", "systemd")
+    return subprocess.run([tool, "verify", "--man=no", str(unit)], capture_output=True, text=True, timeout=60)
+
+
+def test_the_unit_runs_one_hosts_nodes_supervised_and_systemd_accepts_it(tmp_path):
+    show = tmp_path / "museum.toml"
+    show.write_text(SHOW)
+    code, out, err = cli("service", str(show), "--host", "stage", "--user", "root", "-o", str(tmp_path))
+    assert code == 0, err
+    unit = tmp_path / "sonibus-museum-stage.service"
+    text = unit.read_text()
+    settings = dict(line.split("=", 1) for line in text.splitlines() if "=" in line and not line.startswith("#"))
+    assert settings["ExecStart"] == f"{Path(sys.prefix) / 'bin' / 'sonibus'} run {show} --host stage"
+    assert settings["WorkingDirectory"] == str(tmp_path) and settings["User"] == "root"
+    assert (settings["Type"], settings["Restart"], settings["WatchdogSec"]) == ("notify", "always", "30")
+    assert settings["StartLimitIntervalSec"] == "0" and settings["SuccessExitStatus"] == "130"
+    assert "StandardOutput" not in settings  # stdout and stderr go to the journal, systemd's default
+    assert settings["Description"] == "sonibus show museum.toml on host stage (pepper)"
+    assert out.splitlines()[0] == (f"wrote {unit}: museum.toml's nodes of host 'stage' (pepper) as user 'root', "
+                                   f"restarted always, watchdog 30 s")
+    assert "sudo systemctl enable --now sonibus-museum-stage" in out and "journalctl -u sonibus-museum-stage" in out
+    checked = verify(unit)
+    assert (checked.returncode, checked.stderr, checked.stdout) == (0, "", ""), checked.stderr
+
+
+def test_paths_with_spaces_percent_and_dollar_reach_systemd_as_they_are(tmp_path, monkeypatch):
+    """systemd reads ExecStart= with its own quoting, specifiers (%) and variables ($):
+    ``verify`` checks that the command it parsed out of the line is executable."""
+    odd = tmp_path / "my show 100% $HOME"
+    odd.mkdir()
+    (odd / "sonibus").symlink_to(Path(sys.prefix) / "bin" / "sonibus")
+    monkeypatch.setattr(service_module, "_sonibus", lambda: odd / "sonibus")
+    (odd / "the show.toml").write_text(SHOW)
+    code, _, err = cli("service", str(odd / "the show.toml"), "--host", "stage", "--user", "root", "-o", str(odd))
+    assert code == 0, err
+    unit = odd / "sonibus-the-show-stage.service"
+    odd_in_unit = str(odd).replace("%", "%%")
+    assert f'ExecStart="{odd_in_unit}/sonibus" run "{odd_in_unit.replace("$", "$$")}/the show.toml"' in unit.read_text()
+    checked = verify(unit)
+    assert (checked.returncode, checked.stderr) == (0, ""), checked.stderr
+    broken = unit.read_text().replace('ExecStart="', "ExecStart=")  # unquoted, its first word is not the command
+    unit.write_text(broken)
+    assert verify(unit).returncode != 0
+
+
+@pytest.mark.parametrize(("args", "error"), [
+    (("--host", "nobody-here"), "no node for host 'nobody-here' — hosts: sound-pc, stage; use --host NAME"),
+    (("--host", "stage", "--user", "no-such-user-x"),
+     "--user 'no-such-user-x': no such user on this machine — give the account that runs the show"),
+    (("--host", "stage", "--watchdog-s", "0"), "--watchdog-s 0 / --restart-s 2: give a watchdog of 1 s or more"),
+])
+def test_a_unit_that_could_not_run_is_not_written(tmp_path, args, error):
+    show = tmp_path / "museum.toml"
+    show.write_text(SHOW)
+    code, out, err = cli("service", str(show), *args, "-o", str(tmp_path))
+    assert code == 2 and out == "" and error in err and err.count("\n") == 1, err
+    assert not list(tmp_path.glob("*.service"))
+
+
+def test_the_unit_can_be_printed_instead(tmp_path):
+    show = tmp_path / "museum.toml"
+    show.write_text(SHOW)
+    code, out, _ = cli("service", str(show), "--host", "sound-pc", "--user", "root", "-o", "-", "--watchdog-s", "12")
+    assert code == 0 and out.startswith("# Written by `sonibus service`") and "\nWatchdogSec=12\n" in out
+    assert "Description=sonibus show museum.toml on host sound-pc (sound)" in out
