@@ -33,6 +33,7 @@ from typing import Any, ClassVar
 
 from . import codec, keys
 from .errors import SonibusError
+from .installed import name_of
 from .node import Bus, Qos
 from .ownership import Ownership
 from .queue import SampleQueue
@@ -65,7 +66,6 @@ class Adapter:
             raise TypeError(f"{type(self).__name__} takes a {self.Config.__name__}, "
                             f"got {type(self.config).__name__}")
         self.name = name or type(self).__name__.lower()
-        from .registry import name_of  # (the registry checks adapters: it imports this module)
         self.kind = name_of(type(self))  # "sim", not "SimRobot", in logs, stats and `sonibus nodes`
         self.state = "new"
         self.stopping = threading.Event()

@@ -2,7 +2,7 @@
 should play on ``<robot>/audio/speaker``, as chunks of int16 PCM of about
 10-20 ms (``schemas/v1/audio_chunk.json``; the gate checks them,
 ``bus/messages.py``). Publish them with ``node.AUDIO``; play them through a
-``JitterBuffer``.
+``JitterBuffer`` (``bus/jitter.py``).
 
 >>> import numpy as np
 >>> chunk = AudioChunk.from_samples(1.5, 0, 16000, np.array([[0.5, -1.0], [0.0, 2.0]]))
@@ -20,11 +20,10 @@ from typing import Any
 
 import numpy as np
 
-from .jitter import JitterBuffer
 from .keys import Key
 from .messages import Gate
 
-__all__ = ["FULL_SCALE", "SAMPLE", "AudioChunk", "JitterBuffer", "received", "to_int16"]
+__all__ = ["FULL_SCALE", "SAMPLE", "AudioChunk", "received", "to_int16"]
 
 FULL_SCALE = 32767
 SAMPLE = np.dtype("<i2")  # int16 little-endian, whatever this host's byte order

@@ -5,7 +5,7 @@ Built-in adapters are registered exactly like third-party ones (see
 it loads, before any node starts: a robot adapter's ``Verbs`` must implement
 every verb (``verbs.RobotVerbs``), and a name two packages register is refused.
 
->>> sorted(available())[:2]  # doctest: +SKIP
+>>> sorted(entries()[0])[:2]  # doctest: +SKIP
 ['console', 'osc']
 """
 
@@ -20,39 +20,11 @@ from importlib.metadata import EntryPoint, entry_points
 
 from .adapter import Adapter
 from .errors import AdapterError
+from .installed import GROUP, _package, entries, package
 from .owner import RobotAdapter
 from .verbs import missing
 
-GROUP = "sonibus.adapters"
-
 log = logging.getLogger(__name__)
-
-
-def entries() -> tuple[dict[str, EntryPoint], dict[str, str]]:
-    """Installed adapters by name, and the names that more than one package
-    registers, each with the one line that refuses it."""
-    by_name: dict[str, list[EntryPoint]] = {}
-    for ep in entry_points(group=GROUP):
-        by_name.setdefault(ep.name, []).append(ep)
-    unique = {name: eps[0] for name, eps in by_name.items() if len(eps) == 1}
-    clashes = {name: f"adapter '{name}' is registered by more than one package: "
-                     f"{' and '.join(f'{_package(ep)} ({ep.value})' for ep in eps)} — uninstall all but one"
-               for name, eps in by_name.items() if len(eps) > 1}
-    return unique, clashes
-
-
-def available() -> dict[str, EntryPoint]:
-    """Installed adapters by name (not yet imported); a name two packages register is left out."""
-    return entries()[0]
-
-
-def name_of(cls: type) -> str:
-    """The name ``cls`` is registered under (found without importing any plug-in);
-    its class name when it is not registered."""
-    for name, ep in available().items():
-        if ep.attr == cls.__name__ and (cls.__module__ + ".").startswith(ep.module + "."):
-            return name
-    return cls.__name__
 
 
 def load(name: str) -> type[Adapter]:
@@ -89,15 +61,6 @@ def summary(cls: type[Adapter]) -> str:
     return (cls.__doc__ or "").strip().splitlines()[0] if cls.__doc__ else ""
 
 
-def package(ep: EntryPoint) -> str:
-    """The name of the distribution that registers ``ep`` ("?" if unknown)."""
-    return ep.dist.name if ep.dist is not None else "?"
-
-
-def _package(ep: EntryPoint) -> str:
-    return f"package '{package(ep)}'" if ep.dist is not None else "an unknown package"
-
-
 class MissingExtra(AdapterError):
     """An adapter needs optional dependencies that are not installed; ``install`` says which."""
 
@@ -119,6 +82,14 @@ def install_line(ep: EntryPoint, extra: str) -> str:
         return f"pip install '{package(ep)}[{extra}]'"
     editable = "-e " if (origin.get("dir_info") or {}).get("editable") else ""
     return f"pip install {editable}'{urllib.parse.unquote(url.path)}[{extra}]'"
+
+
+def install_extra(extra: str, adapter: str = "sim") -> str:
+    """How to add sonibus's own ``extra`` as sonibus was installed (the line of
+    ``install_line``), for an adapter that needs it only once it runs (``ros2``'s DDS);
+    ``adapter`` names one of sonibus's entry points to find its distribution by."""
+    found = [ep for ep in entry_points(group=GROUP) if ep.name == adapter]
+    return install_line(found[0], extra) if found else f"pip install -e '.[{extra}]' (in sonibus's clone)"
 
 
 def extra_of(ep: EntryPoint, module: str) -> str | None:

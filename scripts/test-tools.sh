@@ -19,6 +19,7 @@ tools=(
   "systemd-analyze systemd"
   "node nodejs"
   "npm npm"
+  "dot graphviz"
 )
 
 # the official Foxglove client (tests/foxglove/test_official_client.py), from the npm registry

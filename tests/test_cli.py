@@ -540,8 +540,10 @@ def test_command_args_bad_number(verb, words, name):
     assert "number" in message
 
 
-def test_command_args_unknown_verb_is_left_to_the_robot():
-    assert command_args("dance", ["wildly"]) == {}
+def test_command_args_unknown_verb_is_a_usage_error_in_the_robots_words():
+    """Issue 29, item 8: it was left to the robot, which refused it: exit 4, not 2 (usage)."""
+    with pytest.raises(ConfigError, match=r"^unknown command 'dance' — known commands: awareness, "):
+        command_args("dance", ["wildly"])
 
 
 # -- a closed output ends a command quietly --------------------------------------------

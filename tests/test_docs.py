@@ -12,7 +12,7 @@ import pytest
 import sonibus.adapters
 import sonibus.bus
 import sonibus.schemas
-from sonibus.bus import config, registry, runner
+from sonibus.bus import config, installed, registry, runner
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -44,7 +44,7 @@ def test_the_readme_lists_every_adapter_sonibus_ships_as_sonibus_adapters_does()
     text = (ROOT / "README.md").read_text(encoding="utf-8")
     block = text.partition("    sonibus adapters\n")[2].partition("\n\n")[0]
     listed = dict(line.strip().split(None, 1) for line in block.splitlines())
-    ours = {name for name, ep in registry.available().items() if registry.package(ep) == "sonibus"}
+    ours = {name for name, ep in installed.available().items() if installed.package(ep) == "sonibus"}
     assert set(listed) == ours
     for name, summary in listed.items():
         assert summary == registry.summary(registry.load(name)), name

@@ -27,6 +27,7 @@ from sonibus.bus import (
     RobotAdapter,
     config,
     decode,
+    installed,
     keys,
     load_model,
     registry,
@@ -42,7 +43,7 @@ BUILT_IN = {"sim": SimRobot, "osc": OscSink, "console": ConsoleView}
 
 
 def test_available_lists_built_ins_and_the_plugin_without_importing():
-    found = registry.available()
+    found = installed.available()
     assert {"sim", "osc", "console", "jsonl", "broken"} <= set(found)
     assert found["jsonl"].value == "sonibus_testplugin:JsonLinesSink"
     assert found["sim"].value == "sonibus.adapters.sim:SimRobot"
@@ -349,7 +350,7 @@ def test_a_name_two_packages_register_is_refused_naming_both(install, caplog):
         message = str(caught.value)
         assert f"adapter '{name}'" in message and all(p in message for p in packages), message
         assert "\n" not in message
-        assert name not in registry.available()
+        assert name not in installed.available()
     assert registry.entries()[1].keys() == {"sim", "twin"}
     caplog.set_level(logging.WARNING, logger="sonibus")
     loaded = registry.load_all()

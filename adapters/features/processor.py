@@ -14,7 +14,7 @@ from typing import Any
 
 import zenoh
 
-from sonibus.bus import codec, keys
+from sonibus.bus import codec, keys, lateness
 from sonibus.bus.adapter import Adapter
 from sonibus.bus.frames import Frame, FrameAssembler
 from sonibus.bus.info import InfoRequests
@@ -46,6 +46,7 @@ class Features(Adapter):
         self._assembler = FrameAssembler(cfg.max_wait_ms / 1000.0)  # with per_joint_keys
         self.stats.follow("late", lambda: self._assembler.late)
         self._queue = self.own(SampleQueue(cfg.queue))
+        lateness.follow(self.bus)  # (where each robot's node runs: a stale frame's warning names the likely cause)
         self._info = InfoRequests(self.bus, lambda robot, info: self._queue.put((INFO, (robot, info))),
                                   lambda robot, text: self.warn("info", text))
         self._streams = self.own(Streams(self.bus, [keys.joints(r) for r in cfg.robots], self._queue,
@@ -88,7 +89,8 @@ class Features(Adapter):
         if max_age and time.time() - frame.t > max_age:  # a backlog: what it would give, sinks drop as stale
             self.count("stale")
             self.warn("stale", f"{frame.robot}: frames older than {self.config.max_age_ms:g} ms skipped "
-                               f"(frame {frame.seq} was {time.time() - frame.t:.2f} s old; clocks in step?)")
+                               f"(frame {frame.seq} was {time.time() - frame.t:.2f} s old: "
+                               f"{lateness.why_late(self.bus, frame.robot)})")
             return
         out = features.step(frame.t, frame.seq, frame.values)
         self.count("frames")

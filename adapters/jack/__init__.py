@@ -3,7 +3,7 @@
     from sonibus.adapters.jack import JackBridge, JackConfig
     bridge = JackBridge(JackConfig(robot="pepper", connect_inputs=("pd:output_1", "pd:output_2")), name="jack")
 
-Needs a running JACK server and libjack (``pip install 'sonibus[jack]'``);
+Needs a running JACK server and libjack (the ``jack`` extra: ``pip install -e '.[jack]'`` in sonibus's clone);
 docs/jack.md says how to play Pd into the robot and hear its microphones.
 """
 

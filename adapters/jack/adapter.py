@@ -24,8 +24,9 @@ import numpy as np
 
 from sonibus.bus import codec, keys, messages
 from sonibus.bus.adapter import Adapter
-from sonibus.bus.audio import AudioChunk, JitterBuffer, received
+from sonibus.bus.audio import AudioChunk, received
 from sonibus.bus.errors import ConfigError
+from sonibus.bus.jitter import JitterBuffer
 from sonibus.bus.node import AUDIO
 
 from . import client as jack_client

@@ -22,7 +22,8 @@ from typing import Any
 import numpy as np
 
 from sonibus.bus import keys, messages
-from sonibus.bus.audio import JitterBuffer, received
+from sonibus.bus.audio import received
+from sonibus.bus.jitter import JitterBuffer
 from sonibus.bus.owner import RobotAdapter
 
 from .config import NaoqiConfig

@@ -11,7 +11,7 @@ import time
 from collections.abc import Callable, Sequence
 from typing import Any, NamedTuple
 
-from sonibus.bus import presence
+from sonibus.bus import lateness, presence
 from sonibus.bus.adapter import Adapter
 from sonibus.bus.errors import ConfigError
 from sonibus.bus.frames import Frame, FrameAssembler
@@ -101,6 +101,7 @@ class OscSink(Adapter):
         self._queue = self.own(SampleQueue(cfg.queue))
         self._presence = presence.connection_events(self.bus, self._queue, cfg.subscribe,
                                                     self.capped)  # a robot's loss, return
+        lateness.follow(self.bus)  # (where each robot's node runs: a stale sample's warning names the likely cause)
         # Frames are taken where they arrive (a thread hand-off less: docs/performance.md), the rest
         # from the queue by the forward worker; one lock between them guards the sink's state.
         self._state = threading.Lock()
@@ -181,7 +182,7 @@ class OscSink(Adapter):
         if max_age and age > max_age:
             self.count("stale")
             self.warn("stale", f"samples older than max_age_ms = {self.config.max_age_ms:g} dropped ('{key}' was "
-                               f"{age * 1000:.0f} ms old: a stalled publisher or link, or clocks not in step)")
+                               f"{age * 1000:.0f} ms old: {lateness.why_late(self.bus, message.source.robot)})")
             return
         if message.selected is None:
             self._samples((message,), now)

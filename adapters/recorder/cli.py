@@ -79,7 +79,8 @@ def _record_arguments(p: argparse.ArgumentParser) -> None:
                    help=f"what to record (default: {' '.join(EVERYTHING)}: joints, derived values and events of "
                         "every robot, and each robot's info; no audio: microphones only when named, e.g. "
                         f"'{MICROPHONES}')")
-    p.add_argument("--force", action="store_true", help="overwrite FILE if it exists")
+    p.add_argument("--overwrite", "--force", dest="overwrite", action="store_true",
+                   help="overwrite FILE if it exists (the recorder node's overwrite = true)")
     p.add_argument("--duration", type=float, metavar="S", help="stop after S seconds")
     p.add_argument("--rotate-s", type=float, default=0.0, metavar="S",
                    help="a new file every S seconds (FILE needs {time}, e.g. show-{time}.mcap)")
@@ -99,7 +100,7 @@ def _record(args: argparse.Namespace, env: Environment) -> Exit:
     options = {"subscribe": tuple(args.keyexpr)} if args.keyexpr else {}
     flags = {"rotate_s": "--rotate-s", "rotate_mb": "--rotate-mb", "min_free_mb": "--min-free-mb"}
     try:
-        config = RecorderConfig(path=args.file, overwrite=args.force, status_every_s=0,
+        config = RecorderConfig(path=args.file, overwrite=args.overwrite, status_every_s=0,
                                 per_joint_keys=args.per_joint_keys, foxglove=args.foxglove, rotate_s=args.rotate_s,
                                 rotate_mb=args.rotate_mb, min_free_mb=args.min_free_mb,
                                 warn_free_mb=max(RecorderConfig.warn_free_mb, args.min_free_mb), **options)
@@ -195,8 +196,9 @@ def _replay(args: argparse.Namespace, env: Environment) -> Exit:
 
     _run(replay, args, env, progress, replay.finished.is_set, args.status_every)
     gaps = f", {replay.stats['gaps']} gaps shortened" if replay.stats["gaps"] else ""
+    why = " (this machine was too busy to send them on time: its CPU)" if replay.stats["late"] else ""
     env.say(f"replayed {os.path.basename(args.file)}: {replay.stats['sent']} messages, "
-            f"{replay.stats['late']} skipped as late{gaps}")
+            f"{replay.stats['late']} skipped as late{why}{gaps}")
     return Exit.OK
 
 

@@ -144,7 +144,8 @@ class Recorder(Adapter):
         self._series = Series(cfg.path, Rotation(cfg.rotate_s, cfg.rotate_mb), metadata, cfg.flush_s)
         self.path = self.address = self._series.first(time.time())
         if os.path.exists(self.path) and TIME not in cfg.path and not cfg.overwrite:
-            raise ConfigError(f"{self.path} exists — choose another name, or overwrite it (--force, overwrite = true)")
+            raise ConfigError(f"{self.path} exists — choose another name, or overwrite it "
+                              "(--overwrite, overwrite = true)")
         if cfg.microphones:
             log.warning("%s: records the microphones (%s): what visitors say near the robot goes into %s — "
                         "a venue needs their consent (docs/recorder.md, \"Audio\")", self.name,

@@ -26,12 +26,13 @@ from __future__ import annotations
 import itertools
 import logging
 import os
+import queue
 import threading
 import time
 from collections import deque
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, TypeVar
 
 import zenoh
 
@@ -46,9 +47,11 @@ from .reading import Message, Recording, RecordingError
 from .timeline import OFFSETS, Timeline
 
 log = logging.getLogger(__name__)
+T = TypeVar("T")
 
 MAX_LATE_S = 0.1  # samples later than this are skipped (events never): no bursts of stale data
 LEAD_S = 0.2      # between declaring the publishers and the first message: Zenoh settles its routes
+AHEAD = 512       # moments read and decoded ahead of the player (~5 s of a robot at 100 frames/s)
 GATHER_NS = 5_000_000  # a frame's joint samples reach a recorder within this of each other
 STREAMED = {"joints": STREAM, "derived": STREAM, "audio": AUDIO}  # sections sent as streams (late: skipped)
 
@@ -89,8 +92,19 @@ class Replay(Adapter):
 
     def __init__(self, config: ReplayConfig, *, name: str = "") -> None:
         super().__init__(config, name=name)
-        self.position_s, self.window_s, self.loops = 0.0, 0.0, 0   # progress: seconds into the window, passes
-        self.finished = threading.Event()                          # set at the end of a replay without loop
+        self.window_s, self.loops = 0.0, 0        # progress: the window's length, passes done
+        self.finished = threading.Event()          # set at the end of a replay without loop
+        self._clock: tuple[float, float] | None = None  # the pass's start (monotonic) and the time cut from it
+
+    @property
+    def position_s(self) -> float:
+        """Seconds into the window the replay is now, by its clock: not the last message
+        sent, which a gap in the recording or the next pass's start held back (the
+        progress line showed 4.8/4.8 s with "loop 2", or stood still through a gap)."""
+        if self._clock is None:
+            return 0.0
+        start, cut_s = self._clock
+        return min(self.window_s, max(0.0, (time.monotonic() - start) * self.config.speed + cut_s))
 
     @classmethod
     def owned_robots(cls, config: ReplayConfig) -> tuple[str, ...]:
@@ -155,7 +169,7 @@ class Replay(Adapter):
     def _play(self) -> None:
         cfg: ReplayConfig = self.config
         origin_ns = self.recording.start_ns + int(cfg.start * 1e9)
-        start = time.monotonic() + LEAD_S
+        start: float | None = None
         wall = time.time() - time.monotonic()
         first_seq: dict[str, int] = {}
         last_seq: dict[str, int] = {}
@@ -164,7 +178,11 @@ class Replay(Adapter):
             timeline = Timeline(cfg.max_gap_s)
             ahead = itertools.islice(self.recording.messages(self.keys, cfg.start, cfg.end), OFFSETS)
             timeline.prime((m.publish_ns - m.log_ns) / 1e9 for m in ahead)
-            for framed, moment in _moments(self.recording.messages(self.keys, cfg.start, cfg.end)):
+            if start is None:  # (after the first reading: its time must not make the first messages late)
+                start = time.monotonic() + LEAD_S
+            self._clock = (start, 0.0)
+            for framed, moment in ReadAhead(_moments(self.recording.messages(self.keys, cfg.start, cfg.end)),
+                                            self.stopping):
                 message = moment[0]
                 # the robot's timeline (a frame leaves whole), as far as it agrees with the recorder's
                 published_s = (message.publish_ns - origin_ns) / 1e9
@@ -175,7 +193,7 @@ class Replay(Adapter):
                 due = start + offset_s / cfg.speed
                 if self.stopping.wait(max(0.0, due - time.monotonic())):
                     return
-                self.position_s = at_s
+                self._clock = (start, timeline.shift_s)
                 if message.key.endswith("/info"):
                     continue
                 seq = message.data.get("seq")
@@ -190,10 +208,13 @@ class Replay(Adapter):
                     self._publish_frame(moment, t_origin, seq, late)
                 else:
                     self._publish(message, t_origin, seq, late)
+            if self.stopping.is_set():
+                return
             self.loops += 1
             if not cfg.loop:
                 break
             start += (self.window_s - timeline.shift_s + self._gap_s) / cfg.speed
+            self._clock = (start, 0.0)
         self.finished.set()
         log.info("%s: replay of %s finished", self.name, cfg.path)
 
@@ -245,6 +266,60 @@ class Replay(Adapter):
     def _moved(self, t: float, t_origin: float) -> float:
         """A recorded ``t`` on the replay's clock: now, at its speed."""
         return t_origin + t / self.config.speed
+
+
+class ReadAhead(Iterator[T]):
+    """``items``, taken from a thread of their own up to ``AHEAD`` in advance: reading
+    a recording is bursty (a chunk decompressed and decoded at once: milliseconds, and
+    hundreds of them on a busy machine), and a burst on the player's thread made every
+    message due meanwhile late (at ×2, a third of them skipped). Ends when ``items``
+    do or when ``stopping`` is set; an error reading them is raised here, to the player."""
+
+    def __init__(self, items: Iterator[T], stopping: threading.Event, size: int = AHEAD) -> None:
+        self._queue: queue.Queue[tuple[bool, Any]] = queue.Queue(size)
+        self._stopping = stopping
+        self._done = threading.Event()
+        self._thread = threading.Thread(target=self._read, args=(items,), name="read-ahead", daemon=True)
+        self._thread.start()
+
+    def _read(self, items: Iterator[T]) -> None:
+        try:
+            for item in items:
+                if not self._put((True, item)):
+                    return
+        except BaseException as exc:  # (a damaged recording: the player fails the node with it)
+            self._put((False, exc))
+            return
+        self._put((False, None))
+
+    def _put(self, entry: tuple[bool, Any]) -> bool:
+        while not (self._done.is_set() or self._stopping.is_set()):
+            try:
+                self._queue.put(entry, timeout=0.1)
+                return True
+            except queue.Full:
+                continue
+        return False
+
+    def __next__(self) -> T:
+        while not self._stopping.is_set():
+            try:
+                more, item = self._queue.get(timeout=0.1)
+            except queue.Empty:
+                continue
+            if more:
+                return item
+            self.close()
+            if item is not None:
+                raise item
+            break
+        self.close()
+        raise StopIteration
+
+    def close(self) -> None:
+        """Stop reading (the thread ends within 0.1 s; the recording is free again when it has)."""
+        self._done.set()
+        self._thread.join(1.0)
 
 
 def _counter(key: str) -> str:

@@ -13,6 +13,7 @@ import threading
 from dataclasses import dataclass
 from typing import Any
 
+from sonibus.bus import registry
 from sonibus.bus.queue import SampleQueue
 
 try:
@@ -25,7 +26,8 @@ try:
     from cyclonedds.topic import Topic
     from cyclonedds.util import duration
 except ImportError as exc:
-    raise ImportError(f"middleware = \"dds\" needs Cyclone DDS: pip install 'sonibus[ros2-dds]' ({exc})") from None
+    raise ImportError(f"middleware = \"dds\" needs Cyclone DDS: {registry.install_extra('ros2-dds', 'ros2')} "
+                      f"({exc})") from None
 
 from . import cdr
 from .config import Ros2Config

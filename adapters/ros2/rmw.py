@@ -15,6 +15,8 @@ from __future__ import annotations
 import struct
 from dataclasses import dataclass
 
+from sonibus.bus import registry
+
 ADMIN = "@ros2_lv"
 JOINT_STATE = "sensor_msgs::msg::dds_::JointState_"
 JOINT_TRAJECTORY = "trajectory_msgs::msg::dds_::JointTrajectory_"
@@ -105,6 +107,7 @@ def gid(token: str) -> bytes:
     try:
         import xxhash
     except ImportError:
-        raise ImportError("the ros2 adapter needs xxhash for rmw_zenoh's GIDs: pip install 'sonibus[ros2]'") from None
+        raise ImportError("the ros2 adapter needs xxhash for rmw_zenoh's GIDs: "
+                          + registry.install_extra("ros2", "ros2")) from None
     value = xxhash.xxh3_128_intdigest(token.encode())
     return (value & (2**64 - 1)).to_bytes(8, "little") + (value >> 64).to_bytes(8, "little")

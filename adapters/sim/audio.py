@@ -20,7 +20,8 @@ import numpy as np
 
 from sonibus.bus import codec, keys, messages
 from sonibus.bus.adapter import Adapter
-from sonibus.bus.audio import AudioChunk, JitterBuffer, received
+from sonibus.bus.audio import AudioChunk, received
+from sonibus.bus.jitter import JitterBuffer
 from sonibus.bus.node import AUDIO
 from sonibus.bus.owner import RobotAdapter
 from sonibus.bus.pacing import Pacer

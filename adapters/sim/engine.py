@@ -167,7 +167,7 @@ class SimEngine:
             if self.running_behavior == name:
                 raise CommandError("failed", f"behavior '{name}' is already running")
             self._emit(self._start_behavior(name, time.time()))
-        return {"name": name, "duration": LIBRARY[name].duration}
+        return {"name": name, "duration": round(LIBRARY[name].duration, 3)}  # (3.1 s, not 3.1000000000000005)
 
     def behavior_stop(self, name: str | None = None) -> dict[str, Any]:
         with self.lock:

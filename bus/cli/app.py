@@ -15,9 +15,9 @@ import sys
 from collections.abc import Callable, Sequence
 from importlib.metadata import EntryPoint, entry_points, version
 
-from .. import registry
+from .. import installed
 from ..client import UNANSWERED
-from ..errors import CommandError, ConfigError, RobotNotFound, SonibusError
+from ..errors import CommandError, ConfigError, OwnershipError, RobotNotFound, SonibusError
 from ..text import PrintableFormatter
 from .api import COMMAND_GROUP, Command, Environment, Exit, add_bus_arguments
 
@@ -31,11 +31,11 @@ def commands(wanted: str | None = None) -> dict[str, Command]:
     it is one of them (and loads), else all; a broken one is logged and skipped, and of
     two with one name the first is kept (sonibus's own, if it is one of them) and the
     other named."""
-    installed = sorted(entry_points(group=COMMAND_GROUP), key=lambda ep: registry.package(ep) != OWN)
-    named = [ep for ep in installed if ep.name == wanted]
+    eps = sorted(entry_points(group=COMMAND_GROUP), key=lambda ep: installed.package(ep) != OWN)
+    named = [ep for ep in eps if ep.name == wanted]
     found = _loaded(named)
     if not found:  # argparse's "invalid choice" lists the others
-        found = _loaded([ep for ep in installed if ep not in named])
+        found = _loaded([ep for ep in eps if ep not in named])
     return found
 
 
@@ -45,12 +45,12 @@ def _loaded(eps: list[EntryPoint]) -> dict[str, Command]:
     for ep in eps:
         if ep.name in found:
             log.warning("command '%s' of %s is also registered by %s, whose command is used (skipped)",
-                        ep.name, registry.package(ep), origin[ep.name])
+                        ep.name, installed.package(ep), origin[ep.name])
             continue
         command = _load(ep)
         if command is not None:
             found[ep.name] = command
-            origin[ep.name] = registry.package(ep)
+            origin[ep.name] = installed.package(ep)
     own = [name for name in found if origin[name] == OWN]
     return {name: found[name] for name in own + sorted(set(found) - set(own))}
 
@@ -157,7 +157,7 @@ def _status(exc: Exception) -> Exit:
         return Exit.NOT_FOUND
     if isinstance(exc, CommandError):
         return Exit.TIMEOUT if exc.code in UNANSWERED else Exit.REFUSED
-    if isinstance(exc, ConfigError):
+    if isinstance(exc, ConfigError | OwnershipError):  # (a robot already owned: a second owner configured)
         return Exit.USAGE
     return Exit.ERROR
 

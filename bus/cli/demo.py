@@ -13,6 +13,7 @@ of its adapters.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import re
 import tomllib
 from dataclasses import dataclass, replace
@@ -22,7 +23,9 @@ from typing import Any
 
 from .. import config, runner
 from ..errors import ConfigError, OwnershipError
+from ..node import Bus
 from .api import Command, Environment, Exit, add_bus_arguments, bus_config
+from .run import stop_lines
 
 WHERE = "demo.toml [demo]"
 
@@ -115,18 +118,27 @@ def _demo(args: argparse.Namespace, env: Environment) -> Exit:
         raise ConfigError(blamed(str(exc), values)) from None
     for line in wiring().banner:
         env.say(filled(line, values))
-    bus = bus_config(args, wired.bus)
+    names = ", ".join(f"{a.name} ({a.kind})" for a in adapters)
+
+    def started(bus: Bus) -> None:
+        env.say(f"sonibus: running {names} on {bus.host}")
+
+    config = bus_config(args, wired.bus)
     try:
         try:
-            runner.run(adapters, bus, env.stop)
+            runner.run(adapters, config, env.stop, on_started=started)
         except ConfigError as exc:
             if "Address already in use" not in str(exc) or args.listen or args.connect:
                 raise
             # another demo of this machine listens there: join its bus (still this machine's only)
-            env.say(f"  another demo runs on this machine ({', '.join(bus.listen)}): joining its bus")
-            runner.run(adapters, replace(bus, listen=(), connect=bus.listen), env.stop)
+            env.say(f"  another demo runs on this machine ({', '.join(config.listen)}): joining its bus")
+            runner.run(adapters, replace(config, listen=(), connect=config.listen), env.stop, on_started=started)
     except OwnershipError as exc:
         raise OwnershipError(blamed(str(exc), values, taken=True)) from None
+    finally:
+        with contextlib.suppress(OSError):  # (its output gone: nobody to tell)
+            for line in stop_lines(adapters):
+                env.say(line)
     return Exit.OK
 
 

@@ -17,6 +17,7 @@ from ..node import Bus
 from ..notify import Notifier
 from ..restarts import STOPPED, RunState
 from ..session import BusConfig, from_here, listening, open_session
+from ..stats import BASE
 from ..watchdog import Watchdog
 from .api import Command, Environment, Exit, add_bus_arguments, bus_config
 
@@ -74,12 +75,32 @@ def run_installation(args: argparse.Namespace, env: Environment,
     else:
         state.end(STOPPED)
     finally:
+        with contextlib.suppress(OSError):  # (its output gone: nobody to tell)
+            for line in stop_lines(adapters):
+                say(line)
         notifier.close()
         if log_file is not None:
             log_file.close()
     # it returns only once a signal set env.stop (its KeyboardInterrupt, which says 130, may be lost on the way:
     # twice in CI it exited 0 on a SIGINT sent while the nodes were starting)
     return Exit.INTERRUPTED
+
+
+def stop_lines(adapters: list[Adapter]) -> list[str]:
+    """A line per node that started: what it counted, the losses too when nothing was lost.
+
+    >>> from sonibus.adapters.sim import SimRobot
+    >>> node = SimRobot(name="pepper")
+    >>> node.since = 1.0; node.stats.add("sent", 12345); node.stats.add("commands", 2)
+    >>> stop_lines([node])
+    ['sonibus: stopped pepper (sim): received 0, sent 12,345, dropped 0, stale 0, bad 0, errors 0, commands 2']
+    """
+    lines = []
+    for adapter in adapters:
+        if adapter.since:  # (one that never started counted nothing)
+            counted = [f"{name} {count:,}" for name, count in adapter.stats.items() if count or name in BASE]
+            lines.append(f"sonibus: stopped {adapter.name} ({adapter.kind}): {', '.join(counted)}")
+    return lines
 
 
 def reached(bus: Bus, adapters: list[Adapter], cfg: BusConfig, config_flags: str = "") -> list[str]:

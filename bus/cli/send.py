@@ -25,6 +25,9 @@ def _arguments(p: argparse.ArgumentParser) -> None:
 def command_args(verb: str, words: Sequence[str]) -> dict[str, Any]:
     """The request of ``NAME=VALUE`` words (and the verb's main value); a mistake is
     a usage error here, with the message OSC and JSON give for it."""
+    verbs = schemas.command_verbs()
+    if verb not in verbs:  # a typo, not the robot's refusal: said before the bus is joined
+        raise ConfigError(f"unknown command '{verb}' — known commands: {', '.join(verbs)}")  # (the robot's words)
     try:
         return from_words(verb, words)
     except CommandError as exc:

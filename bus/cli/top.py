@@ -40,13 +40,18 @@ from .hints import reach_hint
 EVERY_S = 0.25         # the view is redrawn this often
 STOP_TIMEOUT_S = 5.0   # a robot's answer to stop
 BAR = 20               # characters of a joint's bar
-SPARK_SPAN = 0.02      # the smallest range a sparkline spreads over, of a joint's limits
+SPARK_SPAN = 0.25      # the smallest range a sparkline spreads over, of a joint's limits
+SPARK_MIN = 6          # characters of sparkline before the bar is given room
 SPARKS = "▁▂▃▄▅▆▇█"
 LONELY_S = 3.0         # with no node on the bus for this long, the status line says whom top reached
 ALARM, WARNING, GONE = "bold red", "bold yellow", "red"
 
+NARROW = 120           # a terminal narrower than this (80×24) has its events below the joints, its tables compact
+EVENTS_MIN = 4         # rows the events keep below the joints (their border and three lines)
+
 ROBOT_COLUMNS = ("robot", "owner", "model", "frames/s", "latency", "seq gaps", "state")
 NODE_COLUMNS = ("adapter", "host", "node", "uptime", "state", "rx/s", "tx/s", "dropped", "stale", "bad", "errors")
+NARROW_NODE_COLUMNS = ("adapter", "node", "up", "state", "rx/s", "tx/s", "drop", "stale", "bad", "err")  # (host/node)
 
 
 class Nodes(DataTable[Text], can_focus=False):
@@ -85,6 +90,9 @@ class TopApp(App[int]):
     #below { height: 1fr; }
     #joints { width: 3fr; padding-right: 2; border-top: solid $accent; text-wrap: nowrap; text-overflow: clip; }
     #events { width: 2fr; min-width: 40; border-top: solid $accent; }
+    #below.narrow { layout: vertical; }
+    #below.narrow #joints { width: 1fr; height: auto; padding-right: 0; }
+    #below.narrow #events { width: 1fr; min-width: 0; height: 1fr; min-height: 3; }
     #event-lines { text-wrap: nowrap; text-overflow: ellipsis; }
     #status { height: auto; max-height: 3; color: $text-muted; }
     """
@@ -112,9 +120,10 @@ class TopApp(App[int]):
         self.nodes = Nodes(id="nodes", cursor_type="none", zebra_stripes=True)
         self.joints, self.events = Static(id="joints"), Vertical(id="events")
         self.event_lines, self.status = Static(id="event-lines"), Static(id="status")
+        self.below = Horizontal(id="below")
         yield self.robots
         yield self.nodes
-        with Horizontal(id="below"):
+        with self.below:
             yield self.joints
             with self.events:
                 yield self.event_lines
@@ -124,8 +133,7 @@ class TopApp(App[int]):
     def on_mount(self) -> None:
         for name in ROBOT_COLUMNS:
             self.robots.add_column(name, key=name)
-        for name in NODE_COLUMNS:
-            self.nodes.add_column(name, key=name)
+        self.narrow: bool | None = None  # (the nodes' columns are made for the width at the first redraw)
         self.robots.focus()
         self.events.border_title = "events"
         owners(self.monitor.bus)  # the claims, followed from now: those a stop reports as silent
@@ -147,16 +155,36 @@ class TopApp(App[int]):
         if not self.robots.is_attached:  # (a tick while the app ends)
             return
         snap = self.snapshot = self.monitor.snapshot()
+        narrow = self._layout()
         _fill(self.robots, ((r.name, robot_cells(r)) for r in snap.robots))
-        _fill(self.nodes, ((f"{n.host}/{n.node}", node_cells(n)) for n in snap.nodes))
+        _fill(self.nodes, ((f"{n.host}/{n.node}", node_cells(n, narrow)) for n in snap.nodes))
         if self.selected is None and snap.robots:
             self.selected = snap.robots[0].name
         robot = next((r for r in snap.robots if r.name == self.selected), None)
         self.joints.border_title = Text(printable(f"joints of {robot.name}" if robot else "joints"))  # (str: markup)
-        self.joints.update(joint_lines(robot) if robot else Text("no robot on the bus yet", style="italic"))
+        columns = 2 if robot and narrow and len(robot.joints) > self._joint_rows() else 1
+        self.joints.update(joint_lines(robot, self.joints.content_size.width, columns) if robot
+                           else Text("no robot on the bus yet", style="italic"))
         lines = max(1, self.events.size.height - 1)
         self.event_lines.update(event_lines(snap.events[-lines:]))
         self.status.update(status_line(snap, self._reach_hint(any(not n.gone for n in snap.nodes))))
+
+    def _layout(self) -> bool:
+        """Whether the terminal is narrow (80×24): events below the joints, the nodes'
+        columns compact (made again when that changes)."""
+        narrow = self.size.width < NARROW
+        if narrow != self.narrow:
+            self.narrow = narrow
+            self.below.set_class(narrow, "narrow")
+            self.nodes.clear(columns=True)
+            for name in NARROW_NODE_COLUMNS if narrow else NODE_COLUMNS:
+                self.nodes.add_column(name, key=name)
+        return narrow
+
+    def _joint_rows(self) -> int:
+        """Rows the joints may take below the tables, leaving ``EVENTS_MIN`` to the events."""
+        taken = sum(w.outer_size.height for w in (self.robots, self.nodes, self.status)) + 1 + 1  # footer, border
+        return self.size.height - taken - EVENTS_MIN
 
     def _reach_hint(self, listed: bool) -> str:
         """With no node on the bus for ``LONELY_S``: whom this session reached and what to check
@@ -253,15 +281,17 @@ def robot_cells(robot: RobotView) -> list[Text]:
             Text(f"{robot.rate_hz:.0f}", style=style), Text(latency, style=style), gaps, Text(state, style=style)]
 
 
-def node_cells(node: NodeView) -> list[Text]:
-    """A node's row: red when gone or failed, a loss counter yellow when it moved in the last second."""
+def node_cells(node: NodeView, narrow: bool = False) -> list[Text]:
+    """A node's row: red when gone or failed, a loss counter yellow when it moved in the last second
+    (``narrow``: host and node in one cell, ``host/node``, as ``NARROW_NODE_COLUMNS``)."""
     style = ALARM if node.gone or node.state == "failed" else ""
     state = f"{node.state}: {node.error}" if node.error else node.state
     rates = ("-", "-") if node.gone else (f"{node.rx_per_s:,.0f}", f"{node.tx_per_s:,.0f}")
     losses = [Text(f"{node.counters.get(k, 0):,}", style=style or (WARNING if k in node.moved else ""))
               for k in ("dropped", "stale", "bad", "errors")]
-    return [Text(node.adapter, style=style), Text(node.host, style=style), Text(node.node, style=style),
-            Text(clock(node.uptime_s), style=style), Text(state, style=style),
+    where = [Text(f"{node.host}/{node.node}", style=style)] if narrow else [Text(node.host, style=style),
+                                                                             Text(node.node, style=style)]
+    return [Text(node.adapter, style=style), *where, Text(clock(node.uptime_s), style=style), Text(state, style=style),
             *(Text(r, style=style) for r in rates), *losses]
 
 
@@ -279,33 +309,68 @@ def clock(seconds: float | None) -> str:
     return f"{whole // 3600}:{whole % 3600 // 60:02d}:{whole % 60:02d}"
 
 
-def joint_lines(robot: RobotView) -> Text:
-    """Each joint: a bar of its value within its limits, the value, the limits and a
-    sparkline of its last seconds (scaled to its own range: small motions show; last,
-    so a narrow terminal crops the sparkline, not the figures)."""
+def joint_lines(robot: RobotView, width: int = 0, columns: int = 1) -> Text:
+    """Each joint: its name, its value, its limits, a bar of the value within its limits
+    and a sparkline of its last seconds, in ``columns`` columns of ``width`` characters in
+    all (0: as wide as they come). What a narrow terminal cannot hold goes first: the
+    sparkline shrinks, then the bar, never the name, the value or the limits."""
+    joints = robot.joints
+    if not joints:
+        return Text()
+    gap = 2
+    each = (width - gap * (columns - 1)) // columns if width else 0
+    rows = -(-len(joints) // columns)
+    cells = [_joint(j, each, any(x.unit != "rad" for x in joints)) for j in joints]
     text = Text()
-    for joint in robot.joints:
-        fraction = joint.fraction
-        if fraction is None:
-            bar = Text(" " * (BAR + 2))
-        else:
-            filled = round(fraction * BAR)
-            bar = Text.assemble("[", ("█" * filled, "green"), ("·" * (BAR - filled), "dim"), "]")
-        limits = f"{joint.min:+.2f}..{joint.max:+.2f}" if fraction is not None else ""
-        unit = "" if joint.unit == "rad" else printable(joint.unit[:4])
-        text.append_text(Text.assemble(printable(f"{joint.name:<15}"), bar, f"{joint.value:+8.3f} {unit:<4} ",
-                                       (f"{limits:<13} ", "dim"), (sparkline(joint), "cyan"), "\n"))
+    for row in range(rows):
+        line = Text()
+        for column in range(columns):
+            i = column * rows + row
+            if i < len(cells):
+                if column:
+                    line.append(" " * gap)
+                line.append_text(cells[i])
+        text.append_text(line)
+        if row < rows - 1:
+            text.append("\n")
     return text
 
 
+def _joint(joint: JointView, width: int, units: bool) -> Text:
+    """One joint's cell, ``width`` characters at most (0: unbounded)."""
+    fraction = joint.fraction
+    limits = f"{joint.min:+.2f}..{joint.max:+.2f}" if fraction is not None else ""
+    unit = ("" if joint.unit == "rad" else printable(joint.unit[:4])) if units else None
+    figures = Text.assemble(printable(f"{joint.name:<15}"), f"{joint.value:+6.3f}",
+                            f" {unit:<4}" if unit is not None else "", (f" {limits:<12}", "dim"))
+    room = width - len(figures) if width else BAR + 2 + 1 + len(joint.history)
+    bar_width = BAR if room >= BAR + 2 + 1 + SPARK_MIN else BAR // 2 if room >= BAR // 2 + 2 + 1 + SPARK_MIN else 0
+    if bar_width and fraction is not None:
+        filled = round(fraction * bar_width)
+        figures.append_text(Text.assemble(" [", ("█" * filled, "green"), ("·" * (bar_width - filled), "dim"), "]"))
+    elif bar_width:
+        figures.append(" " * (bar_width + 3))
+    spark = room - (bar_width + 3 if bar_width else 0) - 1
+    if spark > 0:
+        figures.append(" " + sparkline(joint)[-spark:], style="cyan")
+    if width:
+        figures.truncate(width)
+    return figures
+
+
 def sparkline(joint: JointView) -> str:
-    """The joint's recent values as block characters, scaled to their own range (at
-    least ``SPARK_SPAN`` of the joint's limits: a still joint stays a flat line).
+    """The joint's recent values as block characters, spread over their own range but
+    at least ``SPARK_SPAN`` of the joint's limits: a gesture fills the height, a wobble
+    of a few hundredths of a radian stays near the floor, a still joint is flat.
 
     >>> sparkline(JointView("LHand", 1.0, 0.0, 1.0, "fraction", (0.0, 0.5, 1.0, 1.0)))
     '▁▅██'
     >>> sparkline(JointView("HeadYaw", 0.3, -2.0, 2.0, "rad", (0.3, 0.3)))
     '▁▁'
+    >>> sparkline(JointView("HeadYaw", 0.0, -2.0857, 2.0857, "rad", (0.0, 0.06, 0.0, 0.06)))  # a 3° wobble
+    '▁▁▁▁'
+    >>> sparkline(JointView("HeadYaw", 0.0, -2.0857, 2.0857, "rad", (0.0, 0.5, 1.0, 0.5)))  # a gesture
+    '▁▄█▄'
     """
     values = joint.history
     if not values:

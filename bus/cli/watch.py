@@ -10,6 +10,7 @@ from typing import Any
 
 from .. import codec, connection, health, keys, ownership, registry
 from ..client import robot_info
+from ..errors import ConfigError
 from ..node import Bus
 from ..presence import SILENCE_S
 from ..session import BusConfig
@@ -110,26 +111,39 @@ def _echo_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("keyexpr", metavar="KEYEXPR", help="e.g. 'pepper/joints/*' or '*/events/**'")
     p.add_argument("--count", type=int, help="exit after this many samples")
     p.add_argument("--duration", type=float, help="exit after this many seconds")
+    p.add_argument("--timeout", type=float, metavar="S",
+                   help="exit with status 5 (timeout) once S seconds passed without a sample (default: wait)")
 
 
 def _echo(args: argparse.Namespace, env: Environment) -> Exit:
+    if args.timeout is not None and not args.timeout > 0:
+        raise ConfigError(f"--timeout {args.timeout:g}: give the seconds to wait for a sample, e.g. --timeout 5")
     deadline = time.monotonic() + args.duration if args.duration else None
     seen = 0
     cfg = bus_config(args)
     with joined(cfg) as bus:
         subscriber, queue = bus.subscribe(args.keyexpr, 65536)
         hint_at = time.monotonic() + SILENCE_S
+        last = time.monotonic()  # (the last sample, or the start)
         try:
             while not env.stop.is_set() and (args.count is None or seen < args.count):
                 if deadline is not None and time.monotonic() >= deadline:
                     break
+                if args.timeout is not None and time.monotonic() - last >= args.timeout:
+                    what = "no sample" if not seen else f"no sample after the {seen} shown"
+                    print(f"sonibus: error: echo '{args.keyexpr}': {what} for {args.timeout:g} s",
+                          file=env.stderr, flush=True)
+                    if not seen and hint_at < float("inf"):
+                        env.hint(_echo_hint(bus, cfg, args.keyexpr))
+                    return Exit.TIMEOUT
                 if not seen and time.monotonic() >= hint_at:  # said once, while it goes on waiting
                     env.hint(_echo_hint(bus, cfg, args.keyexpr))
                     hint_at = float("inf")
-                item = queue.get(timeout=0.2)
+                item = queue.get(timeout=0.2 if args.timeout is None else min(0.2, args.timeout))
                 if item is None:
                     continue
                 key, payload = item
+                last = time.monotonic()
                 try:
                     shown = json.dumps(codec.decode(payload), separators=(", ", ": "), default=_unprintable)
                 except codec.DecodeError:

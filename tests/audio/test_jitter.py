@@ -9,8 +9,8 @@ import time
 import numpy as np
 import pytest
 
-from sonibus.bus.audio import AudioChunk, JitterBuffer
-from sonibus.bus.jitter import FADE_S
+from sonibus.bus.audio import AudioChunk
+from sonibus.bus.jitter import FADE_S, JitterBuffer
 
 FADE = round(48000 * FADE_S)  # frames of a fade at 48 kHz
 

@@ -22,9 +22,10 @@ from rosbags.typesys import Stores, get_typestore
 from zenoh.ext import Int64, z_serialize
 
 from sonibus.adapters.ros2 import Ros2Config, Ros2Robot
+from sonibus.bus import keys
 from sonibus.bus.node import Bus
 
-from ..conftest import Network
+from ..conftest import Network, wait_for
 from ..web.conftest import websocket  # noqa: F401  (the page's WebSocket client, a fixture here too)
 
 ROOT = Path(__file__).resolve().parent.parent.parent
@@ -116,6 +117,14 @@ def ros(net: Network) -> Iterator[Ros]:
         yield made
     finally:
         made.close()
+
+
+def seeing(net: Network, name: str, robot: str = "arm") -> Bus:
+    """A session of its own (another machine) once it sees ``robot``'s info: a new session
+    reaches the others a moment after it opens, and a command sent before is 'not found'."""
+    bus = net.bus(name)
+    wait_for(lambda: bus.query(keys.info(robot), timeout=1.0), 10, f"robot '{robot}' seen from session '{name}'")
+    return bus
 
 
 def start_arm(net: Network, **options: Any) -> Ros2Robot:
