@@ -117,6 +117,8 @@ def test_stopping_every_robot_is_one_query_whatever_the_robots_on_the_bus(net, p
     assert ended.wait(10), "the stop never ended"
     assert answered == {"pepper": {}, "nao": {}}
     robots, error = silent[0]
-    assert len(robots) == MAX_ROBOTS - 2 and set(robots) <= set(fakes) and error.code == "robot_not_found"
+    # (which claims the asker kept is the order they reached it: pepper's and nao's may be among those left out)
+    assert set(robots) == set(owners(asker).robots()) - {"pepper", "nao"} and set(robots) <= set(fakes)
+    assert len(robots) >= MAX_ROBOTS - 2 and error.code == "robot_not_found"
     assert queries == ["*/cmd/stop"], f"{len(queries)} queries: {queries[:3]}"
     assert pepper.state == nao.state == "running"
