@@ -85,12 +85,15 @@ class FrameBytes:
         self._last = last          # PepperOSC: the prefix of its /latency message
 
     def render(self, t: float, seq: int, values: Sequence[float], interval: float = 0.0) -> list[bytes]:
-        pack = self._pack
-        if self._extra:
-            tail = self._extra((t, seq & SEQ_MASK))
-            out = [prefix + pack(v, *tail) for prefix, v in zip(self._prefixes, values, strict=True)]
+        pack, pairs = self._pack, zip(self._prefixes, values, strict=True)
+        tail = self._extra((t, seq & SEQ_MASK)) if self._extra else ()
+        if len(tail) == 2:  # (t and seq: named, as a call with *tail costs a third of the frame)
+            a, b = tail
+            out = [prefix + pack(v, a, b) for prefix, v in pairs]
+        elif tail:
+            out = [prefix + pack(v, *tail) for prefix, v in pairs]
         else:
-            out = [prefix + pack(v) for prefix, v in zip(self._prefixes, values, strict=True)]
+            out = [prefix + pack(v) for prefix, v in pairs]
         if self._shape == "bundle":
             return [encode.bundle_head(encode.timetag(t + self._latency_s)) + b"".join(out)]
         if self._shape == "pepperosc":

@@ -97,6 +97,7 @@ class OscSink(Adapter):
         self._frame_links = [link for link in self._links if link.target.framed]
         self._assembler = FrameAssembler()
         self.stats.follow("late", lambda: self._assembler.late)
+        self._tally = self.stats.tally(("received", "sent"))  # (counted under self._state: no lock of their own)
         self._socket = self.own(socket.socket(socket.AF_INET, socket.SOCK_DGRAM))
         self._queue = self.own(SampleQueue(cfg.queue))
         self._presence = presence.connection_events(self.bus, self._queue, cfg.subscribe,
@@ -163,8 +164,15 @@ class OscSink(Adapter):
                 else:
                     self._sample_to(link, *held, now)
 
+    def _counted(self, kind: str, n: int = 1) -> None:
+        """``count``, under ``_state``: what every frame counts goes to the tally."""
+        if kind == "received":
+            self._tally[kind] += n
+        else:
+            self.count(kind, n)
+
     def _take(self, key: str, payload: Any, now: float) -> None:
-        message = self._streams.take(key, payload, self.count, self.warn)
+        message = self._streams.take(key, payload, self._counted, self.warn)
         if message is None:
             return
         source = message.source
@@ -342,7 +350,7 @@ class OscSink(Adapter):
                 self.warn("send", f"cannot send to {link.target.to}: {exc.strerror or exc}")
         if sent:
             link.sent += sent
-            self.count("sent", sent)
+            self._tally["sent"] += sent
 
     def _unencodable(self, link: _Link, dropped: list[EncodeError]) -> None:
         self.count("unencodable", len(dropped))
