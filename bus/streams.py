@@ -138,6 +138,7 @@ class Selection:
         self._accepted: dict[str, bool] = {}
         self._parsed: dict[str, keys.Key] = {}
         self._frames: dict[tuple[str, tuple[str, ...]], Selected] = {}
+        self._last: dict[str, tuple[list[str], Selected]] = {}  # robot → its last names (a copy), their selection
 
     def incoming(self, key: str, payload: bytes) -> Incoming:
         """What came on ``key``, checked by the gate (a frame keeps the selected joints);
@@ -159,6 +160,9 @@ class Selection:
 
     def selected(self, robot: str, names: list[str]) -> Selected:
         """The joints of ``robot``'s frames with ``names`` (checked by the gate) that the patterns select."""
+        last = self._last.get(robot)
+        if last is not None and last[0] == names:  # (a robot's names are the same every frame: one comparison)
+            return last[1]
         signature = (robot, tuple(names))
         found = self._frames.get(signature)
         if found is None:
@@ -169,6 +173,9 @@ class Selection:
             sources = tuple(self._key(prefix + names[i]) for i in indices)
             found = self._frames[signature] = Selected(sources, None if len(indices) == len(names) else indices,
                                                        frozenset(source.key for source in sources))
+        if len(self._last) >= MAX_FRAMES:  # (robot names come from the network)
+            self._last.clear()
+        self._last[robot] = (list(names), found)
         return found
 
     def take(self, key: str, payload: bytes, count: Callable[[str, int], None],

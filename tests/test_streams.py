@@ -125,3 +125,18 @@ def test_a_payload_over_the_size_limit_is_queued_as_its_size_only_and_refused_by
             codec.decode(items["pepper/frame"])
     finally:
         subscriber.undeclare()
+
+
+def test_each_frame_gets_the_selection_of_its_own_joint_list():
+    """A sink remembers what it takes of a robot's last joint list: a robot whose list changes
+    (or a node that changes a message's list afterwards) still gets each frame's own joints."""
+    selection = Selection(["*/joints/Head*"])
+    lists = [["HeadYaw", "LHand", "HeadPitch"], ["LHand", "HeadPitch"], ["HeadYaw", "LHand", "HeadPitch"]]
+    for robot in ("pepper", "nao"):
+        for seq, names in enumerate(lists):
+            values = [float(i) for i in range(len(names))]
+            frame = codec.encode({"t": 1.5, "seq": seq, "names": names, "v": values})
+            taken = selection.incoming(f"{robot}/frame", frame)
+            assert [(s.source.key, s.values) for s in taken.samples] == [
+                (f"{robot}/joints/{n}", (v,)) for n, v in zip(names, values, strict=True) if n.startswith("Head")]
+            taken.message["names"][:] = lists[(seq + 1) % len(lists)]  # (the one remembered is a copy)
