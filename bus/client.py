@@ -18,9 +18,10 @@ from collections.abc import Callable
 from typing import Any
 
 from . import codec, keys
+from .claimwatch import owners
 from .errors import CommandError, RobotNotFound
 from .node import Bus, Reply
-from .ownership import MAX_ROBOTS, Claim, claims, owners
+from .ownership import MAX_ROBOTS, Claim, claims
 
 Outcome = dict[str, Any] | CommandError
 STOP_ALL = keys.command("*", "stop")  # one query every owner of the bus serves: no robot waits behind another

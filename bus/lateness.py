@@ -11,8 +11,9 @@ call ``follow(bus)`` when the node starts, so the first warning knows it.
 
 from __future__ import annotations
 
+from .claimwatch import owners
 from .node import Bus
-from .ownership import Claim, owners
+from .ownership import Claim
 
 
 def follow(bus: Bus) -> None:

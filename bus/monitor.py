@@ -41,6 +41,7 @@ EVENTS = 200            # events kept
 LOSSES = ("dropped", "stale", "bad", "errors")  # counters whose moving is a warning
 QUEUE = 8192
 MAX_SHOWN = 1024        # robots, and nodes, kept: names made up on the fly must not grow it for ever
+MAX_WHY = 300          # characters kept of why a node is paused
 
 
 @dataclass(frozen=True)
@@ -347,6 +348,8 @@ class Monitor:
             kept = {k: message[k] for k in ("adapter", "state", "uptime_s") if k in message}  # (what a view shows)
             kept["counters"] = {k: message["counters"][k] for k in LOSSES if k in message["counters"]}
             kept["rates"] = {k: message["rates"][k] for k in ("received", "sent", *LOSSES) if k in message["rates"]}
+            if isinstance(paused := message.get("metrics", {}).get("paused"), str):  # (why a paused node is)
+                kept["metrics"] = {"paused": paused[:MAX_WHY]}
             with self._lock:
                 if (entry := self._node(host, node)) is not None:
                     entry.stats, entry.stats_at = kept, time.monotonic()

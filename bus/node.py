@@ -10,6 +10,8 @@ core talk (``tests/test_bus_only.py`` fails if another module touches a session)
 
 from __future__ import annotations
 
+import logging
+import queue
 import socket
 import threading
 import time
@@ -26,6 +28,7 @@ from .queue import SampleQueue
 from .session import discover, lease_s, listening
 
 T = TypeVar("T")
+log = logging.getLogger(__name__)
 
 
 @dataclass(frozen=True)
@@ -205,9 +208,20 @@ class Bus:
         return self.session.liveliness().declare_token(key)
 
     def alive(self, keyexpr: str, timeout: float = 1.0) -> list[str]:
-        """Keys of the liveliness tokens alive under ``keyexpr``."""
-        replies = self.session.liveliness().get(keyexpr, timeout=timeout)
-        return sorted(str(r.ok.key_expr) for r in replies if r.ok is not None)
+        """Keys of the liveliness tokens alive under ``keyexpr`` (at most ``MAX_ALIVE``)."""
+        found: list[str] = []
+        done = threading.Event()
+
+        def take(reply: zenoh.Reply) -> None:
+            if reply.ok is not None and len(found) < MAX_ALIVE:
+                found.append(str(reply.ok.key_expr))
+        # Not the default channel of 256 replies: Zenoh hands over the tokens it knows inside
+        # ``get`` itself, before anyone reads the channel, so a 257th token blocked it for ever
+        # (a recorder asking with 1,200 made-up claims on the bus hung)
+        self.session.liveliness().get(keyexpr, zenoh.handlers.Callback(take, done.set, indirect=False),
+                                      timeout=timeout)
+        done.wait(timeout + 1.0)
+        return sorted(found)
 
     def watch_tokens(self, keyexpr: str, changed: Callable[[str, bool], None]) -> zenoh.Subscriber:
         """Call ``changed(key, alive)`` for every token under ``keyexpr`` alive now and
@@ -215,6 +229,16 @@ class Bus:
         return self.session.liveliness().declare_subscriber(
             keyexpr, self.guarded(lambda s: changed(str(s.key_expr), s.kind == zenoh.SampleKind.PUT),
                                   f"watcher of {keyexpr}"), history=True)
+
+    def token_events(self, keyexpr: str, capacity: int) -> zenoh.Subscriber:
+        """The changes of the liveliness tokens under ``keyexpr``, those alive now first, held
+        in a ring channel of ``capacity`` inside Zenoh: ``recv()`` waits for the next (a
+        ``zenoh.Sample``: ``key_expr``, ``kind``), ``try_recv()`` does not (None). Zenoh's
+        threads never wait for Python here (a callback's channel of 256 blocks them when full):
+        past ``capacity`` the oldest are dropped, so a reader that drains a full channel
+        reads the tokens again (``alive``). Undeclare what it returns to stop."""
+        return self.session.liveliness().declare_subscriber(keyexpr, zenoh.handlers.RingChannel(capacity),
+                                                            history=True)
 
     @property
     def zid(self) -> str:
@@ -254,8 +278,12 @@ class Bus:
         options: dict[str, Any] = {"consolidation": zenoh.ConsolidationMode.NONE} if every_answer else {}
         if message is not None:
             options.update(payload=codec.encode(message), encoding=codec.ENCODING)
-        self.session.get(selector, zenoh.handlers.Callback(self.guarded(reply, f"answer to {selector}"),
-                                                           self.guarded(on_end, f"end of {selector}")),
+        answers = _answers()
+        reply_, end = self.guarded(reply, f"answer to {selector}"), self.guarded(on_end, f"end of {selector}")
+        # Not zenoh-python's default (indirect): it starts a Python thread for each query, and
+        # a thousand made-up robots asked about at once started thousands (STOP waited seconds)
+        self.session.get(selector, zenoh.handlers.Callback(lambda answer: answers.reply(reply_, answer),
+                                                           lambda: answers.end(end), indirect=False),
                          timeout=timeout, **options)
 
     def query(self, selector: str, message: dict[str, Any] | None = None,
@@ -274,3 +302,52 @@ class Bus:
 
     def __repr__(self) -> str:
         return f"<Bus node={self.node!r} host={self.host!r} zid={self.session.zid()}>"
+
+
+MAX_ALIVE = 65536  # tokens ``Bus.alive`` returns
+MAX_ANSWERS = 65536  # answers to ``ask`` waiting for the worker; past that, answers (never ends) are dropped
+
+
+class _Answers:
+    """One worker of the process that runs what ``Bus.ask`` was told to call, in the order
+    Zenoh hands it over: Zenoh's thread only enqueues (it must not decode a 1 MiB info), and
+    no thread is started per query. Answers past ``MAX_ANSWERS`` (a rogue queryable may answer
+    a query many times) are dropped and said; a query's end never is (its asker waits for it)."""
+
+    def __init__(self) -> None:
+        self._queue: queue.SimpleQueue[tuple[Callable[..., Any], tuple[Any, ...]]] = queue.SimpleQueue()
+        self.dropped = 0
+        self._said = -1e18
+        threading.Thread(target=self._run, name="answers", daemon=True).start()
+
+    def reply(self, take: Callable[[zenoh.Reply], Any], answer: zenoh.Reply) -> None:
+        if self._queue.qsize() >= MAX_ANSWERS:
+            self.dropped += 1
+            if time.monotonic() - self._said >= 10.0:
+                self._said = time.monotonic()
+                log.warning("answers to queries: more than %d waiting, %d dropped so far (a queryable that "
+                            "answers far more than asked?)", MAX_ANSWERS, self.dropped)
+            return
+        self._queue.put((take, (answer,)))
+
+    def end(self, end: Callable[[], Any]) -> None:
+        self._queue.put((end, ()))
+
+    def _run(self) -> None:
+        while True:
+            call, args = self._queue.get()
+            try:
+                call(*args)
+            except Exception:  # (a node's callback with no on_error): said, and the next one runs
+                log.exception("an answer to a query failed")
+
+
+_ANSWERS: list[_Answers] = []
+_ANSWERS_LOCK = threading.Lock()
+
+
+def _answers() -> _Answers:
+    with _ANSWERS_LOCK:
+        if not _ANSWERS:
+            _ANSWERS.append(_Answers())
+        return _ANSWERS[0]

@@ -148,8 +148,14 @@ class RobotAdapter(Adapter):
         """What to check when the robot is not connected (hook: "check it is on and reachable at ...")."""
         return ""
 
+    def awareness_state(self) -> bool | None:
+        """Whether the robot's basic awareness is on (it looks at people), as the owner knows it
+        now, without asking the robot (the info is served on a Zenoh thread). None: the owner
+        does not know, or the robot has none (ROS 2): the info then leaves ``awareness`` out (hook)."""
+        return None
+
     def robot_info(self) -> dict[str, Any]:
-        return {
+        info: dict[str, Any] = {
             "robot": self.robot, "model": self.model.name,
             "joints": [j.to_info() for j in self.model.joints],
             "rate_hz": self.rate_hz, "behaviors": list(self.behaviors()),
@@ -158,6 +164,10 @@ class RobotAdapter(Adapter):
             "owner": {"host": self.bus.host, "node": self.name},
             "connection": self.connection.info(standing_by=not self.ownership.active),
         }
+        awareness = self.awareness_state()
+        if awareness is not None:
+            info["awareness"] = awareness
+        return info
 
     # -- serving ----------------------------------------------------------------
 

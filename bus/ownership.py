@@ -49,7 +49,7 @@ log = logging.getLogger(__name__)
 CHECK_TIMEOUT_S = 1.0  # a liveliness query for the robot's claims
 BUS_EPOCH_MS = 1_735_689_600_000  # 2025-01-01T00:00Z: no sonibus bus existed before; an earlier claim is made up
 MAX_RIVALS = 64        # other claims of one robot an owner keeps (the earliest): names made up must not grow it
-MAX_ROBOTS = 1024      # robots a session's ``Owners`` view keeps
+MAX_ROBOTS = 1024      # robots a session's view of the claims keeps (``bus/claimwatch.py``)
 STANDBY_EVENTS_S = 3.0  # after going to stand by, the robot's events still go out this long: the end of what it did
 _SINCE = re.compile(r"[0-9]{1,15}")  # ms since the epoch (15 digits: the year 33658), ASCII only
 
@@ -125,51 +125,6 @@ def claims(keys_: Iterable[str], max_future_s: float = 5.0) -> dict[str, list[Cl
         if claim is not None:
             found.setdefault(claim.robot, []).append(claim)
     return {robot: sorted(cs, key=lambda c: c.rank) for robot, cs in sorted(found.items())}
-
-
-class Owners:
-    """The claims of every robot as one session sees them, kept by a liveliness
-    subscriber: what a sender needs to name a robot's owner (``owner``) without a query."""
-
-    def __init__(self, bus: Bus) -> None:
-        self._claims: dict[str, dict[str, Claim]] = {}
-        self._lock = threading.Lock()
-        self.max_future_s = bus.limits.max_future_s
-        self.ignored = 0  # claims left out: no room (``MAX_ROBOTS``, ``MAX_RIVALS``)
-        self._subscriber = bus.watch_tokens(keys.robot_token(), self._changed)
-
-    def _changed(self, key: str, alive: bool) -> None:
-        claim = Claim.credible(key, self.max_future_s) if alive else Claim.parse(key)
-        if claim is None:
-            return
-        with self._lock:
-            held = self._claims.get(claim.robot)
-            if not alive:
-                if held is not None:
-                    held.pop(claim.key, None)
-                    if not held:
-                        del self._claims[claim.robot]
-                return
-            if (held is None and len(self._claims) >= MAX_ROBOTS) or (held is not None and len(held) >= MAX_RIVALS):
-                self.ignored += 1
-                return
-            self._claims.setdefault(claim.robot, {})[claim.key] = claim
-
-    def robots(self) -> list[str]:
-        """The robots with a claim seen now."""
-        with self._lock:
-            return sorted(self._claims)
-
-    def owner(self, robot: str) -> Claim | None:
-        """The earliest claim of ``robot`` seen so far (None: none yet)."""
-        with self._lock:
-            held = list(self._claims.get(robot, {}).values())
-        return min(held, key=lambda c: c.rank) if held else None
-
-
-def owners(bus: Bus) -> Owners:
-    """The ``Owners`` view of ``bus``'s session, made on first use (one per session)."""
-    return bus.shared("owners", Owners)
 
 
 class Ownership:

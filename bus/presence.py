@@ -18,10 +18,9 @@ from typing import Any
 import zenoh
 
 from . import codec, connection, keys
+from .claimwatch import Watching, owners
 from .node import Bus
-from .ownership import MAX_RIVALS, MAX_ROBOTS, Claim
 from .queue import SampleQueue
-from .text import printable
 
 log = logging.getLogger(__name__)
 
@@ -31,41 +30,14 @@ PROBES_PER_ROUND = 8  # robots whose owner is asked for its state, per half seco
 
 
 def watch_robots(bus: Bus, on_change: Callable[[str, bool], None],
-                 capped: Callable[[str], None] | None = None) -> zenoh.Subscriber:
-    """Call ``on_change(robot, alive)`` (on a Zenoh thread) for every robot already
-    on the bus and whenever one leaves or comes back (its first claim appears, its
-    last one goes). Claims whose time makes no sense are no robot (``Claim.refusal``);
-    at most ``MAX_ROBOTS`` robots of ``MAX_RIVALS`` claims each are followed, a claim
-    past that told to ``capped`` (a line saying so) and left out."""
-    held: dict[str, set[str]] = {}
-    lock = threading.Lock()
-
-    def changed(key: str, alive: bool) -> None:
-        claim = Claim.credible(key, bus.limits.max_future_s) if alive else Claim.parse(key)
-        if claim is None:
-            return
-        with lock:
-            claims = held.get(claim.robot)
-            full = alive and (len(held) >= MAX_ROBOTS if claims is None else len(claims) >= MAX_RIVALS)
-            if claims is None and not full:
-                claims = held[claim.robot] = set()
-            before = bool(claims)
-            if claims is not None and not full:
-                if alive:
-                    claims.add(claim.key)
-                else:
-                    claims.discard(claim.key)
-                    if not claims:
-                        del held[claim.robot]
-            after = bool(claims)
-        if full:
-            (capped or _said)(f"robot '{printable(claim.robot)}' (claim of node '{printable(claim.node)}' on "
-                   f"'{printable(claim.host)}') not followed: already {MAX_ROBOTS} robots, or {MAX_RIVALS} claims "
-                   "of it")
-        elif before != after:
-            on_change(claim.robot, after)
-
-    return bus.watch_tokens(keys.robot_token(), changed)
+                 capped: Callable[[str], None] | None = None) -> Watching:
+    """Call ``on_change(robot, alive)`` for every robot already on the bus and whenever
+    one leaves or comes back (its first claim appears, its last one goes), from the
+    session's one view of the claims (``bus/claimwatch.py``, on its worker: store or
+    enqueue, never wait). Claims whose time makes no sense are no robot
+    (``Claim.refusal``); at most ``MAX_ROBOTS`` robots of ``MAX_RIVALS`` claims each are
+    followed, a claim past that told to ``capped`` (a line saying so) and left out."""
+    return owners(bus).watch(bus, on_change, capped or _said)
 
 
 _last_said = [-1e18]
@@ -106,12 +78,16 @@ class Presence:
                 if self._wants_events(robot):
                     self.unsaid.add(robot)  # (its state comes from its info: ``watch``)
                 return
+            # a robot the sink was never told of (no state said, no data heard: a made-up claim)
+            # leaves without a word: a thousand of them were a thousand events ahead of real frames
+            known = robot in self.said or robot in self.heard
             self.on_bus.pop(robot, None)
             self.heard.pop(robot, None)
             self.warned.pop(robot, None)
             self.checked.pop(robot, None)
             self.unsaid.discard(robot)
-        self._tell(robot, {"t": time.time(), "state": "lost", "source": "presence"})
+        if known:
+            self._tell(robot, {"t": time.time(), "state": "lost", "source": "presence"})
 
     def _tell(self, robot: str, fields: dict[str, Any]) -> None:
         """Feed the sink a ``connection`` event of ``robot``, as if its owner had sent it."""
@@ -252,9 +228,10 @@ def _frame_key(pattern: str) -> str:
 def connection_events(bus: Bus, queue: SampleQueue, patterns: Sequence[str],
                       capped: Callable[[str], None] | None = None) -> Presence:
     """Feed ``queue`` (a sink's) a ``connection`` event, as if the robot's owner had
-    sent it, when a robot leaves (``lost``) or comes back (``connected``) — for the
-    robots whose events ``patterns`` select. A sink then reacts to a vanished robot
-    the same way whatever the cause (a killed process, a cut link, a robot's fall).
+    sent it, when a robot leaves (``lost``: of a robot the sink was told of, its state or
+    its data) or comes back (``connected``) — for the robots whose events ``patterns``
+    select. A sink then reacts to a vanished robot the same way whatever the cause (a
+    killed process, a cut link, a robot's fall).
     It also warns once (``silence_hint``) when a robot whose joints ``patterns``
     select is on the bus and its owner up (it answers ``<robot>/info``) but none of
     its data reaches the sink for ``SILENCE_S``: the sink calls ``heard_from`` for

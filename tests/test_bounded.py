@@ -13,9 +13,10 @@ from importlib import resources
 import pytest
 
 from sonibus.bus import BusConfig, ConfigError, keys, open_session
+from sonibus.bus.claimwatch import owners
 from sonibus.bus.cli.api import DEMO_BUS
 from sonibus.bus.monitor import Monitor
-from sonibus.bus.ownership import MAX_ROBOTS, owners
+from sonibus.bus.ownership import MAX_ROBOTS
 from sonibus.bus.presence import watch_robots
 
 from .conftest import wait_for

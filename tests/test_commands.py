@@ -336,8 +336,11 @@ def test_stiffness_chains_and_body(pepper):
 
 
 def test_awareness(pepper):
+    assert robot_info(pepper.bus, "pepper")["awareness"] is False  # (the info says it: issue 29, item 3)
     assert ok(pepper, *R["awareness_on"]) == {"enabled": True, "previous": False}
+    assert robot_info(pepper.bus, "pepper")["awareness"] is True
     assert ok(pepper, *R["awareness_off"]) == {"enabled": False, "previous": True}
+    assert robot_info(pepper.bus, "pepper")["awareness"] is False
 
 
 def test_stop_halts_a_running_behavior(pepper):

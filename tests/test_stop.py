@@ -13,8 +13,9 @@ import time
 import pytest
 
 from sonibus.bus import CommandError, decode, keys, send_command
+from sonibus.bus.claimwatch import owners
 from sonibus.bus.client import stop_all
-from sonibus.bus.ownership import BUS_EPOCH_MS, MAX_ROBOTS, Claim, owners
+from sonibus.bus.ownership import BUS_EPOCH_MS, MAX_ROBOTS, Claim
 
 from .conftest import wait_for
 
@@ -117,8 +118,9 @@ def test_stopping_every_robot_is_one_query_whatever_the_robots_on_the_bus(net, p
     assert ended.wait(10), "the stop never ended"
     assert answered == {"pepper": {}, "nao": {}}
     robots, error = silent[0]
-    # (which claims the asker kept is the order they reached it: pepper's and nao's may be among those left out)
-    assert set(robots) == set(owners(asker).robots()) - {"pepper", "nao"} and set(robots) <= set(fakes)
-    assert len(robots) >= MAX_ROBOTS - 2 and error.code == "robot_not_found"
+    # (the asker keeps MAX_ROBOTS robots, whichever claims came first: pepper and nao among them or not)
+    kept = set(owners(asker).robots())
+    assert len(kept) == MAX_ROBOTS and set(robots) == kept - {"pepper", "nao"} <= set(fakes)
+    assert error.code == "robot_not_found"
     assert queries == ["*/cmd/stop"], f"{len(queries)} queries: {queries[:3]}"
     assert pepper.state == nao.state == "running"

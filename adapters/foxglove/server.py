@@ -149,7 +149,8 @@ class FoxgloveServer(Adapter):
         self._views.derived_seen.discard(robot)
         self._infos = {k: v for k, v in self._infos.items() if k.partition("/")[0] != robot}
         forgotten = self.hub.forget(f"{robot}/")
-        log.info("%s: robot '%s' left the bus: %d channels unadvertised", self.name, robot, forgotten)
+        if forgotten:  # (a claim that never sent anything, made up or not, is not worth a line)
+            log.info("%s: robot '%s' left the bus: %d channels unadvertised", self.name, robot, forgotten)
 
     def _take(self, key: str, payload: bytes) -> None:
         if key.endswith("/" + DERIVED_INFO):

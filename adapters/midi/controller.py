@@ -164,13 +164,13 @@ class MidiController(Adapter):
         send(self.bus, robot, verb, args, done, self.config.timeout)
 
     def _fail(self, what: str, message: str) -> None:
-        self.count("errors")
         with self._lock:
             first = what not in self._failed
             self._failed.add(what)
         if first:
             log.error("%s: %s (%s; further errors of this mapping are counted, not logged)",
                       self.name, message, what)
+        self.count("errors")  # (after the line: whoever sees the count finds the line said)
 
     def _learn(self, robot: str, info: dict[str, Any]) -> None:
         try:

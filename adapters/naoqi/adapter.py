@@ -150,6 +150,7 @@ class NaoqiRobot(RobotAdapter):
                 self.verbs.pause_awareness()
             except RemoteError as exc:
                 log.warning("%s: could not pause basic awareness: %s", self.name, exc)
+        self.verbs.aware.read()
         self.model, self.facts, self._error = robot.model, robot, ""
         for difference in robot.differences:
             log.info("%s: limits from the robot differ: %s", self.name, difference)
@@ -249,6 +250,7 @@ class NaoqiRobot(RobotAdapter):
             if time.monotonic() >= next_status:
                 next_status += self.config.status_every_s
                 self.publish_event("status", **self.status(pacer.skipped))
+                self.verbs.aware.follow()
 
         pacer.run(tick, self._halt)
         self.frames_skipped += pacer.skipped
@@ -269,6 +271,9 @@ class NaoqiRobot(RobotAdapter):
 
     def behaviors(self) -> Sequence[str]:
         return self.verbs.installed
+
+    def awareness_state(self) -> bool | None:
+        return self.verbs.aware.value
 
     def robot_info(self) -> dict[str, Any]:
         info = super().robot_info()

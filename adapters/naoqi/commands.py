@@ -20,6 +20,7 @@ from sonibus.bus.commands import expand_stiffness_names
 from sonibus.bus.errors import CommandError
 from sonibus.bus.robot import RobotModel
 
+from .awareness import Awareness
 from .connection import Link, LinkDown, RemoteError, one_line
 from .events import RobotEvents
 
@@ -77,6 +78,7 @@ class NaoqiCommands:
         self.voice_defaults: dict[str, float] = {}
         self._voice: dict[str, float] = {}
         self._awareness_paused = False   # by this adapter, to be resumed on stop
+        self.aware = Awareness(link)     # whether it is on now, for the info
         self._paused_before: bool | None = None
 
     @property
@@ -201,6 +203,7 @@ class NaoqiCommands:
         if enabled and self._awareness_paused:  # turned on by hand: no longer held paused
             self._call("awareness", "ALBasicAwareness", "resumeAwareness")
             self._awareness_paused = False
+        self.aware.took(enabled)
         return {"enabled": enabled, "previous": previous}
 
     def stop(self) -> dict[str, Any]:

@@ -24,9 +24,9 @@ from typing import Any
 
 from sonibus.bus import client, keys
 from sonibus.bus.adapter import Adapter
+from sonibus.bus.claimwatch import owners
 from sonibus.bus.errors import CommandError
 from sonibus.bus.info import InfoRequests
-from sonibus.bus.ownership import owners
 from sonibus.bus.presence import watch_robots
 from sonibus.bus.queue import SampleQueue
 from sonibus.bus.streams import Incoming, Streams

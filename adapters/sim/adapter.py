@@ -81,6 +81,9 @@ class SimRobot(RobotAdapter):
     def behaviors(self) -> Sequence[str]:
         return self.engine.behaviors()
 
+    def awareness_state(self) -> bool:
+        return self.engine.aware
+
     def robot_info(self) -> dict[str, Any]:
         info = super().robot_info()
         if self.config.body_sound or self.config.speaker:

@@ -11,7 +11,8 @@ Open http://127.0.0.1:8080/ (operator) or /kiosk. Pages are plain files shipped 
 the options, the tokens and the protocol.
 
 Modules: ``config`` (options), ``auth`` (tokens), ``protocol`` (messages), ``server``
-(routes and clients), ``slider`` (coalesced joint moves), ``kiosk`` (the buttons' states).
+(routes and clients), ``slider`` (coalesced joint moves), ``kiosk`` (the buttons' states),
+``activity`` (what each robot runs and says, for the page's summary lines).
 """
 
 from __future__ import annotations
@@ -26,10 +27,10 @@ import zenoh
 
 from sonibus.bus import connection, keys
 from sonibus.bus.adapter import Adapter
+from sonibus.bus.claimwatch import owners
 from sonibus.bus.info import InfoRequests
 from sonibus.bus.messages import Gate
 from sonibus.bus.monitor import LOSSES
-from sonibus.bus.ownership import owners
 from sonibus.bus.pacing import Pacer
 from sonibus.bus.presence import watch_robots
 from sonibus.bus.queue import SampleQueue
@@ -37,7 +38,7 @@ from sonibus.bus.streams import Incoming, Streams
 from sonibus.bus.text import printable
 from sonibus.bus.web import WebServer
 
-from . import auth
+from . import activity, auth
 from .config import WebConfig
 from .server import Pages
 
@@ -133,7 +134,8 @@ class WebPages(Adapter):
             changed = False
             if shown is not None:  # (back: its state as before until its info, asked below, says it anew)
                 state = shown["connection"] if alive else {"state": "lost", "error": "its owner left the bus"}
-                self._robots[robot] = _with_state(shown, alive, state)
+                self._robots[robot] = _with_state(shown if alive else {**shown, "activity": activity.IDLE},
+                                                  alive, state)
                 changed = self._robots[robot] != shown
             robots = dict(self._robots)
         if changed:
@@ -162,9 +164,11 @@ class WebPages(Adapter):
                  "joints": [{"name": j["name"], "min": j["min"], "max": j["max"], "unit": j.get("unit", "rad")}
                             for j in info.get("joints", ())],
                  "behaviors": list(info.get("behaviors", ()))[:MAX_BEHAVIORS],
-                 "postures": list(info.get("postures", ()))[:MAX_BEHAVIORS], "rate_hz": info.get("rate_hz")}
+                 "postures": list(info.get("postures", ()))[:MAX_BEHAVIORS], "rate_hz": info.get("rate_hz"),
+                 "awareness": info.get("awareness")}
         state = {k: v for k, v in connection.state_of(info).items() if k in ("state", "error")}
         with self._lock:
+            shown["activity"] = self._robots.get(robot, {}).get("activity", activity.IDLE)
             shown = _with_state(shown, robot in self._present, state)
             if self._robots.get(robot) == shown:
                 return
@@ -196,6 +200,8 @@ class WebPages(Adapter):
             robot, kind = source.robot, source.name
             if kind == "connection":
                 self._connection(robot, message.event)
+            else:
+                self._follow(robot, kind, message.event)
             self.pages.event(robot, kind, message.event, self._shows(robot) or robot == "sonibus")
 
     def _connection(self, robot: str, event: dict[str, Any]) -> None:
@@ -206,6 +212,26 @@ class WebPages(Adapter):
             if shown is None or shown["connection"] == state:
                 return
             self._robots[robot] = _with_state(shown, robot in self._present, state)
+            robots = dict(self._robots)
+        self.pages.robots(robots)
+
+    def _follow(self, robot: str, kind: str, event: dict[str, Any]) -> None:
+        """What a shown robot runs and says (its behavior and speech events), and its awareness
+        as an ``awareness`` command it carried out set it (its info says it too, when asked again)."""
+        with self._lock:
+            shown = self._robots.get(robot)
+            if shown is None:
+                return
+            if kind == "command":
+                if event.get("verb") != "awareness" or not event.get("ok") or shown["awareness"] is None:
+                    return
+                changed = {**shown, "awareness": bool(event.get("args", {}).get("enabled"))}
+            else:
+                now = activity.follow(shown["activity"], kind, event)
+                changed = shown if now is None else {**shown, "activity": now}
+            if changed == shown:
+                return
+            self._robots[robot] = changed
             robots = dict(self._robots)
         self.pages.robots(robots)
 

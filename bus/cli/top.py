@@ -28,10 +28,10 @@ from textual.screen import ModalScreen
 from textual.widgets import DataTable, Footer, Static
 
 from .. import connection
+from ..claimwatch import owners
 from ..client import Outcome, stop_all
 from ..errors import CommandError, ConfigError, SonibusError
 from ..monitor import EventView, JointView, Monitor, NodeView, RobotView, Snapshot
-from ..ownership import owners
 from ..session import BusConfig
 from ..text import printable
 from .api import Command, Environment, Exit, bus_config, joined

@@ -104,8 +104,10 @@ def alive(show: Show, report: Report, when: str) -> None:
 
 def stop_works(fuzzer: Any, report: Report, when: str) -> None:
     """``stop`` to pepper is answered ok (whatever claims of it the bus holds)."""
+    started = time.monotonic()
     outcome = fuzzer.stop()
     report.figures.setdefault("stop", {})[when] = outcome
+    report.figures.setdefault("stop_s", {})[when] = round(time.monotonic() - started, 3)
     report.check(outcome == "ok", f"{when}: stop to pepper: {outcome}")
 
 

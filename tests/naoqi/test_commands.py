@@ -92,6 +92,25 @@ def test_stiffness_and_awareness(rig):
     assert r.fake.engine.aware is False
 
 
+def test_the_info_says_whether_awareness_is_on_and_follows_a_change_made_elsewhere(rig):
+    """Issue 29, item 3: the operator page's checkbox starts from the info's ``awareness``.
+    Read on connection, set by the command at once, and a change made on the robot by
+    something else (Choregraphe, autonomous life) followed within two status periods;
+    enabled but paused is off (the robot does not look at people)."""
+    r = rig(fake={"idle": True}, status_every_s=0.1)
+
+    def said() -> bool | None:
+        return robot_info(r.bus, "pepper")["awareness"]
+
+    assert said() is True
+    send_command(r.bus, "pepper", "awareness", {"enabled": False})
+    assert said() is False
+    r.fake.engine.awareness(True)  # (elsewhere: not through the adapter)
+    wait_for(lambda: said() is True, what="the info to follow awareness turned on elsewhere")
+    r.fake.services["ALBasicAwareness"].paused = True
+    wait_for(lambda: said() is False, what="the info to say a paused awareness is off")
+
+
 def test_stop_halts_behavior_motion_and_speech(rig):
     r = rig()
     send_command(r.bus, "pepper", "behavior/run", {"name": SKY})

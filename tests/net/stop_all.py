@@ -17,9 +17,9 @@ import time
 from contextlib import closing
 
 from sonibus.bus import Bus, CommandError, open_session
+from sonibus.bus.claimwatch import owners
 from sonibus.bus.cli.api import add_bus_arguments, bus_config
 from sonibus.bus.client import stop_all
-from sonibus.bus.ownership import owners
 
 
 def main() -> None:

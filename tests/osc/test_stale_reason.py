@@ -12,7 +12,7 @@ import pytest
 
 from sonibus.adapters.osc import OscSink, OscSinkConfig
 from sonibus.bus import Bus, encode, messages
-from sonibus.bus.ownership import owners
+from sonibus.bus.claimwatch import owners
 
 from ..conftest import wait_for
 from .test_sink_delivery import messages as received

@@ -22,6 +22,7 @@ from selenium.webdriver.support.ui import WebDriverWait
 CHROMIUM = "/usr/bin/chromium"
 CHROMEDRIVER = "/usr/bin/chromedriver"
 WAIT_S = 10.0            # generous: a busy 2-core machine
+SIZE = (1280, 900)       # the window, unless a test asks for another
 SCREENSHOTS = "SONIBUS_SCREENSHOTS"  # a folder the screenshots are also written to (docs/img for the README)
 
 # The screenshot, decoded by Chromium itself (no PIL here): how many colours, and the
@@ -73,7 +74,7 @@ class Browser:
                 pytest.fail(f"{path} is not installed: apt-get install {package} (scripts/test-tools.sh does)")
         options = webdriver.ChromeOptions()
         options.binary_location = CHROMIUM
-        for argument in ("--headless=new", "--no-sandbox", "--disable-gpu", "--window-size=1280,900",
+        for argument in ("--headless=new", "--no-sandbox", "--disable-gpu", f"--window-size={SIZE[0]},{SIZE[1]}",
                          f"--user-data-dir={profile}", "--disable-dev-shm-usage", "--no-first-run",
                          "--disable-background-networking", "--disable-extensions"):
             options.add_argument(argument)
@@ -85,10 +86,17 @@ class Browser:
     def quit(self) -> None:
         self.driver.quit()
 
-    def open(self, url: str) -> None:
+    def open(self, url: str, size: tuple[int, int] = SIZE) -> None:
+        """Open ``url`` in a window of ``size`` (width, height of the page's viewport, CSS px)."""
         self.driver.get("about:blank")  # the previous page is gone (its server too, maybe: it would retry) ...
         self.driver.get_log("browser")  # ... and what it said stays with it
         self.console.clear()
+        shown = tuple(self.js("return [innerWidth, innerHeight]"))
+        if shown != size:  # (tests share one browser) the window's outer size: its frame, if any, added
+            outer = self.driver.get_window_size()
+            self.driver.set_window_size(outer["width"] + size[0] - shown[0], outer["height"] + size[1] - shown[1])
+            shown = tuple(self.js("return [innerWidth, innerHeight]"))
+            assert shown == size, f"asked for a {size} viewport, Chromium shows {shown}"
         self.driver.get(url)
 
     def wait(self, condition: Callable[[], Any], what: str, timeout: float = WAIT_S) -> Any:
@@ -144,3 +152,4 @@ class Browser:
         seen = self.driver.execute_async_script(_PIXELS, base64.b64encode(png).decode("ascii"))
         assert seen is not None, f"Chromium could not decode its own screenshot {paths[0]}"
         return Shot(paths[0], width, height, seen["colours"], seen["other"])
+

@@ -11,6 +11,7 @@ kiosk buttons; and a WebSocket client (aiohttp) that gathers what the server sen
 from __future__ import annotations
 
 import asyncio
+import math
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from typing import Any
@@ -20,16 +21,19 @@ import pytest
 
 from sonibus.adapters.sim import SimRobot
 from sonibus.adapters.web import WebConfig, WebPages
+from sonibus.bus import Bus, codec, keys
 
 from ..conftest import Network, wait_for
 from ..oscquery.conftest import Socket as QuerySocket
 from ..oscquery.conftest import opener
+from .browser import Browser
 
 RATE = 50                 # frames/s of the simulated robot
 TOKEN = "operator-secret-1"
 KIOSK_TOKEN = "kiosk-secret-2"
 WAVE = "animations/Stand/Gestures/Hey_1"  # a sim behavior of about 3 s
 HELLO = "Hello, visitors!"
+NOTICE_SHOWN = "return document.getElementById('notice').checkVisibility()"  # (the kiosk's "One moment")
 BUTTONS = [{"id": "wave", "label": "Wave hello", "behavior": WAVE},
            {"id": "hello", "label": "Say hello", "say": HELLO}]
 
@@ -104,3 +108,66 @@ class Socket(QuerySocket):
 def websocket() -> Iterator[Callable[[str], Socket]]:
     """``websocket(url)`` opens a client, closed at the end of the test."""
     yield from opener(Socket)
+
+
+@pytest.fixture(scope="session")
+def browser(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Browser]:
+    """One Chromium for every page test (each opens its own page of its own server, in the
+    window size it asks for: ``Browser.open``)."""
+    chromium = Browser(tmp_path_factory.mktemp("chromium-profile"))
+    try:
+        yield chromium
+    finally:
+        chromium.quit()
+
+
+class Watch:
+    """What the robot publishes, read on the test's own session: events and frames, in order."""
+
+    def __init__(self, bus: Bus, robot: str = "pepper") -> None:
+        self._event_sub, self._events = bus.subscribe(f"{robot}/events/*", maxlen=100_000)
+        self._frame_sub, self._frames = bus.subscribe(keys.frame(robot), maxlen=100_000)
+        self.events: list[tuple[str, dict[str, Any]]] = []  # (kind, event)
+        self.frames: list[dict[str, Any]] = []
+        # Routes to a new subscriber take a moment: once frames come, the events (declared first) do too.
+        wait_for(lambda: self.update() or self.frames, 10, f"{robot}'s frames at the test's session")
+
+    def update(self) -> None:
+        for key, payload in self._events.drain(0):
+            self.events.append((key.rsplit("/", 1)[1], codec.decode(payload)))
+        for _, payload in self._frames.drain(0):
+            self.frames.append(codec.decode(payload))
+
+    def event(self, kind: str, **fields: Any) -> list[dict[str, Any]]:
+        """Events of ``kind`` whose ``fields`` are as given, oldest first."""
+        self.update()
+        return [e for k, e in self.events if k == kind and all(e.get(f) == v for f, v in fields.items())]
+
+    def commands(self, verb: str) -> list[dict[str, Any]]:
+        """The robot's notices of ``verb`` commands it answered."""
+        return self.event("command", verb=verb)
+
+    def wait_event(self, kind: str, what: str, **fields: Any) -> dict[str, Any]:
+        return wait_for(lambda: self.event(kind, **fields), 10, what, lambda: f"events: {self.events[-10:]}")[0]
+
+    def value(self, joint: str) -> float:
+        """``joint`` in the newest frame (NaN before the first)."""
+        self.update()
+        if not self.frames:
+            return math.nan
+        frame = self.frames[-1]
+        return frame["v"][frame["names"].index(joint)]
+
+    def still(self, frames: int) -> bool:
+        """Whether the last ``frames`` frames are all the same pose (the robot halted)."""
+        self.update()
+        last = self.frames[-frames:]
+        return len(last) == frames and all(f["v"] == last[0]["v"] for f in last)
+
+
+def open_operator(browser: Browser, stage: Stage) -> None:
+    """The operator page with pepper's panel shown (with other robots, the first by name would be)."""
+    browser.open(f"{stage.operator_url}#pepper")
+    browser.wait(lambda: browser.attribute("#connection", "data-state") == "connected", "the page connected")
+    browser.wait(lambda: (browser.text('[data-robot="pepper"] [data-joint="HeadYaw"]') or "–") != "–",
+                 "pepper's HeadYaw shown")

@@ -4,22 +4,31 @@ the page shows is checked in the page, what it makes the robot do on the bus."""
 
 from __future__ import annotations
 
-import math
 import urllib.error
 import urllib.request
-from collections.abc import Iterator
-from typing import Any
 
 import pytest
 from selenium.webdriver.common.action_chains import ActionChains
 from selenium.webdriver.common.keys import Keys
 
-from sonibus.bus import Bus, codec, keys, send_command
+from sonibus.bus import keys, send_command
 from sonibus.bus.errors import CommandError, RobotNotFound
 
 from ..conftest import Network, wait_for
 from .browser import Browser
-from .conftest import BUTTONS, HELLO, KIOSK_TOKEN, RATE, TOKEN, WAVE, Stage, start_web
+from .conftest import (
+    BUTTONS,
+    HELLO,
+    KIOSK_TOKEN,
+    NOTICE_SHOWN,
+    RATE,
+    TOKEN,
+    WAVE,
+    Stage,
+    Watch,
+    open_operator,
+    start_web,
+)
 from .test_server import non_loopback_address
 
 NOD = "animations/Stand/Gestures/Yes_1"            # a short behavior: about 1.7 s
@@ -46,60 +55,6 @@ socket.send = (text) => {
 """
 
 
-@pytest.fixture(scope="module")
-def browser(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Browser]:
-    """One Chromium for the module (each test opens its own page of its own server)."""
-    chromium = Browser(tmp_path_factory.mktemp("chromium-profile"))
-    try:
-        yield chromium
-    finally:
-        chromium.quit()
-
-
-class Watch:
-    """What the robot publishes, read on the test's own session: events and frames, in order."""
-
-    def __init__(self, bus: Bus, robot: str = "pepper") -> None:
-        self._event_sub, self._events = bus.subscribe(f"{robot}/events/*", maxlen=100_000)
-        self._frame_sub, self._frames = bus.subscribe(keys.frame(robot), maxlen=100_000)
-        self.events: list[tuple[str, dict[str, Any]]] = []  # (kind, event)
-        self.frames: list[dict[str, Any]] = []
-        # Routes to a new subscriber take a moment: once frames come, the events (declared first) do too.
-        wait_for(lambda: self.update() or self.frames, 10, f"{robot}'s frames at the test's session")
-
-    def update(self) -> None:
-        for key, payload in self._events.drain(0):
-            self.events.append((key.rsplit("/", 1)[1], codec.decode(payload)))
-        for _, payload in self._frames.drain(0):
-            self.frames.append(codec.decode(payload))
-
-    def event(self, kind: str, **fields: Any) -> list[dict[str, Any]]:
-        """Events of ``kind`` whose ``fields`` are as given, oldest first."""
-        self.update()
-        return [e for k, e in self.events if k == kind and all(e.get(f) == v for f, v in fields.items())]
-
-    def commands(self, verb: str) -> list[dict[str, Any]]:
-        """The robot's notices of ``verb`` commands it answered."""
-        return self.event("command", verb=verb)
-
-    def wait_event(self, kind: str, what: str, **fields: Any) -> dict[str, Any]:
-        return wait_for(lambda: self.event(kind, **fields), 10, what, lambda: f"events: {self.events[-10:]}")[0]
-
-    def value(self, joint: str) -> float:
-        """``joint`` in the newest frame (NaN before the first)."""
-        self.update()
-        if not self.frames:
-            return math.nan
-        frame = self.frames[-1]
-        return frame["v"][frame["names"].index(joint)]
-
-    def still(self, frames: int) -> bool:
-        """Whether the last ``frames`` frames are all the same pose (the robot halted)."""
-        self.update()
-        last = self.frames[-frames:]
-        return len(last) == frames and all(f["v"] == last[0]["v"] for f in last)
-
-
 @pytest.fixture
 def still_stage(net: Network) -> Stage:
     """The stage of tests/web/conftest.py with a robot that moves only when told (no idle
@@ -108,14 +63,6 @@ def still_stage(net: Network) -> Stage:
     node = start_web(net, token=TOKEN, kiosk_token=KIOSK_TOKEN, kiosk={"robot": "pepper", "buttons": BUTTONS})
     wait_for(lambda: "pepper" in node.shown_robots(), 10, "pepper's info at the web node")
     return Stage(net, sim, node)
-
-
-def open_operator(browser: Browser, stage: Stage) -> None:
-    browser.open(stage.operator_url)
-    browser.wait(lambda: browser.attribute("#connection", "data-state") == "connected", "the page connected")
-    browser.wait(lambda: (browser.text('[data-robot="pepper"] [data-joint="HeadYaw"]') or "–") != "–",
-                 "pepper's HeadYaw shown")
-
 
 def states_of(browser: Browser, name: str) -> list[str]:
     return [state for who, state in browser.js("return window.seenStates") if who == name]
@@ -189,7 +136,7 @@ def test_a_behavior_click_runs_on_the_robot_and_shows_running_then_done(stage, b
     watch.wait_event("behavior", "the robot to start the behavior", name=NOD, state="started")
     browser.wait(lambda: "running" in states_of(browser, NOD), "the button to show running")
     browser.wait(lambda: browser.text("#status") == "✓ pepper behavior/run", "the reply (after the event, maybe)")
-    shot = browser.screenshot("web-operator.png", tmp_path, publish=True)  # mid-behavior: the docs' picture
+    shot = browser.screenshot("web-operator.png", tmp_path)  # (the docs' pictures: test_show_size.py)
     watch.wait_event("behavior", "the robot to end the behavior", name=NOD, state="stopped")
     browser.wait(lambda: browser.attribute(button, "data-state") == "done", "the button to show done")
     states = states_of(browser, NOD)
@@ -385,7 +332,7 @@ def test_the_kiosk_has_only_its_buttons_and_follows_the_robot(stage, browser, tm
     watch.wait_event("behavior", "the robot to run the wave", name=WAVE, state="started")
     browser.wait(lambda: browser.attribute('[data-button="wave"]', "data-state") == "running", "wave running")
     assert not browser.find('[data-button="hello"]').is_enabled()  # one scenario at a time
-    shot = browser.screenshot("web-kiosk.png", tmp_path, publish=True)
+    shot = browser.screenshot("web-kiosk.png", tmp_path)
     watch.wait_event("behavior", "the wave to end", name=WAVE, state="stopped")
     browser.wait(lambda: browser.attribute('[data-button="wave"]', "data-state") == "done", "wave done")
     assert states_of(browser, "wave") == ["running", "done"]
@@ -401,15 +348,16 @@ def test_the_kiosk_has_only_its_buttons_and_follows_the_robot(stage, browser, tm
 
 def test_the_kiosk_disables_its_buttons_while_disconnected(still_stage, browser):
     browser.open(still_stage.kiosk_url)
-    browser.wait(lambda: browser.attribute("#connection", "data-state") == "connected", "the kiosk connected")
+    browser.wait(lambda: browser.js("return sonibus.link.connected"), "the kiosk connected")
     assert browser.find('[data-button="wave"]').is_enabled()
     port = still_stage.node.web.port
     still_stage.node.stop()
-    browser.wait(lambda: browser.attribute("#connection", "data-state") == "disconnected", "disconnected shown")
+    browser.wait(lambda: browser.js(NOTICE_SHOWN), "the kiosk's notice")
     assert not any(button.is_enabled() for button in browser.all("[data-button]"))
     start_web(still_stage.net, name="web2", listen=f"127.0.0.1:{port}", token=TOKEN, kiosk_token=KIOSK_TOKEN,
               kiosk={"robot": "pepper", "buttons": BUTTONS})
-    browser.wait(lambda: browser.attribute("#connection", "data-state") == "connected", "reconnected", timeout=20)
+    browser.wait(lambda: browser.js("return sonibus.link.connected"), "reconnected", timeout=20)
+    assert not browser.js(NOTICE_SHOWN)
     browser.wait(lambda: all(button.is_enabled() for button in browser.all("[data-button]")), "buttons usable again")
     assert len(browser.all("[data-button]")) == len(BUTTONS)
 
@@ -441,7 +389,7 @@ def test_from_another_address_the_pages_work_with_their_token_only(net, browser,
     browser.wait(lambda: browser.attribute("#connection", "data-state") == "connected", "connected over the LAN")
     browser.wait(lambda: browser.all('[data-robot="pepper"] [data-joint="HeadYaw"]'), "pepper shown")
     browser.open(f"{base}/kiosk?token={KIOSK_TOKEN}")
-    browser.wait(lambda: browser.attribute("#connection", "data-state") == "connected", "the kiosk connected")
+    browser.wait(lambda: browser.js("return sonibus.link.connected"), "the kiosk connected")
     loaded = "const i = document.querySelector('[data-button=\"wave\"] img'); return i && i.complete && i.naturalWidth"
     assert browser.wait(lambda: browser.js(loaded), "the wave button's image") > 0
     assert browser.errors() == []

@@ -89,6 +89,8 @@ const sonibus = (() => {
       if (banner) {
         banner.textContent = text;
         banner.dataset.state = connected ? "connected" : "disconnected";
+      } else if (!connected) {
+        console.warn(`sonibus: ${text}`);  // (a page without the banner, the kiosk: said where an operator looks)
       }
       if (this.on.connection) this.on.connection(connected);
     }

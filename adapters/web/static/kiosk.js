@@ -1,12 +1,15 @@
 /* The kiosk page for visitors: only the buttons the installation lists (from
    `hello`), big touch targets, one scenario at a time; each button shows
    "running" then "done" from the server's `button` messages. It can only
-   `press`: no other control exists in this page. Protocol: docs/web.md. */
+   `press`: no other control exists in this page. Visitors see nothing of the
+   operator's: no status line, no replies, no connection banner; while the page
+   is not connected, "One moment, please…" and the buttons disabled (the reason
+   goes to the console). Protocol: docs/web.md. */
 "use strict";
 
 (() => {
-  const {el, status, withToken, Link} = sonibus;
-  const SHOWN = {idle: "", running: "running…", done: "done", failed: "failed"};
+  const {el, withToken, Link} = sonibus;
+  const SHOWN = {idle: "", running: "running…", done: "done", failed: "sorry, not now"};  // (for visitors)
   const buttons = new Map();   // id → button element
   let waiting = null;          // the id of a press not yet answered
   let shown = "";              // the buttons of the last hello, as JSON
@@ -61,10 +64,10 @@
   document.addEventListener("contextmenu", (event) => event.preventDefault());  // a long press on a touchscreen
   function onConnection(connected) {
     if (!connected) waiting = null;  // a press the link lost is never answered
+    document.getElementById("notice").hidden = connected;
     refresh();
   }
 
   const link = new Link("/kiosk/ws", {hello: onHello, button: onButton, connection: onConnection});
-  status("", "info");
   Object.assign(sonibus, {link});
 })();

@@ -1,6 +1,8 @@
-/* The operator page: a section per robot (robot.js) redrawn on requestAnimationFrame
-   when frames came, the nodes and their stats, the event log, every reply in the
-   status line, and STOP (button, Space, Escape). Protocol: docs/web.md. */
+/* The operator page: a summary line per robot at the top (its state, what it runs and
+   says; a click shows that robot's panel, one at a time: robot.js), redrawn on
+   requestAnimationFrame when frames came, the nodes and their stats, the event log
+   (repeats folded into one line, ×N), every reply in the status line, and STOP
+   (button, Space, Escape). Protocol: docs/web.md. */
 "use strict";
 
 (() => {
@@ -12,6 +14,7 @@
 
   const settings = {update_hz: 25, slider_hz: 20, speed: 0.2};
   const views = new Map();       // robot name → RobotView
+  let selected = decodeURIComponent(location.hash.slice(1)) || null;  // the robot whose panel is shown
   const counters = {frames: 0, rendered: 0, render_ms: 0, events: 0, stats: 0};
   const trace = [];              // {what, ms}: a behavior click until its reply, until it shows running (bench/web_page.py)
   let dirty = false;
@@ -31,27 +34,44 @@
 
   function onRobots(message) {
     const container = document.getElementById("robots");
+    const lines = document.getElementById("summary");
     const robots = message.robots || {};
     for (const [name, view] of views) {
       if (!(name in robots)) {
         view.section.remove();
+        view.line.remove();
         views.delete(name);
       }
     }
     for (const name of Object.keys(robots).sort()) {
       const info = {joints: [], ...robots[name]};
       const view = views.get(name);
-      const key = JSON.stringify({...info, connected: undefined, connection: undefined});
-      if (view && JSON.stringify({...view.info, connected: undefined, connection: undefined}) === key) {
+      if (view && RobotView.sameBuild(view.info, info)) {
         view.update(info);
         continue;
       }
       const fresh = new RobotView(name, info, page);
-      if (view) view.section.replaceWith(fresh.section);
-      else container.append(fresh.section);
+      if (view) {
+        view.section.replaceWith(fresh.section);
+        view.line.replaceWith(fresh.line);
+      } else {
+        container.append(fresh.section);
+        lines.append(fresh.line);
+      }
       views.set(name, fresh);
     }
     container.classList.toggle("empty", views.size === 0);
+    select(views.has(selected) ? selected : [...views.keys()].sort()[0]);
+    dirty = true;
+  }
+
+  /** Show robot `name`'s panel, the others' summary lines only (kept in the URL's #: a reload keeps it). */
+  function select(name) {
+    if (name === undefined) return;
+    selected = name;
+    for (const [other, view] of views) view.show(other === name);
+    const hash = `#${encodeURIComponent(name)}`;
+    if (location.hash !== hash) history.replaceState(null, "", hash);
     dirty = true;
   }
 
@@ -63,6 +83,17 @@
     dirty = true;
   }
 
+  /** What tells an event from the one before in the log: all of it but its time, and but the
+      angles and speed of a joints/set (a slider's moves fold into one line). */
+  function sameAs(message) {
+    const {t, ...event} = message.event || {};
+    if (message.kind === "command" && event.verb === "joints/set") {
+      const {angles, speed, ...args} = event.args || {};
+      event.args = args;
+    }
+    return JSON.stringify([message.robot, message.kind, event]);
+  }
+
   function onEvent(message) {
     counters.events += 1;
     const event = message.event || {};
@@ -72,9 +103,22 @@
     const when = new Date((event.t || Date.now() / 1000) * 1000).toLocaleTimeString([], {hour12: false});
     const details = Object.entries(event).filter(([key]) => key !== "t" && key !== "kind")
       .map(([key, value]) => `${key}=${typeof value === "string" ? value : JSON.stringify(value)}`).join(" ");
+    const same = sameAs(message);
+    const last = log.firstElementChild;
+    if (last && last.same === same) {  // the same again (a slider's moves): one line, ×N, the latest shown
+      const times = Number(last.dataset.times) + 1;
+      last.dataset.times = String(times);
+      last.querySelector("time").textContent = when;
+      last.querySelector(".details").textContent = details;
+      last.querySelector(".times").textContent = `×${times}`;
+      return;
+    }
     const failed = event.state === "failed" || event.ok === false;
-    log.prepend(el("li", {class: failed ? "failed" : "", dataset: {kind: message.kind}},
-      el("time", {}, when), el("b", {}, `${message.robot || "sonibus"} ${message.kind}`), " ", details));
+    const line = el("li", {class: failed ? "failed" : "", dataset: {kind: message.kind, times: "1"}},
+      el("time", {}, when), el("b", {}, `${message.robot || "sonibus"} ${message.kind}`), " ",
+      el("span", {class: "details"}, details), " ", el("span", {class: "times"}));
+    line.same = same;
+    log.prepend(line);
     while (log.children.length > EVENTS_KEPT) log.lastElementChild.remove();
   }
 
@@ -171,12 +215,12 @@
     requestAnimationFrame(frameLoop);
   }
 
-  const page = {command, note, settings, redraw: () => { dirty = true; }};
+  const page = {command, note, settings, select, redraw: () => { dirty = true; }};
   const link = new Link("/ws", {
     hello: onHello, robots: onRobots, frame: onFrame, event: onEvent, stats: onStats,
   });
   requestAnimationFrame(frameLoop);
 
   // For tests and bench/web_page.py: what the page counted, and a way to send as the page does.
-  Object.assign(sonibus, {link, counters, trace, settings, command, stop: stopAll});
+  Object.assign(sonibus, {link, counters, trace, settings, command, select, stop: stopAll});
 })();

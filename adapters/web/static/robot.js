@@ -1,15 +1,17 @@
-/* One robot on the operator page: its joints live (values, range bars, strip charts
-   per joint group, drawn when the page's animation frame asks) and its controls from
-   its info (behaviors, postures, say, awareness, head and arm sliders throttled to
-   slider_hz). Plain script: it adds `sonibus.RobotView`. */
+/* One robot on the operator page: its summary line (state, what it runs and says), and
+   its panel: the controls from its info (behaviors, postures, say, awareness, head and
+   arm sliders wide enough for fine moves, throttled to slider_hz), its strip charts
+   (chart.js) and its joints live. The controls follow the robot's state: disabled while
+   it is not connected, awareness as its owner says it. Plain script: it adds
+   `sonibus.RobotView`. */
 "use strict";
 
 (() => {
-  const {el, status, fixed} = sonibus;
+  const {el, status, fixed, StripChart} = sonibus;
   const HISTORY = 600;          // frames kept per robot for the charts (24 s at 25/s)
-  const CHART_S = 6;            // seconds a chart shows
   const TOUCHED_MS = 1500;      // a slider the operator moved is left alone this long before it follows the robot
-  const COLOURS = ["#4fc3f7", "#ffb74d", "#81c784", "#e57373", "#ba68c8", "#fff176", "#4db6ac", "#f06292"];
+  const FINE_RAD = Math.PI / 1800;  // a slider's step for an angle: 0.1° (the arrow keys' move)
+  const DEGREES = 180 / Math.PI;
   const GROUPS = [
     ["Head", (name) => name.startsWith("Head")],
     ["Left arm", (name) => /^L(Shoulder|Elbow|Wrist|Hand)/.test(name)],
@@ -19,6 +21,8 @@
   const SLIDER_GROUPS = new Set(["Head", "Left arm", "Right arm"]);
   const STATES = {connected: "connected", connecting: "not connected: connecting", lost: "not connected: lost",
     not_answering: "not answering", standby: "standby: another owner keeps it"};  // (bus/connection.py)
+  // What a robots message may change without the panel being built again (its state, not its controls).
+  const LIVE = ["connected", "connection", "awareness", "activity"];
 
   function groupOf(name) {
     return GROUPS.find(([, test]) => test(name))[0];
@@ -28,9 +32,19 @@
     return behavior.split("/").pop();
   }
 
-  /** One robot: its section of the page, its latest frame and its recent history.
-      `page`: {command(robot, verb, args, done), note(what, ms), settings, redraw()}. */
+  function stateOf(info) {
+    return (info.connection || {}).state || (info.connected === false ? "lost" : "connected");
+  }
+
+  /** One robot: its summary line and its panel, its latest frame and its recent history.
+      `page`: {command(robot, verb, args, done), note(what, ms), settings, redraw(), select(name)}. */
   class RobotView {
+    /** Whether robots-message entries `a` and `b` give the same panel (they differ in state only). */
+    static sameBuild(a, b) {
+      const built = (info) => JSON.stringify({...info, ...Object.fromEntries(LIVE.map((key) => [key, undefined]))});
+      return built(a) === built(b);
+    }
+
     constructor(name, info, page) {
       this.name = name;
       this.info = info;
@@ -43,7 +57,19 @@
       this.rate = {frames: 0, since: performance.now(), hz: 0};
       this.touched = new Map();        // slider joint → when the operator last moved it
       this.throttle = new Map();       // slider joint → {last (ms), value, timer}
+      this.awarenessAsked = null;      // the awareness the operator asked for, until the robot answers
+      this.line = this.summary();
       this.section = this.build();
+    }
+
+    summary() {
+      this.lineState = el("span", {class: "summary-state"});
+      this.lineDoing = el("span", {class: "summary-doing"});
+      this.lineSaying = el("span", {class: "summary-saying"});
+      this.lineRate = el("span", {class: "summary-rate"});
+      return el("button", {type: "button", class: "summary-line", dataset: {summary: this.name},
+        title: `show ${this.name}'s controls`, onclick: () => this.page.select(this.name)},
+      el("b", {}, this.name), this.lineState, this.lineDoing, this.lineSaying, this.lineRate);
     }
 
     build() {
@@ -52,7 +78,6 @@
       this.bars = new Map();
       this.sliders = new Map();
       this.behaviorButtons = new Map();
-      this.charts = [];
       const groups = GROUPS.map(([group]) => [group, joints.filter((j) => groupOf(j.name) === group)])
         .filter(([, members]) => members.length);
       this.connection = el("span", {class: "robot-connection"});
@@ -61,55 +86,63 @@
         el("h2", {}, this.name),
         el("span", {class: "robot-meta"}, `${this.info.model || "robot"} · ${this.info.owner || "no owner"}`),
         this.connection, this.rateLabel);
-      const charts = el("div", {class: "charts"}, ...groups.map(([group, members]) => this.chart(group, members)));
-      const table = el("table", {class: "joints"},
-        el("thead", {}, el("tr", {}, el("th", {}, "joint"), el("th", {}, "value"), el("th", {}, "range"))),
-        el("tbody", {}, ...joints.map((joint) => this.jointRow(joint))));
-      const controls = el("div", {class: "controls"},
-        this.behaviorBox(), this.postureBox(), this.sayBox(), this.awarenessBox(),
-        ...groups.filter(([group]) => SLIDER_GROUPS.has(group))
-          .map(([group, members]) => this.sliderBox(group, members)));
-      const section = el("section", {class: "robot", dataset: {robot: this.name}}, header, charts,
-        el("div", {class: "robot-body"}, el("div", {class: "joint-list"}, table), controls));
+      // (one fieldset around them all: disabled, it disables every control inside while the robot is not connected)
+      this.controls = el("fieldset", {class: "controls"},
+        el("div", {class: "actions"}, this.behaviorBox(), this.postureBox(), this.sayBox(), this.awarenessBox()),
+        el("div", {class: "sliders"}, ...groups.filter(([group]) => SLIDER_GROUPS.has(group))
+          .map(([group, members]) => this.sliderBox(group, members))));
+      this.charts = groups.map(([group, members]) => new StripChart(group, members, () => {
+        this.fresh = true;
+        this.page.redraw();
+      }));
+      const section = el("section", {class: "robot", dataset: {robot: this.name}}, header, this.controls,
+        el("div", {class: "charts"}, ...this.charts.map((chart) => chart.figure)),
+        el("div", {class: "joints"}, ...joints.map((joint) => this.jointRow(joint))));
       this.update(this.info);
       return section;
     }
 
+    /** The robot's state from a robots message: connection, awareness, what it runs and says. */
     update(info) {
       this.info = info;
-      const state = (info.connection || {}).state || (info.connected === false ? "lost" : "connected");
+      const state = stateOf(info);
       const error = (info.connection || {}).error;
-      this.connection.textContent = STATES[state] || state;
-      this.connection.title = error || "";
-      this.connection.dataset.state = state;
+      for (const label of [this.connection, this.lineState]) {
+        label.textContent = STATES[state] || state;
+        label.title = error || "";
+        label.dataset.state = state;
+      }
+      const usable = info.connected !== false && state === "connected";
+      this.controls.disabled = !usable;
+      this.controls.title = usable ? "" : `${this.name} is ${STATES[state] || state}: its controls wait for it (STOP works)`;
+      this.showAwareness();
+      const activity = info.activity || {behaviors: [], speaking: null};
+      const running = activity.behaviors || [];
+      this.lineDoing.textContent = running.length ? `running ${running.map(shortName).join(", ")}` : "";
+      this.lineDoing.title = running.join(", ");
+      this.lineSaying.textContent = activity.speaking ? `saying “${activity.speaking}”` : "";
+      this.lineSaying.title = activity.speaking || "";
+      this.line.dataset.idle = String(!running.length && !activity.speaking);
+      for (const name of running) {  // (a page opened while it runs: the server heard it start)
+        const button = this.behaviorButtons.get(name);
+        if (button && button.dataset.state === "idle") this.behaviorState(name, "started");
+      }
     }
 
-    chart(group, members) {
-      const canvas = el("canvas", {height: 90, dataset: {chart: group}});
-      const legend = el("div", {class: "legend"}, ...members.map((joint, i) =>
-        el("span", {style: `color:${COLOURS[i % COLOURS.length]}`}, joint.name)));
-      const chart = {canvas, members, width: 0, height: 0};
-      // Sizes come from a ResizeObserver: reading clientWidth while drawing would force a layout every frame.
-      new ResizeObserver(([entry]) => {
-        const ratio = window.devicePixelRatio || 1;
-        chart.width = Math.max(Math.round(entry.contentRect.width * ratio), 10);
-        chart.height = Math.max(Math.round(entry.contentRect.height * ratio), 10);
-        this.fresh = true;
-        this.page.redraw();
-      }).observe(canvas);
-      this.charts.push(chart);
-      return el("figure", {class: "chart"}, el("figcaption", {}, group), canvas, legend);
+    /** Show this robot's panel (or hide it: another robot is selected). */
+    show(shown) {
+      this.section.hidden = !shown;
+      this.line.setAttribute("aria-pressed", String(shown));
+      if (shown) this.fresh = true;
     }
 
     jointRow(joint) {
-      const cell = el("td", {class: "value", dataset: {joint: joint.name}}, "–");
+      const cell = el("span", {class: "value", dataset: {joint: joint.name}}, "–");
       const bar = el("span", {class: "bar-fill"});
       this.cells.set(joint.name, cell);
       this.bars.set(joint.name, bar);
-      return el("tr", {},
-        el("th", {scope: "row"}, joint.name), cell,
-        el("td", {class: "range", title: `${fixed(joint.min, 2)} … ${fixed(joint.max, 2)}`},
-          el("span", {class: "range-bar"}, bar)));
+      return el("div", {class: "joint"}, el("span", {class: "name"}, joint.name), cell,
+        el("span", {class: "range-bar", title: `${fixed(joint.min, 2)} … ${fixed(joint.max, 2)}`}, bar));
     }
 
     behaviorBox() {
@@ -144,28 +177,58 @@
         if (!text) return status("say: the text is empty — type something first", "error");
         if (this.command("say", {text}) !== null) input.value = "";
       }}, input, el("button", {type: "submit"}, "Say"));
-      return el("fieldset", {}, el("legend", {}, "Say"), form);
+      return el("fieldset", {class: "say-box"}, el("legend", {}, "Say"), form);
     }
 
     awarenessBox() {
-      const box = el("input", {type: "checkbox", dataset: {awareness: this.name},
-        onchange: () => this.command("awareness", {enabled: box.checked})});
+      const box = this.awareness = el("input", {type: "checkbox", dataset: {awareness: this.name},
+        onchange: () => this.askAwareness(box.checked)});
+      this.awarenessNote = el("small", {class: "note"});
       return el("fieldset", {class: "awareness"}, el("legend", {}, "Awareness"),
-        el("label", {}, box, " basic awareness (look at people)"));
+        el("label", {}, box, " look at people"), " ", this.awarenessNote);
+    }
+
+    /** The operator's click: shown at once, until the robot's answer (refused: back to its state). */
+    askAwareness(enabled) {
+      this.awarenessAsked = enabled;
+      const sent = this.command("awareness", {enabled}, (reply) => {
+        this.awarenessAsked = null;
+        if (reply.ok) this.info = {...this.info, awareness: enabled};  // (its info says so too, when asked again)
+        this.showAwareness();
+        return false;
+      });
+      if (sent === null) this.awarenessAsked = null;
+      this.showAwareness();
+    }
+
+    showAwareness() {
+      if (!this.awareness) return;
+      const known = typeof this.info.awareness === "boolean";
+      const shown = this.awarenessAsked !== null ? this.awarenessAsked : this.info.awareness;
+      this.awareness.indeterminate = this.awarenessAsked === null && !known;
+      this.awareness.checked = shown === true;
+      this.awareness.dataset.robotState = known ? String(this.info.awareness) : "unknown";
+      this.awarenessNote.textContent = this.awarenessAsked !== null ? "asking…"
+        : known ? (this.info.awareness ? "on" : "off") : "not said by its owner";
     }
 
     sliderBox(group, members) {
-      return el("fieldset", {class: "sliders"}, el("legend", {}, group), ...members.map((joint) => {
+      return el("fieldset", {class: "slider-group", dataset: {group}}, el("legend", {}, group), ...members.map((joint) => {
+        const angle = joint.unit === "rad";
         const output = el("output", {}, "–");
         const slider = el("input", {type: "range", min: joint.min, max: joint.max,
-          step: Math.max((joint.max - joint.min) / 500, 0.001), value: (joint.min + joint.max) / 2,
-          dataset: {slider: joint.name}, "aria-label": `${this.name} ${joint.name}`});
+          step: angle ? FINE_RAD : Math.max((joint.max - joint.min) / 1000, 1e-6), value: (joint.min + joint.max) / 2,
+          dataset: {slider: joint.name}, "aria-label": `${this.name} ${joint.name}`,
+          title: `${joint.name}: drag, or ← → in steps of ${angle ? "0.1°" : "a thousandth"}`});
+        const show = (value) => {
+          output.textContent = angle ? `${fixed(value * DEGREES, 1)}°` : fixed(value, 2);
+        };
         slider.addEventListener("input", () => {
           this.touched.set(joint.name, performance.now());
-          output.textContent = fixed(Number(slider.value), 2);
+          show(Number(slider.value));
           this.moveJoint(joint.name, Number(slider.value));
         });
-        this.sliders.set(joint.name, {slider, output});
+        this.sliders.set(joint.name, {slider, show});
         return el("label", {class: "slider"}, el("span", {}, joint.name), slider, output);
       }));
     }
@@ -244,9 +307,9 @@
       if (now - this.rate.since >= 1000) {
         this.rate.hz = this.rate.frames * 1000 / (now - this.rate.since);
         this.rate = {frames: 0, since: now, hz: this.rate.hz};
-        this.rateLabel.textContent = `${this.rate.hz.toFixed(0)} frames/s`;
+        this.rateLabel.textContent = this.lineRate.textContent = `${this.rate.hz.toFixed(0)} frames/s`;
       }
-      if (!this.fresh) return false;
+      if (!this.fresh || this.section.hidden) return false;  // (a hidden panel is drawn when shown)
       this.fresh = false;
       for (const [name, value] of this.values) {
         const cell = this.cells.get(name);
@@ -260,52 +323,11 @@
         if (control && document.activeElement !== control.slider
             && now - (this.touched.get(name) || -Infinity) > TOUCHED_MS) {
           control.slider.value = value;
-          control.output.textContent = fixed(value, 2);
+          control.show(value);
         }
       }
-      for (const chart of this.charts) this.drawChart(chart);
+      for (const chart of this.charts) chart.draw(this.times, this.history, this.count);
       return true;
-    }
-
-    drawChart({canvas, members, width, height}) {
-      if (!width) return;  // not laid out yet
-      const ratio = window.devicePixelRatio || 1;
-      if (canvas.width !== width || canvas.height !== height) {
-        canvas.width = width;
-        canvas.height = height;
-      }
-      const g = canvas.getContext("2d");
-      g.clearRect(0, 0, width, height);
-      g.strokeStyle = "rgba(255,255,255,0.08)";
-      g.lineWidth = 1;
-      for (const y of [0.25, 0.5, 0.75]) {
-        g.beginPath();
-        g.moveTo(0, y * height);
-        g.lineTo(width, y * height);
-        g.stroke();
-      }
-      const n = Math.min(this.count, HISTORY);
-      if (n < 2) return;
-      const newest = this.times[(this.count - 1) % HISTORY];
-      g.lineWidth = 1.5 * ratio;
-      members.forEach((joint, m) => {
-        const ring = this.history.get(joint.name);
-        const span = joint.max - joint.min || 1;
-        g.strokeStyle = COLOURS[m % COLOURS.length];
-        g.beginPath();
-        let started = false;
-        for (let k = n; k >= 1; k--) {
-          const slot = (this.count - k) % HISTORY;
-          const age = newest - this.times[slot];
-          if (age > CHART_S) continue;
-          const x = width * (1 - age / CHART_S);
-          const y = height * (1 - (ring[slot] - joint.min) / span);
-          if (started) g.lineTo(x, y);
-          else g.moveTo(x, y);
-          started = true;
-        }
-        g.stroke();
-      });
     }
   }
 
