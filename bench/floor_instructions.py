@@ -158,8 +158,16 @@ def main() -> None:
                 f"{name} {count / 1000:,.1f}k" for name, count in counts.items())
                 + f"; sonibus {rows[-1]['sonibus_to_floor']:.2f}× floor, gate {rows[-1]['gate_to_decode']:.2f}× decode",
                 flush=True)
+    summary = []
+    for r in rows:
+        k = {name: f"{count / 1000:,.0f}k" for name, count in r["per_frame"].items()}
+        summary.append({"scenario": f"(floor) instructions per frame, {r['joints']} joints, "
+                                    + ("one bundle" if r["bundle"] else "plain messages"),
+                        "sonibus": f"{k['sonibus']} (Gate.check {k['gate']})",
+                        "baseline": f"floor {k['floor']} (msgpack {k['decode']})",
+                        "ratio": f"{r['sonibus_to_floor']:.2f}×", "goal": "", "met": ""})
     write(args.name, {"tree": os.path.dirname(os.path.dirname(__import__("sonibus.bus").bus.__file__)),
-                      "frames": args.frames, "rows": rows})
+                      "frames": args.frames, "rows": rows, "summary": summary})
 
 
 if __name__ == "__main__":

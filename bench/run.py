@@ -30,6 +30,7 @@ SCRIPTS: dict[str, tuple[str, list[str], float]] = {
     "osc_latency_one_process": ("osc_latency", ["--robots", "2", "--seconds", "8", "--one-process",
                                                 "--name", "osc_latency_one_process"], 60),
     "show": ("show", ["--rounds", "2", "--seconds", "8"], 300),  # a full show, node by node (issue 27)
+    "floor_instructions": ("floor_instructions", [], 900),  # the OSC sink's frame path in instructions (callgrind)
     "sink_throughput": ("sink_throughput", [], 120),
     "sink_throughput_bundles": ("sink_throughput", ["--bundles", "--name", "sink_throughput_bundles",
                                                     "--rates", "40000", "100000", "150000", "200000"], 90),
