@@ -49,7 +49,7 @@ def test_sonibus_run_logs_what_it_says_and_its_nodes_to_a_rotated_file(spawn, tm
     # at its start than it did, and the first lines were gone) — how many are kept is the test above's
     assert "show.log.1" in files and len(files) <= 41, files
     text = "".join((log.parent / name).read_text() for name in reversed(files))
-    for said in run.lines:  # what it said on stdout is in the file too, with the time
+    for said in filter(None, run.lines):  # what it said on stdout is in the file too, with the time
         assert re.search(rf"^\S+ \S+ INFO sonibus.run: {re.escape(said)}$", text, re.M), said
     assert re.search(r"INFO sonibus.bus.adapter: pepper: stopping; ", text)  # (INFO: the nodes' own lines)
     assert "INFO" not in err  # stderr keeps its level (warnings)
