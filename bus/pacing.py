@@ -20,10 +20,13 @@ from collections.abc import Callable
 from typing import NamedTuple
 
 SHARE = 0.75          # after a stall, a stream's frames go no closer than this share of its period
-STALL_PERIODS = 2.0   # a stall: no frame of a stream for this many of its periods
+STALL_PERIODS = 2.0   # a stall: no frame of a stream for this many of its periods,
+STALL_S = 0.25        # and for this long: a shorter gap is a busy machine's scheduling (its backlog is
+                      # a few frames, taken together by a worker), which spacing would only thin out
 MAX_GAP_S = 0.05      # a frame is never held longer (well under a sink's max_age_ms: what is held stays fresh)
 MAX_PERIOD_S = 1.0    # a longer spacing is a pause or a clock's jump, not a stream's period
-RESTART_S = 1.0       # a frame this much older than the last one sent starts the stream over (a clock set back)
+RESTART_S = 0.25      # a frame this much older than the last one sent starts the stream over (a clock set
+                      # back, or a sample put on its key with a t ahead: it holds the stream back no longer)
 SLACK_S = 0.002       # a frame less early than this goes (Zenoh batches what is put within a millisecond)
 LEARNING = 3          # frames whose spacing teaches a stream's period before it is paced (a script's few are not)
 MAX_STREAMS = 10_000  # streams remembered (their names come from the network)
@@ -89,7 +92,8 @@ class Spacing:
 
     A stall (a link cut and healed, a paused process, a full queue) holds a stream's
     frames back; then they arrive together, and sent as they come they would replay
-    the stall as a burst. Here, once no frame came for ``STALL_PERIODS`` periods, the
+    the stall as a burst. Here, once no frame came for ``STALL_PERIODS`` periods (and
+    ``STALL_S`` at least: a worker late by a few frames on a busy machine is no stall), the
     first goes, the next is held until its turn and each newer one replaces it: the
     newest goes most of a period later, the ones between are skipped, and no frame
     goes out older than one already sent. Once frames arrive at their pace again,
@@ -129,7 +133,7 @@ class Spacing:
             if arrived:
                 self._learn(state, t, seq)
                 gap, state.arrived = now - state.arrived, now
-                stalled = paced and gap >= STALL_PERIODS * state.period
+                stalled = paced and gap >= max(STALL_PERIODS * state.period, STALL_S)
                 state.recovering = state.recovering or stalled
             if t < state.sent_t or (t == state.sent_t and paced):  # (a script may put one sample again)
                 return SKIP

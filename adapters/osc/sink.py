@@ -130,16 +130,23 @@ class OscSink(Adapter):
     def _forward(self) -> None:
         while not self.stopping.is_set():
             items = self._queue.drain(timeout=self._wait())
-            now = time.monotonic()
             with self._state:
+                now = time.monotonic()  # (once the lock is had: a frame taken where it arrived may have held it)
                 for item in items:
                     self._take(*item, now)
                 self._tick(now)
 
     def _direct(self, key: str, payload: Any) -> bool:
-        """A frame, on its subscription's callback thread (``Streams``' ``direct``)."""
-        with self._state:
+        """A frame, on its subscription's callback thread (``Streams``' ``direct``); into the
+        queue instead (False) while the forward worker holds the state: Zenoh's callback
+        threads serve every subscription and query of the session and must never wait on
+        a sink (a batch of thousands of fuzzed samples held them for seconds)."""
+        if not self._state.acquire(blocking=False):
+            return False
+        try:
             self._take(key, payload, time.monotonic())
+        finally:
+            self._state.release()
         return True
 
     def _wait(self) -> float:
