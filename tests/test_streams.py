@@ -8,7 +8,7 @@ import threading
 import pytest
 
 from sonibus import schemas
-from sonibus.bus import codec
+from sonibus.bus import codec, streams
 from sonibus.bus.queue import SampleQueue
 from sonibus.bus.streams import Incoming, Plan, Selection, Streams, plan
 
@@ -140,3 +140,20 @@ def test_each_frame_gets_the_selection_of_its_own_joint_list():
             assert [(s.source.key, s.values) for s in taken.samples] == [
                 (f"{robot}/joints/{n}", (v,)) for n, v in zip(names, values, strict=True) if n.startswith("Head")]
             taken.message["names"][:] = lists[(seq + 1) % len(lists)]  # (the one remembered is a copy)
+
+
+def test_made_up_robots_and_joint_lists_do_not_grow_a_sinks_tables():
+    """Robot names and joint lists come from the network: the selections a sink keeps
+    per joint list and per robot, and its gate's joint lists, stay within their bounds
+    however many are made up (the fuzz show sends frames of made-up lists and robots)."""
+    selection = Selection(["*/joints/*"])
+    extra = streams.MAX_FRAMES + 200
+    for n in range(extra):
+        names = ["HeadYaw", f"Made{n}"]
+        taken = selection.incoming(f"robot{n}/frame", codec.encode({"t": 1.5, "seq": n, "names": names,
+                                                                   "v": [0.1, 0.2]}))
+        assert [s.source.key for s in taken.samples] == [f"robot{n}/joints/HeadYaw", f"robot{n}/joints/Made{n}"]
+    assert len(selection._frames) <= streams.MAX_FRAMES and len(selection._last) <= streams.MAX_FRAMES
+    assert len(selection.gate._last_names) <= selection.gate.MAX_KNOWN
+    assert len(selection.gate._known_names) <= selection.gate.MAX_KNOWN
+    assert len(selection._parsed) <= streams.MAX_KEYS
