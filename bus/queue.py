@@ -37,6 +37,11 @@ class SampleQueue:
         self.dropped = 0
         self._filled = self._taken = time.monotonic()  # when it last went from empty to not; last get/drain
 
+    @property
+    def maxlen(self) -> int:
+        """The most items it keeps waiting (and, apart, the most it holds: ``hold``)."""
+        return self._items.maxlen or 0
+
     def put(self, item: Any) -> None:
         with self._ready:
             if len(self._items) == self._items.maxlen:

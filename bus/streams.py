@@ -281,9 +281,9 @@ class Streams(Selection):
             return None
         held = Held(message)
         with self._held_lock:
-            if len(self._held) >= MAX_KEYS:
-                self._held.clear()
-            replaced = self._held.get(key)
+            replaced = self._held.pop(key, None)
+            if replaced is None and len(self._held) >= self.queue.maxlen:  # (keys come from the network)
+                del self._held[next(iter(self._held))]  # the one the queue drops too (held longest), counted there
             self._held[key] = held
         self.queue.hold(key, (key, held), turn.until)
         if replaced is not None:

@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import threading
+import time
 
 import pytest
 
@@ -157,3 +158,29 @@ def test_made_up_robots_and_joint_lists_do_not_grow_a_sinks_tables():
     assert len(selection.gate._last_names) <= selection.gate.MAX_KNOWN
     assert len(selection.gate._known_names) <= selection.gate.MAX_KNOWN
     assert len(selection._parsed) <= streams.MAX_KEYS
+
+
+def test_what_waits_for_its_turn_is_bounded_by_the_queue(net):
+    """Samples held for their turn after a stall (skip, never burst) are kept by key, and keys
+    come from the network: no more are kept than the queue holds, the one held longest
+    going first in both (counted ``dropped`` by the queue)."""
+    queue = SampleQueue(4)
+    paced = Streams(net.bus("held"), ["*/derived/**"], queue)
+    counted: dict[str, int] = {}
+
+    def take(key: str, seq: int, t: float) -> None:
+        paced.take(key, codec.encode({"t": t, "seq": seq, "v": 0.5}), lambda kind, n: counted.update(
+            {kind: counted.get(kind, 0) + n}), lambda kind, text: None)
+    keys = [f"robot{n}/derived/qom/Body" for n in range(10)]
+    t0 = time.time() - 1.0
+    for seq in range(5):  # each key's period learnt: 20 ms
+        for key in keys:
+            take(key, seq, t0 + 0.02 * seq)
+    time.sleep(0.3)  # a stall: longer than pacing.STALL_S
+    for key in keys:
+        take(key, 5, t0 + 0.1)  # goes
+        take(key, 6, t0 + 0.12)  # held for its turn
+    assert len(paced._held) <= queue.maxlen and len(queue) <= queue.maxlen
+    assert queue.dropped == len(keys) - queue.maxlen
+    assert set(paced._held) == set(keys[-queue.maxlen:])
+    paced.undeclare()
