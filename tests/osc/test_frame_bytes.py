@@ -166,3 +166,24 @@ def test_made_up_joint_lists_do_not_grow_the_plans(net, receivers):
         return any(a == "/robot0/joints/Last" for a, _ in messages(receiver))
     wait_for(last_sent, what="a frame at the target after them")
     assert len(link.plans) <= osc_sink.MAX_PLANS
+
+
+def test_a_frame_never_waits_on_zenohs_thread_for_the_forward_worker(net, receivers):
+    """Frames are taken on the subscription's callback thread, which serves every
+    subscription and query of the session: while the sink's worker holds its state (a
+    batch of a burst can take seconds), a frame goes into the queue instead of waiting."""
+    receiver = receivers()
+    sink = net.start(OscSink(OscSinkConfig(targets=(receiver.target,), subscribe="toy/joints/*", max_age_ms=0),
+                             name="busy"))
+    robot = net.bus("toy")
+    seq = iter(range(10 ** 6))
+
+    def queued() -> bool:  # (put again until the sessions see each other)
+        robot.put("toy/frame", frame(time.time(), next(seq), ["A"], [0.25]))
+        deadline = time.monotonic() + 0.2
+        while time.monotonic() < deadline and not len(sink._queue):
+            time.sleep(0.01)
+        return len(sink._queue) > 0
+    with sink._state:  # (as the forward worker does while it takes a batch)
+        wait_for(queued, what="a frame in the queue while the worker is busy")
+    wait_for(lambda: any(a == "/toy/joints/A" for a, _ in messages(receiver)), what="the frame at the target")
