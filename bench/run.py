@@ -2,7 +2,7 @@
 docs/performance.md (between its `bench:begin` and `bench:end` marks), each
 sonibus figure beside its baseline from the same run and the goal.
 
-    .venv/bin/python bench/run.py [--only osc_latency sink_throughput ...] [--table-only]
+    .venv/bin/python bench/run.py [--only floor sink_throughput ...] [--table-only]
     .venv/bin/python bench/run.py --only soak_show_long     # the show soak's long form: 70 minutes
 
 Each script writes bench/results/<name>.json; this file only runs them and
@@ -24,13 +24,14 @@ HERE = Path(__file__).resolve().parent
 DOC = HERE.parent / "docs" / "performance.md"
 BEGIN, END = "<!-- bench:begin -->", "<!-- bench:end -->"
 
-# results name → (script, arguments, time limit in s); together well under 10 minutes
+# results name → (script, arguments, time limit in s); together about half an hour
 SCRIPTS: dict[str, tuple[str, list[str], float]] = {
-    "osc_latency": ("osc_latency", ["--robots", "1,2,10", "--seconds", "8"], 150),
-    "osc_latency_bundles": ("osc_latency", ["--robots", "2,10", "--seconds", "8", "--sink", "bundle = true",
-                                            "--name", "osc_latency_bundles"], 120),
+    # the OSC sink beside the floor of the stack (issue 27): 1, 2, 10 robots; 64 and 128 joints; bundles
+    "floor": ("floor", ["--rounds", "3", "--seconds", "4"], 900),
     "osc_latency_one_process": ("osc_latency", ["--robots", "2", "--seconds", "8", "--one-process",
                                                 "--name", "osc_latency_one_process"], 60),
+    "show": ("show", ["--rounds", "2", "--seconds", "8"], 300),  # a full show, node by node (issue 27)
+    "floor_instructions": ("floor_instructions", [], 900),  # the OSC sink's frame path in instructions (callgrind)
     "sink_throughput": ("sink_throughput", [], 120),
     "sink_throughput_bundles": ("sink_throughput", ["--bundles", "--name", "sink_throughput_bundles",
                                                     "--rates", "40000", "100000", "150000", "200000"], 90),
@@ -132,7 +133,6 @@ def rows_generic(r: dict[str, Any]) -> list[Row]:
 
 
 ROWS: dict[str, Callable[[dict[str, Any]], list[Row]]] = {
-    "osc_latency": rows_osc_latency, "osc_latency_bundles": rows_osc_latency,
     "osc_latency_one_process": rows_osc_latency, "naoqi_rate": rows_naoqi_rate,
     "features": rows_features,
 }

@@ -39,11 +39,13 @@ class Oversize:
 
 
 def decode(payload: bytes | zenoh.ZBytes | Oversize | None) -> dict[str, Any]:
-    if payload is None:
-        return {}
-    if isinstance(payload, Oversize):
-        raise DecodeError(f"payload of {payload.size} bytes is over the size limit (not kept)")
-    data = payload.to_bytes() if isinstance(payload, zenoh.ZBytes) else payload
+    data = payload
+    if data.__class__ is not bytes:  # (bytes, as a subscription keeps them, are the usual case)
+        if payload is None:
+            return {}
+        if isinstance(payload, Oversize):
+            raise DecodeError(f"payload of {payload.size} bytes is over the size limit (not kept)")
+        data = payload.to_bytes() if isinstance(payload, zenoh.ZBytes) else payload
     if not data:
         return {}
     try:

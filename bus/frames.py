@@ -65,6 +65,16 @@ class FrameAssembler:
             done.append(self._close(robot))
         return done
 
+    def whole(self, robot: str, seq: int, t: float, keys: frozenset[str]) -> bool:
+        """Whether a frame that came whole, with ``keys``, is complete by itself: none of
+        ``robot``'s is open and its frames hold just these keys (no derived values join
+        them). It is then taken as closed without being built (a sample of its ``seq``
+        that comes later is late), and the caller sends it as it is."""
+        if robot in self._open or self._expected.get(robot) != keys:
+            return False
+        self._closed[robot] = (seq, t)
+        return True
+
     def expire(self, now: float | None = None) -> list[Frame]:
         """Frames open for longer than ``max_wait_s`` (their stream paused or lost keys)."""
         now = time.monotonic() if now is None else now

@@ -24,6 +24,7 @@ import re
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from math import hypot
 from typing import Any
 
 import jsonschema
@@ -83,6 +84,7 @@ class Gate:
     def __init__(self, limits: Limits | None = None) -> None:
         self.limits = limits or Limits()
         self._known_names: set[tuple[str, ...]] = set()
+        self._last_names: dict[str, list[str]] = {}  # robot → the (checked) names of its last frame
 
     def check(self, key: Key, payload: bytes) -> dict[str, Any]:
         section = SECTIONS.get(key.section)
@@ -112,13 +114,14 @@ class Gate:
             raise BadMessage("names and v are not two lists of the same length")
         if len(names) > MAX_JOINTS:
             raise BadMessage(f"{len(names)} joints in one frame, at most {MAX_JOINTS}")
-        signature = tuple(names) if all(n.__class__ is str for n in names) else None
-        if signature not in self._known_names:
-            self._check_names(names)
-            if len(self._known_names) >= self.MAX_KNOWN:  # names made up on the fly must not grow it for ever
-                self._known_names.clear()
-            self._known_names.add(signature)  # type: ignore[arg-type]
+        if names != self._last_names.get(key.robot):  # (a robot's names are the same every frame: one comparison)
+            self._known(names)
+            if len(self._last_names) >= self.MAX_KNOWN:  # robot names come from the network
+                self._last_names.clear()
+            self._last_names[key.robot] = list(names)  # (a copy: whoever takes the message may change its list)
         numbers(values, "v")
+        if len(message) == len(FRAME_FIELDS):  # (all four were read above: no quantity per joint beside v)
+            return
         for quantity, extra in message.items():
             if quantity in FRAME_FIELDS:
                 continue
@@ -127,6 +130,19 @@ class Gate:
             if extra.__class__ is not list or len(extra) != len(names):
                 raise BadMessage(f"{quantity} is not a list of {len(names)} numbers")
             numbers(extra, quantity)
+
+    def _known(self, names: list[Any]) -> None:
+        """``names`` checked (plain, unique), or one of the lists checked before."""
+        try:
+            signature = tuple(names)
+            if signature in self._known_names:
+                return
+        except TypeError:  # (a name that is a list or a map: refused just below)
+            pass
+        self._check_names(names)
+        if len(self._known_names) >= self.MAX_KNOWN:  # names made up on the fly must not grow it for ever
+            self._known_names.clear()
+        self._known_names.add(signature)
 
     def joint_sample(self, key: Key, message: dict[str, Any]) -> None:
         self.stamp(message)
@@ -269,14 +285,26 @@ def schema_of(key: Key) -> str | None:
 
 def numbers(values: Sequence[Any], field: str) -> None:
     """Every value a finite number within ±``MAX_VALUE``; ``BadMessage`` naming the first that is not."""
-    if all(v.__class__ is float for v in values) and min(values, default=0.0) >= -MAX_VALUE \
-            and max(values, default=0.0) <= MAX_VALUE and math.isfinite(sum(values)):
-        return  # the usual frame, in a few C loops (a NaN can hide from min and max, not from sum)
+    if plain_floats(values):
+        return
     for i, v in enumerate(values):
         if not number(v):
             raise BadMessage(f"{field}[{i}] = {_short(v)} is not a number")
         if not -MAX_VALUE <= v <= MAX_VALUE:  # (NaN fails too)
             raise BadMessage(f"{field}[{i}] = {v!r} is outside ±{MAX_VALUE:g}")
+
+
+def plain_floats(values: Sequence[Any]) -> bool:
+    """Whether ``values`` are all floats whose length as a vector is within ``MAX_VALUE``:
+    the usual frame, let through in two C loops (no Python code per value). False says
+    nothing: ``numbers`` then looks at each value (an int, a large value or a bad one).
+
+    >>> plain_floats([0.1, -2.0]), plain_floats([0.1, True]), plain_floats([float("nan")]), plain_floats([7])
+    (True, False, False, False)
+    """
+    # (a bool is an int to hypot: the types first; hypot of values within ±MAX_VALUE can exceed it,
+    # never the other way round, and it is NaN or inf when one of them is)
+    return list(map(type, values)).count(float) == len(values) and hypot(*values) <= MAX_VALUE
 
 
 def json_like(value: Any, what: str, depth: int = 0) -> None:

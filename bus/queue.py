@@ -2,6 +2,18 @@
 
 Zenoh runs every callback of a session on shared threads, so a callback must
 only enqueue; the consumer works on its own thread and can be woken to stop.
+An item can also be held until a time (``hold``): a sink's frame that came too
+soon after the one before waits for its turn there (``bus/pacing.py``), and the
+consumer's ``get``/``drain`` hand it out when it is due, waking for it.
+
+>>> queue = SampleQueue()
+>>> queue.hold("pepper/frame", ("pepper/frame", b"older"), due=0.0)
+False
+>>> queue.hold("pepper/frame", ("pepper/frame", b"newer"), due=0.0)  # replaces the one held
+True
+>>> queue.put(("pepper/events/x", b"event"))
+>>> queue.drain()  # what was held and is due comes first
+[('pepper/frame', b'newer'), ('pepper/events/x', b'event')]
 """
 
 from __future__ import annotations
@@ -19,10 +31,16 @@ class SampleQueue:
         if maxlen < 1:
             raise ValueError(f"queue length must be at least 1, got {maxlen}")
         self._items: deque[Any] = deque(maxlen=maxlen)
+        self._held: dict[str, tuple[float, Any]] = {}  # slot → (due, item), at most maxlen
         self._ready = threading.Condition()
         self._closed = False
         self.dropped = 0
         self._filled = self._taken = time.monotonic()  # when it last went from empty to not; last get/drain
+
+    @property
+    def maxlen(self) -> int:
+        """The most items it keeps waiting (and, apart, the most it holds: ``hold``)."""
+        return self._items.maxlen or 0
 
     def put(self, item: Any) -> None:
         with self._ready:
@@ -34,24 +52,57 @@ class SampleQueue:
             if len(self._items) == 1:  # only an empty queue has someone to wake
                 self._ready.notify()
 
+    def hold(self, slot: str, item: Any, due: float) -> bool:
+        """Give ``item`` out once ``time.monotonic()`` reaches ``due``; an item held
+        for ``slot`` already is replaced (True is returned then). Never blocks; past
+        ``maxlen`` slots the one held longest is dropped and counted."""
+        with self._ready:
+            replaced = self._held.pop(slot, None) is not None
+            if not replaced and len(self._held) >= self._items.maxlen:
+                del self._held[next(iter(self._held))]
+                self.dropped += 1
+            self._held[slot] = (due, item)
+            self._ready.notify()  # a consumer waiting recomputes when to wake
+            return replaced
+
     def get(self, timeout: float | None = None) -> Any | None:
-        """The oldest item, or None when closed or after ``timeout`` seconds."""
+        """The oldest item (one held and due first), or None when closed, after
+        ``timeout`` seconds, or when woken to look at a newly held item."""
         with self._ready:
             if not self._items and not self._closed:
-                self._ready.wait(timeout)
+                self._ready.wait(self._until(timeout))
             self._taken = time.monotonic()
+            if self._held:
+                due = self._due(1)
+                if due:
+                    return due[0]
             return self._items.popleft() if self._items else None
 
     def drain(self, timeout: float | None = None) -> list[Any]:
-        """Every item waiting (oldest first), waiting up to ``timeout`` for one: a
-        consumer that takes a frame's samples in one go wakes once, not per sample."""
+        """Every item waiting (held and due ones first, then oldest first), waiting up to
+        ``timeout`` for one: a consumer that takes a frame's samples in one go wakes once,
+        not per sample."""
         with self._ready:
             if not self._items and not self._closed:
-                self._ready.wait(timeout)
+                self._ready.wait(self._until(timeout))
             self._taken = time.monotonic()
-            items = list(self._items)
+            items = self._due() if self._held else []
+            items += self._items
             self._items.clear()
             return items
+
+    def _until(self, timeout: float | None) -> float | None:
+        """How long to wait: ``timeout``, or less if a held item falls due sooner."""
+        if not self._held:
+            return timeout
+        soonest = max(0.0, min(due for due, _ in self._held.values()) - time.monotonic())
+        return soonest if timeout is None else min(timeout, soonest)
+
+    def _due(self, most: int | None = None) -> list[Any]:
+        """Held items that are due (at most ``most``), taken out, soonest first."""
+        now = time.monotonic()
+        due = sorted((d, slot) for slot, (d, _) in self._held.items() if d <= now)[:most]
+        return [self._held.pop(slot)[1] for _, slot in due]
 
     def close(self) -> None:
         with self._ready:
@@ -71,4 +122,4 @@ class SampleQueue:
         return self._closed
 
     def __len__(self) -> int:
-        return len(self._items)
+        return len(self._items) + len(self._held)

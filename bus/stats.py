@@ -16,6 +16,7 @@ True
 
 from __future__ import annotations
 
+import math
 import os
 import random
 import resource
@@ -48,6 +49,22 @@ class Counters(Mapping[str, int]):
         with self._lock:
             self._counts[name] = self._counts.get(name, 0) + n
 
+    def tally(self, names: Iterable[str]) -> dict[str, int]:
+        """Counters ``names`` kept in a plain dict that its owner adds to (``tally[name] += n``)
+        under a lock of its own, one thread at a time (a sink's state lock): no lock taken per
+        count, a few per frame fewer on a sink's path. They are read with the rest.
+
+        >>> counters = Counters(("sent",))
+        >>> tally = counters.tally(("sent",))
+        >>> tally["sent"] += 17
+        >>> counters["sent"]
+        17
+        """
+        kept = dict.fromkeys(names, 0)
+        for name in kept:
+            self.follow(name, lambda name=name: kept[name])
+        return kept
+
     def follow(self, name: str, source: Callable[[], int]) -> None:
         """Add ``source()`` (a count kept elsewhere, e.g. a queue's drops) to ``name`` when read."""
         with self._lock:
@@ -79,33 +96,58 @@ class Counters(Mapping[str, int]):
 
 
 class Latencies:
-    """A uniform sample (at most ``size``) of the latencies seen since the last ``take``."""
+    """A uniform sample (at most ``size``) of the latencies seen since the last ``take``.
+
+    Reservoir sampling by Li's algorithm L: once the sample is full, how many latencies
+    to pass over before the next one kept is drawn at once, so most ``add`` calls draw
+    no random number (a sink adds one a frame).
+
+    >>> latencies = Latencies(size=4)
+    >>> for ms in range(1000):
+    ...     latencies.add(ms / 1000)
+    >>> taken = latencies.take()
+    >>> taken["samples"], len(latencies._kept)
+    (1000, 0)
+    """
 
     def __init__(self, size: int = RESERVOIR) -> None:
         self._size = size
         self._lock = threading.Lock()
         self._kept: list[float] = []
         self._seen = 0
+        self._next = 0      # the count at which the next latency is kept (once the sample is full)
+        self._weight = 1.0  # algorithm L's W
 
     def add(self, seconds: float) -> None:
         with self._lock:
             self._seen += 1
             if len(self._kept) < self._size:
                 self._kept.append(seconds)
-            else:  # reservoir sampling: each latency seen is kept with the same chance
-                slot = random.randrange(self._seen)
-                if slot < self._size:
-                    self._kept[slot] = seconds
+                if len(self._kept) == self._size:
+                    self._skip()
+            elif self._seen == self._next:  # each latency seen is kept with the same chance
+                self._kept[random.randrange(self._size)] = seconds
+                self._skip()
+
+    def _skip(self) -> None:
+        """Draw the next latency to keep (algorithm L)."""
+        self._weight *= math.exp(math.log(_uniform()) / self._size)
+        self._next = self._seen + 1 + int(math.log(_uniform()) / math.log1p(-self._weight))
 
     def take(self) -> dict[str, float] | None:
         """p50 and p99 in ms of the sample, and how many were seen; None if none; starts over."""
         with self._lock:
             kept, seen = sorted(self._kept), self._seen
-            self._kept, self._seen = [], 0
+            self._kept, self._seen, self._next, self._weight = [], 0, 0, 1.0
         if not kept:
             return None
         return {"p50": round(_quantile(kept, 0.50) * 1000.0, 3), "p99": round(_quantile(kept, 0.99) * 1000.0, 3),
                 "samples": seen}
+
+
+def _uniform() -> float:
+    """A random number in (0, 1)."""
+    return random.random() or 0.5
 
 
 def _quantile(ordered: list[float], q: float) -> float:

@@ -36,12 +36,14 @@ import zenoh
 from . import keys, messages
 from .errors import ConfigError
 from .node import Bus
+from .pacing import Spacing
 from .queue import SampleQueue
 
 log = logging.getLogger(__name__)
 
 _JOINTS = zenoh.KeyExpr(keys.joints())
 MAX_KEYS = 10_000  # keys taken apart and remembered
+MAX_FRAMES = 1024  # joint lists of frames remembered (their selection)
 
 
 @dataclass(frozen=True)
@@ -76,10 +78,22 @@ def plan(patterns: Iterable[str], per_joint_keys: bool = False) -> Plan:
     return Plan(tuple(frames), tuple(direct), tuple(broad))
 
 
+class Selected(NamedTuple):
+    """The joints a sink's patterns take out of one robot's frames with one joint list:
+    their ``sources``, at ``indices`` in the frame (None: all of them, in order), and
+    their ``keys``. Made once per joint list and kept: a sink may key what it works out
+    for these frames by its identity."""
+
+    sources: tuple[keys.Key, ...]
+    indices: tuple[int, ...] | None
+    keys: frozenset[str]
+
+
 class Incoming(NamedTuple):
     """A checked message as a sink takes it: an event (``event`` set), a sample
-    (``t``, ``seq``, ``values``) or a frame (``t``, ``seq`` and the ``samples`` of
-    the joints a sink's patterns select); ``message`` is the payload, decoded."""
+    (``t``, ``seq``, ``values``) or a frame (``t``, ``seq``, the joints a sink's
+    patterns select in ``selected`` and their ``values``, in that order); ``message``
+    is the payload, decoded."""
 
     source: keys.Key
     message: dict[str, Any]
@@ -87,18 +101,29 @@ class Incoming(NamedTuple):
     t: float = 0.0
     seq: int = 0
     values: tuple[float, ...] = ()
-    samples: tuple[Incoming, ...] = ()
+    selected: Selected | None = None
+
+    @property
+    def samples(self) -> tuple[Incoming, ...]:
+        """A frame's selected joints, each as a sample (made at each call: a sink that
+        takes many frames reads ``selected`` and ``values`` instead)."""
+        if self.selected is None:
+            return ()
+        message, t, seq = self.message, self.t, self.seq
+        return tuple(Incoming(source, message, None, t, seq, (value,))
+                     for source, value in zip(self.selected.sources, self.values, strict=True))
 
     @property
     def joints(self) -> tuple[Incoming, ...]:
         """The samples it carries: a frame's, or itself."""
-        return self.samples if self.source.section == "frame" else (self,)
+        return self.samples if self.selected is not None else (self,)
 
 
 class Selection:
     """What a sink's ``patterns`` select, and what it receives, checked by the
     message layer's gate: ``incoming``/``take`` decode, ``accepts(key)`` tells
-    whether a joint of a frame is one the patterns select.
+    whether a joint of a frame is one the patterns select (what a robot's frames
+    with one joint list give is worked out once: ``selected``).
 
     >>> from sonibus.bus.codec import encode
     >>> selection = Selection(["pepper/joints/Head*"])
@@ -112,6 +137,8 @@ class Selection:
         self._selected = [zenoh.KeyExpr(keys.expr(p)) for p in patterns]
         self._accepted: dict[str, bool] = {}
         self._parsed: dict[str, keys.Key] = {}
+        self._frames: dict[tuple[str, tuple[str, ...]], Selected] = {}
+        self._last: dict[str, tuple[list[str], Selected]] = {}  # robot → its last names (a copy), their selection
 
     def incoming(self, key: str, payload: bytes) -> Incoming:
         """What came on ``key``, checked by the gate (a frame keeps the selected joints);
@@ -120,17 +147,36 @@ class Selection:
         message = self.gate.check(source, payload)  # (a key of no section is refused here)
         taken_as = messages.SECTIONS[source.section].taken_as
         if taken_as == "frame":
-            t, seq = message["t"], message["seq"]
-            prefix = f"{source.robot}/joints/"
-            samples = tuple(Incoming(self._key(prefix + name), message, None, t, seq, (float(value),))
-                            for name, value in zip(message["names"], message["v"], strict=True)
-                            if self.accepts(prefix + name))
-            return Incoming(source, message, None, t, seq, (), samples)
+            values = message["v"]
+            selected = self.selected(source.robot, message["names"])
+            if selected.indices is not None:
+                values = [values[i] for i in selected.indices]
+            return Incoming(source, message, None, message["t"], message["seq"], tuple(map(float, values)), selected)
         if taken_as == "sample":
             value = message["v"]
             values = tuple(map(float, value)) if isinstance(value, list) else (float(value),)
             return Incoming(source, message, None, message["t"], message["seq"], values)
         return Incoming(source, message, message)
+
+    def selected(self, robot: str, names: list[str]) -> Selected:
+        """The joints of ``robot``'s frames with ``names`` (checked by the gate) that the patterns select."""
+        last = self._last.get(robot)
+        if last is not None and last[0] == names:  # (a robot's names are the same every frame: one comparison)
+            return last[1]
+        signature = (robot, tuple(names))
+        found = self._frames.get(signature)
+        if found is None:
+            if len(self._frames) >= MAX_FRAMES:  # joint lists made up on the fly must not grow it for ever
+                self._frames.clear()
+            prefix = f"{robot}/joints/"
+            indices = tuple(i for i, name in enumerate(names) if self.accepts(prefix + name))
+            sources = tuple(self._key(prefix + names[i]) for i in indices)
+            found = self._frames[signature] = Selected(sources, None if len(indices) == len(names) else indices,
+                                                       frozenset(source.key for source in sources))
+        if len(self._last) >= MAX_FRAMES:  # (robot names come from the network)
+            self._last.clear()
+        self._last[robot] = (list(names), found)
+        return found
 
     def take(self, key: str, payload: bytes, count: Callable[[str, int], None],
              warn: Callable[[str, str], None]) -> Incoming | None:
@@ -144,7 +190,7 @@ class Selection:
             count("bad", 1)
             warn("bad", f"message on '{key}' refused: {exc}")
             return None
-        count("received", len(message.samples) or 1)
+        count("received", (len(message.values) if message.selected is not None else 0) or 1)
         return message
 
     def accepts(self, key: str) -> bool:
@@ -165,22 +211,84 @@ class Selection:
         return parsed
 
 
+class Held(NamedTuple):
+    """A message ``Streams`` held back for its turn (``bus/pacing.py``), as the queue
+    gives it back in place of its payload."""
+
+    message: Incoming
+
+
 class Streams(Selection):
-    """The subscriptions of ``patterns`` into ``queue`` (see ``plan``), and their ``Selection``."""
+    """The subscriptions of ``patterns`` into ``queue`` (see ``plan``), and their ``Selection``.
+
+    Skip, never burst (``pace``, on unless a sink must keep every frame, as the recorder):
+    frames and samples of one key that arrive faster than their own rate — the backlog of
+    a stalled link or process — never go out as a burst: after a stall they are spaced
+    by ``pacing.Spacing``. One goes, the newest of the rest waits in ``queue`` for its
+    turn, the others are skipped and counted (``skipped``). ``max_age_ms`` and the like
+    only drop what is old; this keeps what is young from arriving all at once.
+
+    ``direct``: a sink that takes frames where they arrive (on the subscription's callback
+    thread, guarding its state with a lock of its own) is given each frame there, as
+    ``direct(key, payload)``, instead of through ``queue`` (what it returns False for goes
+    into ``queue``); everything else still comes through ``queue``. It saves a thread
+    hand-off per frame (docs/performance.md, "The queue hop"), but a sink that falls
+    behind there holds up the Zenoh session's callbacks: only for what is quick."""
 
     def __init__(self, bus: Bus, patterns: Iterable[str], queue: SampleQueue, *,
-                 per_joint_keys: bool = False, stamped: bool = False, limits: messages.Limits | None = None) -> None:
+                 per_joint_keys: bool = False, stamped: bool = False, limits: messages.Limits | None = None,
+                 pace: bool = True, direct: Callable[[str, Any], bool] | None = None) -> None:
         super().__init__(patterns := tuple(patterns), limits or bus.limits)
+        if pace and stamped:
+            raise ValueError("stamped items cannot be paced: a held item would lose its stamp")
         self.queue = queue
         self.plan = plan(patterns, per_joint_keys)
+        self.spacing = Spacing() if pace else None
+        self._held: dict[str, Held] = {}  # key → the message waiting for its turn in the queue
+        self._held_lock = threading.Lock()
         if self.plan.frames:  # said once: what a user asked for is not the key subscribed to
             log.info("%s: %s served from whole frames on %s (per_joint_keys = true for publishers of "
                      "joint keys only)", bus.node, ", ".join(patterns), ", ".join(self.plan.frames))
-        self.subscribers = [bus.subscribe(k, queue=queue, stamped=stamped)[0] for k in self.plan.frames]
+        into = _Direct(queue, direct) if direct is not None else queue
+        self.subscribers = [bus.subscribe(k, queue=into, stamped=stamped)[0] for k in self.plan.frames]
         self.subscribers += [bus.subscribe(k, queue=queue, stamped=stamped, skip=_skip(k, keys.is_frame))[0]
                              for k in self.plan.keys]
         self.subscribers += [bus.subscribe(k, queue=queue, stamped=stamped, skip=_skip(k, _from_frames))[0]
                              for k in self.plan.broad]
+
+    def take(self, key: str, payload: bytes | Held, count: Callable[[str, int], None],
+             warn: Callable[[str, str], None]) -> Incoming | None:
+        """``Selection.take``, then the pacing: None for a message held for its turn
+        (the queue gives it back then, as a ``Held``) or skipped (counted)."""
+        if payload.__class__ is Held:
+            with self._held_lock:
+                newest = self._held.get(key) is payload
+                if newest:
+                    del self._held[key]
+            if not newest:  # (replaced while the queue gave it out: counted then)
+                return None
+            message = payload.message  # type: ignore[union-attr]
+        else:
+            message = super().take(key, payload, count, warn)  # type: ignore[arg-type]
+            if message is None or self.spacing is None or message.event is not None:
+                return message
+        turn = self.spacing.turn(key, message.t, message.seq,  # type: ignore[union-attr]
+                                 arrived=payload.__class__ is not Held)
+        if turn.go:
+            return message
+        if not turn.until:
+            count("skipped", 1)
+            return None
+        held = Held(message)
+        with self._held_lock:
+            replaced = self._held.pop(key, None)
+            if replaced is None and len(self._held) >= self.queue.maxlen:  # (keys come from the network)
+                del self._held[next(iter(self._held))]  # the one the queue drops too (held longest), counted there
+            self._held[key] = held
+        self.queue.hold(key, (key, held), turn.until)
+        if replaced is not None:
+            count("skipped", 1)
+        return None
 
     def each(self, stopping: threading.Event, count: Callable[[str, int], None],
              warn: Callable[[str, str], None]) -> Iterator[Incoming]:
@@ -196,6 +304,20 @@ class Streams(Selection):
         for subscriber in self.subscribers:
             subscriber.undeclare()
         self.subscribers.clear()
+
+
+class _Direct(SampleQueue):
+    """What a sink's frame subscriptions put into when it takes frames where they arrive:
+    ``take(key, payload)`` on the subscription's callback thread; what it gives back
+    (False) goes into the sink's ``queue``."""
+
+    def __init__(self, queue: SampleQueue, take: Callable[[str, Any], bool]) -> None:
+        super().__init__(1)  # (holds nothing itself)
+        self.queue, self.take = queue, take
+
+    def put(self, item: Any) -> None:
+        if not self.take(item[0], item[1]):
+            self.queue.put(item)
 
 
 def _from_frames(key: str) -> bool:

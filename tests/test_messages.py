@@ -157,6 +157,65 @@ def test_the_gate_accepts_a_frame_exactly_when_the_schema_does(frame):
     assert accepted == schema_ok, (frame, next(schemas.validator("frame").iter_errors(frame), None))
 
 
+@st.composite
+def streams(draw: st.DrawFn) -> list[tuple[str, dict]]:
+    """Frames of two robots whose joint names come from a few lists, good and bad."""
+    lists = draw(st.lists(st.lists(NAMES, max_size=4), min_size=1, max_size=3))
+    out = []
+    for _ in range(draw(st.integers(1, 8))):
+        names = list(draw(st.sampled_from(lists)))
+        values = draw(st.lists(st.one_of(st.floats(-1.0, 1.0), NUMBERS), min_size=len(names), max_size=len(names)))
+        out.append((draw(st.sampled_from(["pepper", "nao"])), now_frame(names=names, v=values)))
+    return out
+
+
+@given(streams())
+@settings(max_examples=300, deadline=None)
+def test_one_gate_over_many_frames_accepts_each_exactly_when_the_schema_does(sequence):
+    """A node's gate remembers each robot's last joint names and the lists it checked: what
+    it remembers never lets through a frame the schema refuses (nor refuses one it takes)."""
+    gate = Gate()
+    for robot, frame in sequence:
+        try:
+            gate.check(Key.parse(f"{robot}/frame"), pack(frame))
+            accepted = True
+        except BadMessage:
+            accepted = False
+        assert accepted == schemas.validator("frame").is_valid(frame), (robot, frame)
+
+
+MAX = messages.MAX_VALUE
+VALUES = st.lists(st.one_of(st.floats(), st.floats(-2 * MAX, 2 * MAX), st.sampled_from([MAX, -MAX, MAX / 2, 0.0, -0.0]),
+                            st.integers(-10**20, 10**20), st.booleans(), st.text(max_size=2), st.none(),
+                            st.just([0.5]), st.just({"v": 0.5})), max_size=40)
+
+
+@given(st.one_of(VALUES, st.lists(st.floats(-MAX, MAX), max_size=128)))
+@settings(max_examples=1000, deadline=None)
+def test_the_quick_check_of_values_lets_through_only_what_the_value_by_value_check_does(values):
+    """``plain_floats`` (two C loops) says yes only to values each of which is a finite
+    number within ±MAX_VALUE and no bool; ``numbers`` refuses exactly the others."""
+    one_by_one = all(isinstance(v, int | float) and not isinstance(v, bool) and -MAX <= v <= MAX for v in values)
+    if messages.plain_floats(values):
+        assert one_by_one, values
+    try:
+        messages.numbers(values, "v")
+        accepted = True
+    except BadMessage:
+        accepted = False
+    assert accepted == one_by_one, values
+
+
+def test_a_checked_frame_whose_names_are_changed_afterwards_lets_nothing_through():
+    """The gate remembers a robot's names from a copy: a node that changes the list of a
+    message it was given does not make the gate take a bad one for it."""
+    gate = Gate()
+    checked = gate.check(FRAME, pack(now_frame()))
+    checked["names"][1] = "a/b"
+    assert "joint name 'a/b' is not one plain key chunk" in refused(FRAME, now_frame(names=["HeadYaw", "a/b"]), gate)
+    assert gate.check(FRAME, pack(now_frame()))["names"] == ["HeadYaw", "HeadPitch"]
+
+
 @given(st.fixed_dictionaries({"t": TIMES, "seq": SEQS, "v": NUMBERS},
                              optional={"cmd": NUMBERS, "a b": NUMBERS, "temp": NUMBERS}))
 @settings(max_examples=300, deadline=None)

@@ -22,7 +22,7 @@ from sonibus.adapters.osc import OscSink, OscSinkConfig
 from sonibus.adapters.sim.naoqi import FakeNaoqi, FakeNaoqiConfig
 from sonibus.bus import Adapter, decode, health, keys
 from sonibus.bus.queue import SampleQueue
-from sonibus.bus.stats import BASE, Counters
+from sonibus.bus.stats import BASE, RESERVOIR, Counters, Latencies
 from sonibus.bus.streams import Streams
 
 from .conftest import free_port, wait_for
@@ -163,6 +163,41 @@ def test_counters_are_exact_when_counted_from_many_threads():
         sys.setswitchinterval(interval)
     assert seen == sorted(seen)
     assert dict(counters) == {"sent": threads * per_thread, "own0": threads * per_thread, "own1": threads * per_thread}
+
+
+def test_a_tally_counted_under_its_owners_lock_reads_with_the_counters():
+    counters = Counters(["sent", "bad"])
+    counters.add("sent", 2)
+    tally = counters.tally(["sent", "received"])
+    owner = threading.Lock()  # (what the tally relies on: one writer at a time)
+    threads, per_thread = 4, 5_000
+
+    def work() -> None:
+        for _ in range(per_thread):
+            with owner:
+                tally["sent"] += 3
+                tally["received"] += 1
+
+    workers = [threading.Thread(target=work) for _ in range(threads)]
+    for worker in workers:
+        worker.start()
+    for worker in workers:
+        worker.join()
+    assert dict(counters) == {"sent": 2 + 3 * threads * per_thread, "bad": 0, "received": threads * per_thread}
+
+
+def test_the_latencies_kept_are_a_uniform_sample_of_every_one_seen():
+    """Each second keeps RESERVOIR latencies of however many were seen, each with the same
+    chance: over many seconds of 0..9,999 ms (in s), every tenth of the range is kept as often."""
+    latencies, tenths, seconds, seen = Latencies(), [0] * 10, 100, 10_000
+    for _ in range(seconds):
+        for ms in range(seen):
+            latencies.add(ms / 1000)
+        for kept in latencies._kept:  # (the sample itself: take() gives its p50 and p99)
+            tenths[int(kept)] += 1
+        assert latencies.take()["samples"] == seen
+    expected = seconds * RESERVOIR / 10  # 2,560 each; the standard deviation is about 48
+    assert all(abs(n - expected) < 0.1 * expected for n in tenths), tenths
 
 
 def test_an_adapter_counts_through_count_and_reads_like_a_dict():

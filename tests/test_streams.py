@@ -4,11 +4,12 @@
 from __future__ import annotations
 
 import threading
+import time
 
 import pytest
 
 from sonibus import schemas
-from sonibus.bus import codec
+from sonibus.bus import codec, streams
 from sonibus.bus.queue import SampleQueue
 from sonibus.bus.streams import Incoming, Plan, Selection, Streams, plan
 
@@ -125,3 +126,61 @@ def test_a_payload_over_the_size_limit_is_queued_as_its_size_only_and_refused_by
             codec.decode(items["pepper/frame"])
     finally:
         subscriber.undeclare()
+
+
+def test_each_frame_gets_the_selection_of_its_own_joint_list():
+    """A sink remembers what it takes of a robot's last joint list: a robot whose list changes
+    (or a node that changes a message's list afterwards) still gets each frame's own joints."""
+    selection = Selection(["*/joints/Head*"])
+    lists = [["HeadYaw", "LHand", "HeadPitch"], ["LHand", "HeadPitch"], ["HeadYaw", "LHand", "HeadPitch"]]
+    for robot in ("pepper", "nao"):
+        for seq, names in enumerate(lists):
+            values = [float(i) for i in range(len(names))]
+            frame = codec.encode({"t": 1.5, "seq": seq, "names": names, "v": values})
+            taken = selection.incoming(f"{robot}/frame", frame)
+            assert [(s.source.key, s.values) for s in taken.samples] == [
+                (f"{robot}/joints/{n}", (v,)) for n, v in zip(names, values, strict=True) if n.startswith("Head")]
+            taken.message["names"][:] = lists[(seq + 1) % len(lists)]  # (the one remembered is a copy)
+
+
+def test_made_up_robots_and_joint_lists_do_not_grow_a_sinks_tables():
+    """Robot names and joint lists come from the network: the selections a sink keeps
+    per joint list and per robot, and its gate's joint lists, stay within their bounds
+    however many are made up (the fuzz show sends frames of made-up lists and robots)."""
+    selection = Selection(["*/joints/*"])
+    extra = streams.MAX_FRAMES + 200
+    for n in range(extra):
+        names = ["HeadYaw", f"Made{n}"]
+        taken = selection.incoming(f"robot{n}/frame", codec.encode({"t": 1.5, "seq": n, "names": names,
+                                                                   "v": [0.1, 0.2]}))
+        assert [s.source.key for s in taken.samples] == [f"robot{n}/joints/HeadYaw", f"robot{n}/joints/Made{n}"]
+    assert len(selection._frames) <= streams.MAX_FRAMES and len(selection._last) <= streams.MAX_FRAMES
+    assert len(selection.gate._last_names) <= selection.gate.MAX_KNOWN
+    assert len(selection.gate._known_names) <= selection.gate.MAX_KNOWN
+    assert len(selection._parsed) <= streams.MAX_KEYS
+
+
+def test_what_waits_for_its_turn_is_bounded_by_the_queue(net):
+    """Samples held for their turn after a stall (skip, never burst) are kept by key, and keys
+    come from the network: no more are kept than the queue holds, the one held longest
+    going first in both (counted ``dropped`` by the queue)."""
+    queue = SampleQueue(4)
+    paced = Streams(net.bus("held"), ["*/derived/**"], queue)
+    counted: dict[str, int] = {}
+
+    def take(key: str, seq: int, t: float) -> None:
+        paced.take(key, codec.encode({"t": t, "seq": seq, "v": 0.5}), lambda kind, n: counted.update(
+            {kind: counted.get(kind, 0) + n}), lambda kind, text: None)
+    keys = [f"robot{n}/derived/qom/Body" for n in range(10)]
+    t0 = time.time() - 1.0
+    for seq in range(5):  # each key's period learnt: 20 ms
+        for key in keys:
+            take(key, seq, t0 + 0.02 * seq)
+    time.sleep(0.3)  # a stall: longer than pacing.STALL_S
+    for key in keys:
+        take(key, 5, t0 + 0.1)  # goes
+        take(key, 6, t0 + 0.12)  # held for its turn
+    assert len(paced._held) <= queue.maxlen and len(queue) <= queue.maxlen
+    assert queue.dropped == len(keys) - queue.maxlen
+    assert set(paced._held) == set(keys[-queue.maxlen:])
+    paced.undeclare()

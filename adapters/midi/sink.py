@@ -66,7 +66,7 @@ class MidiSink(Adapter):
     """Robots as MIDI: joints on controllers, behaviors and speech as notes (for a DAW or a synth)."""
 
     Config = MidiSinkConfig
-    counters = ("notes", "held", "waiting_info", "unmapped", "send_errors")
+    counters = ("notes", "held", "waiting_info", "unmapped", "send_errors", "skipped")
 
     def _start(self) -> None:
         cfg: MidiSinkConfig = self.config

@@ -5,11 +5,18 @@ target; it holds no sockets and no timing, so it is easy to test. What OSC
 cannot carry raises ``encode.EncodeError``; a frame leaves out just the
 messages that cannot be encoded and returns them beside the rest, so one bad
 value never costs a target its whole bundle.
+
+For a robot's frames, which bring the same joints again and again, a profile
+also works out their datagrams once (``compile``): the same bytes as ``sample``
+of each joint or ``frame``, from precomputed addresses and one ``struct.pack``
+per message (``tests/osc/test_frame_bytes.py`` compares them for every option).
 """
 
 from __future__ import annotations
 
+import struct
 from collections.abc import Callable, Iterable, Sequence
+from operator import itemgetter
 from typing import Any, TypeVar
 
 from sonibus.bus.keys import Key
@@ -53,6 +60,47 @@ def event_args(kind: str, fields: dict[str, Any]) -> list[encode.Arg]:
     return out
 
 
+SEQ_MASK = 0x7FFFFFFF  # seq as an OSC int32: its low 31 bits
+
+
+class FrameBytes:
+    """One target's datagrams for a robot's frames with one list of joints, worked out
+    once: ``render(t, seq, values, interval)`` gives the plain messages (one per joint),
+    the bundle, or PepperOSC's loop, byte for byte as the profile does it one joint at
+    a time. Raises what ``struct`` raises for a value OSC cannot carry (the caller then
+    takes the general path, which leaves out just that message)."""
+
+    __slots__ = ("_extra", "_last", "_latency_s", "_pack", "_prefixes", "_shape")
+
+    def __init__(self, prefixes: tuple[bytes, ...], pack: Callable[..., bytes], extra: tuple[str, ...],
+                 shape: str, latency_s: float = 0.0, last: bytes = b"") -> None:
+        self._prefixes = prefixes  # per joint: its address and type tags (with its size first, in a bundle)
+        self._pack = pack          # the arguments of one message
+        # what follows the value, picked out of (t, seq as int32) in the order of extra ("t", "seq")
+        picks = [0 if e == "t" else 1 for e in extra]
+        self._extra = (itemgetter(*picks) if len(picks) > 1 else lambda both, i=picks[0]: (both[i],)) \
+            if picks else None
+        self._shape = shape        # "messages", "bundle" or "pepperosc"
+        self._latency_s = latency_s
+        self._last = last          # PepperOSC: the prefix of its /latency message
+
+    def render(self, t: float, seq: int, values: Sequence[float], interval: float = 0.0) -> list[bytes]:
+        pack, pairs = self._pack, zip(self._prefixes, values, strict=True)
+        tail = self._extra((t, seq & SEQ_MASK)) if self._extra else ()
+        if len(tail) == 2:  # (t and seq: named, as a call with *tail costs a third of the frame)
+            a, b = tail
+            out = [prefix + pack(v, a, b) for prefix, v in pairs]
+        elif tail:
+            out = [prefix + pack(v, *tail) for prefix, v in pairs]
+        else:
+            out = [prefix + pack(v) for prefix, v in pairs]
+        if self._shape == "bundle":
+            return [encode.bundle_head(encode.timetag(t + self._latency_s)) + b"".join(out)]
+        if self._shape == "pepperosc":
+            out.append(self._last + pack(interval))
+        return out
+
+
 class SonibusProfile:
     """Addresses from the target's templates; one value (or a few) per message."""
 
@@ -68,6 +116,21 @@ class SonibusProfile:
                 robot=source.robot, section=source.section, joint=source.name, name=source.name,
                 feature=source.feature, key=source.key)
         return found
+
+    def compile(self, sources: Sequence[Key]) -> FrameBytes | None:
+        """The datagrams of frames of these joints, worked out once (None: an address OSC cannot
+        carry; the general path says which)."""
+        tags = "f" + "".join("d" if e == "t" else "i" for e in self.target.extra)
+        try:
+            prefixes = tuple(encode.prefix(self.address(source), tags) for source in sources)
+        except ValueError:
+            return None
+        packer = encode.packer(tags)
+        if not self.target.bundle:
+            return FrameBytes(prefixes, packer.pack, self.target.extra, "messages")
+        sized = tuple(struct.pack(">i", len(prefix) + packer.size) + prefix for prefix in prefixes)
+        # (the same sum as ``frame``'s, so the same timetag to the last bit)
+        return FrameBytes(sized, packer.pack, self.target.extra, "bundle", self.target.latency_ms / 1000.0)
 
     def sample(self, source: Key, values: Sequence[float], t: float, seq: int) -> bytes:
         if not self.target.extra:
@@ -100,6 +163,18 @@ class PepperOscProfile:
 
     def sample(self, source: Key, values: Sequence[float], t: float, seq: int) -> bytes | None:
         return None  # PepperOSC sent whole loops only
+
+    def compile(self, sources: Sequence[Key]) -> FrameBytes | None:
+        """The loop of frames of these joints, worked out once (None: not joints only)."""
+        if any(source.section != "joints" for source in sources):
+            return None
+        try:
+            prefixes = tuple(encode.prefix("/pepperdata", "ssf") + encode.padded(f"/{source.name}")
+                             + encode.padded("/PositionSensor") for source in sources)
+        except ValueError:
+            return None
+        last = encode.prefix("/pepperdata", "sf") + encode.padded("/latency")
+        return FrameBytes(prefixes, encode.packer("f").pack, (), "pepperosc", last=last)
 
     def frame(self, robot: str, t: float, seq: int, samples: list[tuple[Key, Sequence[float]]],
               interval: float) -> Rendered:

@@ -26,5 +26,10 @@ def ranges(info: dict[str, Any]) -> dict[str, tuple[float, float]]:
 
 def normalized(values: Sequence[float], span: tuple[float, float]) -> tuple[float, ...]:
     """``values`` as fractions of ``span``, clipped to 0..1 (0 for an empty span)."""
+    return tuple(fraction(v, span) for v in values)
+
+
+def fraction(value: float, span: tuple[float, float]) -> float:
+    """One value as a fraction of ``span``, clipped to 0..1 (0 for an empty span)."""
     low, high = span
-    return tuple(min(1.0, max(0.0, (v - low) / (high - low))) if high > low else 0.0 for v in values)
+    return min(1.0, max(0.0, (value - low) / (high - low))) if high > low else 0.0

@@ -5,9 +5,11 @@ from __future__ import annotations
 import logging
 import math
 import socket
+import struct
+import threading
 import time
 from collections.abc import Callable, Sequence
-from typing import Any
+from typing import Any, NamedTuple
 
 from sonibus.bus import lateness, presence
 from sonibus.bus.adapter import Adapter
@@ -16,18 +18,29 @@ from sonibus.bus.frames import Frame, FrameAssembler
 from sonibus.bus.info import InfoRequests
 from sonibus.bus.keys import Key
 from sonibus.bus.queue import SampleQueue
-from sonibus.bus.streams import Streams
+from sonibus.bus.streams import Incoming, Selected, Streams
 
 from . import scale
 from .config import OscSinkConfig, Target, parse_target
 from .encode import EncodeError
-from .profiles import PROFILES, Rendered
+from .profiles import PROFILES, FrameBytes, Rendered
 
 log = logging.getLogger(__name__)
 
 INFO_RETRY_S = 2.0
 MAX_ROBOTS = 1024  # robots whose info (ranges) is kept: names made up on the bus must not grow it
 UNDESCRIBED_WAIT_S = 3.0  # a derived value no info describes is held back this long at most, then sent raw
+HEARD_EVERY_S = 0.5       # how often a robot's data is told to presence (its silence is warned of after 3 s)
+MAX_PLANS = 1024          # frame plans kept per target (joint lists come from the network)
+_REFUSED = (struct.error, OverflowError, ValueError)  # what packing a value OSC cannot carry raises
+
+
+class _Plan(NamedTuple):
+    """How one target sends frames of one joint list: their datagrams worked out once,
+    and each joint's range (``values = "normalized"``)."""
+
+    datagrams: FrameBytes
+    spans: tuple[tuple[float, float] | None, ...] | None
 
 
 class _Link:
@@ -44,6 +57,10 @@ class _Link:
         self.held: dict[str, Any] = {}            # slot → the newest thing waiting for its turn
         self.last_frame_t: dict[str, float] = {}  # robot → t of the last frame sent
         self.sent = 0                             # datagrams sent to it
+        # Frames go out from their precomputed bytes unless a rate cap or a filter needs each value.
+        self.direct = not self.min_interval and not self.filtering
+        # id(Selected) → it (kept, so its id is not reused) and its plan (None: the general path)
+        self.plans: dict[int, tuple[Selected, _Plan | None]] = {}
 
     def changed(self, key: str, values: Sequence[float]) -> bool:
         """Whether ``values`` pass the on-change/deadband filter (and remember them if so)."""
@@ -64,13 +81,14 @@ class OscSink(Adapter):
     """Forwards joints, derived values and events to OSC receivers (Pd, Max, SuperCollider) over UDP."""
 
     Config = OscSinkConfig
-    counters = ("unencodable", "late", "waiting_info", "send_errors")
+    counters = ("unencodable", "late", "waiting_info", "send_errors", "skipped")
 
     def _start(self) -> None:
         cfg: OscSinkConfig = self.config
         self._ranges: dict[str, dict[str, tuple[float, float]]] = {}
         self._described: dict[str, set[str]] = {}  # robot → derived values its info describes (ranged or not)
         self._first_seen: dict[tuple[str, str], float] = {}  # (robot, derived value) → when it first came
+        self._heard: dict[str, float] = {}  # robot → when its data was last told to presence
         self._info = InfoRequests(self.bus, self._take_info, lambda robot, text: self.warn("info", text),
                                   INFO_RETRY_S)
         self._links = [_Link(t, _resolve(t.to)) for t in cfg.resolved_targets()]
@@ -79,13 +97,18 @@ class OscSink(Adapter):
         self._frame_links = [link for link in self._links if link.target.framed]
         self._assembler = FrameAssembler()
         self.stats.follow("late", lambda: self._assembler.late)
+        self._tally = self.stats.tally(("received", "sent"))  # (counted under self._state: no lock of their own)
         self._socket = self.own(socket.socket(socket.AF_INET, socket.SOCK_DGRAM))
         self._queue = self.own(SampleQueue(cfg.queue))
-        self._streams = Streams(self.bus, cfg.subscribe, self._queue, per_joint_keys=cfg.per_joint_keys)
         self._presence = presence.connection_events(self.bus, self._queue, cfg.subscribe,
                                                     self.capped)  # a robot's loss, return
         lateness.follow(self.bus)  # (where each robot's node runs: a stale sample's warning names the likely cause)
-        self.spawn(self._forward, "forward")  # before anything else is declared: nothing waits in the queue
+        # Frames are taken where they arrive (a thread hand-off less: docs/performance.md), the rest
+        # from the queue by the forward worker; one lock between them guards the sink's state.
+        self._state = threading.Lock()
+        self._streams = Streams(self.bus, cfg.subscribe, self._queue, per_joint_keys=cfg.per_joint_keys,
+                                direct=self._direct)
+        self.spawn(self._forward, "forward")
         self.own(self._streams)
         self.own(self._presence)
         self.spawn(lambda: self._presence.watch(self.stopping), "silence")
@@ -107,10 +130,24 @@ class OscSink(Adapter):
     def _forward(self) -> None:
         while not self.stopping.is_set():
             items = self._queue.drain(timeout=self._wait())
-            now = time.monotonic()
-            for item in items:
-                self._take(*item, now)
-            self._tick(now)
+            with self._state:
+                now = time.monotonic()  # (once the lock is had: a frame taken where it arrived may have held it)
+                for item in items:
+                    self._take(*item, now)
+                self._tick(now)
+
+    def _direct(self, key: str, payload: Any) -> bool:
+        """A frame, on its subscription's callback thread (``Streams``' ``direct``); into the
+        queue instead (False) while the forward worker holds the state: Zenoh's callback
+        threads serve every subscription and query of the session and must never wait on
+        a sink (a batch of thousands of fuzzed samples held them for seconds)."""
+        if not self._state.acquire(blocking=False):
+            return False
+        try:
+            self._take(key, payload, time.monotonic())
+        finally:
+            self._state.release()
+        return True
 
     def _wait(self) -> float:
         soonest = [0.2]
@@ -134,15 +171,26 @@ class OscSink(Adapter):
                 else:
                     self._sample_to(link, *held, now)
 
-    def _take(self, key: str, payload: bytes, now: float) -> None:
-        message = self._streams.take(key, payload, self.count, self.warn)
+    def _counted(self, kind: str, n: int = 1) -> None:
+        """``count``, under ``_state``: what every frame counts goes to the tally."""
+        if kind == "received":
+            self._tally[kind] += n
+        else:
+            self.count(kind, n)
+
+    def _take(self, key: str, payload: Any, now: float) -> None:
+        message = self._streams.take(key, payload, self._counted, self.warn)
         if message is None:
             return
-        if message.source.section in ("frame", "joints"):
-            self._presence.heard_from(message.source.robot)
+        source = message.source
+        if source.section in ("frame", "joints") and now - self._heard.get(source.robot, -math.inf) >= HEARD_EVERY_S:
+            if len(self._heard) >= 4096:  # (robot names come from the network)
+                self._heard.clear()
+            self._heard[source.robot] = now
+            self._presence.heard_from(source.robot)
         if message.event is not None:
-            if self._presence.passes(message.source.robot, message.event):  # (a repeated connection state: not)
-                self._event(message.source, message.event)
+            if self._presence.passes(source.robot, message.event):  # (a repeated connection state: not)
+                self._event(source, message.event)
             return
         max_age = self.config.max_age_ms / 1000.0
         age = time.time() - message.t
@@ -151,19 +199,92 @@ class OscSink(Adapter):
             self.warn("stale", f"samples older than max_age_ms = {self.config.max_age_ms:g} dropped ('{key}' was "
                                f"{age * 1000:.0f} ms old: {lateness.why_late(self.bus, message.source.robot)})")
             return
-        samples = message.joints
-        if not samples:
-            return
+        if message.selected is None:
+            self._samples((message,), now)
+        elif message.values:
+            self._frame(message, now)
+        self.record_latency(time.time() - message.t)  # once a message, however many targets
+
+    def _samples(self, samples: Sequence[Incoming], now: float) -> None:
+        """The general path: samples (joint keys, derived values), one target and one value at a time."""
         for link in self._sample_links:
             for sample in samples:
                 self._sample_to(link, sample.source, sample.values, sample.t, sample.seq, now)
         if self._frame_links:
             # Joints and derived values of one seq go out in one bundle, however they came.
-            frames = self._assembler.extend(message.source.robot, message.seq, message.t,
+            first = samples[0]
+            frames = self._assembler.extend(first.source.robot, first.seq, first.t,
                                             {s.source.key: (s.source, s.values) for s in samples})
             for frame in frames:
                 self._send_frame(frame, now)
-        self.record_latency(time.time() - message.t)  # once a message, however many targets
+
+    def _frame(self, message: Incoming, now: float) -> None:
+        """A robot's frame: each target's datagrams from its plan for these joints, where it
+        has one; the general path (``_samples``) for the others."""
+        selected = message.selected
+        assert selected is not None
+        slow = [link for link in self._sample_links if not self._planned(link, message, now)]
+        for link in slow:
+            for sample in message.samples:
+                self._sample_to(link, sample.source, sample.values, sample.t, sample.seq, now)
+        if not self._frame_links:
+            return
+        robot = message.source.robot
+        if not self._assembler.whole(robot, message.seq, message.t, selected.keys):
+            items = {s.key: (s, (v,)) for s, v in zip(selected.sources, message.values, strict=True)}
+            for frame in self._assembler.extend(robot, message.seq, message.t, items):
+                self._send_frame(frame, now)
+            return
+        frame = None
+        for link in self._frame_links:
+            if not self._planned(link, message, now):
+                frame = frame or Frame(robot, message.seq, message.t, {s.key: (s, (v,)) for s, v in zip(
+                    selected.sources, message.values, strict=True)})
+                self._frame_link(link, frame, now)
+
+    def _planned(self, link: _Link, message: Incoming, now: float) -> bool:
+        """Send ``message`` (a frame) to ``link`` from its plan; False when it takes the general
+        path instead: a rate cap or a filter, ranges not known yet, a value OSC cannot carry."""
+        if not link.direct:
+            return False
+        selected = message.selected
+        entry = link.plans.get(id(selected))
+        if entry is None or entry[0] is not selected:
+            if len(link.plans) >= MAX_PLANS:
+                link.plans.clear()
+            entry = link.plans[id(selected)] = (selected, self._plan(link, selected, message.source.robot))  # type: ignore[arg-type]
+        found = entry[1]
+        if found is None:
+            return False
+        values: Sequence[float] = message.values
+        if found.spans is not None:
+            fraction = scale.fraction
+            values = [v if span is None else fraction(v, span) for v, span in zip(values, found.spans, strict=True)]
+        robot, t = message.source.robot, message.t
+        framed = link.target.framed
+        previous = link.last_frame_t.get(robot) if framed else None
+        try:
+            datagrams = found.datagrams.render(t, message.seq, values,
+                                               t - previous if previous is not None and t > previous else 0.0)
+        except _REFUSED:  # (the general path leaves out just what OSC cannot carry, and says so)
+            return False
+        if framed:
+            link.last_sent[robot] = now
+            link.last_frame_t[robot] = t
+        self._emit(link, datagrams)
+        return True
+
+    def _plan(self, link: _Link, selected: Selected, robot: str) -> _Plan | None:
+        """``link``'s plan for frames of ``selected`` joints (None: the general path, which
+        waits for the robot's ranges, or says what OSC cannot carry)."""
+        spans = None
+        if link.target.values != "raw":
+            ranges = self._ranges.get(robot)
+            if ranges is None:
+                return None
+            spans = tuple(ranges.get(source.name) for source in selected.sources)
+        datagrams = link.profile.compile(selected.sources)
+        return None if datagrams is None else _Plan(datagrams, spans)
 
     # -- per target ------------------------------------------------------------------
 
@@ -182,10 +303,13 @@ class OscSink(Adapter):
 
     def _send_frame(self, frame: Frame, now: float) -> None:
         for link in self._frame_links:
-            if link.turn(frame.robot, now):
-                self._frame_to(link, frame, now)
-            else:
-                link.held[frame.robot] = frame
+            self._frame_link(link, frame, now)
+
+    def _frame_link(self, link: _Link, frame: Frame, now: float) -> None:
+        if link.turn(frame.robot, now):
+            self._frame_to(link, frame, now)
+        else:
+            link.held[frame.robot] = frame
 
     def _frame_to(self, link: _Link, frame: Frame, now: float) -> None:
         samples = []
@@ -219,14 +343,21 @@ class OscSink(Adapter):
             rendered, dropped = rendered
             if dropped:
                 self._unencodable(link, dropped)
-        for datagram in [rendered] if isinstance(rendered, bytes) else rendered or ():
+        self._emit(link, [rendered] if isinstance(rendered, bytes) else rendered or ())
+
+    def _emit(self, link: _Link, datagrams: Sequence[bytes]) -> None:
+        """Send ``datagrams`` to ``link``'s target, counted once."""
+        sendto, destination, sent = self._socket.sendto, link.destination, 0
+        for datagram in datagrams:
             try:
-                self._socket.sendto(datagram, link.destination)
-                link.sent += 1
-                self.count("sent")
+                sendto(datagram, destination)
+                sent += 1
             except OSError as exc:
                 self.count("send_errors")
                 self.warn("send", f"cannot send to {link.target.to}: {exc.strerror or exc}")
+        if sent:
+            link.sent += sent
+            self._tally["sent"] += sent
 
     def _unencodable(self, link: _Link, dropped: list[EncodeError]) -> None:
         self.count("unencodable", len(dropped))
@@ -269,11 +400,15 @@ class OscSink(Adapter):
         except (KeyError, TypeError, ValueError) as exc:
             self.warn("info", f"{robot}/info unusable: {exc}")
             return
-        if robot not in self._ranges and len(self._ranges) >= MAX_ROBOTS:
-            self.capped(f"robot '{robot}': its info not kept, already {MAX_ROBOTS} robots' (its values go out raw)")
-            return
-        self._ranges[robot] = ranges
-        self._described[robot] = {str(d.get("name")) for d in info.get("derived", []) if isinstance(d, dict)}
+        with self._state:
+            if robot not in self._ranges and len(self._ranges) >= MAX_ROBOTS:
+                self.capped(f"robot '{robot}': its info not kept, already {MAX_ROBOTS} robots' (its values go out "
+                            "raw)")
+                return
+            self._ranges[robot] = ranges
+            self._described[robot] = {str(d.get("name")) for d in info.get("derived", []) if isinstance(d, dict)}
+            for link in self._links:  # (worked out again with these ranges)
+                link.plans = {}
 
 
 def _resolve(target: str) -> tuple[str, int]:

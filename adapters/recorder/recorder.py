@@ -164,7 +164,7 @@ class Recorder(Adapter):
         self._info = InfoRequests(self.bus, self._take_info, lambda robot, text: log.warning("%s", text))
         try:
             self._streams = Streams(self.bus, cfg.subscribe, self._queue, per_joint_keys=cfg.per_joint_keys,
-                                    stamped=True)
+                                    stamped=True, pace=False)  # a recording keeps every frame, bursts too
         except BaseException:
             self._series.close(dict(self.stats))
             raise

@@ -212,8 +212,10 @@ def test_frames_too_old_to_matter_are_skipped_not_computed_late(net, owner):
     pose = PEPPER.posture("StandInit")
     last = pump(fake, lambda k: pose, lambda: features.stats["stale"] >= 20 and features.stats["frames"] == 0,
                 "old frames skipped")  # pump stamps them T0 + ..., years old
-    now = time.time()
-    fresh = [fake.frame(now + 0.01 * k, pose, seq=last + k) for k in (1, 2)]
+    fresh = []
+    for k in (1, 2):  # one after the other: two frames 10 ms apart in t put at once are a burst, the newest goes
+        fresh.append(fake.frame(time.time(), pose, seq=last + k))
+        wait_for(lambda n=k: features.stats["frames"] == n, what=f"fresh frame {k} computed")
     wait_for(lambda: any(m["seq"] == fresh[1] for _, m in list(derived)), what="the fresh frames computed")
     subscriber.undeclare()
     assert features.stats["frames"] == 2 and {m["seq"] for _, m in derived} <= set(fresh)

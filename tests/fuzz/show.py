@@ -159,19 +159,47 @@ def _osc_message(address: str) -> bytes:
     return pad(address.encode()) + pad(b",")
 
 
+_MIDI_CHILD = r"""
+import json, sys, time, rtmidi
+midi = rtmidi.MidiIn(rtmidi.API_UNIX_JACK, "fuzz-reader")
+names = midi.get_ports()
+wanted = [i for i, name in enumerate(names) if sys.argv[1] in name]
+if not wanted:
+    print(json.dumps(names), flush=True)
+    raise SystemExit(0)
+midi.set_callback(lambda event, _: print(time.monotonic(), event[0][0], flush=True))
+midi.open_port(wanted[0], "in")
+print("ready", flush=True)
+sys.stdin.read()  # (until the show closes it)
+midi.close_port()
+midi.delete()
+"""
+
+
 class MidiReader:
-    """A JACK MIDI input connected to ``port``; each message with ``time.monotonic()``."""
+    """A JACK MIDI input connected to ``port``; each message's status byte with its
+    ``time.monotonic()`` (one clock for every process of the machine). python-rtmidi's JACK
+    input runs in a process of its own: its callback thread crashed the process that held it
+    (SIGSEGV in _rtmidi: a soak's, and this test's worker, which took the whole run down)."""
 
     def __init__(self, port: str) -> None:
-        self.midi = rtmidi.MidiIn(rtmidi.API_UNIX_JACK, "fuzz-reader")
-        names = self.midi.get_ports()
-        wanted = [i for i, n in enumerate(names) if port in n]
-        if not wanted:
-            self.midi.delete()
-            raise ShowError(f"no JACK MIDI port '{port}' among {names}")
+        self.child = subprocess.Popen([sys.executable, "-c", _MIDI_CHILD, port], stdin=subprocess.PIPE,
+                                      stdout=subprocess.PIPE, text=True)
+        assert self.child.stdout is not None
+        said = self.child.stdout.readline().strip()
+        if said != "ready":
+            self.close()
+            raise ShowError(f"no JACK MIDI port '{port}' among {said or '(the reader died)'}")
         self.messages: list[tuple[float, list[int]]] = []
-        self.midi.set_callback(lambda event, _: self.messages.append((time.monotonic(), event[0])))
-        self.midi.open_port(wanted[0], "in")
+        self._reader = threading.Thread(target=self._read, name="midi-reader", daemon=True)
+        self._reader.start()
+
+    def _read(self) -> None:
+        assert self.child.stdout is not None
+        for line in self.child.stdout:
+            read, _, status = line.partition(" ")
+            with contextlib.suppress(ValueError):
+                self.messages.append((float(read), [int(status)]))
 
     def count(self, since: float, status_high: int | None = None) -> int:
         """Messages read at or after ``since``; ``status_high`` 0xB0 (CC) or 0xE0 (pitch bend) selects."""
@@ -184,8 +212,13 @@ class MidiReader:
         return n
 
     def close(self) -> None:
-        self.midi.close_port()
-        self.midi.delete()
+        with contextlib.suppress(OSError, ValueError):
+            self.child.stdin.close()  # type: ignore[union-attr]
+        try:
+            self.child.wait(3)
+        except subprocess.TimeoutExpired:
+            self.child.kill()
+            self.child.wait()
 
 
 class Rss:

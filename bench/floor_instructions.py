@@ -1,0 +1,174 @@
+"""Instructions per frame (issue 27): the OSC sink's frame path beside ``floor.py``'s
+minimal sink, counted by ``valgrind --tool=callgrind``: deterministic, whatever the
+load of the machine (user space only: the kernel's part of ``sendto`` is not in them).
+
+One process under callgrind, which dumps its counts (and starts afresh) whenever
+``os.getppid`` is entered, called between contenders; only the main thread's counts
+are kept (the sink's workers and Zenoh's threads idle meanwhile). Each contender
+takes the same msgpack frames (``{t, seq, names, v}`` of ``robot0/frame``), one
+call a frame, after a warm-up of as many:
+
+- ``decode``: ``msgpack.unpackb`` alone;
+- ``gate``: ``Gate.check`` (decode and check, as every sink does);
+- ``floor``: ``floor.py``'s sink callback (unpack, the precomputed datagrams, sent);
+- ``sonibus``: an ``osc`` node (``extra = ["t", "seq"]``, ``bundle`` as asked) started
+  on a real Zenoh session, given each frame as its frame subscription's callback does
+  (``Streams``' ``direct``); its frames' ``t`` are 2 s apart, more than any period the
+  pacing learns, so it never holds one back (under valgrind the main thread can wait
+  a second for its turn: a stall to the pacing), and ``max_age_ms = 0`` (they are old).
+
+    .venv/bin/python bench/floor_instructions.py [--joints 17 128] [--frames 2000]
+
+Writes bench/results/floor_instructions.json and prints a table.
+"""
+
+from __future__ import annotations
+
+import argparse
+import gc
+import os
+import re
+import socket
+import subprocess
+import sys
+import tempfile
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+from common import write
+from floor import Datagrams
+
+CONTENDERS = ("decode", "gate", "floor", "sonibus")
+SPACING_S = 2.0  # between the frames' t: over pacing.MAX_PERIOD_S, so nothing is paced however slowly valgrind runs
+
+
+def frames(joints: int, n: int) -> list[bytes]:
+    """``n`` frames of ``joints`` values, their ``t`` in the past and ``SPACING_S`` apart."""
+    import math
+
+    import msgpack
+    names = [f"J{j}" for j in range(joints)]
+    t0 = time.time() - n * SPACING_S - 10
+    return [msgpack.packb({"t": t0 + i * SPACING_S, "seq": i, "names": names,
+                           "v": [math.sin(i + 0.1 * j) for j in range(joints)]}) for i in range(n)]
+
+
+def contenders(joints: int, bundle: bool, port: int) -> tuple[dict[str, Callable[[bytes], Any]], Callable[[], Any]]:
+    """Each contender as a call on one payload, and what stops the sonibus one."""
+    import msgpack
+
+    from sonibus.adapters.osc.config import OscSinkConfig
+    from sonibus.adapters.osc.sink import OscSink
+    from sonibus.bus.keys import Key
+    from sonibus.bus.messages import Gate
+    from sonibus.bus.node import Bus
+    from sonibus.bus.session import BusConfig, open_session
+
+    key, destination = "robot0/frame", ("127.0.0.1", port)
+    sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    datagrams = Datagrams(1, joints)
+
+    def floor(payload: bytes) -> None:
+        frame = msgpack.unpackb(payload)
+        if bundle:
+            sock.sendto(datagrams.bundle(key, frame["t"], frame["seq"], frame["v"]), destination)
+            return
+        for datagram in datagrams.messages(key, frame["t"], frame["seq"], frame["v"]):
+            sock.sendto(datagram, destination)
+
+    session = open_session(BusConfig(multicast=False, listen=("tcp/127.0.0.1:0",)))
+    sink = OscSink(OscSinkConfig(subscribe=("*/joints/*",), targets=(f"127.0.0.1:{port}",), extra=("t", "seq"),
+                                 bundle=bundle, max_age_ms=0), name="sound")
+    sink.start(Bus(session, node="bench"))
+    gate, parsed = Gate(), Key.parse(key)
+
+    def close() -> dict[str, int]:
+        counted = dict(sink.stats)
+        sink.stop()
+        session.close()
+        return counted
+
+    return {"decode": msgpack.unpackb, "gate": lambda payload: gate.check(parsed, payload), "floor": floor,
+            "sonibus": lambda payload: sink._direct(key, payload)}, close
+
+
+def segments(joints: int, n: int, bundle: bool) -> None:
+    """Under callgrind: each contender on ``n`` frames after ``n`` others, ``os.getppid``
+    before each and at the end, the collector off (its passes depend on the heap)."""
+    receiver = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    receiver.bind(("127.0.0.1", 0))  # (never read: what overflows it is dropped by the kernel)
+    calls, close = contenders(joints, bundle, receiver.getsockname()[1])
+    payloads = frames(joints, 2 * n)
+    warm, counted = payloads[:n], payloads[n:]
+    for call in calls.values():
+        for payload in warm:
+            call(payload)
+    gc.collect()
+    gc.disable()
+    for call in calls.values():
+        os.getppid()
+        for payload in counted:
+            call(payload)
+    os.getppid()
+    gc.enable()
+    stats = close()
+    print(f"sink counters: {stats}", file=sys.stderr)
+    if stats.get("received") != 2 * n * joints or stats.get("skipped") or stats.get("bad"):
+        raise SystemExit(f"the sink did not take every frame as it should: {stats}")
+
+
+def instructions(joints: int, n: int, bundle: bool) -> dict[str, float]:
+    """Instructions per frame of each contender, counted in one process under callgrind."""
+    with tempfile.TemporaryDirectory() as tmp:
+        out = Path(tmp) / "callgrind.out"
+        run = subprocess.run(["valgrind", "--tool=callgrind", f"--callgrind-out-file={out}",
+                              "--dump-before=os_getppid", "--separate-threads=yes", sys.executable, __file__,
+                              "--segments", str(joints), str(n), *(["--bundle"] if bundle else [])],
+                             capture_output=True, text=True, cwd=Path(__file__).parent)
+        if run.returncode:
+            raise SystemExit(f"callgrind run failed:\n{run.stderr[-3000:]}")
+        main = [path for path in Path(tmp).glob("callgrind.out.*-01")]  # (the main thread's dumps)
+        main.sort(key=lambda path: int(path.name.rsplit(".", 1)[1].split("-")[0]))
+        totals = [int(re.search(r"^(?:summary|totals): (\d+)", path.read_text(), re.M).group(1)) for path in main]
+    # dump 1 is the setup and warm-up; then one per contender, each ended by the next getppid
+    return {name: total / n for name, total in zip(CONTENDERS, totals[1:], strict=False)}
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--joints", type=int, nargs="+", default=[17, 128])
+    parser.add_argument("--frames", type=int, default=2000, help="frames counted per contender")
+    parser.add_argument("--name", default="floor_instructions", help="results file name")
+    parser.add_argument("--segments", type=int, nargs=2, help=argparse.SUPPRESS)  # (the run under callgrind)
+    parser.add_argument("--bundle", action="store_true", help=argparse.SUPPRESS)
+    args = parser.parse_args()
+    if args.segments:
+        segments(*args.segments, args.bundle)
+        return
+    rows = []
+    for joints in args.joints:
+        for bundle in (False, True):
+            counts = instructions(joints, args.frames, bundle)
+            rows.append({"joints": joints, "bundle": bundle, "per_frame": counts,
+                         "sonibus_to_floor": counts["sonibus"] / counts["floor"],
+                         "gate_to_decode": counts["gate"] / counts["decode"]})
+            print(f"{joints:>4} joints {'bundle' if bundle else 'plain ':>6}: " + ", ".join(
+                f"{name} {count / 1000:,.1f}k" for name, count in counts.items())
+                + f"; sonibus {rows[-1]['sonibus_to_floor']:.2f}× floor, gate {rows[-1]['gate_to_decode']:.2f}× decode",
+                flush=True)
+    summary = []
+    for r in rows:
+        k = {name: f"{count / 1000:,.0f}k" for name, count in r["per_frame"].items()}
+        summary.append({"scenario": f"(floor) instructions per frame, {r['joints']} joints, "
+                                    + ("one bundle" if r["bundle"] else "plain messages"),
+                        "sonibus": f"{k['sonibus']} (Gate.check {k['gate']})",
+                        "baseline": f"floor {k['floor']} (msgpack {k['decode']})",
+                        "ratio": f"{r['sonibus_to_floor']:.2f}×", "goal": "", "met": ""})
+    write(args.name, {"tree": os.path.dirname(os.path.dirname(__import__("sonibus.bus").bus.__file__)),
+                      "frames": args.frames, "rows": rows, "summary": summary})
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,353 @@
+"""A full show, node by node (issue 27): what each node of an installation costs,
+beside minimal harnesses of the same libraries, in the same run.
+
+The show: a simulated Pepper at 50 frames/s (idle motion), and every other node
+with a client attached — ``osc`` (joints, derived values and events to a UDP
+receiver), ``osc-gateway`` (listening), ``features``, ``recorder`` (an MCAP file),
+``web`` (a page's WebSocket, read), ``oscquery`` (a client LISTENing to every
+joint), ``foxglove`` (a client subscribed to every channel) and ``midi`` (a
+private JACK server, dummy driver). Two layouts, each round:
+
+- one process (``sonibus run show.toml``, as one machine runs an installation):
+  its CPU;
+- a process per node (``--only NODE``; the sim's listens, the others connect):
+  each node's CPU, its own Zenoh session included.
+
+Beside them, the floors: a zenoh-python publisher of the same frames at the same
+rate (the sim's), a subscriber of them with an empty callback (what any sink pays
+to receive), and ``floor.py``'s minimal OSC sink. CPU is each process's, from
+``/proc/<pid>/task/*/schedstat`` over the window after a warm-up; medians of rounds.
+
+    .venv/bin/python bench/show.py [--rounds 2] [--seconds 8] [--name show]
+
+"Before" figures come from the same script run against an older tree:
+``PYTHONPATH=<dir with sonibus/{bus,adapters,schemas} of that tree> .venv/bin/python
+bench/show.py --name show_before`` (the ``sonibus`` processes import that tree).
+
+Writes bench/results/<name>.json and prints a table.
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import json
+import os
+import signal
+import socket
+import statistics
+import subprocess
+import tempfile
+import threading
+import time
+from pathlib import Path
+from typing import Any
+
+import aiohttp
+from common import free_port, write
+from floor import CONTEXT, Case, _zenoh_config, cpu_ns, floor_sink, publish
+from midi_rate import start_jack
+from sink_throughput import SONIBUS, stop_process
+
+RATE_HZ = 50
+WARMUP_S = 3.0
+NODES = ("sim", "osc", "gateway", "features", "recorder", "web", "oscquery", "foxglove", "midi")
+SHOW = """[bus]
+multicast = false
+
+[nodes.sim]
+adapter = "sim"
+robot = "pepper"
+rate_hz = {rate}
+idle = true
+
+[nodes.osc]
+adapter = "osc"
+subscribe = ["pepper/joints/*", "pepper/derived/**", "pepper/events/*"]
+targets = ["127.0.0.1:{osc}"]
+
+[nodes.gateway]
+adapter = "osc-gateway"
+listen = "127.0.0.1:{gateway}"
+
+[nodes.features]
+adapter = "features"
+robots = "pepper"
+
+[nodes.recorder]
+adapter = "recorder"
+path = "{folder}/show-{{time}}.mcap"
+status_every_s = 0
+
+[nodes.web]
+adapter = "web"
+listen = "127.0.0.1:{web}"
+
+[nodes.oscquery]
+adapter = "oscquery"
+listen = "127.0.0.1:{oscquery}"
+gateway = "127.0.0.1:{gateway}"
+mdns = false
+
+[nodes.foxglove]
+adapter = "foxglove"
+listen = "127.0.0.1:{foxglove}"
+
+[nodes.midi]
+adapter = "midi"
+api = "jack"
+"""
+JOINTS = ("HeadYaw", "HeadPitch", "HipRoll", "HipPitch", "KneePitch", "LShoulderPitch", "LShoulderRoll",
+          "LElbowYaw", "LElbowRoll", "LWristYaw", "LHand", "RShoulderPitch", "RShoulderRoll", "RElbowYaw",
+          "RElbowRoll", "RWristYaw", "RHand")
+
+
+# -- clients ---------------------------------------------------------------------------------
+
+
+async def _read(ws: aiohttp.ClientWebSocketResponse, counts: dict[str, int], name: str) -> None:
+    async for message in ws:
+        if message.type in (aiohttp.WSMsgType.TEXT, aiohttp.WSMsgType.BINARY):
+            counts[name] = counts.get(name, 0) + 1
+
+
+async def _clients(ports: dict[str, int], counts: dict[str, int], stop: asyncio.Event, ready: Any) -> None:
+    """A page on the web node, an OSCQuery client LISTENing to every joint, a Foxglove client
+    subscribed to every channel; each reads all it is sent until ``stop``."""
+    async with aiohttp.ClientSession() as session:
+        deadline = time.monotonic() + 30
+        while True:
+            try:
+                web = await session.ws_connect(f"ws://127.0.0.1:{ports['web']}/ws")
+                oscquery = await session.ws_connect(f"ws://127.0.0.1:{ports['oscquery']}/")
+                foxglove = await session.ws_connect(f"ws://127.0.0.1:{ports['foxglove']}",
+                                                    protocols=("foxglove.sdk.v1", "foxglove.websocket.v1"))
+                break
+            except aiohttp.ClientError:
+                if time.monotonic() > deadline:
+                    raise
+                await asyncio.sleep(0.2)
+        for joint in JOINTS:
+            await oscquery.send_str(json.dumps({"COMMAND": "LISTEN", "DATA": f"/pepper/joints/{joint}"}))
+        subscribed: set[int] = set()
+
+        async def foxglove_reader() -> None:
+            async for message in foxglove:
+                if message.type == aiohttp.WSMsgType.TEXT:
+                    data = json.loads(message.data)
+                    fresh = [c["id"] for c in data.get("channels", []) if c["id"] not in subscribed] \
+                        if data.get("op") == "advertise" else []
+                    if fresh:
+                        subscribed.update(fresh)
+                        await foxglove.send_str(json.dumps({"op": "subscribe", "subscriptions": [
+                            {"id": channel, "channelId": channel} for channel in fresh]}))
+                elif message.type == aiohttp.WSMsgType.BINARY:
+                    counts["foxglove"] = counts.get("foxglove", 0) + 1
+
+        tasks = [asyncio.create_task(_read(web, counts, "web")),
+                 asyncio.create_task(_read(oscquery, counts, "oscquery")), asyncio.create_task(foxglove_reader())]
+        ready.set()
+        await stop.wait()
+        for ws in (web, oscquery, foxglove):
+            await ws.close()
+        for task in tasks:
+            task.cancel()
+
+
+def clients(ports: dict[str, int], counts: dict[str, int], ready: Any, done: Any) -> None:
+    """The clients and a UDP receiver for the OSC node, in this process (not measured)."""
+    receiver = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    receiver.bind(("127.0.0.1", ports["osc"]))
+    receiver.settimeout(0.2)
+
+    def drain() -> None:
+        while not done.is_set():
+            try:
+                receiver.recv(65536)
+                counts["osc"] = counts.get("osc", 0) + 1
+            except TimeoutError:
+                continue
+
+    threading.Thread(target=drain, daemon=True).start()
+
+    async def main() -> None:
+        stop = asyncio.Event()
+        task = asyncio.create_task(_clients(ports, counts, stop, ready))
+        await asyncio.wait([task, asyncio.create_task(asyncio.to_thread(done.wait))],
+                           return_when=asyncio.FIRST_COMPLETED)
+        if task.done():  # (the clients failed: said by the caller, which finds nothing received)
+            task.result()
+        stop.set()
+        await task
+
+    asyncio.run(main())
+    receiver.close()
+
+
+# -- the run ---------------------------------------------------------------------------------
+
+
+def started(log: Path, process: subprocess.Popen[bytes], marker: str = "sonibus: running") -> None:
+    deadline = time.monotonic() + 60
+    while marker not in log.read_text(errors="replace"):
+        if process.poll() is not None or time.monotonic() > deadline:
+            raise RuntimeError(f"{process.args}: did not start: {log.read_text(errors='replace')[-1500:]}")
+        time.sleep(0.1)
+
+
+def sonibus(config: Path, log: Path, *args: str) -> subprocess.Popen[bytes]:
+    with open(log, "w") as out:
+        return subprocess.Popen([SONIBUS, "run", str(config), "--no-multicast", *args], stdout=out,
+                                stderr=subprocess.STDOUT, start_new_session=True)
+
+
+def window(pids: dict[str, int], seconds: float) -> dict[str, float]:
+    """CPU % of one core of each process over ``seconds``."""
+    before, started_at = {name: cpu_ns(pid) for name, pid in pids.items()}, time.monotonic()
+    time.sleep(seconds)
+    wall = time.monotonic() - started_at
+    return {name: 100.0 * (cpu_ns(pid) - before[name]) / 1e9 / wall for name, pid in pids.items()}
+
+
+def measure_show(folder: Path, seconds: float, split: bool) -> dict[str, float]:
+    """The show in one process (``{"show": cpu}``) or in a process per node (cpu by node), clients attached."""
+    ports = {name: free_port(socket.SOCK_DGRAM if name in ("osc", "gateway") else socket.SOCK_STREAM)
+             for name in ("osc", "gateway", "web", "oscquery", "foxglove")}
+    config = folder / "show.toml"
+    config.write_text(SHOW.format(rate=RATE_HZ, folder=folder, **ports))
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    processes: dict[str, subprocess.Popen[bytes]] = {}
+    manager = CONTEXT.Manager()
+    counts, ready, done = manager.dict(), CONTEXT.Event(), CONTEXT.Event()
+    client = None
+    try:
+        if split:
+            processes["sim"] = sonibus(config, folder / "sim.log", "--only", "sim", "--listen", endpoint)
+            started(folder / "sim.log", processes["sim"])
+            for node in NODES[1:]:
+                processes[node] = sonibus(config, folder / f"{node}.log", "--only", node, "--connect", endpoint)
+            for node in NODES[1:]:
+                started(folder / f"{node}.log", processes[node])
+        else:
+            processes["show"] = sonibus(config, folder / "show.log", "--listen", endpoint)
+            started(folder / "show.log", processes["show"])
+        client = CONTEXT.Process(target=clients, args=(ports, counts, ready, done), daemon=True)
+        client.start()
+        if not ready.wait(60):
+            raise RuntimeError("the clients did not connect")
+        deadline = time.monotonic() + 30  # (every client fed before the warm-up: a busy machine starts slowly)
+        while min(counts.get(name, 0) for name in ("osc", "web", "oscquery", "foxglove")) == 0:
+            if time.monotonic() > deadline or not client.is_alive():
+                logs = {name: (folder / f"{name}.log").read_text(errors="replace")[-600:] for name in processes}
+                raise RuntimeError(f"a client received nothing: {dict(counts)}; {logs}")
+            time.sleep(0.2)
+        time.sleep(WARMUP_S)
+        return window({name: p.pid for name, p in processes.items()}, seconds)
+    finally:
+        done.set()
+        if client is not None:
+            client.join(10)
+            if client.is_alive():
+                client.kill()
+        for process in processes.values():
+            stop_process(process)
+        manager.shutdown()
+
+
+def measure_floors(seconds: float) -> dict[str, float]:
+    """The minimal harnesses: publisher (the sim's floor), an empty subscriber (a sink's floor)
+    and floor.py's OSC sink, one robot × 17 joints at ``RATE_HZ``."""
+    case = Case(1, 17)
+    endpoint, osc_endpoint = f"tcp/127.0.0.1:{free_port()}", f"tcp/127.0.0.1:{free_port()}"
+    receiver = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    receiver.bind(("127.0.0.1", 0))
+    ready, done = CONTEXT.Event(), CONTEXT.Event()
+    empty = CONTEXT.Process(target=empty_subscriber, args=(endpoint, ready, done), daemon=True)
+    osc_ready = CONTEXT.Event()
+    osc = CONTEXT.Process(target=floor_sink, args=(osc_endpoint, receiver.getsockname()[1], case, osc_ready, done),
+                          daemon=True)
+    empty.start()
+    osc.start()
+    feeders = []
+    try:
+        if not ready.wait(30) or not osc_ready.wait(30):
+            raise RuntimeError("the floor harnesses did not start")
+        handles = []  # (kept until the end: a queue collected here is gone for the child too)
+        for target in (endpoint, osc_endpoint):
+            fed, out = CONTEXT.Event(), CONTEXT.Queue()
+            feeders.append(CONTEXT.Process(target=publish, args=(target, case, seconds + WARMUP_S + 1, fed, out),
+                                           kwargs={"rate_hz": RATE_HZ}, daemon=True))
+            feeders[-1].start()
+            handles.append((fed, out))
+        if not all(fed.wait(30) for fed, _ in handles):
+            raise RuntimeError("the floor publishers did not find their subscribers")
+        time.sleep(WARMUP_S)
+        return window({"publisher": feeders[0].pid, "subscriber": empty.pid, "osc sink": osc.pid}, seconds)
+    finally:
+        done.set()
+        for process in (*feeders, empty, osc):
+            process.join(10)
+            if process.is_alive():
+                process.kill()
+        receiver.close()
+
+
+def empty_subscriber(endpoint: str, ready: Any, done: Any) -> None:
+    """Receives the frames and does nothing with them."""
+    import zenoh
+    session = zenoh.open(_zenoh_config(listen=endpoint))
+    subscriber = session.declare_subscriber("*/frame", lambda sample: None)
+    ready.set()
+    done.wait()
+    subscriber.undeclare()
+    session.close()
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--rounds", type=int, default=2)
+    parser.add_argument("--seconds", type=float, default=8.0, help="measuring window of each layout and round")
+    parser.add_argument("--name", default="show", help="results file name (show_before: an older tree)")
+    args = parser.parse_args()
+    load = [os.getloadavg()[0]]
+    rounds: list[dict[str, dict[str, float]]] = []
+    with tempfile.TemporaryDirectory() as name:
+        folder = Path(name)
+        jack = start_jack(folder / "jackd.log")
+        try:
+            for index in range(args.rounds):
+                got = {"floors": measure_floors(args.seconds)}
+                for split in ((True, False) if index % 2 == 0 else (False, True)):
+                    got["split" if split else "one"] = measure_show(folder, args.seconds, split)
+                rounds.append(got)
+                load.append(os.getloadavg()[0])
+                print(f"round {index + 1}: " + "; ".join(f"{layout}: " + ", ".join(
+                    f"{node} {cpu:.1f} %" for node, cpu in values.items()) for layout, values in got.items()),
+                    flush=True)
+        finally:
+            stop_process(jack, timeout=5)
+            for leftover in Path("/dev/shm").glob(f"jack_sem.*_{os.environ.get('JACK_DEFAULT_SERVER')}_*"):
+                leftover.unlink(missing_ok=True)
+    med = {layout: {node: statistics.median(r[layout][node] for r in rounds) for node in rounds[0][layout]}
+           for layout in rounds[0]}
+    machine = f"{os.cpu_count()} cores, load {min(load):.2f}–{max(load):.2f}"
+    tree = os.environ.get("PYTHONPATH", "") or "this tree"
+    receive, floors = med["floors"]["subscriber"], med["floors"]
+    summary = [{"scenario": f"(show) one process, every node, 1 robot at {RATE_HZ} Hz, clients attached: CPU",
+                "sonibus": f"{med['one']['show']:.1f} %",
+                "baseline": f"{sum(med['split'].values()):.1f} % as a process per node", "ratio": ""}]
+    for node, cpu in med["split"].items():
+        base = floors["publisher"] if node == "sim" else floors["osc sink"] if node == "osc" else receive
+        label = "publisher" if node == "sim" else "minimal OSC sink" if node == "osc" else "empty subscriber"
+        summary.append({"scenario": f"(show) {node} node, own process: CPU", "sonibus": f"{cpu:.1f} %",
+                        "baseline": f"{base:.1f} % ({label})", "ratio": f"{cpu / base:.1f}×"})
+    write(args.name, {"machine": machine, "tree": tree, "rate_hz": RATE_HZ, "seconds": args.seconds,
+                      "rounds": rounds, "median": med, "summary": summary})
+    for layout, values in med.items():
+        print(f"{layout:>7}: " + ", ".join(f"{node} {cpu:.2f} %" for node, cpu in values.items()))
+    print(machine, tree)
+
+
+if __name__ == "__main__":
+    signal.signal(signal.SIGTERM, signal.default_int_handler)  # a kill still runs the finally blocks (jackd)
+    main()
