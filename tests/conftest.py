@@ -10,6 +10,7 @@ import signal
 import socket
 import subprocess
 import sys
+import tempfile
 import threading
 import time
 from collections.abc import Callable, Iterator
@@ -21,6 +22,8 @@ import zenoh
 
 from sonibus.adapters.sim import SimConfig, SimRobot
 from sonibus.bus import Bus, BusConfig, open_session
+
+from .supervisor import Supervisor
 
 SONIBUS = str(Path(sys.executable).with_name("sonibus"))
 
@@ -165,6 +168,18 @@ def spawn() -> Iterator[Callable[..., Process]]:
     finally:
         for process in started:
             process.kill()
+
+
+@pytest.fixture
+def supervisor() -> Iterator[Supervisor]:
+    """systemd's side of sd_notify and the watchdog, listening on a socket of its own."""
+    folder = tempfile.mkdtemp(prefix="sb-notify-")  # (a unix socket's path has at most 107 bytes)
+    listening = Supervisor(Path(folder) / "notify")
+    try:
+        yield listening
+    finally:
+        listening.close()
+        shutil.rmtree(folder, ignore_errors=True)
 
 
 def run_cli(*args: str, timeout: float = 20.0) -> subprocess.CompletedProcess[str]:

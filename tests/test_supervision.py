@@ -5,12 +5,8 @@ here a real unix datagram socket read as systemd reads it."""
 from __future__ import annotations
 
 import os
-import shutil
 import signal
-import tempfile
 import threading
-from collections.abc import Iterator
-from pathlib import Path
 
 import pytest
 
@@ -24,17 +20,6 @@ from sonibus.bus.watchdog import Watchdog
 
 from .conftest import SONIBUS, free_port, wait_for
 from .supervisor import Supervisor
-
-
-@pytest.fixture
-def supervisor() -> Iterator[Supervisor]:
-    folder = tempfile.mkdtemp(prefix="sb-notify-")  # (a unix socket's path has at most 107 bytes)
-    listening = Supervisor(Path(folder) / "notify")
-    try:
-        yield listening
-    finally:
-        listening.close()
-        shutil.rmtree(folder, ignore_errors=True)
 
 
 def test_sonibus_run_says_ready_pings_the_watchdog_and_says_stopping(supervisor, spawn, tmp_path):

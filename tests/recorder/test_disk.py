@@ -12,19 +12,13 @@ import errno
 import os
 import shutil
 import socket
-import tempfile
 import time
-from collections.abc import Iterator
-from pathlib import Path
-
-import pytest
 
 from sonibus.adapters.recorder import Recording, recover
 from sonibus.bus import decode, keys
 from sonibus.bus.monitor import Monitor
 
 from ..conftest import SONIBUS, free_port, require_tool, run_cli, wait_for
-from ..supervisor import Supervisor
 from .conftest import tmpfs
 
 SHOW = """
@@ -63,18 +57,6 @@ def logger(monitor: Monitor):
     """The recorder as ``sonibus top`` shows it: (state, why)."""
     node = next((n for n in monitor.snapshot().nodes if n.node == "logger"), None)
     return (node.state, node.error) if node is not None else None
-
-
-@pytest.fixture
-def supervisor() -> Iterator[Supervisor]:
-    """systemd's side of the watchdog: a paused recorder must not get the show killed."""
-    folder = tempfile.mkdtemp(prefix="sb-notify-")  # (a unix socket's path has at most 107 bytes)
-    listening = Supervisor(Path(folder) / "notify")
-    try:
-        yield listening
-    finally:
-        listening.close()
-        shutil.rmtree(folder, ignore_errors=True)
 
 
 def test_a_full_disk_pauses_the_recorder_and_the_show_goes_on(net, tmp_path, spawn, supervisor):
