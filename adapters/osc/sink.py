@@ -106,6 +106,7 @@ class OscSink(Adapter):
         # Frames are taken where they arrive (a thread hand-off less: docs/performance.md), the rest
         # from the queue by the forward worker; one lock between them guards the sink's state.
         self._state = threading.Lock()
+        self._streams: Streams | None = None  # (a frame may arrive while Streams subscribes: queued, see _direct)
         self._streams = Streams(self.bus, cfg.subscribe, self._queue, per_joint_keys=cfg.per_joint_keys,
                                 direct=self._direct)
         self.spawn(self._forward, "forward")
@@ -141,8 +142,8 @@ class OscSink(Adapter):
         queue instead (False) while the forward worker holds the state: Zenoh's callback
         threads serve every subscription and query of the session and must never wait on
         a sink (a batch of thousands of fuzzed samples held them for seconds)."""
-        if not self._state.acquire(blocking=False):
-            return False
+        if self._streams is None or not self._state.acquire(blocking=False):
+            return False  # (not yet subscribed everywhere, or the worker holds the state: the queue)
         try:
             self._take(key, payload, time.monotonic())
         finally:

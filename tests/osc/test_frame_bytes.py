@@ -187,3 +187,26 @@ def test_a_frame_never_waits_on_zenohs_thread_for_the_forward_worker(net, receiv
     with sink._state:  # (as the forward worker does while it takes a batch)
         wait_for(queued, what="a frame in the queue while the worker is busy")
     wait_for(lambda: any(a == "/toy/joints/A" for a, _ in messages(receiver)), what="the frame at the target")
+
+
+def test_a_frame_that_arrives_while_the_sink_subscribes_is_queued_not_a_failure(net, receivers, monkeypatch):
+    """A robot already streaming: its first frame can reach ``_direct`` on Zenoh's thread
+    while ``Streams`` is still declaring the sink's other subscriptions, before the sink
+    holds it — ``make demo`` once failed the sink there (``'OscSink' object has no
+    attribute '_streams'``). Such a frame goes into the queue and out to the target."""
+    from sonibus.adapters.osc import sink as osc_sink
+    real = osc_sink.Streams
+
+    class Subscribing(real):  # a frame comes in at the end of subscribing, as it can from a live robot
+        def __init__(self, bus, patterns, queue, **options):
+            super().__init__(bus, patterns, queue, **options)
+            frame_now = encode(frame(time.time(), 1, ["A"], [0.25]))
+            assert options["direct"]("toy/frame", frame_now) is False  # (not taken there: queued)
+            queue.put(("toy/frame", frame_now))
+
+    monkeypatch.setattr(osc_sink, "Streams", Subscribing)
+    receiver = receivers()
+    sink = net.start(OscSink(OscSinkConfig(targets=(receiver.target,), subscribe="toy/joints/*", max_age_ms=0),
+                             name="early"))
+    wait_for(lambda: any(a == "/toy/joints/A" for a, _ in messages(receiver)), what="the early frame at the target")
+    assert sink.stats["errors"] == 0 and not sink.failure and sink.state == "running"
