@@ -22,9 +22,11 @@ every node's view of the robots, never Zenoh).
 
 from __future__ import annotations
 
+import atexit
 import logging
 import threading
 import time
+import weakref
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
@@ -77,6 +79,7 @@ class ClaimWatch:
         self._events = bus.token_events(keys.robot_token(), channel)
         self._worker = threading.Thread(target=self._run, name="claims", daemon=True)
         self._worker.start()
+        _WORKERS.add(self._worker)
 
     # -- what nodes ask -----------------------------------------------------------------
 
@@ -194,3 +197,18 @@ def owners(bus: Bus) -> ClaimWatch:
     """The ``ClaimWatch`` of ``bus``'s session, made on first use (one per session): what a
     sender needs to name a robot's owner (``owner``) without a query."""
     return bus.shared("claims", ClaimWatch)
+
+
+# A worker waits inside Zenoh (``recv``); closing its session wakes it. Had the process
+# already begun to finalize when it woke, its return into Python would unwind through
+# Rust frames and abort the process ("FATAL: exception not rethrown", rc -6: seen at the
+# end of ``sonibus top`` and of a ``sonibus run``). So the process lets them return first.
+_WORKERS: weakref.WeakSet[threading.Thread] = weakref.WeakSet()
+EXIT_WAIT_S = 1.0  # at most, for workers whose session was closed (one left open keeps waiting: not joined)
+
+
+@atexit.register
+def _let_workers_return() -> None:
+    deadline = time.monotonic() + EXIT_WAIT_S
+    for worker in list(_WORKERS):
+        worker.join(max(0.0, deadline - time.monotonic()))
