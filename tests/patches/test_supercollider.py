@@ -87,6 +87,7 @@ def check_head_turn(sc: Listener, watch, heads: list) -> None:
     """HeadYaw turned to 0.5 rad arrives as the robot's positions, 0..1 of its limits, and pans the drone."""
     head = PEPPER.joint("HeadYaw")
     target = (0.5 - head.min) / (head.max - head.min)
+    before = len(sc.printed("joint"))  # (what came earlier may precede the per-joint key reaching ``heads``)
     send_command(watch, "pepper", "joints/set", {"names": ["HeadYaw"], "angles": [0.5], "speed": 0.5})
     sc.wait(lambda: any(abs(float(f[1]) - target) < 1e-4 for f in sc.printed("joint") if f[0] == "HeadYaw"),
             "HeadYaw at 0.5 rad in sclang")
@@ -94,7 +95,7 @@ def check_head_turn(sc: Listener, watch, heads: list) -> None:
     assert {f[0] for f in joints} == set(PEPPER.joint_names)
     assert all(0.0 <= float(f[1]) <= 1.0 for f in joints)
     on_bus = [(m["v"] - head.min) / (head.max - head.min) for _, m in list(heads)]
-    yaw = [f for f in joints if f[0] == "HeadYaw"]
+    yaw = [f for f in joints[before:] if f[0] == "HeadYaw"]
     assert all(near_one_of(float(f[1]), on_bus) for f in yaw), "a HeadYaw the robot never had"
     values = [float(f[1]) for f in yaw]
     assert values == sorted(values) and len(set(values)) > 3, f"HeadYaw did not move up through values: {values}"
