@@ -122,7 +122,11 @@ class ClaimWatch:
             try:
                 sample = self._events.try_recv() if run else self._events.recv()
             except Exception as exc:  # the session closed: nothing more comes
-                log.debug("claims of %s: %s", self.bus, exc)
+                if self.bus.session.is_closed():
+                    log.debug("claims of %s: %s", self.bus, exc)
+                else:  # the view of every node on this session stops here: never silently
+                    log.error("claims of %s: the watcher stopped: %s: robots coming and going are no longer "
+                              "seen by this process's nodes", self.bus, exc)
                 return
             if sample is None:  # the channel ran empty
                 if run >= self.channel:  # it was full: changes may have been lost (only then can they be)
