@@ -122,7 +122,7 @@ class ClaimWatch:
             try:
                 sample = self._events.try_recv() if run else self._events.recv()
             except Exception as exc:  # the session closed: nothing more comes
-                if self.bus.session.is_closed():
+                if self.bus.closed:
                     log.debug("claims of %s: %s", self.bus, exc)
                 else:  # the view of every node on this session stops here: never silently
                     log.error("claims of %s: the watcher stopped: %s: robots coming and going are no longer "

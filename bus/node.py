@@ -241,6 +241,11 @@ class Bus:
                                                             history=True)
 
     @property
+    def closed(self) -> bool:
+        """Whether this bus's session has been closed."""
+        return self.session.is_closed()
+
+    @property
     def zid(self) -> str:
         """This session's Zenoh id (another protocol's graph names it: rmw_zenoh's liveliness tokens)."""
         return str(self.session.zid())
