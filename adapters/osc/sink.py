@@ -32,6 +32,7 @@ MAX_ROBOTS = 1024  # robots whose info (ranges) is kept: names made up on the bu
 UNDESCRIBED_WAIT_S = 3.0  # a derived value no info describes is held back this long at most, then sent raw
 HEARD_EVERY_S = 0.5       # how often a robot's data is told to presence (its silence is warned of after 3 s)
 MAX_PLANS = 1024          # frame plans kept per target (joint lists come from the network)
+LISTENING_AFTER_S = 2.0   # a target whose host has not refused a datagram for this long: something listens there
 _REFUSED = (struct.error, OverflowError, ValueError)  # what packing a value OSC cannot carry raises
 
 
@@ -66,6 +67,7 @@ class _Link:
             self.send: Callable[[bytes], int] = self.socket.send
         except OSError:  # (no route yet, say: sendto says so a datagram at a time, and works once there is one)
             self.send = lambda datagram: self.socket.sendto(datagram, destination)
+        self.refused_at = 0.0  # when its host last said nothing listens (monotonic; 0: not since it was heard)
         # Frames go out from their precomputed bytes unless a rate cap or a filter needs each value.
         self.direct = not self.min_interval and not self.filtering
         # id(Selected) → it (kept, so its id is not reused) and its plan (None: the general path)
@@ -364,9 +366,7 @@ class OscSink(Adapter):
                 send(datagram)
                 sent += 1
             except ConnectionRefusedError:  # an earlier datagram's "port unreachable"; this one was not sent
-                self.count("unreachable")
-                self.warn("unreachable", f"nothing listens at udp {link.target.to} (its host answered 'port "
-                                         f"unreachable'): start the receiver there, or check the port")
+                self._refused(link)
                 try:
                     send(datagram)  # (the error is reported once: this one goes)
                     sent += 1
@@ -377,6 +377,18 @@ class OscSink(Adapter):
         if sent:
             link.sent += sent
             self._tally["sent"] += sent
+            if link.refused_at and time.monotonic() - link.refused_at > LISTENING_AFTER_S:
+                link.refused_at = 0.0
+                log.info("%s: something listens at udp %s now", self.name, link.target.to)
+
+    def _refused(self, link: _Link) -> None:
+        """Nothing listens at ``link``'s target: counted, and said once until something does."""
+        self.count("unreachable")
+        if not link.refused_at:
+            log.warning("%s: nothing listens at udp %s (its host answered 'port unreachable'): start the "
+                        "receiver there, or check the port; sending on, it gets the stream once it listens",
+                        self.name, link.target.to)
+        link.refused_at = time.monotonic()
 
     def _send_failed(self, link: _Link, exc: OSError) -> None:
         self.count("send_errors")
