@@ -34,6 +34,7 @@ UNDESCRIBED_WAIT_S = 3.0  # a derived value no info describes is held back this 
 HEARD_EVERY_S = 0.5       # how often a robot's data is told to presence (its silence is warned of after 3 s)
 MAX_PLANS = 1024          # frame plans kept per target (joint lists come from the network)
 MAX_PLAN_BYTES = 4 << 20  # and their bytes (a plan holds a datagram's head per joint: 128 long names fill 64 KB)
+LISTENING_AFTER_S = 2.0   # a target whose host has not refused a datagram for this long: something listens there
 _REFUSED = (struct.error, OverflowError, ValueError)  # what packing a value OSC cannot carry raises
 
 
@@ -59,6 +60,16 @@ class _Link:
         self.held: dict[str, Any] = {}            # slot → the newest thing waiting for its turn
         self.last_frame_t: dict[str, float] = {}  # robot → t of the last frame sent
         self.sent = 0                             # datagrams sent to it
+        # A socket of its own, connected: the kernel keeps the route and the address (cheaper
+        # per datagram than sendto: docs/performance.md), and a "port unreachable" from the
+        # target's host (nobody listens there) comes back on a later send, where it is counted.
+        self.socket = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        try:
+            self.socket.connect(destination)
+            self.send: Callable[[bytes], int] = self.socket.send
+        except OSError:  # (no route yet, say: sendto says so a datagram at a time, and works once there is one)
+            self.send = lambda datagram: self.socket.sendto(datagram, destination)
+        self.refused_at = 0.0  # when its host last said nothing listens (monotonic; 0: not since it was heard)
         # Frames go out from their precomputed bytes unless a rate cap or a filter needs each value.
         self.direct = not self.min_interval and not self.filtering
         # id(Selected) → it (kept, so its id is not reused) and its plan (None: the general path)
@@ -83,7 +94,7 @@ class OscSink(Adapter):
     """Forwards joints, derived values and events to OSC receivers (Pd, Max, SuperCollider) over UDP."""
 
     Config = OscSinkConfig
-    counters = ("unencodable", "late", "waiting_info", "send_errors", "skipped")
+    counters = ("unencodable", "late", "waiting_info", "send_errors", "unreachable", "skipped")
 
     def _start(self) -> None:
         cfg: OscSinkConfig = self.config
@@ -100,7 +111,8 @@ class OscSink(Adapter):
         self._assembler = FrameAssembler()
         self.stats.follow("late", lambda: self._assembler.late)
         self._tally = self.stats.tally(("received", "sent"))  # (counted under self._state: no lock of their own)
-        self._socket = self.own(socket.socket(socket.AF_INET, socket.SOCK_DGRAM))
+        for link in self._links:
+            self.own(link.socket)
         self._queue = self.own(SampleQueue(cfg.queue))
         self._presence = presence.connection_events(self.bus, self._queue, cfg.subscribe,
                                                     self.capped)  # a robot's loss, return
@@ -349,17 +361,39 @@ class OscSink(Adapter):
 
     def _emit(self, link: _Link, datagrams: Sequence[bytes]) -> None:
         """Send ``datagrams`` to ``link``'s target, counted once."""
-        sendto, destination, sent = self._socket.sendto, link.destination, 0
+        send, sent = link.send, 0
         for datagram in datagrams:
             try:
-                sendto(datagram, destination)
+                send(datagram)
                 sent += 1
+            except ConnectionRefusedError:  # an earlier datagram's "port unreachable"; this one was not sent
+                self._refused(link)
+                try:
+                    send(datagram)  # (the error is reported once: this one goes)
+                    sent += 1
+                except OSError as exc:
+                    self._send_failed(link, exc)
             except OSError as exc:
-                self.count("send_errors")
-                self.warn("send", f"cannot send to {link.target.to}: {exc.strerror or exc}")
+                self._send_failed(link, exc)
         if sent:
             link.sent += sent
             self._tally["sent"] += sent
+            if link.refused_at and time.monotonic() - link.refused_at > LISTENING_AFTER_S:
+                link.refused_at = 0.0
+                log.info("%s: something listens at udp %s now", self.name, link.target.to)
+
+    def _refused(self, link: _Link) -> None:
+        """Nothing listens at ``link``'s target: counted, and said once until something does."""
+        self.count("unreachable")
+        if not link.refused_at:
+            log.warning("%s: nothing listens at udp %s (its host answered 'port unreachable'): start the "
+                        "receiver there, or check the port; sending on, it gets the stream once it listens",
+                        self.name, link.target.to)
+        link.refused_at = time.monotonic()
+
+    def _send_failed(self, link: _Link, exc: OSError) -> None:
+        self.count("send_errors")
+        self.warn("send", f"cannot send to {link.target.to}: {exc.strerror or exc}")
 
     def _unencodable(self, link: _Link, dropped: list[EncodeError]) -> None:
         self.count("unencodable", len(dropped))

@@ -70,3 +70,25 @@ def test_a_bad_sample_is_skipped_and_the_stream_goes_on(net, spawn, per_joint_ke
 def test_bad_options_are_config_errors(options, fragment):
     with pytest.raises(ConfigError, match=fragment.replace("{", r"\{").replace("}", r"\}")):
         OscSinkConfig(**options)
+
+
+def test_a_target_nobody_listens_at_is_said_and_gets_the_frames_once_it_listens(net, spawn, caplog):
+    """Each target's socket is connected: the "port unreachable" its host answers while
+    nothing listens comes back on a later send. It is counted (``unreachable``) and
+    warned of once, never taken for a failure: the datagram it was reported on goes too,
+    and a receiver started later gets the frames from then on, with no gap."""
+    oscdump = require_tool("oscdump", "liblo-tools")
+    port = free_port(socket.SOCK_DGRAM)
+    caplog.set_level("INFO", logger="sonibus")
+    sink = net.start(OscSink(OscSinkConfig(subscribe="pepper/joints/HeadYaw", targets=(f"127.0.0.1:{port}",),
+                                           extra=("seq",)), name="sound"))
+    net.sim("pepper", rate_hz=50)
+    wait_for(lambda: sink.stats["unreachable"] >= 3, what="sends refused while nothing listens")
+    assert caplog.text.count(f"nothing listens at udp 127.0.0.1:{port}") == 1
+    assert sink.stats["send_errors"] == 0 and sink.state == "running"
+    receiver = spawn(oscdump, "-L", str(port), collect=True)
+    wait_for(lambda: len(receiver.lines) >= 40, what="frames once a receiver listens")
+    seqs = [int(line.split()[-1]) for line in receiver.lines[:40]]
+    assert seqs[1:] == list(range(seqs[0] + 1, seqs[0] + 40)), f"a gap once the receiver listens: {seqs}"
+    wait_for(lambda: f"something listens at udp 127.0.0.1:{port} now" in caplog.text, what="said once it listens")
+    assert sink.stats["send_errors"] == 0
