@@ -223,8 +223,8 @@ class MidiReader:
 
 class Rss:
     """The resident set size of a process, sampled every ``every_s`` from /proc, and the part
-    of it that is shared memory (``RssShmem``: Zenoh's pools of 16 MiB in /dev/shm, mapped
-    once a peer on this machine sends a payload over 3 KiB)."""
+    of it that is shared memory (``RssShmem``: JACK's, and Zenoh's pools of 16 MiB in
+    /dev/shm, mapped once a peer on this machine sends a payload over 3 KiB)."""
 
     def __init__(self, pid: int, every_s: float = 0.2) -> None:
         self.pid, self.samples = pid, []
@@ -257,10 +257,10 @@ class Rss:
     def peak(self, since: float = 0.0) -> int:
         return max((v for t, v in self.samples if t >= since), default=0)
 
-    def shmem_at_peak(self, since: float = 0.0) -> int:
-        """``RssShmem`` in the sample of ``peak(since)``."""
+    def shmem_growth(self, since: float = 0.0) -> int:
+        """``RssShmem`` in the sample of ``peak(since)`` less in the first sample since."""
         kept = [(v, s) for (t, v), s in zip(self.samples, self.shmem, strict=False) if t >= since]
-        return max(kept, default=(0, 0))[1]
+        return max(kept, default=(0, 0))[1] - (kept[0][1] if kept else 0)
 
     def close(self) -> None:
         self._done.set()
