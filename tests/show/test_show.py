@@ -124,7 +124,8 @@ def test_a_refused_step_aborts_its_scenario_with_the_reason_and_nothing_after_it
     end = aborted(rig, "missing")
     assert end["step"] == 2 and "behavior/run refused: unknown behavior 'animations/Not/There_1'" in end["reason"]
     ask(rig, "scenario", {"name": "hello"})  # (the next command shows what came after the refusal: nothing)
-    wait_for(lambda: len(commands(rig, 3)) > 2, 5, "the next scenario's first command")
+    # (15 s: no bound of the show's, only the test's patience; a loaded CI timed out at 5 s once)
+    wait_for(lambda: len(commands(rig, 3)) > 2, 15, "the next scenario's first command")
     assert commands(rig, 3)[:3] == [("say", "One"), ("behavior/run", "animations/Not/There_1"), ("say", "Hello there")]
 
 
