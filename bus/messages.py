@@ -30,6 +30,7 @@ from typing import Any
 import jsonschema
 
 from .. import schemas
+from .capped import Capped, size_of
 from .codec import DecodeError, decode
 from .keys import AUDIO_STREAMS, Key
 
@@ -80,11 +81,13 @@ class Gate:
     are the same every frame), at most ``MAX_KNOWN`` of them."""
 
     MAX_KNOWN = 1024
+    MAX_KNOWN_BYTES = 2 << 20  # of names in each table (a count alone let 1,024 lists of 128 long names pile up)
 
     def __init__(self, limits: Limits | None = None) -> None:
         self.limits = limits or Limits()
-        self._known_names: set[tuple[str, ...]] = set()
-        self._last_names: dict[str, list[str]] = {}  # robot → the (checked) names of its last frame
+        self._known_names: Capped[tuple[str, ...], bool] = Capped(self.MAX_KNOWN, self.MAX_KNOWN_BYTES)
+        # robot → the (checked) names of its last frame
+        self._last_names: Capped[str, list[str]] = Capped(self.MAX_KNOWN, self.MAX_KNOWN_BYTES)
 
     def check(self, key: Key, payload: bytes) -> dict[str, Any]:
         section = SECTIONS.get(key.section)
@@ -116,9 +119,8 @@ class Gate:
             raise BadMessage(f"{len(names)} joints in one frame, at most {MAX_JOINTS}")
         if names != self._last_names.get(key.robot):  # (a robot's names are the same every frame: one comparison)
             self._known(names)
-            if len(self._last_names) >= self.MAX_KNOWN:  # robot names come from the network
-                self._last_names.clear()
-            self._last_names[key.robot] = list(names)  # (a copy: whoever takes the message may change its list)
+            # (a copy: whoever takes the message may change its list; robot and joint names come from the network)
+            self._last_names.put(key.robot, list(names), size_of(names) + len(key.robot))
         numbers(values, "v")
         if len(message) == len(FRAME_FIELDS):  # (all four were read above: no quantity per joint beside v)
             return
@@ -140,9 +142,7 @@ class Gate:
         except TypeError:  # (a name that is a list or a map: refused just below)
             pass
         self._check_names(names)
-        if len(self._known_names) >= self.MAX_KNOWN:  # names made up on the fly must not grow it for ever
-            self._known_names.clear()
-        self._known_names.add(signature)
+        self._known_names.put(signature, True, size_of(signature))  # (names made up on the fly: capped)
 
     def joint_sample(self, key: Key, message: dict[str, Any]) -> None:
         self.stamp(message)

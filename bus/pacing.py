@@ -19,6 +19,8 @@ import time
 from collections.abc import Callable
 from typing import NamedTuple
 
+from .capped import Capped
+
 SHARE = 0.75          # after a stall, a stream's frames go no closer than this share of its period
 STALL_PERIODS = 2.0   # a stall: no frame of a stream for this many of its periods,
 STALL_S = 0.25        # and for this long: a shorter gap is a busy machine's scheduling (its backlog is
@@ -30,6 +32,8 @@ RESTART_S = 0.25      # a frame this much older than the last one sent starts th
 SLACK_S = 0.002       # a frame less early than this goes (Zenoh batches what is put within a millisecond)
 LEARNING = 3          # frames whose spacing teaches a stream's period before it is paced (a script's few are not)
 MAX_STREAMS = 10_000  # streams remembered (their names come from the network)
+MAX_BYTES = 4 << 20  # bytes of them (a key may be tens of KB long)
+_STREAM = 300        # bytes of one stream's state beside its key
 
 class Pacer:
     """Calls ``tick(frame)`` at ``rate_hz`` against deadlines fixed at the start.
@@ -114,7 +118,7 @@ class Spacing:
 
     def __init__(self, share: float = SHARE) -> None:
         self.share = share
-        self._streams: dict[str, _Stream] = {}
+        self._streams: Capped[str, _Stream] = Capped(MAX_STREAMS, MAX_BYTES)  # (their keys: capped by bytes too)
         self._lock = threading.Lock()
 
     def turn(self, stream: str, t: float, seq: int, now: float | None = None, arrived: bool = True) -> Turn:
@@ -125,9 +129,7 @@ class Spacing:
         with self._lock:
             state = self._streams.get(stream)
             if state is None or t < state.sent_t - RESTART_S:  # a new stream, or one whose clock went back
-                if len(self._streams) >= MAX_STREAMS:
-                    self._streams.clear()
-                self._streams[stream] = _Stream(t, seq, now)
+                self._streams.put(stream, _Stream(t, seq, now), len(stream) + _STREAM)
                 return GO
             paced, gap, stalled = state.learnt >= LEARNING, 0.0, False
             if arrived:

@@ -13,6 +13,7 @@ from . import keys, registry
 from .adapter import Adapter
 from .config import Installation
 from .errors import AdapterError, ConfigError, NodeFailed
+from .memory import Trimmer
 from .messages import Limits
 from .node import Bus
 from .notify import Notifier
@@ -62,8 +63,12 @@ def run(adapters: list[Adapter], bus_config: BusConfig, stop: threading.Event,
     ``watchdog`` tells a supervisor (systemd) how it goes: joining, each node starting,
     ready, healthy or not (``bus/watchdog.py``). ``restart`` (``bus/restarts.py``): when
     this process is a supervisor's restart, every node reports it in its stats and a
-    ``node`` event with state ``restarted`` says so, once every node has started."""
+    ``node`` event with state ``restarted`` says so, once every node has started.
+
+    While it waits, what glibc's malloc keeps free after a burst goes back to the system
+    (``bus/memory.py``): a flood must not leave the process at its high-water mark."""
     watchdog = watchdog or Watchdog(Notifier({}), adapters)
+    trimmer = Trimmer()
     restart = restart or Restart()
     with contextlib.ExitStack() as closing:
         with watchdog.joining(f"joining the bus ({_joining(bus_config)})"):
@@ -93,6 +98,7 @@ def run(adapters: list[Adapter], bus_config: BusConfig, stop: threading.Event,
                     why = "; ".join(f"node '{a.name}': {a.failure}" for a in failed)
                     raise NodeFailed(why)
                 watchdog.check()
+                trimmer.check()
         except BaseException as exc:
             if not isinstance(exc, KeyboardInterrupt | NodeFailed):
                 why = f"{type(exc).__name__}: {exc}"

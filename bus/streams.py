@@ -34,6 +34,7 @@ from typing import Any, NamedTuple
 import zenoh
 
 from . import keys, messages
+from .capped import PER_NAME, Capped, size_of
 from .errors import ConfigError
 from .node import Bus
 from .pacing import Spacing
@@ -44,6 +45,8 @@ log = logging.getLogger(__name__)
 _JOINTS = zenoh.KeyExpr(keys.joints())
 MAX_KEYS = 10_000  # keys taken apart and remembered
 MAX_FRAMES = 1024  # joint lists of frames remembered (their selection)
+MAX_BYTES = 2 << 20  # of names in each of those tables (a frame's 128 names may fill its 64 KB: a count is no cap)
+_PARSED = 400      # bytes of a parsed key beside its characters (the ``Key`` and its four strings)
 
 
 @dataclass(frozen=True)
@@ -135,10 +138,12 @@ class Selection:
     def __init__(self, patterns: Iterable[str], limits: messages.Limits | None = None) -> None:
         self.gate = messages.Gate(limits)
         self._selected = [zenoh.KeyExpr(keys.expr(p)) for p in patterns]
-        self._accepted: dict[str, bool] = {}
-        self._parsed: dict[str, keys.Key] = {}
-        self._frames: dict[tuple[str, tuple[str, ...]], Selected] = {}
-        self._last: dict[str, tuple[list[str], Selected]] = {}  # robot → its last names (a copy), their selection
+        # (keys, robots and joint names come from the network: every table is capped, count and bytes)
+        self._accepted: Capped[str, bool] = Capped(MAX_KEYS, MAX_BYTES)
+        self._parsed: Capped[str, keys.Key] = Capped(MAX_KEYS, MAX_BYTES)
+        self._frames: Capped[tuple[str, tuple[str, ...]], Selected] = Capped(MAX_FRAMES, MAX_BYTES)
+        self._last: Capped[str, tuple[list[str], Selected]] = Capped(MAX_FRAMES, MAX_BYTES)  # robot → its last
+        # names (a copy), their selection
 
     def incoming(self, key: str, payload: bytes) -> Incoming:
         """What came on ``key``, checked by the gate (a frame keeps the selected joints);
@@ -165,17 +170,15 @@ class Selection:
             return last[1]
         signature = (robot, tuple(names))
         found = self._frames.get(signature)
+        size = size_of(names) + len(robot)
         if found is None:
-            if len(self._frames) >= MAX_FRAMES:  # joint lists made up on the fly must not grow it for ever
-                self._frames.clear()
             prefix = f"{robot}/joints/"
             indices = tuple(i for i, name in enumerate(names) if self.accepts(prefix + name))
             sources = tuple(self._key(prefix + names[i]) for i in indices)
-            found = self._frames[signature] = Selected(sources, None if len(indices) == len(names) else indices,
-                                                       frozenset(source.key for source in sources))
-        if len(self._last) >= MAX_FRAMES:  # (robot names come from the network)
-            self._last.clear()
-        self._last[robot] = (list(names), found)
+            found = self._frames.put(signature, Selected(sources, None if len(indices) == len(names) else indices,
+                                                         frozenset(source.key for source in sources)),
+                                     size + PER_NAME * len(indices))  # (its keys, mostly _parsed's)
+        self._last.put(robot, (list(names), found), size)
         return found
 
     def take(self, key: str, payload: bytes, count: Callable[[str, int], None],
@@ -197,17 +200,13 @@ class Selection:
         """Whether joint ``key`` (taken from a frame) is one the patterns select."""
         accepted = self._accepted.get(key)
         if accepted is None:
-            if len(self._accepted) > MAX_KEYS:  # names made up on the fly must not grow it for ever
-                self._accepted.clear()
-            accepted = self._accepted[key] = any(p.intersects(key) for p in self._selected)
+            accepted = self._accepted.put(key, any(p.intersects(key) for p in self._selected), len(key) + PER_NAME)
         return accepted
 
     def _key(self, key: str) -> keys.Key:
         parsed = self._parsed.get(key)
         if parsed is None:
-            if len(self._parsed) > MAX_KEYS:
-                self._parsed.clear()
-            parsed = self._parsed[key] = keys.Key.parse(key)
+            parsed = self._parsed.put(key, keys.Key.parse(key), 2 * len(key) + _PARSED)
         return parsed
 
 

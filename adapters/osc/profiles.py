@@ -19,6 +19,7 @@ from collections.abc import Callable, Iterable, Sequence
 from operator import itemgetter
 from typing import Any, TypeVar
 
+from sonibus.bus.capped import PER_NAME, Capped
 from sonibus.bus.keys import Key
 
 from . import encode
@@ -60,6 +61,8 @@ def event_args(kind: str, fields: dict[str, Any]) -> list[encode.Arg]:
     return out
 
 
+MAX_ADDRESSES = 10_000        # addresses kept per target, and their bytes
+MAX_ADDRESS_BYTES = 4 << 20
 SEQ_MASK = 0x7FFFFFFF  # seq as an OSC int32: its low 31 bits
 
 
@@ -106,15 +109,16 @@ class SonibusProfile:
 
     def __init__(self, target: Target) -> None:
         self.target = target
-        self._addresses: dict[str, str] = {}
+        # key → its address (keys come from the network: capped; it grew with every key sent before)
+        self._addresses: Capped[str, str] = Capped(MAX_ADDRESSES, MAX_ADDRESS_BYTES)
 
     def address(self, source: Key) -> str:
         found = self._addresses.get(source.key)
         if found is None:
             template = self.target.derived_address if source.section == "derived" else self.target.address
-            found = self._addresses[source.key] = template.format(
-                robot=source.robot, section=source.section, joint=source.name, name=source.name,
-                feature=source.feature, key=source.key)
+            found = template.format(robot=source.robot, section=source.section, joint=source.name, name=source.name,
+                                    feature=source.feature, key=source.key)
+            self._addresses.put(source.key, found, len(source.key) + len(found) + 2 * PER_NAME)
         return found
 
     def compile(self, sources: Sequence[Key]) -> FrameBytes | None:

@@ -13,6 +13,7 @@ from typing import Any, NamedTuple
 
 from sonibus.bus import lateness, presence
 from sonibus.bus.adapter import Adapter
+from sonibus.bus.capped import Capped, size_of
 from sonibus.bus.errors import ConfigError
 from sonibus.bus.frames import Frame, FrameAssembler
 from sonibus.bus.info import InfoRequests
@@ -32,6 +33,7 @@ MAX_ROBOTS = 1024  # robots whose info (ranges) is kept: names made up on the bu
 UNDESCRIBED_WAIT_S = 3.0  # a derived value no info describes is held back this long at most, then sent raw
 HEARD_EVERY_S = 0.5       # how often a robot's data is told to presence (its silence is warned of after 3 s)
 MAX_PLANS = 1024          # frame plans kept per target (joint lists come from the network)
+MAX_PLAN_BYTES = 4 << 20  # and their bytes (a plan holds a datagram's head per joint: 128 long names fill 64 KB)
 LISTENING_AFTER_S = 2.0   # a target whose host has not refused a datagram for this long: something listens there
 _REFUSED = (struct.error, OverflowError, ValueError)  # what packing a value OSC cannot carry raises
 
@@ -71,7 +73,7 @@ class _Link:
         # Frames go out from their precomputed bytes unless a rate cap or a filter needs each value.
         self.direct = not self.min_interval and not self.filtering
         # id(Selected) → it (kept, so its id is not reused) and its plan (None: the general path)
-        self.plans: dict[int, tuple[Selected, _Plan | None]] = {}
+        self.plans: Capped[int, tuple[Selected, _Plan | None]] = Capped(MAX_PLANS, MAX_PLAN_BYTES)
 
     def changed(self, key: str, values: Sequence[float]) -> bool:
         """Whether ``values`` pass the on-change/deadband filter (and remember them if so)."""
@@ -263,9 +265,8 @@ class OscSink(Adapter):
         selected = message.selected
         entry = link.plans.get(id(selected))
         if entry is None or entry[0] is not selected:
-            if len(link.plans) >= MAX_PLANS:
-                link.plans.clear()
-            entry = link.plans[id(selected)] = (selected, self._plan(link, selected, message.source.robot))  # type: ignore[arg-type]
+            entry = link.plans.put(id(selected), (selected, self._plan(link, selected, message.source.robot)),
+                                   size_of(s.key for s in selected.sources))  # (its addresses: about its keys)
         found = entry[1]
         if found is None:
             return False
@@ -443,7 +444,7 @@ class OscSink(Adapter):
             self._ranges[robot] = ranges
             self._described[robot] = {str(d.get("name")) for d in info.get("derived", []) if isinstance(d, dict)}
             for link in self._links:  # (worked out again with these ranges)
-                link.plans = {}
+                link.plans.clear()
 
 
 def _resolve(target: str) -> tuple[str, int]:

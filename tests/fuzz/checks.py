@@ -167,8 +167,10 @@ def commands(oracle: Any, report: Report) -> None:
 
 def memory(show: Show, report: Report, before: int, since: float) -> None:
     peak = show.rss.peak(since) if show.rss else 0
+    shmem = show.rss.shmem_growth(since) if show.rss else 0
     report.figures["rss_mb"] = {"before": round(before / 1e6, 1), "peak": round(peak / 1e6, 1),
-                                "growth": round((peak - before) / 1e6, 1)}
+                                "growth": round((peak - before) / 1e6, 1),
+                                "shared_growth": round(shmem / 1e6, 1)}  # (Zenoh's pools mapped: in the growth)
     report.check(peak - before < RSS_BOUND, f"RSS of sonibus run grew by {(peak - before) / 1e6:.0f} MB "
                                             f"({before / 1e6:.0f} → {peak / 1e6:.0f} MB), bound {RSS_BOUND / 1e6:.0f}")
 

@@ -222,32 +222,45 @@ class MidiReader:
 
 
 class Rss:
-    """The resident set size of a process, sampled every ``every_s`` from /proc."""
+    """The resident set size of a process, sampled every ``every_s`` from /proc, and the part
+    of it that is shared memory (``RssShmem``: JACK's, and Zenoh's pools of 16 MiB in
+    /dev/shm, mapped once a peer on this machine sends a payload over 3 KiB)."""
 
     def __init__(self, pid: int, every_s: float = 0.2) -> None:
         self.pid, self.samples = pid, []
+        self.shmem: list[int] = []  # (beside each sample)
         self._done = threading.Event()
         self._thread = threading.Thread(target=self._run, args=(every_s,), daemon=True)
         self._thread.start()
 
     def now(self) -> int:
         """Bytes, or 0 once the process is gone."""
+        return self._read()[0]
+
+    def _read(self) -> tuple[int, int]:
+        found = {}
         try:
             for line in Path(f"/proc/{self.pid}/status").read_text().splitlines():
-                if line.startswith("VmRSS:"):
-                    return int(line.split()[1]) * 1024
+                if line.startswith(("VmRSS:", "RssShmem:")):
+                    found[line.split(":")[0]] = int(line.split()[1]) * 1024
         except OSError:
             pass
-        return 0
+        return found.get("VmRSS", 0), found.get("RssShmem", 0)
 
     def _run(self, every_s: float) -> None:
         while not self._done.wait(every_s):
-            value = self.now()
+            value, shmem = self._read()
             if value:
+                self.shmem.append(shmem)  # (first: a reader's zip never finds a sample without it)
                 self.samples.append((time.monotonic(), value))
 
     def peak(self, since: float = 0.0) -> int:
         return max((v for t, v in self.samples if t >= since), default=0)
+
+    def shmem_growth(self, since: float = 0.0) -> int:
+        """``RssShmem`` in the sample of ``peak(since)`` less in the first sample since."""
+        kept = [(v, s) for (t, v), s in zip(self.samples, self.shmem, strict=False) if t >= since]
+        return max(kept, default=(0, 0))[1] - (kept[0][1] if kept else 0)
 
     def close(self) -> None:
         self._done.set()
