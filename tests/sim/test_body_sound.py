@@ -159,8 +159,11 @@ def test_the_mic_publishes_only_while_anyone_listens(net):
 
     chunks = Chunks(client)
     wait_for(lambda: len(chunks.poll()) >= 25, what="25 mic chunks")
+    # Nothing lost: at some instant between two ticks, every chunk published was received (a
+    # tick the sim's pacer skipped on a loaded machine is a gap in seq by design, not a loss).
+    wait_for(lambda: len(chunks.poll()) == sim.stats["mic_chunks"], what="every chunk published, received")
     items = chunks.poll()
-    assert [c.seq for c in items] == list(range(items[0].seq, items[0].seq + len(items)))  # no gap
+    assert [c.seq for c in items] == sorted({c.seq for c in items})  # in order, none twice
     assert {(c.rate, c.channels, c.frames) for c in items} == {(16000, 1, 320)}
     assert all(b.t > a.t for a, b in itertools.pairwise(items))
 
