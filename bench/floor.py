@@ -422,10 +422,13 @@ def summary_rows(cases: list[dict[str, Any]]) -> list[dict[str, str]]:
             "sonibus": f"{cpu['sonibus']:.2f} %, {bus['p50_us']:,.0f} / {bus['p99_us']:,.0f} µs, "
                        f"{100 * bus['delivered']:.1f} % delivered, stale {stale}, skipped {skipped}",
             "baseline": f"floor {cpu['floor']:.2f} %, {floor['p50_us']:,.0f} / {floor['p99_us']:,.0f} µs; "
-                        f"no bus {direct['p50_us']:,.0f} / {direct['p99_us']:,.0f} µs",
+                        + (f"floor connected {cpu[CONNECTED]:.2f} %; " if CONNECTED in cpu else "")
+                        + f"no bus {direct['p50_us']:,.0f} / {direct['p99_us']:,.0f} µs",
             "ratio": f"CPU {ratio['cpu_pct']:.2f}×, p50 {ratio['p50_us']:.2f}× / p99 {ratio['p99_us']:.2f}× floor; "
                      f"p50 {c['ratio_to_no_bus']['p50_us']:.2f}× no bus "
-                     f"({c['ratio_to_no_bus']['woken_p50_us']:.2f}× by the receiver's clock)",
+                     f"({c['ratio_to_no_bus']['woken_p50_us']:.2f}× by the receiver's clock)"
+                     + (f"; CPU {c['ratio_to_connected_floor']['cpu_pct']:.2f}× floor connected"
+                        if c.get("ratio_to_connected_floor") else ""),
             "goal": goal, "met": ("yes" if met else "no") if goal else ""})
     return rows
 
