@@ -134,8 +134,11 @@ class Process:
             threading.Thread(target=self._collect, daemon=True).start()
 
     def _collect(self) -> None:
-        for line in self.popen.stdout:
-            self.lines.append(line.rstrip("\n"))
+        try:
+            for line in self.popen.stdout:
+                self.lines.append(line.rstrip("\n"))
+        except ValueError:  # (stop's communicate closed the pipe under it: the rest is in what it returns)
+            pass
 
     def stop(self, sig: int = signal.SIGINT, timeout: float = 5.0) -> tuple[int, str, str]:
         if self.popen.poll() is None:

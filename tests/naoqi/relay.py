@@ -70,7 +70,10 @@ class Relay:
             for connection in self._connections:
                 for writer in connection.writers:
                     writer.transport.abort()
-            self._loop.run_until_complete(asyncio.sleep(0))
+            pending = asyncio.all_tasks(self._loop)  # (connections still pumping: ended, not left to the collector)
+            for task in pending:
+                task.cancel()
+            self._loop.run_until_complete(asyncio.gather(*pending, asyncio.sleep(0), return_exceptions=True))
             self._loop.close()
 
     async def _serve(self, client_in: asyncio.StreamReader, client_out: asyncio.StreamWriter) -> None:
