@@ -1,5 +1,8 @@
 """A bounded sample queue fed by a Zenoh callback: newest kept, oldest dropped.
 
+Bounded in items and in bytes: a payload may be up to the gate's 64 KiB, so 8,192
+waiting items could hold 512 MiB; past ``max_bytes`` of payloads the oldest go too.
+
 Zenoh runs every callback of a session on shared threads, so a callback must
 only enqueue; the consumer works on its own thread and can be woken to stop.
 An item can also be held until a time (``hold``): a sink's frame that came too
@@ -23,14 +26,28 @@ import time
 from collections import deque
 from typing import Any
 
+MAX_BYTES = 32 << 20  # of payloads waiting in one queue (a flood of 64 KiB frames at a stalled sink)
+ITEM_BYTES = 64       # what an item is counted beside its payload's bytes (or alone, with no bytes payload)
+
+
+def size_of(item: Any) -> int:
+    """Bytes ``item`` is counted as: its payload's (a ``(key, bytes, ...)`` tuple, as a
+    subscription queues), and ``ITEM_BYTES``."""
+    if item.__class__ is tuple and len(item) > 1 and item[1].__class__ is bytes:
+        return len(item[1]) + ITEM_BYTES
+    return ITEM_BYTES
+
 
 class SampleQueue:
-    """``put`` never blocks: when full, the oldest item is dropped and counted."""
+    """``put`` never blocks: when full (``maxlen`` items, or ``max_bytes`` of payloads),
+    the oldest items are dropped and counted."""
 
-    def __init__(self, maxlen: int = 1024) -> None:
+    def __init__(self, maxlen: int = 1024, max_bytes: int = MAX_BYTES) -> None:
         if maxlen < 1:
             raise ValueError(f"queue length must be at least 1, got {maxlen}")
         self._items: deque[Any] = deque(maxlen=maxlen)
+        self.max_bytes = max_bytes
+        self.bytes = 0  # of the items waiting (not the held ones: at most one per slot, each replaced)
         self._held: dict[str, tuple[float, Any]] = {}  # slot → (due, item), at most maxlen
         self._ready = threading.Condition()
         self._closed = False
@@ -43,12 +60,15 @@ class SampleQueue:
         return self._items.maxlen or 0
 
     def put(self, item: Any) -> None:
+        size = size_of(item)
         with self._ready:
-            if len(self._items) == self._items.maxlen:
-                self.dropped += 1
-            elif not self._items:
+            if not self._items:
                 self._filled = time.monotonic()
+            while self._items and (len(self._items) == self._items.maxlen or self.bytes + size > self.max_bytes):
+                self.bytes -= size_of(self._items.popleft())
+                self.dropped += 1
             self._items.append(item)
+            self.bytes += size
             if len(self._items) == 1:  # only an empty queue has someone to wake
                 self._ready.notify()
 
@@ -76,7 +96,11 @@ class SampleQueue:
                 due = self._due(1)
                 if due:
                     return due[0]
-            return self._items.popleft() if self._items else None
+            if not self._items:
+                return None
+            item = self._items.popleft()
+            self.bytes -= size_of(item)
+            return item
 
     def drain(self, timeout: float | None = None) -> list[Any]:
         """Every item waiting (held and due ones first, then oldest first), waiting up to
@@ -89,6 +113,7 @@ class SampleQueue:
             items = self._due() if self._held else []
             items += self._items
             self._items.clear()
+            self.bytes = 0
             return items
 
     def _until(self, timeout: float | None) -> float | None:
