@@ -30,12 +30,13 @@ demo: $(STAMP)
 	trap true INT; $(BIN)/sonibus demo $(DEMO_ARGS) || test $$? -eq 130
 
 # the suite waits on processes and networks more than it computes: one worker per core;
-# a worker that crashes ends the run (xdist's replacement worker once left the run waiting for ever)
+# a worker that crashes ends the run (xdist's replacement worker once left the run waiting for ever);
+# the 15 slowest tests are listed, so a suite creeping toward CI's 15 minutes shows where
 TEST_WORKERS ?= 2
 test: $(TESTS)
 	bash scripts/test-tools.sh
 	$(BIN)/ruff check .
-	$(BIN)/python -m pytest -n $(TEST_WORKERS) --dist loadscope --max-worker-restart 0
+	$(BIN)/python -m pytest -n $(TEST_WORKERS) --dist loadscope --max-worker-restart 0 --durations 15
 
 bench: $(TESTS)
 	bash scripts/test-tools.sh
