@@ -171,14 +171,18 @@ class WebServer:
         self.latest, self._latest_text = value, text
         self.call(self._push, text)
 
-    def call(self, function: Callable[..., None], *args: Any) -> None:
+    def call(self, function: Callable[..., None], *args: Any) -> bool:
         """Run ``function(*args)`` on the server's loop soon (from any thread; a plain callback,
-        cheaper than ``submit`` on a per-frame path); nothing when the server is not running."""
+        cheaper than ``submit`` on a per-frame path); nothing when the server is not running
+        (False then)."""
         loop = self._loop
         if loop is None:
-            return
-        with contextlib.suppress(RuntimeError):  # the loop has closed: the node is stopping, nobody listens
+            return False
+        try:
             loop.call_soon_threadsafe(function, *args)
+        except RuntimeError:  # the loop has closed: the node is stopping, nobody listens
+            return False
+        return True
 
     def submit(self, coro: Coroutine[Any, Any, Any]) -> concurrent.futures.Future[Any]:
         """Run ``coro`` on the server's loop (from another thread); its result or

@@ -14,6 +14,12 @@ a viewer drops those topics, and subscribes again when they are advertised anew 
 as the robot comes back. A subscription to a channel unadvertised since is kept, inert,
 until the client unsubscribes it, as Lichtblick does on ``unadvertise``: that unsubscribe
 is no error.
+
+What goes to the clients (advertisements, messages, unadvertisements) is handed to the
+server's loop in batches, in order: ``log`` adds to the hub's outbox, and the loop is
+asked to empty it only if it was empty (a call into the loop is a wake-up and a write
+to its pipe: one per message, 2,300 a second with a robot and its derived values,
+took 14 % of the node's CPU).
 """
 
 from __future__ import annotations
@@ -37,6 +43,7 @@ if TYPE_CHECKING:
 MAX_CHANNELS = 4096         # channels advertised at most (keys made up on the fly must not grow it for ever)
 MAX_SUBSCRIPTIONS = MAX_CHANNELS  # one client's, inert ones (their channel gone) included
 MAX_WS_MESSAGE = 1 << 20    # bytes of one client message; aiohttp closes a connection that sends more (1009)
+MAX_OUTBOX = 8192           # messages waiting for the server's loop; past it a message is dropped (a stuck loop)
 HEARTBEAT_S = 10.0          # a ping this often; a client that does not answer within half of it is dropped
 
 
@@ -71,6 +78,7 @@ class Hub:
         self._clients: set[_Client] = set()
         self._last_id = 0  # channel ids are never given twice (a viewer caches a channel's schema by its id)
         self._lock = Lock()  # channels, latest messages, subscribers: the adapter's thread and the loop
+        self._outbox: list[tuple[Callable[..., None], tuple[Any, ...]]] = []  # for the loop, in order (under _lock)
         web_server.app.router.add_get("/{path:.*}", self._websocket)  # (a client may name any path)
         web_server.app.on_shutdown.append(lambda app: close_clients(list(self._clients)))
 
@@ -94,13 +102,19 @@ class Hub:
                 self._last_id += 1
                 channel = _Channel(describe(self._last_id))
                 self._channels[topic] = self._by_id[channel.described.id] = channel
-                self.web.call(self._advertise, channel.described)
+                self._later(self._advertise, channel.described)
             channel.latest = (message, log_time_ns)
             subscribers = list(channel.subscribers.items())
         if subscribers:
             payload = self.to_json(message)
-            self.web.call(self._send, subscribers, payload, log_time_ns)
-            self.adapter.count("sent", len(subscribers))
+            with self._lock:
+                waiting = len(self._outbox)
+                if waiting < MAX_OUTBOX:
+                    self._later(self._send, subscribers, payload, log_time_ns)
+            if waiting >= MAX_OUTBOX:
+                self.adapter.count("dropped_for_clients", len(subscribers))
+            else:
+                self.adapter.count("sent", len(subscribers))
         return True
 
     def forget(self, prefix: str) -> int:
@@ -110,9 +124,21 @@ class Hub:
             gone = [c for topic, c in self._channels.items() if topic.startswith(prefix)]
             for channel in gone:
                 del self._channels[channel.described.topic], self._by_id[channel.described.id]
-        if gone:
-            self.web.call(self._unadvertise, {c.described.id for c in gone})
+            if gone:
+                self._later(self._unadvertise, {c.described.id for c in gone})
         return len(gone)
+
+    def _later(self, function: Callable[..., None], *args: Any) -> None:
+        """``function(*args)`` on the server's loop, after what is in the outbox (under ``_lock``)."""
+        self._outbox.append((function, args))
+        if len(self._outbox) == 1 and not self.web.call(self._flush):
+            self._outbox.clear()  # (the server is not running: nobody to tell)
+
+    def _flush(self) -> None:
+        with self._lock:
+            outbox, self._outbox = self._outbox, []
+        for function, args in outbox:
+            function(*args)
 
     # -- on the server's loop ------------------------------------------------------------
 

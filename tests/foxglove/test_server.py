@@ -22,6 +22,7 @@ import pytest
 
 from sonibus import schemas
 from sonibus.adapters.features.kinematics import load_arms
+from sonibus.adapters.foxglove import hub
 from sonibus.adapters.foxglove.server import FoxgloveConfig, FoxgloveServer
 from sonibus.bus.errors import ConfigError
 from sonibus.schemas import foxglove
@@ -291,3 +292,29 @@ def test_every_bad_request_is_answered_with_a_status_and_an_unsubscribe_ends_the
     assert "Unknown subscription ID: 12345" in statuses(answers)[3]["message"]
     assert 7 not in after, after
     assert served.stats["bad"] == 7 and served.state == "running"
+
+
+def test_messages_wait_for_a_stuck_server_loop_up_to_a_bound_then_are_dropped_counted_and_flow_again(served,
+                                                                                                   monkeypatch):
+    """What goes to the clients reaches the server's loop in batches (the hub's outbox): a
+    loop held up (here: a callback that sleeps 1.5 s) lets at most ``MAX_OUTBOX`` messages
+    wait; the rest are dropped and counted, never held without bound, and once the loop
+    runs again the client gets the new frames."""
+    monkeypatch.setattr(hub, "MAX_OUTBOX", 10)
+
+    async def scenario() -> None:
+        async with aiohttp.ClientSession() as session:
+            client = await connect(session, served.port)
+            await client.until(lambda _: "pepper/frame" in client.channels)
+            await client.subscribe({1: "pepper/frame"})
+            await client.until(lambda got: len(got) >= 5)
+            served.web.call(time.sleep, 1.5)  # the loop held up: nothing goes out meanwhile
+            await asyncio.to_thread(wait_for, lambda: served.stats["dropped_for_clients"] > 0, 5,
+                                    "messages dropped while the loop is held up")
+            after = time.time()
+            found = await client.until(lambda got: sum(json.loads(p)["t"] > after for _, _, p in got) >= 10)
+            old = len(found) - sum(json.loads(p)["t"] > after for _, _, p in found)
+            assert old <= 10 + 5, f"{old} messages from before the stall: the outbox held more than its bound"
+
+    run(scenario())
+    assert served.state == "running"
