@@ -1,9 +1,11 @@
-"""What the benchmark scripts share: free ports, latency statistics, results."""
+"""What the benchmark scripts share: free ports, Zenoh configs, OSC datagrams taken apart,
+latency statistics, results."""
 
 from __future__ import annotations
 
 import json
 import socket
+import struct
 from pathlib import Path
 from typing import Any
 
@@ -16,6 +18,31 @@ def free_port(kind: int = socket.SOCK_STREAM) -> int:
     with socket.socket(socket.AF_INET, kind) as s:
         s.bind(("127.0.0.1", 0))
         return s.getsockname()[1]
+
+
+def zenoh_config(extra: dict[str, Any] | None = None, **endpoints: str) -> Any:
+    """A zenoh-python config without sonibus: multicast scouting off, ``listen=`` / ``connect=``
+    an endpoint each, and ``extra`` options (key → value, as JSON5)."""
+    import zenoh
+    config = zenoh.Config()
+    config.insert_json5("scouting/multicast/enabled", "false")
+    for side, endpoint in endpoints.items():
+        config.insert_json5(f"{side}/endpoints", json.dumps([endpoint]))
+    for key, value in (extra or {}).items():
+        config.insert_json5(key, json.dumps(value))
+    return config
+
+
+def osc_messages(data: bytes) -> list[bytes]:
+    """The OSC messages of a datagram: itself, or a bundle's elements."""
+    if not data.startswith(b"#bundle\0"):
+        return [data]
+    out, at = [], 16
+    while at < len(data):
+        size = struct.unpack(">i", data[at:at + 4])[0]
+        out.append(data[at + 4:at + 4 + size])
+        at += 4 + size
+    return out
 
 
 def latency_stats(seconds: list[float]) -> dict[str, float]:

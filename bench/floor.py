@@ -32,7 +32,6 @@ from __future__ import annotations
 
 import argparse
 import gc
-import json
 import math
 import multiprocessing as mp
 import os
@@ -47,7 +46,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from common import free_port, latency_stats, write
+from common import free_port, latency_stats, osc_messages, write, zenoh_config
 from sink_throughput import sink_stats, stop_process
 
 CONTEXT = mp.get_context("spawn")  # never fork a process that has opened a Zenoh session
@@ -106,15 +105,6 @@ class Datagrams:
         return head + b"".join([sized + pack(v, t, seq) for sized, v in zip(self.sized[key], values, strict=True)])
 
 
-def _zenoh_config(**endpoints: str) -> Any:
-    import zenoh
-    config = zenoh.Config()
-    config.insert_json5("scouting/multicast/enabled", "false")
-    for side, endpoint in endpoints.items():
-        config.insert_json5(f"{side}/endpoints", json.dumps([endpoint]))
-    return config
-
-
 # -- processes ------------------------------------------------------------------------------
 
 
@@ -122,7 +112,7 @@ def publish(endpoint: str, case: Case, seconds: float, ready: Any, out: Any, rat
     """A publisher per robot on ``robot<r>/frame``, ``rate_hz`` frames/s each, for ``seconds``."""
     import msgpack
     import zenoh
-    session = zenoh.open(_zenoh_config(connect=endpoint))
+    session = zenoh.open(zenoh_config(connect=endpoint))
     publishers = [session.declare_publisher(f"robot{r}/frame", priority=zenoh.Priority.DATA_HIGH,
                                             congestion_control=zenoh.CongestionControl.DROP, express=False)
                   for r in range(case.robots)]
@@ -174,7 +164,7 @@ def floor_sink(endpoint: str, port: int, case: Case, ready: Any, done: Any, conn
         for datagram in datagrams.messages(key, frame["t"], frame["seq"], frame["v"]):
             send(datagram)
 
-    session = zenoh.open(_zenoh_config(listen=endpoint))
+    session = zenoh.open(zenoh_config(listen=endpoint))
     subscriber = session.declare_subscriber("*/frame", each)
     ready.set()
     done.wait()
@@ -241,23 +231,12 @@ def receive(port: int, ready: Any, control: Any, out: Any) -> None:
             if level == socket.SOL_SOCKET and kind == SO_TIMESTAMPNS:
                 seconds, nanoseconds = struct.unpack("qq", stamp[:16])
                 arrival = seconds + nanoseconds * 1e-9
-        for message in _messages(data):
+        for message in osc_messages(data):
             t, seq = struct.unpack(">di", message[-12:])
             latencies.append(arrival - t)
             woken.append(woke - t)
             frames.add((message[:12], seq))
             messages += 1
-
-
-def _messages(data: bytes) -> list[bytes]:
-    if not data.startswith(b"#bundle\0"):
-        return [data]
-    out, at = [], 16
-    while at < len(data):
-        size = struct.unpack(">i", data[at:at + 4])[0]
-        out.append(data[at + 4:at + 4 + size])
-        at += 4 + size
-    return out
 
 
 def cpu_ns(pid: int) -> int:

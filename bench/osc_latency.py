@@ -28,7 +28,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from common import compare, free_port, latency_stats, write
+from common import compare, free_port, latency_stats, osc_messages, write
 
 SONIBUS = str(Path(sys.executable).with_name("sonibus"))
 JOINTS = 17
@@ -50,23 +50,11 @@ def receive(port: int, seconds: float, ready: multiprocessing.Event, out: multip
         except TimeoutError:
             continue
         now = time.time()
-        for message in _messages(data):
+        for message in osc_messages(data):
             address = message[:message.index(b"\0")]
             t, seq = struct.unpack(">di", message[-12:])
             records.append((address, seq, now - t))
     out.put(records)
-
-
-def _messages(data: bytes) -> list[bytes]:
-    """The OSC messages of a datagram: itself, or a bundle's elements."""
-    if not data.startswith(b"#bundle\0"):
-        return [data]
-    out, at = [], 16
-    while at < len(data):
-        size = struct.unpack(">i", data[at:at + 4])[0]
-        out.append(data[at + 4:at + 4 + size])
-        at += 4 + size
-    return out
 
 
 def summarize(records: list[tuple[bytes, int, float]], robots: int) -> dict[str, float]:

@@ -15,32 +15,22 @@ from __future__ import annotations
 
 import argparse
 import contextlib
-import json
 import multiprocessing as mp
 import os
 import socket
 import time
 from typing import Any
 
-from common import free_port, write
+from common import free_port, write, zenoh_config
 from sink_throughput import cpu_seconds
 
 CONTEXT = mp.get_context("spawn")  # never fork a process that has opened a Zenoh session
 PAYLOAD = b"x" * 400
 
 
-def _config(**endpoints: str) -> Any:
-    import zenoh
-    config = zenoh.Config()
-    config.insert_json5("scouting/multicast/enabled", "false")
-    for side, endpoint in endpoints.items():
-        config.insert_json5(f"{side}/endpoints", json.dumps([endpoint]))
-    return config
-
-
 def _zenoh_subscriber(endpoint: str, done: Any) -> None:
     import zenoh
-    session = zenoh.open(_config(connect=endpoint))
+    session = zenoh.open(zenoh_config(connect=endpoint))
     subscriber = session.declare_subscriber("r/frame", lambda sample: None)
     done.wait(120)
     subscriber.undeclare()
@@ -69,7 +59,7 @@ def measure(path: str, rate: float, seconds: float) -> float:
     if path == "zenoh":
         import zenoh
         endpoint = f"tcp/127.0.0.1:{free_port()}"
-        session = zenoh.open(_config(listen=endpoint))
+        session = zenoh.open(zenoh_config(listen=endpoint))
         publisher = session.declare_publisher("r/frame", express=True)
         receiver = CONTEXT.Process(target=_zenoh_subscriber, args=(endpoint, done))
         receiver.start()

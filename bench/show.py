@@ -44,8 +44,8 @@ from pathlib import Path
 from typing import Any
 
 import aiohttp
-from common import free_port, write
-from floor import CONTEXT, Case, _zenoh_config, cpu_ns, floor_sink, publish
+from common import free_port, write, zenoh_config
+from floor import CONTEXT, Case, cpu_ns, floor_sink, publish
 from midi_rate import start_jack
 from sink_throughput import SONIBUS, stop_process
 
@@ -295,7 +295,7 @@ def measure_floors(seconds: float) -> dict[str, float]:
 def empty_subscriber(endpoint: str, ready: Any, done: Any) -> None:
     """Receives the frames and does nothing with them."""
     import zenoh
-    session = zenoh.open(_zenoh_config(listen=endpoint))
+    session = zenoh.open(zenoh_config(listen=endpoint))
     subscriber = session.declare_subscriber("*/frame", lambda sample: None)
     ready.set()
     done.wait()

@@ -15,14 +15,13 @@ Writes bench/results/zenoh_hop.json.
 from __future__ import annotations
 
 import argparse
-import json
 import multiprocessing as mp
 import os
 import socket
 import time
 from typing import Any
 
-from common import free_port, latency_stats, write
+from common import free_port, latency_stats, write, zenoh_config
 
 JOINTS = 17
 VARIANTS: dict[str, tuple[dict[str, Any], bool, int]] = {  # Zenoh options, express, keys per frame
@@ -35,20 +34,9 @@ VARIANTS: dict[str, tuple[dict[str, Any], bool, int]] = {  # Zenoh options, expr
 }
 
 
-def _config(extra: dict[str, Any], **endpoints: str) -> Any:
-    import zenoh
-    config = zenoh.Config()
-    config.insert_json5("scouting/multicast/enabled", "false")
-    for side, endpoint in endpoints.items():
-        config.insert_json5(f"{side}/endpoints", json.dumps([endpoint]))
-    for key, value in extra.items():
-        config.insert_json5(key, json.dumps(value))
-    return config
-
-
 def _publish(extra: dict[str, Any], express: bool, keys: int, endpoint: str, frames: int, go: Any) -> None:
     import zenoh
-    session = zenoh.open(_config(extra, listen=endpoint))
+    session = zenoh.open(zenoh_config(extra, listen=endpoint))
     publishers = [session.declare_publisher(f"r/joints/J{j}", congestion_control=zenoh.CongestionControl.DROP,
                                             priority=zenoh.Priority.DATA_HIGH, express=express)
                   for j in range(keys)]
@@ -66,7 +54,7 @@ def _publish(extra: dict[str, Any], express: bool, keys: int, endpoint: str, fra
 
 def _subscribe(extra: dict[str, Any], endpoint: str, go: Any, done: Any, out: Any) -> None:
     import zenoh
-    session = zenoh.open(_config(extra, connect=endpoint))
+    session = zenoh.open(zenoh_config(extra, connect=endpoint))
     seen: list[float] = []
     subscriber = session.declare_subscriber("r/joints/*",
                                             lambda s: seen.append(time.time() - float(s.payload.to_bytes())))
