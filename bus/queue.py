@@ -30,7 +30,7 @@ MAX_BYTES = 32 << 20  # of payloads waiting in one queue (a flood of 64 KiB fram
 ITEM_BYTES = 64       # what an item is counted beside its payload's bytes (or alone, with no bytes payload)
 
 
-def size_of(item: Any) -> int:
+def item_size(item: Any) -> int:
     """Bytes ``item`` is counted as: its payload's (a ``(key, bytes, ...)`` tuple, as a
     subscription queues), and ``ITEM_BYTES``."""
     if item.__class__ is tuple and len(item) > 1 and item[1].__class__ is bytes:
@@ -60,12 +60,12 @@ class SampleQueue:
         return self._items.maxlen or 0
 
     def put(self, item: Any) -> None:
-        size = size_of(item)
+        size = item_size(item)
         with self._ready:
             if not self._items:
                 self._filled = time.monotonic()
             while self._items and (len(self._items) == self._items.maxlen or self.bytes + size > self.max_bytes):
-                self.bytes -= size_of(self._items.popleft())
+                self.bytes -= item_size(self._items.popleft())
                 self.dropped += 1
             self._items.append(item)
             self.bytes += size
@@ -99,7 +99,7 @@ class SampleQueue:
             if not self._items:
                 return None
             item = self._items.popleft()
-            self.bytes -= size_of(item)
+            self.bytes -= item_size(item)
             return item
 
     def drain(self, timeout: float | None = None) -> list[Any]:

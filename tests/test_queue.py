@@ -8,7 +8,7 @@ import zenoh
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from sonibus.bus.queue import ITEM_BYTES, SampleQueue, size_of
+from sonibus.bus.queue import ITEM_BYTES, SampleQueue, item_size
 
 from .conftest import wait_for
 
@@ -26,7 +26,7 @@ def test_a_flood_of_big_payloads_at_a_stalled_consumer_holds_its_byte_budget_and
     for n in range(1000):
         publisher.put(n.to_bytes(4, "big") + bytes(BIG))
     wait_for(lambda: len(queue) + queue.dropped == 1000, what="every payload queued or counted dropped")
-    assert queue.bytes <= budget and queue.bytes == sum(size_of(item) for item in list(queue._items))
+    assert queue.bytes <= budget and queue.bytes == sum(item_size(item) for item in list(queue._items))
     assert len(queue) == budget // (BIG + 4 + ITEM_BYTES)
     kept = [int.from_bytes(item[1][:4], "big") for item in queue.drain()]
     assert kept == list(range(1000 - len(kept), 1000))  # the newest, in order
@@ -50,7 +50,7 @@ def test_what_a_queue_counts_is_what_it_holds(steps, maxlen, budget):
         else:
             taken += len(queue.drain(timeout=0))
         held = list(queue._items)
-        assert queue.bytes == sum(size_of(item) for item in held)
+        assert queue.bytes == sum(item_size(item) for item in held)
         assert len(held) <= maxlen and (queue.bytes <= budget or len(held) == 1)  # (one too big is kept alone)
         dropped = queue.dropped
     assert put == taken + len(queue) + dropped
