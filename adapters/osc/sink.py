@@ -51,7 +51,6 @@ class _Link:
 
     def __init__(self, target: Target, destination: tuple[str, int]) -> None:
         self.target = target
-        self.destination = destination
         self.profile = PROFILES[target.profile](target)
         self.min_interval = 1.0 / target.max_rate_hz if target.max_rate_hz else 0.0
         self.filtering = target.on_change or target.deadband > 0
