@@ -144,3 +144,20 @@ def test_a_show_opening_in_the_spring_gap_opens_when_the_clocks_jump(net, ticks)
     assert timedelta(0) <= opened <= timedelta(seconds=10), events      # at the jump (a turn of the worker late)
     assert len(ticks) <= 10, f"{len(ticks)} turns of the worker in {ticks[-1] - ticks[0]:.0f} s of the show"
     assert status["open"] and status["next"] == f"{SPRING}T04:00:00+02:00" and show.state == "running"
+
+
+class Stuck(Schedule):
+    """Hours whose next change is now, not ahead — what the autumn night gave before issue 33."""
+
+    def next_change(self, when: datetime) -> datetime | None:
+        return when
+
+
+def test_a_next_change_that_is_not_ahead_fails_the_node_loudly_instead_of_spinning(net, ticks):
+    rig = connect(net)
+    show = Show(ShowConfig(robot="pepper", timezone="Europe/Paris", hours=["daily 00:00-24:00"]), name="show")
+    object.__setattr__(show.config, "schedule", Stuck(show.config.schedule.rules, show.config.zone))
+    net.start(show)
+    wait_for(lambda: show.state == "failed", 10, "the show node failed")
+    assert "is not after the show's clock" in show.failure and "a bug" in show.failure
+    assert len(ticks) < 100  # (a few turns while it takes the robot, then the failure: a spin makes thousands)
