@@ -154,7 +154,7 @@ class Stuck(Schedule):
 
 
 def test_a_next_change_that_is_not_ahead_fails_the_node_loudly_instead_of_spinning(net, ticks):
-    rig = connect(net)
+    connect(net)  # (the robot the show drives)
     show = Show(ShowConfig(robot="pepper", timezone="Europe/Paris", hours=["daily 00:00-24:00"]), name="show")
     object.__setattr__(show.config, "schedule", Stuck(show.config.schedule.rules, show.config.zone))
     net.start(show)
