@@ -77,6 +77,7 @@ def _service(args: argparse.Namespace, env: Environment) -> Exit:
     name = unit_name(path, host)
     text = unit(path, host, user, nodes, args.watchdog_s, args.restart_s)
     written = Path("-") if args.output == "-" else Path(args.output).absolute() / f"{name}.service"
+    _plain("--output", str(written.parent), "give a folder without them")
     checked = verify(text, name, written)
     if checked:
         env.hint(checked)
