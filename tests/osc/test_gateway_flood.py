@@ -9,6 +9,7 @@ import socket
 
 from sonibus.adapters.osc.gateway import OscGateway, OscGatewayConfig
 from sonibus.bus import health
+from sonibus.bus.udpdrops import KernelDrops
 
 from ..conftest import wait_for
 from .test_gateway import build
@@ -38,3 +39,12 @@ def test_what_the_kernel_drops_under_a_flood_is_in_the_stats_and_the_log(net, ca
     assert "metrics" not in stats  # (the counter is available here: no "unavailable" said)
     said = [r.getMessage() for r in caplog.records if "lost in the kernel's receive buffer" in r.getMessage()]
     assert said and said[0].startswith("gate: ") and "datagrams lost in the kernel's receive buffer" in said[0]
+
+
+def test_where_the_drop_counter_cannot_be_read_it_says_unavailable_and_counts_nothing():
+    """A socket whose counter the kernel will not give (here: one already closed, as on a system
+    without SO_MEMINFO, getsockopt fails): no drops made up, no exception on the receive path."""
+    sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    sock.close()
+    drops = KernelDrops(sock)
+    assert (drops.available, drops.new(), drops.total, repr(drops)) == (False, 0, 0, "<KernelDrops unavailable>")
