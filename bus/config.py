@@ -14,7 +14,7 @@ from pathlib import Path
 from typing import Any
 
 from .adapter import Adapter
-from .errors import ConfigError
+from .errors import ConfigError, controls, visible
 from .keys import check_name
 from .logfile import LogConfig
 from .options import from_mapping, located
@@ -136,7 +136,7 @@ def parse(text: str, path: str = "<string>") -> Installation:
         raise ConfigError(f"{path}: no [nodes.NAME] table — an installation needs at least one node")
     nodes = {}
     for name, table in nodes_table.items():
-        where = f"{path} [nodes.{name}]"
+        where = f"{path} [nodes.{visible(name)}]"
         line = _line(text, "nodes", name)
         at_table = f"{where} line {line}" if line else where
         try:
@@ -155,6 +155,10 @@ def parse(text: str, path: str = "<string>") -> Installation:
             raise ConfigError(f"{at_table}: missing key 'adapter' (a string: see `sonibus adapters`)")
         if not isinstance(host, str):
             raise ConfigError(f"{located(where, lines, 'host')}: key 'host': {host!r} is not a string")
+        if controls(host):
+            raise ConfigError(f"{located(where, lines, 'host')}: key 'host': '{visible(host)}' holds control "
+                              f"characters ({', '.join(controls(host))}) — give the machine's name, as "
+                              f"`hostname` prints it")
         nodes[name] = NodeSpec(name, adapter, options, where, lines, host, line)
     log_table = data.get("log", {})
     if not isinstance(log_table, dict):

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import unicodedata
+
 
 class SonibusError(Exception):
     """Base of every error sonibus raises on purpose."""
@@ -41,3 +43,26 @@ class RobotNotFound(CommandError):
     def __init__(self, robot: str) -> None:
         super().__init__("robot_not_found", f"robot '{robot}' not found: no node on the bus owns it")
         self.robot = robot
+
+
+def controls(text: str) -> list[str]:
+    """The control characters in ``text`` (``\\n``, ``\\r``, ``\\x1b``...; an undecodable
+    byte of a file name too), written as escapes; [] when it has none.
+
+    >>> controls("stage"), controls("a\\n[Service]\\r")
+    ([], ['\\\\n', '\\\\r'])
+    """
+    return [_escape(c) for c in text if unicodedata.category(c) in ("Cc", "Cs")]
+
+
+def visible(text: str) -> str:
+    """``text`` with its control characters written as escapes, for a message of one line.
+
+    >>> print(visible("a\\n[Service]"))
+    a\\n[Service]
+    """
+    return "".join(_escape(c) if unicodedata.category(c) in ("Cc", "Cs") else c for c in text)
+
+
+def _escape(char: str) -> str:
+    return char.encode("unicode_escape", "backslashreplace").decode("ascii")

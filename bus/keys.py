@@ -6,7 +6,7 @@ from dataclasses import dataclass
 
 import zenoh
 
-from .errors import ConfigError
+from .errors import ConfigError, controls, visible
 
 NODES = "sonibus/nodes"
 ROBOTS = "sonibus/robots"
@@ -129,8 +129,9 @@ NOT_IN_NAMES = "/*$?#@ "  # what a name must not hold to be one plain key chunk
 
 def check_name(kind: str, name: str) -> str:
     """A robot or node name must be one plain key chunk."""
-    if not name or any(c in name for c in NOT_IN_NAMES):
-        raise ValueError(f"{kind} name '{name}' must be non-empty without '/', '*', '$', '?', '#', '@' or spaces")
+    if not name or any(c in name for c in NOT_IN_NAMES) or controls(name):
+        raise ValueError(f"{kind} name '{visible(name)}' must be non-empty without '/', '*', '$', '?', '#', '@', "
+                         f"spaces or control characters (a newline...)")
     return name
 
 

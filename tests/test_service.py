@@ -4,6 +4,7 @@ verify``, Debian's systemd: it parses units without systemd running as PID 1).""
 from __future__ import annotations
 
 import io
+import json
 import subprocess
 import sys
 from pathlib import Path
@@ -91,3 +92,86 @@ def test_the_unit_can_be_printed_instead(tmp_path):
     code, out, _ = cli("service", str(show), "--host", "sound-pc", "--user", "root", "-o", "-", "--watchdog-s", "12")
     assert code == 0 and out.startswith("# Written by `sonibus service`") and "\nWatchdogSec=12\n" in out
     assert "Description=sonibus show museum.toml on host sound-pc (sound)" in out
+
+
+# -- issue 33, item 7: no value from outside writes a directive of its own ----------------------------
+
+ANY_HOST = '[bus]\nmulticast = false\n\n[nodes.pepper]\nadapter = "sim"\n'   # a node for whichever host runs it
+INJECTED = "\n[Service]\nExecStartPre=true"                                    # what would be a directive of its own
+
+
+def hostile(tmp_path: Path, case: str) -> tuple[Path, list[str]]:
+    """The show's file and the command's arguments for one way of smuggling a directive in."""
+    folder, name, node, host = tmp_path, "museum.toml", "pepper", "stage"
+    if case == "node name \\n":
+        node = f"pepper{INJECTED}"
+    elif case == "node name \\r":
+        node = f"pepper{INJECTED}".replace("\n", "\r")
+    elif case == "--host":
+        host += INJECTED
+    elif case == "file name":
+        name = f"museum{INJECTED}.toml"
+    elif case == "folder":
+        folder = tmp_path / f"shows{INJECTED}"
+    elif case == "folder ending with a backslash":  # WorkingDirectory= would go on over User=
+        folder = tmp_path / "shows\\"
+    folder.mkdir(exist_ok=True)
+    show = folder / name
+    show.write_text(ANY_HOST.replace("[nodes.pepper]", f"[nodes.{json.dumps(node)}]"))
+    return show, ["--host", host]
+
+
+@pytest.mark.parametrize(("case", "error"), [
+    ("node name \\n", r"node name 'pepper\n[Service]\nExecStartPre=true' must be non-empty without"),
+    ("node name \\r", r"node name 'pepper\r[Service]\rExecStartPre=true' must be non-empty without"),
+    ("--host", r"--host 'stage\n[Service]\nExecStartPre=true' holds control characters (\n, \n) that a systemd "
+               "unit cannot carry — give the machine's name"),
+    ("file name", r"museum\n[Service]\nExecStartPre=true.toml' holds control characters (\n, \n)"),
+    ("folder", r"[Service]\nExecStartPre=true/museum.toml' holds control characters (\n, \n)"),
+    ("folder ending with a backslash", "ends with a space or a backslash, which a unit's WorkingDirectory= "
+                                       "cannot carry — rename the folder"),
+])
+def test_a_name_host_or_path_that_would_write_a_directive_is_refused_and_no_unit_written(tmp_path, case, error):
+    show, args = hostile(tmp_path, case)
+    code, out, err = cli("service", str(show), *args, "--user", "root", "-o", str(tmp_path))
+    assert (code, out) == (2, ""), out
+    assert error in err and err.count("\n") == 1 and err.startswith("sonibus: error: "), err
+    assert not list(tmp_path.rglob("*.service"))
+
+
+def test_odd_but_printable_node_names_reach_the_description_as_they_are(tmp_path):
+    """What a node name may hold (quotes, backslash, ';', '=', '%', brackets) stays a literal of one line."""
+    odd = 'a"b\\c;d=e%n[Service]'
+    show = tmp_path / "museum.toml"
+    show.write_text(ANY_HOST.replace("[nodes.pepper]", f"[nodes.{json.dumps(odd)}]"))
+    code, _, err = cli("service", str(show), "--host", "stage", "--user", "root", "-o", str(tmp_path))
+    assert code == 0, err
+    unit = tmp_path / "sonibus-museum-stage.service"
+    lines = unit.read_text().splitlines()
+    assert 'Description=sonibus show museum.toml on host stage (a"b\\c;d=e%%n[Service])' in lines
+    assert sum(line.startswith("[") for line in lines) == 3  # [Unit], [Service], [Install]: no more
+    assert verify(unit).returncode == 0
+
+
+def test_a_unit_systemd_refuses_is_not_written(tmp_path, monkeypatch):
+    """``systemd-analyze verify`` runs before the unit is written: a command that cannot run stops it."""
+    require_tool("systemd-analyze", "systemd")
+    not_executable = tmp_path / "sonibus"
+    not_executable.write_text("")
+    monkeypatch.setattr(service_module, "_sonibus", lambda: not_executable)
+    show = tmp_path / "museum.toml"
+    show.write_text(SHOW)
+    code, out, err = cli("service", str(show), "--host", "stage", "--user", "root", "-o", str(tmp_path))
+    assert (code, out) == (2, "") and err.count("\n") == 1, err
+    assert (f"systemd refuses the unit, not written: sonibus-museum-stage.service: Command {not_executable} is not "
+            f"executable") in err
+    assert not list(tmp_path.glob("*.service"))
+
+
+def test_without_systemd_analyze_the_unit_is_written_and_said_unchecked(tmp_path, monkeypatch):
+    monkeypatch.setenv("PATH", str(tmp_path / "empty"))  # (a machine without systemd's tools)
+    show = tmp_path / "museum.toml"
+    show.write_text(SHOW)
+    code, out, err = cli("service", str(show), "--host", "stage", "--user", "root", "-o", str(tmp_path))
+    assert code == 0 and (tmp_path / "sonibus-museum-stage.service").is_file(), err
+    assert "not checked by systemd: no systemd-analyze here (Debian: apt install systemd)" in err + out

@@ -19,6 +19,7 @@ import ipaddress
 import json
 import logging
 import socket
+import time
 from dataclasses import dataclass
 from typing import Any
 
@@ -27,6 +28,7 @@ from sonibus.bus.client import Outcome, ask, ask_program
 from sonibus.bus.errors import CommandError, ConfigError
 from sonibus.bus.options import bad
 from sonibus.bus.queue import SampleQueue
+from sonibus.bus.udpdrops import KernelDrops
 
 from . import routes, tcp, wire
 from .config import parse_target
@@ -35,8 +37,9 @@ from .tcp import Peer
 log = logging.getLogger(__name__)
 
 COUNTERS = ("received", "commands", "replies_ok", "replies_error", "malformed", "unknown_address",
-            "refused_source", "bad_args", "busy", "replies_lost", "internal")
+            "refused_source", "bad_args", "busy", "replies_lost", "internal", "kernel_dropped")
 POLL_S = 0.2          # socket timeouts: how soon stop() is noticed
+DROPS_EVERY_S = 1.0   # how often the kernel's drops on the UDP socket are read (as the stats are sent)
 UDP_BUFFER = 1 << 20  # bytes of receive buffer asked for
 
 
@@ -93,6 +96,7 @@ class OscGateway(Adapter):
         self.udp_address: tuple[Any, ...] = ()
         self.tcp_address: tuple[Any, ...] = ()
         self._pending = 0  # commands awaiting an answer (guarded by the base class's lock)
+        self._kernel_drops: KernelDrops | None = None  # (made with the UDP socket)
 
     def _start(self) -> None:
         cfg: OscGatewayConfig = self.config
@@ -100,6 +104,7 @@ class OscGateway(Adapter):
         self._replies = self.own(SampleQueue(4096))
         self._udp = self.own(self._bind(socket.SOCK_DGRAM, "listen", cfg.listen))
         self.udp_address = self._udp.getsockname()
+        self._kernel_drops = KernelDrops(self._udp)
         if cfg.tcp:
             self._tcp = self.own(self._bind(socket.SOCK_STREAM, "tcp", cfg.tcp))
             self.tcp_address = self._tcp.getsockname()
@@ -138,7 +143,11 @@ class OscGateway(Adapter):
     # -- receiving ------------------------------------------------------------------
 
     def _receive_udp(self) -> None:
+        checked = time.monotonic()
         while not self.stopping.is_set():
+            if time.monotonic() - checked >= DROPS_EVERY_S:
+                checked = time.monotonic()
+                self._count_kernel_drops()
             try:
                 data, source = self._udp.recvfrom(65535)
             except TimeoutError:
@@ -150,6 +159,24 @@ class OscGateway(Adapter):
                 self._guarded(data, Peer(source))
             else:
                 self.count("received")
+
+    def _count_kernel_drops(self) -> None:
+        """What the kernel dropped since the last look (the receive buffer was full): counted
+        ``kernel_dropped`` and ``dropped``, said like the other losses."""
+        found = self._kernel_drops.new() if self._kernel_drops else 0
+        if not found:
+            return
+        self.count("kernel_dropped", found)
+        self.count("dropped", found)
+        size = self._udp.getsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF)
+        self.warn("kernel_dropped", f"{found:,} datagrams lost in the kernel's receive buffer ({size:,} bytes, full): "
+                                    f"they came faster than this gateway reads — send fewer, or raise "
+                                    f"net.core.rmem_max for a larger buffer")
+
+    def metrics(self) -> dict[str, Any]:
+        if self._kernel_drops is None or self._kernel_drops.available:
+            return {}
+        return {"kernel_dropped": "unavailable on this system"}
 
     def _allowed(self, host: str) -> bool:
         ip = ipaddress.ip_address(host.split("%")[0])

@@ -48,11 +48,12 @@ def _rehearse(args: argparse.Namespace, env: Environment) -> Exit:
                               "a rehearsal speeds up the clock of the show nodes (adapter = \"show\")")
         for show in shows:
             try:
-                show.rehearse(speed, start(args.start, show.config.zone) if args.start else None)
+                begins = start(args.start, show.config.zone) if args.start else None
+                show.rehearse(speed, begins)
             except ValueError as exc:
                 raise ConfigError(f"rehearse: --from: {exc}") from None
             env.say(f"sonibus: rehearsal: {show.name}'s clock runs {speed:g}× faster"
-                    + (f" from {args.start}" if args.start else ""))
+                    + (f" from {begins.isoformat(' ', 'seconds')}" if begins else ""))
 
     return run_installation(args, env, prepare)
 

@@ -26,9 +26,11 @@ from __future__ import annotations
 import re
 import time
 from collections.abc import Callable
-from datetime import date, datetime
+from datetime import date, datetime, timedelta
 from datetime import time as TimeOfDay
 from datetime import tzinfo as TzInfo
+
+from .schedule import first_instant
 
 DAY_S = 86400.0
 _DURATION = re.compile(r"^\s*(\d+(?:\.\d+)?)\s*(s|m|min|h)\s*$")  # (a unit always: is "10" s or min?)
@@ -83,11 +85,33 @@ def start(text: str, zone: TzInfo, today: date | None = None) -> datetime:
     try:
         if re.fullmatch(r"\d{1,2}:\d{2}(:\d{2})?", text):
             padded = text.rjust(len(text) + (text.index(":") == 1), "0")  # (9:55 is 09:55)
-            return datetime.combine(today or datetime.now(zone).date(), TimeOfDay.fromisoformat(padded), zone)
+            return local(datetime.combine(today or datetime.now(zone).date(), TimeOfDay.fromisoformat(padded)), zone,
+                         text)
         found = datetime.fromisoformat(text)
     except ValueError:
         raise ValueError(f"'{text}' is not a time like 09:55 or 2025-06-03 09:55") from None
-    return found if found.tzinfo is not None else found.replace(tzinfo=zone)
+    return found if found.tzinfo is not None else local(found, zone, text)
+
+
+def local(wall: datetime, zone: TzInfo, text: str = "") -> datetime:
+    """``wall`` (naive, or in ``zone``) as an instant in ``zone``: of a time the clocks go
+    through twice (autumn), the first (fold 0: an offset after it, ``+01:00``, says the
+    second); ``ValueError`` for a time they skip (spring), naming the jump.
+
+    >>> from zoneinfo import ZoneInfo
+    >>> local(datetime(2026, 10, 25, 2, 30), ZoneInfo("Europe/Paris")).isoformat()
+    '2026-10-25T02:30:00+02:00'
+    """
+    naive = wall.replace(tzinfo=None)
+    first = naive.replace(tzinfo=zone, fold=0)
+    if datetime.fromtimestamp(first.timestamp(), zone).replace(tzinfo=None) == naive:
+        return datetime.fromtimestamp(first.timestamp(), zone)
+    instant = first_instant(naive.date(), naive.hour * 60 + naive.minute, zone)
+    jump = datetime.fromtimestamp(instant, zone)
+    skipped = datetime.fromtimestamp(instant - 1, zone) + timedelta(seconds=1)  # (what the clock would have read)
+    raise ValueError(f"'{text or naive.isoformat(' ')}' does not exist in {zone}: that night the clocks go from "
+                     f"{skipped:%H:%M} to {jump:%H:%M} — give a time before or after the jump, e.g. "
+                     f"{jump:%Y-%m-%d %H:%M}")
 
 
 def speed_of(day: str) -> float:

@@ -31,6 +31,7 @@ import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
+from datetime import datetime
 from typing import Any
 
 from sonibus.bus import keys
@@ -185,7 +186,12 @@ class Director:
 
     def _until_change(self, now: float) -> float:
         later = self.config.schedule.next_change(self.clock.now())
-        return SLICE_S * 4 if later is None else max(0.0, self.clock.real(later.timestamp() - now))
+        if later is None:
+            return SLICE_S * 4
+        if not later.timestamp() > now:  # (waiting 0 s for it, again and again, would spin a core: issue 33)
+            raise RuntimeError(f"the next change of the hours, {later.isoformat()}, is not after the show's "
+                               f"clock ({datetime.fromtimestamp(now, self.clock.zone).isoformat()}): a bug")
+        return self.clock.real(later.timestamp() - now)
 
     def _schedule(self) -> bool:
         """Whether the hours changed what the show does (said on ``<robot>/events/show``)."""

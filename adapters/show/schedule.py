@@ -82,25 +82,33 @@ class Schedule:
         """Whether the show is open at ``when`` (any aware time; read in the schedule's zone)."""
         if self.always:
             return True
-        local = when.astimezone(self.zone)
-        minute = local.hour * 60 + local.minute + (local.second + local.microsecond / 1e6) / 60
-        return any(start <= minute < end for start, end in self._spans(local.date()))
+        instant = when.timestamp()
+        day = when.astimezone(self.zone).date()
+        return any(start <= instant < end for offset in (-1, 0, 1)
+                   for start, end in self._openings(day + timedelta(days=offset)))
 
     def next_change(self, when: datetime) -> datetime | None:
-        """The first instant after ``when`` at which ``is_open`` differs from now (None: never)."""
+        """The first instant after ``when`` at which ``is_open`` differs from now (None: never),
+        in the schedule's zone (its offset says which of a repeated hour it is); always
+        strictly after ``when``."""
         if self.always:
             return None
-        now_open = self.is_open(when)
-        local = when.astimezone(self.zone)
-        for offset in range(SEARCH_DAYS):
-            day = local.date() + timedelta(days=offset)
-            edges = sorted({edge for span in self._spans(day) for edge in span})
-            edges.append(24 * 60)  # (a day's end: an opening may not go on the next day)
-            for edge in edges:
-                instant = _at(day, edge, self.zone)
-                if instant > when and self.is_open(instant) != now_open:
+        now_open, after = self.is_open(when), when.timestamp()
+        day = when.astimezone(self.zone).date()
+        for offset in range(-1, SEARCH_DAYS):
+            for edge in sorted({e for opening in self._openings(day + timedelta(days=offset)) for e in opening}):
+                instant = datetime.fromtimestamp(edge, self.zone)
+                if edge > after and self.is_open(instant) != now_open:
                     return instant
         return None
+
+    def _openings(self, day: date) -> list[tuple[float, float]]:
+        """The day's openings as instants (seconds since the epoch), each from the first
+        instant its clock reads the start to the first it reads the end: an hour the clocks
+        repeat (autumn) is open or closed once, through both; a start or end the clocks
+        skip (spring) is the instant they jump."""
+        return [(first_instant(day, start, self.zone), first_instant(day, end, self.zone))
+                for start, end in self._spans(day)]
 
     def _spans(self, day: date) -> list[tuple[int, int]]:
         """The day's openings in minutes after midnight, touching and overlapping rules joined."""
@@ -144,9 +152,26 @@ def _days(text: str, rule: str) -> frozenset[int]:
     return frozenset(found)
 
 
-def _at(day: date, minute: int, zone: TzInfo) -> datetime:
-    """``minute`` after midnight of ``day`` in ``zone`` (24:00: the next midnight)."""
-    return datetime.combine(day, time(), zone) + timedelta(minutes=minute)
+def first_instant(day: date, minute: int, zone: TzInfo) -> float:
+    """The first instant (seconds since the epoch) at which the clock of ``zone`` reads
+    ``minute`` after midnight of ``day`` or later (24:00: the next midnight): of a time
+    that happens twice, the first; of one that never happens, the instant the clocks jump."""
+    wall = datetime.combine(day, time()) + timedelta(minutes=minute)
+    first = wall.replace(tzinfo=zone, fold=0)  # (PEP 495: fold 0 is the earlier of a repeated time)
+    if _reads(first.timestamp(), zone) == wall:
+        return first.timestamp()
+    # a time the clocks skip: the jump lies between it read at the offset after (before the jump) and before
+    before, after = wall.replace(tzinfo=zone, fold=1).timestamp(), first.timestamp()
+    before, after = min(before, after), max(before, after)
+    while after - before > 1:  # (offsets change on whole seconds)
+        middle = (before + after) // 2
+        before, after = (before, middle) if _reads(middle, zone) >= wall else (middle, after)
+    return after
+
+
+def _reads(instant: float, zone: TzInfo) -> datetime:
+    """What the clock of ``zone`` reads at ``instant`` (naive)."""
+    return datetime.fromtimestamp(instant, zone).replace(tzinfo=None)
 
 
 def _hhmm(minute: int) -> str:

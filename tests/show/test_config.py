@@ -91,6 +91,8 @@ def test_the_show_pages_first_example_builds():
 @pytest.mark.parametrize("args, message", [
     (["--day", "10"], "rehearse: '10' is not a duration like 10m, 90s or 1h"),
     (["--from", "25:00"], "rehearse: --from: '25:00' is not a time like 09:55"),
+    (["--from", "2026-03-29 02:30"], "rehearse: --from: '2026-03-29 02:30' does not exist in Europe/Paris: that "
+                                     "night the clocks go from 02:00 to 03:00 — give a time before or after the jump"),
     (["--only", "robot"], "no show node among robot — a rehearsal speeds up the clock of the show nodes"),
 ])
 def test_a_rehearsal_that_cannot_run_says_why_in_one_line_and_starts_nothing(args, message):
