@@ -94,6 +94,7 @@ class Replay(Adapter):
         super().__init__(config, name=name)
         self.window_s, self.loops = 0.0, 0        # progress: the window's length, passes done
         self.finished = threading.Event()          # set at the end of a replay without loop
+        self.problems = ""                         # what the reading skipped (``Recording.problems``), so far
         self._clock: tuple[float, float] | None = None  # the pass's start (monotonic) and the time cut from it
 
     @property
@@ -210,6 +211,7 @@ class Replay(Adapter):
                     self._publish(message, t_origin, seq, late)
             if self.stopping.is_set():
                 return
+            self._skipped()
             self.loops += 1
             if not cfg.loop:
                 break
@@ -217,6 +219,14 @@ class Replay(Adapter):
             self._clock = (start, 0.0)
         self.finished.set()
         log.info("%s: replay of %s finished", self.name, cfg.path)
+
+    def _skipped(self) -> None:
+        """Say, once a pass, what the reading skipped (a message the gate refuses, a chunk that cannot be
+        read); each pass skips the same, so it is said when it changes."""
+        problems = self.recording.problems()
+        if problems and problems != self.problems:
+            self.warn("skipped", problems)
+        self.problems = problems
 
     def _gap(self, gap_s: float, at_s: float, message: Message) -> None:
         self.count("gaps")
