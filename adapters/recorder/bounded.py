@@ -29,6 +29,7 @@ section met a chunk there, which mcap's reader decompressed whole).
 from __future__ import annotations
 
 import io
+import os
 import struct
 import zlib
 from collections.abc import Iterator
@@ -55,7 +56,7 @@ from mcap.summary import Summary
 
 MAX_CHUNK = 32 << 20       # bytes a chunk may expand to (the recorder's close at 1 MiB, or every second)
 MAX_RECORD = MAX_CHUNK + 4096  # bytes of any record in the file (a chunk's, compressed, or less)
-MAX_RATIO = 200            # the index's chunks may expand to at most this many times the file's size, in all
+MAX_RATIO = 200            # chunks may expand to at most this many times the file's size, in all (beyond one chunk)
 MAX_CHANNELS = 4096        # channels read from one file (a robot's keys are about 60, its views a few more)
 MAX_TOPIC = 1024           # characters of a channel's topic (a bus key)
 MESSAGE_HEADER = 22        # channel id, sequence, log time, publish time: the bytes of a message record before its data
@@ -187,15 +188,19 @@ def chunk_records(data: bytes) -> Iterator[Channel | Schema | Message]:
 
 
 def records(f: BinaryIO, bad_chunk: list[ChunkError]) -> Iterator[Any]:
-    """The records of the MCAP stream ``f`` in order, a chunk's one by one; a chunk that
-    cannot be expanded is skipped and appended to ``bad_chunk``. Raises a ``DAMAGE``
-    exception at the first damaged record outside a chunk (or inside one, after its
-    records before the damage)."""
-    offset = 0
+    """The records of the MCAP file ``f`` in order, a chunk's one by one; a chunk that
+    cannot be expanded, or would take what its chunks expand to past ``allowance``, is
+    skipped and appended to ``bad_chunk``. Raises a ``DAMAGE`` exception at the first
+    damaged record outside a chunk (or inside one, after its records before the damage)."""
+    offset, left = 0, allowance(os.fstat(f.fileno()).st_size)
     stream = StreamReader(f, skip_magic=False, emit_chunks=True, record_size_limit=MAX_RECORD)
     for record in stream.records:
         if isinstance(record, Chunk):
             try:
+                if record.uncompressed_size > left:
+                    raise ChunkError(f"the chunk at byte {offset} would take what the file's chunks expand to "
+                                     f"past {MAX_RATIO} times its size (a decompression bomb?)")
+                left -= record.uncompressed_size
                 data = expand(record, offset)
             except ChunkError as exc:
                 bad_chunk.append(exc)
@@ -206,9 +211,15 @@ def records(f: BinaryIO, bad_chunk: list[ChunkError]) -> Iterator[Any]:
         offset = f.tell()
 
 
+def allowance(file_size: int) -> int:
+    """Bytes the chunks of a file of ``file_size`` may expand to, in all: ``MAX_RATIO``
+    times its size, and 4 MiB more (a short file's chunk may compress better)."""
+    return (4 << 20) + MAX_RATIO * file_size
+
+
 def check_sizes(summary: Summary, file_size: int) -> None:
     """``ChunkError`` if the index says a chunk expands past ``MAX_CHUNK``, or all of
-    them past ``MAX_RATIO`` times the file's size (a decompression bomb)."""
+    them past ``allowance`` (a decompression bomb)."""
     total = 0
     for index in summary.chunk_indexes:
         if index.uncompressed_size > MAX_CHUNK:
@@ -216,7 +227,7 @@ def check_sizes(summary: Summary, file_size: int) -> None:
                              f"{_size(index.uncompressed_size)}, more than a chunk may ({_size(MAX_CHUNK)}; "
                              "sonibus's recorder writes chunks of about 1 MiB)")
         total += index.uncompressed_size
-    if total > MAX_RATIO * file_size:
+    if total > allowance(file_size):
         raise ChunkError(f"its index says its chunks expand to {_size(total)}, {total / max(file_size, 1):.0f} times "
                          f"its size (at most {MAX_RATIO} times: recordings compress about 10 times)")
 

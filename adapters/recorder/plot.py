@@ -35,6 +35,8 @@ SPANS = {"behavior": {"color": "tab:orange", "alpha": 0.15}, "speech": {"color":
 MARKED = ("behavior", "speech", "posture", "command")
 LABEL_ROWS = 3       # label heights a run of close spans steps through
 CLOSE = 0.08         # spans starting within this fraction of the plot's width are close
+MAX_PANELS = 24      # panels in one picture (a robot's chains: Pepper 5; a file may name thousands of robots)
+MAX_LINES = 256      # joints drawn in one picture (Pepper 17, NAO 26)
 
 
 def plot(recording: Recording, out: str, keys: Sequence[str] | None = None, title: str | None = None) -> str:
@@ -60,6 +62,13 @@ def figure(recording: Recording, keys: Sequence[str] | None = None, title: str |
     if not robots:
         raise RecordingError(f"nothing to plot in {recording.path}: no joint nor event key among "
                              f"{', '.join(chosen[:8])}{', ...' if len(chosen) > 8 else ''}")
+    infos = recording.infos()
+    panels = [(robot, *panel) for robot in robots
+              for panel in _panels([k for k in joints if _robot(k) == robot], infos.get(robot))]
+    if len(panels) > MAX_PANELS or len(joints) > MAX_LINES:  # (matplotlib took minutes and GBs over thousands)
+        raise RecordingError(f"{recording.path}: too much for one picture ({len(joints)} joints in {len(panels)} "
+                             f"panels; at most {MAX_LINES} joints in {MAX_PANELS} panels) — choose some with --keys, "
+                             f"e.g. --keys '{robots[0]}/joints/*'")
     series: dict[str, tuple[list[float], list[float]]] = {k: ([], []) for k in joints}
     happened: dict[str, list[tuple[float, dict[str, Any]]]] = {robot: [] for robot in robots}
     for message in recording.messages(joints + events):
@@ -72,9 +81,6 @@ def figure(recording: Recording, keys: Sequence[str] | None = None, title: str |
     # acquisition precedes logging: the first samples can lie just before the start
     begin = min([0.0, *(xs[0] for xs, _ in series.values() if xs)])
     end = max([recording.duration_s, *(xs[-1] for xs, _ in series.values() if xs)])
-    infos = recording.infos()
-    panels = [(robot, *panel) for robot in robots
-              for panel in _panels([k for k in joints if _robot(k) == robot], infos.get(robot))]
 
     fig = Figure(figsize=(11, 1.2 + 2.0 * len(panels)), dpi=120, layout="constrained")
     axes = list(fig.subplots(len(panels), 1, sharex=True, squeeze=False)[:, 0])

@@ -119,6 +119,12 @@ class Recording:
             summary = read_summary(self._file)
             if summary is not None:
                 check_sizes(summary, size)
+        except ChunkError as exc:  # (what the index says: recover, which reads every chunk, cannot help)
+            raise RecordingError(f"{path} cannot be read: {exc}") from None
+        except DAMAGE as exc:
+            raise RecordingError(f"{path} is damaged ({_why(exc)}); {_RECOVER.format(path=path)}") from None
+        try:
+            if summary is not None:
                 self._indexes = sorted(summary.chunk_indexes, key=lambda index: index.chunk_start_offset)
                 if self._indexes:  # the last chunk: where a writer that failed would have left damage
                     last = self._indexes[-1]
@@ -205,18 +211,19 @@ class Recording:
                 continue
             if index.message_index_offsets and wanted.isdisjoint(index.message_index_offsets):
                 continue
+            at = index.chunk_start_offset
             try:
-                data = expand(read_chunk(self._file, index), index.chunk_start_offset)
-                for record in chunk_records(data):
+                data = expand(read_chunk(self._file, index), at)
+                for n, record in enumerate(chunk_records(data)):
                     if isinstance(record, McapMessage) and record.channel_id in wanted \
                             and start <= record.log_time and (end is None or record.log_time < end):
-                        found = self.checks.message(self._channels[record.channel_id], record)
+                        found = self.checks.message(self._channels[record.channel_id], record, (at, n))
                         if found is not None:
                             yield found
             except ChunkError as exc:
-                self.checks.skip("chunks", str(exc))
+                self.checks.skip("chunks", str(exc), at)
             except DAMAGE as exc:  # (a record torn inside a chunk: those before it were read)
-                self.checks.skip("chunks", f"the chunk at byte {index.chunk_start_offset}: {_why(exc)}")
+                self.checks.skip("chunks", f"the chunk at byte {at}: {_why(exc)}", at)
 
     def _unindexed(self, wanted: set[int], start: int, end: int | None) -> Iterator[Message]:
         bad: list[ChunkError] = []
@@ -258,15 +265,18 @@ class Checks:
     gate; a view only to be a map): a file from a stranger may hold anything. What
     fails is skipped and counted in ``skipped``, as is a chunk that cannot be read."""
 
+    REMEMBERED = 1 << 16  # places skipped that are remembered, not counted twice (replay reads a file again)
+
     def __init__(self, path: str) -> None:
         self.path = path
         self.skipped: dict[str, int] = {"messages": 0, "chunks": 0}
         self._first: dict[str, str] = {}  # what, of each kind, was skipped first
+        self._seen: set[object] = set()
         # (a recording's t are old, and its bus may have allowed larger payloads)
         self._gate = Gate(Limits(max_future_s=math.inf, max_payload=1 << 30, max_info_payload=1 << 30))
 
-    def message(self, channel: Channel, message: McapMessage) -> Message | None:
-        """The message, checked; None, counted, if it fails."""
+    def message(self, channel: Channel, message: McapMessage, where: object = None) -> Message | None:
+        """The message, checked; None, counted, if it fails (once for each ``where``, its place in the file)."""
         if channel.message_encoding not in (MESSAGE_ENCODING, AUDIO_ENCODING):
             raise RecordingError(f"channel {channel.topic} is {channel.message_encoding}, not {MESSAGE_ENCODING} "
                                  f"or {AUDIO_ENCODING}: not a sonibus recording")
@@ -278,11 +288,17 @@ class Checks:
                 key = Key.parse(channel.topic)
                 SECTIONS[key.section].check(self._gate, key, data)
         except (BadMessage, KeyError, TypeError, ValueError, RecursionError, OverflowError) as exc:
-            self.skip("messages", f"{channel.topic[:80]}: {_why(exc)}")
+            self.skip("messages", f"{channel.topic[:80]}: {_why(exc)}", where)
             return None
         return Message(channel.topic, message.log_time, message.publish_time, data)
 
-    def skip(self, kind: str, why: str) -> None:
+    def skip(self, kind: str, why: str, where: object = None) -> None:
+        """Count one ``kind`` skipped, unless what is at ``where`` was (None: always count)."""
+        if where is not None:
+            if (kind, where) in self._seen:
+                return
+            if len(self._seen) < self.REMEMBERED:
+                self._seen.add((kind, where))
         self.skipped[kind] += 1
         self._first.setdefault(kind, why)
 

@@ -53,6 +53,7 @@ MAX_LATE_S = 0.1  # samples later than this are skipped (events never): no burst
 LEAD_S = 0.2      # between declaring the publishers and the first message: Zenoh settles its routes
 AHEAD = 512       # moments read and decoded ahead of the player (~5 s of a robot at 100 frames/s)
 GATHER_NS = 5_000_000  # a frame's joint samples reach a recorder within this of each other
+MAX_ROBOTS = 64   # robots one replay claims (each like a live one: a token, two servers; 4,096 took minutes and GBs)
 STREAMED = {"joints": STREAM, "derived": STREAM, "audio": AUDIO}  # sections sent as streams (late: skipped)
 
 
@@ -122,6 +123,9 @@ class Replay(Adapter):
             self.warn("audio", f"--speed {cfg.speed:g}: audio left out ({', '.join(audio)}): sound plays only at "
                                "the speed it was recorded")
         robots = sorted({k.partition("/")[0] for k in self.keys})
+        if len(robots) > MAX_ROBOTS:
+            raise RecordingError(f"{cfg.path} holds {len(robots)} robots ({', '.join(robots[:3])}, ...); a replay "
+                                 f"takes at most {MAX_ROBOTS} — choose some with --keys, e.g. --keys '{robots[0]}/**'")
         unknown = sorted(set(cfg.rename) - set(robots))
         if unknown:
             raise RecordingError(f"--as {unknown[0]}: no robot '{unknown[0]}' in {cfg.path} — "

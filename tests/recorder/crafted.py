@@ -119,7 +119,7 @@ def craft(path, recipe: Recipe) -> bytes:
         start = len(out)
         out += record(Chunk(compression=part.compression if part.compression != "none" else "", data=data,
                             message_start_time=T0, message_end_time=T0 + 10**9,
-                            uncompressed_crc=zlib.crc32(part.content) if part.crc and part.data is None else 0,
+                            uncompressed_crc=zlib.crc32(part.content) if part.crc else 0,
                             uncompressed_size=declared))
         indexes.append(ChunkIndex(chunk_length=len(out) - start, chunk_start_offset=start,
                                   compression=part.compression if part.compression != "none" else "",
