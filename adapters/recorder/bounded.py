@@ -71,6 +71,10 @@ class ChunkError(ValueError):
     """A chunk that cannot be read as it says: too large, lying about its size, corrupt."""
 
 
+class NotAsIndexed(ChunkError):
+    """A chunk that is not what the file's index says (``recover`` reads the chunks, not the index)."""
+
+
 def read_summary(f: BinaryIO) -> Summary | None:
     """The summary section of ``f`` (None if it has none), read record by record,
     none larger than ``MAX_RECORD``; a chunk met there is not opened."""
@@ -111,10 +115,10 @@ def read_chunk(f: BinaryIO, index: ChunkIndex) -> Chunk:
     chunk = read_record(f, index.chunk_start_offset)
     where = f"the chunk at byte {index.chunk_start_offset}"
     if not isinstance(chunk, Chunk):
-        raise ChunkError(f"{where} is a {type(chunk).__name__} record, not a chunk")
+        raise NotAsIndexed(f"{where} is a {type(chunk).__name__} record, not a chunk")
     if (chunk.uncompressed_size, chunk.compression, len(chunk.data)) != \
             (index.uncompressed_size, index.compression, index.compressed_size):
-        raise ChunkError(f"{where} says it holds {_size(len(chunk.data))} of {chunk.compression or 'raw'} data "
+        raise NotAsIndexed(f"{where} says it holds {_size(len(chunk.data))} of {chunk.compression or 'raw'} data "
                          f"expanding to {_size(chunk.uncompressed_size)}; the file's index says "
                          f"{_size(index.compressed_size)} of {index.compression or 'raw'} to "
                          f"{_size(index.uncompressed_size)}")

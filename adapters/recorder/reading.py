@@ -45,6 +45,7 @@ from .bounded import (
     MAX_RECORD,
     MAX_TOPIC,
     ChunkError,
+    NotAsIndexed,
     check_sizes,
     chunk_records,
     expand,
@@ -130,6 +131,9 @@ class Recording:
                     last = self._indexes[-1]
                     for _ in chunk_records(expand(read_chunk(self._file, last), last.chunk_start_offset)):
                         pass
+        except NotAsIndexed as exc:
+            raise RecordingError(f"{path} cannot be read: {exc}; 'sonibus recover {path}' reads its chunks, "
+                                 "not its index") from None
         except ChunkError as exc:
             many = summary is not None and len(summary.chunk_indexes) > 1
             raise RecordingError(f"{path} cannot be read: {exc}" + (

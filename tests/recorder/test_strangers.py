@@ -1,0 +1,263 @@
+"""Recordings from strangers (issue 33): a crafted file never takes a command that
+reads it (``info``, ``export``, ``plot``, ``replay``, ``recover``) past ``RSS_MB``
+of memory, nor ends it with an internal error; it is refused in one line, or read
+with what cannot be read skipped and counted."""
+
+from __future__ import annotations
+
+import io
+import json
+import re
+import subprocess
+import sys
+import time
+
+import pytest
+
+from sonibus.adapters.recorder.bounded import MAX_CHANNELS, MAX_TOPIC
+from sonibus.bus.cli import Environment, main
+
+from .crafted import Part, Recipe, Topic, compress, craft, jsons, lz4_zeros, message, samples, zstd_zeros
+
+RSS_MB = 200
+COMMANDS = ("info", "export", "plot", "replay", "recover")
+INTERNAL = re.compile(r"^sonibus: error: \w*(Error|Exception|Exit|Interrupt)\b")  # a Python exception's own name
+
+
+def argv(command, path, tmp):
+    extra = {"export": ["--csv", str(tmp / "csv")], "plot": ["-o", str(tmp / "out.png")],
+             "replay": ["--no-multicast"], "recover": ["-o", str(tmp / "recovered.mcap")]}
+    return [command, str(path), *extra.get(command, [])]
+
+
+def cli(*args):
+    env = Environment(stdout=io.StringIO(), stderr=io.StringIO())
+    return main(list(args), env), env.stdout.getvalue(), env.stderr.getvalue()
+
+
+def clean(status, err, command):
+    """A success (warnings allowed) or one line of a refusal that is not an internal error."""
+    assert status in (0, 1), (command, status, err)
+    lines = err.splitlines()
+    assert "Traceback" not in err, (command, err)
+    if status == 1:
+        assert len(lines) == 1 and lines[0].startswith("sonibus: error: ") and not INTERNAL.match(lines[0]), \
+            (command, err)
+    else:
+        assert all(line.startswith(("sonibus: WARNING: ", "replay [")) for line in lines), (command, err)
+
+
+# -- the files ----------------------------------------------------------------------------------
+
+HEAD_YAW = [Topic(1, "pepper/joints/HeadYaw", count=20)]
+
+
+def zstd_bomb(path):  # the 98 KB file of the issue: one chunk that expands to 3 GiB, as it says
+    craft(path, Recipe(parts=[Part(data=zstd_zeros(3 << 30), declared=3 << 30)]))
+
+
+def zstd_liar(path):  # the same chunk saying it expands to 1,000 bytes
+    craft(path, Recipe(parts=[Part(data=zstd_zeros(3 << 30), declared=1000)]))
+
+
+def lz4_bomb(path):  # 4.2 MB of lz4 that expands to 1 GiB
+    craft(path, Recipe(parts=[Part(compression="lz4", data=lz4_zeros(1 << 30), declared=1 << 30)]))
+
+
+def lz4_liar(path):
+    craft(path, Recipe(parts=[Part(compression="lz4", data=lz4_zeros(1 << 30), declared=1000)]))
+
+
+def tiny_messages(path):  # 256 MiB of 33-byte messages in 16 honest chunks, 27 KB on disk
+    tiny = message(1, 0, b"{}") * ((16 << 20) // 33)
+    craft(path, Recipe(topics=[Topic(1, "pepper/info", count=16 * ((16 << 20) // 33))],
+                       parts=[Part(tiny) for _ in range(16)]))
+
+
+def index_liar(path):  # the chunk says 1 MiB, the file's index 1 KiB
+    craft(path, Recipe(parts=[Part(samples(1, 10), indexed=1024)]))
+
+
+BOMBS = {"zstd bomb": zstd_bomb, "zstd liar": zstd_liar, "lz4 bomb": lz4_bomb, "lz4 liar": lz4_liar,
+         "tiny messages": tiny_messages}
+
+DRIVER = """
+import io, json, sys
+from sonibus.bus.cli import Environment, main
+found = []
+for args in json.loads(sys.argv[1]):
+    env = Environment(stdout=io.StringIO(), stderr=io.StringIO())
+    found.append((args[0], main(args, env), env.stderr.getvalue()))
+with open("/proc/self/status") as f:
+    peak = next(int(line.split()[1]) for line in f if line.startswith("VmHWM:"))
+print(json.dumps({"peak_mb": peak / 1024, "found": found}))
+"""
+
+
+def rss_mb(pid):
+    try:
+        with open(f"/proc/{pid}/status") as f:
+            return next(int(line.split()[1]) for line in f if line.startswith("VmRSS:")) / 1024
+    except (OSError, StopIteration):
+        return 0.0
+
+
+@pytest.mark.parametrize("make", list(BOMBS.values()), ids=list(BOMBS))
+def test_a_bomb_takes_no_command_past_the_memory_bound(tmp_path, make, figure):
+    """Every reading command, one after the other in one process: its peak (VmHWM) stays under RSS_MB.
+    (A watchdog ends it at twice that: before the fix each went past 2 GB.)"""
+    path = tmp_path / "bomb.mcap"
+    make(path)
+    runs = [argv(command, path, tmp_path) for command in COMMANDS]
+    child = subprocess.Popen([sys.executable, "-c", DRIVER, json.dumps(runs)], stdout=subprocess.PIPE,
+                             stderr=subprocess.PIPE, text=True)
+    deadline, peak = time.monotonic() + 60, 0.0
+    try:
+        while child.poll() is None:
+            peak = max(peak, rss_mb(child.pid))
+            assert peak < 2 * RSS_MB, f"past {peak:.0f} MB"
+            assert time.monotonic() < deadline, "still running after 60 s"
+            time.sleep(0.005)
+        out, err = child.communicate()
+    finally:
+        child.kill()
+        child.wait()
+    assert child.returncode == 0, err
+    report = json.loads(out)
+    figure("peak RSS", report["peak_mb"], "MB")
+    assert report["peak_mb"] < RSS_MB, report
+    for command, status, said in report["found"]:
+        clean(status, said, command)
+        assert status == 1, (command, said)  # nothing in it can be read
+
+
+@pytest.mark.parametrize("make, why", [
+    (zstd_bomb, "the chunk at byte 82 expands to 3072.0 MiB, more than a chunk may (32.0 MiB"),
+    (zstd_liar, "the chunk at byte 82 expands to more than the 1000 bytes it says"),
+    (lz4_bomb, "the chunk at byte 82 expands to 1024.0 MiB, more than a chunk may"),
+    (lz4_liar, "the chunk at byte 82 expands to more than the 1000 bytes it says"),
+    (tiny_messages, "its chunks expand to 256.0 MiB, 9822 times its size (at most 200 times"),
+], ids=["zstd bomb", "zstd liar", "lz4 bomb", "lz4 liar", "tiny messages"])
+def test_a_file_that_lies_about_its_sizes_is_refused_in_one_line_without_the_recover_hint(tmp_path, make, why):
+    path = tmp_path / "liar.mcap"
+    make(path)
+    for command in ("info", "export"):
+        status, _, err = cli(*argv(command, path, tmp_path))
+        clean(status, err, command)
+        assert status == 1 and why in err and "recover" not in err, err
+    status, _, err = cli(*argv("recover", path, tmp_path))
+    assert status == 1 and "nothing to recover" in err and len(err.splitlines()) == 1, err
+    assert not (tmp_path / "recovered.mcap").exists()
+
+
+def test_a_chunk_its_index_lies_about_is_refused_with_the_recover_hint_and_recovered(tmp_path):
+    path = tmp_path / "liar.mcap"
+    index_liar(path)
+    status, _, err = cli("info", str(path))
+    clean(status, err, "info")
+    assert status == 1 and "the chunk at byte 82 says it holds 206 bytes of zstd data expanding to 719 bytes; the " \
+        f"file's index says 206 bytes of zstd to 1024 bytes; 'sonibus recover {path}' reads its chunks" in err, err
+    status, out, err = cli(*argv("recover", path, tmp_path))
+    assert status == 0 and err == "" and "recovered 10 messages" in out, err
+    assert cli("export", str(tmp_path / "recovered.mcap"), "--csv", str(tmp_path / "csv"))[0] == 0
+
+
+BAD_JSON = [b"[" * 100_000 + b"]" * 100_000, b"{" * 50_000, b'{"t":' * 3000 + b"1" + b"}" * 3000, b"1", b"[1, 2]",
+            b'"x"', b"null", b"\xff\xfe", b'{"t": "soon", "seq": 0, "v": 1}', b'{"t": 1.7e9, "seq": 0, "v": [1]}',
+            b'{"t": 1.7e9, "kind": "behavior", "args": [[[]]], "state": "started", "name": {"a": 1}}']
+
+
+def bad_json(path):
+    """Joint samples and events, with ``BAD_JSON`` on both keys among them."""
+    craft(path, Recipe(topics=[Topic(1, "pepper/joints/HeadYaw", count=20 + len(BAD_JSON)),
+                               Topic(2, "pepper/events/behavior", count=len(BAD_JSON))],
+                       parts=[Part(samples(1, 10) + jsons(2, BAD_JSON, 10) + jsons(1, BAD_JSON, 30) +
+                                   samples(1, 10, 60), channels=(1, 2))]))
+
+
+def test_deep_or_non_object_json_is_skipped_and_counted(tmp_path):
+    """RecursionError and TypeError ended every command before."""
+    path = tmp_path / "json.mcap"
+    bad_json(path)
+    skipped = f"{path}: skipped {2 * len(BAD_JSON)} messages (the first: "
+    for command in ("export", "plot", "recover"):
+        status, out, err = cli(*argv(command, path, tmp_path))
+        clean(status, err, command)
+        assert status == 0 and err.startswith(f"sonibus: WARNING: {skipped}"), (command, err)
+    assert "recovered 20 messages" in out
+    with open(tmp_path / "csv" / "pepper.csv") as f:
+        assert len(f.read().splitlines()) == 1 + 20
+    status, out, err = cli("info", str(tmp_path / "recovered.mcap"))
+    assert status == 0 and "pepper/joints/HeadYaw" in out and err == "", err
+
+
+def corrupt(path, compression, how):
+    """Two chunks of ten samples; the first one's compressed data corrupt (``how``: its bytes after the
+    compression's magic replaced, or one flipped so only its CRC tells)."""
+    good = samples(1, 10)
+    data = bytearray(compress(good, compression))
+    if how == "garbage":
+        data[4:] = bytes((i * 37 + 11) % 256 for i in range(len(data) - 4))
+    else:
+        data[len(data) // 2] ^= 0xFF
+    craft(path, Recipe(topics=HEAD_YAW, parts=[Part(good, compression=compression, data=bytes(data)),
+                                               Part(samples(1, 10, 10))]))
+
+
+@pytest.mark.parametrize("compression", ["zstd", "lz4"])
+@pytest.mark.parametrize("how", ["garbage", "a flipped byte"])
+def test_a_corrupt_chunk_is_skipped_and_counted(tmp_path, compression, how):
+    """A ZstdError (or lz4's RuntimeError) ended every command before; recover gave up at it."""
+    path = tmp_path / "corrupt.mcap"
+    corrupt(path, compression, how)
+    for command in ("export", "plot", "recover"):
+        status, out, err = cli(*argv(command, path, tmp_path))
+        clean(status, err, command)
+        assert status == 0 and f"{path}: skipped 1 chunk (the first: the chunk at byte 82 " in err, (command, err)
+    status, out, _ = cli("info", str(tmp_path / "recovered.mcap"))
+    assert status == 0 and "10 messages" in out, out
+    with open(tmp_path / "csv" / "pepper.csv") as f:
+        assert [row.split(",")[1] for row in f.read().splitlines()[1:]] == [str(seq) for seq in range(10, 20)]
+
+
+def test_replay_skips_a_corrupt_chunk_and_counts_it(tmp_path):
+    """Replay's worker failed on a ZstdError before: the node ended with it."""
+    path = tmp_path / "corrupt.mcap"
+    corrupt(path, "zstd", "garbage")
+    status, out, err = cli(*argv("replay", path, tmp_path))
+    clean(status, err, "replay")
+    assert status == 0 and "replayed corrupt.mcap: 10 messages" in out, (out, err)
+    assert "skipped 1 chunk (the first: the chunk at byte 82 is corrupt (zstd:" in err, err
+
+
+def test_a_megabyte_topic_name_is_refused_at_once(tmp_path):
+    """plot hung on it before."""
+    path = tmp_path / "long.mcap"
+    craft(path, Recipe(topics=[Topic(1, "pepper/joints/" + "J" * (1 << 20), count=10)], parts=[Part(samples(1, 10))]))
+    for command in ("info", "plot", "replay"):
+        status, _, err = cli(*argv(command, path, tmp_path))
+        clean(status, err, command)
+        assert status == 1 and f"holds a channel named by {(1 << 20) + 14} characters" in err, err
+        assert f"more than a key may ({MAX_TOPIC})" in err
+
+
+def many_channels(path, count, robots):
+    topics = [Topic(i, f"r{i}/joints/J" if robots else f"pepper/joints/J{i}", count=1) for i in range(1, count + 1)]
+    content = b"".join(message(i, 0, b'{"t":1.7e9,"seq":0,"v":0.1}') for i in range(1, count + 1))
+    craft(path, Recipe(topics=topics, parts=[Part(content)]))
+
+
+def test_65535_channels_are_refused_and_a_picture_or_replay_of_thousands_of_robots_too(tmp_path):
+    """plot and replay hung on 65,535 channels before (and took minutes and GBs on 4,096)."""
+    path = tmp_path / "many.mcap"
+    many_channels(path, 65535, robots=True)
+    for command in ("info", "plot", "replay"):
+        status, _, err = cli(*argv(command, path, tmp_path))
+        clean(status, err, command)
+        assert status == 1 and f"holds 65535 channels, more than sonibus reads ({MAX_CHANNELS}" in err, err
+    many_channels(path, MAX_CHANNELS, robots=True)
+    status, _, err = cli(*argv("replay", path, tmp_path))
+    assert status == 1 and "holds 4096 robots (r1, r10, r100, ...); a replay takes at most 64" in err, err
+    status, _, err = cli(*argv("plot", path, tmp_path))
+    assert status == 1 and "too much for one picture (4096 joints in 4096 panels" in err, err
+    assert "--keys 'r1/joints/*'" in err
