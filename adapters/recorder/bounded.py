@@ -29,7 +29,6 @@ section met a chunk there, which mcap's reader decompressed whole).
 from __future__ import annotations
 
 import io
-import os
 import struct
 import zlib
 from collections.abc import Iterator
@@ -84,7 +83,7 @@ def read_summary(f: BinaryIO) -> Summary | None:
         raise McapError(f"expected the footer at the end of the file, found a {type(footer).__name__}")
     if footer.summary_start == 0:
         return None
-    f.seek(footer.summary_start)
+    _seek(f, footer.summary_start)
     summary = Summary()
     for record in StreamReader(f, skip_magic=True, emit_chunks=True, record_size_limit=MAX_RECORD).records:
         if isinstance(record, Statistics):
@@ -106,8 +105,16 @@ def read_summary(f: BinaryIO) -> Summary | None:
 
 def read_record(f: BinaryIO, offset: int) -> Any:
     """The record at ``offset`` of ``f`` (a chunk not opened), at most ``MAX_RECORD`` bytes."""
-    f.seek(offset)
+    _seek(f, offset)
     return next(StreamReader(f, skip_magic=True, emit_chunks=True, record_size_limit=MAX_RECORD).records)
+
+
+def _seek(f: BinaryIO, offset: int) -> None:
+    """To ``offset`` of ``f``, an offset the file gave: ``McapError`` if it is not in the file."""
+    size = f.seek(0, io.SEEK_END)
+    if not 0 <= offset < size:
+        raise McapError(f"an offset ({offset}) outside the file ({size} bytes)")
+    f.seek(offset)
 
 
 def read_chunk(f: BinaryIO, index: ChunkIndex) -> Chunk:
@@ -196,7 +203,8 @@ def records(f: BinaryIO, bad_chunk: list[ChunkError]) -> Iterator[Any]:
     cannot be expanded, or would take what its chunks expand to past ``allowance``, is
     skipped and appended to ``bad_chunk``. Raises a ``DAMAGE`` exception at the first
     damaged record outside a chunk (or inside one, after its records before the damage)."""
-    offset, left = 0, allowance(os.fstat(f.fileno()).st_size)
+    offset, left = 0, allowance(f.seek(0, io.SEEK_END))
+    f.seek(0)
     stream = StreamReader(f, skip_magic=False, emit_chunks=True, record_size_limit=MAX_RECORD)
     for record in stream.records:
         if isinstance(record, Chunk):

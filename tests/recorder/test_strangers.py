@@ -7,7 +7,6 @@ from __future__ import annotations
 
 import io
 import json
-import re
 import subprocess
 import sys
 import time
@@ -18,10 +17,11 @@ from sonibus.adapters.recorder.bounded import MAX_CHANNELS, MAX_TOPIC
 from sonibus.bus.cli import Environment, main
 
 from .crafted import Part, Recipe, Topic, compress, craft, jsons, lz4_zeros, message, samples, zstd_zeros
+from .fuzz_files import COMMANDS as FUZZED
+from .fuzz_files import INTERNAL, judge, mutants
 
 RSS_MB = 200
 COMMANDS = ("info", "export", "plot", "replay", "recover")
-INTERNAL = re.compile(r"^sonibus: error: \w*(Error|Exception|Exit|Interrupt)\b")  # a Python exception's own name
 
 
 def argv(command, path, tmp):
@@ -261,3 +261,13 @@ def test_65535_channels_are_refused_and_a_picture_or_replay_of_thousands_of_robo
     status, _, err = cli(*argv("plot", path, tmp_path))
     assert status == 1 and "too much for one picture (4096 joints in 4096 panels" in err, err
     assert "--keys 'r1/joints/*'" in err
+
+
+def test_a_fuzz_of_crafted_recordings(tmp_path):
+    """A small, deterministic slice (bench/recording_fuzz.py runs thousands): payloads of every kind,
+    lying sizes, garbage chunks, flipped bytes, cut files; ``info``, ``export`` and ``recover`` on each,
+    ``plot`` on some (it found the OSError of an offset outside the file)."""
+    wrong = []
+    for n, (_, path) in enumerate(mutants(seed=33, count=60, folder=tmp_path)):
+        wrong += judge(path, (*FUZZED, "plot") if n % 12 == 0 else FUZZED)
+    assert not wrong, "\n".join(wrong)
