@@ -276,6 +276,7 @@ class Checks:
         self.skipped: dict[str, int] = {"messages": 0, "chunks": 0}
         self._first: dict[str, str] = {}  # what, of each kind, was skipped first
         self._seen: set[object] = set()
+        self._keys: dict[str, Key] = {}  # each channel's topic taken apart (a file's channels: MAX_CHANNELS)
         # (a recording's t are old, and its bus may have allowed larger payloads)
         self._gate = Gate(Limits(max_future_s=math.inf, max_payload=1 << 30, max_info_payload=1 << 30))
 
@@ -289,7 +290,7 @@ class Checks:
             if data.__class__ is not dict:
                 raise BadMessage(f"a {type(data).__name__}, not a map")
             if not is_view(channel.topic):
-                key = Key.parse(channel.topic)
+                key = self._keys.get(channel.topic) or self._keys.setdefault(channel.topic, Key.parse(channel.topic))
                 SECTIONS[key.section].check(self._gate, key, data)
         except (BadMessage, KeyError, TypeError, ValueError, RecursionError, OverflowError) as exc:
             self.skip("messages", f"{channel.topic[:80]}: {_why(exc)}", where)
