@@ -53,6 +53,7 @@ MAX_LATE_S = 0.1  # samples later than this are skipped (events never): no burst
 LEAD_S = 0.2      # between declaring the publishers and the first message: Zenoh settles its routes
 AHEAD = 512       # moments read and decoded ahead of the player (~5 s of a robot at 100 frames/s)
 GATHER_NS = 5_000_000  # a frame's joint samples reach a recorder within this of each other
+MOMENT = messages.MAX_JOINTS  # joint samples in one moment (a frame's most): what reading ahead holds is bounded
 MAX_ROBOTS = 64   # robots one replay claims (each like a live one: a token, two servers; 4,096 took minutes and GBs)
 STREAMED = {"joints": STREAM, "derived": STREAM, "audio": AUDIO}  # sections sent as streams (late: skipped)
 
@@ -365,9 +366,9 @@ def _moments(messages: Iterable[Message]) -> Iterator[tuple[bool, list[Message]]
             waiting.append((None, [message]))
             continue
         frame = (message.key.partition("/")[0], message.data["seq"], message.data["t"])
-        if frame in gathering:
+        if frame in gathering and len(gathering[frame]) < MOMENT:
             gathering[frame].append(message)
-        else:
+        else:  # (a moment holds one frame's worth: a file's frame may hold thousands, read ahead by the 512)
             gathering[frame] = [message]
             waiting.append((frame, gathering[frame]))
     for frame, moment in waiting:

@@ -14,7 +14,10 @@ import time
 import pytest
 
 from sonibus.adapters.recorder.bounded import MAX_CHANNELS, MAX_TOPIC
+from sonibus.adapters.recorder.reading import Message
+from sonibus.adapters.recorder.replay import _moments
 from sonibus.bus.cli import Environment, main
+from sonibus.bus.messages import MAX_JOINTS
 
 from .crafted import Part, Recipe, Topic, compress, craft, jsons, lz4_zeros, message, samples, zstd_zeros
 from .fuzz_files import COMMANDS as FUZZED
@@ -291,3 +294,9 @@ def test_a_fuzz_of_crafted_recordings(tmp_path):
     for n, (_, path) in enumerate(mutants(seed=33, count=60, folder=tmp_path)):
         wrong += judge(path, (*FUZZED, "plot") if n % 12 == 0 else FUZZED)
     assert not wrong, "\n".join(wrong)
+
+
+def test_a_frame_of_thousands_of_joints_is_replayed_in_moments_of_a_frame_each():
+    """Replay reads 512 moments ahead: a file's frame of 4,096 joints made each moment 4,096 messages."""
+    samples_ = [Message(f"pepper/joints/J{n}", 10**18, 10**18, {"t": 1.7e9, "seq": 0, "v": 0.1}) for n in range(300)]
+    assert [len(moment) for framed, moment in _moments(samples_)] == [MAX_JOINTS, MAX_JOINTS, 300 - 2 * MAX_JOINTS]
