@@ -29,7 +29,7 @@ from dataclasses import dataclass
 from typing import Any, BinaryIO
 
 import zenoh
-from mcap.records import Channel, Chunk, Metadata
+from mcap.records import Channel, Chunk, ChunkIndex, Metadata
 from mcap.records import Message as McapMessage
 from mcap.stream_reader import StreamReader
 
@@ -213,21 +213,25 @@ class Recording:
         for index in self._indexes:
             if index.message_end_time < start or (end is not None and index.message_start_time >= end):
                 continue
-            if index.message_index_offsets and wanted.isdisjoint(index.message_index_offsets):
-                continue
-            at = index.chunk_start_offset
-            try:
-                data = expand(read_chunk(self._file, index), at)
-                for n, record in enumerate(chunk_records(data)):
-                    if isinstance(record, McapMessage) and record.channel_id in wanted \
-                            and start <= record.log_time and (end is None or record.log_time < end):
-                        found = self.checks.message(self._channels[record.channel_id], record, (at, n))
-                        if found is not None:
-                            yield found
-            except ChunkError as exc:
-                self.checks.skip("chunks", str(exc), at)
-            except DAMAGE as exc:  # (a record torn inside a chunk: those before it were read)
-                self.checks.skip("chunks", f"the chunk at byte {at}: {_why(exc)}", at)
+            yield from self._chunk(index, wanted, start, end)
+
+    def _chunk(self, index: ChunkIndex, wanted: set[int], start: int = 0, end: int | None = None) -> Iterator[Message]:
+        """The messages of the chunk ``index`` points to on channels ``wanted``, logged in [start, end)."""
+        if index.message_index_offsets and wanted.isdisjoint(index.message_index_offsets):
+            return
+        at = index.chunk_start_offset
+        try:
+            data = expand(read_chunk(self._file, index), at)
+            for n, record in enumerate(chunk_records(data)):
+                if isinstance(record, McapMessage) and record.channel_id in wanted \
+                        and start <= record.log_time and (end is None or record.log_time < end):
+                    found = self.checks.message(self._channels[record.channel_id], record, (at, n))
+                    if found is not None:
+                        yield found
+        except ChunkError as exc:
+            self.checks.skip("chunks", str(exc), at)
+        except DAMAGE as exc:  # (a record torn inside a chunk: those before it were read)
+            self.checks.skip("chunks", f"the chunk at byte {at}: {_why(exc)}", at)
 
     def _unindexed(self, wanted: set[int], start: int, end: int | None) -> Iterator[Message]:
         bad: list[ChunkError] = []
@@ -246,13 +250,26 @@ class Recording:
                     from None
 
     def infos(self) -> dict[str, dict[str, Any]]:
-        """The last recorded ``<robot>/info`` of each robot."""
+        """The last recorded ``<robot>/info`` of each robot (read from the last chunks
+        that hold one: a file of a million infos took ``info`` 50 s)."""
         found = {}
-        info_keys = [k for k in self.keys if k.endswith("/info")]
-        if info_keys:
-            for message in self.messages(info_keys):
-                found[message.key.partition("/")[0]] = message.data
+        for key in (k for k in self.keys if k.endswith("/info")):
+            last = self._last(key)
+            if last is not None:
+                found[key.partition("/")[0]] = last.data
         return found
+
+    def _last(self, key: str) -> Message | None:
+        """The last message on ``key`` that passes the checks, read backwards a chunk at a time."""
+        wanted = {cid for cid, c in self._channels.items() if c.topic == key}
+        last = None
+        for found in (self._chunk(index, wanted) for index in reversed(self._indexes)) if self._indexes \
+                else [self.messages([key])]:
+            for last in found:  # noqa: B007 (the last one is wanted)
+                pass
+            if last is not None:
+                return last
+        return None
 
     def close(self) -> None:
         self._file.close()

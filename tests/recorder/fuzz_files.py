@@ -36,9 +36,10 @@ def _events(start: int) -> list[bytes]:
             for n, state in zip(range(start, start + 2), ("started", "stopped"), strict=True)]
 
 
-def _info() -> bytes:
+def info() -> bytes:
     return json.dumps({"robot": "pepper", "model": "pepper", "schema_version": 1, "rate_hz": 50.0,
-                       "joints": [{"name": "HeadYaw", "chain": "head", "unit": "rad", "min": -2.0, "max": 2.0}],
+                       "joints": [{"name": "HeadYaw", "chain": "head", "unit": "rad", "min": -2.0, "max": 2.0,
+                                   "max_velocity": 7.0}],
                        "behaviors": [], "postures": [], "adapter": "sim",
                        "owner": {"host": "h", "node": "n"}}).encode()
 
@@ -56,7 +57,7 @@ def _chunk(start: int, payloads: dict[int, list[bytes]] | None = None) -> bytes:
     out += jsons(3, payloads.get(3, _events(start)), start)
     out += b"".join(message(5, start + n, p) for n, p in enumerate(payloads.get(5, [_audio(start), _audio(start + 1)])))
     if start == 0:
-        out += jsons(4, payloads.get(4, [_info()]), start)
+        out += jsons(4, payloads.get(4, [info()]), start)
     if 1 in payloads:
         out += jsons(1, payloads[1], start + 100)
     return out

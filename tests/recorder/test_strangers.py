@@ -14,14 +14,14 @@ import time
 import pytest
 
 from sonibus.adapters.recorder.bounded import MAX_CHANNELS, MAX_TOPIC
-from sonibus.adapters.recorder.reading import Message
+from sonibus.adapters.recorder.reading import Message, Recording
 from sonibus.adapters.recorder.replay import _moments
 from sonibus.bus.cli import Environment, main
 from sonibus.bus.messages import MAX_JOINTS
 
 from .crafted import Part, Recipe, Topic, compress, craft, jsons, lz4_zeros, message, samples, zstd_zeros
 from .fuzz_files import COMMANDS as FUZZED
-from .fuzz_files import INTERNAL, judge, mutants
+from .fuzz_files import INTERNAL, info, judge, mutants
 
 RSS_MB = 200
 COMMANDS = ("info", "export", "plot", "replay", "recover")
@@ -300,3 +300,15 @@ def test_a_frame_of_thousands_of_joints_is_replayed_in_moments_of_a_frame_each()
     """Replay reads 512 moments ahead: a file's frame of 4,096 joints made each moment 4,096 messages."""
     samples_ = [Message(f"pepper/joints/J{n}", 10**18, 10**18, {"t": 1.7e9, "seq": 0, "v": 0.1}) for n in range(300)]
     assert [len(moment) for framed, moment in _moments(samples_)] == [MAX_JOINTS, MAX_JOINTS, 300 - 2 * MAX_JOINTS]
+
+
+def test_info_reads_the_last_info_from_the_last_chunk_that_holds_one(tmp_path):
+    """``info`` read every recorded info to keep the last (50 s for a file of a million): now it reads
+    backwards from the last chunk, so the corrupt chunks before it are never even opened."""
+    path = tmp_path / "infos.mcap"
+    good = jsons(1, [info()], 0)
+    craft(path, Recipe(topics=[Topic(1, "pepper/info", count=5)],
+                       parts=[*(Part(good, data=b"\x28\xb5\x2f\xfd" + bytes(40)) for _ in range(4)), Part(good)]))
+    with Recording(str(path)) as recording:
+        assert recording.infos()["pepper"]["model"] == "pepper"
+        assert recording.skipped == {"messages": 0, "chunks": 0}
