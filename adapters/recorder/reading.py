@@ -372,10 +372,12 @@ def head(path: str) -> dict[str, str]:
 
 
 def _data_key(topic: str) -> bool:
-    """A topic that is a bus key of one of the key space's sections."""
+    """A topic that is a bus key (one Zenoh takes: replay puts it back on the bus) of one of the key
+    space's sections."""
     try:
+        zenoh.KeyExpr(topic)
         return Key.parse(topic).section in SECTIONS
-    except ValueError:
+    except Exception:  # (zenoh's own error for what is no key: "a*b", "a//b", "$x")
         return False
 
 

@@ -312,3 +312,15 @@ def test_info_reads_the_last_info_from_the_last_chunk_that_holds_one(tmp_path):
     with Recording(str(path)) as recording:
         assert recording.infos()["pepper"]["model"] == "pepper"
         assert recording.skipped == {"messages": 0, "chunks": 0}
+
+
+def test_a_channel_zenoh_takes_for_no_key_is_left_out(tmp_path):
+    """``--keys`` and replay took every topic apart with Zenoh: "pepper/joints/a*b" ended them with ZError."""
+    path = tmp_path / "keys.mcap"
+    craft(path, Recipe(topics=[Topic(1, "pepper/joints/HeadYaw", count=10), Topic(2, "pepper/joints/a*b", count=10)],
+                       parts=[Part(samples(1, 10) + samples(2, 10), channels=(1, 2))]))
+    for args in (argv("plot", path, tmp_path) + ["--keys", "pepper/**"], argv("replay", path, tmp_path),
+                 argv("info", path, tmp_path)):
+        status, out, err = cli(*args)
+        clean(status, err, args[0])
+        assert status == 0 and "a*b" not in out, (args, out, err)
