@@ -258,7 +258,7 @@ def _info(args: argparse.Namespace, env: Environment) -> Exit:
     for robot, about in facts["robots"].items():
         rate = f"{about['rate_hz']:g} frames/s" if about["rate_hz"] else "no info"  # (checked: a number)
         env.say(f"  robot {robot}: {about['model'] or '?'}, {about['joints']} joints, {rate}")
-    width = max(len(k) for k in facts["keys"])
+    width = max((len(k) for k in facts["keys"]), default=0)  # (a file may hold no key a reader takes)
     for key, about in facts["keys"].items():
         env.say(f"    {key:<{width}}  {about['messages']:>8}  {about['rate_hz']:8.1f}/s")
     return Exit.OK

@@ -102,6 +102,7 @@ class Recipe:
     topics: list[Topic] = field(default_factory=lambda: [Topic(1, "pepper/joints/HeadYaw", count=10)])
     parts: list[Part] = field(default_factory=lambda: [Part(samples(1, 10))])
     channels_in_summary: bool = True
+    times: tuple[int, int] = (T0, T0 + 10**9)  # the statistics' first and last message times
 
 
 def craft(path, recipe: Recipe) -> bytes:
@@ -134,7 +135,7 @@ def craft(path, recipe: Recipe) -> bytes:
     total = sum(t.count for t in recipe.topics)
     out += record(Statistics(attachment_count=0, channel_count=len(channels),
                              channel_message_counts={t.id: t.count for t in recipe.topics}, chunk_count=len(indexes),
-                             message_count=total, message_end_time=T0 + 10**9, message_start_time=T0,
+                             message_count=total, message_end_time=recipe.times[1], message_start_time=recipe.times[0],
                              metadata_count=0, schema_count=0))
     for index in indexes:
         out += record(index)

@@ -15,6 +15,7 @@ import random
 import re
 import zlib
 from collections.abc import Callable, Iterator
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -64,7 +65,7 @@ def _chunk(start: int, payloads: dict[int, list[bytes]] | None = None) -> bytes:
 
 
 def base() -> Recipe:
-    return Recipe(topics=list(TOPICS), parts=[Part(_chunk(0), channels=(1, 2, 3, 4, 5)),
+    return Recipe(topics=[replace(topic) for topic in TOPICS], parts=[Part(_chunk(0), channels=(1, 2, 3, 4, 5)),
                                               Part(_chunk(15), channels=(1, 2, 3, 5))])
 
 
@@ -158,9 +159,20 @@ def _cut(rng: random.Random, path: Path) -> bytes:
     return data
 
 
+def _summary(rng: random.Random, path: Path) -> bytes:
+    """Odd topics (Zenoh's wildcards, empty chunks, a section of no one's) and times (backwards, at 2^64)."""
+    recipe = base()
+    topic = recipe.topics[rng.randrange(len(recipe.topics))]
+    topic.topic = rng.choice(["pepper/joints/a*b", "pepper//x", "$x/joints/y", "pepper", "", "pepper/nothing/x",
+                              "pepper/joints/" + "é" * 300, "pepper/joints/a b", "/pepper/joints/x", topic.topic])
+    recipe.times = rng.choice([(T0, T0 + 10**9), (T0 + 10**9, T0), (0, 2**64 - 1), (2**64 - 1, 0), (T0, T0)])
+    topic.count = rng.choice([topic.count, 0, 2**40])
+    return craft(path, recipe)
+
+
 KINDS: dict[str, Callable[[random.Random, Path], bytes]] = {
     "payloads": _payloads, "audio": _audio_payloads, "sizes": _sizes, "garbage chunk": _garbage_chunk,
-    "flipped bytes": _flips, "cut": _cut}
+    "flipped bytes": _flips, "cut": _cut, "summary": _summary}
 
 
 def mutants(seed: int, count: int, folder: Path) -> Iterator[tuple[str, Path]]:
