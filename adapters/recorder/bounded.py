@@ -78,7 +78,7 @@ class NotAsIndexed(ChunkError):
 def read_summary(f: BinaryIO) -> Summary | None:
     """The summary section of ``f`` (None if it has none), read record by record,
     none larger than ``MAX_RECORD``; a chunk met there is not opened."""
-    f.seek(-(FOOTER_SIZE + MAGIC_SIZE), io.SEEK_END)
+    _seek(f, f.seek(0, io.SEEK_END) - FOOTER_SIZE - MAGIC_SIZE)  # (a file shorter than a footer: refused)
     footer = next(StreamReader(f, skip_magic=True, emit_chunks=True, record_size_limit=MAX_RECORD).records)
     if not isinstance(footer, Footer):
         raise McapError(f"expected the footer at the end of the file, found a {type(footer).__name__}")

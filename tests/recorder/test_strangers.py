@@ -19,7 +19,7 @@ from sonibus.adapters.recorder.replay import _moments
 from sonibus.bus.cli import Environment, main
 from sonibus.bus.messages import MAX_JOINTS
 
-from .crafted import Part, Recipe, Topic, compress, craft, jsons, lz4_zeros, message, samples, zstd_zeros
+from .crafted import MAGIC, Part, Recipe, Topic, compress, craft, jsons, lz4_zeros, message, samples, zstd_zeros
 from .fuzz_files import COMMANDS as FUZZED
 from .fuzz_files import INTERNAL, info, judge, mutants
 
@@ -329,3 +329,13 @@ def test_a_channel_zenoh_takes_for_no_key_is_left_out(tmp_path):
         status, out, err = cli(*argv(command, path, tmp_path))
         clean(status, err, command)
         assert "a*b" not in out, (command, out)
+
+
+def test_a_file_shorter_than_a_footer_between_its_magics_is_refused_in_one_line(tmp_path):
+    """The fuzz campaign's find: a cut that kept the magic at its end; info ended with OSError (a seek before 0)."""
+    path = tmp_path / "short.mcap"
+    path.write_bytes(MAGIC + b"\x01\x02\x03\x04\x05\x06\x07" + MAGIC)
+    for command in ("info", "export", "plot", "replay"):
+        status, _, err = cli(*argv(command, path, tmp_path))
+        clean(status, err, command)
+        assert status == 1 and "is damaged (McapError: an offset (-14) outside the file (23 bytes))" in err, err
