@@ -49,6 +49,8 @@ SCRIPTS: dict[str, tuple[str, list[str], float]] = {
     "pacing": ("pacing", [], 90),  # the sim's pacing, the OSC rate cap, replay timing: no longer asserted by tests
     "audio": ("audio", ["--seconds", "20"], 330),  # JACK ↔ robot audio over the bus and over plain UDP
     "soak": ("soak", ["--minutes", "3"], 330),  # the fuzz suite of tests/fuzz for minutes
+    # crafted recordings (issue 33): the suite's fuzz of files at length; what checking every message costs a reading
+    "recording_fuzz": ("recording_fuzz", ["--files", "1500"], 300),
     "ros2_cdr": ("ros2_cdr", ["--instructions", "17"], 300),  # ROS 2 CDR, ours beside rosbags (and msgpack)
     "ros2_rate": ("ros2_rate", [], 300),  # ROS 2 JointState publish → OSC, beside NAOqi → OSC
     "soak_show": ("soak_show", ["--minutes", "6"], 600),  # a whole show, clients coming and going: memory flat?

@@ -6,6 +6,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import json
+import logging
 import os
 import threading
 import time
@@ -25,6 +26,14 @@ from .reading import Recording, RecordingError, StillRecording, head, recover
 from .recorder import EVERYTHING, MICROPHONES, Recorder, RecorderConfig, describe
 from .replay import Replay, ReplayConfig
 from .wav import audio_keys, export_wav
+
+log = logging.getLogger(__name__)
+
+
+def _said(problems: str) -> None:
+    """What a command skipped in a recording (``Recording.problems``), as a warning."""
+    if problems:
+        log.warning(problems)
 
 
 def _while_running(env: Environment, line: Callable[[], str], done: Callable[[], bool] = lambda: False,
@@ -198,7 +207,7 @@ def _replay(args: argparse.Namespace, env: Environment) -> Exit:
     gaps = f", {replay.stats['gaps']} gaps shortened" if replay.stats["gaps"] else ""
     why = " (this machine was too busy to send them on time: its CPU)" if replay.stats["late"] else ""
     env.say(f"replayed {os.path.basename(args.file)}: {replay.stats['sent']} messages, "
-            f"{replay.stats['late']} skipped as late{why}{gaps}")
+            f"{replay.stats['late']} skipped as late{why}{gaps}")  # (what it could not read: warned, replay.py)
     return Exit.OK
 
 
@@ -232,7 +241,9 @@ def _info(args: argparse.Namespace, env: Environment) -> Exit:
                            "joints": sum(1 for k in recording.keys if k.startswith(f"{r}/joints/"))}
                        for r in recording.robots},
             "keys": {k: {"messages": recording.counts[k], "rate_hz": recording.rate_hz(k)} for k in recording.keys},
+            "skipped": dict(recording.skipped),
         }
+        _said(recording.problems())
     if args.json:
         env.say(json.dumps(facts, indent=2))
         return Exit.OK
@@ -245,9 +256,9 @@ def _info(args: argparse.Namespace, env: Environment) -> Exit:
         env.say(f"  recorded by {about.get('node', '?')} on {about.get('host', '?')}{part}, "
                 f"dropped {facts['stats'].get('dropped', '?')}")
     for robot, about in facts["robots"].items():
-        rate = f"{about['rate_hz']:g} frames/s" if about["rate_hz"] else "no info"
+        rate = f"{about['rate_hz']:g} frames/s" if about["rate_hz"] else "no info"  # (checked: a number)
         env.say(f"  robot {robot}: {about['model'] or '?'}, {about['joints']} joints, {rate}")
-    width = max(len(k) for k in facts["keys"])
+    width = max((len(k) for k in facts["keys"]), default=0)  # (a file may hold no key a reader takes)
     for key, about in facts["keys"].items():
         env.say(f"    {key:<{width}}  {about['messages']:>8}  {about['rate_hz']:8.1f}/s")
     return Exit.OK
@@ -301,8 +312,9 @@ def _recover(args: argparse.Namespace, env: Environment) -> Exit:
     out = args.output or os.path.splitext(args.file)[0] + ".recovered.mcap"
     if os.path.exists(out):
         raise RecordingError(f"{out} exists — choose another with -o")
-    kept = recover(args.file, out)
+    kept, skipped = recover(args.file, out)
     env.say(f"recovered {kept} messages from {args.file} into {out}")
+    _said(skipped)
     return Exit.OK
 
 
@@ -328,6 +340,7 @@ def _export(args: argparse.Namespace, env: Environment) -> Exit:
             env.say(f"no audio in {args.file}: no WAV written")
         for path in export_wav(recording, args.wav, env.say) if args.wav else ():
             env.say(path)
+        _said(recording.problems())
     return Exit.OK
 
 
@@ -346,6 +359,7 @@ def _plot(args: argparse.Namespace, env: Environment) -> Exit:
     out = args.output or os.path.splitext(args.file)[0] + ".png"
     with Recording(args.file) as recording:
         env.say(plot(recording, out, args.keys, args.title))
+        _said(recording.problems())
     return Exit.OK
 
 

@@ -20,7 +20,9 @@ matplotlib.
 
 from __future__ import annotations
 
+import logging
 import os
+from array import array
 from collections.abc import Sequence
 from typing import TYPE_CHECKING, Any
 
@@ -35,6 +37,13 @@ SPANS = {"behavior": {"color": "tab:orange", "alpha": 0.15}, "speech": {"color":
 MARKED = ("behavior", "speech", "posture", "command")
 LABEL_ROWS = 3       # label heights a run of close spans steps through
 CLOSE = 0.08         # spans starting within this fraction of the plot's width are close
+MAX_PANELS = 24      # panels in one picture (a robot's chains: Pepper 5; a file may name thousands of robots)
+MAX_LINES = 256      # joints drawn in one picture (Pepper 17, NAO 26)
+MAX_MARKS = 500      # events marked, of each robot (20,000 took matplotlib minutes and GBs)
+MAX_POINTS = 1 << 20  # samples drawn, of all joints: a longer recording is thinned (an hour of Pepper: 6 M)
+MIN_POINTS = 4096    # samples drawn of one joint, however many joints
+
+log = logging.getLogger(__name__)
 
 
 def plot(recording: Recording, out: str, keys: Sequence[str] | None = None, title: str | None = None) -> str:
@@ -60,27 +69,37 @@ def figure(recording: Recording, keys: Sequence[str] | None = None, title: str |
     if not robots:
         raise RecordingError(f"nothing to plot in {recording.path}: no joint nor event key among "
                              f"{', '.join(chosen[:8])}{', ...' if len(chosen) > 8 else ''}")
-    series: dict[str, tuple[list[float], list[float]]] = {k: ([], []) for k in joints}
-    happened: dict[str, list[tuple[float, dict[str, Any]]]] = {robot: [] for robot in robots}
-    for message in recording.messages(joints + events):
-        x = (message.publish_ns - recording.start_ns) / 1e9
-        if message.key in series:
-            series[message.key][0].append(x)
-            series[message.key][1].append(message.data["v"])
-        else:
-            happened[_robot(message.key)].append((x, message.data))
-    # acquisition precedes logging: the first samples can lie just before the start
-    begin = min([0.0, *(xs[0] for xs, _ in series.values() if xs)])
-    end = max([recording.duration_s, *(xs[-1] for xs, _ in series.values() if xs)])
     infos = recording.infos()
     panels = [(robot, *panel) for robot in robots
               for panel in _panels([k for k in joints if _robot(k) == robot], infos.get(robot))]
+    if len(panels) > MAX_PANELS or len(joints) > MAX_LINES:  # (matplotlib took minutes and GBs over thousands)
+        raise RecordingError(f"{recording.path}: too much for one picture ({len(joints)} joints in {len(panels)} "
+                             f"panels; at most {MAX_LINES} joints in {MAX_PANELS} panels) — choose some with --keys, "
+                             f"e.g. --keys '{robots[0]}/joints/*'")
+    series = {k: _Series(max(MIN_POINTS, MAX_POINTS // len(joints))) for k in joints}
+    happened: dict[str, list[tuple[float, dict[str, Any]]]] = {robot: [] for robot in robots}
+    unmarked = 0
+    for message in recording.messages(joints + events):
+        x = (message.publish_ns - recording.start_ns) / 1e9
+        if message.key in series:
+            series[message.key].add(x, message.data["v"])
+        elif len(happened[_robot(message.key)]) < MAX_MARKS:
+            happened[_robot(message.key)].append((x, message.data))
+        else:
+            unmarked += 1
+    if unmarked:
+        log.warning("%s: %d events not marked: a picture marks at most the first %d of a robot",
+                    recording.path, unmarked, MAX_MARKS)
+    # acquisition precedes logging: the first samples can lie just before the start
+    begin = min([0.0, *(line.x[0] for line in series.values() if line.x)])
+    end = max([recording.duration_s, *(line.x[-1] for line in series.values() if line.x)])
 
     fig = Figure(figsize=(11, 1.2 + 2.0 * len(panels)), dpi=120, layout="constrained")
     axes = list(fig.subplots(len(panels), 1, sharex=True, squeeze=False)[:, 0])
     for ax, (robot, chain, names, units) in zip(axes, panels, strict=True):
         for name in names:
-            ax.plot(*series[f"{robot}/joints/{name}"], lw=1, label=name)
+            line = series[f"{robot}/joints/{name}"]
+            ax.plot(line.x, line.y, lw=1, label=name)
         label = f"{robot} {chain}" if len(robots) > 1 else chain
         ax.set_ylabel(f"{label}\n{units}" if units else label, fontsize=8)
         if names:
@@ -94,6 +113,30 @@ def figure(recording: Recording, keys: Sequence[str] | None = None, title: str |
     axes[-1].set_xlabel("s since the recording start")
     fig.suptitle(title or f"{os.path.basename(recording.path)} — {recording.duration_s:.1f} s — {', '.join(robots)}")
     return fig
+
+
+class _Series:
+    """A joint's samples as drawn: at most ``2 * most``, thinned as they come (every
+    other one dropped, then every fourth...), in arrays (8 bytes a value).
+
+    >>> line = _Series(most=4)
+    >>> for i in range(20):
+    ...     line.add(i, -i)
+    >>> list(line.x), list(line.y)
+    ([0.0, 4.0, 8.0, 12.0, 16.0], [0.0, -4.0, -8.0, -12.0, -16.0])
+    """
+
+    def __init__(self, most: int) -> None:
+        self.x, self.y = array("d"), array("d")
+        self._most, self._step, self._seen = most, 1, 0
+
+    def add(self, x: float, y: float) -> None:
+        if self._seen % self._step == 0:
+            self.x.append(x)
+            self.y.append(y)
+            if len(self.x) >= 2 * self._most:
+                self.x, self.y, self._step = self.x[::2], self.y[::2], 2 * self._step
+        self._seen += 1
 
 
 def _section(key: str) -> str:

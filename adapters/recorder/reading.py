@@ -22,31 +22,43 @@ before the damage.
 
 from __future__ import annotations
 
-import io
+import math
 import os
-import struct
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from typing import Any, BinaryIO
 
 import zenoh
-from mcap.exceptions import McapError
-from mcap.opcode import Opcode
-from mcap.reader import SeekingReader
-from mcap.records import Channel, Chunk, Metadata, Schema
+from mcap.records import Channel, Chunk, ChunkIndex, Metadata
 from mcap.records import Message as McapMessage
-from mcap.stream_reader import StreamReader, get_chunk_data_stream
+from mcap.stream_reader import StreamReader
 
 from sonibus.bus import keys
 from sonibus.bus.errors import SonibusError
+from sonibus.bus.keys import Key
+from sonibus.bus.messages import SECTIONS, BadMessage, Gate, Limits
 
 from . import lock
+from .bounded import (
+    DAMAGE,
+    MAX_CHANNELS,
+    MAX_RECORD,
+    MAX_TOPIC,
+    ChunkError,
+    NotAsIndexed,
+    check_sizes,
+    chunk_records,
+    expand,
+    read_chunk,
+    read_record,
+    read_summary,
+    records,
+)
 from .channels import AUDIO_ENCODING, MESSAGE_ENCODING, from_data, is_view
-from .writer import METADATA_RECORDING, BadRecord, RecordingWriter
+from .writer import METADATA_RECORDING, METADATA_STATS, BadRecord, RecordingWriter
 
 MAGIC = b"\x89MCAP0\r\n"
-MESSAGE_HEADER = 22  # channel id, sequence, log time, publish time: the bytes of a message record before its data
-DAMAGE = (McapError, ValueError, EOFError, MemoryError, OverflowError, struct.error)  # a damaged file, in the reader
+METADATA = (METADATA_RECORDING, METADATA_STATS)  # the metadata records read (a file may hold any number)
 
 
 class RecordingError(SonibusError):
@@ -76,35 +88,85 @@ class Message:
 
 
 class Recording:
-    """An MCAP recording, opened and checked: ``RecordingError`` if it is not one."""
+    """An MCAP recording, opened and checked: ``RecordingError`` if it is not one.
+
+    Each message read is checked like one on the bus (``bus/messages.py``'s gate: a
+    file from a stranger may hold anything); one that fails, or a chunk that cannot be
+    read, is skipped and counted in ``skipped`` (``problems()`` says what)."""
 
     def __init__(self, path: str) -> None:
         self.path = path
-        _check_file(path)
+        size = _check_file(path)
         self._file: BinaryIO = open(path, "rb")  # noqa: SIM115 — closed by close()
         try:
-            self._reader = SeekingReader(self._file, validate_crcs=True)
-            summary = self._reader.get_summary()
-            if summary is not None and summary.chunk_indexes:  # where a writer that failed would have left damage
-                last = max(summary.chunk_indexes, key=lambda index: index.chunk_start_offset)
-                self._file.seek(last.chunk_start_offset)
-                for _ in _chunk_records(_read_chunk(self._file.read(last.chunk_length))):
-                    pass
-        except DAMAGE as exc:
+            self._open(size)
+        except BaseException:
             self._file.close()
+            raise
+        self.checks = Checks(path)
+
+    @property
+    def skipped(self) -> dict[str, int]:
+        """Messages and chunks skipped so far (``Checks``)."""
+        return self.checks.skipped
+
+    def problems(self) -> str:
+        """What was skipped so far, in a line ("" if nothing was)."""
+        return self.checks.problems()
+
+    def _open(self, size: int) -> None:
+        path = self.path
+        try:
+            summary = read_summary(self._file)
+            if summary is not None:
+                check_sizes(summary, size)
+        except ChunkError as exc:  # (what the index says: recover, which reads every chunk, cannot help)
+            raise RecordingError(f"{path} cannot be read: {exc}") from None
+        except DAMAGE as exc:
+            raise RecordingError(f"{path} is damaged ({_why(exc)}); {_RECOVER.format(path=path)}") from None
+        try:
+            if summary is not None:
+                self._indexes = sorted(summary.chunk_indexes, key=lambda index: index.chunk_start_offset)
+                if self._indexes:  # the last chunk: where a writer that failed would have left damage
+                    last = self._indexes[-1]
+                    for _ in chunk_records(expand(read_chunk(self._file, last), last.chunk_start_offset)):
+                        pass
+        except NotAsIndexed as exc:
+            raise RecordingError(f"{path} cannot be read: {exc}; 'sonibus recover {path}' reads its chunks, "
+                                 "not its index") from None
+        except ChunkError as exc:
+            many = summary is not None and len(summary.chunk_indexes) > 1
+            raise RecordingError(f"{path} cannot be read: {exc}" + (
+                f"; 'sonibus recover {path}' keeps its other chunks" if many else "")) from None
+        except DAMAGE as exc:
             raise RecordingError(f"{path} is damaged ({_why(exc)}); {_RECOVER.format(path=path)}") from None
         if summary is None or summary.statistics is None:
-            self._file.close()
             raise RecordingError(f"{path} has no summary; {_RECOVER.format(path=path)}")
+        if len(summary.channels) > MAX_CHANNELS:
+            raise RecordingError(f"{path} holds {len(summary.channels)} channels, more than sonibus reads "
+                                 f"({MAX_CHANNELS}, as many as its recorder writes): not a recording of robots")
+        for channel in summary.channels.values():
+            if len(channel.topic) > MAX_TOPIC:
+                raise RecordingError(f"{path} holds a channel named by {len(channel.topic)} characters "
+                                     f"('{channel.topic[:40]}...'), more than a key may ({MAX_TOPIC})")
         stats = summary.statistics
         if stats.message_count == 0:
-            self._file.close()
             raise RecordingError(f"{path} is an empty recording: it holds no messages")
         self.start_ns, self.end_ns = stats.message_start_time, stats.message_end_time
         self.message_count = stats.message_count
-        self._channels: dict[int, Channel] = summary.channels
-        self.counts = {c.topic: stats.channel_message_counts.get(cid, 0) for cid, c in summary.channels.items()}
-        self.metadata = {m.name: dict(m.metadata) for m in self._reader.iter_metadata()}
+        # channels of a data key or a view: a message on any other is skipped (keys are what readers take apart)
+        self._channels: dict[int, Channel] = {cid: c for cid, c in summary.channels.items()
+                                              if is_view(c.topic) or _data_key(c.topic)}
+        self.counts = {c.topic: stats.channel_message_counts.get(cid, 0) for cid, c in self._channels.items()}
+        self.metadata: dict[str, dict[str, str]] = {}
+        try:
+            for index in summary.metadata_indexes:
+                if index.name in METADATA and index.name not in self.metadata:
+                    record = read_record(self._file, index.offset)
+                    if isinstance(record, Metadata):
+                        self.metadata[record.name] = dict(record.metadata)
+        except DAMAGE as exc:
+            raise RecordingError(f"{path} is damaged ({_why(exc)}); {_RECOVER.format(path=path)}") from None
 
     @property
     def keys(self) -> list[str]:
@@ -140,28 +202,74 @@ class Recording:
     def messages(self, keys: Sequence[str] | None = None, start_s: float | None = None,
                  end_s: float | None = None) -> Iterator[Message]:
         """Messages in the order they were recorded, optionally only ``keys`` and
-        only between ``start_s`` and ``end_s`` seconds from the start."""
-        start = self.start_ns + int(start_s * 1e9) if start_s is not None else None
+        only between ``start_s`` and ``end_s`` seconds from the start; what cannot be
+        read is skipped and counted (``skipped``)."""
+        start = self.start_ns + int(start_s * 1e9) if start_s is not None else 0
         end = self.start_ns + int(end_s * 1e9) if end_s is not None else None
-        found = self._reader.iter_messages(topics=keys, starting_at=start, ending_at=end, log_time_order=False)
-        while True:
+        wanted = {cid for cid, c in self._channels.items() if keys is None or c.topic in set(keys)}
+        if not self._indexes:  # (messages outside chunks: read in order, chunk by chunk)
+            yield from self._unindexed(wanted, start, end)
+            return
+        for index in self._indexes:
+            if index.message_end_time < start or (end is not None and index.message_start_time >= end):
+                continue
+            yield from self._chunk(index, wanted, start, end)
+
+    def _chunk(self, index: ChunkIndex, wanted: set[int], start: int = 0, end: int | None = None) -> Iterator[Message]:
+        """The messages of the chunk ``index`` points to on channels ``wanted``, logged in [start, end)."""
+        if index.message_index_offsets and wanted.isdisjoint(index.message_index_offsets):
+            return
+        at = index.chunk_start_offset
+        try:
+            data = expand(read_chunk(self._file, index), at)
+            for n, record in enumerate(chunk_records(data)):
+                if isinstance(record, McapMessage) and record.channel_id in wanted \
+                        and start <= record.log_time and (end is None or record.log_time < end):
+                    found = self.checks.message(self._channels[record.channel_id], record, (at, n))
+                    if found is not None:
+                        yield found
+        except ChunkError as exc:
+            self.checks.skip("chunks", str(exc), at)
+        except DAMAGE as exc:  # (a record torn inside a chunk: those before it were read)
+            self.checks.skip("chunks", f"the chunk at byte {at}: {_why(exc)}", at)
+
+    def _unindexed(self, wanted: set[int], start: int, end: int | None) -> Iterator[Message]:
+        bad: list[ChunkError] = []
+        with open(self.path, "rb") as f:  # (its own: two readings may take turns)
             try:
-                _, channel, message = next(found)
-                yield _message(channel, message)
-            except StopIteration:
-                return
+                for record in records(f, bad):
+                    while bad:
+                        self.checks.skip("chunks", str(bad.pop()))
+                    if isinstance(record, McapMessage) and record.channel_id in wanted \
+                            and start <= record.log_time and (end is None or record.log_time < end):
+                        found = self.checks.message(self._channels[record.channel_id], record)
+                        if found is not None:
+                            yield found
             except DAMAGE as exc:
                 raise RecordingError(f"{self.path} is damaged ({_why(exc)}); {_RECOVER.format(path=self.path)}") \
                     from None
 
     def infos(self) -> dict[str, dict[str, Any]]:
-        """The last recorded ``<robot>/info`` of each robot."""
+        """The last recorded ``<robot>/info`` of each robot (read from the last chunks
+        that hold one: a file of a million infos took ``info`` 50 s)."""
         found = {}
-        info_keys = [k for k in self.keys if k.endswith("/info")]
-        if info_keys:
-            for message in self.messages(info_keys):
-                found[message.key.partition("/")[0]] = message.data
+        for key in (k for k in self.keys if k.endswith("/info")):
+            last = self._last(key)
+            if last is not None:
+                found[key.partition("/")[0]] = last.data
         return found
+
+    def _last(self, key: str) -> Message | None:
+        """The last message on ``key`` that passes the checks, read backwards a chunk at a time."""
+        wanted = {cid for cid, c in self._channels.items() if c.topic == key}
+        last = None
+        for found in (self._chunk(index, wanted) for index in reversed(self._indexes)) if self._indexes \
+                else [self.messages([key])]:
+            for last in found:  # noqa: B007 (the last one is wanted)
+                pass
+            if last is not None:
+                return last
+        return None
 
     def close(self) -> None:
         self._file.close()
@@ -173,11 +281,62 @@ class Recording:
         self.close()
 
 
+class Checks:
+    """Each message read from a file checked like one on the bus (``bus/messages.py``'s
+    gate; a view only to be a map): a file from a stranger may hold anything. What
+    fails is skipped and counted in ``skipped``, as is a chunk that cannot be read."""
+
+    REMEMBERED = 1 << 16  # places skipped that are remembered, not counted twice (replay reads a file again)
+
+    def __init__(self, path: str) -> None:
+        self.path = path
+        self.skipped: dict[str, int] = {"messages": 0, "chunks": 0}
+        self._first: dict[str, str] = {}  # what, of each kind, was skipped first
+        self._seen: set[object] = set()
+        self._keys: dict[str, Key] = {}  # each channel's topic taken apart (a file's channels: MAX_CHANNELS)
+        # (a recording's t are old, and its bus may have allowed larger payloads)
+        self._gate = Gate(Limits(max_future_s=math.inf, max_payload=1 << 30, max_info_payload=1 << 30))
+
+    def message(self, channel: Channel, message: McapMessage, where: object = None) -> Message | None:
+        """The message, checked; None, counted, if it fails (once for each ``where``, its place in the file)."""
+        if channel.message_encoding not in (MESSAGE_ENCODING, AUDIO_ENCODING):
+            raise RecordingError(f"channel {channel.topic} is {channel.message_encoding}, not {MESSAGE_ENCODING} "
+                                 f"or {AUDIO_ENCODING}: not a sonibus recording")
+        try:
+            data = from_data(channel.message_encoding, message.data)
+            if data.__class__ is not dict:
+                raise BadMessage(f"a {type(data).__name__}, not a map")
+            if not is_view(channel.topic):
+                key = self._keys.get(channel.topic) or self._keys.setdefault(channel.topic, Key.parse(channel.topic))
+                SECTIONS[key.section].check(self._gate, key, data)
+        except (BadMessage, KeyError, TypeError, ValueError, RecursionError, OverflowError) as exc:
+            self.skip("messages", f"{channel.topic[:80]}: {_why(exc)}", where)
+            return None
+        return Message(channel.topic, message.log_time, message.publish_time, data)
+
+    def skip(self, kind: str, why: str, where: object = None) -> None:
+        """Count one ``kind`` skipped, unless what is at ``where`` was (None: always count)."""
+        if where is not None:
+            if (kind, where) in self._seen:
+                return
+            if len(self._seen) < self.REMEMBERED:
+                self._seen.add((kind, where))
+        self.skipped[kind] += 1
+        self._first.setdefault(kind, why)
+
+    def problems(self) -> str:
+        """What was skipped so far, in a line ("" if nothing was)."""
+        said = [f"{n} {kind[:-1] if n == 1 else kind} (the first: {self._first[kind]})"
+                for kind, n in self.skipped.items() if n]
+        return f"{self.path}: skipped " + " and ".join(said) if said else ""
+
+
 _RECOVER = ("it was not closed cleanly (a killed recorder, a full disk, an unfinished copy); "
             "'sonibus recover {path}' keeps what it holds up to its last complete chunk")
 
 
-def _check_file(path: str) -> None:
+def _check_file(path: str) -> int:
+    """The size of ``path``, an MCAP file that is whole; ``RecordingError`` if it is not."""
     try:
         size = os.path.getsize(path)
         with open(path, "rb") as f:
@@ -194,6 +353,7 @@ def _check_file(path: str) -> None:
         if lock.held(path):
             raise StillRecording(path, size)
         raise RecordingError(f"{path} is truncated: " + _RECOVER.format(path=path))
+    return size
 
 
 def head(path: str) -> dict[str, str]:
@@ -201,7 +361,7 @@ def head(path: str) -> dict[str, str]:
     when), read without the summary a file being written does not have yet; {} if none."""
     try:
         with open(path, "rb") as f:
-            for record in StreamReader(f, skip_magic=False, emit_chunks=True).records:
+            for record in StreamReader(f, skip_magic=False, emit_chunks=True, record_size_limit=MAX_RECORD).records:
                 if isinstance(record, Metadata) and record.name == METADATA_RECORDING:
                     return dict(record.metadata)
                 if isinstance(record, Chunk):
@@ -211,55 +371,27 @@ def head(path: str) -> dict[str, str]:
     return {}
 
 
-def _message(channel: Channel, message: McapMessage) -> Message:
-    if channel.message_encoding not in (MESSAGE_ENCODING, AUDIO_ENCODING):
-        raise RecordingError(f"channel {channel.topic} is {channel.message_encoding}, not {MESSAGE_ENCODING} "
-                             f"or {AUDIO_ENCODING}: not a sonibus recording")
-    return Message(channel.topic, message.log_time, message.publish_time,
-                   from_data(channel.message_encoding, message.data))
+def _data_key(topic: str) -> bool:
+    """A topic that is a bus key (one Zenoh takes: replay puts it back on the bus) of one of the key
+    space's sections."""
+    try:
+        zenoh.KeyExpr(topic)
+        return Key.parse(topic).section in SECTIONS
+    except Exception:  # (zenoh's own error for what is no key: "a*b", "a//b", "$x")
+        return False
 
 
 def _why(exc: BaseException) -> str:
+    if isinstance(exc, BadMessage | ChunkError):
+        return " ".join(str(exc).split())[:160]
     text = " ".join(str(exc).split())
     return f"{type(exc).__name__}: {text[:100]}" if text else type(exc).__name__
 
 
-def _read_chunk(data: bytes) -> Chunk:
-    """The chunk record held whole in ``data``."""
-    record = next(StreamReader(io.BytesIO(data), skip_magic=True, emit_chunks=True).records)
-    if not isinstance(record, Chunk):
-        raise ValueError(f"a {type(record).__name__} record where a chunk should be")
-    return record
-
-
-def _chunk_records(chunk: Chunk) -> Iterator[Channel | Schema | McapMessage]:
-    """The records of ``chunk``, each checked to fill its stated length exactly (the
-    library's reader lets a torn record swallow the rest of its chunk); ``ValueError``
-    at the first that does not."""
-    stream, size = get_chunk_data_stream(chunk, validate_crc=True)
-    while stream.count < size:
-        opcode, length = stream.read1(), stream.read8()
-        end = stream.count + length
-        if end > size or (opcode == Opcode.MESSAGE and length < MESSAGE_HEADER):
-            raise ValueError(f"a torn record at byte {stream.count} of a chunk")
-        record: Channel | Schema | McapMessage | None = None
-        if opcode == Opcode.MESSAGE:
-            record = McapMessage.read(stream, length)
-        elif opcode == Opcode.CHANNEL:
-            record = Channel.read(stream)
-        elif opcode == Opcode.SCHEMA:
-            record = Schema.read(stream)
-        else:
-            stream.read(length)
-        if stream.count != end:
-            raise ValueError(f"a torn record at byte {stream.count} of a chunk")
-        if record is not None:
-            yield record
-
-
-def recover(path: str, out: str) -> int:
+def recover(path: str, out: str) -> tuple[int, str]:
     """Copy every message of the damaged recording ``path`` that can be read into a
-    new, complete recording ``out``; returns how many."""
+    new, complete recording ``out``; returns how many, and what was skipped ("" if
+    nothing was: a message the recorder would not write, a chunk that cannot be read)."""
     try:
         with open(path, "rb") as f:
             head = f.read(len(MAGIC))
@@ -268,34 +400,34 @@ def recover(path: str, out: str) -> int:
     if not MAGIC.startswith(head):
         raise RecordingError(f"{path} is not an MCAP file (it starts with {head[:8]!r})")
     channels: dict[int, Channel] = {}
-    kept = 0
+    kept, checks = 0, Checks(path)
+    bad: list[ChunkError] = []
     with open(path, "rb") as f, RecordingWriter(out) as writer:
         try:
-            for record in _records(f):
+            for record in records(f, bad):
                 if isinstance(record, Channel):
-                    channels[record.id] = record
+                    if len(channels) < MAX_CHANNELS and len(record.topic) <= MAX_TOPIC and \
+                            record.message_encoding in (MESSAGE_ENCODING, AUDIO_ENCODING) and \
+                            (is_view(record.topic) or _data_key(record.topic)):
+                        channels[record.id] = record
                 elif isinstance(record, McapMessage) and record.channel_id in channels:
-                    found = _message(channels[record.channel_id], record)
+                    found = checks.message(channels[record.channel_id], record)
+                    if found is None:
+                        continue
                     try:
                         writer.write(found.key, found.log_ns, found.data)
-                    except BadRecord:  # (from an older recorder): the rest is kept
+                    except BadRecord as exc:  # (from an older recorder): the rest is kept
+                        checks.skip("messages", f"{found.key}: {exc}")
                         continue
                     kept += 1
                 elif isinstance(record, Metadata) and record.name == METADATA_RECORDING:
                     writer.add_metadata(record.name, dict(record.metadata))
         except DAMAGE:
             pass  # the damaged end: everything before it is kept
+    for exc in bad:
+        checks.skip("chunks", str(exc))
     if kept == 0:
         os.unlink(out)
-        raise RecordingError(f"{path} holds no complete chunk: nothing to recover")
-    return kept
-
-
-def _records(f: BinaryIO) -> Iterator[Any]:
-    """The records of an MCAP stream in order, a chunk's one by one, up to the first
-    damaged record (raised: a ``DAMAGE`` exception)."""
-    for record in StreamReader(f, skip_magic=False, emit_chunks=True).records:
-        if isinstance(record, Chunk):
-            yield from _chunk_records(record)
-        else:
-            yield record
+        more = f": {checks.problems().partition(': ')[2]}" if checks.problems() else ""
+        raise RecordingError(f"{path} holds no complete chunk: nothing to recover{more}")
+    return kept, checks.problems()

@@ -53,6 +53,8 @@ MAX_LATE_S = 0.1  # samples later than this are skipped (events never): no burst
 LEAD_S = 0.2      # between declaring the publishers and the first message: Zenoh settles its routes
 AHEAD = 512       # moments read and decoded ahead of the player (~5 s of a robot at 100 frames/s)
 GATHER_NS = 5_000_000  # a frame's joint samples reach a recorder within this of each other
+MOMENT = messages.MAX_JOINTS  # joint samples in one moment (a frame's most): what reading ahead holds is bounded
+MAX_ROBOTS = 64   # robots one replay claims (each like a live one: a token, two servers; 4,096 took minutes and GBs)
 STREAMED = {"joints": STREAM, "derived": STREAM, "audio": AUDIO}  # sections sent as streams (late: skipped)
 
 
@@ -94,6 +96,7 @@ class Replay(Adapter):
         super().__init__(config, name=name)
         self.window_s, self.loops = 0.0, 0        # progress: the window's length, passes done
         self.finished = threading.Event()          # set at the end of a replay without loop
+        self.problems = ""                         # what the reading skipped (``Recording.problems``), so far
         self._clock: tuple[float, float] | None = None  # the pass's start (monotonic) and the time cut from it
 
     @property
@@ -121,6 +124,9 @@ class Replay(Adapter):
             self.warn("audio", f"--speed {cfg.speed:g}: audio left out ({', '.join(audio)}): sound plays only at "
                                "the speed it was recorded")
         robots = sorted({k.partition("/")[0] for k in self.keys})
+        if len(robots) > MAX_ROBOTS:
+            raise RecordingError(f"{cfg.path} holds {len(robots)} robots ({', '.join(robots[:3])}, ...); a replay "
+                                 f"takes at most {MAX_ROBOTS} — choose some with --keys, e.g. --keys '{robots[0]}/**'")
         unknown = sorted(set(cfg.rename) - set(robots))
         if unknown:
             raise RecordingError(f"--as {unknown[0]}: no robot '{unknown[0]}' in {cfg.path} — "
@@ -210,6 +216,7 @@ class Replay(Adapter):
                     self._publish(message, t_origin, seq, late)
             if self.stopping.is_set():
                 return
+            self._skipped()
             self.loops += 1
             if not cfg.loop:
                 break
@@ -217,6 +224,14 @@ class Replay(Adapter):
             self._clock = (start, 0.0)
         self.finished.set()
         log.info("%s: replay of %s finished", self.name, cfg.path)
+
+    def _skipped(self) -> None:
+        """Say, once a pass, what the reading skipped (a message the gate refuses, a chunk that cannot be
+        read); each pass skips the same, so it is said when it changes."""
+        problems = self.recording.problems()
+        if problems and problems != self.problems:
+            self.warn("skipped", problems)
+        self.problems = problems
 
     def _gap(self, gap_s: float, at_s: float, message: Message) -> None:
         self.count("gaps")
@@ -351,9 +366,9 @@ def _moments(messages: Iterable[Message]) -> Iterator[tuple[bool, list[Message]]
             waiting.append((None, [message]))
             continue
         frame = (message.key.partition("/")[0], message.data["seq"], message.data["t"])
-        if frame in gathering:
+        if frame in gathering and len(gathering[frame]) < MOMENT:
             gathering[frame].append(message)
-        else:
+        else:  # (a moment holds one frame's worth: a file's frame may hold thousands, read ahead by the 512)
             gathering[frame] = [message]
             waiting.append((frame, gathering[frame]))
     for frame, moment in waiting:

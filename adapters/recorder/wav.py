@@ -5,8 +5,9 @@ key's first chunk). A gap in ``seq`` (chunks lost on the way, or dropped by
 the recorder) becomes silence of the missing chunks' length, so the file keeps
 time; a ``seq`` that goes back (the publisher restarted) is played on as it
 comes. A chunk of another rate or channel count than the first is skipped, and
-said once per file; so is a message that is no audio chunk (the gate's check:
-a file not written by sonibus), and a key with none gets no file.
+said once per file; a message that is no audio chunk never comes here (the
+recording's reader checks each like the gate, and counts what it skips), and a
+key with none gets no file.
 
 >>> import os, tempfile
 >>> import numpy as np
@@ -28,16 +29,13 @@ a file not written by sonibus), and a key with none gets no file.
 
 from __future__ import annotations
 
-import math
 import os
 import wave
 from collections.abc import Callable
 from typing import Any
 
-from sonibus.bus import codec
 from sonibus.bus.audio import AudioChunk
 from sonibus.bus.keys import Key
-from sonibus.bus.messages import BadMessage, Gate, Limits
 
 from .reading import Recording
 
@@ -60,16 +58,13 @@ def export_wav(recording: Recording, directory: str, say: Callable[[str], None])
         written = _Writer(path)
         try:
             for message in recording.messages([key]):
-                written.add(key_parts, message.data)
+                written.add(message.data)
         finally:
             written.close()
         if written.skipped and written.first is not None:
             count, found = written.skipped, written.other
             say(f"{key}: {count} chunk{'s' if count != 1 else ''} skipped: {found}, not the "
                 f"{_format(written.first)} of the first chunk (the WAV's)")
-        if written.bad:
-            say(f"{key}: {written.bad} chunk{'s' if written.bad != 1 else ''} not an audio chunk, left out "
-                f"(the first: {written.why})")
         if written.first is not None:
             paths.append(path)
     return paths
@@ -83,17 +78,10 @@ class _Writer:
         self.first: AudioChunk | None = None
         self.last: AudioChunk | None = None
         self.skipped, self.other = 0, ""    # chunks of another format than the first
-        self.bad, self.why = 0, ""          # messages that are no audio chunk (a file not written by sonibus)
-        # (a recording's t are old, and its bus may have allowed larger payloads)
-        self._gate = Gate(Limits(max_future_s=math.inf, max_payload=1 << 30))
         self._out: wave.Wave_write | None = None
 
-    def add(self, key: Key, message: Any) -> None:
-        try:
-            self._gate.check(key, codec.encode(message))
-        except (BadMessage, TypeError, ValueError, OverflowError) as exc:  # (what msgpack cannot carry too)
-            self.bad, self.why = self.bad + 1, self.why or str(exc)
-            return
+    def add(self, message: Any) -> None:
+        """One audio chunk, checked by the gate (``reading.Checks``)."""
         chunk = AudioChunk.of(message)
         if self._out is None:
             self.first = chunk

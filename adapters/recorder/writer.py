@@ -40,13 +40,13 @@ from mcap.writer import CompressionType, Writer
 from sonibus.bus.errors import SonibusError
 
 from . import index, lock
+from .bounded import MAX_CHANNELS, MAX_TOPIC
 from .channels import AUDIO_ENCODING, PROFILE, SCHEMA_ENCODING, channel_schema, encoding_of, to_data
 
 METADATA_RECORDING = "sonibus.recording"
 METADATA_STATS = "sonibus.stats"
 TIME_LIMIT_NS = 1 << 64        # MCAP times are uint64 ns since the epoch
 MAX_CLOCK_OFFSET_S = 60.0      # a t further than this from the log time is not a publish time (a clock gone wrong)
-MAX_CHANNELS = (1 << 16) - 1   # MCAP channel ids are uint16 (0 is none)
 
 
 class BadRecord(ValueError):
@@ -91,9 +91,12 @@ class RecordingWriter:
         if log_ns.__class__ is not int or not 0 <= log_ns < TIME_LIMIT_NS:
             raise BadRecord(f"log time {log_ns!r} is not in 0..2^64 ns")
         channel = self._channels.get(key)
-        if channel is None:
+        if channel is None:  # (bounds its readers keep too: bounded.py)
             if len(self._channels) >= MAX_CHANNELS:
-                raise BadRecord(f"a file holds at most {MAX_CHANNELS} keys; '{key}' would be one more")
+                raise BadRecord(f"a file holds at most {MAX_CHANNELS} keys; '{key[:80]}' would be one more")
+            if len(key) > MAX_TOPIC:
+                raise BadRecord(f"a key of {len(key)} characters ('{key[:40]}...'), more than a file's may "
+                                f"({MAX_TOPIC})")
             channel = self._channels[key] = self._do(self._channel, key)
         sequence = self._sequence[channel] = (self._sequence.get(channel, -1) + 1) & 0xFFFFFFFF  # uint32: wraps
         self._do(self._writer.add_message, channel, log_time=log_ns, data=data,

@@ -122,4 +122,4 @@ def test_a_full_disk_pauses_the_recorder_and_the_show_goes_on(net, tmp_path, spa
         assert not any("Traceback" in line or "FAILED" in line for line in run.lines), said()
         copy = tmp_path / "second.mcap"  # finished, or only closed if the disk filled mid-chunk: recoverable
         shutil.copy(os.path.join(disk, second[0]), copy)
-        assert recover(str(copy), str(tmp_path / "second.recovered.mcap")) > 0
+        assert recover(str(copy), str(tmp_path / "second.recovered.mcap"))[0] > 0

@@ -34,7 +34,7 @@ def write_info(out: RecordingWriter, robot: str = "pepper", model: str = "pepper
     joints = load_model(model).joints
     out.write(f"{robot}/info", ns(T0), {"robot": robot, "model": model, "joints": [j.to_info() for j in joints],
                                         "rate_hz": RATE_HZ, "behaviors": [], "postures": [], "adapter": "sim",
-                                        "schema_version": 1, "owner": "test"})
+                                        "schema_version": 1, "owner": {"host": "test", "node": "test"}})
 
 
 def write_frame(out: RecordingWriter, seq: int, robot: str = "pepper", model: str = "pepper",

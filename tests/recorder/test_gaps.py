@@ -33,7 +33,7 @@ def rows(gap_ns: int, spike: bool) -> list[tuple[str, int, dict]]:
         t = log_ns / 1e9 + (3600 if spike and seq == 20 else 0)
         found += [(f"pepper/joints/{joint}", log_ns, {"t": t, "seq": seq, "v": seq / 100}) for joint in JOINTS]
     end = start + 40 * FRAME_NS + gap_ns
-    found.append(("pepper/events/behavior", end, {"t": end / 1e9, "kind": "behavior", "state": "done", "name": "x"}))
+    found.append(("pepper/events/behavior", end, {"t": end / 1e9, "kind": "behavior", "state": "stopped", "name": "x"}))
     return found
 
 
@@ -87,7 +87,7 @@ def test_replay_shortens_a_long_gap_and_replays_all_after_it(net, tmp_path, case
     assert ordered_part_of_40([f["seq"] for f in frames], skipped)
     assert all(f["names"] == list(JOINTS) for f in frames)
     assert all(abs(f["t"] - time.time()) < 30 for f in frames)  # on the replay's clock, the gap gone
-    assert [decode(payload)["state"] for key, payload in got if key == "pepper/events/behavior"] == ["done"]
+    assert [decode(payload)["state"] for key, payload in got if key == "pepper/events/behavior"] == ["stopped"]
 
 
 def test_a_looped_replay_does_not_wait_the_gap_between_passes(net, tmp_path):
