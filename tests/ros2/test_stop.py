@@ -169,3 +169,20 @@ def test_the_stand_in_arm_is_not_moved_by_stop_or_by_joints_a_command_does_not_n
     wait_for(lambda: abs(sim.position["head_pan"] - 0.2) < 1e-9, 10, "the head where it was sent")
     assert {n: v for n, v in sim.position.items() if n != "head_pan"} == \
         {n: v for n, v in before.items() if n != "head_pan"}  # nothing else moved, spoofed states or not
+
+
+def test_the_page_and_nodes_say_whether_the_controller_is_matched(net, ros):
+    from sonibus.bus.cli.watch import node_line
+
+    from ..web.conftest import start_web
+
+    web = start_web(net)
+    arm = start_arm(net)  # no controller yet
+    wait_for(lambda: web.shown_robots().get("arm", {}).get("controller", {}).get("matched") is False, 10,
+             "the page showing the controller unmatched")
+    assert "no subscription of node joint_trajectory_controller" in web.shown_robots()["arm"]["controller"]["why"]
+    assert "CONTROLLER NOT MATCHED: no subscription" in node_line("h", "arm", arm.describe(), 0.0)
+    ros.robot()
+    wait_for(lambda: web.shown_robots()["arm"]["controller"] == {"matched": True, "why": ""}, 10,
+             "the page showing the controller matched")
+    assert node_line("h", "arm", arm.describe(), 0.0).endswith("controller matched")
