@@ -152,7 +152,7 @@ def _joint(element: ET.Element, source: str) -> Joint:
 def _line(text: str | bytes, name: str) -> int:
     """The line of ``text`` where joint ``name`` is declared (0 if not found): for errors only."""
     data = text.decode("utf-8", "replace") if isinstance(text, bytes) else text
-    at = data.find(f'name="{name}"')
+    at = max(data.find(f'name="{name}"'), data.find(f"name='{name}'"))
     return data.count("\n", 0, at) + 1 if at >= 0 else 0
 
 
