@@ -53,6 +53,7 @@ SCRIPTS: dict[str, tuple[str, list[str], float]] = {
     "recording_fuzz": ("recording_fuzz", ["--files", "1500"], 300),
     "ros2_cdr": ("ros2_cdr", ["--instructions", "17"], 300),  # ROS 2 CDR, ours beside rosbags (and msgpack)
     "ros2_rate": ("ros2_rate", [], 300),  # ROS 2 JointState publish → OSC, beside NAOqi → OSC
+    "urdf_parse": ("urdf_parse", [], 300),  # reading a URDF beside the XML parser alone: linear, loops refused
     "soak_show": ("soak_show", ["--minutes", "6"], 600),  # a whole show, clients coming and going: memory flat?
     # the long form of the show soak (issue 25: an hour or more, the RSS slope judged); only when asked for
     "soak_show_long": ("soak_show", ["--minutes", "70", "--name", "soak_show_long"], 80 * 60),

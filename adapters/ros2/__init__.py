@@ -20,13 +20,14 @@ from sonibus.bus import ConfigError
 from sonibus.bus.owner import RobotAdapter
 
 from . import cdr
-from .commands import UNSUPPORTED, Positions, Ros2Verbs
+from .commands import UNSUPPORTED, Ros2Verbs
 from .config import Ros2Config
 from .description import Description, describe, wrap
 from .urdf import UrdfError, group_states, parse
 from .zenoh_link import BadInput, Received, RosSession, ZenohLink
 
 log = logging.getLogger(__name__)
+LIMIT_SLACK = 0.01  # rad or m past a URDF limit a robot may report (encoder noise at an end stop)
 MAX_NAMED = 128  # unknown joint names remembered for their one warning (the names come from the network)
 
 __all__ = ["Ros2Config", "Ros2Robot", "Ros2Verbs"]
@@ -50,9 +51,8 @@ class Ros2Robot(RobotAdapter):
             if joint not in commanded:
                 raise ConfigError(f"{self._at('joints')}: '{joint}' is not a movable, non-mimic joint of the URDF "
                                   f"— those are: {', '.join(commanded)}")
-        self.positions = Positions()
-        self.verbs = Ros2Verbs(self.robot, self.description, c.joints or commanded, self.positions,
-                               self.link.send, c.stop_s)
+        self.verbs = Ros2Verbs(self.robot, self.description, c.joints or commanded, self.link.send,
+                               getattr(self.link, "matched", _matched))
         self._seq = 0
         self._unknown: set[str] = set()
         self._dropped = 0
@@ -108,7 +108,22 @@ class Ros2Robot(RobotAdapter):
                 del joint["chain"]
         if self.description.kinematics is not None:
             info["kinematics"] = self.description.kinematics
+        info["controller"] = self.controller()
         return info
+
+    def controller(self) -> dict[str, Any]:
+        """The trajectory controller as this node sees it: its topic, and whether its subscription
+        is matched (``why`` not, otherwise): commands reach it only then."""
+        unmatched = self.verbs.matched() if hasattr(self, "verbs") else "not started"
+        shown: dict[str, Any] = {"topic": self.config.controller, "matched": not unmatched}
+        if unmatched:
+            shown["why"] = unmatched
+        return shown
+
+    def describe(self) -> dict[str, Any]:
+        described = super().describe()
+        described["controller"] = self.controller()
+        return described
 
     def execute(self, verb: str, args: Any) -> dict[str, Any]:
         """A verb a ROS robot has no interface for is refused as such before its arguments are
@@ -165,12 +180,16 @@ class Ros2Robot(RobotAdapter):
                 values[name] = wrap(position) if name in self.description.continuous else position
             else:
                 self._unknown_joint(name)
+        outside = _outside(self.model, values)
+        if outside:  # a robot does not report what it cannot reach: a broken driver, or someone else's
+            self.count("bad")
+            self.warn("ros_input", f"{self.robot}: refused from {self.config.joint_states}: {outside}")
+            return
         for joint, mimic in self.description.mimics.items():
             if joint not in values and mimic.joint in values:
                 values[joint] = mimic.multiplier * values[mimic.joint] + mimic.offset
         if not values:
             return
-        self.positions.update({n: v for n, v in values.items() if math.isfinite(v)})
         self._seq += 1
         self.publish_frame(self._stamp(state.stamp), self._seq, list(values.values()), list(values))
 
@@ -189,6 +208,21 @@ class Ros2Robot(RobotAdapter):
             self._unknown.add(name)
             log.warning("%s: joint %r of %s is not in the URDF: left out of the frames", self.name, name[:80],
                         self.config.joint_states)
+
+
+def _matched() -> str:
+    """A link that cannot tell whether the controller is matched (DDS): it is taken as matched."""
+    return ""
+
+
+def _outside(model: Any, values: dict[str, float]) -> str:
+    """The first heard position outside its URDF limits, or '' (a NaN, "not measured", is left out
+    of the frame downstream)."""
+    for name, value in values.items():
+        spec = model.joint(name)
+        if math.isfinite(value) and not spec.min - LIMIT_SLACK <= value <= spec.max + LIMIT_SLACK:
+            return f"{name} at {value!r}, outside its URDF limits [{spec.min:g}, {spec.max:g}]"
+    return ""
 
 
 def _shape(state: cdr.JointState) -> str:

@@ -1,63 +1,63 @@
 """What a ROS 2 robot does with sonibus's commands: ``joints/set`` and ``posture`` become a
-``trajectory_msgs/JointTrajectory`` for ros2_control's joint_trajectory_controller,
-``stop`` the trajectory that holds the last positions; what a ROS robot has no standard
+``trajectory_msgs/JointTrajectory`` for ros2_control's joint_trajectory_controller (JTC),
+``stop`` the trajectory JTC itself uses to stop and hold; what a ROS robot has no standard
 interface for (speech, behaviors, stiffness, awareness) is refused as ``unsupported``.
 
-The owner has validated every request against the URDF's limits before these run.
-A trajectory is one point: the controller's every joint (it refuses partial goals by
-default), those not named held where they are, reached in the time the slowest named
-joint needs at ``speed`` × its URDF velocity (``MIN_DURATION_S`` at least).
+Nothing heard from ROS becomes a target or shortens a move: anyone on the ROS graph can
+publish ``/joint_states``. So
 
-Why ``stop`` is a hold and not an empty trajectory: ROS 1's controller took an empty
-trajectory as "stop", but ros2_controllers' (ros2_controllers#902, backported to
-Humble) rejects empty trajectories as invalid, so an empty one would stop nothing.
-A new trajectory replaces the running one from its start time (header stamp zero:
-now), so one point at the last measured positions, ``stop_s`` away, halts it.
+- a trajectory names only the joints the command names (JTC fills the others with where
+  it holds them; it needs ``allow_partial_joints_goal: true`` for that, and without it
+  refuses the trajectory and nothing moves: "Joints on incoming trajectory don't match
+  the controller joints");
+- its one point is within the URDF's limits (the owner has validated the request; checked
+  again before sending), reached in the time the slowest named joint needs at ``speed`` ×
+  its URDF velocity from the furthest place it could be within its limits (a continuous
+  joint: half a turn, JTC's angle wraparound), ``MIN_DURATION_S`` at least;
+- ``stop`` is the trajectory with no points: in JTC, ``set_hold_position()`` is that
+  message (stamp zero, no points), which replaces the running trajectory and holds the
+  joints where the controller has them (ros2_controllers' joint_trajectory_controller.cpp
+  up to Humble's releases). Later releases build the hold from the controller's own state
+  and refuse an empty trajectory sent on the topic ("Empty trajectory received."):
+  docs/ros2.md says so, and what a stop needs there (the action's cancel).
+
+A trajectory is sent only while the controller's subscription is matched (``matched``):
+otherwise the command is ``not_connected`` (for ``stop``: not reached), never a reply
+that says the robot did it.
 """
 
 from __future__ import annotations
 
 import math
-import threading
-import time
 from collections.abc import Callable, Sequence
 from typing import Any
 
 from sonibus.bus.errors import CommandError
 
 from . import cdr
-from .description import Description, wrap
+from .description import Description
 
 MIN_DURATION_S = 0.1  # no controller should be asked to jump
 UNSUPPORTED = {"behavior/run": "behaviors", "say": "speech", "stiffness": "stiffness", "awareness": "awareness"}
 
 
-class Positions:
-    """The latest position of each joint, as the robot reported it (any thread)."""
-
-    def __init__(self) -> None:
-        self._lock = threading.Lock()
-        self._values: dict[str, float] = {}
-        self.t = 0.0  # when last updated (time.time())
-
-    def update(self, values: dict[str, float]) -> None:
-        with self._lock:
-            self._values.update(values)
-            self.t = time.time()
-
-    def get(self, names: Sequence[str]) -> list[float | None]:
-        with self._lock:
-            return [self._values.get(n) for n in names]
+def reach_s(description: Description, joint: str, goal: float, speed: float) -> float:
+    """The time ``joint`` needs to reach ``goal`` at ``speed`` × its URDF velocity from wherever
+    within its limits it is (not from a heard position, which anyone can publish)."""
+    spec = description.model.joint(joint)
+    furthest = math.pi if joint in description.continuous else max(goal - spec.min, spec.max - goal)
+    return furthest / (speed * spec.max_velocity)
 
 
 class Ros2Verbs:
     """Every verb of ``sonibus.bus.verbs.RobotVerbs`` for a ROS 2 robot behind a trajectory controller."""
 
     def __init__(self, robot: str, description: Description, controller_joints: Sequence[str],
-                 positions: Positions, send: Callable[[bytes], None], stop_s: float) -> None:
+                 send: Callable[[bytes], None], matched: Callable[[], str]) -> None:
+        """``matched()``: "" while the controller's subscription is matched, else why not."""
         self.robot, self.description = robot, description
         self.controller_joints = tuple(controller_joints)
-        self.positions, self.send, self.stop_s = positions, send, stop_s
+        self.send, self.matched = send, matched
 
     # -- what a ROS robot does ------------------------------------------------------
 
@@ -69,17 +69,9 @@ class Ros2Verbs:
             if name not in self.controller_joints:
                 raise CommandError("bad_request", f"joints/set: {name} is not among the controller's joints "
                                    f"({', '.join(self.controller_joints)}: key 'joints')")
-        current = self.positions.get(self.controller_joints)
-        unknown = [j for j, v in zip(self.controller_joints, current, strict=True) if v is None]
-        if unknown:
-            raise CommandError("failed", f"joints/set: no position of {', '.join(unknown)} heard from the robot yet: "
-                               "without where it is, no safe duration for the move")
-        target = dict(zip(self.controller_joints, current, strict=True))
-        target.update(zip(names, angles, strict=True))
-        seconds = max([MIN_DURATION_S, *(self._distance(n, target[n], here) /
-                                         (speed * self.description.model.joint(n).max_velocity)
-                                         for n, here in zip(self.controller_joints, current, strict=True))])
-        self._trajectory([target[n] for n in self.controller_joints], seconds)  # type: ignore[misc]
+        goal = dict(zip(names, angles, strict=True))
+        seconds = max([MIN_DURATION_S, *(reach_s(self.description, n, v, speed) for n, v in goal.items())])
+        self._trajectory("joints/set", tuple(goal), [cdr.Point(list(goal.values()), seconds, [0.0] * len(goal))])
         return {"duration_s": round(seconds, 3)}
 
     def posture(self, name: str, speed: float) -> dict[str, Any]:
@@ -88,11 +80,8 @@ class Ros2Verbs:
         return {"name": name, **result}
 
     def stop(self) -> dict[str, Any]:
-        """Hold the last positions heard, ``stop_s`` from now; works with the ROS side gone (it only publishes)."""
-        current = self.positions.get(self.controller_joints)
-        if any(v is None for v in current):
-            return {"held": False, "reason": "no joint state heard from the robot: sonibus has moved nothing"}
-        self._trajectory(current, self.stop_s)  # type: ignore[arg-type]
+        """JTC's own stop-and-hold (no points); ``not_connected`` when no controller would get it."""
+        self._trajectory("stop", self.controller_joints, [])
         return {"held": True}
 
     def behavior_list(self) -> dict[str, Any]:
@@ -122,12 +111,15 @@ class Ros2Verbs:
 
     # -- helpers ----------------------------------------------------------------------
 
-    def _distance(self, joint: str, goal: float, here: float | None) -> float:
-        delta = goal - (here or 0.0)
-        return abs(wrap(delta) if joint in self.description.continuous else delta)
-
-    def _trajectory(self, positions: Sequence[float], seconds: float) -> None:
-        point = cdr.Point([float(p) for p in positions], seconds, [0.0] * len(positions))
-        if not all(math.isfinite(p) for p in point.positions):
-            raise CommandError("failed", "a position heard from the robot is not finite: nothing sent")
-        self.send(cdr.joint_trajectory(cdr.Stamp(0, 0), self.controller_joints, [point]))
+    def _trajectory(self, verb: str, names: Sequence[str], points: Sequence[cdr.Point]) -> None:
+        for point in points:
+            for name, value in zip(names, point.positions, strict=True):
+                spec = self.description.model.joint(name)
+                if not (math.isfinite(value) and spec.min <= value <= spec.max):
+                    raise CommandError("failed", f"{verb}: {name} {value!r} is outside its URDF limits "
+                                       f"[{spec.min:g}, {spec.max:g}]: nothing sent")
+        unmatched = self.matched()
+        if unmatched:
+            raise CommandError("not_connected", f"{verb}: the trajectory reached no controller ({unmatched}): "
+                               "nothing was sent")
+        self.send(cdr.joint_trajectory(cdr.Stamp(0, 0), names, points))

@@ -38,7 +38,7 @@ class Ros2Config:
     chain_root: str = ""                     # the link chains start from (default: the URDF's root)
     default_velocity: float = 1.0            # rad/s or m/s where the URDF gives no velocity limit
     rate_hz: float = 100.0                   # how often the robot publishes its joint states (info)
-    stop_s: float = 0.2                      # a stop holds the last positions this soon
+    stop_s: float = 0.2                      # unused: stop is the controller's own hold (kept: older files load)
     max_skew_s: float = 2.0                  # header stamps further from this clock: frames stamped on receipt
     queue: int = 256                         # JointStates waiting to be published; the oldest go first
     # rmw_zenoh: the sonibus bus's own Zenoh network, or a router of the ROS side

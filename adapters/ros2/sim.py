@@ -30,7 +30,7 @@ from sonibus.bus.queue import SampleQueue
 from . import cdr, rmw
 from .description import describe
 from .urdf import UrdfError, parse
-from .zenoh_link import RosSession
+from .zenoh_link import RosSession, controller_node
 
 JOINT_STATES = Qos(drop=True)  # like a sensor stream: never block the robot
 
@@ -84,8 +84,13 @@ class SimArm(Adapter):
         self.gid, self.seq = rmw.gid(state_token), 0
         self.publisher = self.own(bus.stream_publisher(rmw.topic_key(c.domain_id, c.joint_states, rmw.JOINT_STATE,
                                                                      state_hash), JOINT_STATES, encoding=None))
-        self.own(bus.token(node.entity(2, "MS", c.controller, rmw.JOINT_TRAJECTORY, trajectory_hash,
-                                       rmw.QOS_DEPTH_10)))
+        # the controller is a node of its own, named after it (JTC subscribes to ``~/joint_trajectory``)
+        named = controller_node(c.controller)
+        controller = rmw.Node(c.domain_id, bus.zid, named[1] if named else c.node_name, node_id=1)
+        if named:
+            self.own(bus.token(controller.token()))
+        self.own(bus.token(controller.entity(2, "MS", c.controller, rmw.JOINT_TRAJECTORY, trajectory_hash,
+                                             rmw.QOS_DEPTH_10)))
         self.commands = self.own(SampleQueue(16))
         self.own(bus.subscribe(rmw.topic_key(c.domain_id, c.controller, rmw.JOINT_TRAJECTORY), queue=self.commands,
                                attachment=True)[0])
@@ -123,7 +128,10 @@ class SimArm(Adapter):
         self.count("sent")
 
     def _follow(self, item: tuple[str, bytes, bytes | None]) -> None:
-        """A trajectory: from where the arm is to its last point, in that point's time."""
+        """A trajectory, as joint_trajectory_controller takes it from its topic: no points is its
+        stop-and-hold (where the arm is now); otherwise from where the arm is to the last point, in
+        that point's time, the joints it does not name held (``allow_partial_joints_goal``). Like the
+        controller, it follows whatever it gets at whatever speed it says: limits are the sender's."""
         try:
             rmw.read_attachment(item[2])
             trajectory = cdr.read_joint_trajectory(item[1])
@@ -131,16 +139,17 @@ class SimArm(Adapter):
             self.count("bad")
             self.warn("trajectory", f"refused a trajectory: {exc}")
             return
-        if not trajectory.points or any(n not in self.position for n in trajectory.names):
+        if not trajectory.names or any(n not in self.position for n in trajectory.names):
             self.count("bad")
-            self.warn("trajectory", f"refused a trajectory for {', '.join(trajectory.names)}: empty, or unknown joints")
+            self.warn("trajectory", f"refused a trajectory for {', '.join(trajectory.names)}: no joints, or unknown")
             return
-        last = trajectory.points[-1]
         self.count("trajectories")
         self.position.update(self.shown)  # from where it is seen, sway included
         self.start, self.goal = dict(self.position), dict(self.position)
-        for name, value in zip(trajectory.names, last.positions, strict=True):
-            joint = self.description.model.joint(name)
-            self.goal[name] = joint.clamp(value)
         self.t0 = time.time()
+        if not trajectory.points:
+            self.t1 = self.t0  # hold here
+            return
+        last = trajectory.points[-1]
+        self.goal.update(zip(trajectory.names, last.positions, strict=True))
         self.t1 = self.t0 + max(last.seconds, 1e-3)

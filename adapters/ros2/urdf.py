@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import math
 import xml.etree.ElementTree as ET
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 MOVABLE = ("revolute", "continuous", "prismatic")
 TYPES = (*MOVABLE, "fixed", "floating", "planar")
@@ -64,16 +64,16 @@ class Urdf:
     joints: tuple[Joint, ...]
     root: str
     source: str = "URDF"
+    _index: dict[str, Joint] = field(default_factory=dict, compare=False, repr=False)
 
     @property
     def movable(self) -> tuple[Joint, ...]:
         return tuple(j for j in self.joints if j.movable)
 
     def joint(self, name: str) -> Joint:
-        for joint in self.joints:
-            if joint.name == name:
-                return joint
-        raise KeyError(name)
+        if len(self._index) != len(self.joints):
+            self._index.update((j.name, j) for j in self.joints)
+        return self._index[name]
 
     def path(self, tip: str, root: str = "") -> tuple[Joint, ...]:
         """The joints from link ``root`` (default: the URDF's root) down to link ``tip``."""
@@ -86,7 +86,7 @@ class Urdf:
         out: list[Joint] = []
         link = tip
         while link != root:
-            if link not in into:
+            if link not in into or len(out) > len(self.joints):
                 raise UrdfError(f"{self.source}: link '{tip}' does not hang below link '{root}'")
             out.append(into[link])
             link = into[link].parent
@@ -149,8 +149,18 @@ def _joint(element: ET.Element, source: str) -> Joint:
                  velocity if velocity and velocity > 0 else None, follows)
 
 
+def _line(text: str | bytes, name: str) -> int:
+    """The line of ``text`` where joint ``name`` is declared (0 if not found): for errors only."""
+    data = text.decode("utf-8", "replace") if isinstance(text, bytes) else text
+    at = max(data.find(f'name="{name}"'), data.find(f"name='{name}'"))
+    return data.count("\n", 0, at) + 1 if at >= 0 else 0
+
+
 def parse(text: str | bytes, source: str = "URDF") -> Urdf:
-    """The URDF in ``text``; ``UrdfError`` naming ``source`` and the fault if it describes no robot."""
+    """The URDF in ``text``; ``UrdfError`` naming ``source`` (file:line) and the fault if it describes
+    no robot. Linear in the number of joints; a kinematic loop (a link that is the child of two joints,
+    or a chain that comes back to a link it passed) is refused, as it would make every walk down the
+    tree endless."""
     try:
         robot = ET.fromstring(text)
     except ET.ParseError as exc:
@@ -158,24 +168,50 @@ def parse(text: str | bytes, source: str = "URDF") -> Urdf:
     if robot.tag != "robot":
         raise UrdfError(f"{source}: the root element is <{robot.tag}>, not <robot>")
     joints = tuple(_joint(element, source) for element in robot.findall("joint"))
-    names = [j.name for j in joints]
-    twice = sorted({n for n in names if names.count(n) > 1})
-    if twice:
-        raise UrdfError(f"{source}: joint '{twice[0]}' is defined twice")
+    seen: set[str] = set()
+    for joint in joints:
+        if joint.name in seen:
+            raise UrdfError(f"{source}:{_line(text, joint.name)}: joint '{joint.name}' is defined twice")
+        seen.add(joint.name)
     links = [str(link.get("name")) for link in robot.findall("link")]
-    children = [j.child for j in joints]
+    known = set(links)
+    into: dict[str, Joint] = {}
     for joint in joints:
         for link in (joint.parent, joint.child):
-            if link not in links:
-                raise UrdfError(f"{source}: joint '{joint.name}' names link '{link}', which has no <link>")
-        if joint.mimic is not None and joint.mimic.joint not in names:
-            raise UrdfError(f"{source}: joint '{joint.name}' mimics '{joint.mimic.joint}', which is no joint")
-    if len(set(children)) != len(children):
-        raise UrdfError(f"{source}: a link is the child of two joints (a URDF is a tree)")
-    roots = [link for link in links if link not in children]
+            if link not in known:
+                raise UrdfError(f"{source}:{_line(text, joint.name)}: joint '{joint.name}' names link '{link}', "
+                                "which has no <link>")
+        if joint.mimic is not None and joint.mimic.joint not in seen:
+            raise UrdfError(f"{source}:{_line(text, joint.name)}: joint '{joint.name}' mimics "
+                            f"'{joint.mimic.joint}', which is no joint")
+        if joint.child in into:
+            raise UrdfError(f"{source}:{_line(text, joint.name)}: link '{joint.child}' is the child of joint "
+                            f"'{into[joint.child].name}' and of joint '{joint.name}': a loop (a URDF is a tree)")
+        into[joint.child] = joint
+    _no_cycle(into, source, text)
+    roots = [link for link in links if link not in into]
     if len(roots) != 1:
-        raise UrdfError(f"{source}: {len(roots)} root links ({', '.join(roots) or 'a cycle'}); a URDF has one")
+        raise UrdfError(f"{source}: {len(roots)} root links ({', '.join(roots[:10]) or 'a cycle'}); a URDF has one")
     return Urdf(str(robot.get("name") or "robot"), joints, roots[0], source)
+
+
+def _no_cycle(into: dict[str, Joint], source: str, text: str | bytes) -> None:
+    """Refuse a chain that comes back to a link it passed (each link has at most one parent here):
+    every link is walked up once, so this is linear."""
+    state: dict[str, int] = {}  # 1: on the walk being made, 2: known to reach a root
+    for start in into:
+        walk: list[str] = []
+        link = start
+        while link in into and state.get(link) is None:
+            state[link] = 1
+            walk.append(link)
+            link = into[link].parent
+        if state.get(link) == 1:
+            joint = into[link]
+            raise UrdfError(f"{source}:{_line(text, joint.name)}: joint '{joint.name}' closes a loop: link "
+                            f"'{link}' hangs below itself (a URDF is a tree)")
+        for passed in walk:
+            state[passed] = 2
 
 
 def group_states(text: str | bytes, source: str = "SRDF") -> dict[str, dict[str, float]]:

@@ -27,6 +27,10 @@ from .config import Ros2Config
 
 log = logging.getLogger(__name__)
 MAX_PUBLISHERS = 64  # GIDs whose sequence numbers are followed (the table is keyed by what the network sends)
+MAX_SUBSCRIPTIONS = 64  # the controller's subscription tokens followed (keyed by what the network sends)
+# the type hashes a JointTrajectory subscription may carry without being the controller's own:
+# REP-2016's, and Humble-era implementations' placeholder
+KNOWN_HASHES = (rmw.HASHES[rmw.JOINT_TRAJECTORY], "TypeHashNotSupported")
 COMMANDS = Qos()     # trajectories: reliable, blocking rather than dropped
 
 
@@ -67,6 +71,9 @@ class ZenohLink:
         self._send_lock = threading.Lock()
         self.trajectory_hash = rmw.HASHES[rmw.JOINT_TRAJECTORY]  # until the controller's subscription says
         self._wanted_hash = self.trajectory_hash
+        self.controller_node = controller_node(config.controller)  # (namespace, name) chunks, or None: any node
+        self._controller: dict[str, str] = {}  # the controller's subscription tokens alive → their type hash
+        self._graph_lock = threading.Lock()
 
     @property
     def where(self) -> str:
@@ -99,23 +106,48 @@ class ZenohLink:
             self._token = self.bus.token(token)
 
     def _graph(self, key: str, alive: bool) -> None:
-        """A ROS entity came or went: say so, and publish trajectories with the type hash the
-        controller's subscription announces (Humble's ``TypeHashNotSupported``, or a distro's own)."""
+        """A ROS entity came or went: say so, and follow the controller's subscription to its
+        topic — matched or not, and the type hash trajectories must carry for it to take them."""
         chunks = key.split("/")
         if len(chunks) < 9 or chunks[2] == self.bus.zid:
             return
         if self.on_graph is not None:
             self.on_graph(key, alive)
-        if (alive and len(chunks) >= 13 and chunks[5] == "MS" and chunks[9] == rmw.mangle(self.config.controller)
+        if not (len(chunks) >= 13 and chunks[5] == "MS" and chunks[9] == rmw.mangle(self.config.controller)
                 and chunks[10] == rmw.JOINT_TRAJECTORY):
-            self._wanted_hash = chunks[11]  # redeclared by the reader's thread (no declaring in a Zenoh callback)
+            return
+        if self.controller_node is not None and (chunks[7], chunks[8]) != self.controller_node:
+            return  # another node's subscription on the controller's topic is not the controller
+        if self.controller_node is None and chunks[11] not in KNOWN_HASHES:
+            return  # without the controller's node to tell, only the type's known hashes are taken
+        with self._graph_lock:
+            if not alive:
+                self._controller.pop(key, None)
+            elif key in self._controller or len(self._controller) < MAX_SUBSCRIPTIONS:
+                self._controller[key] = chunks[11]
+            self._wanted_hash = pick_hash(self.trajectory_hash, list(self._controller.values()))
+        # (redeclared by the reader's thread: no declaring in a Zenoh callback)
+
+    def matched(self) -> str:
+        """"" while the controller's subscription is alive with the type hash trajectories carry,
+        else what is seen instead (for the refusal and the node's description)."""
+        with self._graph_lock:
+            hashes = sorted(set(self._controller.values()))
+        if self.trajectory_hash in hashes:
+            return ""
+        who = (f"node {self.controller_node[1].replace('%', '')}" if self.controller_node is not None
+               else "any node")
+        if not hashes:
+            return f"no subscription of {who} to {self.config.controller} in the ROS graph ({self.where})"
+        return (f"the controller's subscription has type hash {', '.join(h[:20] for h in hashes)}…, "
+                f"trajectories {self.trajectory_hash[:20]}…")
 
     def take(self, timeout: float) -> Received | None:
         """The next JointState (None after ``timeout``); ``BadInput`` for a sample that is refused."""
         wanted = self._wanted_hash
         if wanted != self.trajectory_hash:
-            log.info("%s: the controller's subscription has type hash %s: trajectories use it", self.config.robot,
-                     wanted)
+            log.info("%s: the controller's subscription on %s has type hash %s: trajectories use it",
+                     self.config.robot, self.config.controller, wanted)
             self._publish_as(wanted)
         item = self.queue.get(timeout=timeout)
         if item is None:
@@ -172,3 +204,26 @@ class ZenohLink:
                 except Exception as exc:  # the session closed underneath: nothing left to undeclare
                     log.debug("undeclare at close: %s", exc)
         self._owned.clear()
+
+
+def controller_node(topic: str) -> tuple[str, str] | None:
+    """The (namespace, name) chunks of the node whose ``~/joint_trajectory`` is ``topic``, as its
+    liveliness tokens write them: JTC subscribes in its own node's namespace, so
+    ``/joint_trajectory_controller/joint_trajectory`` is node ``joint_trajectory_controller`` of
+    namespace ``/``. None for a topic of one name (no node to tell): any node's subscription counts."""
+    parts = topic.strip("/").split("/")
+    if len(parts) < 2:
+        return None
+    return rmw.mangle("/" + "/".join(parts[:-2]) if parts[:-2] else ""), parts[-2]
+
+
+def pick_hash(current: str, seen: list[str]) -> str:
+    """The type hash trajectories carry, given the controller's subscriptions ``seen``: the current
+    one while one of them has it (a hash that works is kept); else a known one they have; else theirs
+    (a distro of its own); with none seen, the current one (it worked last)."""
+    if current in seen and (current in KNOWN_HASHES or not any(h in KNOWN_HASHES for h in seen)):
+        return current
+    for candidate in (*KNOWN_HASHES, *sorted(seen)):
+        if candidate in seen:
+            return candidate
+    return current

@@ -46,6 +46,7 @@ __all__ = ["WebConfig", "WebPages"]
 
 log = logging.getLogger(__name__)
 
+MAX_WHY = 240        # characters of why a robot's controller is not matched, as the page shows it
 INFO_EVERY_S = 2.0   # how often each robot's info is asked again (behaviors installed, a new owner)
 GONE_AFTER_S = 3.0   # a node whose stats have not come for this long is shown gone
 FORGET_AFTER_S = 60.0  # ... and left out after this
@@ -166,6 +167,10 @@ class WebPages(Adapter):
                  "behaviors": list(info.get("behaviors", ()))[:MAX_BEHAVIORS],
                  "postures": list(info.get("postures", ()))[:MAX_BEHAVIORS], "rate_hz": info.get("rate_hz"),
                  "awareness": info.get("awareness")}
+        controller = info.get("controller")
+        if isinstance(controller, dict):  # a ROS 2 robot's trajectory controller: matched or not, and why
+            shown["controller"] = {"matched": controller.get("matched") is True,
+                                   "why": str(controller.get("why", ""))[:MAX_WHY]}
         state = {k: v for k, v in connection.state_of(info).items() if k in ("state", "error")}
         with self._lock:
             shown["activity"] = self._robots.get(robot, {}).get("activity", activity.IDLE)

@@ -86,6 +86,10 @@ def node_line(host: str, node: str, about: dict[str, Any], now: float) -> str:
     since = f"  up {_duration(now - about['since'])}" if about.get("since") else ""
     state = about.get("state", "running")
     failed = f"  {state.upper()}: {about.get('failure', '')}" if state != "running" else ""
+    controller = about.get("controller")  # a robot adapter that sends to a controller (ROS 2): matched or not
+    if isinstance(controller, dict):
+        failed += ("  controller matched" if controller.get("matched") is True
+                   else f"  CONTROLLER NOT MATCHED: {str(controller.get('why', ''))[:200]}")
     return f"  node  {node:<16} on {host:<12} {about.get('adapter', '?'):<12}{since}{owns}{failed}"
 
 

@@ -61,14 +61,18 @@ class RosArm:
     """A ROS 2 arm as rmw_zenoh puts it on Zenoh: a node token, a JointState publisher (``MP``)
     and a trajectory subscription (``MS``) with their tokens; trajectories kept as rosbags decodes them."""
 
-    def __init__(self, session: zenoh.Session, controller: str, trajectory_hash: str = TRAJECTORY_HASH) -> None:
+    def __init__(self, session: zenoh.Session, controller: str, trajectory_hash: str = TRAJECTORY_HASH,
+                 controller_node: str = "") -> None:
         zid = str(session.zid())
         node = f"@ros2_lv/{DOMAIN}/{zid}/0/0/NN/%/%/fake_arm"
         publisher = f"@ros2_lv/{DOMAIN}/{zid}/0/1/MP/%/%/fake_arm/%joint_states/" \
                     f"sensor_msgs::msg::dds_::JointState_/{STATE_HASH}/::,10:,:,:,,"
-        subscription = f"@ros2_lv/{DOMAIN}/{zid}/0/2/MS/%/%/fake_arm/{controller.replace('/', '%')}/" \
+        # the controller is a node of its own, named after the topic's parent (JTC's ``~/joint_trajectory``)
+        name = controller_node or controller.strip("/").split("/")[-2]
+        jtc = f"@ros2_lv/{DOMAIN}/{zid}/1/1/NN/%/%/{name}"
+        subscription = f"@ros2_lv/{DOMAIN}/{zid}/1/2/MS/%/%/{name}/{controller.replace('/', '%')}/" \
                        f"trajectory_msgs::msg::dds_::JointTrajectory_/{trajectory_hash}/::,10:,:,:,,"
-        self.tokens = [session.liveliness().declare_token(key) for key in (node, publisher, subscription)]
+        self.tokens = [session.liveliness().declare_token(key) for key in (node, publisher, jtc, subscription)]
         self.publisher = session.declare_publisher(f"{DOMAIN}/joint_states/sensor_msgs::msg::dds_::JointState_/"
                                                    f"{STATE_HASH}")
         self.gid, self.seq = bytes(range(16)), 0

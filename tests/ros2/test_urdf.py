@@ -5,6 +5,7 @@ hands and Foxglove's transforms from the chains a robot's info carries."""
 from __future__ import annotations
 
 import math
+import re
 
 import numpy as np
 import pytest
@@ -104,7 +105,7 @@ def test_reach_boxes_hold_every_hand_position(arm):
 def test_a_urdf_that_describes_no_robot_is_refused_naming_why(text, fault):
     with pytest.raises(UrdfError) as refused:
         parse(text, "bad.urdf")
-    assert str(refused.value).startswith("bad.urdf: ") and fault in str(refused.value)
+    assert re.match(r"bad\.urdf(:\d+)?: ", str(refused.value)) and fault in str(refused.value)
 
 
 def test_chains_and_postures_must_fit_the_urdf():
@@ -120,3 +121,40 @@ def test_chains_and_postures_must_fit_the_urdf():
     srdf = ('<robot name="sonibus_arm"><group_state name="home" group="arm"><joint name="shoulder" value="0.5"/>'
             '<joint name="elbow" value="1"/></group_state></robot>')
     assert describe(urdf, postures=group_states(srdf)).model.posture("home") == {"shoulder": 0.5, "elbow": 1.0}
+
+
+def _chain(count: int, *extra: str) -> str:
+    """A URDF of ``count`` joints in one chain l0 → l1 → … (ten movable, the rest fixed), plus ``extra`` lines."""
+    lines = ['<robot name="long">', *(f'<link name="l{i}"/>' for i in range(count + 1))]
+    lines += [f'<joint name="j{i}" type="{"revolute" if i < 10 else "fixed"}"><parent link="l{i}"/>'
+              f'<child link="l{i + 1}"/><limit lower="-1" upper="1" velocity="1" effort="1"/></joint>'
+              for i in range(count)]
+    return "\n".join([*lines, *extra, "</robot>"])
+
+
+def test_a_loop_through_the_chains_tip_is_refused_with_its_file_and_line(tmp_path):
+    # the tip and another link hang below each other: one root (l0), no link the child of two joints,
+    # and the walk up from the tip never reaches the root (it ran for ever, growing, before)
+    loop = ['<link name="tip"/><link name="other"/>',
+            '<joint name="down" type="fixed"><parent link="tip"/><child link="other"/></joint>',
+            '<joint name="up" type="fixed"><parent link="other"/><child link="tip"/></joint>']
+    path = tmp_path / "loop.urdf"
+    path.write_text(_chain(3, *loop))
+    with pytest.raises(UrdfError, match=r"loop\.urdf:(9|10): joint '(down|up)' closes a loop: link '(tip|other)' "
+                                        r"hangs below itself"):
+        parse(path.read_text(), str(path))
+    two_parents = '<joint name="again" type="fixed"><parent link="l0"/><child link="l3"/></joint>'
+    with pytest.raises(UrdfError, match=r"x\.urdf:9: link 'l3' is the child of joint 'j2' and of joint 'again'"):
+        parse(_chain(3, two_parents), "x.urdf")
+
+
+def test_a_long_chain_is_read_whole_and_a_loop_at_its_far_end_is_found():
+    # parsing is linear (10,000 joints took 2.8 s before, quadratic checks; 0.14 s now): 20,000 here
+    count = 20_000
+    urdf = parse(_chain(count), "long.urdf")
+    assert len(urdf.joints) == count and urdf.root == "l0"
+    assert [j.name for j in urdf.path(f"l{count}")][-1] == f"j{count - 1}" and len(urdf.path(f"l{count}")) == count
+    assert describe(urdf, {"tip": f"l{count}"}).model.joint("j9").max == 1.0
+    closing = f'<joint name="back" type="fixed"><parent link="l{count}"/><child link="l0"/></joint>'
+    with pytest.raises(UrdfError, match="closes a loop"):
+        parse(_chain(count, closing), "long.urdf")

@@ -69,16 +69,13 @@ def test_joint_states_drive_osc_recorder_and_page_and_the_page_moves_the_robot(n
     wait_for(lambda: robot.trajectories, 5, "a JointTrajectory at the ROS robot")
     trajectory = robot.trajectories[-1]
     assert rmw.read_attachment(robot.attachments[-1]).sequence >= 1  # as rmw_zenoh attaches it
-    names = list(trajectory.joint_names)
-    assert names == ["lift", "torso_yaw", "shoulder", "elbow", "wrist", "finger_left", "head_pan"]  # no mimic
+    assert list(trajectory.joint_names) == ["shoulder"]  # the joints it does not name are not moved
     point = trajectory.points[0]
-    target = dict(zip(names, point.positions, strict=True))
-    assert target["shoulder"] == 1.0 and target["elbow"] == pytest.approx(-0.4)  # the others held
-    assert point.time_from_start.sec + point.time_from_start.nanosec * 1e-9 == pytest.approx(0.7 / (0.5 * 2.0),
-                                                                                             abs=1e-3)
-    for name, value in target.items():
-        joint = arm.model.joint(name)
-        assert joint.min <= value <= joint.max
+    assert list(point.positions) == [1.0]
+    # from the furthest the shoulder could be (its lower limit, -1.7: heard positions do not count) at half speed
+    shoulder = arm.model.joint("shoulder")
+    assert point.time_from_start.sec + point.time_from_start.nanosec * 1e-9 == pytest.approx(
+        (1.0 - shoulder.min) / (0.5 * shoulder.max_velocity), abs=1e-3)
 
     recorder.stop()
     with Recording(str(tmp_path / "arm.mcap")) as recording:
@@ -107,9 +104,6 @@ def test_unsupported_verbs_are_refused_with_their_own_code_and_limits_hold(net, 
         with pytest.raises(CommandError) as refused:
             send_command(bus, "arm", verb, args)
         assert refused.value.code == "unsupported" and "ROS 2 robot" in refused.value.message
-    with pytest.raises(CommandError) as refused:  # before any joint state: no safe duration
-        send_command(bus, "arm", "joints/set", {"names": ["shoulder"], "angles": [0.5]})
-    assert refused.value.code == "failed" and "no position" in refused.value.message
     _, frames = _frames(net)
     wait_for(lambda: robot.publish(POSE) or frames.get(timeout=0.05), 5, "the arm's positions heard")
     for args, code in (({"names": ["shoulder"], "angles": [2.0]}, "out_of_range"),
@@ -121,22 +115,26 @@ def test_unsupported_verbs_are_refused_with_their_own_code_and_limits_hold(net, 
     assert not robot.trajectories  # nothing refused moved the robot
 
 
-def test_stop_works_with_the_ros_side_gone(net, ros):
+def test_stop_is_the_controllers_hold_and_says_when_it_reached_no_controller(net, ros):
     robot = ros.robot()
-    start_arm(net)
+    arm = start_arm(net)
     bus = seeing(net, "sender")
-    assert send_command(bus, "arm", "stop", {}) == {"held": False, "reason": "no joint state heard from the robot: "
-                                                                          "sonibus has moved nothing"}
-    _, frames = _frames(net)
-    wait_for(lambda: robot.publish(POSE) or frames.get(timeout=0.05), 5, "a frame")
-    assert send_command(bus, "arm", "stop", {}) == {"held": True}
+    wait_for(lambda: not arm.link.matched(), 5, "the controller's subscription matched")
+    assert send_command(bus, "arm", "stop", {}) == {"held": True}  # no joint state heard: it needs none
     wait_for(lambda: robot.trajectories, 5, "the hold trajectory")
     hold = robot.trajectories[-1]
-    assert dict(zip(hold.joint_names, hold.points[0].positions, strict=True))["shoulder"] == pytest.approx(0.3)
-    assert list(hold.points[0].velocities) == [0.0] * len(hold.joint_names)
+    # joint_trajectory_controller's own stop-and-hold: every joint named, no point (nothing to move to)
+    assert list(hold.joint_names) == ["lift", "torso_yaw", "shoulder", "elbow", "wrist", "finger_left", "head_pan"]
+    assert list(hold.points) == [] and (hold.header.stamp.sec, hold.header.stamp.nanosec) == (0, 0)
     robot.close()
-    ros.arms.remove(robot)  # the ROS side is gone: stop still answers, and holds where it was
-    assert send_command(bus, "arm", "stop", {}) == {"held": True}
+    ros.arms.remove(robot)  # the ROS side is gone: stop says it reached nothing
+    wait_for(lambda: arm.link.matched(), 5, "the controller's subscription gone")
+    answer = send_command(bus, "arm", "stop", {})
+    assert answer["reached"] is False and "reached no controller" in answer["error"], answer
+    assert "no subscription of node joint_trajectory_controller" in answer["error"], answer
+    with pytest.raises(CommandError) as refused:
+        send_command(bus, "arm", "joints/set", {"names": ["shoulder"], "angles": [0.5]})
+    assert refused.value.code == "not_connected", refused.value.message
 
 
 def test_the_graph_sees_our_tokens_and_we_follow_the_controllers_type_hash(net, ros):

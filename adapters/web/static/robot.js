@@ -22,7 +22,7 @@
   const STATES = {connected: "connected", connecting: "not connected: connecting", lost: "not connected: lost",
     not_answering: "not answering", standby: "standby: another owner keeps it"};  // (bus/connection.py)
   // What a robots message may change without the panel being built again (its state, not its controls).
-  const LIVE = ["connected", "connection", "awareness", "activity"];
+  const LIVE = ["connected", "connection", "awareness", "activity", "controller"];
 
   function groupOf(name) {
     return GROUPS.find(([, test]) => test(name))[0];
@@ -107,10 +107,13 @@
       this.info = info;
       const state = stateOf(info);
       const error = (info.connection || {}).error;
+      // a ROS 2 robot whose trajectory controller is not matched: connected, but nothing it is sent arrives
+      const unmatched = info.controller && !info.controller.matched && state === "connected";
       for (const label of [this.connection, this.lineState]) {
-        label.textContent = STATES[state] || state;
-        label.title = error || "";
-        label.dataset.state = state;
+        label.textContent = unmatched ? "connected, controller not matched: commands reach nothing"
+          : STATES[state] || state;
+        label.title = unmatched ? info.controller.why : error || "";
+        label.dataset.state = unmatched ? "unmatched" : state;
       }
       const usable = info.connected !== false && state === "connected";
       this.controls.disabled = !usable;
