@@ -9,6 +9,15 @@ a channel made while a client is connected (a robot's first event, ``<robot>/log
 not lost to the client's subscribing a moment later. A message is made JSON only for
 channels someone subscribes to.
 
+A channel of events (``<robot>/log``, ``<robot>/events/<kind>``: ``history=True``) keeps
+more than its latest: a subscription gets every message the channel logged since it was
+advertised to that client, in order, then the live ones (issue 33: a viewer subscribes a
+moment after it hears of a channel, and a behavior's ``started`` and ``ok`` can both come
+in that moment; the latest alone showed ``[ok, stopped]`` where the run was ``[started,
+ok, ...]``). A client that connects later gets the latest, as before. What is kept is
+bounded: ``HISTORY`` messages a channel, ``HISTORY_BYTES`` of JSON for all channels
+(past that a channel keeps only its latest; a flood of made-up event keys cannot grow it).
+
 ``forget`` unadvertises the channels of a robot that left (and their latest messages go):
 a viewer drops those topics, and subscribes again when they are advertised anew (new ids)
 as the robot comes back. A subscription to a channel unadvertised since is kept, inert,
@@ -26,6 +35,7 @@ from __future__ import annotations
 
 import json
 import time
+from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from threading import Lock
@@ -45,6 +55,8 @@ MAX_SUBSCRIPTIONS = MAX_CHANNELS  # one client's, inert ones (their channel gone
 MAX_WS_MESSAGE = 1 << 20    # bytes of one client message; aiohttp closes a connection that sends more (1009)
 MAX_OUTBOX = 8192           # messages waiting for the server's loop; past it a message is dropped (a stuck loop)
 HEARTBEAT_S = 10.0          # a ping this often; a client that does not answer within half of it is dropped
+HISTORY = 256               # messages an event channel keeps for a subscription taken a moment after advertising
+HISTORY_BYTES = 16 << 20    # bytes of JSON all event channels keep together (past it: the latest only)
 
 
 @dataclass
@@ -52,6 +64,9 @@ class _Channel:
     described: wire.Channel
     latest: tuple[Any, int] | None = None            # (message, log time ns), as logged
     subscribers: dict[_Client, int] = field(default_factory=dict)  # client → its subscription id
+    logged: int = 0                                  # messages logged on it (the number of the latest)
+    history: deque[tuple[int, int, bytes]] | None = None  # event channels: (number, log time ns, JSON)
+    history_bytes: int = 0
 
 
 class _Client(WebClient):
@@ -61,6 +76,8 @@ class _Client(WebClient):
         super().__init__(ws, on_drop, transport)
         self.subscriptions: dict[int, int] = {}
         self.advertised: set[int] = set()  # channel ids told to it (an advertisement never goes twice)
+        self.since: dict[int, int] = {}    # channel id → the number of its first message since it was told of it
+                                           # (until its first subscription; on the loop)
 
 
 class Hub:
@@ -77,6 +94,7 @@ class Hub:
         self._by_id: dict[int, _Channel] = {}
         self._clients: set[_Client] = set()
         self._last_id = 0  # channel ids are never given twice (a viewer caches a channel's schema by its id)
+        self._history_bytes = 0  # what every event channel's history holds (under _lock)
         self._lock = Lock()  # channels, latest messages, subscribers: the adapter's thread and the loop
         self._outbox: list[tuple[Callable[..., None], tuple[Any, ...]]] = []  # for the loop, in order (under _lock)
         web_server.app.router.add_get("/{path:.*}", self._websocket)  # (a client may name any path)
@@ -90,23 +108,31 @@ class Hub:
     def clients(self) -> int:
         return len(self._clients)
 
-    def log(self, topic: str, message: Any, log_time_ns: int, describe: Callable[[int], wire.Channel]) -> bool:
+    def log(self, topic: str, message: Any, log_time_ns: int, describe: Callable[[int], wire.Channel],
+            history: bool = False) -> bool:
         """``message`` on the channel of ``topic`` (made, by ``describe(id)``, and advertised if
         new), to its subscribers; False if the channel cannot be made (``MAX_CHANNELS``).
-        From any thread; what ``to_json`` raises (not strict JSON) reaches the caller."""
+        ``history``: a channel of events, whose messages since a client was told of it reach
+        its subscription (see the module's docstring). From any thread; what ``to_json``
+        raises (not strict JSON) reaches the caller."""
+        payload = self.to_json(message) if history else None  # (events: a few a second)
         with self._lock:
             channel = self._channels.get(topic)
             if channel is None:
                 if len(self._channels) >= MAX_CHANNELS:
                     return False
                 self._last_id += 1
-                channel = _Channel(describe(self._last_id))
+                channel = _Channel(describe(self._last_id), history=deque() if history else None)
                 self._channels[topic] = self._by_id[channel.described.id] = channel
                 self._later(self._advertise, channel.described)
             channel.latest = (message, log_time_ns)
+            channel.logged += 1
+            if payload is not None and channel.history is not None:
+                self._keep(channel, (channel.logged, log_time_ns, payload))
             subscribers = list(channel.subscribers.items())
         if subscribers:
-            payload = self.to_json(message)
+            if payload is None:
+                payload = self.to_json(message)
             with self._lock:
                 waiting = len(self._outbox)
                 if waiting < MAX_OUTBOX:
@@ -117,6 +143,21 @@ class Hub:
                 self.adapter.count("sent", len(subscribers))
         return True
 
+    def _keep(self, channel: _Channel, entry: tuple[int, int, bytes]) -> None:
+        """``entry`` in ``channel``'s history, within ``HISTORY`` and ``HISTORY_BYTES`` (under ``_lock``)."""
+        history, size = channel.history, len(entry[2])
+        while history and (len(history) >= HISTORY or self._history_bytes + size > HISTORY_BYTES):
+            self._forget_oldest(channel)
+        if self._history_bytes + size <= HISTORY_BYTES:
+            history.append(entry)
+            channel.history_bytes += size
+            self._history_bytes += size
+
+    def _forget_oldest(self, channel: _Channel) -> None:
+        size = len(channel.history.popleft()[2])
+        channel.history_bytes -= size
+        self._history_bytes -= size
+
     def forget(self, prefix: str) -> int:
         """Unadvertise every channel whose topic starts with ``prefix`` (``"pepper/"``: a robot
         gone), its latest message with it; how many. From any thread."""
@@ -124,6 +165,7 @@ class Hub:
             gone = [c for topic, c in self._channels.items() if topic.startswith(prefix)]
             for channel in gone:
                 del self._channels[channel.described.topic], self._by_id[channel.described.id]
+                self._history_bytes -= channel.history_bytes
             if gone:
                 self._later(self._unadvertise, {c.described.id for c in gone})
         return len(gone)
@@ -155,6 +197,7 @@ class Hub:
             client.push(json.dumps(wire.server_info(self.name, self.session, self.metadata)))
             with self._lock:
                 known = [c.described for c in self._channels.values()]
+                client.since = {c.described.id: c.logged + 1 for c in self._channels.values()}  # (from now on)
                 self._clients.add(client)
             client.advertised.update(c.id for c in known)
             if known:
@@ -175,6 +218,7 @@ class Hub:
         for client in list(self._clients):
             if channel.id not in client.advertised:
                 client.advertised.add(channel.id)
+                client.since[channel.id] = 1  # (made since it connected: every message it logged)
                 client.push(text)
 
     def _unadvertise(self, ids: set[int]) -> None:
@@ -182,6 +226,8 @@ class Hub:
             told = sorted(ids & client.advertised)
             if told:  # (a viewer takes the unadvertising of a channel it was never told of for an error)
                 client.advertised.difference_update(told)
+                for channel_id in told:
+                    client.since.pop(channel_id, None)
                 client.push(json.dumps(wire.unadvertise(told)))
 
     def _send(self, subscribers: list[tuple[_Client, int]], payload: bytes, log_time_ns: int) -> None:
@@ -217,7 +263,7 @@ class Hub:
                                  "already)", wire.WARNING)
 
     def _subscribe(self, client: _Client, subscription: int, channel_id: int) -> None:
-        latest = None
+        first: list[tuple[int, bytes | None, Any]] = []  # (log time ns, JSON or None, message) to send first
         with self._lock:
             channel = self._by_id.get(channel_id)
             if len(client.subscriptions) >= MAX_SUBSCRIPTIONS:
@@ -237,16 +283,29 @@ class Hub:
                 problem = ""
                 client.subscriptions[subscription] = channel_id
                 channel.subscribers[client] = subscription
-                latest = channel.latest
+                first = self._first(channel, client.since.pop(channel_id, channel.logged))  # (again: the latest)
         if problem:
             self._refuse(client, problem)
-        elif latest is not None:  # (latched: the client hears the channel's latest message first)
-            try:
-                payload = self.to_json(latest[0])
-            except (ValueError, TypeError):
-                return  # (said by log's caller when it was logged)
-            client.push(wire.message_data(subscription, latest[1], payload))
+            return
+        for log_time_ns, payload, message in first:  # (before any live one: those are behind in the outbox)
+            if payload is None:
+                try:
+                    payload = self.to_json(message)
+                except (ValueError, TypeError):
+                    continue  # (said by log's caller when it was logged)
+            client.push(wire.message_data(subscription, log_time_ns, payload))
             self.adapter.count("sent")
+
+    @staticmethod
+    def _first(channel: _Channel, since: int) -> list[tuple[int, bytes | None, Any]]:
+        """What a new subscription hears first (under ``_lock``): an event channel's messages
+        numbered ``since`` on (every one since the client was told of the channel), else
+        (or if none) the latest, as a latched topic."""
+        if channel.history:
+            kept = [(t, payload, None) for number, t, payload in channel.history if number >= since]
+            if kept:
+                return kept
+        return [] if channel.latest is None else [(channel.latest[1], None, channel.latest[0])]
 
     def _refuse(self, client: _Client, problem: str, level: int = wire.ERROR) -> None:
         client.push(json.dumps(wire.status(problem, level)))

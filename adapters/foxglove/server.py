@@ -42,7 +42,7 @@ from sonibus.bus.web import Limits, WebServer
 
 from . import wire
 from .hub import MAX_CHANNELS, Hub
-from .views import DERIVED_INFO, Views, joint_samples
+from .views import DERIVED_INFO, LOG, Views, joint_samples
 
 log = logging.getLogger(__name__)
 
@@ -183,13 +183,20 @@ class FoxgloveServer(Adapter):
     def _log(self, key: str, message: dict[str, Any]) -> None:
         """``message`` on the channel of ``key`` (advertised now if new), to the clients subscribed."""
         try:
-            made = self.hub.log(key, message, time.time_ns(), lambda id_: _describe(id_, key))
+            made = self.hub.log(key, message, time.time_ns(), lambda id_: _describe(id_, key), history=_events(key))
         except (ValueError, TypeError) as exc:  # (past the gate: rare) not strict JSON
             self.count("bad")
             self.warn("unsendable", f"message on '{key}' not sent: {exc}")
             return
         if not made:
             self.warn("channels", f"'{key}' not served: {MAX_CHANNELS} channels already")
+
+
+def _events(key: str) -> bool:
+    """Whether the channel of ``key`` carries events (a robot's events, its ``log`` view): every
+    message of it counts, not only the latest (``Hub.log``'s ``history``)."""
+    section = key.split("/", 2)[1:2]
+    return section == ["events"] or key.partition("/")[2] == LOG
 
 
 def _describe(id_: int, key: str) -> wire.Channel:

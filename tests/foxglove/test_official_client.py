@@ -8,6 +8,7 @@ sessions none of its subscriptions to channels made while it connects is refused
 from __future__ import annotations
 
 import json
+import os
 import subprocess
 import threading
 import time
@@ -16,6 +17,7 @@ from typing import Any
 
 import pytest
 
+from sonibus.adapters.foxglove.hub import HISTORY
 from sonibus.adapters.foxglove.server import FoxgloveConfig, FoxgloveServer
 
 from ..conftest import Network, wait_for
@@ -26,13 +28,13 @@ CLIENT = Path(__file__).resolve().parent / "js" / "client.js"
 class Official:
     """``node client.js``: its events (JSON lines) as they come; a line on stdin ends a session."""
 
-    def __init__(self, port: int, pattern: str, sessions: int = 1) -> None:
+    def __init__(self, port: int, pattern: str, sessions: int = 1, subscribe_later: bool = False) -> None:
         if not (CLIENT.parent / "node_modules" / "@foxglove" / "ws-protocol").is_dir():
             pytest.fail(f"the official client is not installed: run `npm ci --prefix {CLIENT.parent}` "
                         "(scripts/test-tools.sh does)")
         self.popen = subprocess.Popen(["node", str(CLIENT), f"ws://127.0.0.1:{port}", pattern, str(sessions)],
                                       stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                                      text=True)
+                                      text=True, env={**os.environ, "SUBSCRIBE_LATER": "1" if subscribe_later else ""})
         self.events: list[dict[str, Any]] = []
         threading.Thread(target=self._read, daemon=True).start()
 
@@ -45,6 +47,11 @@ class Official:
 
     def next_session(self) -> None:
         self.popen.stdin.write("\n")
+        self.popen.stdin.flush()
+
+    def subscribe(self) -> None:
+        """Take the subscriptions held back (``subscribe_later``)."""
+        self.popen.stdin.write("subscribe\n")
         self.popen.stdin.flush()
 
     def close(self) -> str:
@@ -87,6 +94,55 @@ def test_the_official_client_offering_foxglove_websocket_v1_sees_the_first_messa
     assert texts["pepper/log"]["message"] == "behavior animations/Hey_1 started"
     assert texts["pepper/events/behavior"]["state"] == "started"
     assert not client.of("status") and not client.of("error")
+
+
+def test_a_subscription_taken_after_several_events_gets_every_one_since_the_advertisement(net: Network, official):
+    """Issue 33: a viewer subscribes a moment after it hears of a channel; a behavior's ``started``
+    and the next event came in that moment, and the Log panel showed only the second (the
+    channel's latest). Now it gets both, in order, then the live ones; a state channel (the
+    frame) still gives its latest only."""
+    server = net.start(FoxgloveServer(FoxgloveConfig(listen="127.0.0.1:0"), name="foxglove"))
+    client = official(server.port, "^pepper/(log|events/behavior)$", 1, True)
+    watcher = official(server.port, "^pepper/log$")  # (subscribes at once: tells when the server logged both)
+    wait_for(lambda: client.of("serverInfo") and watcher.of("serverInfo"), 15, "the official clients connected",
+             lambda: str(client.events + watcher.events))
+    bus = net.bus("robot")
+    name = "animations/Hey_1"
+    bus.put("pepper/events/behavior", event("behavior", name=name, state="started"))
+    bus.put("pepper/events/behavior", event("behavior", name=name, state="stopped"))
+    wait_for(lambda: {a["topic"] for a in client.of("advertise")} >= {"pepper/log", "pepper/events/behavior"}, 10,
+             "both channels advertised", lambda: str(client.events))
+    wait_for(lambda: len(watcher.of("message")) == 2, 10, "both events on pepper/log", lambda: str(watcher.events))
+    client.subscribe()
+    bus.put("pepper/events/behavior", event("behavior", name="animations/Wave", state="started"))
+
+    def log_lines() -> list[str]:
+        return [json.loads(m["text"])["message"] for m in client.of("message") if m["topic"] == "pepper/log"]
+
+    wait_for(lambda: len(log_lines()) >= 3, 10, "three lines in the Log channel", lambda: str(client.events))
+    assert log_lines() == [f"behavior {name} started", f"behavior {name} stopped",
+                           "behavior animations/Wave started"]
+    states = [json.loads(m["text"])["state"] for m in client.of("message") if m["topic"] == "pepper/events/behavior"]
+    assert states == ["started", "stopped", "started"]
+    assert not client.of("status") and not client.of("error")
+
+
+def test_what_an_event_channel_keeps_for_a_late_subscription_is_bounded(net: Network, official):
+    """A flood of events before the subscription: the newest ``HISTORY`` of them, in order."""
+    server = net.start(FoxgloveServer(FoxgloveConfig(listen="127.0.0.1:0"), name="foxglove"))
+    client = official(server.port, "^pepper/events/behavior$", 1, True)
+    watcher = official(server.port, "^pepper/events/behavior$")
+    wait_for(lambda: client.of("serverInfo") and watcher.of("serverInfo"), 15, "the official clients connected")
+    bus = net.bus("robot")
+    sent = HISTORY + 44
+    for n in range(sent):
+        bus.put("pepper/events/behavior", event("behavior", name=f"b{n}", state="started"))
+    wait_for(lambda: len(watcher.of("message")) == sent, 15, f"{sent} events logged",
+             lambda: str(len(watcher.of("message"))))
+    client.subscribe()
+    wait_for(lambda: len(client.of("message")) >= HISTORY, 10, "the kept events", lambda: str(client.events)[-500:])
+    names = [json.loads(m["text"])["name"] for m in client.of("message")]
+    assert names == [f"b{n}" for n in range(sent - HISTORY, sent)]
 
 
 def test_no_subscription_is_refused_over_many_sessions_of_channels_made_while_connecting(net: Network, official,

@@ -9,7 +9,9 @@
 // subprotocol agreed), advertise, unadvertise, message (topic and text), status, close. As
 // Lichtblick does, it unsubscribes from a channel that is unadvertised (and subscribes again
 // when its topic is advertised anew). A line on stdin ends the session; the next one connects.
-// It exits after SESSIONS sessions (default 1).
+// It exits after SESSIONS sessions (default 1). With SUBSCRIBE_LATER=1 in its environment it
+// holds its subscriptions until a line "subscribe" on stdin (a viewer that subscribes a moment
+// after it hears of a channel, made deterministic for a test).
 "use strict";
 
 const readline = require("readline");
@@ -22,7 +24,17 @@ const decoder = new TextDecoder();
 const say = (event) => process.stdout.write(JSON.stringify(event) + "\n");
 const lines = readline.createInterface({ input: process.stdin });
 const waiting = [];
-lines.on("line", () => (waiting.shift() || (() => {}))());
+const later = process.env.SUBSCRIBE_LATER === "1";
+let held = [];
+lines.on("line", (line) => {
+  if (line === "subscribe") {
+    const due = held;
+    held = [];
+    due.forEach((subscribe) => subscribe());
+  } else {
+    (waiting.shift() || (() => {}))();
+  }
+});
 
 function session(index) {
   return new Promise((resolve) => {
@@ -35,7 +47,10 @@ function session(index) {
       for (const channel of channels) {
         say({ ev: "advertise", topic: channel.topic, id: channel.id });
         if (topics.test(channel.topic)) {
-          bySubscription.set(client.subscribe(channel.id), { id: channel.id, topic: channel.topic });
+          const subscribe = () =>
+            bySubscription.set(client.subscribe(channel.id), { id: channel.id, topic: channel.topic });
+          if (later) held.push(subscribe);
+          else subscribe();
         }
       }
     });
