@@ -1,0 +1,50 @@
+"""The control session: ``stop`` served and sent where data cannot hold it up.
+
+A process's data session takes each link's messages in order on one Zenoh
+thread: when a subscription's callback channel (zenoh-python's, 256 samples) is
+full, that thread waits for Python, and a ``stop`` that came over the same link
+waits behind the flood (0.3-0.9 s after 2,000 frames at 5,000/s, issue 33).
+So every process that owns robots or sends stops opens one more session, the
+control session, with the data session's config (mode, namespace, login, TLS,
+access control) but a link of its own: it connects where the data session
+connects and to the data session itself (Zenoh's gossip then links it with the
+control sessions of the other processes directly), and listens on a free port
+of the same interfaces. Robot owners serve ``<robot>/cmd/stop`` there with a
+callback called on Zenoh's own thread (no channel, no Python thread between),
+and askers send ``stop`` from it at Zenoh's real-time priority, express.
+
+>>> from contextlib import closing
+>>> from sonibus.bus.session import BusConfig, open_session
+>>> cfg = BusConfig(multicast=False, listen=("tcp/127.0.0.1:0",))
+>>> with closing(open_session(cfg)) as data, closing(open_control(cfg, data)) as control:
+...     str(control.zid()) != str(data.zid())
+True
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import replace
+
+import zenoh
+
+from .session import BusConfig, default_listen, from_here, listening, open_session
+
+URGENT = {"priority": zenoh.Priority.REAL_TIME, "express": True}
+"""Zenoh options of a stop: ahead of every data message in Zenoh's queues."""
+URGENT_REPLY = {"express": True}
+"""Of its reply (which travels at its query's priority: Zenoh ignores a reply's own)."""
+
+
+def control_config(config: BusConfig, data: zenoh.Session) -> BusConfig:
+    """``config`` as the control session of ``data`` opens it (see the module's docstring)."""
+    if config.mode == "client":  # (its router links it with everybody: no listen of its own)
+        return config
+    here = tuple(from_here(endpoint) for endpoint in listening(data) if not endpoint.endswith(":0"))
+    listen = tuple(re.sub(r":\d+$", ":0", endpoint) for endpoint in (config.listen or default_listen(config.mode)))
+    return replace(config, mode="peer", listen=listen, connect=tuple(dict.fromkeys((*config.connect, *here))))
+
+
+def open_control(config: BusConfig, data: zenoh.Session) -> zenoh.Session:
+    """The control session of the process whose data session is ``data``; its opener closes it."""
+    return open_session(control_config(config, data))
