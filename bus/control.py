@@ -8,7 +8,8 @@ So every process that owns robots or sends stops opens one more session, the
 control session, with the data session's config (mode, namespace, login, TLS,
 access control) but a link of its own: it connects where the data session
 connects and to the data session itself (Zenoh's gossip then links it with the
-control sessions of the other processes directly), and listens on a free port
+control sessions of the other processes directly; to the data session only when
+it names nobody to connect to and scouts for nobody: a listener), and listens on a free port
 of the same interfaces. Robot owners serve ``<robot>/cmd/stop`` there with a
 callback called on Zenoh's own thread (no channel, no Python thread between),
 and askers send ``stop`` from it at Zenoh's real-time priority, express.
@@ -28,7 +29,7 @@ from dataclasses import replace
 
 import zenoh
 
-from .session import BusConfig, default_listen, from_here, listening, open_session
+from .session import CONTROLS, BusConfig, default_listen, from_here, listening, open_session
 
 URGENT = {"priority": zenoh.Priority.REAL_TIME, "express": True}
 """Zenoh options of a stop: ahead of every data message in Zenoh's queues."""
@@ -40,11 +41,15 @@ def control_config(config: BusConfig, data: zenoh.Session) -> BusConfig:
     """``config`` as the control session of ``data`` opens it (see the module's docstring)."""
     if config.mode == "client":  # (its router links it with everybody: no listen of its own)
         return config
-    here = tuple(from_here(endpoint) for endpoint in listening(data) if not endpoint.endswith(":0"))
+    here: tuple[str, ...] = ()
+    if not config.connect and not config.multicast:  # (the others come to the data session: so does this one)
+        here = tuple(from_here(endpoint) for endpoint in listening(data) if not endpoint.endswith(":0"))
     listen = tuple(re.sub(r":\d+$", ":0", endpoint) for endpoint in (config.listen or default_listen(config.mode)))
     return replace(config, mode="peer", listen=listen, connect=tuple(dict.fromkeys((*config.connect, *here))))
 
 
 def open_control(config: BusConfig, data: zenoh.Session) -> zenoh.Session:
     """The control session of the process whose data session is ``data``; its opener closes it."""
-    return open_session(control_config(config, data))
+    session = open_session(control_config(config, data))
+    CONTROLS.add(str(session.zid()))
+    return session

@@ -300,8 +300,13 @@ def discover(session: zenoh.Session) -> list[str]:
 
 
 def links(session: zenoh.Session) -> list[str]:
-    """The ids of the routers and peers ``session`` has a link with now."""
-    return [str(z) for z in (*session.info.routers_zid(), *session.info.peers_zid())]
+    """The ids of the routers and peers ``session`` has a link with now (not this process's
+    control sessions, ``bus/control.py``: nobody else)."""
+    found = [str(z) for z in (*session.info.routers_zid(), *session.info.peers_zid())]
+    return [zid for zid in found if zid not in CONTROLS]
+
+
+CONTROLS: set[str] = set()  # the ids of this process's control sessions (``bus/control.py``)
 
 
 def find_router(config: BusConfig, timeout_s: float) -> tuple[str, ...]:
