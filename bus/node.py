@@ -253,9 +253,10 @@ class Bus:
         """This session's Zenoh id (another protocol's graph names it: rmw_zenoh's liveliness tokens)."""
         return str(self.session.zid())
 
-    def discover(self) -> list[str]:
-        """Wait until this session is really on the bus (``session.discover``); the ids it reached."""
-        return discover(self.session)
+    def discover(self, served: str = "") -> list[str]:
+        """Wait until this session is really on the bus (``session.discover``; with ``served``,
+        until a queryable of that key is known, at most as long); the ids it reached."""
+        return discover(self.session, served)
 
     @property
     def listening(self) -> tuple[str, ...]:
