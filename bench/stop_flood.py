@@ -48,24 +48,14 @@ from typing import Any
 
 from common import free_port, latency_stats, write
 from sink_throughput import SONIBUS, stop_process
+from web import SHOW as WEB_SHOW
 
-SHOW = """[bus]
-multicast = false
-
-[nodes.pepper]
-adapter = "sim"
-robot = "pepper"
-rate_hz = 100
-
+SHOW = WEB_SHOW + """
 [nodes.osc]
 adapter = "osc"
 subscribe = ["*/frame", "*/joints/*", "*/derived/**"]
 targets = ["127.0.0.1:9"]
-
-[nodes.web]
-adapter = "web"
-listen = "127.0.0.1:{port}"
-"""
+"""  # web.py's show (pepper at 100 frames/s, the web node) and a sink that follows all the flood
 KEYS = {"frames": "nao/frame", "derived": "pepper/derived/flood/x"}
 PATHS = ("bus query", "page's STOP", "top's s y")
 CONDITIONS = ("alone", "frames, same link", "frames, other link", "derived, same link", "derived, other link")
