@@ -6,13 +6,16 @@ full, that thread waits for Python, and a ``stop`` that came over the same link
 waits behind the flood (0.3-0.9 s after 2,000 frames at 5,000/s, issue 33).
 So every process that owns robots or sends stops opens one more session, the
 control session, with the data session's config (mode, namespace, login, TLS,
-access control) but a link of its own: it connects where the data session
-connects and to the data session itself (Zenoh's gossip then links it with the
-control sessions of the other processes directly; to the data session only when
-it names nobody to connect to and scouts for nobody: a listener), and listens on a free port
-of the same interfaces. Robot owners serve ``<robot>/cmd/stop`` there with a
-callback called on Zenoh's own thread (no channel, no Python thread between),
-and askers send ``stop`` from it at Zenoh's real-time priority, express.
+access control) but links of its own. It listens nowhere and dials: where the data
+session connects (the data session itself when that is a plain listener), then, told
+by Zenoh's gossip, every other process's data session. Nobody dials it, so no data
+session routes through it (a listening control session, linked by gossip with every
+data session, cost a sink its frames across two machines: tests/net/test_multihost.py).
+An asker's ``stop`` leaves from it at Zenoh's real-time priority, express, on a link
+that carries no data and that the owner's data session reads on a Zenoh task of its
+own; a stop from a process without one (``sonibus send``) reaches the owner's control
+session over the link it dialled, where ``<robot>/cmd/stop`` is served by a callback
+called on Zenoh's own thread (no channel, no Python thread in between).
 
 >>> from contextlib import closing
 >>> from sonibus.bus.session import BusConfig, open_session
@@ -24,12 +27,11 @@ True
 
 from __future__ import annotations
 
-import re
 from dataclasses import replace
 
 import zenoh
 
-from .session import CONTROLS, BusConfig, default_listen, from_here, listening, open_session
+from .session import CONTROLS, BusConfig, from_here, listening, open_session
 
 URGENT = {"priority": zenoh.Priority.REAL_TIME, "express": True}
 """Zenoh options of a stop: ahead of every data message in Zenoh's queues."""
@@ -44,8 +46,10 @@ def control_config(config: BusConfig, data: zenoh.Session) -> BusConfig:
     here: tuple[str, ...] = ()
     if not config.connect and not config.multicast:  # (the others come to the data session: so does this one)
         here = tuple(from_here(endpoint) for endpoint in listening(data) if not endpoint.endswith(":0"))
-    listen = tuple(re.sub(r":\d+$", ":0", endpoint) for endpoint in (config.listen or default_listen(config.mode)))
-    return replace(config, mode="peer", listen=listen, connect=tuple(dict.fromkeys((*config.connect, *here))))
+    # no listen: it dials the others (gossip tells it whom), nobody dials it, so no data session
+    # links with it nor routes through it
+    return replace(config, mode="peer", listen=(), connect=tuple(dict.fromkeys((*config.connect, *here))),
+                   options={**config.options, "listen/endpoints": []})
 
 
 def open_control(config: BusConfig, data: zenoh.Session) -> zenoh.Session:
