@@ -24,7 +24,7 @@ not a stop). Goal: p99 ≤ 50 ms on every path and condition.
 
 ``make bench`` also runs it with 5,000 messages as fast as one process sends them
 (``stop_flood_heavy``): there a command on the data path waits behind the flood (behavior/list
-273 ms p50 on the same link, 2 cores), as stop did before.
+271 ms p50 on the same link, 2 cores), as stop did before.
 
 Writes bench/results/stop_flood.json and prints a table.
 """
