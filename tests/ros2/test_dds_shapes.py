@@ -1,0 +1,56 @@
+"""The ``ros2`` adapter on DDS, configured only as docs/ros2.md says (``interface = "lo"``),
+meets a Cyclone DDS robot in ROS 2's localhost mode (``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST``:
+unicast only, no multicast, its peer 127.0.0.1, as rmw_cyclonedds configures it), in a process
+of its own; without a robot it says so, and a ``stop`` says it reached no controller."""
+
+from __future__ import annotations
+
+import json
+import logging
+import os
+import sys
+from pathlib import Path
+
+from sonibus.bus.client import send_command
+
+from ..conftest import wait_for
+from .conftest import seeing, start_arm
+
+ROBOT = Path(__file__).with_name("cyclone_robot.py")
+# rmw_cyclonedds's configuration in localhost mode (before the user's CYCLONEDDS_URI)
+LOCALHOST = ('<CycloneDDS><Domain id="any"><General><Interfaces><NetworkInterface address="127.0.0.1"/>'
+             "</Interfaces><AllowMulticast>false</AllowMulticast></General><Discovery>"
+             "<ParticipantIndex>auto</ParticipantIndex><MaxAutoParticipantIndex>32</MaxAutoParticipantIndex>"
+             '<Peers><Peer Address="localhost"/></Peers></Discovery></Domain></CycloneDDS>')
+
+
+def _domain(offset: int) -> int:
+    return 200 + (os.getpid() + offset) % 30  # apart from test_dds_path's (100..199) and other runs
+
+
+def test_a_cyclone_robot_in_localhost_mode_meets_the_adapter_as_documented(net, spawn):
+    domain = _domain(0)
+    robot = spawn(sys.executable, str(ROBOT), str(domain), collect=True,
+                  env={**os.environ, "CYCLONEDDS_URI": LOCALHOST})
+    wait_for(lambda: robot.lines, 10, "the Cyclone robot ready")
+    arm = start_arm(net, middleware="dds", domain_id=domain, interface="lo", joints=("lift", "shoulder", "elbow"))
+    wait_for(lambda: arm.stats.get("joint_states", 0) >= 5, 10, "JointStates from the Cyclone robot",
+             lambda: f"{arm.stats}")
+    wait_for(lambda: arm.verbs.matched() == "", 10, "the robot's trajectory reader matched")
+    bus = seeing(net, "cmd")
+    reply = send_command(bus, "arm", "joints/set", {"names": ["shoulder"], "angles": [0.5], "speed": 0.5})
+    assert "error" not in reply, reply
+    wait_for(lambda: any("names" in json.loads(line) for line in robot.lines), 10, "the trajectory at the robot")
+    got = next(json.loads(line) for line in robot.lines if "names" in json.loads(line))
+    assert got["names"] == ["shoulder"] and got["positions"][0][0] == 0.5
+
+
+def test_without_a_robot_the_adapter_says_so_and_a_stop_reaches_no_controller(net, caplog):
+    caplog.set_level(logging.WARNING)
+    domain = _domain(15)
+    arm = start_arm(net, middleware="dds", domain_id=domain, interface="lo")
+    answer = send_command(seeing(net, "cmd"), "arm", "stop", {})
+    assert answer["reached"] is False and "reached no controller" in answer["error"], answer
+    wait_for(lambda: f"no ROS publisher matched on rt/joint_states (domain {domain})" in caplog.text, 10,
+             "the adapter saying no publisher matched", lambda: caplog.text[-500:])
+    assert arm.stats.get("joint_states", 0) == 0
