@@ -14,9 +14,12 @@ from pathlib import Path
 from sonibus.bus.client import send_command
 
 from ..conftest import wait_for
-from .conftest import seeing, start_arm
+from ..net.conftest import _stale_removed, topology  # noqa: F401  (fixtures: a network namespace)
+from ..net.netns import NsProcess, ip
+from .conftest import ARM_URDF, seeing, start_arm
 
 ROBOT = Path(__file__).with_name("cyclone_robot.py")
+PROBE = Path(__file__).with_name("dds_link_probe.py")
 # rmw_cyclonedds's configuration in localhost mode (before the user's CYCLONEDDS_URI)
 LOCALHOST = ('<CycloneDDS><Domain id="any"><General><Interfaces><NetworkInterface address="127.0.0.1"/>'
              "</Interfaces><AllowMulticast>false</AllowMulticast></General><Discovery>"
@@ -54,3 +57,21 @@ def test_without_a_robot_the_adapter_says_so_and_a_stop_reaches_no_controller(ne
     wait_for(lambda: f"no ROS publisher matched on rt/joint_states (domain {domain})" in caplog.text, 10,
              "the adapter saying no publisher matched", lambda: caplog.text[-500:])
     assert arm.stats.get("joint_states", 0) == 0
+
+
+def test_a_cyclone_robot_discovering_by_multicast_on_loopback_meets_the_same_configuration(topology):  # noqa: F811
+    """In a namespace of its own whose ``lo`` has multicast on, a Cyclone robot with Cyclone's
+    defaults (discovery and data by multicast) and the adapter's link as documented meet."""
+    ns = topology.namespace("dds")
+    ip("-n", ns, "link", "set", "lo", "multicast", "on")
+    ip("-n", ns, "route", "add", "224.0.0.0/4", "dev", "lo")
+    env = {k: v for k, v in os.environ.items() if k != "CYCLONEDDS_URI"}
+    domain = _domain(7)
+    robot = topology.track(NsProcess(["ip", "netns", "exec", ns, sys.executable, str(ROBOT), str(domain)], env=env))
+    probe = topology.track(NsProcess(["ip", "netns", "exec", ns, sys.executable, str(PROBE), str(domain),
+                                      str(ARM_URDF)], env=env))
+    wait_for(lambda: any("names" in json.loads(line) for line in probe.lines), 10,
+             "a JointState at the adapter's link", topology.report)
+    assert json.loads(probe.lines[0])["names"] == ["shoulder", "elbow", "lift"]
+    wait_for(lambda: any("names" in json.loads(line) for line in robot.lines), 10, "a trajectory at the robot",
+             topology.report)
