@@ -75,3 +75,18 @@ def test_a_cyclone_robot_discovering_by_multicast_on_loopback_meets_the_same_con
     assert json.loads(probe.lines[0])["names"] == ["shoulder", "elbow", "lift"]
     wait_for(lambda: any("names" in json.loads(line) for line in robot.lines), 10, "a trajectory at the robot",
              topology.report)
+
+
+def test_the_users_cyclonedds_uri_is_honoured_with_the_interface_selected_once(net, spawn, monkeypatch):
+    """A robot whose Cyclone configuration has a discovery tag (participants with another tag
+    ignore it) is met only through the user's ``CYCLONEDDS_URI``, which also selects the
+    interface the installation names (Cyclone would otherwise have it twice)."""
+    domain = _domain(22)
+    tagged = LOCALHOST.replace("<Discovery>", "<Discovery><Tag>lab</Tag>")
+    robot = spawn(sys.executable, str(ROBOT), str(domain), collect=True, env={**os.environ, "CYCLONEDDS_URI": tagged})
+    wait_for(lambda: robot.lines, 10, "the Cyclone robot ready")
+    monkeypatch.setenv("CYCLONEDDS_URI", tagged)
+    arm = start_arm(net, middleware="dds", domain_id=domain, interface="lo")
+    wait_for(lambda: arm.stats.get("joint_states", 0) >= 5, 10, "JointStates from the tagged robot",
+             lambda: f"{arm.stats}")
+    assert "CYCLONEDDS_URI" in arm.link.where
