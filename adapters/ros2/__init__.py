@@ -218,7 +218,7 @@ class Ros2Robot(RobotAdapter):
 
 
 def _matched() -> str:
-    """A link that cannot tell whether the controller is matched (DDS): it is taken as matched."""
+    """A link that cannot tell whether the controller is matched: it is taken as matched."""
     return ""
 
 
