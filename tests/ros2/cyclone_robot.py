@@ -2,8 +2,9 @@
 as rmw_cyclonedds configures one (the test sets it): it publishes a JointState every 20 ms
 on ``rt/joint_states`` (reliable, as ROS 2's default profile) and prints every
 JointTrajectory it takes on ``rt/joint_trajectory_controller/joint_trajectory`` as a JSON line.
+With ``silent``, it publishes nothing (its writer matched, no data).
 
-    python cyclone_robot.py DOMAIN
+    python cyclone_robot.py DOMAIN [silent]
 """
 
 import json
@@ -28,10 +29,12 @@ def main() -> None:
     reader = DataReader(participant, Topic(participant, "rt/joint_trajectory_controller/joint_trajectory",
                                            JointTrajectory), qos)
     print(json.dumps({"ready": True}), flush=True)
+    silent = sys.argv[2:] == ["silent"]
     while True:
         now = time.time()
-        writer.write(JointState(Header(Time(int(now), int(now % 1 * 1e9)), ""), ["shoulder", "elbow", "lift"],
-                                [0.3, -0.4, 0.1], [], []))
+        if not silent:
+            writer.write(JointState(Header(Time(int(now), int(now % 1 * 1e9)), ""), ["shoulder", "elbow", "lift"],
+                                    [0.3, -0.4, 0.1], [], []))
         for sample in reader.take(N=10):
             if isinstance(sample, JointTrajectory):
                 print(json.dumps({"names": list(sample.joint_names),

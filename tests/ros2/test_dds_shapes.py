@@ -59,6 +59,17 @@ def test_without_a_robot_the_adapter_says_so_and_a_stop_reaches_no_controller(ne
     assert arm.stats.get("joint_states", 0) == 0
 
 
+def test_a_robot_that_matches_but_sends_nothing_is_told_apart(net, spawn, caplog):
+    caplog.set_level(logging.WARNING)
+    domain = _domain(3)
+    robot = spawn(sys.executable, str(ROBOT), str(domain), "silent", collect=True,
+                  env={**os.environ, "CYCLONEDDS_URI": LOCALHOST})
+    wait_for(lambda: robot.lines, 10, "the Cyclone robot ready")
+    start_arm(net, middleware="dds", domain_id=domain, interface="lo")
+    wait_for(lambda: "no JointState after" in caplog.text, 10, "the adapter's word on the silence")
+    assert f"a ROS publisher matched on rt/joint_states (domain {domain}), but no data arrived" in caplog.text
+
+
 def test_a_cyclone_robot_discovering_by_multicast_on_loopback_meets_the_same_configuration(topology):  # noqa: F811
     """In a namespace of its own whose ``lo`` has multicast on, a Cyclone robot with Cyclone's
     defaults (discovery and data by multicast) and the adapter's link as documented meet."""
