@@ -12,6 +12,7 @@ joint_trajectory_controller subscribes with).
 import os
 import threading
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 from sonibus.bus import registry
@@ -86,7 +87,19 @@ class String(IdlStruct, typename="std_msgs::msg::dds_::String_"):
 
 
 LOOPBACK = ("lo", "lo0", "127.0.0.1", "localhost")
+IFF_MULTICAST = 0x1000  # linux/if.h
 MAX_PARTICIPANTS = 32  # participant indices probed by unicast discovery: rmw_cyclonedds's localhost mode
+
+
+def multicast_flag(interface: str) -> str:
+    """Cyclone's ``multicast`` attribute for ``interface``: on Linux its own flag, since Cyclone
+    presumes multicast on a loopback interface even where the flag is off (it then joins and
+    sends SPDP multicast there); "default" (Cyclone's choice) where the flag cannot be read."""
+    try:
+        flags = int(Path(f"/sys/class/net/{interface}/flags").read_text(), 16)
+    except (OSError, ValueError):
+        return "default"
+    return "true" if flags & IFF_MULTICAST else "false"
 
 
 def cyclone_xml(config: Ros2Config, user_uri: str = "") -> str:
@@ -99,7 +112,8 @@ def cyclone_xml(config: Ros2Config, user_uri: str = "") -> str:
     On a loopback interface, 127.0.0.1 is a peer, as ROS 2's own localhost mode has it."""
     general = ""
     if config.interface and not user_uri:
-        general = f'<Interfaces><NetworkInterface name="{config.interface}"/></Interfaces>'
+        general = (f'<Interfaces><NetworkInterface name="{config.interface}" '
+                   f'multicast="{multicast_flag(config.interface)}"/></Interfaces>')
     general += f"<AllowMulticast>{'spdp' if config.multicast else 'false'}</AllowMulticast>"
     peers = list(config.peers)
     if config.interface in LOOPBACK and "127.0.0.1" not in peers:

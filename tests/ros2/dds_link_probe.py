@@ -1,5 +1,5 @@
 """The ``ros2`` adapter's DDS link, configured as docs/ros2.md says (``interface = "lo"``), in a
-process of its own (inside a test's network namespace): prints its first JointState's joint
+process of its own (inside a test's network namespace): prints ``{"open": true}``, its first JointState's joint
 names as a JSON line, then sends a trajectory (``shoulder`` to 0.5) every 0.2 s while a
 controller is matched, printing ``{"sent": n}``.
 
@@ -17,6 +17,7 @@ from sonibus.adapters.ros2.dds_link import DdsLink
 
 def main() -> None:
     link = DdsLink(Ros2Config(middleware="dds", domain_id=int(sys.argv[1]), interface="lo", urdf=sys.argv[2]))
+    print(json.dumps({"open": True}), flush=True)
     try:
         received = None
         while received is None:

@@ -8,6 +8,7 @@ from __future__ import annotations
 import json
 import logging
 import os
+import subprocess
 import sys
 from pathlib import Path
 
@@ -83,7 +84,7 @@ def test_a_cyclone_robot_discovering_by_multicast_on_loopback_meets_the_same_con
                                       str(ARM_URDF)], env=env))
     wait_for(lambda: any("names" in json.loads(line) for line in probe.lines), 10,
              "a JointState at the adapter's link", topology.report)
-    assert json.loads(probe.lines[0])["names"] == ["shoulder", "elbow", "lift"]
+    assert json.loads(probe.lines[1])["names"] == ["shoulder", "elbow", "lift"]
     wait_for(lambda: any("names" in json.loads(line) for line in robot.lines), 10, "a trajectory at the robot",
              topology.report)
 
@@ -101,3 +102,15 @@ def test_the_users_cyclonedds_uri_is_honoured_with_the_interface_selected_once(n
     wait_for(lambda: arm.stats.get("joint_states", 0) >= 5, 10, "JointStates from the tagged robot",
              lambda: f"{arm.stats}")
     assert "CYCLONEDDS_URI" in arm.link.where
+
+
+def test_on_a_loopback_without_multicast_the_adapter_joins_no_multicast_group(topology):  # noqa: F811
+    """Cyclone presumes multicast on loopback; where ``lo``'s flag is off (as on a machine's
+    own), the adapter neither joins nor sends SPDP multicast there: unicast to 127.0.0.1 only."""
+    ns = topology.namespace("dds")
+    probe = topology.track(NsProcess(["ip", "netns", "exec", ns, sys.executable, str(PROBE), str(_domain(11)),
+                                      str(ARM_URDF)]))
+    wait_for(lambda: probe.lines, 10, "the adapter's link open", topology.report)
+    groups = subprocess.run(["ip", "netns", "exec", ns, "cat", "/proc/net/igmp"], capture_output=True, text=True,
+                            check=True).stdout
+    assert "0100FFEF" not in groups, groups  # 239.255.0.1, DDS's SPDP group
