@@ -28,6 +28,7 @@ from .zenoh_link import BadInput, Received, RosSession, ZenohLink
 
 log = logging.getLogger(__name__)
 LIMIT_SLACK = 0.01  # rad or m past a URDF limit a robot may report (encoder noise at an end stop)
+SILENCE_S = 3.0  # no JointState this long after the start: the link says why (DDS: matched or not)
 MAX_NAMED = 128  # unknown joint names remembered for their one warning (the names come from the network)
 
 __all__ = ["Ros2Config", "Ros2Robot", "Ros2Verbs"]
@@ -39,7 +40,7 @@ class Ros2Robot(RobotAdapter):
     Config = Ros2Config
     Verbs = Ros2Verbs
     verbs: Ros2Verbs
-    counters = ("unknown_joints", "ros_lost", "restamped")
+    counters = ("joint_states", "unknown_joints", "ros_lost", "restamped")
 
     def _open(self) -> None:
         c = self.config
@@ -144,8 +145,13 @@ class Ros2Robot(RobotAdapter):
     # -- the frame loop -------------------------------------------------------------
 
     def _acquire(self) -> None:
-        heard = False
+        heard, silent_at = False, time.monotonic() + SILENCE_S
         while not self.stopping.is_set():
+            if not heard and silent_at and time.monotonic() > silent_at:
+                silent_at = 0.0
+                why = getattr(self.link, "silence", None)
+                if why is not None:
+                    log.warning("%s: no JointState after %g s: %s", self.name, SILENCE_S, why())
             try:
                 received = self.link.take(0.2)
             except BadInput as exc:
@@ -163,6 +169,7 @@ class Ros2Robot(RobotAdapter):
                     log.info("%s: first JointState from %s: %d joints", self.name, self.link.where,
                              len(received.state.names))
                 self.count("received")
+                self.count("joint_states")  # (received also counts the bus's commands)
                 self._frame(received)
 
     def _frame(self, received: Received) -> None:
@@ -211,7 +218,7 @@ class Ros2Robot(RobotAdapter):
 
 
 def _matched() -> str:
-    """A link that cannot tell whether the controller is matched (DDS): it is taken as matched."""
+    """A link that cannot tell whether the controller is matched: it is taken as matched."""
     return ""
 
 

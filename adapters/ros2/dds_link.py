@@ -9,8 +9,10 @@ joint_trajectory_controller subscribes with).
 
 # (no `from __future__ import annotations`: Cyclone reads the IDL structs' annotations as objects)
 
+import os
 import threading
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 from sonibus.bus import registry
@@ -84,15 +86,44 @@ class String(IdlStruct, typename="std_msgs::msg::dds_::String_"):
     data: str
 
 
-def cyclone_xml(config: Ros2Config) -> str:
-    """Cyclone's configuration for the installation's ``interface``, ``peers`` and ``multicast``."""
-    general = f'<Interfaces><NetworkInterface name="{config.interface}"/></Interfaces>' if config.interface else ""
-    general += "" if config.multicast else "<AllowMulticast>false</AllowMulticast>"
-    peers = "".join(f'<Peer Address="{p}"/>' for p in config.peers)
-    discovery = (f"<ParticipantIndex>auto</ParticipantIndex><MaxAutoParticipantIndex>20</MaxAutoParticipantIndex>"
-                 f"<Peers>{peers}</Peers>") if peers else ""
-    return (f'<CycloneDDS><Domain id="any"><General>{general}</General>'
+LOOPBACK = ("lo", "lo0", "127.0.0.1", "localhost")
+IFF_MULTICAST = 0x1000  # linux/if.h
+MAX_PARTICIPANTS = 32  # participant indices probed by unicast discovery: rmw_cyclonedds's localhost mode
+
+
+def multicast_flag(interface: str) -> str:
+    """Cyclone's ``multicast`` attribute for ``interface``: on Linux its own flag, since Cyclone
+    presumes multicast on a loopback interface even where the flag is off (it then joins and
+    sends SPDP multicast there); "default" (Cyclone's choice) where the flag cannot be read."""
+    try:
+        flags = int(Path(f"/sys/class/net/{interface}/flags").read_text(), 16)
+    except (OSError, ValueError):
+        return "default"
+    return "true" if flags & IFF_MULTICAST else "false"
+
+
+def cyclone_xml(config: Ros2Config, user_uri: str = "") -> str:
+    """Cyclone's configuration for the installation's ``interface``, ``peers`` and ``multicast``,
+    before the user's ``CYCLONEDDS_URI`` (later fragments win; the interface is then the user's).
+
+    Data goes by unicast always (``AllowMulticast spdp``: participants announce themselves by
+    multicast where it works, and advertise unicast data locators only), so one configuration
+    meets a robot in ROS 2's localhost mode (unicast only) and one discovering by multicast.
+    On a loopback interface, 127.0.0.1 is a peer, as ROS 2's own localhost mode has it."""
+    general = ""
+    if config.interface and not user_uri:
+        general = (f'<Interfaces><NetworkInterface name="{config.interface}" '
+                   f'multicast="{multicast_flag(config.interface)}"/></Interfaces>')
+    general += f"<AllowMulticast>{'spdp' if config.multicast else 'false'}</AllowMulticast>"
+    peers = list(config.peers)
+    if config.interface in LOOPBACK and "127.0.0.1" not in peers:
+        peers.append("127.0.0.1")
+    listed = "".join(f'<Peer Address="{p}"/>' for p in peers)
+    discovery = (f"<ParticipantIndex>auto</ParticipantIndex><MaxAutoParticipantIndex>{MAX_PARTICIPANTS}"
+                 f"</MaxAutoParticipantIndex><Peers>{listed}</Peers>" if peers else "")
+    ours = (f'<CycloneDDS><Domain id="any"><General>{general}</General>'
             f"<Discovery>{discovery}</Discovery></Domain></CycloneDDS>")
+    return f"{ours},{user_uri}" if user_uri else ours
 
 
 class DdsLink:
@@ -102,7 +133,8 @@ class DdsLink:
         self.config = config
         self.queue = SampleQueue(1)  # (only its drop count is read: the reader keeps its own bounded history)
         c = config
-        self.domain = Domain(c.domain_id, cyclone_xml(c))
+        self.user_uri = os.environ.get("CYCLONEDDS_URI", "").strip()
+        self.domain = Domain(c.domain_id, cyclone_xml(c, self.user_uri))
         self.participant = DomainParticipant(c.domain_id)
         best_effort = Qos(Policy.Reliability.BestEffort, Policy.History.KeepLast(c.queue))
         self.reader = DataReader(self.participant, Topic(self.participant, "rt/" + c.joint_states.strip("/"),
@@ -119,7 +151,26 @@ class DdsLink:
     @property
     def where(self) -> str:
         interface = f", interface {self.config.interface}" if self.config.interface else ""
+        if self.user_uri:
+            interface += ", CYCLONEDDS_URI"
         return f"DDS domain {self.config.domain_id} (Cyclone DDS{interface})"
+
+    def matched(self) -> str:
+        """"" while a subscription matches the trajectory writer (Cyclone's publication-matched
+        status), else why not: a command then reaches no controller."""
+        if self.writer is None:
+            return "closed"
+        if self.writer.get_publication_matched_status().current_count:
+            return ""
+        return f"no subscription matched on rt/{self.config.controller.strip('/')} ({self.where})"
+
+    def silence(self) -> str:
+        """Why no JointState arrived (said once, a few seconds after the start)."""
+        topic = f"rt/{self.config.joint_states.strip('/')} (domain {self.config.domain_id})"
+        if self.reader is not None and self.reader.get_subscription_matched_status().current_count:
+            return f"a ROS publisher matched on {topic}, but no data arrived"
+        return (f"no ROS publisher matched on {topic}: is the robot on this domain and interface "
+                f"({self.where})?")
 
     def take(self, timeout: float) -> Received | None:
         if not self._pending:

@@ -40,7 +40,7 @@ def test_rti_joint_states_drive_the_sinks_and_a_joints_set_reaches_rti(net, conn
     connector, domain = connext
     states = connector.get_output("Pub::States")
     trajectories = connector.get_input("Sub::Trajectories")
-    arm = start_arm(net, middleware="dds", domain_id=domain, interface="lo", peers=("127.0.0.1",), multicast=False,
+    arm = start_arm(net, middleware="dds", domain_id=domain, interface="lo",  # as docs/ros2.md says
                     joints=("lift", "shoulder", "elbow"))  # the controller's
     udp = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     udp.bind(("127.0.0.1", 0))
