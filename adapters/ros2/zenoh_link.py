@@ -109,8 +109,8 @@ class ZenohLink:
         """A ROS entity came or went: say so, and follow the controller's subscription to its
         topic — matched or not, and the type hash trajectories must carry for it to take them."""
         chunks = key.split("/")
-        if len(chunks) < 9 or chunks[2] == self.bus.zid:
-            return
+        if len(chunks) < 9 or (chunks[2], chunks[3]) == (self.bus.zid, str(self.node.node_id)):
+            return  # (our own node's; another node of this session — ros2-sim's controller in one run — counts)
         if self.on_graph is not None:
             self.on_graph(key, alive)
         if not (len(chunks) >= 13 and chunks[5] == "MS" and chunks[9] == rmw.mangle(self.config.controller)

@@ -30,7 +30,12 @@ def test_the_examples_without_multicast_are_joined_with_their_file(topology):
         assert f"listening on {endpoint} — join from this machine with --config {example}, or --connect " \
                f"{endpoint} " in bus, bus
 
-        nodes = host.cli("nodes", "--config", example)
+        # (a ROS 2 robot answers stop only once its controller is matched: until then it says it reached none)
+        def matched(host=host, example=example):
+            found = host.cli("nodes", "--config", example)
+            return found.returncode == 0 and "NOT MATCHED" not in found.stdout and found
+
+        nodes = wait_for(matched, 20, f"{name}'s robot and its controller")
         robot = re.search(r"^\s*robot (\S+) .* owned by ", nodes.stdout, re.M)
         assert nodes.returncode == 0 and robot, f"{name}: {nodes.stdout}{nodes.stderr}"
         sent = host.cli("send", robot[1], "stop", "--config", example)
