@@ -48,3 +48,13 @@ def test_a_controller_that_floods_and_vanishes_leaves_the_node_up_for_the_next(n
 
     wait_for(started, 10, "the new controller's key to run the behavior")
     assert node.stats["controllers_left"] == 1 and node.state == "running"
+
+
+def test_the_jack_server_going_away_fails_the_node_in_one_line(net, jack_server):
+    name, server = jack_server
+    node = net.start(MidiController(MidiControllerConfig(api="jack"), name="surface-in"))
+    server.stop(timeout=5)
+    wait_for(lambda: node.failure, 5, "the node to fail")
+    assert node.state == "failed" and f"JACK server '{name}' went away" in node.failure
+    assert len(node.failure.splitlines()) == 1
+    node.stop()  # (closing a client whose server is gone returns)
