@@ -38,6 +38,7 @@ SCRIPTS: dict[str, tuple[str, list[str], float]] = {
                                                     "--rates", "40000", "100000", "150000", "200000"], 90),
     "naoqi_rate": ("naoqi_rate", [], 90),
     "midi_rate": ("midi_rate", [], 90),
+    "midi_in_latency": ("midi_in_latency", [], 60),  # midi-in's JACK input: JACK-Client beside rtmidi (issue 33)
     "recorder_rate": ("recorder_rate", [], 90),
     "stop_latency": ("stop_latency", [], 90),
     "features": ("features", [], 90),

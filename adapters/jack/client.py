@@ -34,9 +34,9 @@ def server_name(server: str) -> str:
 OPEN_TIMEOUT_S = 5.0  # a JACK server that does not answer (jackd stopped with Ctrl-Z, or hung): one line, not a hang
 
 
-def open_client(name: str, server: str) -> jack.Client:
+def open_client(name: str, server: str, key: str = "server") -> jack.Client:
     """A client of JACK server ``server`` (never starting one); ``ConfigError`` naming
-    key ``server`` when it is not running, or does not answer within ``OPEN_TIMEOUT_S``
+    ``key`` (the node's option that chose JACK) when it is not running, or does not answer within ``OPEN_TIMEOUT_S``
     (libjack waits for it without a bound: a client it opens too late is closed)."""
     opened: list[jack.Client] = []
     failed: list[Exception] = []
@@ -63,14 +63,14 @@ def open_client(name: str, server: str) -> jack.Client:
             return opened[0]
         if opening.is_alive():
             given_up = True
-            raise ConfigError(f"key 'server': JACK server '{server_name(server)}' does not answer within "
+            raise ConfigError(f"key '{key}': JACK server '{server_name(server)}' does not answer within "
                               f"{OPEN_TIMEOUT_S:g} s — is jackd stopped (Ctrl-Z in its terminal: 'fg') or hung?")
     exc = failed[0]
     if not isinstance(exc, jack.JackOpenError):
         raise exc
     jackd = f"jackd -n {server}" if server else "jackd"
     log.debug("jack.Client(%r, servername=%r): %s", name, server, exc)
-    raise ConfigError(f"key 'server': no JACK server '{server_name(server)}' running — start one first, "
+    raise ConfigError(f"key '{key}': no JACK server '{server_name(server)}' running — start one first, "
                       f"e.g. '{jackd} -d dummy -r 48000' (no sound card) or '{jackd} -d alsa'") from None
 
 

@@ -234,9 +234,12 @@ class MidiControllerConfig:
     stop: tuple[dict[str, Any], ...] = ()     # StopMapping: note or CC → stop
     rate_hz: float = 20.0               # joints/set per robot per second at most (the newest values)
     timeout: float = 5.0                # seconds a robot has to answer
+    queue: int = 4096                   # MIDI messages waiting before the oldest are dropped (a flood)
 
     def __post_init__(self) -> None:
         _port(self.port, self.connect)
+        if self.queue < 1:
+            raise bad("queue", f"{self.queue} must be at least 1")
         if not self.rate_hz > 0:
             raise bad("rate_hz", f"{self.rate_hz:g} must be more than 0")
         if not self.timeout > 0:

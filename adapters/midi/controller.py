@@ -2,7 +2,11 @@
 MIDI input become robot commands, always through ``sonibus.bus.client.ask`` (so the
 robot validates them); a key mapped to a scenario asks the robot's show for it
 (``client.ask_program``). Fader moves are coalesced to ``rate_hz`` per robot, sending
-the newest value of every fader moved since the last command."""
+the newest value of every fader moved since the last command.
+
+On JACK the input is a JACK-Client port (``jack_in.py``: no python-rtmidi, whose
+JACK input crashed the process), which says when a controller connects or leaves
+and connects again to a new one; ALSA, CoreMIDI and WinMM go through python-rtmidi."""
 
 from __future__ import annotations
 
@@ -36,7 +40,7 @@ class MidiController(Adapter):
     A panic note or CC sends stop."""
 
     Config = MidiControllerConfig
-    counters = ("commands", "ok", "unmapped", "waiting_info")
+    counters = ("commands", "ok", "unmapped", "waiting_info", "dropped", "controllers_left")
 
     def _start(self) -> None:
         cfg: MidiControllerConfig = self.config
@@ -46,11 +50,16 @@ class MidiController(Adapter):
         self._held: dict[tuple[str, str], tuple[int, CcMapping]] = {}   # (robot, joint) → newest value
         self._last_sent: dict[str, float] = {}
         self._interval = 1.0 / cfg.rate_hz
-        self._queue = self.own(SampleQueue(4096))
+        self._queue = self.own(SampleQueue(cfg.queue))
         self._info = InfoRequests(self.bus, lambda robot, info: self._queue.put((INFO, (robot, info))),
                                   lambda robot, text: self._fail(f"info {robot}", text), INFO_RETRY_S)
-        self._in = ports.open_input(cfg.api, cfg.port, cfg.connect, self._receive, client=self.name)
-        self.own(ports.Closer(self._in))
+        if cfg.api == "jack":
+            from .jack_in import JackMidiIn  # (JACK-Client and libjack only for JACK)
+            self._jack = self.own(JackMidiIn(self.name, cfg.port, cfg.connect,
+                                             lambda message: self._queue.put(("midi", message))))
+            self.spawn(self._watch, "jack")
+        else:
+            self.own(ports.Closer(ports.open_input(cfg.api, cfg.port, cfg.connect, self._receive, client=self.name)))
         for robot in {m.robot for m in cfg.mappings("cc")}:
             self._info.ask(robot)
         self.spawn(self._work, "commands")
@@ -59,6 +68,20 @@ class MidiController(Adapter):
 
     def _receive(self, event: tuple[list[int], float], data: Any = None) -> None:
         self._queue.put(("midi", event[0]))   # rtmidi's thread: only enqueue
+
+    def _watch(self) -> None:
+        """Says who connects to the JACK port and who leaves; the JACK server gone fails the node."""
+        while not self.stopping.is_set():
+            self._jack.changed.wait(0.5)
+            came, left = self._jack.changes()
+            for port in sorted(came):
+                log.info("%s: controller '%s' connected to %s", self.name, port, self._jack.name)
+            for port in sorted(left):
+                self.count("controllers_left")
+                counters = ", ".join(f"{k} {v}" for k, v in self.stats.items() if v)
+                log.warning("%s: controller '%s' left %s%s (%s)", self.name, port, self._jack.name,
+                            f", waiting for a port matching '{self.config.connect}'" if self.config.connect else "",
+                            counters)
 
     # -- the loop ---------------------------------------------------------------------
 

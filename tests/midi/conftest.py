@@ -14,7 +14,8 @@ from sonibus.bus import codec, keys, messages
 
 from .. import jackd
 
-jack = jackd.jack  # the fixture, shared with tests/jack
+jack = jackd.jack  # the fixtures, shared with tests/jack
+jack_server = jackd.jack_server
 
 
 class Reader:

@@ -24,7 +24,7 @@ def test_an_unknown_port_is_an_error_listing_the_ports(net, jack, writer):
     try:
         with pytest.raises(ConfigError, match=r"key 'connect': no MIDI output port matches 'nosuch'.*'synth:keys'"):
             net.start(MidiSink(MidiSinkConfig(api="jack", connect="nosuch"), name="daw"))
-        with pytest.raises(ConfigError, match=r"key 'connect': no MIDI input port matches 'nosuch'.*'surface:fader'"):
+        with pytest.raises(ConfigError, match=r"key 'connect': no MIDI output port matches 'nosuch'.*'surface:fader'"):
             net.start(MidiController(MidiControllerConfig(api="jack", connect="nosuch"), name="surface-in"))
     finally:
         synth.close_port()
