@@ -55,7 +55,8 @@ def ask(bus: Bus, robot: str, verb: str, args: dict[str, Any], done: Callable[[O
     parameters = [f"owner={owner.address}"] if owner is not None else []
     if verb == "stop":  # (served on both sessions of its owner: its id has it run once)
         parameters.append(f"id={uuid.uuid4().hex}")
-    _send(bus, keys.command(robot, verb) + ("?" + "&".join(parameters) if parameters else ""), args, pending,
+    # (Zenoh's parameters are separated by ';': with '&' the id was read as part of the owner)
+    _send(bus, keys.command(robot, verb) + ("?" + ";".join(parameters) if parameters else ""), args, pending,
           urgent=verb == "stop")
 
 

@@ -186,11 +186,14 @@ class RobotAdapter(Adapter):
     def _serve_info(self, query: zenoh.Query) -> None:
         query.reply(keys.info(self.robot), codec.encode(self.robot_info()), encoding=codec.ENCODING)
 
-    def _first_stop(self, stop_id: str | None) -> bool:
-        """Whether the stop ``stop_id`` (a query's ``id`` parameter) has not been run yet: one
-        query reaches both sessions of this process, and it runs once, on the first it reaches."""
-        if not stop_id or len(stop_id) > 64:  # (an asker that names none: each arrival runs it)
-            return True
+    def _first_stop(self, stop_id: str | None, urgent: bool) -> bool:
+        """Whether to run the stop ``stop_id`` (a query's ``id`` parameter) arriving on the
+        control session (``urgent``) or the data session. An asker that names an id (every
+        sonibus asker: ``client.ask``, ``client.stop_all``) reaches both sessions of this process,
+        and the stop runs once, on the first it reaches; one that names none (a raw query) is
+        run where every command is, on the data session only."""
+        if not stop_id or len(stop_id) > 64:
+            return not urgent
         with self._stops_lock:
             if stop_id in self._stops:
                 return False
@@ -202,8 +205,8 @@ class RobotAdapter(Adapter):
     def _serve_command(self, query: zenoh.Query, qos: dict[str, Any] | None = None) -> None:
         asked = str(query.key_expr)
         verb = keys.command_verb(asked)
-        if verb == "stop" and not self._first_stop(query.parameters.get("id")):
-            return  # answered on the other session already (the asker takes the first answer)
+        if verb == "stop" and not self._first_stop(query.parameters.get("id"), urgent=qos is not None):
+            return  # answered on the other session (the asker takes the first answer)
         # a query for many robots (``*/cmd/stop``: ``client.stop_all``) is answered on this robot's own
         # key, so the asker knows who answered
         answer_on = keys.command(self.robot, verb) if verb and keys.is_concrete(verb) else asked

@@ -82,8 +82,10 @@ class Network:
         role = {"connect": (self.endpoint,)} if self._sessions else {"listen": (self.endpoint,)}
         return BusConfig(multicast=False, **{**role, **changes})
 
-    def bus(self, node: str = "test", control: bool = True) -> Bus:
-        """A session on this network, with its control session (``bus/control.py``) unless not ``control``."""
+    def bus(self, node: str = "test", control: bool = False) -> Bus:
+        """A session on this network; with ``control``, its control session too (``bus/control.py``,
+        as every ``sonibus run``: not by default, as a second session costs each test up to 0.5 s,
+        Zenoh's wait for the peers its gossip names)."""
         config = self.config()
         session = open_session(config)
         self._sessions.append(session)

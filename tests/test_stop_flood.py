@@ -18,6 +18,7 @@ from sonibus.adapters.osc.sink import OscSink, OscSinkConfig
 from sonibus.adapters.web import WebPages
 from sonibus.adapters.web.config import WebConfig
 from sonibus.bus import codec, keys, send_command
+from sonibus.bus.client import owner_of
 from sonibus.bus.messages import frame
 
 from .conftest import wait_for
@@ -39,13 +40,13 @@ def flood(publisher) -> None:
 
 
 def test_stop_is_prompt_right_after_a_flood_of_valid_frames_on_the_same_link(net):
-    show = net.bus("show")  # one session for every node, as ``sonibus run``
+    show = net.bus("show", control=True)  # one session for every node, as ``sonibus run``
     net.sim("pepper", bus=show.for_node("sim"), rate_hz=50)
     for node in (OscSink(OscSinkConfig(subscribe=("*/joints/*", "*/frame"), targets=("127.0.0.1:9",)), name="osc"),
                  WebPages(WebConfig(listen="127.0.0.1:0"), name="web"),
                  FoxgloveServer(FoxgloveConfig(listen="127.0.0.1:0"), name="foxglove")):
         net.start(node, show.for_node(node.name))
-    elsewhere = net.bus("elsewhere")  # the flood and the stop leave one process, over one link to the show
+    elsewhere = net.bus("elsewhere", control=True)  # the flood and the stop leave one process, over one link to the show
     publisher = elsewhere.session.declare_publisher(keys.frame("nao"))
     wait_for(lambda: _stop(elsewhere, 2.0)[0], what="pepper's first stop")
     taken = []
@@ -64,3 +65,41 @@ def _stop(bus, timeout: float) -> tuple[bool, float]:
     except Exception:
         return False, time.perf_counter() - started
     return True, time.perf_counter() - started
+
+
+def test_a_stop_runs_once_whichever_way_it_comes(net):
+    """The owner serves ``stop`` on both of its sessions: a sonibus asker's stop (an ``id``, with or
+    without the owner's address) runs once, on the first session it reaches; a raw query (no id) runs
+    once, on the data session. Before: an id after the owner's address was joined with '&' (Zenoh
+    separates parameters with ';'), read as part of the address, and the show's stops ran twice."""
+    show = net.bus("show", control=True)
+    net.sim("pepper", bus=show.for_node("sim"), rate_hz=50)
+    asker = net.bus("asker", control=True)
+    plain = net.bus("plain")
+    _subscriber, events = net.bus("watch").subscribe(keys.event("pepper", "command"))
+    stops = StopEvents(events)
+    wait_for(lambda: _stop(asker, 2.0)[0], what="pepper's first stop")
+    wait_for(lambda: stops.count() >= 1, what="the first stop's event")
+    owner = owner_of(asker, "pepper")
+    assert owner is not None
+    send_command(asker, "pepper", "stop", owner=owner)         # id and owner: the show's way
+    send_command(asker, "pepper", "stop")                      # id alone
+    send_command(plain, "pepper", "stop", owner=owner)         # from a process with no control session
+    assert plain.query(keys.command("pepper", "stop"), {})     # a raw query: no id
+    _subscriber2, later = net.bus("later").subscribe(keys.event("pepper", "command"))
+    send_command(plain, "pepper", "stop")                      # its event comes after every earlier one's
+    wait_for(lambda: StopEvents(later).count() >= 1, what="the last stop's event")
+    wait_for(lambda: stops.count() >= 6, what="six stop events")
+    assert stops.count() == 6, "a stop ran twice"
+
+
+class StopEvents:
+    """The stop events of a queue of command events, counted as they are taken."""
+
+    def __init__(self, events) -> None:
+        self.events, self.seen = events, 0
+
+    def count(self) -> int:
+        while (item := self.events.get(timeout=0)) is not None:
+            self.seen += codec.decode(item[1]).get("verb") == "stop"
+        return self.seen
