@@ -41,6 +41,8 @@ SCRIPTS: dict[str, tuple[str, list[str], float]] = {
     "midi_in_latency": ("midi_in_latency", [], 60),  # midi-in's JACK input: JACK-Client beside rtmidi (issue 33)
     "recorder_rate": ("recorder_rate", [], 90),
     "stop_latency": ("stop_latency", [], 90),
+    "stop_flood": ("stop_flood", [], 400),  # stop on each path alone and right after floods (issue 33)
+    "stop_flood_heavy": ("stop_flood", ["--flood", "5000", "--rate", "50000", "--name", "stop_flood_heavy"], 400),
     "features": ("features", [], 90),
     "zenoh_hop": ("zenoh_hop", [], 90),
     "receive_cpu": ("receive_cpu", [], 60),

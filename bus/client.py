@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import threading
 import time
+import uuid
 from collections.abc import Callable
 from typing import Any
 
@@ -51,7 +52,12 @@ def ask(bus: Bus, robot: str, verb: str, args: dict[str, Any], done: Callable[[O
     ``not_connected``, ``not_answering``, ``bad_request``...), exactly once."""
     pending = _Pending(robot, verb, done, timeout)
     owner = owner if owner is not None else owners(bus).owner(robot)
-    _send(bus, keys.command(robot, verb) + (f"?owner={owner.address}" if owner is not None else ""), args, pending)
+    parameters = [f"owner={owner.address}"] if owner is not None else []
+    if verb == "stop":  # (served on both sessions of its owner: its id has it run once)
+        parameters.append(f"id={uuid.uuid4().hex}")
+    # (Zenoh's parameters are separated by ';': with '&' the id was read as part of the owner)
+    _send(bus, keys.command(robot, verb) + ("?" + ";".join(parameters) if parameters else ""), args, pending,
+          urgent=verb == "stop")
 
 
 def ask_program(bus: Bus, robot: str, verb: str, args: dict[str, Any], done: Callable[[Outcome], None],
@@ -65,10 +71,11 @@ def ask_program(bus: Bus, robot: str, verb: str, args: dict[str, Any], done: Cal
     _send(bus, key, args, _Pending(robot, verb, done, timeout, nobody))
 
 
-def _send(bus: Bus, selector: str, args: dict[str, Any], pending: _Pending) -> None:
+def _send(bus: Bus, selector: str, args: dict[str, Any], pending: _Pending, urgent: bool = False) -> None:
     try:
         # Every answer, not one per key: a node standing by for the robot's owner answers too (``conflict``).
-        bus.ask(selector, pending.on_reply, pending.on_end, message=args, timeout=pending.timeout, every_answer=True)
+        bus.ask(selector, pending.on_reply, pending.on_end, message=args, timeout=pending.timeout, every_answer=True,
+                urgent=urgent)
     except Exception as exc:  # a closed session, a key Zenoh refuses
         pending.finish(CommandError("internal", f"{pending.verb}: the bus refused the query: {exc}"))
 
@@ -175,7 +182,8 @@ def stop_all(bus: Bus, done: Callable[[str, Outcome], None], silent: Callable[[l
         silent(left, error)
 
     try:
-        bus.ask(STOP_ALL, on_reply, on_end, message={}, timeout=timeout, every_answer=True)
+        bus.ask(f"{STOP_ALL}?id={uuid.uuid4().hex}", on_reply, on_end, message={}, timeout=timeout,
+                every_answer=True, urgent=True)
     except Exception as exc:  # a closed session
         silent(on_bus.robots(), CommandError("internal", f"the bus refused the query: {exc}"))
 

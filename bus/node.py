@@ -23,6 +23,7 @@ import zenoh
 import zenoh.ext
 
 from . import codec, keys
+from .control import URGENT
 from .messages import Limits
 from .queue import SampleQueue
 from .session import discover, lease_s, listening
@@ -89,8 +90,10 @@ class Bus:
     """Publish, subscribe, serve and ask on the bus, as node ``node`` of ``host``."""
 
     def __init__(self, session: zenoh.Session, node: str = "", host: str | None = None,
-                 limits: Limits | None = None) -> None:
+                 limits: Limits | None = None, control: zenoh.Session | None = None) -> None:
         self.session = session  # for tests and the few tools that open one; nodes use the methods
+        # the process's control session (``bus/control.py``): stop served and sent on a link of its own
+        self.control = control
         self.node = node
         self.host = host or socket.gethostname()
         self.limits = limits or Limits()  # what the gate of each node on this bus lets through
@@ -101,7 +104,7 @@ class Bus:
         self.on_error: Callable[[str, BaseException], None] | None = None
 
     def for_node(self, node: str) -> Bus:
-        bus = Bus(self.session, node, self.host, self.limits)
+        bus = Bus(self.session, node, self.host, self.limits, self.control)
         bus._shared, bus._lock = self._shared, self._lock
         return bus
 
@@ -250,9 +253,10 @@ class Bus:
         """This session's Zenoh id (another protocol's graph names it: rmw_zenoh's liveliness tokens)."""
         return str(self.session.zid())
 
-    def discover(self) -> list[str]:
-        """Wait until this session is really on the bus (``session.discover``); the ids it reached."""
-        return discover(self.session)
+    def discover(self, served: str = "") -> list[str]:
+        """Wait until this session is really on the bus (``session.discover``; with ``served``,
+        until a queryable of that key is known, at most as long); the ids it reached."""
+        return discover(self.session, served)
 
     @property
     def listening(self) -> tuple[str, ...]:
@@ -269,11 +273,21 @@ class Bus:
     def serve(self, keyexpr: str, handler: Callable[[zenoh.Query], None]) -> zenoh.Queryable:
         return self.session.declare_queryable(keyexpr, self.guarded(handler, f"server of {keyexpr}"))
 
+    def serve_urgent(self, keyexpr: str, handler: Callable[[zenoh.Query], None]) -> zenoh.Queryable | None:
+        """Serve ``keyexpr`` on the control session (None without one), ``handler`` called on
+        Zenoh's own thread: nothing of the data path (its links, its channels) in between."""
+        if self.control is None:
+            return None
+        return self.control.declare_queryable(
+            keyexpr, zenoh.handlers.Callback(self.guarded(handler, f"server of {keyexpr}"), indirect=False))
+
     def ask(self, selector: str, on_reply: Callable[[Reply], None], on_end: Callable[[], None], *,
-            message: dict[str, Any] | None = None, timeout: float = 5.0, every_answer: bool = False) -> None:
+            message: dict[str, Any] | None = None, timeout: float = 5.0, every_answer: bool = False,
+            urgent: bool = False) -> None:
         """Send a query without waiting: each answer goes to ``on_reply`` and the end of
         the query (all answered, or ``timeout``) to ``on_end``, on Zenoh threads.
-        ``every_answer``: no consolidation (several nodes may answer one key)."""
+        ``every_answer``: no consolidation (several nodes may answer one key); ``urgent``
+        (a stop): from the control session, if any, at Zenoh's real-time priority."""
         def reply(answer: zenoh.Reply) -> None:
             if answer.ok is not None:
                 on_reply(Reply(str(answer.ok.key_expr), answer.ok.payload.to_bytes()))
@@ -281,15 +295,19 @@ class Bus:
                 on_reply(Reply(selector, None, answer.err.payload.to_string()))
 
         options: dict[str, Any] = {"consolidation": zenoh.ConsolidationMode.NONE} if every_answer else {}
+        session = self.session
+        if urgent:
+            options.update(URGENT)
+            session = self.control or self.session
         if message is not None:
             options.update(payload=codec.encode(message), encoding=codec.ENCODING)
         answers = _answers()
         reply_, end = self.guarded(reply, f"answer to {selector}"), self.guarded(on_end, f"end of {selector}")
         # Not zenoh-python's default (indirect): it starts a Python thread for each query, and
         # a thousand made-up robots asked about at once started thousands (STOP waited seconds)
-        self.session.get(selector, zenoh.handlers.Callback(lambda answer: answers.reply(reply_, answer),
-                                                           lambda: answers.end(end), indirect=False),
-                         timeout=timeout, **options)
+        session.get(selector, zenoh.handlers.Callback(lambda answer: answers.reply(reply_, answer),
+                                                      lambda: answers.end(end), indirect=False),
+                    timeout=timeout, **options)
 
     def query(self, selector: str, message: dict[str, Any] | None = None,
               timeout: float = 5.0) -> list[dict[str, Any]]:

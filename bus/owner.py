@@ -22,7 +22,9 @@ commands (but ``stop``) while the robot is not connected.
 from __future__ import annotations
 
 import logging
+import threading
 import time
+from collections import OrderedDict
 from collections.abc import Sequence
 from typing import Any, ClassVar
 
@@ -32,11 +34,14 @@ from .. import schemas
 from . import codec, commands, keys, messages
 from .adapter import Adapter
 from .connection import UNREACHED, Connection
+from .control import URGENT_REPLY
 from .errors import CommandError
 from .robot import RobotModel
 from .verbs import RobotVerbs, bind
 
 log = logging.getLogger(__name__)
+
+STOP_IDS = 256  # the stops (by their id) an owner remembers having run: each runs once, whichever session has it first
 
 
 class RobotAdapter(Adapter):
@@ -76,7 +81,14 @@ class RobotAdapter(Adapter):
         self._gate = messages.Gate(self.bus.limits)
         self.ownership.declare_publishers(self.model.joint_names)
         self.own(self.bus.serve(keys.info(self.robot), self._serve_info))
+        self._stops: OrderedDict[str, None] = OrderedDict()
+        self._stops_lock = threading.Lock()
         self.own(self.bus.serve(keys.command(self.robot), self._serve_command))
+        # stop again, on the control session: no flood of data ahead of it (``bus/control.py``)
+        urgent = self.bus.serve_urgent(keys.command(self.robot, "stop"),
+                                       lambda query: self._serve_command(query, URGENT_REPLY))
+        if urgent is not None:
+            self.own(urgent)
         self.spawn(self._acquire, "acquire")
         if self.connection.answer_s is not None:
             self.spawn(self._watch_answers, "answers")
@@ -174,9 +186,27 @@ class RobotAdapter(Adapter):
     def _serve_info(self, query: zenoh.Query) -> None:
         query.reply(keys.info(self.robot), codec.encode(self.robot_info()), encoding=codec.ENCODING)
 
-    def _serve_command(self, query: zenoh.Query) -> None:
+    def _first_stop(self, stop_id: str | None, urgent: bool) -> bool:
+        """Whether to run the stop ``stop_id`` (a query's ``id`` parameter) arriving on the
+        control session (``urgent``) or the data session. An asker that names an id (every
+        sonibus asker: ``client.ask``, ``client.stop_all``) reaches both sessions of this process,
+        and the stop runs once, on the first it reaches; one that names none (a raw query) is
+        run where every command is, on the data session only."""
+        if not stop_id or len(stop_id) > 64:
+            return not urgent
+        with self._stops_lock:
+            if stop_id in self._stops:
+                return False
+            self._stops[stop_id] = None
+            if len(self._stops) > STOP_IDS:
+                self._stops.popitem(last=False)
+            return True
+
+    def _serve_command(self, query: zenoh.Query, qos: dict[str, Any] | None = None) -> None:
         asked = str(query.key_expr)
         verb = keys.command_verb(asked)
+        if verb == "stop" and not self._first_stop(query.parameters.get("id"), urgent=qos is not None):
+            return  # answered on the other session (the asker takes the first answer)
         # a query for many robots (``*/cmd/stop``: ``client.stop_all``) is answered on this robot's own
         # key, so the asker knows who answered
         answer_on = keys.command(self.robot, verb) if verb and keys.is_concrete(verb) else asked
@@ -198,7 +228,7 @@ class RobotAdapter(Adapter):
         except Exception as exc:
             log.exception("%s: command %s failed", self.name, verb)
             reply = commands.error_reply(verb, CommandError("failed", f"{verb} failed: {exc}"))
-        query.reply(answer_on, codec.encode(reply), encoding=codec.ENCODING)
+        query.reply(answer_on, codec.encode(reply), encoding=codec.ENCODING, **(qos or {}))
         if verb in commands.verbs():
             event = {"verb": verb, "args": args if isinstance(args, dict) else {}, "ok": reply["ok"]}
             if not reply["ok"]:

@@ -12,6 +12,7 @@ from collections.abc import Callable
 from . import keys, registry
 from .adapter import Adapter
 from .config import Installation
+from .control import open_control
 from .errors import AdapterError, ConfigError, NodeFailed
 from .memory import Trimmer
 from .messages import Limits
@@ -73,7 +74,8 @@ def run(adapters: list[Adapter], bus_config: BusConfig, stop: threading.Event,
     with contextlib.ExitStack() as closing:
         with watchdog.joining(f"joining the bus ({_joining(bus_config)})"):
             session = closing.enter_context(contextlib.closing(open_session(bus_config, wait=True)))
-        bus = Bus(session, host=host, limits=Limits(max_future_s=bus_config.max_future_s))
+        control = closing.enter_context(contextlib.closing(open_control(bus_config, session)))
+        bus = Bus(session, host=host, limits=Limits(max_future_s=bus_config.max_future_s), control=control)
         started: list[Adapter] = []
         why = "stopped"
         try:

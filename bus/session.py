@@ -283,25 +283,41 @@ class _Joined:
 _JOINED: dict[str, _Joined] = {}  # by session id
 
 
-def discover(session: zenoh.Session) -> list[str]:
+def discover(session: zenoh.Session, served: str = "") -> list[str]:
     """Wait until ``session`` is really on the bus — its first link up, and a moment more
     for the declarations that follow a new link (with multicast, ``SETTLE_S``: also the
     peers found in the same round) — for at most ``DISCOVERY_S``, and not at all when
     there is nobody to find (no multicast, no connect: whoever comes connects to it).
-    The ids of the peers and routers it reached."""
+    With ``served`` (a key a query will go to), that moment ends as soon as a queryable
+    of it is known (``sonibus send``'s stop: no 100 ms more). The ids of the peers and
+    routers it reached."""
     joined = _JOINED.get(str(session.zid()), _Joined(DISCOVERY_S, SETTLE_S, 10.0))
     deadline = time.monotonic() + joined.window_s
     while not links(session):
         if time.monotonic() >= deadline:
             return []
-        time.sleep(0.02)
-    time.sleep(joined.settle_s)
+        time.sleep(0.005 if served else 0.02)
+    if served:
+        querier = session.declare_querier(served)
+        try:
+            settled = time.monotonic() + joined.settle_s
+            while not querier.matching_status and time.monotonic() < settled:
+                time.sleep(0.002)
+        finally:
+            querier.undeclare()
+    else:
+        time.sleep(joined.settle_s)
     return links(session)
 
 
 def links(session: zenoh.Session) -> list[str]:
-    """The ids of the routers and peers ``session`` has a link with now."""
-    return [str(z) for z in (*session.info.routers_zid(), *session.info.peers_zid())]
+    """The ids of the routers and peers ``session`` has a link with now (not this process's
+    control sessions, ``bus/control.py``: nobody else)."""
+    found = [str(z) for z in (*session.info.routers_zid(), *session.info.peers_zid())]
+    return [zid for zid in found if zid not in CONTROLS]
+
+
+CONTROLS: set[str] = set()  # the ids of this process's control sessions (``bus/control.py``)
 
 
 def find_router(config: BusConfig, timeout_s: float) -> tuple[str, ...]:

@@ -22,6 +22,7 @@ import zenoh
 
 from sonibus.adapters.sim import SimConfig, SimRobot
 from sonibus.bus import Bus, BusConfig, open_session
+from sonibus.bus.control import open_control
 
 from .supervisor import Supervisor
 
@@ -81,10 +82,17 @@ class Network:
         role = {"connect": (self.endpoint,)} if self._sessions else {"listen": (self.endpoint,)}
         return BusConfig(multicast=False, **{**role, **changes})
 
-    def bus(self, node: str = "test") -> Bus:
-        session = open_session(self.config())
+    def bus(self, node: str = "test", control: bool = False) -> Bus:
+        """A session on this network; with ``control``, its control session too (``bus/control.py``,
+        as every ``sonibus run``: not by default, as a second session costs each test up to 0.5 s,
+        Zenoh's wait for the peers its gossip names)."""
+        config = self.config()
+        session = open_session(config)
         self._sessions.append(session)
-        bus = Bus(session, node=node)
+        urgent = open_control(config, session) if control else None
+        if urgent is not None:
+            self._sessions.append(urgent)
+        bus = Bus(session, node=node, control=urgent)
         if len(self._sessions) > 1:
             wait_for(lambda: session.info.peers_zid() or session.info.routers_zid(), what="peer connection")
         return bus

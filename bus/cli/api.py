@@ -24,6 +24,7 @@ from dataclasses import dataclass, field, replace
 from typing import Any, TextIO
 
 from .. import config
+from ..control import open_control
 from ..errors import ConfigError
 from ..node import Bus
 from ..session import MODES, BusConfig, check_endpoint, check_option, default_listen, from_here, open_session
@@ -169,7 +170,12 @@ def _zenoh_options(items: list[str], options: dict[str, Any]) -> dict[str, Any]:
 
 
 @contextlib.contextmanager
-def joined(cfg: BusConfig, node: str = "") -> Iterator[Bus]:
-    """A ``Bus`` on a session of its own for one command, closed at the end."""
+def joined(cfg: BusConfig, node: str = "", control: bool = False) -> Iterator[Bus]:
+    """A ``Bus`` on a session of its own for one command, closed at the end; with
+    ``control``, its control session too (``bus/control.py``: a command that stays and stops)."""
     with contextlib.closing(open_session(cfg)) as session:
-        yield Bus(session, node=node)
+        if not control:
+            yield Bus(session, node=node)
+            return
+        with contextlib.closing(open_control(cfg, session)) as urgent:
+            yield Bus(session, node=node, control=urgent)

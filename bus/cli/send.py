@@ -8,6 +8,7 @@ from collections.abc import Sequence
 from typing import Any
 
 from ... import schemas
+from .. import keys
 from ..client import owner_of, send_command, unreached
 from ..commands import from_words
 from ..errors import CommandError, ConfigError, RobotNotFound
@@ -41,11 +42,16 @@ def _send(args: argparse.Namespace, env: Environment) -> Exit:
     request = command_args(args.verb, args.args)
     cfg = bus_config(args)
     with joined(cfg) as bus:
-        reached = bus.discover()
-        owner = owner_of(bus, args.robot, min(2.0, args.timeout))  # not found after this: the command says so
+        # (a stop goes to every owner whatever the claims say: no waiting for the owner's claim, and
+        # no settling once its owner's stop is known: an emergency's stop starts as soon as it can)
+        stop = args.verb == "stop"
+        reached = bus.discover(keys.command(args.robot, args.verb) if stop else "")
+        owner = None if stop else owner_of(bus, args.robot, min(2.0, args.timeout))
         try:
             result = send_command(bus, args.robot, args.verb, request, timeout=args.timeout, owner=owner)
         except RobotNotFound as exc:
+            if stop:
+                owner = owner_of(bus, args.robot, 0.5)  # (for the hint)
             if owner is not None:  # its token is here, its commands are not: refused on the way
                 user = f" (user '{cfg.user}')" if cfg.user else ""
                 raise CommandError("refused", f"robot '{args.robot}' is on the bus but nothing answered "

@@ -426,7 +426,7 @@ def _top(args: argparse.Namespace, env: Environment) -> Exit:
                            "file): run it in a terminal, or use `sonibus nodes` / `sonibus echo KEYEXPR` instead")
     cfg = bus_config(args)
     handlers = {sig: signal.getsignal(sig) for sig in (signal.SIGINT, signal.SIGTERM)}
-    with joined(cfg) as bus, Monitor(bus) as monitor:
+    with joined(cfg, control=True) as bus, Monitor(bus) as monitor:
         app = TopApp(monitor, args.every, signals=True, bus_config=cfg)
         try:
             status = app.run()
