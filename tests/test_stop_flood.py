@@ -46,7 +46,7 @@ def test_stop_is_prompt_right_after_a_flood_of_valid_frames_on_the_same_link(net
                  WebPages(WebConfig(listen="127.0.0.1:0"), name="web"),
                  FoxgloveServer(FoxgloveConfig(listen="127.0.0.1:0"), name="foxglove")):
         net.start(node, show.for_node(node.name))
-    elsewhere = net.bus("elsewhere", control=True)  # the flood and the stop leave one process, over one link to the show
+    elsewhere = net.bus("elsewhere", control=True)  # the flood and the stop: one process, one link to the show
     publisher = elsewhere.session.declare_publisher(keys.frame("nao"))
     wait_for(lambda: _stop(elsewhere, 2.0)[0], what="pepper's first stop")
     taken = []
