@@ -80,9 +80,12 @@ class Ros2Verbs:
         return {"name": name, **result}
 
     def stop(self) -> dict[str, Any]:
-        """JTC's own stop-and-hold (no points); ``not_connected`` when no controller would get it."""
+        """JTC's stop-and-hold of before ros2_controllers#902 (no points); ``not_connected`` when no
+        controller would get it. The answer says what is known: the hold was sent to a matched
+        controller, not that the robot holds (since #902 the controller refuses it, and says so
+        only in its own log)."""
         self._trajectory("stop", self.controller_joints, [])
-        return {"held": True}
+        return {"hold_sent": True}
 
     def behavior_list(self) -> dict[str, Any]:
         return {"behaviors": []}

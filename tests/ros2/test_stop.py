@@ -38,10 +38,10 @@ def _rogue(session: zenoh.Session, node: str, node_id: int) -> list:
 
 
 def _stops(bus, robot, count: int) -> None:
-    """``count`` stops, each answered held and each received by the controller on its key."""
+    """``count`` stops, each answered hold_sent and each received by the controller on its key."""
     before = len(robot.trajectories)
     for i in range(count):
-        assert send_command(bus, "arm", "stop", {}) == {"held": True}
+        assert send_command(bus, "arm", "stop", {}) == {"hold_sent": True}
         wait_for(lambda i=i: len(robot.trajectories) >= before + i + 1, 5, f"stop {i + 1} at the controller")
 
 
@@ -162,7 +162,7 @@ def test_the_stand_in_arm_is_not_moved_by_stop_or_by_joints_a_command_does_not_n
     before = dict(sim.position)
     for _ in range(5):
         spoofer.publish({"shoulder": 1.6, "elbow": -2.0, "lift": 0.0, "head_pan": 1.5})  # fakes within the limits
-    assert send_command(bus, "arm", "stop", {}) == {"held": True}
+    assert send_command(bus, "arm", "stop", {}) == {"hold_sent": True}
     wait_for(lambda: sim.stats.get("trajectories", 0) >= 1, 5, "the stop at the stand-in")
     send_command(bus, "arm", "joints/set", {"names": ["head_pan"], "angles": [0.2], "speed": 1.0})
     wait_for(lambda: sim.stats.get("trajectories", 0) >= 2, 5, "the head move at the stand-in")

@@ -120,7 +120,7 @@ def test_stop_is_the_controllers_hold_and_says_when_it_reached_no_controller(net
     arm = start_arm(net)
     bus = seeing(net, "sender")
     wait_for(lambda: not arm.link.matched(), 5, "the controller's subscription matched")
-    assert send_command(bus, "arm", "stop", {}) == {"held": True}  # no joint state heard: it needs none
+    assert send_command(bus, "arm", "stop", {}) == {"hold_sent": True}  # no joint state heard: it needs none
     wait_for(lambda: robot.trajectories, 5, "the hold trajectory")
     hold = robot.trajectories[-1]
     # joint_trajectory_controller's own stop-and-hold: every joint named, no point (nothing to move to)
