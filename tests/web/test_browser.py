@@ -403,3 +403,25 @@ def test_screenshots_are_checked_for_blankness(browser, tmp_path):
                   document.body.style.cssText = 'background: #123; color: #fe9; font-size: 20px';""")
     assert not browser.screenshot("drawn.png", tmp_path).blank
 
+
+
+def test_frames_per_second_are_the_robots_not_the_pages(net, browser):
+    """Issue 37, item 4: the page showed its own push rate (25 frames/s, ``update_hz``) for a robot
+    at 100, while ``sonibus top`` showed 100. The figure is the robot's, from its frames' ``seq``
+    and ``t``; the page's own rate is in the label's title, said as such; a robot gone silent reads 0."""
+    sim = net.sim("pepper", rate_hz=100, idle=True)
+    node = start_web(net, token=TOKEN)
+    wait_for(lambda: "pepper" in node.shown_robots(), 10, "pepper's info at the web node")
+    open_operator(browser, Stage(net, sim, node))
+    label = '[data-robot="pepper"] .robot-rate'
+
+    def shown() -> float:
+        text = browser.text(label)
+        return float(text.split()[0]) if text.endswith("frames/s") else -1.0
+
+    browser.wait(lambda: shown() > 0, "a rate shown")
+    browser.wait(lambda: shown() > 0 and browser.text(label) == browser.text(".summary-rate"), "both rates shown")
+    assert 90 <= shown() <= 110, f"{browser.text(label)} shown for a robot at 100 frames/s"
+    assert "this page draws" in browser.attribute(label, "title")
+    sim.stop()  # the robot falls silent: its rate is 0, not its last figure
+    browser.wait(lambda: shown() == 0, "0 frames/s once the robot is silent")

@@ -54,7 +54,10 @@
       this.times = new Float64Array(HISTORY);
       this.history = new Map(info.joints.map((joint) => [joint.name, new Float32Array(HISTORY)]));
       this.count = 0;                  // frames taken (the ring's write position is count % HISTORY)
-      this.rate = {frames: 0, since: performance.now(), hz: 0};
+      // The robot's rate, from its frames' own numbers and times (seq, t): the page gets the latest
+      // frame update_hz times a second (25), so counting what it gets told the page's rate, not the
+      // robot's. `pushed` counts those, shown only in the label's title, as the page's own.
+      this.rate = {since: performance.now(), first: null, last: null, pushed: 0};
       this.touched = new Map();        // slider joint → when the operator last moved it
       this.throttle = new Map();       // slider joint → {last (ms), value, timer}
       this.awarenessAsked = null;      // the awareness the operator asked for, until the robot answers
@@ -302,15 +305,21 @@
         if (ring) ring[slot] = frame.v[i];
       });
       this.count += 1;
-      this.rate.frames += 1;
+      this.rate.pushed += 1;
+      if (this.rate.first === null || frame.seq < this.rate.last.seq) this.rate.first = frame;  // (a restart: seq anew)
+      this.rate.last = frame;
       this.fresh = true;
     }
 
     render(now) {
       if (now - this.rate.since >= 1000) {
-        this.rate.hz = this.rate.frames * 1000 / (now - this.rate.since);
-        this.rate = {frames: 0, since: now, hz: this.rate.hz};
-        this.rateLabel.textContent = this.lineRate.textContent = `${this.rate.hz.toFixed(0)} frames/s`;
+        const {first, last, pushed, since} = this.rate;
+        const span = first && last ? last.t - first.t : 0;
+        const hz = span > 0 ? (last.seq - first.seq) / span : 0;  // (no frame for a second: 0, not the last figure)
+        this.rate = {since: now, first: last, last, pushed: 0};
+        this.rateLabel.textContent = this.lineRate.textContent = `${hz.toFixed(0)} frames/s`;
+        this.rateLabel.title = this.lineRate.title =
+          `the robot's frames per second (this page draws ${(pushed * 1000 / (now - since)).toFixed(0)} of them a second)`;
       }
       if (!this.fresh || this.section.hidden) return false;  // (a hidden panel is drawn when shown)
       this.fresh = false;
