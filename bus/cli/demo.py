@@ -24,7 +24,7 @@ from typing import Any
 from .. import config, runner
 from ..errors import ConfigError, OwnershipError
 from ..node import Bus
-from .api import Command, Environment, Exit, add_bus_arguments, bus_config
+from .api import DEMO_LISTEN, Command, Environment, Exit, add_bus_arguments, bus_config
 from .run import stop_lines
 
 WHERE = "demo.toml [demo]"
@@ -130,9 +130,11 @@ def _demo(args: argparse.Namespace, env: Environment) -> Exit:
         except ConfigError as exc:
             if "Address already in use" not in str(exc) or args.listen or args.connect:
                 raise
-            # another demo of this machine listens there: join its bus (still this machine's only)
+            # another demo of this machine listens there: join its bus (still this machine's only: listening
+            # on loopback, not on Zenoh's default of every interface)
             env.say(f"  another demo runs on this machine ({', '.join(config.listen)}): joining its bus")
-            runner.run(adapters, replace(config, listen=(), connect=config.listen), env.stop, on_started=started)
+            runner.run(adapters, replace(config, listen=(DEMO_LISTEN,), connect=config.listen), env.stop,
+                       on_started=started)
     except OwnershipError as exc:
         raise OwnershipError(blamed(str(exc), values, taken=True)) from None
     finally:

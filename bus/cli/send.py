@@ -11,8 +11,8 @@ from ... import schemas
 from ..client import owner_of, send_command, unreached
 from ..commands import from_words
 from ..errors import CommandError, ConfigError, RobotNotFound
-from .api import Command, Environment, Exit, bus_config, joined
-from .hints import reach_hint, robots_hint
+from .api import Command, Environment, Exit, bus_config
+from .hints import not_found, reach_hint, robots_hint, searching
 
 
 def _arguments(p: argparse.ArgumentParser) -> None:
@@ -40,21 +40,18 @@ def _send(args: argparse.Namespace, env: Environment) -> Exit:
                           f"e.g. sonibus send {args.robot} stop")
     request = command_args(args.verb, args.args)
     cfg = bus_config(args)
-    with joined(cfg) as bus:
-        reached = bus.discover()
+    with searching(cfg, args.robot) as (bus, reached):
         owner = owner_of(bus, args.robot, min(2.0, args.timeout))  # not found after this: the command says so
         try:
             result = send_command(bus, args.robot, args.verb, request, timeout=args.timeout, owner=owner)
-        except RobotNotFound as exc:
+        except RobotNotFound:
             if owner is not None:  # its token is here, its commands are not: refused on the way
                 user = f" (user '{cfg.user}')" if cfg.user else ""
                 raise CommandError("refused", f"robot '{args.robot}' is on the bus but nothing answered "
                                               f"'{args.verb}': access control on the robot's machine refuses "
                                               f"commands from this machine{user}") from None
-            exc.message = f"{exc.message} — " + (robots_hint(bus, args.robot) if reached
-                                                  else reach_hint(cfg, reached, "nothing found"))
-            exc.args = (exc.message,)
-            raise
+            raise not_found(args.robot, robots_hint(bus, args.robot) if reached
+                            else reach_hint(cfg, reached, "nothing found")) from None
     env.say(json.dumps(result))
     if unreached(result):  # (a stop is taken whatever the robot's state: its result says what came of it)
         env.hint(f"{args.verb} did not reach robot '{args.robot}' ({result.get('connection', '?')})"
