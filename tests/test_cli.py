@@ -678,6 +678,15 @@ def test_the_demo_banner_names_every_command_that_joins_it_with_demo():
     assert "sonibus send pepper say hello --demo" in banner, banner
 
 
+def test_demo_with_a_listen_off_loopback_is_refused_in_one_line():
+    """Issue 37, item 3: --demo is private; a --listen beside it on every interface would not be."""
+    env = environment()
+    assert main(["send", "pepper", "stop", "--demo", "--listen", "tcp/0.0.0.0:7000"], env) == Exit.USAGE
+    line = one_error_line(env.stderr.getvalue())
+    assert line == ("sonibus: error: --listen tcp/0.0.0.0:7000: --demo keeps to this machine — listen on loopback "
+                    "(tcp/127.0.0.1:PORT or tcp/[::1]:PORT), or leave --demo out to join a network"), line
+
+
 def test_a_command_that_cannot_add_its_options_is_skipped_and_named(caplog):
     def clashing(p):
         p.add_argument("--count")
