@@ -125,6 +125,7 @@ def bus_config(args: argparse.Namespace, base: BusConfig | None = None) -> BusCo
         if getattr(args, flag):
             changes[flag] = tuple(getattr(args, flag))
     if getattr(args, "demo", False):
+        # the demo's bus instead of a file's (a `run` or --config file's connect and listen are for a LAN)
         changes.update(multicast=False, connect=(*changes.get("connect", ()), DEMO_BUS),
                        listen=private(changes.get("listen", ())))
     if args.no_multicast:

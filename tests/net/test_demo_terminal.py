@@ -63,6 +63,9 @@ def test_everything_started_with_demo_listens_on_loopback_only(topology: Topolog
     demo = me.sonibus("demo", "--quiet")
     started(topology, demo, "sonibus: running")
     sink = show(tmp_path, f"""
+        [bus]
+        listen = ["tcp/0.0.0.0:7460"]   # for a LAN: --demo leaves it for the demo's bus
+
         [nodes.sound2]
         subscribe = ["*/joints/*"]
         {SINK.replace("9000", "9002")}
