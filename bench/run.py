@@ -41,6 +41,7 @@ SCRIPTS: dict[str, tuple[str, list[str], float]] = {
     "midi_in_latency": ("midi_in_latency", [], 60),  # midi-in's JACK input: JACK-Client beside rtmidi (issue 33)
     "recorder_rate": ("recorder_rate", [], 90),
     "stop_latency": ("stop_latency", [], 90),
+    "demo_hint": ("demo_hint", [], 120),  # a second terminal told about this machine's demo (issue 37)
     "features": ("features", [], 90),
     "zenoh_hop": ("zenoh_hop", [], 90),
     "receive_cpu": ("receive_cpu", [], 60),
