@@ -45,6 +45,13 @@ def test_a_second_terminal_is_told_whether_this_machines_demo_runs(topology: Top
     joined = me.cli("send", "pepper", "say", "hello", "--demo")
     assert joined.returncode == 0, joined.stderr
     assert '"duration"' in joined.stdout, joined.stdout
+    assert "private to this machine (no multicast, listening on loopback only)" in banner, banner
+
+    public = me.sonibus("demo", "--quiet", "--robot", "nao", "--port", "9001", "--listen", "tcp/0.0.0.0:7449")
+    started(topology, public, "sonibus: running")  # a bus of its own (another port, no multicast)
+    banner = "\n".join(public.lines)
+    assert "private to this machine" not in banner, banner
+    assert "NOT private: listening on tcp/0.0.0.0:7449 — other machines of your network can join" in banner, banner
 
 
 def listeners(pid: int) -> list[str]:
