@@ -70,6 +70,13 @@ def reach_hint(cfg: BusConfig, reached: Sequence[str], what: str) -> str:
             f"machine lets this machine's user see it")
 
 
+def reach_hint_now(cfg: BusConfig, bus: Bus, what: str) -> str:
+    """``reach_hint`` with whom ``bus`` reaches (``Bus.discover``: up to 2 s with nobody
+    to find), not waited for when the missing demo says it all."""
+    missing = no_demo(cfg)
+    return f"{what}: {missing}" if missing else reach_hint(cfg, bus.discover(), what)
+
+
 def robots_hint(bus: Bus, robot: str) -> str:
     """The robots this session sees, and the likely one if ``robot`` is a typo."""
     seen = sorted(claims(bus.alive(keys.robot_token(), timeout=1.0)))

@@ -31,6 +31,9 @@ def test_a_second_terminal_is_told_whether_this_machines_demo_runs(topology: Top
     assert alone.returncode == 3, alone.stderr
     assert "no demo is running on this machine" in alone.stderr and "make demo" in alone.stderr, alone.stderr
     assert "another machine" not in alone.stderr, alone.stderr
+    waiting = me.cli("echo", "pepper/joints/*", "--demo", "--timeout", "1")  # said at once, while it waits
+    assert waiting.returncode == 5, waiting.stderr
+    assert "sonibus: hint: no demo is running on this machine" in waiting.stderr, waiting.stderr
 
     demo = me.sonibus("demo", "--quiet")
     started(topology, demo, "sonibus: running")
