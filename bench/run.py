@@ -43,6 +43,7 @@ SCRIPTS: dict[str, tuple[str, list[str], float]] = {
     "stop_latency": ("stop_latency", [], 90),
     "stop_flood": ("stop_flood", [], 400),  # stop on each path alone and right after floods (issue 33)
     "stop_flood_heavy": ("stop_flood", ["--flood", "5000", "--rate", "50000", "--name", "stop_flood_heavy"], 400),
+    "demo_hint": ("demo_hint", [], 120),  # a second terminal told about this machine's demo (issue 37)
     "features": ("features", [], 90),
     "zenoh_hop": ("zenoh_hop", [], 90),
     "receive_cpu": ("receive_cpu", [], 60),

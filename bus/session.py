@@ -369,9 +369,9 @@ def open_session(config: BusConfig, wait: bool = False) -> zenoh.Session:
         if joined is not None:
             try:
                 with _OPENING:  # (the sockets that appear while it opens are its own)
-                    before = _sockets()
+                    before = sockets()
                     session = zenoh.open(joined.to_zenoh())
-                    after = _sockets()
+                    after = sockets()
                 break
             except ConfigError:
                 raise
@@ -402,7 +402,7 @@ _OPENING = threading.Lock()
 
 def _bound(config: BusConfig, new: dict[str, str]) -> tuple[str, ...]:
     """The endpoints ``config`` listens on, a port 0 replaced by the one bound: found among
-    ``new``, the sockets that appeared as the session opened (``_sockets``)."""
+    ``new``, the sockets that appeared as the session opened (``sockets``)."""
     listen = config.entries().get("listen/endpoints") or default_listen(config.mode)
     free = dict(new)
     out = []
@@ -452,19 +452,20 @@ def _addresses(host: str) -> set[str]:
         return set()
 
 
-def _sockets() -> dict[str, str]:
-    """This process's bound TCP listeners and UDP sockets, by inode: ``{"20634": "tcp/[::]:34865"}``
-    (Linux's ``/proc``; empty elsewhere, where a port 0 stays 0 in ``listening``)."""
+def sockets(pid: int | str = "self") -> dict[str, str]:
+    """The TCP listeners and unconnected UDP sockets of process ``pid`` (default: this one),
+    by inode: ``{"20634": "tcp/[::]:34865"}``, what others can reach it at (Linux's ``/proc``;
+    empty elsewhere, where a port 0 stays 0 in ``listening``)."""
     try:
-        fds = os.listdir("/proc/self/fd")
+        fds = os.listdir(f"/proc/{pid}/fd")
     except OSError:
         return {}
-    inodes = {link[8:-1] for fd in fds if (link := _readlink(f"/proc/self/fd/{fd}")).startswith("socket:[")}
+    inodes = {link[8:-1] for fd in fds if (link := _readlink(f"/proc/{pid}/fd/{fd}")).startswith("socket:[")}
     found = {}
     for table, protocol, state in (("tcp", "tcp", "0A"), ("tcp6", "tcp", "0A"), ("udp", "udp", "07"),
                                    ("udp6", "udp", "07")):
         try:
-            with open(f"/proc/self/net/{table}", encoding="ascii") as rows:
+            with open(f"/proc/{pid}/net/{table}", encoding="ascii") as rows:
                 lines = rows.read().splitlines()[1:]
         except OSError:
             continue

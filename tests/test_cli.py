@@ -659,6 +659,34 @@ def test_demo_blames_its_flags_and_a_taken_name_gets_another(net):
     assert "already owned" in line and line.endswith("or run another: sonibus demo --robot pepper2"), line
 
 
+NOT_BESIDE_A_DEMO = {"router": "a router joins an installation's subnets",
+                     "rehearse": "a show's day at speed, from a show file of its own"}
+
+
+def test_the_demo_banner_names_every_command_that_joins_it_with_demo():
+    """Issue 37, item 2: the banner named `top --demo` only; a second terminal's `send`
+    without --demo scouted the network and never found the demo."""
+    own = {ep.name: ep.load() for ep in entry_points(group=COMMAND_GROUP) if ep.value.startswith("sonibus.")}
+    choices = next(a for a in parser(own)._actions if a.choices and "demo" in a.choices).choices
+    taking = sorted(name for name, sub in choices.items() if "--demo" in sub._option_string_actions)
+    assert {"send", "echo", "record", "top"} <= set(taking), taking
+    values = {name: flag.default for name, flag in demo.wiring().flags.items()}
+    banner = "\n".join(demo.filled(line, values) for line in demo.wiring().banner)
+    named = next((line for line in banner.splitlines() if "--demo (" in line), banner)
+    missing = [name for name in taking if name not in NOT_BESIDE_A_DEMO and not re.search(rf"\b{name}\b", named)]
+    assert not missing, f"the banner's line {named!r} leaves out {missing}"
+    assert "sonibus send pepper say hello --demo" in banner, banner
+
+
+def test_demo_with_a_listen_off_loopback_is_refused_in_one_line():
+    """Issue 37, item 3: --demo is private; a --listen beside it on every interface would not be."""
+    env = environment()
+    assert main(["send", "pepper", "stop", "--demo", "--listen", "tcp/0.0.0.0:7000"], env) == Exit.USAGE
+    line = one_error_line(env.stderr.getvalue())
+    assert line == ("sonibus: error: --listen tcp/0.0.0.0:7000: --demo keeps to this machine — listen on loopback "
+                    "(tcp/127.0.0.1:PORT or tcp/[::1]:PORT), or leave --demo out to join a network"), line
+
+
 def test_a_command_that_cannot_add_its_options_is_skipped_and_named(caplog):
     def clashing(p):
         p.add_argument("--count")

@@ -14,6 +14,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import enum
+import ipaddress
 import json
 import re
 import socket
@@ -31,6 +32,7 @@ from ..session import MODES, BusConfig, check_endpoint, check_option, default_li
 
 COMMAND_GROUP = "sonibus.commands"
 DEMO_BUS = "tcp/127.0.0.1:7448"  # where `sonibus demo` listens (adapters/demo.toml): this machine only
+DEMO_LISTEN = "tcp/127.0.0.1:0"  # where a process that joins the demo listens (for its peers, gossiped): loopback
 
 
 class Exit(enum.IntEnum):
@@ -98,7 +100,8 @@ def add_bus_arguments(parser: argparse.ArgumentParser, installation: bool = True
                        help="raw Zenoh option, e.g. transport/link/tx/lease=2000")
     if demo:
         group.add_argument("--demo", action="store_true",
-                           help=f"join this machine's `sonibus demo` (private: no multicast, connect {DEMO_BUS})")
+                           help=f"join this machine's `sonibus demo` (private: no multicast, connect {DEMO_BUS}, "
+                                "listen on loopback only)")
     if installation:
         group = parser.add_argument_group("installation")
         group.add_argument("--config", dest="bus_file", metavar="CONFIG.toml",
@@ -123,7 +126,9 @@ def bus_config(args: argparse.Namespace, base: BusConfig | None = None) -> BusCo
         if getattr(args, flag):
             changes[flag] = tuple(getattr(args, flag))
     if getattr(args, "demo", False):
-        changes.update(multicast=False, connect=(*changes.get("connect", ()), DEMO_BUS))
+        # the demo's bus instead of a file's (a `run` or --config file's connect and listen are for a LAN)
+        changes.update(multicast=False, connect=(*changes.get("connect", ()), DEMO_BUS),
+                       listen=private(changes.get("listen", ())))
     if args.no_multicast:
         changes["multicast"] = False
     if args.namespace is not None:
@@ -135,6 +140,38 @@ def bus_config(args: argparse.Namespace, base: BusConfig | None = None) -> BusCo
     except ConfigError as exc:  # "key 'namespace': ..." from BusConfig: name the flag instead
         flags = {"namespace": "--namespace", "options": "--zenoh", "mode": "--mode"}
         raise ConfigError(re.sub(r"^key '(\w+)'", lambda m: flags.get(m[1], m[0]), str(exc))) from None
+
+
+def private(listen: tuple[str, ...]) -> tuple[str, ...]:
+    """Where a process that joins this machine's demo listens: ``listen`` (given with
+    ``--listen``) if every endpoint is on loopback, ``DEMO_LISTEN`` if none is given
+    (Zenoh's own default, ``tcp/[::]:0``, is every interface); else ``ConfigError``.
+
+    >>> private(()), private(("tcp/[::1]:7500",))
+    (('tcp/127.0.0.1:0',), ('tcp/[::1]:7500',))
+    >>> private(("tcp/0.0.0.0:7500",))
+    Traceback (most recent call last):
+    sonibus.bus.errors.ConfigError: --listen tcp/0.0.0.0:7500: --demo keeps to this machine — listen on loopback ...
+    """
+    for endpoint in listen:
+        if not on_loopback(endpoint):
+            raise ConfigError(f"--listen {endpoint}: --demo keeps to this machine — listen on loopback "
+                              "(tcp/127.0.0.1:PORT or tcp/[::1]:PORT), or leave --demo out to join a network")
+    return listen or (DEMO_LISTEN,)
+
+
+def on_loopback(endpoint: str) -> bool:
+    """Whether ``endpoint`` (``tcp/127.0.0.1:7448``, ``tcp/[::1]:0``) is on this machine's loopback only.
+
+    >>> on_loopback("tcp/127.0.0.1:0"), on_loopback("tcp/[::1]:7448"), on_loopback("tcp/[::]:0")
+    (True, True, False)
+    """
+    address = re.split(r"[?#]", endpoint.partition("/")[2], maxsplit=1)[0]
+    host = address.rpartition(":")[0].strip("[]")
+    try:
+        return ipaddress.ip_address(host).is_loopback
+    except ValueError:
+        return host == "localhost"
 
 
 def visiting(cfg: BusConfig) -> BusConfig:

@@ -24,7 +24,8 @@ from typing import Any
 from .. import config, runner
 from ..errors import ConfigError, OwnershipError
 from ..node import Bus
-from .api import Command, Environment, Exit, add_bus_arguments, bus_config
+from ..session import BusConfig
+from .api import DEMO_LISTEN, Command, Environment, Exit, add_bus_arguments, bus_config, on_loopback
 from .run import stop_lines
 
 WHERE = "demo.toml [demo]"
@@ -41,13 +42,15 @@ class Flag:
 @dataclass(frozen=True)
 class Wiring:
     """The ``[demo]`` tables: the flags, the options they set (``"node.option"`` →
-    a template), the nodes ``--quiet`` leaves out and the lines said at start."""
+    a template), the nodes ``--quiet`` leaves out, the lines said at start and the
+    line said when the demo keeps to this machine."""
 
     flags: dict[str, Flag]
     sets: dict[str, Any]
     quiet_help: str
     leaves_out: tuple[str, ...]
     banner: tuple[str, ...]
+    private: str
 
 
 def _text() -> str:
@@ -61,10 +64,11 @@ def wiring() -> Wiring:
     try:
         flags = {name: Flag(spec["default"], spec["help"]) for name, spec in table["flags"].items()}
         quiet = table["quiet"]
-        found = Wiring(flags, dict(table["sets"]), quiet["help"], tuple(quiet["leaves_out"]), tuple(table["banner"]))
+        found = Wiring(flags, dict(table["sets"]), quiet["help"], tuple(quiet["leaves_out"]), tuple(table["banner"]),
+                       str(table["private"]))
     except (KeyError, TypeError, AttributeError) as exc:
-        raise ConfigError(f"{WHERE}: {type(exc).__name__}: {exc} — it needs flags, sets, quiet and banner, "
-                          f"as the shipped demo.toml has them") from None
+        raise ConfigError(f"{WHERE}: {type(exc).__name__}: {exc} — it needs flags, sets, quiet, banner and "
+                          f"private, as the shipped demo.toml has them") from None
     for name, flag in flags.items():
         if not isinstance(flag.default, str | int | float) or isinstance(flag.default, bool):
             raise ConfigError(f"{WHERE}: flag '{name}': default {flag.default!r} must be a string or a number")
@@ -116,23 +120,26 @@ def _demo(args: argparse.Namespace, env: Environment) -> Exit:
         adapters = runner.build(wired, only)
     except ConfigError as exc:  # a node option set by a flag: the flag is to blame, not demo.toml
         raise ConfigError(blamed(str(exc), values)) from None
+    config = bus_config(args, wired.bus)
     for line in wiring().banner:
         env.say(filled(line, values))
+    env.say(privacy(config))
     names = ", ".join(f"{a.name} ({a.kind})" for a in adapters)
 
     def started(bus: Bus) -> None:
         env.say(f"sonibus: running {names} on {bus.host}")
 
-    config = bus_config(args, wired.bus)
     try:
         try:
             runner.run(adapters, config, env.stop, on_started=started)
         except ConfigError as exc:
             if "Address already in use" not in str(exc) or args.listen or args.connect:
                 raise
-            # another demo of this machine listens there: join its bus (still this machine's only)
+            # another demo of this machine listens there: join its bus (still this machine's only: listening
+            # on loopback, not on Zenoh's default of every interface)
             env.say(f"  another demo runs on this machine ({', '.join(config.listen)}): joining its bus")
-            runner.run(adapters, replace(config, listen=(), connect=config.listen), env.stop, on_started=started)
+            runner.run(adapters, replace(config, listen=(DEMO_LISTEN,), connect=config.listen), env.stop,
+                       on_started=started)
     except OwnershipError as exc:
         raise OwnershipError(blamed(str(exc), values, taken=True)) from None
     finally:
@@ -140,6 +147,23 @@ def _demo(args: argparse.Namespace, env: Environment) -> Exit:
             for line in stop_lines(adapters):
                 env.say(line)
     return Exit.OK
+
+
+def privacy(config: BusConfig) -> str:
+    """The banner's line on who reaches the demo's bus: demo.toml's ``private`` line when
+    it keeps to this machine (no multicast, every listen on loopback), else what does not.
+
+    >>> privacy(BusConfig(multicast=False, listen=("tcp/127.0.0.1:7448",))) == wiring().private
+    True
+    >>> privacy(BusConfig(multicast=False, listen=("tcp/0.0.0.0:7448",)))
+    '  NOT private: listening on tcp/0.0.0.0:7448 — other machines of your network can join this demo'
+    """
+    public = [e for e in config.listen if not on_loopback(e)] or ([] if config.listen else ["every interface"])
+    if not public and not config.multicast:
+        return wiring().private
+    said = [f"listening on {', '.join(public)}"] if public else []
+    said += ["multicast scouting on"] if config.multicast else []
+    return f"  NOT private: {' and '.join(said)} — other machines of your network can join this demo"
 
 
 def blamed(message: str, values: dict[str, Any], taken: bool = False) -> str:

@@ -23,10 +23,9 @@ import queue
 from typing import Any
 
 from .. import connection
-from ..errors import RobotNotFound
 from ..info import InfoRequests
-from .api import Environment, Exit, bus_config, joined
-from .hints import reach_hint, robots_hint
+from .api import Environment, Exit, bus_config
+from .hints import not_found, reach_hint, robots_hint, searching
 
 
 def table(info: dict[str, Any]) -> list[str]:
@@ -61,8 +60,7 @@ def show(robot: str, args: argparse.Namespace, env: Environment, as_json: bool =
     with the robots there are when nobody answers for it."""
     cfg = bus_config(args)
     answers: queue.Queue[dict[str, Any] | str] = queue.Queue()
-    with joined(cfg) as bus:
-        reached = bus.discover()
+    with searching(cfg, robot) as (bus, reached):
         requests = InfoRequests(bus, lambda _, info: answers.put(info), lambda _, error: answers.put(error),
                                 retry_s=timeout)
         requests.ask(robot)
@@ -71,10 +69,7 @@ def show(robot: str, args: argparse.Namespace, env: Environment, as_json: bool =
         except queue.Empty:
             info = None
         if not isinstance(info, dict):
-            missing = RobotNotFound(robot)
-            missing.message = f"{info or missing.message} — " + (
-                robots_hint(bus, robot) if reached else reach_hint(cfg, reached, "nothing found"))
-            missing.args = (missing.message,)
-            raise missing
+            raise not_found(robot, robots_hint(bus, robot) if reached else reach_hint(cfg, reached, "nothing found"),
+                            info or "")
     env.say(json.dumps(info, indent=2) if as_json else "\n".join(table(info)))
     return Exit.OK

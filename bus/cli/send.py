@@ -12,8 +12,8 @@ from .. import keys
 from ..client import owner_of, send_command, unreached
 from ..commands import from_words
 from ..errors import CommandError, ConfigError, RobotNotFound
-from .api import Command, Environment, Exit, bus_config, joined
-from .hints import reach_hint, robots_hint
+from .api import Command, Environment, Exit, bus_config
+from .hints import not_found, reach_hint, robots_hint, searching
 
 
 def _arguments(p: argparse.ArgumentParser) -> None:
@@ -41,15 +41,14 @@ def _send(args: argparse.Namespace, env: Environment) -> Exit:
                           f"e.g. sonibus send {args.robot} stop")
     request = command_args(args.verb, args.args)
     cfg = bus_config(args)
-    with joined(cfg) as bus:
-        # (a stop goes to every owner whatever the claims say: no waiting for the owner's claim, and
-        # no settling once its owner's stop is known: an emergency's stop starts as soon as it can)
-        stop = args.verb == "stop"
-        reached = bus.discover(keys.command(args.robot, args.verb) if stop else "")
+    # (a stop goes to every owner whatever the claims say: no waiting for the owner's claim, and
+    # no settling once its owner's stop is known: an emergency's stop starts as soon as it can)
+    stop = args.verb == "stop"
+    with searching(cfg, args.robot, keys.command(args.robot, args.verb) if stop else "") as (bus, reached):
         owner = None if stop else owner_of(bus, args.robot, min(2.0, args.timeout))
         try:
             result = send_command(bus, args.robot, args.verb, request, timeout=args.timeout, owner=owner)
-        except RobotNotFound as exc:
+        except RobotNotFound:
             if stop:
                 owner = owner_of(bus, args.robot, 0.5)  # (for the hint)
             if owner is not None:  # its token is here, its commands are not: refused on the way
@@ -57,10 +56,8 @@ def _send(args: argparse.Namespace, env: Environment) -> Exit:
                 raise CommandError("refused", f"robot '{args.robot}' is on the bus but nothing answered "
                                               f"'{args.verb}': access control on the robot's machine refuses "
                                               f"commands from this machine{user}") from None
-            exc.message = f"{exc.message} — " + (robots_hint(bus, args.robot) if reached
-                                                  else reach_hint(cfg, reached, "nothing found"))
-            exc.args = (exc.message,)
-            raise
+            raise not_found(args.robot, robots_hint(bus, args.robot) if reached
+                            else reach_hint(cfg, reached, "nothing found")) from None
     env.say(json.dumps(result))
     if unreached(result):  # (a stop is taken whatever the robot's state: its result says what came of it)
         env.hint(f"{args.verb} did not reach robot '{args.robot}' ({result.get('connection', '?')})"

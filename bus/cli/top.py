@@ -35,7 +35,7 @@ from ..monitor import EventView, JointView, Monitor, NodeView, RobotView, Snapsh
 from ..session import BusConfig
 from ..text import printable
 from .api import Command, Environment, Exit, bus_config, joined
-from .hints import reach_hint
+from .hints import reach_hint_now
 
 EVERY_S = 0.25         # the view is redrawn this often
 STOP_TIMEOUT_S = 5.0   # a robot's answer to stop
@@ -201,7 +201,7 @@ class TopApp(App[int]):
 
     def _find_reach(self, cfg: BusConfig) -> None:
         with contextlib.suppress(Exception):  # (the session closing as top ends: nothing to say any more)
-            self.reach = reach_hint(cfg, self.monitor.bus.discover(), "no node on the bus")
+            self.reach = reach_hint_now(cfg, self.monitor.bus, "no node on the bus")
 
     def on_data_table_row_highlighted(self, event: DataTable.RowHighlighted) -> None:
         if event.data_table is self.robots and event.row_key.value is not None:

@@ -15,7 +15,7 @@ from ..node import Bus
 from ..presence import SILENCE_S
 from ..session import BusConfig
 from .api import Command, Environment, Exit, bus_config, joined
-from .hints import reach_hint
+from .hints import no_demo, reach_hint, reach_hint_now
 
 
 def _adapters(args: argparse.Namespace, env: Environment) -> Exit:
@@ -125,9 +125,12 @@ def _echo(args: argparse.Namespace, env: Environment) -> Exit:
     deadline = time.monotonic() + args.duration if args.duration else None
     seen = 0
     cfg = bus_config(args)
+    missing = no_demo(cfg)
+    if missing:  # said at once (known in a millisecond); it waits on, and joins the demo once it runs
+        env.hint(f"{missing}; echo waits for it")
     with joined(cfg) as bus:
         subscriber, queue = bus.subscribe(args.keyexpr, 65536)
-        hint_at = time.monotonic() + SILENCE_S
+        hint_at = float("inf") if missing else time.monotonic() + SILENCE_S
         last = time.monotonic()  # (the last sample, or the start)
         try:
             while not env.stop.is_set() and (args.count is None or seen < args.count):
@@ -170,7 +173,7 @@ def _echo_hint(bus: Bus, cfg: BusConfig, pattern: str) -> str:
     robots = list(ownership.claims(bus.alive(keys.robot_token(), timeout=0.5)))
     what = f"nothing matched '{pattern}'"
     if not robots:
-        return reach_hint(cfg, bus.discover(), f"{what} and no robot is on the bus")
+        return reach_hint_now(cfg, bus, f"{what} and no robot is on the bus")
     shown = ", ".join(robots[:8])
     example = robots[0]
     return (f"{what} — robots on the bus: {shown}; their keys: {example}/frame, {example}/joints/<Joint> "

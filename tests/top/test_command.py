@@ -13,7 +13,7 @@ import subprocess
 import termios
 import threading
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Sequence
 
 import pytest
 
@@ -23,14 +23,15 @@ EXIT_WITHIN_S = 3.0
 
 
 class Terminal:
-    """``sonibus top ARGS`` on a pty of 160x48, its screen output gathered; always ended."""
+    """``sonibus top ARGS`` on a pty of 160x48, its screen output gathered; always ended.
+    ``prefix`` runs it through another command (``ip netns exec NS``: in a network namespace)."""
 
-    def __init__(self, *args: str) -> None:
+    def __init__(self, *args: str, prefix: Sequence[str] = ()) -> None:
         self.master, slave = pty.openpty()
         fcntl.ioctl(slave, termios.TIOCSWINSZ, struct.pack("HHHH", 48, 160, 0, 0))
         env = {**os.environ, "TERM": "xterm-256color", "COLUMNS": "160", "LINES": "48"}
-        self.process = subprocess.Popen([SONIBUS, "top", *args], stdin=slave, stdout=slave, stderr=slave, env=env,
-                                        start_new_session=True, close_fds=True)
+        self.process = subprocess.Popen([*prefix, SONIBUS, "top", *args], stdin=slave, stdout=slave, stderr=slave,
+                                        env=env, start_new_session=True, close_fds=True)
         os.close(slave)
         self.output = bytearray()
         self._reader = threading.Thread(target=self._read, daemon=True)
