@@ -221,19 +221,18 @@ class WebPages(Adapter):
         self.pages.robots(robots)
 
     def _follow(self, robot: str, kind: str, event: dict[str, Any]) -> None:
-        """What a shown robot runs and says (its behavior and speech events), and its awareness
-        as an ``awareness`` command it carried out set it (its info says it too, when asked again)."""
+        """What a shown robot runs and says (its behavior and speech events), whether a stop holds
+        it still (its command events), and its awareness as an ``awareness`` command it carried out
+        set it (its info says it too, when asked again)."""
         with self._lock:
             shown = self._robots.get(robot)
             if shown is None:
                 return
-            if kind == "command":
-                if event.get("verb") != "awareness" or not event.get("ok") or shown["awareness"] is None:
-                    return
-                changed = {**shown, "awareness": bool(event.get("args", {}).get("enabled"))}
-            else:
-                now = activity.follow(shown["activity"], kind, event)
-                changed = shown if now is None else {**shown, "activity": now}
+            now = activity.follow(shown["activity"], kind, event)
+            changed = shown if now is None else {**shown, "activity": now}
+            if kind == "command" and event.get("verb") == "awareness" and event.get("ok") \
+                    and shown["awareness"] is not None:
+                changed = {**changed, "awareness": bool(event.get("args", {}).get("enabled"))}
             if changed == shown:
                 return
             self._robots[robot] = changed

@@ -1,12 +1,18 @@
-"""What a robot is doing, for the operator page's one line per robot: the behaviors it runs
-and the text it says, followed from the robot's own ``behavior`` and ``speech`` events.
+"""What a robot is doing, for the operator page's one line per robot: the behaviors it runs,
+the text it says, and whether a stop holds it still, followed from the robot's own
+``behavior``, ``speech`` and ``command`` events.
 
 >>> a = follow(IDLE, "behavior", {"name": "animations/Hey_1", "state": "started"})
 >>> a = follow(a, "speech", {"text": "Hello", "state": "started"})
 >>> a
-{'behaviors': ['animations/Hey_1'], 'speaking': 'Hello'}
+{'behaviors': ['animations/Hey_1'], 'speaking': 'Hello', 'stopped': False}
 >>> follow(a, "behavior", {"name": "animations/Hey_1", "state": "stopped"})
-{'behaviors': [], 'speaking': 'Hello'}
+{'behaviors': [], 'speaking': 'Hello', 'stopped': False}
+>>> a = follow(IDLE, "command", {"verb": "stop", "args": {}, "ok": True})
+>>> a["stopped"], follow(a, "command", {"verb": "behavior/list", "args": {}, "ok": True})
+(True, None)
+>>> follow(a, "command", {"verb": "posture", "args": {"name": "Stand"}, "ok": True})["stopped"]
+False
 >>> follow(a, "posture", {"name": "Crouch", "state": "started"}) is None
 True
 
@@ -22,7 +28,10 @@ from typing import Any
 MAX_RUNNING = 8      # behaviors kept as running at once (made-up names must not grow the line)
 MAX_TEXT = 200       # characters kept of a name or a text
 
-IDLE: dict[str, Any] = {"behaviors": [], "speaking": None}
+IDLE: dict[str, Any] = {"behaviors": [], "speaking": None, "stopped": False}
+# Commands that move nothing: a robot held still by a stop stays so after them (any other
+# command the robot carried out is its next move, and ends the hold).
+STILL = ("stop", "behavior/list", "behavior/stop")
 
 
 def follow(activity: dict[str, Any], kind: str, event: dict[str, Any]) -> dict[str, Any] | None:
@@ -41,6 +50,16 @@ def follow(activity: dict[str, Any], kind: str, event: dict[str, Any]) -> dict[s
             changed = {**activity, "speaking": text}
         elif state == "done" and activity["speaking"] in (text, ""):  # (another text's end ends nothing)
             changed = {**activity, "speaking": None}
+        else:
+            return None
+    elif kind == "command":
+        if not event.get("ok"):  # (a refused command moved nothing)
+            return None
+        verb = event.get("verb")
+        if verb == "stop":
+            changed = {**activity, "stopped": True}
+        elif verb not in STILL:
+            changed = {**activity, "stopped": False}
         else:
             return None
     else:

@@ -249,6 +249,14 @@ def test_space_and_escape_stop_the_robot_but_space_types_in_the_say_box(still_st
     wait_for(lambda: watch.still(RATE // 2), 10, "the robot halted (half a second of identical frames)")
     assert len(watch.event("behavior", name=LONG, state="started")) == 1  # Space did not press the button
     browser.wait(lambda: browser.text("#status") == "STOP: ✓ pepper", "the stop's reply shown")
+    # Issue 37, item 6: the robot's line said "connected idle" after STOP; it says it is held
+    # until the robot carries out its next command (a listing is none)
+    line = '[data-summary="pepper"] .summary-doing'
+    browser.wait(lambda: browser.text(line) == "stopped — held still", "the robot's line: held still")
+    assert "next command" in browser.attribute(line, "title")
+    send_command(still_stage.net.bus("asker"), "pepper", "behavior/list")
+    send_command(still_stage.net.bus("mover"), "pepper", "posture", {"name": "Stand"})
+    browser.wait(lambda: browser.text(line) != "stopped — held still", "the hold ended by the posture")
 
     # In the say box Space is a space; Escape stops from anywhere.
     say = browser.find('[data-say="pepper"]')

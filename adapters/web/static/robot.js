@@ -124,11 +124,16 @@
       this.showAwareness();
       const activity = info.activity || {behaviors: [], speaking: null};
       const running = activity.behaviors || [];
-      this.lineDoing.textContent = running.length ? `running ${running.map(shortName).join(", ")}` : "";
-      this.lineDoing.title = running.join(", ");
+      // after a stop, until the robot carries out its next command (any but stop and behavior/list)
+      const held = Boolean(activity.stopped) && !running.length;
+      this.lineDoing.textContent = held ? "stopped — held still"
+        : running.length ? `running ${running.map(shortName).join(", ")}` : "";
+      this.lineDoing.title = held ? "a STOP holds it: its next command (a behavior, a posture, a slider, say) "
+        + "resumes it" : running.join(", ");
+      this.lineDoing.dataset.held = String(held);
       this.lineSaying.textContent = activity.speaking ? `saying “${activity.speaking}”` : "";
       this.lineSaying.title = activity.speaking || "";
-      this.line.dataset.idle = String(!running.length && !activity.speaking);
+      this.line.dataset.idle = String(!held && !running.length && !activity.speaking);
       for (const name of running) {  // (a page opened while it runs: the server heard it start)
         const button = this.behaviorButtons.get(name);
         if (button && button.dataset.state === "idle") this.behaviorState(name, "started");
