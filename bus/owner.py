@@ -175,11 +175,17 @@ class RobotAdapter(Adapter):
             "schema_version": schemas.VERSION,
             "owner": {"host": self.bus.host, "node": self.name},
             "connection": self.connection.info(standing_by=not self.ownership.active),
+            "verbs": list(self.served_verbs()),
         }
         awareness = self.awareness_state()
         if awareness is not None:
             info["awareness"] = awareness
         return info
+
+    def served_verbs(self) -> tuple[str, ...]:
+        """The verbs this robot carries out (its info says them, so a page offers only those):
+        every one, unless an adapter has no interface for some."""
+        return tuple(commands.verbs())
 
     # -- serving ----------------------------------------------------------------
 

@@ -432,6 +432,9 @@ BAD: list[tuple[str, str, Any, str, list[str]]] = [
      ["speed", "nan"]),
     ("angle-outside-limits", "joints/set", {"names": ["HeadYaw", "HeadPitch"], "angles": [1.0, 1.2]},
      "out_of_range", ["HeadPitch", "1.2", "-0.706858", "0.637045"]),
+    # issue 37, item 5: an angle meant in degrees is said so
+    ("degrees", "joints/set", {"names": ["HeadYaw"], "angles": [45.0], "speed": 0.2}, "out_of_range",
+     ["HeadYaw = 45.0 is outside its limits [-2.08567, 2.08567] rad", "(45° = 0.785398 rad: sonibus takes radians)"]),
     ("speed-0", "joints/set", {"names": ["HeadYaw"], "angles": [1.0], "speed": 0}, "out_of_range", ["speed", "0"]),
     ("speed-1.5", "joints/set", {"names": ["HeadYaw"], "angles": [1.0], "speed": 1.5}, "out_of_range",
      ["speed", "1.5"]),

@@ -112,6 +112,9 @@ class Ros2Robot(RobotAdapter):
         info["controller"] = self.controller()
         return info
 
+    def served_verbs(self) -> tuple[str, ...]:
+        return tuple(verb for verb in super().served_verbs() if verb not in UNSUPPORTED)
+
     def controller(self) -> dict[str, Any]:
         """The trajectory controller as this node sees it: its topic, and whether its subscription
         is matched (``why`` not, otherwise): commands reach it only then."""

@@ -45,7 +45,7 @@ class SimArmConfig:
     controller: str = "/joint_trajectory_controller/joint_trajectory"
     description_topic: str = "/robot_description"
     rate_hz: float = 100.0
-    idle: bool = True                        # sway gently when no trajectory is running
+    idle: bool = True                        # sway gently, the joints no trajectory has named yet
     router: str = ""                         # publish through this router instead of the sonibus network
     node_name: str = "sim_arm"
 
@@ -73,6 +73,7 @@ class SimArm(Adapter):
         self.names = model.joint_names
         self.position = {j.name: j.clamp(0.0) for j in model.joints}
         self.start, self.goal, self.t0, self.t1 = dict(self.position), dict(self.position), 0.0, 0.0
+        self.held: set[str] = set()  # joints a trajectory named: they no longer sway
         self.shown = dict(self.position)
         bus = self.own(RosSession(c.router, self.bus)).bus if c.router else self.bus
         node = rmw.Node(c.domain_id, bus.zid, c.node_name)
@@ -116,7 +117,7 @@ class SimArm(Adapter):
         if self.config.idle and now >= self.t1:
             gain = min(1.0, (now - self.t1) / 2.0)  # the sway comes back slowly after a move: no jump
             for i, joint in enumerate(self.description.model.joints):
-                if self.description.is_commanded(joint.name):
+                if self.description.is_commanded(joint.name) and joint.name not in self.held:
                     sway = gain * 0.05 * (joint.max - joint.min) * math.sin(0.5 * now + i)
                     shown[joint.name] = joint.clamp(self.position[joint.name] + sway)
         for joint, mimic in self.description.mimics.items():
@@ -144,6 +145,8 @@ class SimArm(Adapter):
             self.warn("trajectory", f"refused a trajectory for {', '.join(trajectory.names)}: no joints, or unknown")
             return
         self.count("trajectories")
+        # a joint once commanded holds where it is sent (it swayed on: 0.8 sent, 0.64-0.97 read); a stop holds all
+        self.held.update(trajectory.names if trajectory.points else self.names)
         self.position.update(self.shown)  # from where it is seen, sway included
         self.start, self.goal = dict(self.position), dict(self.position)
         self.t0 = time.time()

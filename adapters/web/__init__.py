@@ -25,7 +25,7 @@ from typing import Any
 
 import zenoh
 
-from sonibus.bus import connection, keys
+from sonibus.bus import commands, connection, keys
 from sonibus.bus.adapter import Adapter
 from sonibus.bus.claimwatch import owners
 from sonibus.bus.info import InfoRequests
@@ -46,6 +46,7 @@ __all__ = ["WebConfig", "WebPages"]
 
 log = logging.getLogger(__name__)
 
+VERBS = tuple(commands.verbs())  # what an owner that does not say its verbs carries out
 MAX_WHY = 240        # characters of why a robot's controller is not matched, as the page shows it
 INFO_EVERY_S = 2.0   # how often each robot's info is asked again (behaviors installed, a new owner)
 GONE_AFTER_S = 3.0   # a node whose stats have not come for this long is shown gone
@@ -162,8 +163,9 @@ class WebPages(Adapter):
             return
         owner = info.get("owner", {})
         shown = {"owner": f"{owner.get('host', '?')}/{owner.get('node', '?')}", "model": info.get("model", ""),
-                 "joints": [{"name": j["name"], "min": j["min"], "max": j["max"], "unit": j.get("unit", "rad")}
-                            for j in info.get("joints", ())],
+                 "joints": [{"name": j["name"], "min": j["min"], "max": j["max"], "unit": j.get("unit", "rad"),
+                             "chain": j.get("chain", "")} for j in info.get("joints", ())],
+                 "verbs": list(info.get("verbs", VERBS))[:64],
                  "behaviors": list(info.get("behaviors", ()))[:MAX_BEHAVIORS],
                  "postures": list(info.get("postures", ()))[:MAX_BEHAVIORS], "rate_hz": info.get("rate_hz"),
                  "awareness": info.get("awareness")}

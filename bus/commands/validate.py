@@ -93,7 +93,8 @@ def _check_against_model(verb: str, args: dict[str, Any], model: RobotModel,
             spec = model.joint(name)
             if not spec.min - LIMIT_TOLERANCE <= angle <= spec.max + LIMIT_TOLERANCE:
                 raise CommandError("out_of_range", f"joints/set: {name} = {round(angle, 6)} is outside its limits "
-                                   f"[{round(spec.min, 6)}, {round(spec.max, 6)}] {spec.unit}")
+                                   f"[{round(spec.min, 6)}, {round(spec.max, 6)}] {spec.unit}"
+                                   + _degrees_hint(angle, spec.min, spec.max, spec.unit))
         args["angles"] = [model.joint(n).clamp(a) for n, a in zip(names, angles, strict=True)]
     elif verb == "stiffness":
         groups = {"Body", *(j.chain for j in model.joints), *model.joint_names}
@@ -122,3 +123,17 @@ def expand_stiffness_names(names: Collection[str], model: RobotModel) -> list[st
         group = model.joint_names if name == "Body" else (model.chain(name) or (name,))
         out.extend(j for j in group if j not in out)
     return out
+
+
+def _degrees_hint(value: float, low: float, high: float, unit: str) -> str:
+    """What an angle refused in radians would be had it been meant in degrees, when it is
+    past a turn (no angle in radians is) and that fits the limits (``45`` for HeadYaw:
+    ``" (45° = 0.785398 rad: ...)"``); else nothing (3.0 was meant in radians).
+
+    >>> _degrees_hint(45, -2.08567, 2.08567, "rad"), _degrees_hint(500, -2, 2, "rad"), _degrees_hint(3, -2, 2, "rad")
+    (' (45° = 0.785398 rad: sonibus takes radians)', '', '')
+    """
+    if unit != "rad" or not math.isfinite(value) or abs(value) <= math.tau:
+        return ""
+    radians = math.radians(value)
+    return f" ({value:g}° = {round(radians, 6):g} rad: sonibus takes radians)" if low <= radians <= high else ""

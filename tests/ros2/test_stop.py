@@ -186,3 +186,19 @@ def test_the_page_and_nodes_say_whether_the_controller_is_matched(net, ros):
     wait_for(lambda: web.shown_robots()["arm"]["controller"] == {"matched": True, "why": ""}, 10,
              "the page showing the controller matched")
     assert node_line("h", "arm", arm.describe(), 0.0).endswith("controller matched")
+
+
+def test_the_stand_in_arm_holds_a_commanded_joint_and_sways_the_others(net):
+    """Issue 37, item 1: ros2-sim swayed every joint, a commanded one too (0.8 sent, 0.64-0.97
+    read), and nothing said so. A joint a trajectory named holds where it was sent."""
+    sim = net.start(SimArm(SimArmConfig(urdf=str(ARM_URDF), idle=True, rate_hz=50.0), name="arm-sim"))
+    arm = start_arm(net)
+    bus = seeing(net, "sender")
+    wait_for(lambda: not arm.link.matched(), 5, "the stand-in's controller matched")
+    send_command(bus, "arm", "joints/set", {"names": ["shoulder"], "angles": [0.8], "speed": 1.0})
+    wait_for(lambda: abs(sim.shown["shoulder"] - 0.8) < 1e-9, 10, "the shoulder at 0.8")
+    shoulder, elbow = [], []
+    wait_for(lambda: shoulder.append(sim.shown["shoulder"]) or elbow.append(sim.shown["elbow"]) or len(shoulder) > 100,
+             10, "two seconds of the arm")
+    assert max(abs(v - 0.8) for v in shoulder) < 1e-9, "the commanded shoulder swayed"
+    assert max(elbow) - min(elbow) > 1e-3, "the elbow, never commanded, sways no more: the stand-in is not idle"

@@ -68,13 +68,14 @@ def test_every_slider_moves_at_most_half_a_degree_a_pixel_at_show_sizes(two_robo
             coarse = {name: round(math.degrees(span) / (width - THUMB_PX), 2) for name, span, width in sliders
                       if math.degrees(span) / (width - THUMB_PX) > MOST_DEGREES_PER_PX}
             assert not coarse, f"{robot} at {size}: degrees a pixel {coarse}"
-    # Finer than a pixel: the arrow keys move 0.1°, and the value shows in degrees.
+    # Finer than a pixel: the arrow keys move 0.1°, and the value shows in radians, with its unit
+    # (issue 37, item 5: one unit on the page, as everywhere else; it showed degrees here, radians in the table).
     slider = browser.find('[data-robot="nao"] [data-slider="HeadYaw"]')
     before = float(slider.get_attribute("value"))
     slider.send_keys("\ue014")  # →
     browser.wait(lambda: float(slider.get_attribute("value")) != before, "the arrow key to move the slider")
     assert math.degrees(float(slider.get_attribute("value")) - before) == pytest.approx(0.1, abs=1e-6)
-    assert re.fullmatch(r"-?\d+\.\d°", browser.text('[data-robot="nao"] [data-slider="HeadYaw"] + output'))
+    assert re.fullmatch(r"-?\d+\.\d{3} rad", browser.text('[data-robot="nao"] [data-slider="HeadYaw"] + output'))
     assert browser.errors() == []
 
 

@@ -11,21 +11,24 @@
   const HISTORY = 600;          // frames kept per robot for the charts (24 s at 25/s)
   const TOUCHED_MS = 1500;      // a slider the operator moved is left alone this long before it follows the robot
   const FINE_RAD = Math.PI / 1800;  // a slider's step for an angle: 0.1° (the arrow keys' move)
-  const DEGREES = 180 / Math.PI;
-  const GROUPS = [
-    ["Head", (name) => name.startsWith("Head")],
-    ["Left arm", (name) => /^L(Shoulder|Elbow|Wrist|Hand)/.test(name)],
-    ["Right arm", (name) => /^R(Shoulder|Elbow|Wrist|Hand)/.test(name)],
-    ["Body", () => true],
-  ];
-  const SLIDER_GROUPS = new Set(["Head", "Left arm", "Right arm"]);
+  // A joint's group is its chain, from the robot's info (Pepper's and NAO's, or those an installation names
+  // in a ROS 2 robot's URDF); a joint in none is in "Joints". Legs and wheels get no slider (a slider
+  // on them can topple or drive the robot): they are shown in "Body".
+  const CHAIN_LABELS = {Head: "Head", LArm: "Left arm", RArm: "Right arm"};
+  const BODY = new Set(["Leg", "LLeg", "RLeg", "Wheels"]);
   const STATES = {connected: "connected", connecting: "not connected: connecting", lost: "not connected: lost",
     not_answering: "not answering", standby: "standby: another owner keeps it"};  // (bus/connection.py)
   // What a robots message may change without the panel being built again (its state, not its controls).
   const LIVE = ["connected", "connection", "awareness", "activity", "controller"];
 
-  function groupOf(name) {
-    return GROUPS.find(([, test]) => test(name))[0];
+  function groupOf(joint) {
+    if (!joint.chain) return "Joints";
+    return BODY.has(joint.chain) ? "Body" : CHAIN_LABELS[joint.chain] || joint.chain;
+  }
+
+  /** A value with its unit (every value the page shows has one: radians, metres, as the robot says). */
+  function withUnit(value, unit, digits = 3) {
+    return `${fixed(value, digits)} ${unit}`;
   }
 
   function shortName(behavior) {
@@ -81,8 +84,8 @@
       this.bars = new Map();
       this.sliders = new Map();
       this.behaviorButtons = new Map();
-      const groups = GROUPS.map(([group]) => [group, joints.filter((j) => groupOf(j.name) === group)])
-        .filter(([, members]) => members.length);
+      const names = [...new Set(joints.map(groupOf))].sort((a, b) => (a === "Body") - (b === "Body"));  // (Body last)
+      const groups = names.map((group) => [group, joints.filter((j) => groupOf(j) === group)]);
       this.connection = el("span", {class: "robot-connection"});
       this.rateLabel = el("span", {class: "robot-rate"});
       const header = el("header", {},
@@ -90,9 +93,13 @@
         el("span", {class: "robot-meta"}, `${this.info.model || "robot"} · ${this.info.owner || "no owner"}`),
         this.connection, this.rateLabel);
       // (one fieldset around them all: disabled, it disables every control inside while the robot is not connected)
+      // only what the robot carries out (its info's verbs: a ROS 2 arm has no speech, behaviors nor awareness)
+      const serves = new Set(this.info.verbs || ["behavior/run", "posture", "say", "awareness", "joints/set"]);
+      const boxes = [["behavior/run", () => this.behaviorBox()], ["posture", () => this.postureBox()],
+        ["say", () => this.sayBox()], ["awareness", () => this.awarenessBox()]];
       this.controls = el("fieldset", {class: "controls"},
-        el("div", {class: "actions"}, this.behaviorBox(), this.postureBox(), this.sayBox(), this.awarenessBox()),
-        el("div", {class: "sliders"}, ...groups.filter(([group]) => SLIDER_GROUPS.has(group))
+        el("div", {class: "actions"}, ...boxes.filter(([verb]) => serves.has(verb)).map(([, box]) => box())),
+        el("div", {class: "sliders"}, ...groups.filter(([group]) => group !== "Body" && serves.has("joints/set"))
           .map(([group, members]) => this.sliderBox(group, members))));
       this.charts = groups.map(([group, members]) => new StripChart(group, members, () => {
         this.fresh = true;
@@ -153,7 +160,8 @@
       this.cells.set(joint.name, cell);
       this.bars.set(joint.name, bar);
       return el("div", {class: "joint"}, el("span", {class: "name"}, joint.name), cell,
-        el("span", {class: "range-bar", title: `${fixed(joint.min, 2)} … ${fixed(joint.max, 2)}`}, bar));
+        el("span", {class: "unit"}, joint.unit),
+        el("span", {class: "range-bar", title: `${fixed(joint.min, 2)} … ${withUnit(joint.max, joint.unit, 2)}`}, bar));
     }
 
     behaviorBox() {
@@ -230,9 +238,10 @@
         const slider = el("input", {type: "range", min: joint.min, max: joint.max,
           step: angle ? FINE_RAD : Math.max((joint.max - joint.min) / 1000, 1e-6), value: (joint.min + joint.max) / 2,
           dataset: {slider: joint.name}, "aria-label": `${this.name} ${joint.name}`,
-          title: `${joint.name}: drag, or ← → in steps of ${angle ? "0.1°" : "a thousandth"}`});
+          title: `${joint.name} (${joint.unit}): drag, or ← → in steps of `
+            + `${angle ? `${fixed(FINE_RAD, 4)} rad (0.1°)` : "a thousandth of its range"}`});
         const show = (value) => {
-          output.textContent = angle ? `${fixed(value * DEGREES, 1)}°` : fixed(value, 2);
+          output.textContent = withUnit(value, joint.unit);
         };
         slider.addEventListener("input", () => {
           this.touched.set(joint.name, performance.now());
