@@ -1,0 +1,79 @@
+"""The issue's cutoff example end to end: frames → features → map node → OSC sink →
+a UDP socket, and each value received is the curve's formula applied to the hand
+height of the same frame (matched by its ``t``), smoothed as documented."""
+
+from __future__ import annotations
+
+import math
+import threading
+
+from pythonosc.osc_message import OscMessage
+
+from sonibus.adapters.osc import OscSink, OscSinkConfig
+from sonibus.bus import codec, keys
+
+from ..conftest import wait_for
+from ..features.conftest import model_info
+from ..features.test_processor import start
+from ..osc.pd import Datagrams
+from .conftest import ROOT, cutoff_example, map_node, sweep
+
+
+def test_the_cutoff_example_is_at_most_8_lines_and_the_shipped_example_holds_it():
+    lines = cutoff_example().strip().splitlines()
+    assert len(lines) <= 8, lines
+    assert cutoff_example() in (ROOT / "examples" / "mapping.toml").read_text(encoding="utf-8")
+
+
+def test_pd_gets_sound_cutoff_as_the_exp_curve_of_the_hand_height_smoothed(net, owner):
+    fake = owner("pepper", model_info("pepper"))
+    start(net, robots="pepper", features=("hand",))
+    node = map_node(net, cutoff_example())
+    receiver = Datagrams()
+    watch = net.bus("watch")
+    heights: list[tuple[float, float]] = []
+    lock = threading.Lock()
+
+    def take(sample):
+        message = codec.decode(sample.payload.to_bytes())
+        with lock:
+            heights.append((message["t"], message["v"][2]))
+
+    subscriber = watch.session.declare_subscriber("pepper/derived/hand/R", take)
+    try:
+        net.start(OscSink(OscSinkConfig(subscribe=("sound/derived/**",), targets=(receiver.target,),
+                                        derived_address="/{robot}/{name}", extra=("t",)), name="pd"))
+        box = []
+        sweep(fake, until=lambda: box.extend(watch.query(keys.derived_info("pepper"), timeout=0.1)) or box)
+        hand = next(d for d in box[0]["derived"] if d["key"] == "pepper/derived/hand/R")
+        low, high = hand["box"]["min"][2], hand["box"]["max"][2]
+        sweep(fake, until=lambda: node.stats["sent"] > 0)
+        sweep(fake, 120)
+        wait_for(lambda: len(heights) >= 120, what="the hand heights")
+        wait_for(lambda: max(heights)[0] in {OscMessage(d).params[1] for d in receiver.data()},
+                 what="the last hand height's cutoff in the receiver")
+    finally:
+        subscriber.undeclare()
+        receiver.close()
+    received = [OscMessage(d) for d in receiver.data()]
+    assert {m.address for m in received} == {"/sound/cutoff"}
+    by_t = {m.params[1]: m.params[0] for m in received}
+    with lock:
+        order = sorted(heights)
+    first = min(by_t)
+    start_at = next(i for i, (t, _) in enumerate(order) if t == first)
+    tau = 0.080
+    y: float | None = None
+    previous = 0.0
+    checked = 0
+    for t, z in order[start_at:]:  # the documented formula, written out again: 200·10^x, one-pole of τ = 80 ms
+        x = min(1.0, max(0.0, (z - low) / (high - low)))
+        target = 200.0 * 10.0 ** x
+        y = target if y is None else y + (1.0 - math.exp(-(t - previous) / tau)) * (target - y)
+        previous = t
+        assert t in by_t, f"no output for the hand height of t = {t}"
+        assert math.isclose(by_t[t], y, rel_tol=1e-6), (t, by_t[t], y)  # (float32 on the wire)
+        checked += 1
+    assert checked >= 100
+    assert len({round(v) for v in by_t.values()}) > 20  # the hand really moved the cutoff
+    assert all(200.0 <= v <= 2000.0 for v in by_t.values())
