@@ -22,7 +22,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from sonibus.bus import keys, messages
-from sonibus.bus.errors import ConfigError
+from sonibus.bus.errors import ConfigError, controls, visible
 from sonibus.bus.options import bad
 
 from .curves import CURVES, MAX_POINTS, Curve, Exp, Linear, Log, Points, S, default_base
@@ -189,6 +189,9 @@ def _sources(where: str, table: dict[str, Any]) -> tuple[Source, ...]:
         match = _AXIS.match(pattern)
         key, axis = (match[1], match[2]) if match else (pattern, "")
         try:
+            if any(c in key for c in " ?#@") or controls(key):
+                raise ConfigError(f"'{visible(pattern)}' is not a key: it holds a space, '?', '#', '@' or a "
+                                  "control character")
             keys.expr(key)
         except ConfigError as exc:
             raise bad(at, str(exc)) from None
