@@ -28,7 +28,7 @@ from sonibus.bus.queue import SampleQueue
 from sonibus.bus.streams import Incoming, Streams
 
 from .chain import Chain
-from .config import MapConfig, MapSpec, Source
+from .config import MapConfig, Source
 
 log = logging.getLogger(__name__)
 
@@ -37,7 +37,8 @@ FEATURE = "map"      # <node>/derived/map/<map>
 INFO_RETRY_S = 0.5  # a robot's info asked again this often while a source waits for its range (features come late)
 MAX_ROBOTS = 256     # robots whose ranges are kept (names from the bus)
 MAX_KEYS = 10_000    # keys bound to map sources (patterns match names from the bus)
-Binding = tuple[Chain, Source, int]  # a map, one of its sources, and the component it takes (-1: the only one)
+# a map, one of its sources, the component it takes (-1: the only one), and its range once known
+Binding = tuple[Chain, Source, int, tuple[float, float] | None]
 
 
 class Ranges:
@@ -69,6 +70,11 @@ class Ranges:
         return spans[max(component, 0)] if spans and max(component, 0) < len(spans) else None
 
 
+def _few(names: list[str], shown: int = 5) -> str:
+    """``names`` joined, the first ``shown`` of them and how many more."""
+    return ", ".join(names[:shown]) + (f" and {len(names) - shown} more" if len(names) > shown else "")
+
+
 def _numbers(*values: Any) -> bool:
     return all(isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v) for v in values) \
         and values[0] != values[1]
@@ -89,8 +95,9 @@ class MapNode(Adapter):
         self._matchers = [(zenoh.KeyExpr(keys.expr(source.pattern)), chain, source)
                           for chain in self.chains.values() for source in chain.spec.sources]
         self._heard: dict[str, float] = {}         # map → when a source last sent (monotonic)
-        self._seen: set[tuple[str, str]] = set()   # (map, source) that sent at least once
+        self._seen: set[Source] = set()            # sources that sent at least once
         self._silent: dict[str, float] = {}        # map → when it went silent (monotonic)
+        self._back: list[str] = []                 # maps silent until this message
         self._started = time.monotonic()
         self._unseen_said = False
         self._seq = 0
@@ -152,8 +159,8 @@ class MapNode(Adapter):
                 zip(message.selected.sources, ((v,) for v in message.values), strict=True)
             t = message.t
         for source, numbers in values:
-            for chain, src, component in self._bound(source):
-                span = self._span(chain, src, source, component)
+            for chain, src, component, known in self._bound(source):
+                span = known or self._span(chain, src, source, component)
                 if len(numbers) > 1 and component < 0:
                     self.count("bad_source")
                     axes = self._ranges.get(source.robot)
@@ -169,38 +176,51 @@ class MapNode(Adapter):
                     continue
                 name = chain.spec.name
                 self._heard[name] = now
-                self._seen.add((name, src.name))
+                if src not in self._seen:
+                    self._seen.add(src)
                 if chain.feed(src.name, numbers[max(component, 0)], span, t):
                     touched[name] = chain
-        for name, chain in touched.items():
-            self._publish(name, chain, t)
+        sent = sum(self._publish(name, chain, t) for name, chain in touched.items())
+        if self._back:
+            many = len(self._back) > 1
+            log.info("%s: map%s %s: %s sources send again", self.name, "s" if many else "",
+                     _few([f"'{n}'" for n in self._back]), "their" if many else "its")
+            self._back.clear()
+        if sent:
+            self.count("sent", sent)
+            self.record_latency(time.time() - t)  # (once a message, however many maps it fed)
 
-    def _publish(self, name: str, chain: Chain, t: float) -> None:
+    def _publish(self, name: str, chain: Chain, t: float) -> bool:
+        """Compute map ``name`` and publish its output (True) and its threshold's change."""
         out = chain.compute(t)
         for source, span in chain.frozen:
             log.info("%s: map '%s': source '%s' calibrated to [%g, %g]", self.name, name, source, *span)
         chain.frozen.clear()
         if out is None:
-            return
+            return False
         if name in self._silent:
             del self._silent[name]
-            log.info("%s: map '%s': its sources send again", self.name, name)
+            self._back.append(name)
         self._seq += 1
-        if out.value is not None:
-            self._publishers[name].put(codec.encode({"t": t, "seq": self._seq, "v": out.value}))
-            self.count("sent")
-            self.record_latency(time.time() - t)
         if out.trigger is not None:
             self.bus.put(keys.event(self.name, name), {"t": t, "kind": name, "state": out.trigger,
                                                        "value": chain.value if chain.value is not None else 0.0})
             self.count("triggers")
+        if out.value is None:
+            return False
+        self._publishers[name].put(codec.encode({"t": t, "seq": self._seq, "v": out.value}))
+        return True
 
     def _bound(self, source: keys.Key) -> tuple[Binding, ...]:
-        """The maps' sources that ``source`` feeds (worked out once per key)."""
+        """The maps' sources that ``source`` feeds, with its range when known (worked out once per
+        key, and again when a robot's info comes)."""
         found = self._bindings.get(source.key)
         if found is None:
-            found = tuple((chain, src, self._component(src, source)) for expr, chain, src in self._matchers
-                          if expr.intersects(source.key))
+            ranges = self._ranges.get(source.robot)
+            found = tuple((chain, src, component, (0.0, 1.0) if source.section == "events" else
+                           ranges.of(source, component) if ranges is not None else None)
+                          for expr, chain, src in self._matchers if expr.intersects(source.key)
+                          for component in (self._component(src, source),))
             self._bindings.put(source.key, found, 2 * len(source.key) + PER_NAME)
         return found
 
@@ -246,25 +266,24 @@ class MapNode(Adapter):
             self._unseen_said = True
             for chain in self.chains.values():
                 for src in chain.spec.sources:
-                    if (chain.spec.name, src.name) not in self._seen:
+                    if src not in self._seen:
                         self.count("unseen")
                         log.warning("%s: map '%s': source '%s' sent nothing in %g s — is it published? "
                                     "(sonibus echo '%s'; a derived value needs the features node)",
                                     self.name, chain.spec.name, src.pattern, cfg.unseen_s, src.pattern)
-        for name in self.chains:
-            heard = self._heard.get(name)
-            if heard is None or name in self._silent or now - heard < cfg.silent_s:
-                continue
+        gone = [name for name in self.chains if name not in self._silent
+                and now - self._heard.get(name, math.inf) >= cfg.silent_s]
+        for name in gone:
             self._silent[name] = now
             self.count("silent")
-            chain = self.chains[name]
-            last = f"{chain.value:g} {chain.spec.unit}".rstrip() if chain.value is not None else "none"
-            log.warning("%s: map '%s': its sources (%s) silent for %g s; its output stops at its last value (%s)",
-                        self.name, name, ", ".join(s.pattern for s in chain.spec.sources), cfg.silent_s, last)
             self.bus.put(keys.event(self.name, "map"), {"t": time.time(), "kind": "map", "map": name,
                                                         "state": "silent"})
-
-    @staticmethod
-    def spec_of(config: MapConfig, name: str) -> MapSpec:
-        """Map ``name`` of ``config`` (``KeyError`` if it has none)."""
-        return next(spec for spec in config.specs if spec.name == name)
+        if len(gone) == 1:
+            chain = self.chains[gone[0]]
+            last = f"{chain.value:g} {chain.spec.unit}".rstrip() if chain.value is not None else "none"
+            log.warning("%s: map '%s': its sources (%s) silent for %g s; its output stops at its last value (%s)",
+                        self.name, gone[0], ", ".join(s.pattern for s in chain.spec.sources), cfg.silent_s, last)
+        elif gone:  # (a robot that stops silences every map of its joints at once: one line, not fifty)
+            sources = dict.fromkeys(s.pattern for name in gone for s in self.chains[name].spec.sources)
+            log.warning("%s: %d maps (%s) silent for %g s, their sources (%s) with them; their outputs stop at "
+                        "their last values", self.name, len(gone), _few(gone), cfg.silent_s, _few(list(sources)))
