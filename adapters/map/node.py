@@ -81,7 +81,7 @@ def _numbers(*values: Any) -> bool:
 
 
 class MapNode(Adapter):
-    """Maps: robots' joints, derived values and events → sound parameters on the bus, with ranges and units."""
+    """Mappings from movement to sound: curves, smoothing, thresholds, out as signals with ranges and units."""
 
     Config = MapConfig
     counters = ("triggers", "waiting_info", "not_finite", "expr_errors", "clamped", "bad_source",

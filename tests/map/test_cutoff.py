@@ -5,17 +5,19 @@ height of the same frame (matched by its ``t``), smoothed as documented."""
 from __future__ import annotations
 
 import math
+import socket
 import threading
 
+import pytest
 from pythonosc.osc_message import OscMessage
 
 from sonibus.adapters.osc import OscSink, OscSinkConfig
 from sonibus.bus import codec, keys
 
-from ..conftest import wait_for
+from ..conftest import free_port, wait_for
 from ..features.conftest import model_info
 from ..features.test_processor import start
-from ..osc.pd import Datagrams
+from ..osc.pd import Datagrams, Patch, errors, osc_input, printed, start_pd
 from .conftest import ROOT, cutoff_example, map_node, sweep
 
 
@@ -77,3 +79,27 @@ def test_pd_gets_sound_cutoff_as_the_exp_curve_of_the_hand_height_smoothed(net, 
     assert checked >= 100
     assert len({round(v) for v in by_t.values()}) > 20  # the hand really moved the cutoff
     assert all(200.0 <= v <= 2000.0 for v in by_t.values())
+
+
+@pytest.mark.external
+def test_pure_data_routes_sound_cutoff_as_the_docs_show(net, owner, spawn, tmp_path):
+    """docs/mapping.md's Pd chain, in headless Pd: ``[route sound]`` → ``[route cutoff]`` with a
+    target's ``derived_address = "/{robot}/{name}"``, and the default address beside it."""
+    fake = owner("pepper", model_info("pepper"))
+    start(net, robots="pepper", features=("hand",))
+    node = map_node(net, cutoff_example())
+    short, default = free_port(socket.SOCK_DGRAM), free_port(socket.SOCK_DGRAM)
+    patch = Patch()
+    routed = patch.chain(osc_input(patch, short), patch.obj("route", "sound"), patch.obj("route", "cutoff"))
+    patch.connect(routed, 0, patch.obj("print", "CUTOFF"))
+    whole = patch.chain(osc_input(patch, default), patch.obj("route", "sound"), patch.obj("route", "derived"),
+                        patch.obj("route", "map"), patch.obj("route", "cutoff"))
+    patch.connect(whole, 0, patch.obj("print", "DEFAULT"))
+    pd = start_pd(spawn, tmp_path, patch)
+    net.start(OscSink(OscSinkConfig(subscribe=("sound/derived/**",), targets=(
+        f"127.0.0.1:{default}", {"to": f"127.0.0.1:{short}", "derived_address": "/{robot}/{name}"})), name="pd"))
+    sweep(fake, until=lambda: len(printed(pd, "CUTOFF")) >= 20 and len(printed(pd, "DEFAULT")) >= 20)
+    assert not errors(pd), errors(pd)
+    values = [float(v) for v in printed(pd, "CUTOFF")]
+    assert all(200 <= v <= 2000 for v in values) and len(set(values)) > 5, values
+    assert node.chains["cutoff"].spec.unit == "Hz"
