@@ -87,6 +87,8 @@ class Chain:
             return False
         low, high = span
         x = (raw - low) / (high - low)
+        if x != x:  # NaN: both overflowed (a calibrated span of ±1e308); in halves they do not
+            x = (0.5 * raw - 0.5 * low) / (0.5 * high - 0.5 * low)
         self.values[name] = 0.0 if x <= 0.0 else 1.0 if x >= 1.0 else x  # (x may be ±inf: a tiny calibrated span)
         return True
 
@@ -112,6 +114,9 @@ class Chain:
             x = 1.0 - x
         lo, hi = self._to
         y = lo + (hi - lo) * spec.curve(x)
+        if not math.isfinite(y):  # (never into a filter: a NaN in its state would stop the map for good)
+            self.count("not_finite", 1)
+            return None
         if self.smoother is not None:
             y = self.smoother(t, y)
         if self.limiter is not None:

@@ -16,6 +16,7 @@ from __future__ import annotations
 import logging
 import math
 import time
+from collections.abc import Iterable
 from typing import Any
 
 import zenoh
@@ -34,6 +35,7 @@ log = logging.getLogger(__name__)
 
 INFO = "\0info"      # queue items carrying a robot's info, so only the worker touches state
 FEATURE = "map"      # <node>/derived/map/<map>
+IMPULSE_S = 0.001    # an event's 1 falls back to 0 this much later (by the event's own clock)
 INFO_RETRY_S = 0.5  # a robot's info asked again this often while a source waits for its range (features come late)
 MAX_ROBOTS = 256     # robots whose ranges are kept (names from the bus)
 MAX_KEYS = 10_000    # keys bound to map sources (patterns match names from the bus)
@@ -149,15 +151,19 @@ class MapNode(Adapter):
             self._watch(time.monotonic())
 
     def _take(self, message: Incoming) -> None:
+        if message.event is not None:  # an event is an impulse: 1, then 0 again (a threshold: on, then off)
+            t = float(message.event.get("t") or time.time())
+            self._map([(message.source, (1.0,))], t)
+            self._map([(message.source, (0.0,))], t + IMPULSE_S)
+            return
+        self._map([(message.source, message.values)] if message.selected is None else
+                  zip(message.selected.sources, ((v,) for v in message.values), strict=True), message.t)
+
+    def _map(self, values: Iterable[tuple[keys.Key, tuple[float, ...]]], t: float) -> None:
+        """Feed each map the values of its sources among ``values`` (all of time ``t``), then
+        compute and publish the maps they fed."""
         touched: dict[str, Chain] = {}
         now = time.monotonic()
-        if message.event is not None:
-            values: Any = [(message.source, (1.0,))]   # an event: an impulse of 1
-            t = float(message.event.get("t") or time.time())
-        else:
-            values = [(message.source, message.values)] if message.selected is None else \
-                zip(message.selected.sources, ((v,) for v in message.values), strict=True)
-            t = message.t
         for source, numbers in values:
             for chain, src, component, known in self._bound(source):
                 span = known or self._span(chain, src, source, component)
@@ -176,8 +182,7 @@ class MapNode(Adapter):
                     continue
                 name = chain.spec.name
                 self._heard[name] = now
-                if src not in self._seen:
-                    self._seen.add(src)
+                self._seen.add(src)
                 if chain.feed(src.name, numbers[max(component, 0)], span, t):
                     touched[name] = chain
         sent = sum(self._publish(name, chain, t) for name, chain in touched.items())

@@ -193,3 +193,12 @@ def test_no_expression_of_wild_sources_gives_an_output_outside_its_range(a, b, e
         out = chain.compute(i * 0.01)
         if out is not None:
             assert math.isfinite(out.value) and -3 <= out.value <= 3, (x, y, out)
+
+
+def test_a_calibrated_span_of_the_whole_float_range_does_not_stop_the_map():
+    """Found by the property above: a span of ±1e308 overflowed to inf/inf = NaN, which stayed in the
+    one-pole's state and dropped every output after it."""
+    out = run({"calibrate_s": 0.05, "smooth_ms": 1.0, "to": [200, 2000]},
+              [7.976931348623158e307, -1e308, 7.976931348623158e307] + [0.0] * 20, span=None)
+    assert out[1] == 200.0 and out[-1] is not None and 200.0 <= out[-1] <= 2000.0, out
+    assert all(v is not None for v in out[1:]), out
