@@ -1,13 +1,5 @@
-"""Options of the ``map`` node: its maps, each a table of steps.
-
-    [nodes.sound]
-    adapter = "map"
-    [nodes.sound.maps.cutoff]
-    source = "pepper/derived/hand/R.z"
-    to = [200, 2000]
-    unit = "Hz"
-    curve = "exp"
-    smooth_ms = 80
+"""Options of the ``map`` node: its maps, each a table of steps (the package's docstring
+has an example; docs/mapping.md every step).
 
 Every key of a map is checked here, so a file with a bad map is refused when it
 is loaded, with its file, line and key (``bad("maps.cutoff.curve", ...)``: the

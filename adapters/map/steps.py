@@ -21,22 +21,33 @@ def _dt(last: float | None, t: float) -> float:
     return MIN_DT if last is None or not t - last > MIN_DT else t - last
 
 
-class OnePole:
-    """One-pole low-pass with time constant ``tau`` s: ``y += (1 − e^(−dt/τ))·(x − y)``,
-    so a step reaches 63 % in ``tau`` whatever the sample rate; the first sample passes."""
+class _Timed:
+    """A step on values with times: the first value passes, each next one is ``_next(y, x, dt)``
+    of the last output ``y``."""
 
-    def __init__(self, tau: float) -> None:
-        self.tau = tau
+    def __init__(self) -> None:
         self.y: float | None = None
         self.t: float | None = None
 
     def __call__(self, t: float, x: float) -> float:
-        if self.y is None:
-            self.y = x
-        else:
-            self.y += -math.expm1(-_dt(self.t, t) / self.tau) * (x - self.y)
+        self.y = x if self.y is None else self._next(self.y, x, _dt(self.t, t))
         self.t = t
         return self.y
+
+    def _next(self, y: float, x: float, dt: float) -> float:
+        raise NotImplementedError
+
+
+class OnePole(_Timed):
+    """One-pole low-pass with time constant ``tau`` s: ``y += (1 − e^(−dt/τ))·(x − y)``,
+    so a step reaches 63 % in ``tau`` whatever the sample rate; the first sample passes."""
+
+    def __init__(self, tau: float) -> None:
+        super().__init__()
+        self.tau = tau
+
+    def _next(self, y: float, x: float, dt: float) -> float:
+        return y - math.expm1(-dt / self.tau) * (x - y)
 
 
 def smoothing_factor(cutoff_hz: float, dt: float) -> float:
@@ -71,22 +82,16 @@ class OneEuro:
         return self.x
 
 
-class RateLimit:
+class RateLimit(_Timed):
     """At most ``per_s`` of change per second: ``y = y₀ + clamp(x − y₀, ±per_s·dt)``."""
 
     def __init__(self, per_s: float) -> None:
+        super().__init__()
         self.per_s = per_s
-        self.y: float | None = None
-        self.t: float | None = None
 
-    def __call__(self, t: float, x: float) -> float:
-        if self.y is None:
-            self.y = x
-        else:
-            step = self.per_s * _dt(self.t, t)
-            self.y += min(step, max(-step, x - self.y))
-        self.t = t
-        return self.y
+    def _next(self, y: float, x: float, dt: float) -> float:
+        step = self.per_s * dt
+        return y + min(step, max(-step, x - y))
 
 
 class Deadband:
