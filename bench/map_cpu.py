@@ -1,5 +1,5 @@
 """CPU of the map node: 50 maps on a Pepper's frames at 100 Hz, beside a minimal harness
-doing the same arithmetic in the same run.
+doing the same arithmetic in the same run; and source-to-OSC latency through a map.
 
 - map node: a robot (its info served, its frames put on ``pepper/frame`` at 100 Hz, 17
   joints moving) and a ``map`` node with 50 maps over its joints (linear, exp, log, s
@@ -9,6 +9,8 @@ doing the same arithmetic in the same run.
 - harness, same run, same frames: one thread takes each frame from a Zenoh subscriber's
   queue, decodes it, does the same arithmetic written out by hand (fraction, curve, scale,
   one-pole) for 50 outputs, encodes them and puts them on 50 publishers.
+- latency, same run: the robot's ``t`` of each HeadYaw to its arrival at a UDP socket, through
+  a map (exp curve, one-pole) and an OSC sink, beside HeadYaw straight through an OSC sink.
 
     .venv/bin/python bench/map_cpu.py [--seconds 8]
 
@@ -21,14 +23,17 @@ import argparse
 import math
 import os
 import queue
+import socket
 import threading
 import time
 from typing import Any
 
-from common import free_port, write
+from common import free_port, latency_stats, write
+from pythonosc.osc_message import OscMessage
 
 from sonibus import schemas
 from sonibus.adapters.map import MapConfig, MapNode
+from sonibus.adapters.osc import OscSink, OscSinkConfig
 from sonibus.bus import Bus, BusConfig, codec, keys, load_model, messages, open_session
 
 RATE_HZ = 100.0
@@ -161,6 +166,61 @@ def harness(bus: Bus, seconds: float) -> dict[str, float]:
             publisher.undeclare()
 
 
+class Receiver:
+    """A UDP socket keeping (arrival time, ``t`` sent with the value) of every OSC message."""
+
+    def __init__(self) -> None:
+        self.socket = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self.socket.bind(("127.0.0.1", 0))
+        self.socket.settimeout(0.1)
+        self.target = f"127.0.0.1:{self.socket.getsockname()[1]}"
+        self.latencies: list[float] = []
+        self.stop = threading.Event()
+        self.thread = threading.Thread(target=self._run, daemon=True)
+        self.thread.start()
+
+    def _run(self) -> None:
+        while not self.stop.is_set():
+            try:
+                data = self.socket.recv(65536)
+            except TimeoutError:
+                continue
+            arrived = time.time()
+            self.latencies.append(arrived - OscMessage(data).params[-1])
+
+    def close(self) -> None:
+        self.stop.set()
+        self.thread.join()
+        self.socket.close()
+
+
+def latency(bus: Bus, seconds: float) -> dict[str, Any]:
+    """Source to OSC: the robot's ``t`` to a UDP socket, for HeadYaw straight through an OSC
+    sink, and for a map of HeadYaw (exp curve, one-pole) through the map node and an OSC sink."""
+    direct, mapped = Receiver(), Receiver()
+    node = MapNode(MapConfig(maps={"yaw": {"source": "pepper/joints/HeadYaw", "to": [200, 2000], "curve": "exp",
+                                           "smooth_ms": 80}}), name="sound")
+    sinks = [OscSink(OscSinkConfig(subscribe=("pepper/joints/HeadYaw",), targets=(direct.target,), extra=("t",)),
+                     name="plain"),
+             OscSink(OscSinkConfig(subscribe=("sound/derived/**",), targets=(mapped.target,), extra=("t",)),
+                     name="mapped")]
+    try:
+        for adapter in (node, *sinks):
+            adapter.start(bus)
+        time.sleep(1.0)
+        direct.latencies.clear()
+        mapped.latencies.clear()
+        time.sleep(seconds)
+    finally:
+        for adapter in (*sinks, node):
+            adapter.stop()
+        direct.close()
+        mapped.close()
+    plain, through = latency_stats(direct.latencies), latency_stats(mapped.latencies)
+    return {"plain_osc_sink": plain, "through_map_node": through,
+            "ratio_p50": round(through["p50_us"] / plain["p50_us"], 2)}
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seconds", type=float, default=8.0)
@@ -173,20 +233,29 @@ def main() -> None:
     try:
         node = map_node(Bus(node_session), args.seconds)
         plain = harness(Bus(node_session, node="harness"), args.seconds)
+        path = latency(Bus(node_session), args.seconds / 2)
     finally:
         robot.close()
         node_session.close()
         robot_session.close()
     result = {"maps": MAPS, "rate_hz": RATE_HZ, "machine": machine, "map_node": node, "harness": plain,
-              "ratio_cpu": round(node["cpu_percent"] / max(plain["cpu_percent"], 1e-9), 2)}
+              "ratio_cpu": round(node["cpu_percent"] / max(plain["cpu_percent"], 1e-9), 2), "latency": path}
     result["summary"] = [{"scenario": "map node: 50 maps on a Pepper at 100 Hz, CPU of its worker",
                           "sonibus": f"{node['cpu_percent']:.1f} % of a core ({node['cpu_us_per_frame']:.0f} µs/frame)",
                           "baseline": f"{plain['cpu_percent']:.1f} % (hand-written loop, same arithmetic)",
-                          "ratio": f"{result['ratio_cpu']:.1f}×", "goal": "", "met": ""}]
+                          "ratio": f"{result['ratio_cpu']:.1f}×", "goal": "", "met": ""},
+                         {"scenario": "source to OSC through a map (HeadYaw, exp, one-pole), p50 / p99",
+                          "sonibus": f"{path['through_map_node']['p50_us']:,.0f} / "
+                                     f"{path['through_map_node']['p99_us']:,.0f} µs",
+                          "baseline": f"{path['plain_osc_sink']['p50_us']:,.0f} / "
+                                      f"{path['plain_osc_sink']['p99_us']:,.0f} µs (HeadYaw to the OSC sink)",
+                          "ratio": f"{path['ratio_p50']:.1f}×", "goal": "", "met": ""}]
     print(f"{'50 maps @100 Hz':<16} {'outputs/s':>10} {'CPU % core':>11} {'µs/frame':>9}")
     for name, row in (("map node", node), ("harness", plain)):
         print(f"{name:<16} {row['outputs_per_s']:>10.0f} {row['cpu_percent']:>11.2f} {row['cpu_us_per_frame']:>9.0f}")
     print(f"ratio {result['ratio_cpu']:.2f}")
+    for name, row in (("plain OSC sink", path["plain_osc_sink"]), ("through the map", path["through_map_node"])):
+        print(f"source → OSC, {name:<16} p50 {row['p50_us']:>7.0f} µs  p99 {row['p99_us']:>7.0f} µs  n {row['n']}")
     write("map_cpu", result)
     print(machine)
 
