@@ -28,8 +28,10 @@ from sonibus.bus.info import InfoRequests
 from sonibus.bus.queue import SampleQueue
 from sonibus.bus.streams import Incoming, Streams
 
+from . import ranges as spans
 from .chain import Chain
 from .config import MapConfig, Source
+from .ranges import Ranges
 
 log = logging.getLogger(__name__)
 
@@ -43,43 +45,9 @@ MAX_KEYS = 10_000    # keys bound to map sources (patterns match names from the 
 Binding = tuple[Chain, Source, int, tuple[float, float] | None]
 
 
-class Ranges:
-    """A robot's ranges from its info: each joint's ``(min, max)`` by name, each derived
-    value's by key (per component where the info gives a box), with its axes' names."""
-
-    def __init__(self, info: dict[str, Any]) -> None:
-        self.joints: dict[str, tuple[float, float]] = {}
-        for joint in info.get("joints") or ():
-            if isinstance(joint, dict) and _numbers(joint.get("min"), joint.get("max")):
-                self.joints[str(joint.get("name"))] = (float(joint["min"]), float(joint["max"]))
-        self.derived: dict[str, list[tuple[float, float]]] = {}
-        self.axes: dict[str, list[str]] = {}
-        for entry in info.get("derived") or ():
-            if not isinstance(entry, dict) or not isinstance(entry.get("key"), str):
-                continue
-            box, key = entry.get("box"), entry["key"]
-            if isinstance(box, dict) and isinstance(box.get("min"), list) and isinstance(box.get("max"), list):
-                self.derived[key] = [(float(a), float(b)) for a, b in zip(box["min"], box["max"], strict=False)
-                                     if _numbers(a, b)]
-            elif _numbers(entry.get("min"), entry.get("max")):
-                self.derived[key] = [(float(entry["min"]), float(entry["max"]))] * int(entry.get("size") or 1)
-            self.axes[key] = [str(a) for a in entry.get("axes") or ()]
-
-    def of(self, key: keys.Key, component: int) -> tuple[float, float] | None:
-        if key.section == "joints":
-            return self.joints.get(key.name)
-        spans = self.derived.get(key.key)
-        return spans[max(component, 0)] if spans and max(component, 0) < len(spans) else None
-
-
 def _few(names: list[str], shown: int = 5) -> str:
     """``names`` joined, the first ``shown`` of them and how many more."""
     return ", ".join(names[:shown]) + (f" and {len(names) - shown} more" if len(names) > shown else "")
-
-
-def _numbers(*values: Any) -> bool:
-    return all(isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v) for v in values) \
-        and values[0] != values[1]
 
 
 class MapNode(Adapter):
@@ -230,15 +198,9 @@ class MapNode(Adapter):
         return found
 
     def _component(self, src: Source, source: keys.Key) -> int:
-        """Which component of ``source``'s values ``src`` takes (-1: it names none)."""
-        if not src.axis:
-            return -1
-        if src.axis.isdigit():
-            return int(src.axis)
+        """Which component of ``source``'s values ``src`` takes (see ``ranges.component``)."""
         ranges = self._ranges.get(source.robot)
-        axes = ranges.axes.get(source.key, []) if ranges else []
-        return axes.index(src.axis) if src.axis in axes else ("x", "y", "z").index(src.axis) \
-            if src.axis in ("x", "y", "z") else 1 << 30
+        return spans.component(src.axis, ranges.axes.get(source.key, ()) if ranges is not None else ())
 
     def _span(self, chain: Chain, src: Source, source: keys.Key, component: int) -> tuple[float, float] | None:
         """The range of ``source``'s values from its robot's info (events: 0..1); None if not

@@ -9,6 +9,7 @@ import math
 import threading
 import time
 
+from sonibus.adapters.map.ranges import MAX_COMPONENTS, Ranges
 from sonibus.bus import codec, keys
 
 from ..conftest import wait_for
@@ -134,3 +135,13 @@ to = [0, 127]
     hits = [m["v"] for m in outputs.on("sound/derived/map/hit")]
     assert hits[:4] == [127.0, 0.0, 127.0, 0.0], hits  # each event an impulse: 1, then 0 again
     assert node.stats["bad"] == 6 and node.state == "running"  # (the bus's gate: NaN, ±inf, beyond ±1e6, garbage)
+
+
+def test_an_info_that_lies_about_a_derived_values_size_is_not_trusted_for_memory():
+    """A derived info's ``size`` is any integer to its schema: a made-up 10⁶ (or 10⁹) is read as at most 64."""
+    ranges = Ranges({"derived": [{"key": "pepper/derived/x/y", "size": 10**6, "min": 0, "max": 1,
+                                  "axes": ["a"] * 10**6},
+                                 {"key": "pepper/derived/h/R", "box": {"min": [0, "x", 0], "max": [1, 1, 1]}}]})
+    assert len(ranges.derived["pepper/derived/x/y"]) == MAX_COMPONENTS == len(ranges.axes["pepper/derived/x/y"])
+    assert ranges.of(keys.Key.parse("pepper/derived/h/R"), 1) is None  # (a bad bound: no range, not a shift)
+    assert ranges.of(keys.Key.parse("pepper/derived/h/R"), 2) == (0.0, 1.0)
