@@ -93,8 +93,8 @@ def test_a_silent_source_is_said_and_a_source_that_never_came_too(net, owner, ca
     wait_for(lambda: "source 'pepper/joints/HedYaw' sent nothing in 0.5 s" in caplog.text, what="the unseen source")
     wait_for(lambda: "map 'both': its sources (pepper/joints/HeadYaw, pepper/joints/HeadPitch) silent for 0.5 s; "
                      "its output stops at its last value (" in caplog.text, what="the silence, said")
-    assert events.on("sound/events/map")[0]["map"] == "both"
-    assert events.on("sound/events/map")[0]["state"] == "silent"
+    silent = wait_for(lambda: events.on("sound/events/map"), what="the silence's event")
+    assert (silent[0]["map"], silent[0]["state"]) == ("both", "silent")
     stats = wait_for(lambda: [s for s in watch.query(keys.node_stats(node.bus.host, "sound"), timeout=0.5)
                               if "both" in s.get("metrics", {}).get("silent_maps", {})],
                      what="the silent map in the node's stats (on the bus)")
