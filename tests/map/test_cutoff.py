@@ -34,14 +34,19 @@ def test_pd_gets_sound_cutoff_as_the_exp_curve_of_the_hand_height_smoothed(net, 
     receiver = Datagrams()
     watch = net.bus("watch")
     heights: list[tuple[float, float]] = []
+    used: set[float] = set()  # the t of every output the map put on the bus
     lock = threading.Lock()
 
     def take(sample):
         message = codec.decode(sample.payload.to_bytes())
         with lock:
-            heights.append((message["t"], message["v"][2]))
+            if str(sample.key_expr) == "pepper/derived/hand/R":
+                heights.append((message["t"], message["v"][2]))
+            else:
+                used.add(message["t"])
 
     subscriber = watch.session.declare_subscriber("pepper/derived/hand/R", take)
+    outputs = watch.session.declare_subscriber("sound/derived/map/cutoff", take)
     try:
         net.start(OscSink(OscSinkConfig(subscribe=("sound/derived/**",), targets=(receiver.target,),
                                         derived_address="/{robot}/{name}", extra=("t",)), name="pd"))
@@ -56,27 +61,26 @@ def test_pd_gets_sound_cutoff_as_the_exp_curve_of_the_hand_height_smoothed(net, 
                  what="the last hand height's cutoff in the receiver")
     finally:
         subscriber.undeclare()
+        outputs.undeclare()
         receiver.close()
     received = [OscMessage(d) for d in receiver.data()]
     assert {m.address for m in received} == {"/sound/cutoff"}
     by_t = {m.params[1]: m.params[0] for m in received}
-    with lock:
-        order = sorted(heights)
-    first = min(by_t)
-    start_at = next(i for i, (t, _) in enumerate(order) if t == first)
+    with lock:  # (the heights the map took: under load a node skips a backlog rather than burst it)
+        order = [(t, z) for t, z in sorted(heights) if t in used]
     tau = 0.080
     y: float | None = None
     previous = 0.0
     checked = 0
-    for t, z in order[start_at:]:  # the documented formula, written out again: 200·10^x, one-pole of τ = 80 ms
+    for t, z in order:  # the documented formula, written out again: 200·10^x, one-pole of τ = 80 ms
         x = min(1.0, max(0.0, (z - low) / (high - low)))
         target = 200.0 * 10.0 ** x
         y = target if y is None else y + (1.0 - math.exp(-(t - previous) / tau)) * (target - y)
         previous = t
-        assert t in by_t, f"no output for the hand height of t = {t}"
-        assert math.isclose(by_t[t], y, rel_tol=1e-6), (t, by_t[t], y)  # (float32 on the wire)
-        checked += 1
-    assert checked >= 100
+        if t in by_t:  # (and what reached the receiver: the OSC sink may skip a backlog too)
+            assert math.isclose(by_t[t], y, rel_tol=1e-6), (t, by_t[t], y)  # (float32 on the wire)
+            checked += 1
+    assert checked >= 100 and checked >= 0.9 * len(order), (checked, len(order), len(heights))
     assert len({round(v) for v in by_t.values()}) > 20  # the hand really moved the cutoff
     assert all(200.0 <= v <= 2000.0 for v in by_t.values())
 
