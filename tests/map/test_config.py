@@ -4,10 +4,14 @@ number."""
 
 from __future__ import annotations
 
+import re
+
 import pytest
 
 from sonibus.adapters.map import MapNode
-from sonibus.bus import ConfigError, config
+from sonibus.bus import ConfigError, config, runner
+
+from .conftest import ROOT
 
 HEAD = '''[bus]
 multicast = false
@@ -93,3 +97,14 @@ def test_the_docs_example_builds_with_the_hand_height_as_its_source():
     spec = config.parse(text, "ok.toml").nodes["sound"].build(MapNode).config.specs[0]
     assert (spec.sources[0].pattern, spec.sources[0].axis, spec.to, spec.unit) == \
         ("pepper/derived/hand/R", "z", (200.0, 2000.0), "Hz")
+
+
+def test_every_toml_example_of_docs_mapping_md_builds():
+    text = (ROOT / "docs" / "mapping.md").read_text(encoding="utf-8")
+    blocks = re.findall(r"```toml\n(.*?)```", text, re.S)
+    assert len(blocks) >= 3
+    for block in blocks:
+        if "adapter = " not in block:  # (a map shown alone: in the cutoff example's node)
+            block = '[nodes.sound]\nadapter = "map"\n' + block
+        adapters = runner.build(config.parse(block, "docs/mapping.md"))
+        assert any(isinstance(a, MapNode) for a in adapters), block
