@@ -145,3 +145,31 @@ def test_an_info_that_lies_about_a_derived_values_size_is_not_trusted_for_memory
     assert len(ranges.derived["pepper/derived/x/y"]) == MAX_COMPONENTS == len(ranges.axes["pepper/derived/x/y"])
     assert ranges.of(keys.Key.parse("pepper/derived/h/R"), 1) is None  # (a bad bound: no range, not a shift)
     assert ranges.of(keys.Key.parse("pepper/derived/h/R"), 2) == (0.0, 1.0)
+
+
+def test_a_value_of_several_numbers_needs_its_axis_named(net, owner, caplog):
+    fake = owner("pepper", model_info("pepper"))
+    text = '''[nodes.sound]
+adapter = "map"
+[nodes.sound.maps.whole]
+source = "pepper/derived/hand/R"
+from = [0, 1]
+[nodes.sound.maps.w]
+source = "pepper/derived/hand/R.w"
+from = [0, 1]
+[nodes.sound.maps.z]
+source = "pepper/derived/hand/R.z"
+from = [0, 1]
+'''
+    node = map_node(net, text)
+    watch = net.bus("watch")
+    outputs = Listen(watch, "sound/derived/**")
+    wait_for(lambda: watch.query(keys.derived_info("sound"), timeout=0.5), what="the node")
+    for seq in range(5):
+        fake.put("pepper/derived/hand/R", {"t": time.time(), "seq": seq, "v": [0.1, 0.2, 0.25]})
+        time.sleep(0.02)
+    wait_for(lambda: outputs.on("sound/derived/map/z"), what="the z map's output")
+    assert outputs.on("sound/derived/map/z")[0]["v"] == 0.25
+    assert not outputs.on("sound/derived/map/whole") and not outputs.on("sound/derived/map/w")
+    assert node.stats["bad_source"] >= 2
+    assert "map 'whole': 'pepper/derived/hand/R' has 3 values: name one, as pepper/derived/hand/R.0" in caplog.text
