@@ -212,7 +212,8 @@ class MapNode(Adapter):
         if span is None and src.name not in chain.spec.ranges and not chain.spec.calibrate_s:
             self.count("waiting_info")
             self._info.ask(source.robot)
-            if ranges is not None:
+            if ranges is not None and time.monotonic() - self._started > self.config.unseen_s:  # (not at start:
+                # a features node describes a robot after its first frames, a moment after the owner's info)
                 self.warn("range", f"map '{chain.spec.name}': no range yet for '{source.key}' in {source.robot}'s "
                                    "info (a derived value's comes from the features node): its values wait; "
                                    "or give the map one: from = [LOW, HIGH]")

@@ -173,3 +173,16 @@ from = [0, 1]
     assert not outputs.on("sound/derived/map/whole") and not outputs.on("sound/derived/map/w")
     assert node.stats["bad_source"] >= 2
     assert "map 'whole': 'pepper/derived/hand/R' has 3 values: name one, as pepper/derived/hand/R.0" in caplog.text
+
+
+def test_a_source_nobody_gives_a_range_waits_and_is_said_with_the_fix(net, owner, caplog):
+    fake = owner("pepper", model_info("pepper"))
+    node = map_node(net, '[nodes.sound]\nadapter = "map"\nunseen_s = 0.5\n[nodes.sound.maps.mine]\n'
+                         'source = "pepper/derived/script/level"\n')
+    deadline = time.monotonic() + 5
+    while "no range yet for 'pepper/derived/script/level'" not in caplog.text:
+        assert time.monotonic() < deadline, caplog.text
+        fake.put("pepper/derived/script/level", {"t": time.time(), "seq": 1, "v": 0.5})
+        time.sleep(0.05)
+    assert "or give the map one: from = [LOW, HIGH]" in caplog.text
+    assert node.stats["waiting_info"] > 0 and node.stats["sent"] == 0
