@@ -4,6 +4,7 @@ number."""
 
 from __future__ import annotations
 
+import importlib.util
 import re
 
 import pytest
@@ -108,3 +109,12 @@ def test_every_toml_example_of_docs_mapping_md_builds():
             block = '[nodes.sound]\nadapter = "map"\n' + block
         adapters = runner.build(config.parse(block, "docs/mapping.md"))
         assert any(isinstance(a, MapNode) for a in adapters), block
+
+
+def test_the_curves_picture_of_the_docs_is_what_the_curves_draw():
+    spec = importlib.util.spec_from_file_location("mapping_curves", ROOT / "scripts" / "mapping_curves.py")
+    script = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(script)
+    assert (ROOT / "docs" / "img" / "mapping-curves.svg").read_text(encoding="utf-8") == script.svg(), \
+        "docs/img/mapping-curves.svg is stale: .venv/bin/python scripts/mapping_curves.py"
+    assert "](img/mapping-curves.svg)" in (ROOT / "docs" / "mapping.md").read_text(encoding="utf-8")
