@@ -100,8 +100,8 @@ class MapConfig:
 
     @property
     def patterns(self) -> tuple[str, ...]:
-        """Every source's key or pattern, once."""
-        return tuple(dict.fromkeys(s.pattern for spec in self.specs for s in spec.sources))
+        """Every source's key or pattern (of the maps that run), once."""
+        return tuple(dict.fromkeys(s.pattern for spec in self.specs if spec.enabled for s in spec.sources))
 
 
 def parse_map(name: str, table: Any) -> MapSpec:
@@ -111,6 +111,8 @@ def parse_map(name: str, table: Any) -> MapSpec:
         keys.check_name("map", name)
     except ValueError as exc:
         raise bad(where, str(exc)) from None
+    if name == "map":  # (<node>/events/map: the node's own events, a map's silence)
+        raise bad(where, "'map' is the name of the node's own events (<node>/events/map) — call this map another")
     if not isinstance(table, dict):
         raise bad(where, f"{table!r} is not a table — write [nodes.NODE.maps.{name}] with its steps")
     for key in table:

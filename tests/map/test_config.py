@@ -118,3 +118,11 @@ def test_the_curves_picture_of_the_docs_is_what_the_curves_draw():
     assert (ROOT / "docs" / "img" / "mapping-curves.svg").read_text(encoding="utf-8") == script.svg(), \
         "docs/img/mapping-curves.svg is stale: .venv/bin/python scripts/mapping_curves.py"
     assert "](img/mapping-curves.svg)" in (ROOT / "docs" / "mapping.md").read_text(encoding="utf-8")
+
+
+def test_a_map_called_map_is_refused_and_a_disabled_map_subscribes_to_nothing():
+    message = refused("", HEAD.replace("[nodes.sound.maps.cutoff]", "[nodes.sound.maps.map]"))
+    assert "line 8: key 'maps.map': 'map' is the name of the node's own events" in message, message
+    text = HEAD + '\n[nodes.sound.maps.off]\nsource = "nao/joints/HeadYaw"\nenabled = false\n'
+    node = config.parse(text, "ok.toml").nodes["sound"].build(MapNode)
+    assert node.config.patterns == ("pepper/derived/hand/R",)
