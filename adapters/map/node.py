@@ -237,8 +237,9 @@ class MapNode(Adapter):
                     if src not in self._seen:
                         self.count("unseen")
                         log.warning("%s: map '%s': source '%s' sent nothing in %g s — is it published? "
-                                    "(sonibus echo '%s'; a derived value needs the features node)",
-                                    self.name, chain.spec.name, src.pattern, cfg.unseen_s, src.pattern)
+                                    "(sonibus echo '%s'%s)", self.name, chain.spec.name, src.pattern, cfg.unseen_s,
+                                    src.pattern, "; a derived value needs the features node"
+                                    if src.section == "derived" else "")
         gone = [name for name in self.chains if name not in self._silent
                 and now - self._heard.get(name, math.inf) >= cfg.silent_s]
         for name in gone:
