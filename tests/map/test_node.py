@@ -9,6 +9,7 @@ import math
 import threading
 import time
 
+from sonibus.adapters.map import MapNode
 from sonibus.adapters.map.ranges import MAX_COMPONENTS, Ranges
 from sonibus.bus import codec, keys
 
@@ -48,6 +49,15 @@ class Listen:
     def on(self, key: str) -> list[dict]:
         with self._lock:
             return [m for k, m in self.items if k == key]
+
+
+def serving(net, text: str) -> tuple[MapNode, Listen]:
+    """The map node of ``text``, once it serves its info, and a listener to its outputs."""
+    node = map_node(net, text)
+    watch = net.bus("watch")
+    outputs = Listen(watch, "sound/derived/**")
+    wait_for(lambda: watch.query(keys.derived_info("sound"), timeout=0.5), what="the node")
+    return node, outputs
 
 
 def test_two_sources_an_expression_ranges_from_the_info_and_a_threshold(net, owner):
@@ -118,10 +128,7 @@ to = [0, 10]
 source = "pepper/events/motion"
 to = [0, 127]
 '''
-    node = map_node(net, text)
-    watch = net.bus("watch")
-    outputs = Listen(watch, "sound/derived/**")
-    wait_for(lambda: watch.query(keys.derived_info("sound"), timeout=0.5), what="the node")
+    node, outputs = serving(net, text)
     for seq, value in enumerate((0.5, math.nan, math.inf, -math.inf, 1e300, -1e7, b"\xc1 not msgpack", 0.0)):
         fake.put("pepper/joints/HeadYaw", value if isinstance(value, bytes) else
                  {"t": time.time(), "seq": seq, "v": value})
@@ -161,10 +168,7 @@ from = [0, 1]
 source = "pepper/derived/hand/R.z"
 from = [0, 1]
 '''
-    node = map_node(net, text)
-    watch = net.bus("watch")
-    outputs = Listen(watch, "sound/derived/**")
-    wait_for(lambda: watch.query(keys.derived_info("sound"), timeout=0.5), what="the node")
+    node, outputs = serving(net, text)
     for seq in range(5):
         fake.put("pepper/derived/hand/R", {"t": time.time(), "seq": seq, "v": [0.1, 0.2, 0.25]})
         time.sleep(0.02)
