@@ -167,9 +167,17 @@ def parse(text: str, path: str = "<string>") -> Installation:
     return Installation(bus, nodes, path, log.relative_to(Path(path).resolve().parent))
 
 
-def _lines(text: str, table: str, keys: Any) -> dict[str, int]:
+def _lines(text: str, table: str, keys: Any, depth: int = 3) -> dict[str, int]:
+    """The line of each key of ``[table]``, and of the keys of its sub-tables as dotted
+    keys (``maps.cutoff.curve``, from ``[nodes.sound.maps.cutoff]``), ``depth`` deep."""
     found = {key: _line(text, table, key) for key in keys}
-    return {key: line for key, line in found.items() if line}
+    out = {key: line for key, line in found.items() if line}
+    if depth > 1 and isinstance(keys, dict):
+        for key, value in keys.items():
+            if isinstance(value, dict):
+                nested = _lines(text, f"{table}.{key}", value, depth - 1)
+                out.update({f"{key}.{sub}": line for sub, line in nested.items()})
+    return out
 
 
 def _line(text: str, table: str | None, key: str) -> int:

@@ -58,8 +58,15 @@ def bad(key: str, problem: str) -> ConfigError:
 
 
 def located(where: str, lines: Mapping[str, int] | None, key: str) -> str:
-    """``where`` plus the line that sets ``key``, when known."""
-    return f"{where} line {lines[key]}" if lines and key in lines else where
+    """``where`` plus the line that sets ``key``, when known (a dotted key of a sub-table,
+    ``maps.cutoff.curve``, falls back to the line of the nearest table that holds it)."""
+    while lines:
+        if key in lines:
+            return f"{where} line {lines[key]}"
+        key, dot, _ = key.rpartition(".")
+        if not dot:
+            break
+    return where
 
 
 def coerce(value: Any, tp: Any, where: str) -> Any:
