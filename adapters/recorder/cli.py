@@ -207,7 +207,8 @@ def _replay(args: argparse.Namespace, env: Environment) -> Exit:
     gaps = f", {replay.stats['gaps']} gaps shortened" if replay.stats["gaps"] else ""
     why = " (this machine was too busy to send them on time: its CPU)" if replay.stats["late"] else ""
     env.say(f"replayed {os.path.basename(args.file)}: {replay.stats['sent']} messages, "
-            f"{replay.stats['late']} skipped as late{why}{gaps}")  # (what it could not read: warned, replay.py)
+            f"{replay.stats['late']} skipped as late{why}{gaps}"  # (what it could not read: warned, replay.py)
+            + ("" if replay.listened.is_set() else "; heard by nobody: no node on the bus subscribed to them"))
     return Exit.OK
 
 

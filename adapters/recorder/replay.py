@@ -50,6 +50,7 @@ log = logging.getLogger(__name__)
 T = TypeVar("T")
 
 MAX_LATE_S = 0.1  # samples later than this are skipped (events never): no bursts of stale data
+LISTENERS_S = 1.0  # after the lead, how long a replay waits for a subscriber before it says nobody listens
 LEAD_S = 0.2      # between declaring the publishers and the first message: Zenoh settles its routes
 AHEAD = 512       # moments read and decoded ahead of the player (~5 s of a robot at 100 frames/s)
 GATHER_NS = 5_000_000  # a frame's joint samples reach a recorder within this of each other
@@ -98,6 +99,7 @@ class Replay(Adapter):
         self.finished = threading.Event()          # set at the end of a replay without loop
         self.problems = ""                         # what the reading skipped (``Recording.problems``), so far
         self._clock: tuple[float, float] | None = None  # the pass's start (monotonic) and the time cut from it
+        self.listened = threading.Event()          # set once a node on the bus subscribed to what it replays
 
     @property
     def position_s(self) -> float:
@@ -148,7 +150,20 @@ class Replay(Adapter):
                             for key in self.keys if (qos := STREAMED.get(Key.parse(key).section)) is not None}
         for robot in {k.partition("/")[0] for k in self.keys if Key.parse(k).section == "joints"}:
             self._owners[self.names[robot]].declare_publishers()
+        for name in self.names.values():
+            self.own(self.bus.watch_subscribers(f"{name}/**", lambda matching: matching and self.listened.set()))
         self.spawn(self._play, "play")
+        self.spawn(self._nobody_listens, "listeners")
+
+    def _nobody_listens(self) -> None:
+        """Say it once when no node subscribes to what it replays a moment after it starts: Zenoh
+        sends nothing then, and a replay with no sink on the bus had said nothing at all."""
+        if self.stopping.wait(LEAD_S + LISTENERS_S) or self.listened.is_set():
+            return
+        names = ", ".join(f"{name}/**" for name in self.names.values())
+        self.warn("listeners", f"nobody on the bus subscribes to {names}: the replay goes nowhere — start a sink "
+                               "beside it, e.g. an OSC node for your patch (examples/replay-to-patch.toml: "
+                               "`sonibus run examples/replay-to-patch.toml`, same bus options as the replay)")
 
     def _info(self, info: dict[str, Any], name: str) -> dict[str, Any]:
         info = {k: v for k, v in info.items() if k != "connection"}  # (the recorded owner's state: not this one's)

@@ -3,10 +3,12 @@ what oscdump receives equals what it received live."""
 
 from __future__ import annotations
 
+import contextlib
 import re
 import socket
 import statistics
 import time
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -225,3 +227,50 @@ def test_progress_counts_from_start_and_flags_are_named_as_typed(net, recorded):
         result = run_cli("replay", str(path), *flags, *net.cli_args())
         assert result.returncode != 0 and fragment in result.stderr, result.stderr
         assert "key '" not in result.stderr and len(result.stderr.strip().splitlines()) == 1
+
+
+def test_a_replay_nobody_listens_to_says_so(net, recorded):
+    """Issue 37, item 8: with no sink on the bus a replay sent nothing (Zenoh sends what somebody
+    subscribes to) and said nothing. It says so, with how to start one; with a listener, not."""
+    path, _ = recorded
+    alone = run_cli("replay", str(path), "--end", "1.5", *net.cli_args(), timeout=30)
+    assert alone.returncode == 0, alone.stderr
+    assert "nobody on the bus subscribes to pepper/**" in alone.stderr and "replay-to-patch.toml" in alone.stderr
+    assert "heard by nobody" in alone.stdout + alone.stderr
+    _subscriber, heard = net.bus("sink").subscribe("pepper/joints/*")
+    listened = run_cli("replay", str(path), "--end", "1.5", *net.cli_args(), timeout=30)
+    assert listened.returncode == 0, listened.stderr
+    assert "nobody" not in listened.stdout + listened.stderr
+    assert heard.get(timeout=0) is not None
+
+
+def test_the_documented_recipe_plays_a_take_into_a_pepper_patch_beside_the_live_robot(net, recorded):
+    """Issue 37, item 8: beside a live demo the take is replayed as take1, and a patch listening
+    for /pepper heard nothing. examples/replay-to-patch.toml's OSC node sends it as /pepper/...;
+    an independent UDP socket reads it."""
+    from sonibus.adapters.osc.sink import OscSink
+    from sonibus.bus import config
+
+    path, _ = recorded
+    net.sim("pepper", rate_hz=20)  # the live robot keeps its name
+    port = free_port(socket.SOCK_DGRAM)
+    receiver = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    receiver.bind(("127.0.0.1", port))
+    receiver.settimeout(0.2)
+    try:
+        spec = config.load(Path(__file__).parents[2] / "examples" / "replay-to-patch.toml").nodes["take-to-patch"]
+        assert spec.options["targets"] == ["127.0.0.1:9001"]
+        spec.options["targets"] = [f"127.0.0.1:{port}"]  # (a free port here; 9001 in the example)
+        net.start(spec.build(OscSink))
+        net.start(Replay(ReplayConfig(path=str(path), rename={"pepper": "take1"}), name="take"))
+        addresses: set[str] = set()
+
+        def heard() -> bool:
+            with contextlib.suppress(TimeoutError):
+                addresses.add(receiver.recv(65536).split(b"\0", 1)[0].decode())
+            return "/pepper/joints/HeadYaw" in addresses
+
+        wait_for(heard, 15, "the take's HeadYaw as /pepper/joints/HeadYaw", lambda: f"heard {sorted(addresses)}")
+        assert not any(a.startswith("/take1") for a in addresses), addresses
+    finally:
+        receiver.close()
