@@ -84,7 +84,8 @@ class WebPages(Adapter):
         self.url = self.web.url
         token = "?token=<token>" if cfg.token else ""  # (never the token itself: this line ends up in logs)
         kiosk = "?token=<kiosk_token>" if cfg.kiosk_token else token
-        self.address = f"operator page {self.url}/{token}, kiosk {self.url}/kiosk{kiosk}"
+        # (the kiosk only when one is configured: its page has no buttons otherwise)
+        self.address = f"operator page {self.url}/{token}" + (f", kiosk {self.url}/kiosk{kiosk}" if cfg.kiosk else "")
         log.info("%s: %s", self.name, self.address)
         self._queue = self.own(SampleQueue(cfg.queue))
         patterns = [f"{robot}/joints/*" for robot in cfg.robots] + ["*/events/*"]
