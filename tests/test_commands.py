@@ -219,6 +219,7 @@ def test_behavior_run_replies_at_start_and_announces_stopped(pepper):
     assert result["duration"] == pytest.approx(LIBRARY[NOD].duration)
     started = pepper.events.wait("behavior", name=NOD, state="started")
     stopped = pepper.events.wait("behavior", timeout=LIBRARY[NOD].duration + 3, name=NOD, state="stopped")
+    assert stopped["end"] == "finished"  # (issue 37, item 9: a cut one read "stopped" alike)
     # not before its duration (a frame late on a busy machine ends it later: the wait bounds that)
     assert stopped["t"] - started["t"] >= LIBRARY[NOD].duration - 0.2
     during = [f for s, f in pepper.joints.complete() if started["t"] <= pepper.joints.t[s] <= stopped["t"]]
@@ -247,6 +248,7 @@ def test_behavior_stop_interrupts(pepper, request_name):
     assert ok(pepper, *R[request_name]) == {"was_running": True}
     stopped = pepper.events.wait("behavior", timeout=5.0, name=SKY, state="stopped")
     assert stopped["t"] - started["t"] < LIBRARY[SKY].duration  # cut before its end (at its end it is back home)
+    assert stopped["end"] == "cut"
     frozen = assert_frozen(pepper)
     assert frozen["RShoulderPitch"] != before["RShoulderPitch"], "stopped where it started: no interruption seen"
     assert ok(pepper, *R[request_name]) == {"was_running": False}
@@ -351,6 +353,7 @@ def test_stop_halts_a_running_behavior(pepper):
     assert ok(pepper, *R["stop"]) == {}
     stopped = pepper.events.wait("behavior", timeout=5.0, name=SKY, state="stopped")
     assert stopped["t"] - started["t"] < LIBRARY[SKY].duration  # cut before its end (at its end it is back home)
+    assert stopped["end"] == "cut"
     frozen = assert_frozen(pepper)
     assert frozen["RShoulderPitch"] != before["RShoulderPitch"]
 

@@ -136,6 +136,7 @@ class NaoqiCommands:
         return {"name": name}
 
     def behavior_stop(self, name: str | None = None) -> dict[str, Any]:
+        self.events.cutting(None if name is None else [name])
         if name is None:
             running = bool(self._call("behavior/stop", "ALBehaviorManager", "getRunningBehaviors"))
             self._call("behavior/stop", "ALBehaviorManager", "stopAllBehaviors")
@@ -210,6 +211,7 @@ class NaoqiCommands:
         """Every part is sent at once and each is waited for, whatever the others do (at most
         ``UNANSWERED_STOP_MS`` on a robot that does not answer). Not reached: kept for later."""
         self.events.speech.forget()
+        self.events.cutting(None)
         self.postures.interrupt()
         self._stop_wanted, self._stop_sent = True, []  # (until the robot has done every part)
         wait_ms = None if self.answering() else UNANSWERED_STOP_MS

@@ -11,12 +11,15 @@ from __future__ import annotations
 import logging
 import threading
 from collections import deque
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from typing import Any
 
 from .connection import Link, RemoteError
 
 log = logging.getLogger(__name__)
+
+MAX_RUNNING = 64   # behaviors followed as running at once (names come from the robot: bounded)
+MAX_NAME = 256     # characters kept of a behavior's name
 
 STARTED, DONE = "ALTextToSpeech/TextStarted", "ALTextToSpeech/TextDone"
 
@@ -77,6 +80,9 @@ class RobotEvents:
 
     def __init__(self, publish: Publish) -> None:
         self.publish = publish
+        self._running: set[str] = set()  # behaviors started (their events), to tell a stop's cut from an end
+        self._cut: set[str] = set()      # behaviors a stop is ending
+        self._cut_lock = threading.Lock()
         self.speech = Speech()
         self.mode = "none"  # subscriber | polling
         self._last: dict[str, Any] = {}
@@ -85,6 +91,9 @@ class RobotEvents:
         """Connect to the robot's signals; the ALMemory keys to poll each frame instead."""
         self.mode, self._last = "none", {}
         self.speech.reset()  # what was spoken on an earlier connection will not be announced now
+        with self._cut_lock:  # (nor is what ran then known to run now)
+            self._running.clear()
+            self._cut.clear()
         try:
             link.on_signal("ALBehaviorManager", "behaviorStarted", lambda name: self._behavior(name, "started"))
             link.on_signal("ALBehaviorManager", "behaviorStopped", lambda name: self._behavior(name, "stopped"))
@@ -100,8 +109,25 @@ class RobotEvents:
         self.mode = "subscriber"
         return ()
 
+    def cutting(self, names: Iterable[str] | None) -> None:
+        """Behaviors a stop (None: every one running, as their events said) is about to end: their
+        ``stopped`` says ``end: cut``; any other ``stopped`` played to its end (``finished``).
+        NAOqi's ``behaviorStopped`` says neither."""
+        with self._cut_lock:
+            self._cut.update(self._running if names is None else names)
+
     def _behavior(self, name: Any, state: str) -> None:
-        self.publish("behavior", name=str(name), state=state)
+        name = str(name)[:MAX_NAME]
+        with self._cut_lock:
+            if state == "started" and len(self._running) < MAX_RUNNING:
+                self._running.add(name)
+            if state != "stopped":
+                self.publish("behavior", name=name, state=state)
+                return
+            self._running.discard(name)
+            cut = name in self._cut
+            self._cut.discard(name)
+        self.publish("behavior", name=name, state=state, end="cut" if cut else "finished")
 
     def _signalled(self, key: str, value: Any) -> None:
         if self.mode == "subscriber":

@@ -87,7 +87,8 @@ class SimEngine:
                 targets, done = self._playback.targets(now - self._playback_started)
                 self.body.set_targets(targets, 1.0)
                 if done:
-                    events.append(("behavior", {"name": self._playback.behavior.name, "state": "stopped"}))
+                    events.append(("behavior", {"name": self._playback.behavior.name, "state": "stopped",
+                                                "end": "finished"}))
                     self._playback = None
             elif self._posture is not None and not self.body.moving():
                 events.append(("posture", {"name": self._posture, "state": "reached"}))
@@ -142,7 +143,7 @@ class SimEngine:
             return []
         name = self._playback.behavior.name
         self._playback = None
-        return [("behavior", {"name": name, "state": "stopped"})]
+        return [("behavior", {"name": name, "state": "stopped", "end": "cut"})]
 
     def _interrupt(self) -> list[tuple[str, dict[str, Any]]]:
         events = self._end_behavior()

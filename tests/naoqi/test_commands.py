@@ -34,10 +34,15 @@ def test_behavior_run_stop_and_their_events(rig, subscriber):
     assert running.value.code == "failed" and SKY in running.value.message
     assert send_command(r.bus, "pepper", "behavior/stop", {"name": SKY}) == {"was_running": True}
     assert r.fake.engine.running_behavior is None
-    r.events.wait("behavior", name=SKY, state="stopped")
+    # issue 37, item 9: a behavior cut short and one that finished both read "stopped"; `end` says which
+    r.events.wait("behavior", name=SKY, state="stopped", end="cut")
     assert send_command(r.bus, "pepper", "behavior/stop", {}) == {"was_running": False}
     send_command(r.bus, "pepper", "behavior/run", {"name": NOD})
-    r.events.wait("behavior", timeout=5.0, name=NOD, state="stopped")  # ends by itself
+    r.events.wait("behavior", timeout=5.0, name=NOD, state="stopped", end="finished")  # ends by itself
+    send_command(r.bus, "pepper", "behavior/run", {"name": SKY})
+    r.events.wait("behavior", name=SKY, state="started")
+    send_command(r.bus, "pepper", "stop", {})
+    r.events.wait("behavior", name=SKY, state="stopped", end="cut")
 
 
 def test_say_queues_and_speech_events_name_the_texts(rig):
