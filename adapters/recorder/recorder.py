@@ -205,7 +205,8 @@ class Recorder(Adapter):
         return {"path": self.path, "files": self._series.files, "duration_s": elapsed,
                 "messages": self.stats["written"], "rate": self.stats["written"] / elapsed if elapsed > 0 else 0.0,
                 "bytes": self._series.bytes, "dropped": self._queue.dropped, "bad": self.stats["bad"],
-                "unrecorded": self.stats["unrecorded"], "paused": self.paused, "failure": self.failure}
+                "unrecorded": self.stats["unrecorded"], "paused": self.paused, "failure": self.failure,
+                "views": self.stats.get("foxglove", 0)}
 
     @property
     def files(self) -> list[str]:
@@ -437,13 +438,17 @@ class Recorder(Adapter):
 
 
 def describe(status: dict[str, Any]) -> str:
-    """A status as one line: ``12.0 s, 20400 messages (1700/s), 1.2 MB, 0 dropped, 0 bad``
+    """A status as one line: ``12.0 s, 20400 messages + 1300 for Foxglove's panels = 21700 in the file
+    (1700/s), 1.2 MB, 0 dropped, 0 bad``
     (``, 3 files`` once there are several; ``PAUSED: why`` while paused, ``FAILED: why``
     once the recorder has failed)."""
     files = f", {status['files']} files" if status.get("files", 1) > 1 else ""
     unrecorded = f", {status['unrecorded']} unrecorded" if status.get("unrecorded") else ""
     state = (f" — FAILED: {status['failure']}" if status.get("failure") else
              f" — PAUSED: {status['paused']}" if status.get("paused") else "")
-    return (f"{status['path']}: {status['duration_s']:.1f} s, {status['messages']} messages "
+    # (the file holds Foxglove's views too: `sonibus info` counts them, so both numbers are said)
+    views = (f" + {status['views']} for Foxglove's panels = {status['messages'] + status['views']} in the file"
+             if status.get("views") else "")
+    return (f"{status['path']}: {status['duration_s']:.1f} s, {status['messages']} messages{views} "
             f"({status['rate']:.0f}/s), {status['bytes'] / 1e6:.1f} MB{files}, {status['dropped']} dropped, "
             f"{status.get('bad', 0)} bad{unrecorded}{state}")

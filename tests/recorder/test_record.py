@@ -5,6 +5,7 @@ chunk; a full queue is counted, never silent."""
 from __future__ import annotations
 
 import json
+import re
 import signal
 import threading
 from collections import defaultdict
@@ -199,3 +200,20 @@ def test_info_json_gives_numbers_as_numbers(net, tmp_path, spawn):
     assert result.returncode == 0, result.stderr
     stats = json.loads(result.stdout)["stats"]
     assert stats["dropped"] == 0 and isinstance(stats["received"], int) and stats["received"] > 0, stats
+
+
+def test_record_and_info_give_one_number_for_the_file(net, tmp_path, spawn):
+    """Issue 37, item 9: record said 54,010 messages where info said 60,378 of the same file (info
+    counts the Foxglove views too). Record's last line says both, and the file's total is info's."""
+    path = tmp_path / "counted.mcap"
+    recording = spawn(SONIBUS, "record", str(path), *net.cli_args())
+    net.sim("pepper", rate_hz=50)
+    wait_for(lambda: path.exists() and path.stat().st_size > 5_000, timeout=20, what="data on disk")
+    code, out, err = recording.stop(signal.SIGINT, timeout=3)
+    assert code == 0, err
+    said = re.search(r"(\d+) messages \+ (\d+) for Foxglove's panels = (\d+) in the file", out)
+    assert said, out
+    data, views, total = map(int, said.groups())
+    assert data + views == total and views > 0
+    result = run_cli("info", str(path), "--json")
+    assert json.loads(result.stdout)["messages"] == total, (out, result.stdout[:300])
