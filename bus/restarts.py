@@ -22,6 +22,10 @@ The file lives in ``$STATE_DIRECTORY`` (systemd's ``StateDirectory=``, which
 >>> again = RunState.for_run("show.toml", "stage", environ={"STATE_DIRECTORY": folder}).begin()
 >>> again.count, again.previous
 (1, "failed: node 'rec': worker 'write' failed: OSError: disk full")
+>>> state.end("failed: again")
+>>> by_hand = RunState.for_run("show.toml", "stage", environ={"STATE_DIRECTORY": folder}).begin(by_hand=True)
+>>> by_hand.count, by_hand.previous                 # from a terminal: not a restart, though it says how it ended
+(0, 'failed: again')
 """
 
 from __future__ import annotations
@@ -75,8 +79,10 @@ class RunState:
         key = hashlib.sha1(json.dumps([str(resolved), host, sorted(only or ())]).encode()).hexdigest()[:10]
         return cls(state_folder(env) / f"{resolved.stem}-{host}-{key}.json", env)
 
-    def begin(self) -> Restart:
-        """Read how the previous run ended, and record this one as running."""
+    def begin(self, by_hand: bool = False) -> Restart:
+        """Read how the previous run ended, and record this one as running. ``by_hand``
+        (started from a terminal) starts the count over: a supervisor restarts nothing
+        there, and a hand run after a failed one was reported as "restart 2"."""
         previous = self._read()
         ended = previous.get("ended")
         unclean = bool(previous) and ended != STOPPED
@@ -88,6 +94,8 @@ class RunState:
         nrestarts = self._env.get("NRESTARTS", "")
         if nrestarts.isdigit():
             count, source = int(nrestarts), "systemd's $NRESTARTS"
+        elif by_hand:
+            count, source = 0, "started by hand"
         else:
             count, source = (int(previous.get("restarts", 0)) + 1 if unclean else 0), f"counted in {self.path}"
         self._record = {"pid": os.getpid(), "started": time.time(), "restarts": count, "ended": ""}

@@ -134,6 +134,7 @@ class Process:
     gathered in ``lines`` as they come."""
 
     def __init__(self, args: list[str], collect: bool = False, merge: bool = False, **kwargs: Any) -> None:
+        kwargs.setdefault("stdin", subprocess.DEVNULL)  # (not the runner's terminal: `run` takes that as by hand)
         self.popen = subprocess.Popen(args, stdout=subprocess.PIPE,
                                       stderr=subprocess.STDOUT if merge else subprocess.PIPE, text=True,
                                       start_new_session=True, **kwargs)

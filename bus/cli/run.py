@@ -5,8 +5,10 @@ from __future__ import annotations
 import argparse
 import contextlib
 import logging
+import os
 import re
 import socket
+import sys
 from collections.abc import Callable
 from dataclasses import replace
 
@@ -53,7 +55,7 @@ def run_installation(args: argparse.Namespace, env: Environment,
             log_file.note(text)
 
     try:
-        restart = state.begin()
+        restart = state.begin(by_hand=_from_terminal())
         if log_file is not None:
             say(f"sonibus: logging to {log_file.path} (rotated at {logging_to.max_mb:g} MB, {logging_to.keep} kept)")
         if restart.previous and not restart.count:  # (a start by hand after a crash, a power cut...)
@@ -153,3 +155,11 @@ def _router(args: argparse.Namespace, env: Environment) -> Exit:
 
 
 ROUTER = Command("router", "run a Zenoh router (joins subnets)", lambda p: None, _router, bus=True)
+
+
+def _from_terminal() -> bool:
+    """Whether this run was started by hand, from a terminal (its stdin one): no supervisor's restart."""
+    try:
+        return os.isatty(sys.stdin.fileno())
+    except (AttributeError, ValueError, OSError):  # (no stdin, or one that is not a file)
+        return False
