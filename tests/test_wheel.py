@@ -209,7 +209,7 @@ def test_studio_example_runs_its_robot_is_described_recorded_and_the_recording_r
     exported = installed.run("export", str(recording), "--csv", str(installed.work / "csv"))
     assert (exported.returncode, exported.stderr) == (0, ""), exported.stderr
     rows = (installed.work / "csv" / "pepper.csv").read_text(encoding="utf-8").splitlines()
-    assert rows[0].startswith("t,seq,HeadYaw,") and len(rows) > 2, rows[:3]
+    assert rows[0].startswith("t_s,t_unix_s,seq,HeadYaw,") and len(rows) > 2, rows[:3]
 
     plotted = installed.run("plot", str(recording))  # matplotlib is the plot extra's: one line saying so
     assert plotted.returncode != 0 and "Traceback" not in plotted.stderr, plotted.stderr

@@ -7,15 +7,18 @@
 >>> with RecordingWriter(os.path.join(folder, "doc.mcap")) as out:
 ...     for seq in range(2):
 ...         for joint, v in (("HeadYaw", 0.1 * seq), ("HeadPitch", -0.25)):
-...             out.write(f"pepper/joints/{joint}", (10 + seq) * 10**7, {"t": 1.7e9 + seq / 50, "seq": seq, "v": v})
+...             t = 1.7e9 + seq / 50
+...             out.write(f"pepper/joints/{joint}", int(t * 1e9) + 10**6, {"t": t, "seq": seq, "v": v})
 >>> with Recording(os.path.join(folder, "doc.mcap")) as recording:
 ...     paths = export_csv(recording, os.path.join(folder, "csv"))
 >>> [os.path.basename(p) for p in paths]
 ['pepper.csv']
 >>> print(open(paths[0]).read().strip())
-t,seq,HeadPitch,HeadYaw
-1700000000.0,0,-0.25,0.0
-1700000000.02,1,-0.25,0.1
+t_s,t_unix_s,seq,HeadPitch,HeadYaw
+-0.001,1700000000.0,0,-0.25,0.0
+0.019,1700000000.02,1,-0.25,0.1
+
+(``t_s`` counts from the log time of the recording's first message, 1 ms after its sample.)
 """
 
 from __future__ import annotations
@@ -28,15 +31,18 @@ from typing import Any, TextIO
 
 from .reading import Recording
 
-EVENT_COLUMNS = ["t", "robot", "kind", "state", "name", "text", "details"]
+TIMES = ["t_s", "t_unix_s"]  # a row's time: seconds from the recording's start, and since the epoch
+EVENT_COLUMNS = [*TIMES, "robot", "kind", "state", "name", "text", "details"]
 EVENT_FIELDS = ("t", "kind", "state", "name", "text")  # the fields that have their own column
 
 
 def export_csv(recording: Recording, directory: str) -> list[str]:
     """Write the CSV files of ``recording`` into ``directory`` (created if needed); returns their paths.
 
-    ``<robot>.csv`` holds one row per frame (the samples sharing a ``seq``): ``t`` (acquisition time,
-    s since the epoch), ``seq`` and the position of each recorded joint, in the robot's info order if
+    ``<robot>.csv`` holds one row per frame (the samples sharing a ``seq``): its acquisition time ``t``
+    as ``t_s`` (seconds from the recording's start: the log time of its first message, so a first
+    sample taken just before it reads a few ms below 0) and ``t_unix_s`` (seconds since the epoch),
+    ``seq`` and the position of each recorded joint, in the robot's info order if
     it was recorded, else by name; a joint missing from a frame leaves its cell empty. Extra quantities
     of joint samples (``cmd``, ``cur``, ``temp``) are not exported. ``<robot>-derived.csv`` does the same
     for derived values (a list value spreads over ``<feature>/<name>.0``, ``.1``...), and ``events.csv``
@@ -44,6 +50,7 @@ def export_csv(recording: Recording, directory: str) -> list[str]:
     a row to hold are not written. Rows are written as frames complete: memory stays one frame per table.
     """
     os.makedirs(directory, exist_ok=True)
+    origin = recording.start_ns / 1e9
     infos = recording.infos()
     joints: dict[str, list[str]] = {}
     derived: dict[str, list[str]] = {}
@@ -61,7 +68,7 @@ def export_csv(recording: Recording, directory: str) -> list[str]:
     with ExitStack() as stack:
         def table(name: str, header: list[str]) -> _Frames:
             paths.append(os.path.join(directory, name))
-            return stack.enter_context(_Frames(paths[-1], header))
+            return stack.enter_context(_Frames(paths[-1], header, origin))
 
         for robot in recording.robots:
             if robot in joints:
@@ -79,7 +86,7 @@ def export_csv(recording: Recording, directory: str) -> list[str]:
             robot, section, name = message.key.split("/", 2)
             data = message.data
             if section == "events":
-                event_rows.writerow(_event_row(robot, name, data))
+                event_rows.writerow(_event_row(robot, name, data, origin))
             elif section == "joints":
                 tables[robot, section].add(data["t"], data["seq"], {name: data["v"]})
             else:
@@ -92,10 +99,11 @@ def export_csv(recording: Recording, directory: str) -> list[str]:
 class _Frames:
     """One CSV of frames; a frame's row is written when a message of another ``seq`` comes, or at the end."""
 
-    def __init__(self, path: str, columns: list[str]) -> None:
+    def __init__(self, path: str, columns: list[str], origin: float) -> None:
         self._file: TextIO = open(path, "w", newline="", encoding="utf-8")  # noqa: SIM115 — closed by __exit__
         self._csv = csv.writer(self._file)
-        self._csv.writerow(["t", "seq", *columns])
+        self._csv.writerow([*TIMES, "seq", *columns])
+        self._origin = origin
         self._columns = columns
         self._seq: int | None = None
         self._t: float = 0.0
@@ -110,7 +118,8 @@ class _Frames:
 
     def _flush(self) -> None:
         if self._seq is not None:
-            self._csv.writerow([repr(self._t), self._seq, *(_cell(self._cells.get(c)) for c in self._columns)])
+            self._csv.writerow([*_times(self._t, self._origin), self._seq,
+                                *(_cell(self._cells.get(c)) for c in self._columns)])
         self._seq, self._cells = None, {}
 
     def __enter__(self) -> _Frames:
@@ -145,7 +154,15 @@ def _derived_columns(recording: Recording, key: str) -> list[str]:
     return [f"{column}.{i}" for i in range(len(first))] if isinstance(first, list) else [column]
 
 
-def _event_row(robot: str, kind: str, data: dict[str, Any]) -> list[str]:
+def _times(t: Any, origin: float) -> list[str]:
+    """A row's ``t_s`` (rounded to the µs: a difference of two epoch times has no more) and ``t_unix_s``
+    (exactly as recorded)."""
+    if not isinstance(t, int | float):
+        return ["", _cell(t)]
+    return [repr(round(t - origin, 6)), repr(t)]
+
+
+def _event_row(robot: str, kind: str, data: dict[str, Any], origin: float) -> list[str]:
     rest = {k: v for k, v in data.items() if k not in EVENT_FIELDS}
-    return [_cell(data.get("t")), robot, data.get("kind", kind), data.get("state", ""), data.get("name", ""),
+    return [*_times(data.get("t"), origin), robot, data.get("kind", kind), data.get("state", ""), data.get("name", ""),
             data.get("text", ""), json.dumps(rest, sort_keys=True, ensure_ascii=False) if rest else ""]

@@ -7,6 +7,8 @@ import json
 import math
 import os
 
+import pytest
+
 from sonibus.adapters.recorder.export import export_csv
 from sonibus.adapters.recorder.reading import Recording
 from sonibus.adapters.recorder.writer import RecordingWriter
@@ -26,8 +28,16 @@ def value(seq: int, joint: int) -> float:
     return math.sin(0.1 * seq + joint) / 3
 
 
+LOG_DELAY_S = 0.001  # the recorder gets a message 1 ms after its acquisition
+
+
 def ns(t: float) -> int:
-    return int(t * 1e9) + 1_000_000  # the recorder gets a message 1 ms after its acquisition
+    return int(t * 1e9) + int(LOG_DELAY_S * 1e9)
+
+
+def times(seq: int) -> list[str]:
+    """A row's t_s and t_unix_s in a recording that starts with frame 0 (its first log time)."""
+    return [repr(round(t_of(seq) - ns(t_of(0)) / 1e9, 6)), repr(t_of(seq))]
 
 
 def write_info(out: RecordingWriter, robot: str = "pepper", model: str = "pepper") -> None:
@@ -93,17 +103,19 @@ def test_a_row_per_frame_with_the_joints_in_the_info_order(tmp_path):
     paths = export(record(str(tmp_path / "r.mcap"), frames=12), str(tmp_path / "out" / "csv"))
     assert paths == [str(tmp_path / "out" / "csv" / "pepper.csv"), str(tmp_path / "out" / "csv" / "events.csv")]
     header, *table = rows(paths[0])
-    assert header == ["t", "seq", *PEPPER.joint_names]
+    assert header == ["t_s", "t_unix_s", "seq", *PEPPER.joint_names]
     assert len(PEPPER.joint_names) == 17
     assert len(table) == 12
-    assert [int(row[1]) for row in table] == list(range(12))
+    assert [int(row[2]) for row in table] == list(range(12))
 
 
 def test_values_and_times_come_back_exactly(tmp_path):
     paths = export(record(str(tmp_path / "r.mcap")), str(tmp_path / "csv"))
     for seq, row in enumerate(rows(paths[0])[1:]):
-        assert row[0] == repr(t_of(seq)) and float(row[0]) == t_of(seq)
-        assert [float(cell) for cell in row[2:]] == [value(seq, j) for j in range(17)]
+        assert row[1] == repr(t_of(seq)) and float(row[1]) == t_of(seq)
+        # issue 37, item 9: t was only the Unix time; t_s counts from the recording's start (its first log time)
+        assert float(row[0]) == pytest.approx(t_of(seq) - t_of(0) - LOG_DELAY_S, abs=1e-6)
+        assert [float(cell) for cell in row[3:]] == [value(seq, j) for j in range(17)]
 
 
 def test_a_joint_missing_from_a_frame_leaves_its_cell_empty(tmp_path):
@@ -117,7 +129,7 @@ def test_a_joint_missing_from_a_frame_leaves_its_cell_empty(tmp_path):
 
 def test_without_an_info_the_joints_go_by_name(tmp_path):
     paths = export(record(str(tmp_path / "r.mcap"), info=False), str(tmp_path / "csv"))
-    assert rows(paths[0])[0] == ["t", "seq", *sorted(PEPPER.joint_names)]
+    assert rows(paths[0])[0] == ["t_s", "t_unix_s", "seq", *sorted(PEPPER.joint_names)]
 
 
 def test_a_robot_counting_again_from_zero_starts_new_frames(tmp_path):
@@ -126,7 +138,7 @@ def test_a_robot_counting_again_from_zero_starts_new_frames(tmp_path):
         for seq in (4, 5, 0, 1):
             write_frame(out, seq)
     table = rows(export(path, str(tmp_path / "csv"))[0])[1:]
-    assert [row[1] for row in table] == ["4", "5", "0", "1"]
+    assert [row[2] for row in table] == ["4", "5", "0", "1"]
 
 
 def test_events_of_all_robots_in_one_file(tmp_path):
@@ -141,15 +153,15 @@ def test_events_of_all_robots_in_one_file(tmp_path):
     paths = export(path, str(tmp_path / "csv"))
     assert [os.path.basename(p) for p in paths] == ["pepper.csv", "events.csv"]
     assert rows(paths[1]) == [
-        ["t", "robot", "kind", "state", "name", "text", "details"],
-        [repr(t_of(0)), "pepper", "behavior", "started", "animations/Stand/Gestures/Hey_1", "", ""],
-        [repr(t_of(1)), "nao", "speech", "started", "", "bonjour", ""],
-        [repr(t_of(2)), "pepper", "command", "", "", "",
+        ["t_s", "t_unix_s", "robot", "kind", "state", "name", "text", "details"],
+        [*times(0), "pepper", "behavior", "started", "animations/Stand/Gestures/Hey_1", "", ""],
+        [*times(1), "nao", "speech", "started", "", "bonjour", ""],
+        [*times(2), "pepper", "command", "", "", "",
          json.dumps({"args": {"name": "Crouch", "speed": 0.5}, "error": "unknown_posture", "ok": False,
                      "verb": "posture"})],
-        [repr(t_of(3)), "nao", "connection", "lost", "", "", ""],
+        [*times(3), "nao", "connection", "lost", "", "", ""],
     ]
-    assert json.loads(rows(paths[1])[3][6])["args"] == {"name": "Crouch", "speed": 0.5}
+    assert json.loads(rows(paths[1])[3][7])["args"] == {"name": "Crouch", "speed": 0.5}
 
 
 def test_no_events_no_events_file(tmp_path):
@@ -172,10 +184,10 @@ def test_derived_values_get_their_own_file_only_when_recorded(tmp_path):
     paths = export(path, str(tmp_path / "csv"))
     assert [os.path.basename(p) for p in paths] == ["pepper.csv", "pepper-derived.csv"]
     header, *table = rows(paths[1])
-    assert header == ["t", "seq", "hand/RHand.0", "hand/RHand.1", "hand/RHand.2", "velocity/HeadYaw"]
+    assert header == ["t_s", "t_unix_s", "seq", "hand/RHand.0", "hand/RHand.1", "hand/RHand.2", "velocity/HeadYaw"]
     assert len(table) == 5
-    assert table[2] == [repr(t_of(2)), "2", "", "", "", repr(value(2, 99))]
-    assert [float(c) for c in table[4][2:]] == [4 / 3, -4 / 7, 0.5, value(4, 99)]
+    assert table[2] == [*times(2), "2", "", "", "", repr(value(2, 99))]
+    assert [float(c) for c in table[4][3:]] == [4 / 3, -4 / 7, 0.5, value(4, 99)]
 
 
 def test_two_robots_two_files(tmp_path):
@@ -188,8 +200,8 @@ def test_two_robots_two_files(tmp_path):
     paths = export(path, str(tmp_path / "csv"))
     assert [os.path.basename(p) for p in paths] == ["nao.csv", "pepper.csv"]
     nao, pepper = rows(paths[0]), rows(paths[1])
-    assert nao[0] == ["t", "seq", *load_model("nao").joint_names]
-    assert pepper[0] == ["t", "seq", *sorted(PEPPER.joint_names)]  # no pepper info recorded
-    assert [row[1] for row in nao[1:]] == [str(seq + 100) for seq in range(6)]
+    assert nao[0] == ["t_s", "t_unix_s", "seq", *load_model("nao").joint_names]
+    assert pepper[0] == ["t_s", "t_unix_s", "seq", *sorted(PEPPER.joint_names)]  # no pepper info recorded
+    assert [row[2] for row in nao[1:]] == [str(seq + 100) for seq in range(6)]
     assert len(pepper) == 7
     assert nao[5][nao[0].index("RHand")] == "" and nao[5][nao[0].index("LHand")] != ""

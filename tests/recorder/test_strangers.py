@@ -240,7 +240,7 @@ def test_a_corrupt_chunk_is_skipped_and_counted(tmp_path, compression, how):
     status, out, _ = cli("info", str(tmp_path / "recovered.mcap"))
     assert status == 0 and "10 messages" in out, out
     with open(tmp_path / "csv" / "pepper.csv") as f:
-        assert [row.split(",")[1] for row in f.read().splitlines()[1:]] == [str(seq) for seq in range(10, 20)]
+        assert [row.split(",")[2] for row in f.read().splitlines()[1:]] == [str(seq) for seq in range(10, 20)]
 
 
 def test_replay_skips_a_corrupt_chunk_and_counts_it(tmp_path):
