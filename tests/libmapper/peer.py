@@ -1,0 +1,81 @@
+"""A libmapper program that is not sonibus, as webmapper or a Max patch would be: run
+inside a test's network namespace (``python tests/libmapper/peer.py ...``).
+
+``listen SOURCE EXPRESSION``: a device ``listener`` with an input ``yaw``, mapped (once,
+by this program, as webmapper would) from ``SOURCE`` (``pepper/joints/HeadYaw``: a device
+name without its ordinal) with ``EXPRESSION``; prints ``value <v>`` for each update.
+``--no-map`` leaves the map to sonibus (after a restart of this program).
+
+``send TARGET VALUE...``: a device ``sender`` with an output ``target`` mapped to ``TARGET``
+(``pepper/cmd/joints/set/HipRoll``, ``y=x``), then each VALUE set in turn, 0.4 s apart
+(``nan``, ``inf`` too); prints ``sent <v>``.
+
+Both print ``ready <device name>`` and ``mapped`` and run until killed (or ``--seconds``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from typing import Any
+
+import libmapper as mpr
+
+
+def find(graph: Any, device: Any, name: str, deadline: float) -> Any:
+    """The signal ``<stable device>/<signal>`` of the graph, once it is there."""
+    stable, _, signal = name.partition("/")
+    while time.monotonic() < deadline:
+        device.poll(20)
+        for sig in graph.signals():
+            owner = str(sig.device()[mpr.Property.NAME])
+            if owner.rsplit(".", 1)[0] == stable and str(sig[mpr.Property.NAME]) == signal:
+                return sig
+    sys.exit(f"peer: no signal {name} on the network")
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__)
+    parser.add_argument("mode", choices=("listen", "send"))
+    parser.add_argument("endpoint")
+    parser.add_argument("rest", nargs="*")
+    parser.add_argument("--no-map", action="store_true")
+    parser.add_argument("--seconds", type=float, default=60.0)
+    args = parser.parse_args()
+    graph = mpr.Graph()
+    graph.set_interface("lo")
+    if args.mode == "listen":
+        device = mpr.Device("listener", graph)
+        sig = device.add_signal(mpr.Signal.Direction.INCOMING, "yaw", 1, mpr.Type.FLOAT, None, None, None, None,
+                                lambda s, e, i, v, t: print(f"value {v!r}", flush=True),
+                                mpr.Object.Event.REMOTE_UPDATE)
+    else:
+        device = mpr.Device("sender", graph)
+        sig = device.add_signal(mpr.Signal.Direction.OUTGOING, "target", 1, mpr.Type.FLOAT)
+    while not device.get_is_ready():
+        device.poll(20)
+    print(f"ready {device[mpr.Property.NAME]}", flush=True)
+    end = time.monotonic() + args.seconds
+    if not args.no_map:
+        other = find(graph, device, args.endpoint, time.monotonic() + 20)
+        made = (mpr.Map("%y=" + args.rest[0].replace("x", "%x"), sig, other) if args.mode == "listen"
+                else mpr.Map("%y=%x", other, sig))
+        made.push()
+        while not made.get_is_ready():
+            device.poll(20)
+        print("mapped", flush=True)
+    values = [float(v) for v in args.rest] if args.mode == "send" else []
+    while time.monotonic() < end:
+        device.poll(20)
+        if values:
+            value = values.pop(0)
+            sig.set_value(value)
+            print(f"sent {value}", flush=True)
+            device.poll(400)
+    device.free()
+    graph.free()
+
+
+if __name__ == "__main__":
+    main()

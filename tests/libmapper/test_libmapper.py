@@ -1,0 +1,158 @@
+"""The libmapper node against another libmapper program (tests/libmapper/peer.py, the real
+``libmapper`` package), all inside one network namespace (libmapper discovers by
+multicast: never on this machine's own network). The sonibus side is a ``sonibus run``
+of a sim Pepper and the node, Zenoh in peer mode on the namespace's loopback."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import sys
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+
+from ..conftest import wait_for
+from ..net.netns import Host, NsProcess, Topology, ip, remove_stale, root_reason
+
+INSTALLATION = """
+[bus]
+mode = "peer"
+multicast = false
+listen = ["tcp/127.0.0.1:7447"]
+
+[nodes.robot]
+adapter = "sim"
+robot = "pepper"
+idle = true          # HeadYaw looks around: values that change
+body_sound = false
+speaker = false
+
+[nodes.mapper]
+adapter = "libmapper"
+interface = "lo"
+maps = "maps.json"
+"""
+PEER = Path(__file__).with_name("peer.py")
+
+
+@pytest.fixture(scope="module")
+def host() -> Iterator[Host]:
+    """One namespace whose loopback carries multicast (libmapper's bus, 224.0.1.3)."""
+    reason = root_reason()
+    if reason is not None:
+        if os.environ.get("CI"):
+            pytest.fail(reason)
+        pytest.skip(reason)
+    remove_stale()
+    topology = Topology()
+    try:
+        ns = topology.namespace("lm")
+        ip("-n", ns, "link", "set", "lo", "multicast", "on")
+        ip("-n", ns, "route", "add", "224.0.0.0/4", "dev", "lo")
+        yield Host(topology, "lm", ns, ["127.0.0.1"])
+    finally:
+        topology.close()
+
+
+def run(host: Host, path: Path) -> NsProcess:
+    process = host.sonibus("run", str(path))
+    wait_for(lambda: any("mapper: libmapper devices on lo" in line for line in process.errors + process.lines),
+             20, "sonibus run to start", process.describe)
+    return process
+
+
+def peer(host: Host, *args: str) -> NsProcess:
+    return host.run(sys.executable, str(PEER), *args)
+
+
+def values(process: NsProcess, since: int = 0) -> list[float]:
+    return [float(line.split()[1]) for line in process.lines[since:] if line.startswith("value ")]
+
+
+def echo(host: Host, path: Path, key: str, seconds: float) -> NsProcess:
+    return host.sonibus("echo", "--config", str(path), "--duration", str(seconds), key)
+
+
+def samples(process: NsProcess) -> list[float]:
+    return [json.loads(line.split(" ", 1)[1])["v"] for line in process.lines if line.startswith("pepper/")]
+
+
+def stats(host: Host, path: Path) -> dict:
+    done = host.cli("echo", "--config", str(path), "--count", "1", "--timeout", "5", "sonibus/stats/*/mapper")
+    return json.loads(done.stdout.split(" ", 1)[1])
+
+
+def test_a_map_from_headyaw_runs_at_the_robots_rate_and_comes_back_after_either_end_restarts(
+        host: Host, tmp_path: Path) -> None:
+    path = tmp_path / "show.toml"
+    path.write_text(INSTALLATION)
+    sonibus = run(host, path)
+    frames = echo(host, path, "pepper/joints/HeadYaw", 14)
+    wait_for(lambda: samples(frames), 10, "the robot's frames", frames.describe)  # (before any value is mapped)
+    listener = peer(host, "listen", "pepper/joints/HeadYaw", "x*2")
+    wait_for(lambda: "mapped" in listener.lines, 20, "the peer's map", lambda: listener.describe() + sonibus.describe())
+    start = len(listener.lines)
+    time.sleep(2.0)  # (a window to count updates in: ~100 a second, as the sim's frames)
+    counted = len(values(listener, start))
+    assert counted >= 100, f"{counted} updates in 2 s from a 100 Hz robot"
+    print(f"libmapper: {counted / 2:.0f} updates/s through a map from a 100 Hz robot")
+    got = values(listener)  # (while the frames' echo still runs)
+    # every value is the expression applied to one of the robot's frames (float32 on libmapper's wire)
+    wait_for(lambda: frames.popen.poll() is not None, 15, "the frames' echo to end")
+    seen = samples(frames)
+    assert seen and got
+    unmatched = [v for v in got if not any(abs(v - 2 * f) <= 1e-6 + 1e-6 * abs(v) for f in seen)]
+    assert not unmatched, f"{len(unmatched)} of {len(got)} values are no frame's x*2: {unmatched[:5]}"
+    kept = json.loads((tmp_path / "maps.json").read_text())["maps"]
+    assert kept == [{"sources": ["pepper/joints/HeadYaw"], "destination": "listener/yaw",
+                     "expression": "y=x$0*2", "muted": False}]
+
+    # sonibus killed and started again: the map is back by itself, the peer untouched
+    sonibus.kill()
+    time.sleep(0.5)
+    before = len(listener.lines)
+    restarted = time.monotonic()
+    sonibus = run(host, path)
+    wait_for(lambda: len(values(listener, before)) >= 50, 20, "updates after sonibus restarted",
+             lambda: listener.describe() + sonibus.describe())
+    print(f"libmapper: map back {time.monotonic() - restarted:.1f} s after `sonibus run` was started again")
+
+    # the peer killed and started again (another ordinal), not mapping anything itself: sonibus maps it
+    listener.kill()
+    listener = peer(host, "listen", "pepper/joints/HeadYaw", "--no-map")
+    wait_for(lambda: len(values(listener)) >= 50, 20, "updates to the restarted peer",
+             lambda: listener.describe() + sonibus.describe())
+    assert "restored in" in "\n".join(sonibus.errors), sonibus.describe()
+    code, _, err = sonibus.stop(signal.SIGTERM)  # (ends within stop()'s 5 s, devices freed)
+    assert code == 130, err
+
+
+def test_a_command_input_past_the_limits_is_refused_by_the_robot_and_bad_values_never_leave(
+        host: Host, tmp_path: Path) -> None:
+    path = tmp_path / "show.toml"
+    path.write_text(INSTALLATION)
+    sonibus = run(host, path)
+    frames = echo(host, path, "pepper/joints/HipRoll", 14)  # HipRoll: limits ±0.5149 rad, still when idle
+    sender = peer(host, "send", "pepper/cmd/joints/set/HipRoll", "3.0", "nan", "inf", "1e30", "0.3")
+    wait_for(lambda: "sent 0.3" in sender.lines, 20, "the peer's values", lambda: sender.describe() + sonibus.describe())
+
+    def counted() -> dict:
+        found = stats(host, path)["counters"]
+        return found if found.get("commands", 0) >= 1 else {}
+
+    found = wait_for(counted, 10, "the accepted command in the node's stats")
+    assert found["refused_values"] == 2, found          # nan and inf: refused here, nothing sent
+    assert found["commands_refused"] == 2, found        # 3.0 and 1e30: refused by the robot's owner
+    said = "\n".join(sonibus.errors)
+    assert "refused joints/set (HipRoll = 3) from libmapper: out_of_range" in said, said
+    assert "is not a finite number" in said, said
+    wait_for(lambda: frames.popen.poll() is not None, 20, "the frames' echo to end")
+    hip = samples(frames)
+    assert max(abs(v) for v in hip) <= 0.5149 + 1e-6, "the robot moved past its limits"
+    assert abs(hip[-1] - 0.3) < 0.02, f"the accepted target 0.3 was not reached: {hip[-5:]}"
+    code, _, err = sonibus.stop(signal.SIGTERM)  # (ends within stop()'s 5 s, devices freed)
+    assert code == 130, err
