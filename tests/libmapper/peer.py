@@ -7,8 +7,10 @@ name without its ordinal) with ``EXPRESSION``; prints ``value <v>`` for each upd
 ``--no-map`` leaves the map to sonibus (after a restart of this program).
 
 ``send TARGET VALUE...``: a device ``sender`` with an output ``target`` mapped to ``TARGET``
-(``pepper/cmd/joints/set/HipRoll``, ``y=x``), then each VALUE set in turn, 0.4 s apart
-(``nan``, ``inf`` too); prints ``sent <v>``.
+(``pepper/cmd/joints/set/HipRoll``, ``y=x``), then each VALUE set in turn, 0.4 s apart;
+prints ``sent <v>``. libmapper itself drops a NaN it is asked to send, so ``raw:nan``
+is sent as a bare OSC message to TARGET's device and path, as a buggy or hostile peer
+on the network can (libmapper takes signal updates from anyone who sends them).
 
 Both print ``ready <device name>`` and ``mapped`` and run until killed (or ``--seconds``).
 """
@@ -21,6 +23,7 @@ import time
 from typing import Any
 
 import libmapper as mpr
+from pythonosc.udp_client import SimpleUDPClient
 
 
 def find(graph: Any, device: Any, name: str, deadline: float) -> Any:
@@ -33,6 +36,13 @@ def find(graph: Any, device: Any, name: str, deadline: float) -> Any:
             if owner.rsplit(".", 1)[0] == stable and str(sig[mpr.Property.NAME]) == signal:
                 return sig
     sys.exit(f"peer: no signal {name} on the network")
+
+
+def raw(target: Any, value: float) -> None:
+    """``value`` as a bare OSC message to ``target``'s device, at the signal's path."""
+    owner = target.device()
+    client = SimpleUDPClient(str(owner[mpr.Property.HOST]), int(owner[mpr.Property.PORT]))
+    client.send_message("/" + str(target[mpr.Property.NAME]), value)
 
 
 def main() -> None:
@@ -65,12 +75,15 @@ def main() -> None:
         while not made.get_is_ready():
             device.poll(20)
         print("mapped", flush=True)
-    values = [float(v) for v in args.rest] if args.mode == "send" else []
+    values = list(args.rest) if args.mode == "send" else []
     while time.monotonic() < end:
         device.poll(20)
         if values:
             value = values.pop(0)
-            sig.set_value(value)
+            if value.startswith("raw:"):
+                raw(other, float(value[4:]))
+            else:
+                sig.set_value(float(value))
             print(f"sent {value}", flush=True)
             device.poll(400)
     device.free()
