@@ -141,7 +141,8 @@ def test_a_command_input_past_the_limits_is_refused_by_the_robot_and_bad_values_
     frames = echo(host, path, "pepper/joints/HipRoll", 30)  # HipRoll: limits ±0.5149 rad, still when idle
     sender = peer(host, "send", "pepper/cmd/joints/set/HipRoll", "3.0", "inf", "1e30", "raw:nan",
                   "raw:inf", "0.3")
-    wait_for(lambda: "sent 0.3" in sender.lines, 20, "the peer's values", lambda: sender.describe() + sonibus.describe())
+    wait_for(lambda: "sent 0.3" in sender.lines, 20, "the peer's values",
+             lambda: sender.describe() + sonibus.describe())
 
     def counted() -> dict:
         found = stats(host, path)["counters"]
