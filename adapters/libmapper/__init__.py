@@ -24,6 +24,7 @@ from pathlib import Path
 from typing import Any
 
 from sonibus.bus.adapter import Adapter
+from sonibus.bus.errors import ConfigError
 from sonibus.bus.info import InfoRequests
 from sonibus.bus.presence import watch_robots
 from sonibus.bus.queue import SampleQueue
@@ -64,7 +65,10 @@ class Libmapper(Adapter):
         if not path.is_absolute():
             path = (self.folder or Path.cwd()) / path
         self._file = MapFile(path)
-        self._file.load()  # (a file that cannot be read stops the start here, in one line, and is left as it is)
+        try:  # (a file that cannot be read stops the start here, in one line, and is left as it is)
+            self._file.load()
+        except ValueError as exc:
+            raise ConfigError(f"node '{self.name}': key 'maps': {exc}") from None
         self._changes: queue.Queue[tuple[str, str, Any]] = queue.Queue(CHANGES)
         self._frames = self.own(SampleQueue(cfg.queue))
         self._info = InfoRequests(self.bus, lambda robot, info: self._change("info", robot, info),

@@ -48,6 +48,12 @@ class Commands:
         self.count("inputs")
         self.targets.setdefault(robot, {})[joint] = float(value)
 
+    @property
+    def idle(self) -> bool:
+        """Whether no target waits and no command is unanswered."""
+        with self._lock:
+            return not self._waiting and not any(self.targets.values())
+
     def forget(self, robot: str) -> None:
         """``robot`` is no longer served."""
         self.targets.pop(robot, None)
