@@ -114,7 +114,7 @@ class Libmapper(Adapter):
 
     def _run(self) -> None:
         cfg: LibmapperConfig = self.config
-        devices = Devices(cfg.interface, self._commands.take, self._map_changed, cfg.commands)
+        devices = Devices(cfg.interface, self._commands.take, self._map_changed, self._device_left, cfg.commands)
         try:
             self._keeper = Keeper(self._file, devices, cfg.max_maps, cfg.restore_s,
                                   lambda kind, text: log.warning("%s: %s", self.name, text),
@@ -139,6 +139,10 @@ class Libmapper(Adapter):
     def _map_changed(self, found: Any, present: bool) -> None:
         if self._keeper is not None and not self.stopping.is_set():  # (our devices leaving is no removal)
             self._keeper.changed(found, present)
+
+    def _device_left(self, device: str) -> None:
+        if self._keeper is not None and not self.stopping.is_set():
+            self._keeper.left(device)
 
     def _take_changes(self, devices: Devices) -> None:
         for _ in range(64):  # (a few each round: frames and polls go on)

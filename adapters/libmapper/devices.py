@@ -1,5 +1,9 @@
 """Robots as libmapper devices: one ``Device`` per robot, named after it, on one
-``Graph`` that also sees every other device, signal and map of the network.
+``Graph``; and a second ``Graph`` (``manager``) that sees every device, signal and
+map of the network, as webmapper's does, and makes the maps sonibus restores: a map
+made by its source device's own graph cannot be removed by webmapper (seen with
+libmapper 2.6.1: the other side's release did nothing), one made by a graph of its
+own can.
 
 libmapper is not thread-safe: a ``Devices`` is made, used and closed on one thread
 (the node's ``libmapper`` worker), which polls it often. Output signals are the
@@ -26,6 +30,7 @@ COMMAND = "cmd/joints/set/"  # input signals: a joint's target, as the OSC gatew
 
 OnInput = Callable[[str, str, Any], None]   # (robot, joint, value as libmapper gave it)
 OnMap = Callable[[Any, bool], None]         # (libmapper Map, whether it is there: False when removed)
+OnLeft = Callable[[str], None]              # (the full name of a device that left the network)
 
 
 @dataclass
@@ -50,14 +55,17 @@ class RobotDevice:
 class Devices:
     """The robots' devices on one graph; ``interface`` names the network ("": libmapper's choice)."""
 
-    def __init__(self, interface: str, on_input: OnInput, on_map: OnMap, commands: bool = True) -> None:
-        self.graph = mpr.Graph()
+    def __init__(self, interface: str, on_input: OnInput, on_map: OnMap, on_left: OnLeft,
+                 commands: bool = True) -> None:
+        self.graph, self.manager = mpr.Graph(), mpr.Graph()
         if interface:
             self.graph.set_interface(interface)
-        self.on_input, self.on_map, self.commands = on_input, on_map, commands
+            self.manager.set_interface(interface)
+        self.on_input, self.on_map, self.on_left, self.commands = on_input, on_map, on_left, commands
         self.robots: dict[str, RobotDevice] = {}
         self._events = self._graph_event  # (one bound method: the binding's callbacks are a module-wide set)
-        self.graph.add_callback(self._events, mpr.Type.MAP)
+        # (the binding calls it for the events of both graphs: what it is told twice changes nothing)
+        self.manager.add_callback(self._events, mpr.Type.MAP | mpr.Type.DEVICE)
 
     # -- devices and signals ------------------------------------------------------
 
@@ -136,6 +144,7 @@ class Devices:
         """Handle what came from the network (inputs, maps) and send what was set."""
         for served in list(self.robots.values()):
             served.device.poll(0)
+        self.manager.poll(0)
 
     # -- the graph ------------------------------------------------------------------
 
@@ -143,26 +152,38 @@ class Devices:
         """Whether a device of that name is one of ours (``pepper.1``)."""
         return any(s.name == device_name for s in self.robots.values())
 
-    def _graph_event(self, _kind: Any, found: Any, event: Any) -> None:
+    def _graph_event(self, kind: Any, found: Any, event: Any) -> None:
         # (the binding calls every callback for every graph of the process: one node of this kind per process)
         removed = bool(event & (mpr.Object.Event.REMOVED | mpr.Object.Event.EXPIRED))
-        self.on_map(found, not removed)
+        if kind == mpr.Type.DEVICE:
+            if removed:
+                self.on_left(str(found[mpr.Property.NAME]))
+        else:
+            self.on_map(found, not removed)
 
     def maps(self) -> Iterator[Any]:
-        """Every map the graph knows of."""
-        yield from self.graph.maps()
+        """Every map of the network (as the manager graph knows it)."""
+        yield from self.manager.maps()
+
+    def running(self) -> Iterator[Any]:
+        """The maps our devices hold themselves (libmapper's local maps): what runs, as far as this
+        end knows. (The manager graph keeps a map it was told of until told otherwise: a map
+        unmapped from elsewhere stayed ACTIVE there.)"""
+        for found in self.graph.maps():
+            if found[mpr.Property.IS_LOCAL]:
+                yield found
 
     def remote(self) -> Iterator[tuple[str, float]]:
-        """Every device the graph knows of that is not ours: its name and when it was last heard from."""
-        for device in self.graph.devices():
-            if device[mpr.Property.IS_LOCAL]:
-                continue
+        """Every device of the network (ours too, as the manager graph knows it): its name and when it
+        was last heard from."""
+        for device in self.manager.devices():
             synced = device[mpr.Property.SYNCED]
             yield str(device[mpr.Property.NAME]), synced.get_double() if synced is not None else 0.0
 
     def signal(self, device_name: str, signal: str) -> Any | None:
-        """The signal ``signal`` of device ``device_name`` as the graph knows it, or None."""
-        for device in self.graph.devices():
+        """The signal ``signal`` of device ``device_name`` as the manager graph knows it (maps are
+        made with these), or None."""
+        for device in self.manager.devices():
             if str(device[mpr.Property.NAME]) == device_name:
                 for sig in device.signals():
                     if str(sig[mpr.Property.NAME]) == signal:
@@ -171,9 +192,10 @@ class Devices:
 
     def close(self) -> None:
         """Every device off the network, the graph freed."""
-        self.graph.remove_callback(self._events)
+        self.manager.remove_callback(self._events)
         for robot in list(self.robots):
             self.drop_robot(robot)
+        self.manager.free()
         self.graph.free()
 
 

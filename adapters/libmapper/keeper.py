@@ -9,7 +9,8 @@ resolved to the device of that name heard from most recently, and a map counts a
 back only when it joins those very devices.
 
 A map removed while both its ends stay on the network was removed by a person:
-it is forgotten. A map removed because one of its ends left is kept.
+it is forgotten (``FORGET_S`` later, not made again meanwhile). A map removed
+because one of its ends left is kept.
 
 Runs on the libmapper thread (``Devices`` is not thread-safe).
 """
@@ -32,13 +33,21 @@ log.setLevel(logging.INFO)  # (a map that comes back, or not, is said at sonibus
 
 HEARD_S = 10.0     # libmapper forgets a device not heard from for this long (its TIMEOUT_SEC)
 FORGET_S = 1.5     # a removed map whose ends both stay this long was removed by a person
-RETRY_S = 5.0      # a map that did not come back is pushed again this often
+RETRY_S = 1.0      # a map that is not back this long after it was pushed is pushed again
+PUSHED = "pushed, waiting for libmapper"
+REFUSED_KEPT = 256  # maps refused for max_maps remembered (so as to say each once)
+RELEASES = 2       # /unmap a destination needs to drop a map whose source is gone (libmapper's handler_unmap)
 
 
 @dataclass
 class _Attempt:
-    at: float                      # when it was pushed (monotonic)
-    devices: tuple[str, ...]       # the full device names it was pushed between
+    """Bringing one map back between the devices that carry its names now."""
+
+    at: float                      # when both its ends were seen (monotonic)
+    devices: tuple[str, ...]       # the full device names it is made between
+    pushed: bool = False           # whether it was made (a signal not there yet, a stale map released: not yet)
+    pushed_at: float = 0.0         # when it was last tried
+    releases: int = 0              # stale maps between the same devices released before this push
     said: bool = False             # whether "did not come back" was said for it
 
 
@@ -55,12 +64,13 @@ class Keeper:
             say("maps_refused", f"{file.path}: {len(loaded)} maps, only the first {limit} are kept "
                                 f"(max_maps = {limit})")
         self.wanted: dict[tuple[tuple[str, ...], str], SavedMap] = {m.key: m for m in loaded[:limit]}
-        self.removed: dict[tuple[tuple[str, ...], str], float] = {}
+        self.removed: dict[tuple[tuple[str, ...], str], tuple[float, tuple[str, ...]]] = {}  # when, between what
         self.attempts: dict[tuple[tuple[str, ...], str], _Attempt] = {}
         self.waiting: dict[tuple[tuple[str, ...], str], str] = {}   # what each map that is not back waits for
         self.live: set[tuple[tuple[str, ...], str]] = set()
         self.ready_since: float | None = None  # since when every device of ours has had its name (monotonic)
         self._said_absent: set[tuple[tuple[str, ...], str]] = set()
+        self._refused: set[tuple[tuple[str, ...], str]] = set()  # maps not kept for max_maps, said once each
         self.snapshot: dict[str, Any] = {}  # for the node's stats (read on another thread: replaced whole)
 
     # -- what the graph says ----------------------------------------------------------
@@ -79,7 +89,7 @@ class Keeper:
                         str(expression) if expression else "", bool(muted))
         if not present:
             if seen.key in self.wanted and seen.key not in self.attempts:  # (not the stale one we released)
-                self.removed[seen.key] = time.monotonic()
+                self.removed[seen.key] = (time.monotonic(), tuple(e.full for e in (*sources, destination)))
             return
         if not found.get_is_ready():
             return  # (staged: saved once it runs)
@@ -87,6 +97,11 @@ class Keeper:
         if self.wanted.get(seen.key) == seen:
             return
         if seen.key not in self.wanted and len(self.wanted) >= self.limit:
+            if seen.key in self._refused:  # (said once: each graph tells of it, and again as it changes)
+                return
+            if len(self._refused) >= REFUSED_KEPT:
+                self._refused.clear()
+            self._refused.add(seen.key)
             self.count("maps_refused")
             self.say("maps_refused", f"map {seen.describe()} not saved: already {self.limit} maps in "
                                      f"{self.file.path} (max_maps) — remove some, or raise max_maps")
@@ -96,6 +111,11 @@ class Keeper:
         log.info("libmapper: map %s %s (expression %r)", seen.describe(), "saved" if new else "changed",
                  seen.expression)
         self._save()
+
+    def left(self, device: str) -> None:
+        """A device left the network: the maps removed with it were not removed by a person."""
+        for key in [k for k, (_, between) in self.removed.items() if device in between]:
+            del self.removed[key]
 
     def _save(self) -> None:
         try:
@@ -133,7 +153,7 @@ class Keeper:
         self.live = self._live(current)
         ready = bool(self.devices.robots) and all(s.ready for s in self.devices.robots.values())
         self.ready_since = (self.ready_since or now) if ready else None
-        for key, at in list(self.removed.items()):
+        for key, (at, _) in list(self.removed.items()):
             if now - at < FORGET_S:
                 continue
             del self.removed[key]
@@ -150,6 +170,8 @@ class Keeper:
             if key in self.live:
                 self._back(key, saved, now)
                 continue
+            if key in self.removed:  # (removed while both ends ran, as far as is known yet: not made again)
+                continue
             absent = [d for d in saved.devices if d not in current]
             if absent:
                 self.waiting[key] = f"device {', '.join(repr(d) for d in absent)} not on the network"
@@ -162,12 +184,11 @@ class Keeper:
                 continue
             devices = tuple(current[d] for d in saved.devices)
             attempt = self.attempts.get(key)
-            if attempt is None or attempt.devices != devices or (attempt.said and now - attempt.at >= RETRY_S):
-                self.waiting[key] = self._push(saved, current)
-                self.attempts[key] = _Attempt(now, devices, said=attempt.said if attempt else False)
-                if self.waiting[key].startswith("a stale map"):
-                    self.attempts[key].devices = ()  # (pushed at the next tick)
-                continue
+            if attempt is None or attempt.devices != devices:  # (the clock starts when both ends are seen)
+                attempt = self.attempts[key] = _Attempt(now, devices)
+            if not attempt.pushed or now - attempt.pushed_at >= RETRY_S:
+                self.waiting[key] = self._push(saved, current, attempt)
+                attempt.pushed, attempt.pushed_at = self.waiting[key] == PUSHED, now
             if not attempt.said and now - attempt.at >= self.restore_s:
                 attempt.said = True
                 self.count("maps_not_back")
@@ -179,15 +200,16 @@ class Keeper:
     def _back(self, key: tuple[tuple[str, ...], str], saved: SavedMap, now: float) -> None:
         attempt = self.attempts.pop(key, None)
         self.waiting.pop(key, None)
-        if key in self._said_absent or (attempt and attempt.said):
-            log.info("libmapper: map %s is back", saved.describe())
-        elif attempt is not None:
-            log.info("libmapper: map %s restored in %.0f ms", saved.describe(), (now - attempt.at) * 1000)
+        if attempt is not None:
+            log.info("libmapper: map %s back, %.0f ms after both its ends were on the network", saved.describe(),
+                     (now - attempt.at) * 1000)
+        elif key in self._said_absent:
+            log.info("libmapper: map %s back", saved.describe())
         self._said_absent.discard(key)
 
     def _live(self, current: dict[str, str]) -> set[tuple[tuple[str, ...], str]]:
         live = set()
-        for found in self.devices.maps():
+        for found in self.devices.running():
             ends = endpoints(found)
             if ends is None or not found.get_is_ready():
                 continue
@@ -196,18 +218,22 @@ class Keeper:
                 live.add((tuple(e.name for e in sources), destination.name))
         return live
 
-    def _push(self, saved: SavedMap, current: dict[str, str]) -> str:
+    def _push(self, saved: SavedMap, current: dict[str, str], attempt: _Attempt) -> str:
         """Make ``saved`` between the current devices; what is missing, or what was done instead.
 
         A peer that outlived a restart of ours still holds the map it had with our old device,
-        which may have had the very name of our new one (``pepper.1``) but not its ports: that
-        stale map is released first (the peer forgets it), and pushed anew at the next tick."""
+        which may have had the very name of our new one (``pepper.1``) but not its ports, and
+        libmapper takes a new map between the same names for that one. So a map between the
+        same devices that is not running is released first, ``RELEASES`` times, a tick apart (a
+        destination drops a map whose source is gone only at the second ``/unmap``)."""
         full = [(current[d], s) for d, s in map(split, (*saved.sources, saved.destination))]
-        for found in self.devices.maps():
-            ends = endpoints(found)
-            if ends is not None and [(e.full, e.signal) for e in (*ends[0], ends[1])] == full:
-                found.release()
-                return "a stale map between the same devices released"
+        if attempt.releases < RELEASES:
+            for found in self.devices.maps():
+                ends = endpoints(found)
+                if ends is not None and [(e.full, e.signal) for e in (*ends[0], ends[1])] == full:
+                    found.release()
+                    attempt.releases += 1
+                    return "a stale map between the same devices released; made again next"
         signals = []
         for device, signal in full:
             found = self.devices.signal(device, signal)
@@ -220,10 +246,12 @@ class Keeper:
         if saved.muted:
             made[mpr.Property.MUTED] = True
         made.push()
-        return "pushed, waiting for libmapper"
+        attempt.releases = 0  # (a retry looks for a stale map again)
+        return PUSHED
 
     def _snapshot(self) -> dict[str, Any]:
         missing = [f"{self.wanted[k].describe()}: {why}" for k, why in self.waiting.items() if k in self.wanted]
         shown = "; ".join(missing[:5]) + (f"; and {len(missing) - 5} more" if len(missing) > 5 else "")
         return {"maps_kept": len(self.wanted), "maps_live": len(self.live), "maps_missing": len(missing),
                 "maps_missing_why": shown}
+

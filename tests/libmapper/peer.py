@@ -12,12 +12,17 @@ prints ``sent <v>``. libmapper itself drops a NaN it is asked to send, so ``raw:
 is sent as a bare OSC message to TARGET's device and path, as a buggy or hostile peer
 on the network can (libmapper takes signal updates from anyone who sends them).
 
-Both print ``ready <device name>`` and ``mapped`` and run until killed (or ``--seconds``).
+``--unmap-after N``: release every map into ``yaw`` after N updates, from a graph of
+its own (as a person unmapping in webmapper), printing ``unmapped``.
+
+Both print ``ready <device name>`` and ``mapped`` and run until killed, ``--seconds`` or
+SIGTERM (which frees the device: its peers see it leave, as when a synth is closed).
 """
 
 from __future__ import annotations
 
 import argparse
+import signal
 import sys
 import time
 from typing import Any
@@ -52,13 +57,24 @@ def main() -> None:
     parser.add_argument("rest", nargs="*")
     parser.add_argument("--no-map", action="store_true")
     parser.add_argument("--seconds", type=float, default=60.0)
+    parser.add_argument("--unmap-after", type=float, default=0.0, help="release every map of the signal after "
+                                                                       "this many updates came (0: never)")
     args = parser.parse_args()
-    graph = mpr.Graph()
+    stopping: list[int] = []
+    signal.signal(signal.SIGTERM, lambda *_: stopping.append(1))  # (ends the loop: the device says goodbye)
+    graph, manager = mpr.Graph(), mpr.Graph()
     graph.set_interface("lo")
+    manager.set_interface("lo")
+    updates = [0]
+
+    def updated(value: float) -> None:
+        updates[0] += 1
+        print(f"value {value!r}", flush=True)
+
     if args.mode == "listen":
         device = mpr.Device("listener", graph)
         sig = device.add_signal(mpr.Signal.Direction.INCOMING, "yaw", 1, mpr.Type.FLOAT, None, None, None, None,
-                                lambda s, e, i, v, t: print(f"value {v!r}", flush=True),
+                                lambda s, e, i, v, t: updated(v),
                                 mpr.Object.Event.REMOTE_UPDATE)
     else:
         device = mpr.Device("sender", graph)
@@ -76,8 +92,15 @@ def main() -> None:
             device.poll(20)
         print("mapped", flush=True)
     values = list(args.rest) if args.mode == "send" else []
-    while time.monotonic() < end:
+    while time.monotonic() < end and not stopping:
         device.poll(20)
+        manager.poll(0)
+        if args.unmap_after and updates[0] >= args.unmap_after:
+            args.unmap_after = 0.0
+            for found in manager.maps():  # (as webmapper does: from a graph of its own, not the device's)
+                if any(str(s[mpr.Property.NAME]) == "yaw" for s in found.signals(mpr.Map.Location.DESTINATION)):
+                    found.release()
+            print("unmapped", flush=True)
         if values:
             value = values.pop(0)
             if value.startswith("raw:"):
@@ -87,6 +110,7 @@ def main() -> None:
             print(f"sent {value}", flush=True)
             device.poll(400)
     device.free()
+    manager.free()
     graph.free()
 
 

@@ -35,6 +35,7 @@ speaker = false
 adapter = "libmapper"
 interface = "lo"
 maps = "maps.json"
+max_maps = 1
 """
 PEER = Path(__file__).with_name("peer.py")
 
@@ -87,7 +88,7 @@ def stats(host: Host, path: Path) -> dict:
 
 
 def test_a_map_from_headyaw_runs_at_the_robots_rate_and_comes_back_after_either_end_restarts(
-        host: Host, tmp_path: Path) -> None:
+        host: Host, tmp_path: Path, figure) -> None:
     path = tmp_path / "show.toml"
     path.write_text(INSTALLATION)
     sonibus = run(host, path)
@@ -99,7 +100,7 @@ def test_a_map_from_headyaw_runs_at_the_robots_rate_and_comes_back_after_either_
     time.sleep(2.0)  # (a window to count updates in: ~100 a second, as the sim's frames)
     counted = len(values(listener, start))
     assert counted >= 100, f"{counted} updates in 2 s from a 100 Hz robot"
-    print(f"libmapper: {counted / 2:.0f} updates/s through a map from a 100 Hz robot")
+    figure("updates through a map from a 100 Hz robot", counted / 2, "/s")
     got = values(listener)  # (while the frames' echo still runs)
     # every value is the expression applied to one of the robot's frames (float32 on libmapper's wire)
     printed = len(samples(frames))
@@ -121,14 +122,28 @@ def test_a_map_from_headyaw_runs_at_the_robots_rate_and_comes_back_after_either_
     sonibus = run(host, path)
     wait_for(lambda: len(values(listener, before)) >= 50, 20, "updates after sonibus restarted",
              lambda: listener.describe() + sonibus.describe())
-    print(f"libmapper: map back {time.monotonic() - restarted:.1f} s after `sonibus run` was started again")
+    figure("map back after `sonibus run` was started again", time.monotonic() - restarted, "s")
 
-    # the peer killed and started again (another ordinal), not mapping anything itself: sonibus maps it
-    listener.kill()
-    listener = peer(host, "listen", "pepper/joints/HeadYaw", "--no-map")
-    wait_for(lambda: len(values(listener)) >= 50, 20, "updates to the restarted peer",
+    # the peer closed (its device says goodbye: the map is removed with it), and kept
+    listener.stop(signal.SIGTERM)
+    wait_for(lambda: "device 'listener' not on the network" in stats(host, path)["metrics"]["maps_missing_why"],
+             10, "the map to wait for its peer", sonibus.describe)
+    assert len(json.loads((tmp_path / "maps.json").read_text())["maps"]) == 1
+
+    # the peer started again (another ordinal maybe), not mapping anything itself: sonibus maps it;
+    # then it unmaps (as a person in webmapper) while both ends run: forgotten, not made again
+    listener = peer(host, "listen", "pepper/joints/HeadYaw", "--no-map", "--unmap-after", "50")
+    wait_for(lambda: "unmapped" in listener.lines, 20, "updates to the restarted peer, then its unmap",
              lambda: listener.describe() + sonibus.describe())
-    assert "restored in" in "\n".join(sonibus.errors), sonibus.describe()
+    back = [line for line in sonibus.errors if "libmapper: map pepper/joints/HeadYaw -> listener/yaw back, " in line]
+    assert len(back) == 2, sonibus.describe()  # (after sonibus's restart, and after the peer's)
+    figure("map back after both its ends were on the network", back[-1].split("back, ")[1].split()[0], "ms")
+    wait_for(lambda: json.loads((tmp_path / "maps.json").read_text())["maps"] == [], 5, "the unmapped map forgotten",
+             lambda: "\n".join(sonibus.errors + [line for line in listener.lines if not line.startswith("value")]))
+    assert "removed while both its ends run: forgotten" in "\n".join(sonibus.errors)
+    after = len(listener.lines)
+    assert stats(host, path)["metrics"]["maps_kept"] == 0  # (a second of stats: no map made again meanwhile)
+    assert len(values(listener, after)) == 0
     code, _, err = sonibus.stop(signal.SIGTERM)  # (ends within stop()'s 5 s, devices freed)
     assert code == 130, err
 
@@ -149,6 +164,13 @@ def test_a_command_input_past_the_limits_is_refused_by_the_robot_and_bad_values_
         return found if found.get("commands", 0) >= 1 else {}
 
     found = wait_for(counted, 10, "the accepted command in the node's stats")
+    kept = json.loads((tmp_path / "maps.json").read_text())["maps"]
+    assert [m["sources"] for m in kept] == [["sender/target"]], kept
+    # a second map, past max_maps = 1: it runs, but is not kept (said, counted)
+    listener = peer(host, "listen", "pepper/joints/HeadYaw", "x")
+    wait_for(lambda: stats(host, path)["counters"]["maps_refused"] == 1, 20, "the second map refused",
+             lambda: listener.describe() + sonibus.describe())
+    assert "map pepper/joints/HeadYaw -> listener/yaw not saved: already 1 maps in" in "\n".join(sonibus.errors)
     assert found["refused_values"] == 3, found          # inf (mapped), raw nan and inf: refused here, nothing sent
     assert found["commands_refused"] == 2, found        # 3.0 and 1e30: refused by the robot's owner
     assert found["commands"] == 1, found                # 0.3
