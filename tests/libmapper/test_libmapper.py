@@ -59,6 +59,16 @@ def host() -> Iterator[Host]:
         topology.close()
 
 
+@pytest.fixture(autouse=True)
+def _ended(host: Host) -> Iterator[None]:
+    """What a test started in the namespace ends with it, also when it fails (the next test's
+    `sonibus run` listens on the same port)."""
+    before = len(host.topology.processes)
+    yield
+    for process in host.topology.processes[before:]:
+        process.kill()
+
+
 def run(host: Host, path: Path) -> NsProcess:
     process = host.sonibus("run", str(path))
     wait_for(lambda: any("mapper: libmapper devices on lo" in line for line in process.errors + process.lines),
