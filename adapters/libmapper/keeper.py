@@ -33,10 +33,9 @@ log.setLevel(logging.INFO)  # (a map that comes back, or not, is said at sonibus
 
 HEARD_S = 10.0     # libmapper forgets a device not heard from for this long (its TIMEOUT_SEC)
 FORGET_S = 1.5     # a removed map whose ends both stay this long was removed by a person
-RETRY_S = 1.0      # a map that is not back this long after it was pushed is pushed again
+RETRY_S = 0.3      # a map that is not back this long after it was pushed is pushed again
 PUSHED = "pushed, waiting for libmapper"
 REFUSED_KEPT = 256  # maps refused for max_maps remembered (so as to say each once)
-RELEASES = 2       # /unmap a destination needs to drop a map whose source is gone (libmapper's handler_unmap)
 
 
 @dataclass
@@ -45,9 +44,8 @@ class _Attempt:
 
     at: float                      # when both its ends were seen (monotonic)
     devices: tuple[str, ...]       # the full device names it is made between
-    pushed: bool = False           # whether it was made (a signal not there yet, a stale map released: not yet)
+    pushed: bool = False           # whether it was made (not while a signal is not there yet)
     pushed_at: float = 0.0         # when it was last tried
-    releases: int = 0              # stale maps between the same devices released before this push
     said: bool = False             # whether "did not come back" was said for it
 
 
@@ -88,7 +86,7 @@ class Keeper:
         seen = SavedMap(tuple(e.name for e in sources), destination.name,
                         str(expression) if expression else "", bool(muted))
         if not present:
-            if seen.key in self.wanted and seen.key not in self.attempts:  # (not the stale one we released)
+            if seen.key in self.wanted and seen.key not in self.attempts:  # (not one being brought back)
                 self.removed[seen.key] = (time.monotonic(), tuple(e.full for e in (*sources, destination)))
             return
         if not found.get_is_ready():
@@ -129,14 +127,14 @@ class Keeper:
     # -- what to do about it ------------------------------------------------------------
 
     def current(self) -> dict[str, str]:
-        """Stable device name → the full name of the device it is now: ours, and of the others
-        the one heard from most recently (within ``HEARD_S``)."""
+        """Stable device name → the full name of the device it is now: ours once it has its name,
+        and of the others the one heard from most recently (within ``HEARD_S``)."""
         chosen: dict[str, tuple[float, str]] = {}
         now = time.time()
         for name, synced in self.devices.remote():
             stable_name = stable(name)
-            if now - synced > HEARD_S:
-                continue
+            if now - synced > HEARD_S or stable_name in self.devices.robots:
+                continue  # (a robot of ours is our device alone, once it has its name: never a dead one of before)
             if stable_name not in chosen or synced > chosen[stable_name][0]:
                 chosen[stable_name] = (synced, name)
         out = {s: name for s, (_, name) in chosen.items()}
@@ -187,7 +185,7 @@ class Keeper:
             if attempt is None or attempt.devices != devices:  # (the clock starts when both ends are seen)
                 attempt = self.attempts[key] = _Attempt(now, devices)
             if not attempt.pushed or now - attempt.pushed_at >= RETRY_S:
-                self.waiting[key] = self._push(saved, current, attempt)
+                self.waiting[key] = self._push(saved, current)
                 attempt.pushed, attempt.pushed_at = self.waiting[key] == PUSHED, now
             if not attempt.said and now - attempt.at >= self.restore_s:
                 attempt.said = True
@@ -218,24 +216,13 @@ class Keeper:
                 live.add((tuple(e.name for e in sources), destination.name))
         return live
 
-    def _push(self, saved: SavedMap, current: dict[str, str], attempt: _Attempt) -> str:
-        """Make ``saved`` between the current devices; what is missing, or what was done instead.
-
-        A peer that outlived a restart of ours still holds the map it had with our old device,
-        which may have had the very name of our new one (``pepper.1``) but not its ports, and
-        libmapper takes a new map between the same names for that one. So a map between the
-        same devices that is not running is released first, ``RELEASES`` times, a tick apart (a
-        destination drops a map whose source is gone only at the second ``/unmap``)."""
-        full = [(current[d], s) for d, s in map(split, (*saved.sources, saved.destination))]
-        if attempt.releases < RELEASES:
-            for found in self.devices.maps():
-                ends = endpoints(found)
-                if ends is not None and [(e.full, e.signal) for e in (*ends[0], ends[1])] == full:
-                    found.release()
-                    attempt.releases += 1
-                    return "a stale map between the same devices released; made again next"
+    def _push(self, saved: SavedMap, current: dict[str, str]) -> str:
+        """Make ``saved`` between the current devices, through the manager graph; what is missing,
+        or ``PUSHED``. (After a restart of ours, a peer may still hold the map it had with our old
+        device under the very name of our new one, ``pepper.1``, but not its ports: the first push
+        then does nothing, a push ``RETRY_S`` later takes; seen here, back in about 0.7 s.)"""
         signals = []
-        for device, signal in full:
+        for device, signal in ((current[d], s) for d, s in map(split, (*saved.sources, saved.destination))):
             found = self.devices.signal(device, signal)
             if found is None:
                 return f"{device} has no signal '{signal}'"
@@ -246,7 +233,6 @@ class Keeper:
         if saved.muted:
             made[mpr.Property.MUTED] = True
         made.push()
-        attempt.releases = 0  # (a retry looks for a stale map again)
         return PUSHED
 
     def _snapshot(self) -> dict[str, Any]:
