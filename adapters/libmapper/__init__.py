@@ -79,7 +79,7 @@ class Libmapper(Adapter):
         self._streams = self.own(Streams(self.bus, SUBSCRIBE, self._frames, pace=False))  # (every frame: no spacing)
         self.spawn(self._run, "libmapper")
         self.own(watch_robots(self.bus, self._robot_changed, self.capped))
-        self.spawn(self._refresh, "info")
+        self.spawn(lambda: self._info.keep_asking(self.stopping, self._on_bus), "info")
         self.address = f"libmapper devices on {cfg.interface or 'the interface libmapper picks'}, maps kept in {path}"
         log.info("%s: %s", self.name, self.address)
 
@@ -103,12 +103,9 @@ class Libmapper(Adapter):
         except queue.Full:
             self.capped(f"{kind} of robot '{robot}' not taken: {CHANGES} changes already wait")
 
-    def _refresh(self) -> None:
-        while not self.stopping.wait(INFO_EVERY_S / 2):
-            with self._present_lock:
-                present = list(self._present)
-            for robot in present:
-                self._info.ask(robot)
+    def _on_bus(self) -> list[str]:
+        with self._present_lock:
+            return list(self._present)
 
     # -- the libmapper thread -------------------------------------------------------------
 
