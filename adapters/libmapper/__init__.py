@@ -51,7 +51,7 @@ class Libmapper(Adapter):
     """Every robot on the bus as a libmapper device: joints out, joint targets in, maps kept."""
 
     Config = LibmapperConfig
-    counters = ("published", "inputs", "refused_values", "commands", "commands_refused",
+    counters = ("inputs", "refused_values", "commands", "commands_refused",
                 "maps_saved", "maps_not_back", "maps_refused", "robots_left_out")
 
     def __init__(self, config: LibmapperConfig | None = None, *, name: str = "") -> None:
@@ -179,7 +179,7 @@ class Libmapper(Adapter):
         robot = message.source.robot
         for sample in message.joints:
             if devices.publish(robot, sample.source.key[len(robot) + 1:], sample.values):
-                self.count("published")
+                self.count("sent")  # (values handed to libmapper: it sends those that are mapped)
         self.record_latency(time.time() - message.t)
 
     def metrics(self) -> dict[str, Any]:

@@ -154,7 +154,7 @@ def test_a_map_from_headyaw_runs_at_the_robots_rate_and_comes_back_after_either_
     after = len(listener.lines)
     assert stats(host, path)["metrics"]["maps_kept"] == 0  # (a second of stats: no map made again meanwhile)
     assert len(values(listener, after)) == 0
-    code, _, err = sonibus.stop(signal.SIGTERM)  # (ends within stop()'s 5 s, devices freed)
+    code, _, err = sonibus.stop(signal.SIGTERM, timeout=3.0)  # (devices freed)
     assert code == 130, err
 
 
@@ -191,5 +191,5 @@ def test_a_command_input_past_the_limits_is_refused_by_the_robot_and_bad_values_
              lambda: str(samples(frames)[-5:]))
     hip = samples(frames)
     assert max(abs(v) for v in hip) <= 0.3 + 0.01, "the robot moved toward a refused target"
-    code, _, err = sonibus.stop(signal.SIGTERM)  # (ends within stop()'s 5 s, devices freed)
+    code, _, err = sonibus.stop(signal.SIGTERM, timeout=3.0)  # (devices freed)
     assert code == 130, err
