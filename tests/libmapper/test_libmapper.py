@@ -184,6 +184,8 @@ def test_a_command_input_past_the_limits_is_refused_by_the_robot_and_bad_values_
     assert found["refused_values"] == 3, found          # inf (mapped), raw nan and inf: refused here, nothing sent
     assert found["commands_refused"] == 2, found        # 3.0 and 1e30: refused by the robot's owner
     assert found["commands"] == 1, found                # 0.3
+    nodes = host.cli("nodes", "--config", str(path))
+    assert "libmapper" in nodes.stdout and "unusable" not in nodes.stdout, nodes.stdout  # (its metrics fit the schema)
     said = "\n".join(sonibus.errors)
     assert "refused joints/set (HipRoll = 3) from libmapper: out_of_range" in said, said
     assert "is not a finite number" in said, said
