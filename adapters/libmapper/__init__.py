@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import logging
 import queue
+import socket
 import threading
 import time
 from pathlib import Path
@@ -69,6 +70,10 @@ class Libmapper(Adapter):
             self._file.load()
         except ValueError as exc:
             raise ConfigError(f"node '{self.name}': key 'maps': {exc}") from None
+        names = [name for _, name in socket.if_nameindex()]
+        if cfg.interface and cfg.interface not in names:  # (libmapper would pick another one, unsaid)
+            raise ConfigError(f"node '{self.name}': key 'interface': no interface '{cfg.interface}' on this "
+                              f"machine — interfaces: {', '.join(names)}")
         self._changes: queue.Queue[tuple[str, str, Any]] = queue.Queue(CHANGES)
         self._frames = self.own(SampleQueue(cfg.queue))
         self._info = InfoRequests(self.bus, lambda robot, info: self._change("info", robot, info),

@@ -57,3 +57,11 @@ def test_the_node_does_not_start_on_a_maps_file_it_cannot_read_and_leaves_the_fi
                                 f"{kept}: not valid JSON"), errors
     assert errors[0].endswith("— fix it or move it away")
     assert kept.read_text().endswith('"pepper/cmd/joints/set/HeadYaw"')  # untouched
+
+
+def test_an_interface_this_machine_does_not_have_is_refused_before_libmapper_starts(tmp_path):
+    (tmp_path / "show.toml").write_text(INSTALLATION.replace('interface = "lo"', 'interface = "eth9x"'))
+    done = run_cli("run", str(tmp_path / "show.toml"))
+    errors = [line for line in done.stderr.splitlines() if line.startswith("sonibus: error:")]
+    assert done.returncode == 2 and len(errors) == 1, done.stderr
+    assert "line 6: key 'interface': no interface 'eth9x' on this machine — interfaces: lo" in errors[0], errors
