@@ -96,11 +96,14 @@ def main() -> None:
         device.poll(20)
         manager.poll(0)
         if args.unmap_after and updates[0] >= args.unmap_after:
-            args.unmap_after = 0.0
-            for found in manager.maps():  # (as webmapper does: from a graph of its own, not the device's)
-                if any(str(s[mpr.Property.NAME]) == "yaw" for s in found.signals(mpr.Map.Location.DESTINATION)):
-                    found.release()
-            print("unmapped", flush=True)
+            # as webmapper does: from a graph of its own, not the device's, once that graph knows the map
+            into = [m for m in manager.maps() if m.get_is_ready() and any(
+                str(sig[mpr.Property.NAME]) == "yaw" for sig in m.signals(mpr.Map.Location.DESTINATION))]
+            for found in into:
+                found.release()
+            if into:
+                args.unmap_after = 0.0
+                print("unmapped", flush=True)
         if values:
             value = values.pop(0)
             if value.startswith("raw:"):
