@@ -29,6 +29,7 @@ import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any, ClassVar
 
 from . import codec, keys
@@ -71,6 +72,7 @@ class Adapter:
         self.stopping = threading.Event()
         self.robots: list[str] = []       # robots this node owns (see claim_robot)
         self.where: Callable[[str], str] | None = None  # key → "file [nodes.x] line N", when built from a file
+        self.folder: Path | None = None   # the installation file's folder, when built from one (for relative paths)
         self.since = 0.0                  # when it started (epoch seconds)
         self.address = ""                 # where a person reaches it once started (a page's URL), said by `run`
         self.stats = Counters(BASE + self.counters)  # what it did (count() adds; dropped: its queues')

@@ -15,7 +15,7 @@ from __future__ import annotations
 import math
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from typing import Any
 
 from . import keys, messages
@@ -47,6 +47,13 @@ class InfoRequests:
         self._asked[robot] = now
         merge = _Merge(robot, self._answered, self.on_error, self._gate, self._unanswered)
         self.bus.ask(keys.info(robot) + "/**", merge.take, merge.finish, timeout=self.retry_s)
+
+    def keep_asking(self, stopping: threading.Event, robots: Callable[[], Iterable[str]]) -> None:
+        """Ask each of ``robots()`` again every half ``retry_s`` until ``stopping`` is set (a
+        node's worker: what a robot serves changes, a features node adds derived values)."""
+        while not stopping.wait(self.retry_s / 2):
+            for robot in robots():
+                self.ask(robot)
 
     def _answered(self, robot: str, info: dict[str, Any]) -> None:
         self._misses.pop(robot, None)

@@ -8,6 +8,7 @@ import re
 import threading
 import time
 from collections.abc import Callable
+from pathlib import Path
 
 from . import keys, registry
 from .adapter import Adapter
@@ -34,7 +35,9 @@ def build(installation: Installation, only: list[str] | None = None, host: str |
             cls = registry.load(spec.adapter)
         except AdapterError as exc:
             raise ConfigError(f"{spec.at('adapter')}: key 'adapter': {exc}") from None
-        adapters.append(spec.build(cls))
+        adapter = spec.build(cls)
+        adapter.folder = Path(installation.path).resolve().parent if installation.path else None
+        adapters.append(adapter)
     installation.check_owners(_owned_robots(installation))
     return adapters
 

@@ -75,7 +75,7 @@ class OscQuery(Adapter):
         self.spawn(self._forward, "forward")  # before anything else is declared: nothing waits in the queue
         self.own(self._streams)
         self.own(watch_robots(self.bus, self._robot_changed, self.capped))
-        self.spawn(self._refresh, "info")
+        self.spawn(lambda: self._info.keep_asking(self.stopping, self._on_bus), "info")
         if cfg.mdns:
             self._advertise(cfg)
         if _loopback(cfg.gateway_address[0]) and not _loopback(cfg.host):
@@ -127,12 +127,9 @@ class OscQuery(Adapter):
         if alive:
             self._info.ask(robot)
 
-    def _refresh(self) -> None:
-        while not self.stopping.wait(INFO_EVERY_S / 2):
-            with self._present_lock:
-                present = list(self._present)
-            for robot in present:
-                self._info.ask(robot)
+    def _on_bus(self) -> list[str]:
+        with self._present_lock:
+            return list(self._present)
 
     def _take_info(self, robot: str, info: dict[str, Any]) -> None:
         with self._present_lock:

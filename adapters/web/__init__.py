@@ -102,7 +102,7 @@ class WebPages(Adapter):
         owners(self.bus)  # (the view of robots' owners a command names, kept from now: the first one too)
         self.own(watch_robots(self.bus, self._robot_changed, self.capped))
         self.spawn(self._push, "push")
-        self.spawn(self._refresh, "info")
+        self.spawn(lambda: self._info.keep_asking(self.stopping, self._on_bus), "info")
 
     def metrics(self) -> dict[str, Any]:
         """Pages connected now, and the robots shown."""
@@ -148,10 +148,6 @@ class WebPages(Adapter):
         else:
             self.pages.robot_left(robot)
 
-    def _refresh(self) -> None:
-        while not self.stopping.wait(INFO_EVERY_S / 2):
-            for robot in self._on_bus():
-                self._info.ask(robot)
 
     def _take_info(self, robot: str, info: dict[str, Any]) -> None:
         stand = self.config.stand

@@ -21,6 +21,8 @@ from typing import Any
 REFUSED = ("multicast scouting from the machine's own network (the test suite sends nothing off loopback): "
            "give --no-multicast, multicast = false or BusConfig(multicast=False), or run it in a network "
            "namespace (tests/net/netns.py)")
+LIBMAPPER_REFUSED = ("libmapper discovers by multicast on the machine's own network (the test suite sends nothing "
+                     "off loopback): run it in a network namespace (tests/net/netns.py, tests/libmapper)")
 
 
 def _in_root_namespace() -> bool:
@@ -50,11 +52,32 @@ def guard(zenoh: Any) -> None:
     zenoh.open, zenoh.scout, zenoh._sonibus_guarded = open, scout, True
 
 
+def guard_libmapper(libmapper: Any) -> None:
+    """Refuse a libmapper ``Graph`` or ``Device`` (each joins libmapper's multicast bus) in
+    this machine's own namespace (once)."""
+    if getattr(libmapper, "_sonibus_guarded", False):
+        return
+    for cls in (libmapper.Graph, libmapper.Device):
+        def init(self: Any, *args: Any, _init: Any = cls.__init__, _name: str = cls.__name__, **kwargs: Any) -> None:
+            if _in_root_namespace() and not (kwargs.get("ptr") or (args and isinstance(args[0], int))):
+                raise RuntimeError(f"libmapper.{_name}: {LIBMAPPER_REFUSED}")
+            _init(self, *args, **kwargs)
+        cls.__init__ = init
+    libmapper._sonibus_guarded = True
+
+
+GUARDS = {"zenoh": guard, "libmapper": guard_libmapper}
+
+
 class _OnImport(importlib.abc.MetaPathFinder):
-    """Guards ``zenoh`` right after it is imported (importing it here would slow every process)."""
+    """Guards ``zenoh`` and ``libmapper`` right after they are imported (importing them here
+    would slow every process)."""
+
+    def __init__(self, name: str) -> None:
+        self.name = name
 
     def find_spec(self, name: str, path: Any, target: Any = None) -> Any:
-        if name != "zenoh":
+        if name != self.name:
             return None
         sys.meta_path.remove(self)
         spec = importlib.util.find_spec(name)
@@ -64,13 +87,14 @@ class _OnImport(importlib.abc.MetaPathFinder):
 
         def exec_module(module: Any) -> None:
             run(module)
-            guard(module)
+            GUARDS[name](module)
         spec.loader.exec_module = exec_module  # type: ignore[method-assign]
         return spec
 
 
 if os.environ.get("SONIBUS_TEST_NETNS"):
-    if "zenoh" in sys.modules:
-        guard(sys.modules["zenoh"])
-    else:
-        sys.meta_path.insert(0, _OnImport())
+    for _name, _guard in GUARDS.items():
+        if _name in sys.modules:
+            _guard(sys.modules[_name])
+        else:
+            sys.meta_path.insert(0, _OnImport(_name))
