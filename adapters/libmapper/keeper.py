@@ -92,6 +92,10 @@ class Keeper:
         if not found.get_is_ready():
             return  # (staged: saved once it runs)
         self.removed.pop(seen.key, None)
+        if seen.key in self.attempts and seen.key in self.wanted:
+            # back as it runs, not at the next tick: a person's unmap that comes before it (a busy machine)
+            # would be taken for one of a map being brought back, and the map made again
+            self._back(seen.key, self.wanted[seen.key], time.monotonic())
         if self.wanted.get(seen.key) == seen:
             return
         if seen.key not in self.wanted and len(self.wanted) >= self.limit:
@@ -148,7 +152,13 @@ class Keeper:
         not come back within ``restore_s``."""
         now = time.monotonic()
         current = self.current()
-        self.live = self._live(current)
+        was_live, self.live = self.live, self._live(current)
+        # A map that ran and runs no more while its ends stay is a person's removal, whether or not the
+        # graph told of it (under load its callback had not come, and the map was pushed back: made again)
+        for key in was_live - self.live:
+            saved = self.wanted.get(key)
+            if saved is not None and key not in self.removed and all(d in current for d in saved.devices):
+                self.removed[key] = (now, tuple(current[d] for d in saved.devices))
         ready = bool(self.devices.robots) and all(s.ready for s in self.devices.robots.values())
         self.ready_since = (self.ready_since or now) if ready else None
         for key, (at, _) in list(self.removed.items()):
