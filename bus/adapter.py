@@ -191,6 +191,16 @@ class Adapter:
         self.count("capped")
         self.warn("capped", f"{what} — names made up on the bus must not grow what this node keeps")
 
+    def resolve(self, path: str) -> str:
+        """``path`` (a file or folder an option names) as this node opens it: a relative one is taken
+        from the installation file's folder, as every path an installation file gives (the ``[log]``
+        file, the ``[bus]`` TLS and users files), wherever ``sonibus run`` is started; as given for a
+        node not built from a file (a command's own, ``sonibus record FILE``: from where it runs)."""
+        if not path or self.folder is None:
+            return path
+        given = Path(path).expanduser()
+        return str(given if given.is_absolute() else self.folder / given)
+
     def count(self, kind: str, n: int = 1) -> None:
         """Add ``n`` to counter ``kind`` of ``stats`` (safe from any thread)."""
         self.stats.add(kind, n)

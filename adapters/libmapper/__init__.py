@@ -62,10 +62,7 @@ class Libmapper(Adapter):
 
     def _start(self) -> None:
         cfg: LibmapperConfig = self.config
-        path = Path(cfg.maps)
-        if not path.is_absolute():
-            path = (self.folder or Path.cwd()) / path
-        self._file = MapFile(path)
+        self._file = MapFile(Path(self.resolve(cfg.maps)))
         try:  # (a file that cannot be read stops the start here, in one line, and is left as it is)
             self._file.load()
         except ValueError as exc:
@@ -85,7 +82,8 @@ class Libmapper(Adapter):
         self.spawn(self._run, "libmapper")
         self.own(watch_robots(self.bus, self._robot_changed, self.capped))
         self.spawn(lambda: self._info.keep_asking(self.stopping, self._on_bus), "info")
-        self.address = f"libmapper devices on {cfg.interface or 'the interface libmapper picks'}, maps kept in {path}"
+        self.address = (f"libmapper devices on {cfg.interface or 'the interface libmapper picks'}, "
+                        f"maps kept in {self._file.path}")
         log.info("%s: %s", self.name, self.address)
 
     # -- the bus side -----------------------------------------------------------------

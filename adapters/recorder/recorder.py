@@ -141,7 +141,7 @@ class Recorder(Adapter):
         self.paused = ""  # why the recorder is not writing, while it is not
         self._wall0, self._mono0 = time.time_ns(), time.monotonic_ns()
         metadata = {"host": self.bus.host, "node": self.name, "subscribe": " ".join(cfg.subscribe)}
-        self._series = Series(cfg.path, Rotation(cfg.rotate_s, cfg.rotate_mb), metadata, cfg.flush_s)
+        self._series = Series(self.resolve(cfg.path), Rotation(cfg.rotate_s, cfg.rotate_mb), metadata, cfg.flush_s)
         self.path = self.address = self._series.first(time.time())
         if os.path.exists(self.path) and TIME not in cfg.path and not cfg.overwrite:
             raise ConfigError(f"{self.path} exists — choose another name, or overwrite it "

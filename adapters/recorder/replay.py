@@ -117,7 +117,7 @@ class Replay(Adapter):
 
     def _start(self) -> None:
         cfg: ReplayConfig = self.config
-        self.recording = self.own(Recording(cfg.path))
+        self.recording = self.own(Recording(self.resolve(cfg.path)))
         chosen = self.recording.matching(cfg.keys) if cfg.keys else self.recording.keys
         self.keys = [k for k in chosen if Key.parse(k).section != "cmd"]
         audio = [k for k in self.keys if Key.parse(k).section == "audio"]

@@ -85,7 +85,7 @@ class Ros2Robot(RobotAdapter):
                 return self.link.description(c.description_timeout_s), f"{c.description_topic} of the robot"
             except BadInput as exc:
                 raise ConfigError(f"{self._at('urdf')}: {exc}") from None
-        path = Path(c.urdf)
+        path = Path(self.resolve(c.urdf))
         try:
             return path.read_text(encoding="utf-8"), str(path)
         except OSError as exc:
@@ -94,7 +94,8 @@ class Ros2Robot(RobotAdapter):
     def _describe(self, urdf: tuple[str, str]) -> Description:
         c = self.config
         try:
-            postures = group_states(Path(c.srdf).read_text(encoding="utf-8"), c.srdf) if c.srdf else {}
+            srdf = self.resolve(c.srdf)
+            postures = group_states(Path(srdf).read_text(encoding="utf-8"), srdf) if srdf else {}
             postures.update(c.postures)
             return describe(parse(urdf[0], urdf[1]), c.chains, postures, c.chain_root, c.default_velocity)
         except UrdfError as exc:

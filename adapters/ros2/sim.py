@@ -65,8 +65,9 @@ class SimArm(Adapter):
     def _start(self) -> None:
         c = self.config
         try:
-            text = Path(c.urdf).read_text(encoding="utf-8")
-            self.description = describe(parse(text, c.urdf))
+            urdf = self.resolve(c.urdf)
+            text = Path(urdf).read_text(encoding="utf-8")
+            self.description = describe(parse(text, urdf))
         except (OSError, UrdfError) as exc:
             raise ConfigError(f"ros2-sim: {exc}") from None
         model = self.description.model

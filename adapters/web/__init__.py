@@ -21,6 +21,7 @@ import json
 import logging
 import threading
 import time
+from pathlib import Path
 from typing import Any
 
 import zenoh
@@ -28,6 +29,7 @@ import zenoh
 from sonibus.bus import commands, connection, keys
 from sonibus.bus.adapter import Adapter
 from sonibus.bus.claimwatch import owners
+from sonibus.bus.errors import ConfigError
 from sonibus.bus.info import InfoRequests
 from sonibus.bus.messages import Gate
 from sonibus.bus.monitor import LOSSES
@@ -77,7 +79,7 @@ class WebPages(Adapter):
         self._shown = [zenoh.KeyExpr(keys.expr(r)) for r in cfg.robots]
         self.web = WebServer(self, cfg.host, cfg.port, key="listen", limits=cfg.limits, browsers=True,
                              names=auth.names(cfg.token))
-        self.pages = Pages(self, self.web, cfg)
+        self.pages = Pages(self, self.web, cfg, self._images())
         self._info = InfoRequests(self.bus, self._take_info, lambda robot, text: self.warn("info", text),
                                   INFO_EVERY_S)
         self.web.start()
@@ -103,6 +105,20 @@ class WebPages(Adapter):
         self.own(watch_robots(self.bus, self._robot_changed, self.capped))
         self.spawn(self._push, "push")
         self.spawn(lambda: self._info.keep_asking(self.stopping, self._on_bus), "info")
+
+    def _images(self) -> dict[str, str]:
+        """The kiosk buttons' images by button id, each path from the installation file's folder."""
+        images = {}
+        for button in self.config.stand.buttons:
+            if button.image:
+                path = self.resolve(button.image)
+                if not Path(path).is_file():
+                    where = self.where("kiosk") if self.where else f"node '{self.name}' key 'kiosk'"
+                    raise ConfigError(f"{where}: button {button.id!r}: image {path} is not a file (a relative "
+                                      "path is taken from the installation file's folder) — give an image file "
+                                      "or leave 'image' out")
+                images[button.id] = path
+        return images
 
     def metrics(self) -> dict[str, Any]:
         """Pages connected now, and the robots shown."""

@@ -60,11 +60,10 @@ class Button:
                                    "(longer than the scenario takes: a button without an end frees the kiosk then)")
         if self.say and (not self.say.strip() or len(self.say) > MAX_SAY):
             raise bad("say", f"button {self.id!r}: the text must be 1..{MAX_SAY} characters, not blank")
-        if self.image:
-            if not Path(self.image).is_file():
-                raise bad("image", f"button {self.id!r}: {self.image!r} is not a file (a path from where sonibus "
-                                   f"runs: {Path.cwd()}) — give an image file or leave 'image' out")
-            object.__setattr__(self, "image", str(Path(self.image).resolve()))
+        # (a relative path is the installation file's folder's: checked when the node starts, ``WebPages``)
+        if self.image and Path(self.image).expanduser().is_absolute() and not Path(self.image).expanduser().is_file():
+            raise bad("image", f"button {self.id!r}: {self.image!r} is not a file — give an image file or "
+                               "leave 'image' out")
 
     @property
     def kind(self) -> str:

@@ -74,8 +74,10 @@ class Client(WebClient):
 class Pages:
     """The pages' routes on ``web`` (a ``WebServer`` not started yet) for ``adapter``."""
 
-    def __init__(self, adapter: Adapter, web_server: WebServer, config: WebConfig) -> None:
+    def __init__(self, adapter: Adapter, web_server: WebServer, config: WebConfig,
+                 images: dict[str, str] | None = None) -> None:
         self.adapter, self.web, self.config = adapter, web_server, config
+        self.images = images or {}  # kiosk button id → its image file (resolved by the node)
         self.guard = Guard(config.token, config.kiosk_token, adapter.name, adapter.count)
         self.operators: set[Client] = set()
         self.kiosks: set[Client] = set()
@@ -128,10 +130,10 @@ class Pages:
 
     async def _image(self, request: web.Request) -> web.StreamResponse:
         self.guard.check(request, "asset")
-        button = self.config.button(request.match_info["id"])
-        if button is None or not button.image:
+        image = self.images.get(request.match_info["id"])
+        if image is None:
             raise web.HTTPNotFound(text="no such kiosk button image\n")
-        return web.FileResponse(button.image, headers=HEADERS)
+        return web.FileResponse(image, headers=HEADERS)
 
     async def _websocket(self, role: str, request: web.Request) -> web.StreamResponse:
         self.guard.check(request, role)

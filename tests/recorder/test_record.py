@@ -217,3 +217,19 @@ def test_record_and_info_give_one_number_for_the_file(net, tmp_path, spawn):
     assert data + views == total and views > 0
     result = run_cli("info", str(path), "--json")
     assert json.loads(result.stdout)["messages"] == total, (out, result.stdout[:300])
+
+
+def test_a_recorders_relative_path_is_the_installation_files_folder(tmp_path, spawn):
+    """Issue 37, item 9: one rule for relative paths (the [log] file's already): a recorder's path
+    was taken from where `sonibus run` started, so a service and a hand run recorded to two places."""
+    folder = tmp_path / "show"
+    folder.mkdir()
+    (folder / "show.toml").write_text('[bus]\nmulticast = false\n\n[nodes.pepper]\nadapter = "sim"\nrate_hz = 50\n\n'
+                                      '[nodes.rec]\nadapter = "recorder"\npath = "recs/take.mcap"\n', encoding="utf-8")
+    elsewhere = tmp_path / "elsewhere"
+    elsewhere.mkdir()
+    run = spawn(SONIBUS, "run", str(folder / "show.toml"), cwd=str(elsewhere))
+    wait_for(lambda: (folder / "recs" / "take.mcap").exists(), 20, "the recording beside the installation file")
+    code, _, err = run.stop(signal.SIGINT, timeout=5)
+    assert code in (0, 130), err
+    assert not (elsewhere / "recs").exists()

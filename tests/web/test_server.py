@@ -384,7 +384,7 @@ CONFIG_ERRORS = {
     "behavior = \"a\"\nsay = \"b\"": "needs exactly one of 'behavior'",
     "[nodes.web.kiosk]\n[[nodes.web.kiosk.buttons]]\nid = \"x\"\nlabel = \"X\"\nsay = \"b\"": "but no robot",
     "[nodes.web.kiosk]\nrobot = \"pepper\"\n[[nodes.web.kiosk.buttons]]\nid = \"x\"\nlabel = \"X\"\n"
-    "say = \"b\"\nimage = \"missing.png\"": "'missing.png' is not a file",
+    "say = \"b\"\nimage = \"/nowhere/missing.png\"": "'/nowhere/missing.png' is not a file",
     "[nodes.web.kiosk]\nrobot = \"pepper\"\n[[nodes.web.kiosk.buttons]]\nid = \"x\"\nlabel = \"X\"\n"
     "say = \"b\"\ntimeout_s = 0": "button 'x': 0 must be in (0, 3600] seconds",
     "[nodes.web.kiosk]\nrobot = \"pepper\"\nbutons = []": "unknown key 'butons'",
@@ -515,3 +515,29 @@ def test_the_coalescer_sends_the_first_at_once_then_only_the_latest_and_a_cancel
     assert superseded == [None, None, 1, 2, 3, None]
     assert sent == [0, "p", 4, "first"]
     assert cancelled == ["held"]
+
+
+def test_a_relative_image_is_the_installation_files_and_a_missing_one_is_refused_at_start(tmp_path, spawn):
+    """Issue 37, item 9: relative paths follow one rule, the installation file's folder (a kiosk image
+    was taken from where sonibus ran, the [log] file from the file's folder)."""
+    show = tmp_path / "show"
+    (show / "images").mkdir(parents=True)
+    (show / "images" / "wave.png").write_bytes(b"\x89PNG\r\n\x1a\n not really a picture")
+    port = free_port()
+    body = (f"[bus]\nmulticast = false\n\n[nodes.web]\nadapter = \"web\"\nlisten = \"127.0.0.1:{port}\"\n"
+            "[nodes.web.kiosk]\nrobot = \"pepper\"\n[[nodes.web.kiosk.buttons]]\nid = \"wave\"\nlabel = \"Wave\"\n"
+            "say = \"hello\"\nimage = \"images/wave.png\"\n")
+    (show / "show.toml").write_text(body, encoding="utf-8")
+    process = spawn(SONIBUS, "run", str(show / "show.toml"), collect=True, merge=True, cwd=str(tmp_path))
+
+    def served() -> int:
+        try:
+            return requests.get(f"http://127.0.0.1:{port}/kiosk/image/wave", timeout=2).status_code
+        except requests.ConnectionError:
+            return 0
+    wait_for(lambda: served() == 200, 30, "the image served from the file's folder", lambda: "\n".join(process.lines))
+    process.stop(signal.SIGINT, timeout=STOP_WITHIN_S + 5)
+    (show / "show.toml").write_text(body.replace("images/wave.png", "images/gone.png"), encoding="utf-8")
+    refused = run_cli("run", str(show / "show.toml"))
+    assert refused.returncode != 0 and "gone.png is not a file" in refused.stderr, refused.stderr
+    assert len(refused.stderr.strip().splitlines()) == 1, refused.stderr
