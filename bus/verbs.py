@@ -44,7 +44,8 @@ class RobotVerbs(Protocol):
         ...
 
     def joints_set(self, names: list[str], angles: list[float], speed: float) -> Result:
-        """Move joints to angles (within limits) at ``speed`` × their maximum velocity."""
+        """Move joints to angles (within limits) at ``speed`` × their maximum velocity:
+        ``{"targets": {joint: angle}, "speed"}``, what was sent (a ROS 2 arm adds ``duration_s``)."""
         ...
 
     def posture(self, name: str, speed: float) -> Result:
@@ -60,7 +61,8 @@ class RobotVerbs(Protocol):
         ...
 
     def stop(self) -> Result:
-        """Halt all motion, behaviors and speech at once."""
+        """Halt all motion, behaviors and speech at once: what came of it, ``{"held": bool, "cut":
+        [behaviors it ended], ...}`` (a ROS 2 arm: ``{"hold_sent": true}``)."""
         ...
 
 

@@ -256,8 +256,8 @@ def test_behavior_stop_interrupts(pepper, request_name):
 
 
 def test_joints_set_moves_the_joints(pepper):
-    assert ok(pepper, *R["head_arm"]) == {}
     names, angles = R["head_arm"][1]["names"], R["head_arm"][1]["angles"]
+    assert ok(pepper, *R["head_arm"])["targets"] == dict(zip(names, angles, strict=True))  # (issue 37: it was {})
     reached = pepper.joints.wait_pose(dict(zip(names, angles, strict=True)), timeout=5.0)
     assert_still(pepper, reached)
     ok(pepper, *R["head_default_speed"])
@@ -350,7 +350,7 @@ def test_stop_halts_a_running_behavior(pepper):
     ok(pepper, *R["run_sky"])
     started = pepper.events.wait("behavior", name=SKY, state="started")
     wait_moving(pepper, "RShoulderPitch", before["RShoulderPitch"], by=0.1)
-    assert ok(pepper, *R["stop"]) == {}
+    assert ok(pepper, *R["stop"]) == {"held": True, "cut": [SKY], "silenced": 0}  # (issue 37: it was {})
     stopped = pepper.events.wait("behavior", timeout=5.0, name=SKY, state="stopped")
     assert stopped["t"] - started["t"] < LIBRARY[SKY].duration  # cut before its end (at its end it is back home)
     assert stopped["end"] == "cut"
@@ -393,7 +393,7 @@ def test_stop_runs_whatever_its_arguments(pepper, garbage):
     _, before = pepper.joints.last()
     ok(pepper, *R["head_slow"])
     wait_moving(pepper, "HeadYaw", before["HeadYaw"], by=0.1)
-    assert send_command(pepper.bus, "pepper", "stop", garbage) == {}
+    assert send_command(pepper.bus, "pepper", "stop", garbage)["held"] is True
     frozen = assert_frozen(pepper)
     assert frozen["HeadYaw"] < 1.5
 

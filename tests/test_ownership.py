@@ -176,7 +176,8 @@ def test_an_earlier_claim_makes_the_owner_stand_by_and_its_leaving_gives_the_rob
     wait_for(lambda: pepper.ownership.active, what="the owner to take the robot back")
     wait_for(lambda: frames.get(0.1), what="frames again")
     assert decode(wait_for(lambda: conflicts.get(0.1), what="the 'owner' event")[1])["state"] == "owner"
-    assert send_command(watcher, "pepper", "joints/set", {"names": ["HeadYaw"], "angles": [0.2]}, timeout=2.0) == {}
+    assert send_command(watcher, "pepper", "joints/set", {"names": ["HeadYaw"], "angles": [0.2]},
+                        timeout=2.0)["targets"] == {"HeadYaw": 0.2}
 
 
 def test_a_later_claim_leaves_the_owner_in_charge_and_is_named_once(net, pepper, caplog):
@@ -207,7 +208,7 @@ def test_a_command_sent_to_another_owner_does_not_run_here(net, pepper):
     time.sleep(0.3)
     assert pepper.body.pose()["HeadYaw"] == before
     assert send_command(watcher, "pepper", "joints/set", {"names": ["HeadYaw"], "angles": [0.5], "speed": 1.0},
-                        timeout=2.0, owner=pepper.ownership.claim) == {}
+                        timeout=2.0, owner=pepper.ownership.claim)["targets"] == {"HeadYaw": 0.5}
 
 
 def test_nodes_shows_the_owner_and_who_stands_by(net, pepper):

@@ -55,8 +55,9 @@ def test_a_claim_whose_time_makes_no_sense_takes_nothing_from_the_owner(net, pep
     assert pepper.ownership.active and pepper.ownership.owner is None
     refusals = [r.getMessage() for r in caplog.records if "refused the claim" in r.getMessage()]
     assert refusals and "sonibus/robots/pepper/0/rogue/x" in refusals[0] and "before any sonibus bus" in refusals[0]
-    assert send_command(watcher, "pepper", "stop", timeout=2.0) == {}
-    assert send_command(watcher, "pepper", "joints/set", {"names": ["HeadYaw"], "angles": [0.2]}, timeout=2.0) == {}
+    assert send_command(watcher, "pepper", "stop", timeout=2.0)["held"] is True
+    assert send_command(watcher, "pepper", "joints/set", {"names": ["HeadYaw"], "angles": [0.2]},
+                        timeout=2.0)["targets"] == {"HeadYaw": 0.2}
     assert Claim.parse(spoofs[-1]) is None  # 5,000 digits: no claim (int() of it would raise in Zenoh's thread)
     assert pepper.state == "running"
 
@@ -68,7 +69,7 @@ def test_an_owner_standing_by_runs_stop_and_refuses_everything_else(net, pepper)
     token = watcher.token(rival.key)  # noqa: F841
     wait_for(lambda: not pepper.ownership.active, what="pepper's owner to stand by")
     # sent to the standby node itself (as a sender that sees it first would): stop runs, a move does not
-    assert send_command(watcher, "pepper", "stop", owner=mine, timeout=2.0) == {}
+    assert send_command(watcher, "pepper", "stop", owner=mine, timeout=2.0)["held"] is True
     with pytest.raises(CommandError) as refused:
         send_command(watcher, "pepper", "joints/set", {"names": ["HeadYaw"], "angles": [0.2]}, owner=mine,
                      timeout=2.0)
@@ -116,7 +117,7 @@ def test_stopping_every_robot_is_one_query_whatever_the_robots_on_the_bus(net, p
         ended.set()
     stop_all(asker, done, left, timeout=5.0)
     assert ended.wait(10), "the stop never ended"
-    assert answered == {"pepper": {}, "nao": {}}
+    assert {robot: reply["held"] for robot, reply in answered.items()} == {"pepper": True, "nao": True}
     robots, error = silent[0]
     # (the asker keeps MAX_ROBOTS robots, whichever claims came first: pepper and nao among them or not)
     kept = set(owners(asker).robots())

@@ -149,7 +149,7 @@ class NaoqiCommands:
     def joints_set(self, names: list[str], angles: list[float], speed: float) -> dict[str, Any]:
         self._call("joints/set", "ALMotion", "setAngles", list(names), [float(a) for a in angles], float(speed))
         self.postures.interrupt()
-        return {}
+        return {"targets": dict(zip(names, map(float, angles), strict=True)), "speed": speed}  # (sent: NAOqi's own)
 
     def posture(self, name: str, speed: float) -> dict[str, Any]:
         sent = time.monotonic()
@@ -211,7 +211,7 @@ class NaoqiCommands:
         """Every part is sent at once and each is waited for, whatever the others do (at most
         ``UNANSWERED_STOP_MS`` on a robot that does not answer). Not reached: kept for later."""
         self.events.speech.forget()
-        self.events.cutting(None)
+        cut = self.events.cutting(None)
         self.postures.interrupt()
         self._stop_wanted, self._stop_sent = True, []  # (until the robot has done every part)
         wait_ms = None if self.answering() else UNANSWERED_STOP_MS
@@ -236,7 +236,9 @@ class NaoqiCommands:
         self._stop_wanted = False
         if failures:
             raise CommandError("failed", f"stop: {'; '.join(failures)} (the other parts were done)")
-        return {}
+        # (every part answered: motion killed and still, behaviors and speech stopped; `cut`: the behaviors
+        # running as their events said)
+        return {"held": True, "cut": cut}
 
     def send_pending_stop(self) -> None:
         """On a new connection: the stop asked for while the robot could not be reached."""

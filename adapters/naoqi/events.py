@@ -109,12 +109,14 @@ class RobotEvents:
         self.mode = "subscriber"
         return ()
 
-    def cutting(self, names: Iterable[str] | None) -> None:
+    def cutting(self, names: Iterable[str] | None) -> list[str]:
         """Behaviors a stop (None: every one running, as their events said) is about to end: their
         ``stopped`` says ``end: cut``; any other ``stopped`` played to its end (``finished``).
         NAOqi's ``behaviorStopped`` says neither."""
         with self._cut_lock:
-            self._cut.update(self._running if names is None else names)
+            cut = sorted(self._running) if names is None else list(names)
+            self._cut.update(cut)
+        return cut
 
     def _behavior(self, name: Any, state: str) -> None:
         name = str(name)[:MAX_NAME]

@@ -178,8 +178,9 @@ class Replay(Adapter):
 
     def _refuse(self, query: zenoh.Query) -> None:
         robot, _, verb = str(query.key_expr).partition("/cmd/")
-        if verb == "stop":
-            reply = commands.ok_reply(verb, {})
+        if verb == "stop":  # (taken, as every stop is; what it did is said: nothing)
+            reply = commands.ok_reply(verb, {"held": False, "why": f"'{robot}' is a replay of "
+                                             f"{os.path.basename(self.config.path)}: it moves no robot"})
         else:
             reply = commands.error_reply(verb, CommandError(
                 "failed", f"'{robot}' is a replay of {os.path.basename(self.config.path)}: it takes no commands"))

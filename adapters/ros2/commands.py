@@ -72,7 +72,7 @@ class Ros2Verbs:
         goal = dict(zip(names, angles, strict=True))
         seconds = max([MIN_DURATION_S, *(reach_s(self.description, n, v, speed) for n, v in goal.items())])
         self._trajectory("joints/set", tuple(goal), [cdr.Point(list(goal.values()), seconds, [0.0] * len(goal))])
-        return {"duration_s": round(seconds, 3)}
+        return {"targets": goal, "speed": speed, "duration_s": round(seconds, 3)}
 
     def posture(self, name: str, speed: float) -> dict[str, Any]:
         goal = self.description.model.posture(name)

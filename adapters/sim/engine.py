@@ -185,7 +185,7 @@ class SimEngine:
             self.halted = False
             self.body.set_targets(targets, speed)
             self._idle_home.update(targets)
-        return {}
+        return {"targets": targets, "speed": speed}  # (what it moves to: within the limits, by validation)
 
     def posture(self, name: str, speed: float) -> dict[str, Any]:
         with self.lock:
@@ -229,8 +229,11 @@ class SimEngine:
         return {"enabled": enabled, "previous": previous}
 
     def stop(self, speech: bool = True, motion: bool = True) -> dict[str, Any]:
+        """Halt: ``{"held": True, "cut": [the behaviors it ended], "silenced": texts dropped}``."""
         with self.lock:
             events = self._interrupt() if motion else []
+            cut = [fields["name"] for kind, fields in events if kind == "behavior"]
+            silenced = len(self._speech) if speech else 0
             if motion:
                 # (a real robot's breathing may go on; an operator's STOP means still: idle motion and
                 # autoplay wait for the next behavior, posture or joint move)
@@ -242,4 +245,4 @@ class SimEngine:
                 self._speech.clear()
                 self._speaking_until = 0.0
             self._emit(events)
-        return {}
+        return {"held": motion, "cut": cut, "silenced": silenced}

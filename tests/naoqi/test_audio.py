@@ -283,7 +283,7 @@ def test_the_microphone_level_follows_a_commanded_joint_move(rig):
     rest = rms(mic.chunks[-10:])
     mic.chunks.clear()
     assert send_command(r.bus, "pepper", "joints/set", {"names": ["HeadYaw", "HeadPitch"],
-                                                        "angles": [1.5, -0.5], "speed": 0.6}) == {}
+                                                        "angles": [1.5, -0.5], "speed": 0.6})["speed"] == 0.6
     wait_for(lambda: mic.poll() and rms(mic.chunks[-5:]) > 20 * max(rest, 1.0), timeout=5.0,
              what="the whine of the moving head", explain=lambda: f"rest rms {rest:.1f}")
     wait_for(lambda: not r.fake.engine.body.moving(), timeout=10.0, what="the head to stop")

@@ -17,7 +17,8 @@ SKY = "animations/Stand/Gestures/ShowSky_1"
 def test_joints_set_moves_the_robot(rig):
     r = rig()
     assert send_command(r.bus, "pepper", "joints/set", {"names": ["HeadYaw", "LShoulderPitch"],
-                                                         "angles": [0.5, 0.4], "speed": 1.0}) == {}
+                                                         "angles": [0.5, 0.4], "speed": 1.0}) == \
+        {"targets": {"HeadYaw": 0.5, "LShoulderPitch": 0.4}, "speed": 1.0}  # (issue 37: what was sent; it was {})
     wait_for(lambda: not r.fake.engine.body.moving(), what="the robot to stop moving")
     pose = r.fake.engine.body.pose()
     assert (pose["HeadYaw"], pose["LShoulderPitch"]) == pytest.approx((0.5, 0.4))
@@ -121,11 +122,11 @@ def test_stop_halts_behavior_motion_and_speech(rig):
     send_command(r.bus, "pepper", "behavior/run", {"name": SKY})
     send_command(r.bus, "pepper", "say", {"text": "a long sentence to be cut short by a stop"})
     r.events.wait("speech", state="started")
-    assert send_command(r.bus, "pepper", "stop", {}) == {}
+    assert send_command(r.bus, "pepper", "stop", {})["held"] is True
     assert r.fake.engine.running_behavior is None and not r.fake.engine.speaking
     assert not r.fake.engine.body.moving()
     r.events.wait("speech", state="done")
-    assert send_command(r.bus, "pepper", "stop", "whatever") == {}  # stop takes any payload
+    assert send_command(r.bus, "pepper", "stop", "whatever")["held"] is True  # stop takes any payload
 
 
 @pytest.mark.parametrize(("verb", "args", "code"), [
@@ -195,7 +196,8 @@ def test_the_published_limit_is_accepted_and_errors_show_rounded_numbers(rig):
     r = rig()
     for limit in (2.08567, -2.08567):
         assert send_command(r.bus, "pepper", "joints/set", {"names": ["HeadYaw"], "angles": [limit],
-                                                             "speed": 1.0}) == {}
+                                                             "speed": 1.0})["targets"]["HeadYaw"] == \
+            pytest.approx(limit, abs=1e-6)
         wait_for(lambda: not r.fake.engine.body.moving(), what="the head to get there")
         assert abs(r.fake.engine.body.pose()["HeadYaw"]) <= f32(2.08567)  # clamped to the robot's own limit
     with pytest.raises(CommandError) as refused:

@@ -31,13 +31,14 @@ OK: list[tuple[str, dict[str, Any], dict[str, Any] | set[str]]] = [
     ("behavior/run", {"name": NOD}, {"name"}),
     ("behavior/stop", {"name": NOD}, {"was_running": True}),
     ("behavior/stop", {}, {"was_running": False}),
-    ("joints/set", {"names": ["HeadYaw", "HeadPitch"], "angles": [0.3, 0.1], "speed": 0.5}, {}),
+    ("joints/set", {"names": ["HeadYaw", "HeadPitch"], "angles": [0.3, 0.1], "speed": 0.5},
+     {"targets": {"HeadYaw": 0.3, "HeadPitch": 0.1}, "speed": 0.5}),  # (issue 37: what it did; it was {})
     ("posture", {"name": "Crouch", "speed": 0.2}, {"name": "Crouch"}),  # still going at the stop
     ("say", {"text": "Hi.", "speed": 400}, {"queued"}),
     ("stiffness", {"names": ["RArm"], "value": 0.9}, {"joints": RARM}),
     ("awareness", {"enabled": True}, {"enabled": True, "previous": False}),
     ("awareness", {"enabled": False}, {"enabled": False, "previous": True}),
-    ("stop", {}, {}),
+    ("stop", {}, {"held", "cut"}),
 ]
 
 BAD: list[tuple[str, str, Any, str, str]] = [
@@ -82,12 +83,12 @@ def test_running_a_running_behavior_fails(robot):
     with pytest.raises(CommandError) as failed:
         send_command(robot.bus, "pepper", "behavior/run", {"name": NOD})
     assert failed.value.code == "failed" and NOD in failed.value.message
-    assert send_command(robot.bus, "pepper", "stop", {}) == {}
+    assert send_command(robot.bus, "pepper", "stop", {})["held"] is True
 
 
 @pytest.mark.parametrize("garbage", [{"now": True}, [1, 2], "halt!"], ids=["unknown-keys", "list", "string"])
 def test_stop_runs_whatever_its_arguments(robot, garbage):
-    assert send_command(robot.bus, "pepper", "stop", garbage) == {}
+    assert send_command(robot.bus, "pepper", "stop", garbage)["held"] is True
 
 
 @pytest.mark.parametrize(("verb", "args", "code", "named"), [c[1:] for c in BAD], ids=[c[0] for c in BAD])

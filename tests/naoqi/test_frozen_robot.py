@@ -71,7 +71,8 @@ def test_frozen_then_resumed_streams_again(net, fake_process, figure):
     assert r.joints.next(5)[0][0] > outage
     first = r.joints.complete(outage)[0][0]
     figure("frozen then resumed: first frame after the resume", r.joints.t[first] - resumed, "s")
-    assert send_command(r.bus, "pepper", "joints/set", {"names": ["HeadYaw"], "angles": [0.3]}) == {}
+    moved = send_command(r.bus, "pepper", "joints/set", {"names": ["HeadYaw"], "angles": [0.3]})
+    assert moved["targets"] == {"HeadYaw": 0.3}
 
 
 def test_a_link_that_vanishes_without_closing_is_replaced(net, fakes):

@@ -20,7 +20,7 @@ def test_adapter_over_tcps_with_user_and_password(net, fakes, tmp_path):
         naoqi = robot_info(r.bus, "pepper")["naoqi"]
         assert naoqi["connected"] is True and naoqi["url"] == relay.url("tcps")
         assert send_command(r.bus, "pepper", "joints/set", {"names": ["HeadYaw"], "angles": [0.4],
-                                                             "speed": 1.0}) == {}
+                                                             "speed": 1.0})["targets"] == {"HeadYaw": 0.4}
         r.joints.wait_pose({"HeadYaw": f32(0.4)})
         assert relay.accepted >= 1  # every byte went through the TLS endpoint
         # libqi's login, in its first capability map (user "nao", token = the password)

@@ -132,7 +132,9 @@ def test_behavior_posture_stop_and_list_round_trip(net, client):
     wait_for(lambda: any(e["name"] == hey and e["state"] == "started" for e in behaviors.all()), what="started")
     address, (ok, result) = client.ask("/pepper/cmd/behavior/list")
     assert (address, ok) == ("/pepper/reply/behavior/list", 1) and hey in json.loads(result)["behaviors"]
-    assert client.ask("/pepper/cmd/stop", 1.0) == ("/pepper/reply/stop", [1, "{}"])  # a button's 1.0 is ignored
+    address, (ok, result) = client.ask("/pepper/cmd/stop", 1.0)  # a button's 1.0 is ignored
+    assert (address, ok) == ("/pepper/reply/stop", 1)
+    assert json.loads(result) == {"held": True, "cut": [hey], "silenced": 0}  # (what it did: issue 37; it was {})
     wait_for(lambda: any(e["name"] == hey and e["state"] == "stopped" for e in behaviors.all()), what="stopped")
     assert client.ask("/pepper/cmd/posture", "Crouch", 1) == ("/pepper/reply/posture", [1, '{"name":"Crouch"}'])
     assert client.ask("/pepper/cmd/behavior/stop") == ("/pepper/reply/behavior/stop", [1, '{"was_running":false}'])
@@ -144,7 +146,7 @@ def test_joints_set_moves_the_joint_and_an_invalid_angle_moves_nothing(net, clie
     head = Watch(net, "pepper/joints/HeadYaw")
     start = head.steady(3)
     assert client.ask("/pepper/cmd/joints/set", "HeadYaw", 0.5, "HeadPitch", 0, 1) == \
-        ("/pepper/reply/joints/set", [1, "{}"])
+        ("/pepper/reply/joints/set", [1, '{"targets":{"HeadYaw":0.5,"HeadPitch":0.0},"speed":1.0}'])
     wait_for(lambda: abs(head.all()[-1]["v"] - 0.5) < 1e-6, what="HeadYaw at 0.5")
     assert start != pytest.approx(0.5)
     address, (ok, code, message) = client.ask("/pepper/cmd/joints/set", "HeadYaw", 3.0)
@@ -157,7 +159,9 @@ def test_one_joint_per_address_for_a_fader(net, client):
     """``/pepper/cmd/joints/set/<Joint> angle [speed]``: one float moves one joint; the
     reply goes to the address as sent; a wrong joint or angle moves nothing."""
     head = Watch(net, "pepper/joints/HeadYaw")
-    assert client.ask("/pepper/cmd/joints/set/HeadYaw", -0.4, 1.0) == ("/pepper/reply/joints/set/HeadYaw", [1, "{}"])
+    address, (ok, result) = client.ask("/pepper/cmd/joints/set/HeadYaw", -0.4, 1.0)
+    assert (address, ok) == ("/pepper/reply/joints/set/HeadYaw", 1)
+    assert json.loads(result)["targets"]["HeadYaw"] == pytest.approx(-0.4)  # (OSC's float32)
     wait_for(lambda: head.all() and abs(head.seen[-1]["v"] + 0.4) < 1e-6, what="HeadYaw at -0.4")
     for args, code in (([3.0], "out_of_range"), (["far"], "bad_request"), ([], "bad_request")):
         address, (ok, got, message) = client.ask("/pepper/cmd/joints/set/HeadYaw", *args)
