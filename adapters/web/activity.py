@@ -34,8 +34,9 @@ the node did not hear (it started after the behavior did) is not shown.
 
 from __future__ import annotations
 
-from datetime import datetime
 from typing import Any
+
+from sonibus.bus.text import show_state
 
 MAX_RUNNING = 8      # behaviors kept as running at once (made-up names must not grow the line)
 MAX_TEXT = 200       # characters kept of a name or a text
@@ -97,14 +98,8 @@ def refusal(activity: dict[str, Any], robot: str, verb: str) -> str | None:
     show = activity.get("show") or {}
     if verb not in NEEDS_MOTORS or show.get("state") != "closed" or not activity.get("resting"):
         return None
-    until = f" until {when(show['next'])}" if show.get("next") else ""
+    until = show_state("closed", show.get("next")).partition(", opens")[2]
+    until = f" until{until}" if until else ""
     return (f"closed: the robot rests{until}; a supervisor may wake it "
             f"(`sonibus send {robot} stiffness names=Body value=1`)")
 
-
-def when(iso: str) -> str:
-    """``Sun 10:00`` of an instant a show gave (the wall clock of its own zone, as its offset says)."""
-    try:
-        return f"{datetime.fromisoformat(iso):%a %H:%M}"
-    except ValueError:
-        return iso[:40]

@@ -21,8 +21,8 @@ from typing import Any
 from sonibus.bus import client
 from sonibus.bus.errors import CommandError
 from sonibus.bus.node import Bus
+from sonibus.bus.text import show_state
 
-from .activity import when
 from .config import Button, Kiosk
 
 
@@ -82,7 +82,7 @@ class Stand:
         """Why a press is refused while the robot's show is closed ("" when it is not)."""
         if self.show is None or self.show["state"] != "closed":
             return ""
-        return "closed" + (f", opens {when(self.show['next'])}" if self.show.get("next") else "")
+        return show_state("closed", self.show.get("next"))
 
     def event(self, robot: str, kind: str, event: dict[str, Any]) -> None:
         """An event of ``robot``: its show's state, the end of the current button's scenario, or neither."""
