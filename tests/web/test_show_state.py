@@ -6,7 +6,6 @@ behavior event on the bus, nothing for the sound patch (real UDP)."""
 from __future__ import annotations
 
 import socket
-from collections.abc import Iterator
 
 import pytest
 from pythonosc.osc_message import OscMessage
@@ -17,19 +16,12 @@ from sonibus.adapters.show.clock import start
 from sonibus.bus import send_command
 
 from ..conftest import Network, wait_for
+from ..show import test_state
 from .browser import Browser
 from .conftest import BUTTONS, KIOSK_TOKEN, TOKEN, Stage, Watch, open_operator, start_web
 
 NOD = "animations/Stand/Gestures/Yes_1"
-
-
-@pytest.fixture
-def patch() -> Iterator[socket.socket]:
-    """The sound patch's UDP port (an independent receiver)."""
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
-        sock.bind(("127.0.0.1", 0))
-        sock.settimeout(15)
-        yield sock
+patch = test_state.patch  # (the fixture: the sound patch's UDP port)
 
 
 @pytest.fixture
