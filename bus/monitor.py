@@ -33,6 +33,7 @@ from .node import Bus, Reply
 from .ownership import MAX_RIVALS, Claim
 from .queue import SampleQueue
 from .stats import Counters
+from .text import show_state
 
 WINDOW_S = 1.0          # frame rate and latency are over the last second
 HISTORY = 30            # values kept per joint for a sparkline
@@ -85,6 +86,7 @@ class RobotView:
     gone: bool = False
     joints: tuple[JointView, ...] = ()
     connection: dict[str, Any] = field(default_factory=dict)  # (empty: not known yet)
+    show: str = ""  # its show's state and next change, as its ``show`` events say ("": no show heard)
 
     @property
     def connected(self) -> bool:
@@ -156,6 +158,7 @@ class _Robot:
         self.frames = 0
         self.connection: dict[str, Any] | None = None  # its latest state (its info's, then its events')
         self.connection_t = -math.inf                 # when its owner said it (its clock)
+        self.show = ""                                # its show's state (``show`` events)
 
 
 class _Node:
@@ -385,6 +388,8 @@ class Monitor:
                  or message.get("state") in ("failed", "lost", "not_answering"))
         with self._lock:
             self._listed(EventView(float(message["t"]), robot, kind, describe_event(kind, message), alarm))
+            if kind == "show" and message.get("state") in ("open", "closed") and robot in self._robots:
+                self._robots[robot].show = show_state(str(message["state"]), message.get("next"))
             entry = self._robots.get(robot) if kind == "connection" else None
             if entry is not None and entry.claims:
                 self._connection(entry, {**connection.state_of({"connection": message}), "since": message["t"]})
@@ -480,7 +485,7 @@ def _robot_view(name: str, robot: _Robot, now: float) -> RobotView:
     return RobotView(name, f"{claims[0].host}/{claims[0].node}" if claims else "",
                      tuple(f"{c.host}/{c.node}" for c in claims[1:]), str(info.get("model", "")),
                      len(robot.recent) / WINDOW_S, latency, robot.gaps, robot.frames,
-                     robot.claimed and not claims, joints, robot.connection or {})
+                     robot.claimed and not claims, joints, robot.connection or {}, robot.show)
 
 
 def _node_view(host_node: tuple[str, str], node: _Node, now: float) -> NodeView:

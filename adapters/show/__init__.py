@@ -27,6 +27,7 @@ cap, the order of idle behaviors), ``clock`` (the show's time, rehearsals),
 from __future__ import annotations
 
 import logging
+from collections.abc import Callable
 from datetime import datetime
 from typing import Any
 
@@ -58,6 +59,7 @@ class Show(Adapter):
     def __init__(self, config: ShowConfig | None = None, *, name: str = "") -> None:
         super().__init__(config, name=name)
         self._rehearsal: tuple[float, datetime | None] | None = None
+        self.on_change: Callable[[str], None] | None = None  # each opening and closing, in a line (rehearse prints it)
 
     def rehearse(self, speed: float, start: datetime | None = None) -> None:
         """Run the show's clock ``speed`` times faster, from ``start`` (default: now):
@@ -75,6 +77,7 @@ class Show(Adapter):
         self._refuse_a_second_show()
         self.robot = Robot(self, cfg.robot, cfg.command_timeout_s)
         self.director = Director(cfg, self.clock, self.robot, self)
+        self.director.on_change = self.on_change
         self.own(self.bus.serve(keys.program(cfg.robot), self._serve))
         self.address = f"scenarios ({', '.join(cfg.program) or 'none'}) on {keys.program(cfg.robot, 'scenario')}"
         idle = cfg.gestures

@@ -12,6 +12,8 @@ together than on show days: rehearse with ``sim`` or ``naoqi-sim``, or slowly.
 from __future__ import annotations
 
 import argparse
+import contextlib
+from collections.abc import Callable
 
 from sonibus.bus.adapter import Adapter
 from sonibus.bus.cli.api import Command, Environment, Exit
@@ -50,12 +52,21 @@ def _rehearse(args: argparse.Namespace, env: Environment) -> Exit:
             try:
                 begins = start(args.start, show.config.zone) if args.start else None
                 show.rehearse(speed, begins)
+                show.on_change = _printer(env)
             except ValueError as exc:
                 raise ConfigError(f"rehearse: --from: {exc}") from None
             env.say(f"sonibus: rehearsal: {show.name}'s clock runs {speed:g}× faster"
                     + (f" from {begins.isoformat(' ', 'seconds')}" if begins else ""))
 
     return run_installation(args, env, prepare)
+
+
+def _printer(env: Environment) -> Callable[[str], None]:
+    """Each opening and closing, with the show's clock, on stdout (a reader gone: the log still has it)."""
+    def say(line: str) -> None:
+        with contextlib.suppress(BrokenPipeError, ValueError):  # (stdout closed under a stopping rehearsal)
+            env.say(f"sonibus: rehearsal: {line}")
+    return say
 
 
 REHEARSE = Command("rehearse", "run an installation with its show's clock faster (a day in minutes)",

@@ -84,12 +84,15 @@ class Director:
         self.budget = Budget(idle.rest_s, idle.max_per_hour)
         self.open: bool | None = None      # what the show does now (None: not decided yet)
         self.taken = False                 # the robot is in the state the hours say
+        self.entered: bool | None = None   # the state the robot was last put in (open: awake; closed: resting)
+        self.on_change: Callable[[str], None] | None = None  # told each change in a line (``sonibus rehearse``)
         self.running = ""                  # the scenario under way
         self.pending: Request | None = None
         self.interrupted = False           # a stop from someone else came during a scenario or gesture
         self._order: tuple[str, Order] | None = None  # the day it was drawn for, the idle order
         self._own_stops = 0                # stops sent by the show whose command event has not come yet
         self._announced = -float("inf")    # when the state was last said (monotonic)
+        self._due: datetime | None = None  # the next change of the hours, as last said
         self._lock = threading.Lock()
 
     # -- requests (any thread) -----------------------------------------------------------
@@ -143,6 +146,7 @@ class Director:
                     self._quietly(lambda: self._send("stop"))  # (a stop refused in part: the rest goes on)
                     self._enter()
                     self.taken = True
+                    self._announce(changed=False)  # (sinks started after the show missed its first word)
                 self._tick()
             except Lost:
                 self._lost()
@@ -166,7 +170,7 @@ class Director:
                                              f"{', '.join(missing)} — {listed}")
 
     def _tick(self) -> None:
-        if self._schedule():
+        if self._schedule() or self.entered != self.open:  # (a change said during a gesture is acted on now)
             self._enter()
             return
         with self._lock:
@@ -210,6 +214,7 @@ class Director:
     def _enter(self) -> None:
         """Put the robot in the state of the hours: awake and ready, or resting with stiffness off."""
         cfg = self.config
+        self.entered = self.open
         if self.open:
             self._quietly(lambda: self._send("stiffness", {"names": ["Body"], "value": 1.0}))
             self._quietly(lambda: self._posture(cfg.ready_posture, 0.0, cfg.step_timeout_s))
@@ -368,11 +373,12 @@ class Director:
                 raise Interrupted
             if woken and self.pending is not None:
                 return None
+            self._schedule()  # (said at its time; acted on when what runs has ended: ``_tick``)
             self._repeat()
             left = deadline - time.monotonic()
             if left <= 0:
                 return None
-            event = self.robot.next(min(left, SLICE_S))
+            event = self.robot.next(min(left, SLICE_S, self._until_due()))
             self._take(event)
             if event is not None and match is not None and match(event):
                 return event
@@ -389,13 +395,22 @@ class Director:
 
     # -- what sinks hear ------------------------------------------------------------------------------
 
+    def _until_due(self) -> float:
+        """Real seconds until the next change of the hours (a wait ends then, to say it at its time)."""
+        if self._due is None:
+            return SLICE_S
+        return max(0.0, self.clock.real(self._due.timestamp() - self.clock.seconds()))
+
     def _repeat(self) -> None:
         if time.monotonic() - self._announced >= self.config.announce_every_s:
             self._announce(changed=False)
 
     def _announce(self, changed: bool) -> None:
         now = self.clock.now()
+        if changed and self._due is not None and self._due <= now:  # (the change's own instant, not the wait's end)
+            now = self._due
         later = self.config.schedule.next_change(now)
+        self._due = later
         fields: dict[str, Any] = {"state": "open" if self.open else "closed",
                                   "clock": now.isoformat(timespec="seconds"),
                                   "next": later.isoformat(timespec="seconds") if later else None}
@@ -403,8 +418,11 @@ class Director:
             fields["rehearsal"] = self.clock.speed
         self._announced = time.monotonic()
         if changed:
-            log.info("%s: the show is %s (%s)%s", self.node.name, fields["state"], f"{now:%a %H:%M}",
-                     f", {'closes' if self.open else 'opens'} {later:%a %H:%M}" if later else "")
+            line = (f"the show is {fields['state']} ({now:%a %Y-%m-%d %H:%M:%S})"
+                    + (f", {'closes' if self.open else 'opens'} {later:%a %H:%M}" if later else ""))
+            log.info("%s: %s", self.node.name, line)
+            if self.on_change is not None:
+                self.on_change(f"{self.node.name}: {line}")
         self._event("show", **fields)
 
     def _event(self, kind: str, **fields: Any) -> None:

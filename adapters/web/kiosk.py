@@ -21,6 +21,7 @@ from typing import Any
 from sonibus.bus import client
 from sonibus.bus.errors import CommandError
 from sonibus.bus.node import Bus
+from sonibus.bus.text import show_state
 
 from .config import Button, Kiosk
 
@@ -42,6 +43,7 @@ class Stand:
         self.ended: dict[str, Any] | None = None  # its end, when it came before the robot's answer
         self.states: dict[str, dict[str, Any]] = {}
         self.presses = 0                       # presses so far: which one an ``overdue`` is about
+        self.show: dict[str, Any] | None = None  # the robot's show, as last said: {type: show, state, next}
 
     def busy(self) -> str:
         """Why a press is refused now ("" when it is not)."""
@@ -76,8 +78,16 @@ class Stand:
         if self.ended is not None:
             self._end(**self.ended)
 
+    def closed(self) -> str:
+        """Why a press is refused while the robot's show is closed ("" when it is not)."""
+        if self.show is None or self.show["state"] != "closed":
+            return ""
+        return show_state("closed", self.show.get("next"))
+
     def event(self, robot: str, kind: str, event: dict[str, Any]) -> None:
-        """An event of ``robot``: the end of the current button's scenario, or not."""
+        """An event of ``robot``: its show's state, the end of the current button's scenario, or neither."""
+        if robot == self.kiosk.robot and kind == "show" and event.get("state") in ("open", "closed"):
+            self._show(event)
         button = self.current
         if button is None or robot != self.kiosk.robot:
             return
@@ -97,6 +107,21 @@ class Stand:
         button, self.current = self.current, None
         if button is not None:
             self._say(button, state, error)
+
+    def _show(self, event: dict[str, Any]) -> None:
+        """Tell the kiosks the show's state when it changes; a change forgets the buttons' last
+        ends (a "done" from before the close is stale once closed)."""
+        later = event.get("next")
+        message = {"type": "show", "state": event["state"], "next": str(later)[:40] if later else None}
+        if message == self.show:
+            return
+        if self.show is not None and self.show["state"] != message["state"]:
+            for id_, said in list(self.states.items()):
+                if said["state"] != "running":
+                    self.states[id_] = {"type": "button", "id": id_, "state": "idle"}
+                    self.announce(self.states[id_])
+        self.show = message
+        self.announce(message)
 
     def _say(self, button: Button, state: str, error: str = "") -> None:
         message: dict[str, Any] = {"type": "button", "id": button.id, "state": state}

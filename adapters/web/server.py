@@ -25,7 +25,7 @@ from sonibus.bus.errors import CommandError
 from sonibus.bus.text import printable
 from sonibus.bus.web import WebClient, WebServer, close_clients
 
-from . import kiosk, protocol
+from . import activity, kiosk, protocol
 from .auth import Guard
 from .config import Button, WebConfig
 from .kiosk import Stand
@@ -161,7 +161,7 @@ class Pages:
         client.send({"type": "hello", "role": client.role, "update_hz": cfg.update_hz, "slider_hz": cfg.slider_hz,
                      "speed": cfg.speed, "buttons": buttons})
         if client.role == "kiosk":
-            for state in self.stand.states.values():
+            for state in [*self.stand.states.values(), *([self.stand.show] if self.stand.show else [])]:
                 client.send(state)
             return
         for text in (self._robots, self._stats):
@@ -198,6 +198,12 @@ class Pages:
             args = commands.from_json(request.verb, request.args)
         except CommandError as exc:
             client.answer(protocol.reply(request.id, exc))
+            return
+        shown = self.adapter.shown_robots().get(request.robot)
+        why = activity.refusal(shown["activity"], request.robot, request.verb) if shown else None
+        if why is not None:  # (its show closed and put it to rest: a gesture would be reported, not made)
+            self.adapter.count("refused")
+            client.answer(protocol.reply(request.id, f"{request.verb}: {why}"))
             return
         if client.asking >= MAX_ASKING:  # (said, never silently lost: the page may send it again)
             self.adapter.count("commands_dropped")
@@ -252,7 +258,7 @@ class Pages:
             known = ", ".join(b.id for b in self.config.stand.buttons) or "none"
             self._bad(client, request.id, f"press: no button {request.button[:64]!r} — buttons: {known}")
             return
-        busy = self.stand.busy()
+        busy = self.stand.busy() or self.stand.closed()
         if busy:
             client.answer(protocol.reply(request.id, busy))
             return

@@ -275,6 +275,8 @@ def robot_cells(robot: RobotView) -> list[Text]:
     style = GONE if robot.gone or unreached else WARNING if robot.standby else ""
     state = ("gone" if robot.gone else f"CONFLICT: {', '.join(robot.standby)} stands by" if robot.standby
              else connection.describe(robot.connection) if robot.connection else "on bus")
+    if robot.show and not robot.gone:  # (its show: "show closed, opens Tue 10:00")
+        state = f"{state}; show {robot.show}"
     latency = f"{robot.latency_ms:.1f} ms" if robot.latency_ms is not None else "-"
     gaps = Text(f"{robot.gaps:,}", style=style or (WARNING if robot.gaps else ""))
     return [Text(robot.name, style=style), Text(robot.owner or "?", style=style), Text(robot.model or "?", style=style),

@@ -100,7 +100,13 @@ def ticks(monkeypatch) -> list[float]:
 
 
 def show_events(rig: Any) -> list[tuple[str, str]]:
-    return [(e["state"], e["clock"]) for e in rig.events.find("show")]
+    """Each change of the show's state (the state is also said again: once the robot is taken, and every
+    ``announce_every_s``), with its clock."""
+    changes: list[tuple[str, str]] = []
+    for e in rig.events.find("show"):
+        if not changes or changes[-1][0] != e["state"]:
+            changes.append((e["state"], e["clock"]))
+    return changes
 
 
 def past(rig: Any, until: str) -> dict[str, Any]:

@@ -10,6 +10,8 @@ import time
 
 import pytest
 
+from sonibus.adapters.show import Show, ShowConfig
+from sonibus.adapters.show.clock import start
 from sonibus.bus import decode, keys, messages, send_command
 from sonibus.bus.cli.top import ALARM, WARNING
 
@@ -232,5 +234,20 @@ def test_control_characters_from_the_bus_are_shown_not_sent_to_the_terminal(net)
         shown_text = shown(app, "event-lines") + shown(app, "joints") + "".join(
             c.plain for c in row(app, "robots", bad_robot)) + str(app.joints.border_title)
         assert not any((ord(c) < 0x20 and c != "\n") or 0x7f <= ord(c) <= 0x9f for c in shown_text), repr(shown_text)
+
+    drive(net.bus("top"), scenario)
+
+
+def test_a_robots_row_shows_its_shows_state_and_next_opening(net):
+    """Issue 37, item 7: a closed show (a Monday) on pepper's row, "show closed, opens Tue 10:00"."""
+    net.sim("pepper", rate_hz=50, idle=False)
+    show = Show(ShowConfig(robot="pepper", timezone="Europe/Paris", hours=["tue-sun 10:00-18:00"]), name="show")
+    show.rehearse(1.0, start("2025-06-02 12:00", show.config.zone))
+
+    async def scenario(app, pilot):
+        await until(pilot, lambda: row(app, "robots", "pepper"), what="pepper's row")
+        net.start(show)  # (its state said at start and again once it has taken the robot)
+        await until(pilot, lambda: (r := row(app, "robots", "pepper")) and
+                    r[-1].plain == "connected; show closed, opens Tue 10:00", what="the show's state in pepper's row")
 
     drive(net.bus("top"), scenario)

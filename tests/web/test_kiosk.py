@@ -86,3 +86,22 @@ def test_a_scenario_button_is_done_when_the_show_says_ended_and_failed_with_its_
     kiosk.event("pepper", "scenario", scenario("aborted", reason="robot 'pepper' lost (its owner left the bus)"))
     assert states == ["running", "done", "running", "failed"]
     assert kiosk.states["story"]["error"] == "robot 'pepper' lost (its owner left the bus)"
+
+
+def test_the_shows_close_is_told_and_forgets_a_stale_done_and_a_press_is_refused_until_it_opens():
+    """Issue 37, item 7: "closed, opens Tue 10:00", not the "done" of the last visitor."""
+    said: list[dict] = []
+    kiosk = Stand(Kiosk("pepper", (SAY,)), said.append)
+    kiosk.event("pepper", "show", {"t": 1.0, "kind": "show", "state": "open", "next": "2025-06-03T18:00:00+02:00"})
+    kiosk.press(SAY)
+    kiosk.answered(SAY, {"duration": 1.8, "queued": 0})
+    kiosk.event("pepper", "speech", {"t": 2.0, "kind": "speech", "text": SAY.say, "state": "done"})
+    assert kiosk.states["hello"]["state"] == "done" and kiosk.closed() == ""
+    kiosk.event("nao", "show", {"t": 3.0, "kind": "show", "state": "closed", "next": None})  # another robot's show
+    assert kiosk.closed() == ""
+    kiosk.event("pepper", "show", {"t": 3.0, "kind": "show", "state": "closed", "next": "2025-06-04T10:00:00+02:00"})
+    assert said[-2:] == [{"type": "button", "id": "hello", "state": "idle"},
+                         {"type": "show", "state": "closed", "next": "2025-06-04T10:00:00+02:00"}]
+    assert kiosk.closed() == "closed, opens Wed 10:00" and kiosk.states["hello"]["state"] == "idle"
+    kiosk.event("pepper", "show", {"t": 4.0, "kind": "show", "state": "closed", "next": "2025-06-04T10:00:00+02:00"})
+    assert len(said) == 5  # (said again every announce_every_s: no news for the kiosks)

@@ -151,5 +151,15 @@ const sonibus = (() => {
     }
   }
 
-  return {token, withToken, el, fixed, status, Link};
+  /** A show's state as a line: "closed, opens Sun 10:00", "open, closes Tue 18:00" (the wall clock
+      of the show's own zone: read from its ISO text, not converted to the browser's). */
+  function showState(show) {
+    const when = /^(\d{4})-(\d{2})-(\d{2})T(\d{2}:\d{2})/.exec(show.next || "");
+    if (!when) return show.state;
+    const day = ["Sun", "Mon", "Tue", "Wed", "Thu", "Fri", "Sat"][
+      new Date(Date.UTC(+when[1], +when[2] - 1, +when[3])).getUTCDay()];
+    return `${show.state}, ${show.state === "closed" ? "opens" : "closes"} ${day} ${when[4]}`;
+  }
+
+  return {token, withToken, el, fixed, status, showState, Link};
 })();

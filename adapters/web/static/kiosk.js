@@ -4,15 +4,17 @@
    `press`: no other control exists in this page. Visitors see nothing of the
    operator's: no status line, no replies, no connection banner; while the page
    is not connected, "One moment, please…" and the buttons disabled (the reason
-   goes to the console). Protocol: docs/web.md. */
+   goes to the console). While the robot's show is closed: "closed, opens Sun 10:00" and the
+   buttons dimmed. Protocol: docs/web.md. */
 "use strict";
 
 (() => {
-  const {el, withToken, Link} = sonibus;
+  const {el, withToken, showState, Link} = sonibus;
   const SHOWN = {idle: "", running: "running…", done: "done", failed: "sorry, not now"};  // (for visitors)
   const buttons = new Map();   // id → button element
   let waiting = null;          // the id of a press not yet answered
   let shown = "";              // the buttons of the last hello, as JSON
+  let closed = false;          // the robot's show is closed: the buttons are dimmed, the next opening said
 
   function onHello(message) {
     const container = document.getElementById("buttons");
@@ -43,6 +45,15 @@
     refresh();
   }
 
+  function onShow(message) {
+    closed = message.state === "closed";
+    const line = document.getElementById("show");
+    line.textContent = closed ? showState(message) : "";
+    line.hidden = !closed;
+    document.body.classList.toggle("closed", closed);
+    refresh();
+  }
+
   function press(id) {
     if (waiting !== null || running()) return;
     waiting = link.send({type: "press", button: id}, buttons.get(id).querySelector(".label").textContent,
@@ -56,7 +67,7 @@
 
   /** One scenario at a time: every button is disabled while one runs or a press is unanswered. */
   function refresh() {
-    const busy = waiting !== null || running() || !link.connected;
+    const busy = waiting !== null || running() || !link.connected || closed;
     for (const button of buttons.values()) button.disabled = busy;
     document.body.classList.toggle("busy", busy);
   }
@@ -68,6 +79,7 @@
     refresh();
   }
 
-  const link = new Link("/kiosk/ws", {hello: onHello, button: onButton, connection: onConnection});
+  const link = new Link("/kiosk/ws", {hello: onHello, button: onButton, show: onShow,
+    connection: onConnection});
   Object.assign(sonibus, {link});
 })();

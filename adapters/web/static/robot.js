@@ -7,7 +7,7 @@
 "use strict";
 
 (() => {
-  const {el, status, fixed, StripChart} = sonibus;
+  const {el, status, fixed, showState, StripChart} = sonibus;
   const HISTORY = 600;          // frames kept per robot for the charts (24 s at 25/s)
   const TOUCHED_MS = 1500;      // a slider the operator moved is left alone this long before it follows the robot
   const FINE_RAD = Math.PI / 1800;  // a slider's step for an angle: 0.1° (the arrow keys' move)
@@ -72,10 +72,11 @@
       this.lineState = el("span", {class: "summary-state"});
       this.lineDoing = el("span", {class: "summary-doing"});
       this.lineSaying = el("span", {class: "summary-saying"});
+      this.lineShow = el("span", {class: "summary-show"});
       this.lineRate = el("span", {class: "summary-rate"});
       return el("button", {type: "button", class: "summary-line", dataset: {summary: this.name},
         title: `show ${this.name}'s controls`, onclick: () => this.page.select(this.name)},
-      el("b", {}, this.name), this.lineState, this.lineDoing, this.lineSaying, this.lineRate);
+      el("b", {}, this.name), this.lineState, this.lineDoing, this.lineSaying, this.lineShow, this.lineRate);
     }
 
     build() {
@@ -141,6 +142,12 @@
       this.lineSaying.textContent = activity.speaking ? `saying “${activity.speaking}”` : "";
       this.lineSaying.title = activity.speaking || "";
       this.line.dataset.idle = String(!held && !running.length && !activity.speaking);
+      // its show's state (<robot>/events/show), and when that changes next
+      const show = activity.show;
+      this.lineShow.textContent = show ? `show ${showState(show)}` : "";
+      this.lineShow.dataset.state = show ? show.state : "";
+      this.lineShow.title = show && show.state === "closed" && activity.resting
+        ? "its show put it to rest, motors off: gestures are refused until it opens (or a supervisor wakes it)" : "";
       for (const name of running) {  // (a page opened while it runs: the server heard it start)
         const button = this.behaviorButtons.get(name);
         if (button && button.dataset.state === "idle") this.behaviorState(name, "started");
