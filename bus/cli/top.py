@@ -31,9 +31,10 @@ from .. import connection
 from ..claimwatch import owners
 from ..client import Outcome, stop_all
 from ..errors import CommandError, ConfigError, SonibusError
-from ..monitor import EventView, JointView, Monitor, NodeView, RobotView, Snapshot
+from ..monitor import Monitor
 from ..session import BusConfig
 from ..text import printable
+from ..views import EventView, JointView, NodeView, RobotView, Snapshot
 from .api import Command, Environment, Exit, bus_config, joined
 from .hints import reach_hint_now
 
