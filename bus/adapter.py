@@ -191,6 +191,11 @@ class Adapter:
         self.count("capped")
         self.warn("capped", f"{what} — names made up on the bus must not grow what this node keeps")
 
+    def writes(self) -> list[str]:
+        """The folders this node writes into, as configured (``sonibus service`` checks the show's
+        user may): none, unless an adapter keeps files (a recorder's recordings)."""
+        return []
+
     def resolve(self, path: str) -> str:
         """``path`` (a file or folder an option names) as this node opens it: a relative one is taken
         from the installation file's folder, as every path an installation file gives (the ``[log]``

@@ -5,8 +5,10 @@ from __future__ import annotations
 
 import io
 import json
+import shutil
 import subprocess
 import sys
+import tempfile
 from pathlib import Path
 
 import pytest
@@ -162,6 +164,11 @@ def test_a_unit_systemd_refuses_is_not_written(tmp_path, monkeypatch):
     show = tmp_path / "museum.toml"
     show.write_text(SHOW)
     code, out, err = cli("service", str(show), "--host", "stage", "--user", "root", "-o", str(tmp_path))
+    # (sonibus's own check of the user's rights says it first: issue 37)
+    assert (code, out) == (2, "") and err.count("\n") == 1, err
+    assert f"--user 'root' cannot run ExecStart {not_executable} (mode 644, owner root)" in err
+    monkeypatch.setattr(service_module.access, "refusals", lambda user, wanted: [])  # (systemd's check behind it)
+    code, out, err = cli("service", str(show), "--host", "stage", "--user", "root", "-o", str(tmp_path))
     assert (code, out) == (2, "") and err.count("\n") == 1, err
     assert (f"systemd refuses the unit, not written: sonibus-museum-stage.service: Command {not_executable} is not "
             f"executable") in err
@@ -175,3 +182,30 @@ def test_without_systemd_analyze_the_unit_is_written_and_said_unchecked(tmp_path
     code, out, err = cli("service", str(show), "--host", "stage", "--user", "root", "-o", str(tmp_path))
     assert code == 0 and (tmp_path / "sonibus-museum-stage.service").is_file(), err
     assert "not checked by systemd: no systemd-analyze here (Debian: apt install systemd)" in err + out
+
+
+def test_a_user_who_cannot_read_the_file_or_write_the_recordings_gets_no_unit(request, monkeypatch):
+    """Issue 37, item 9: only the user's existence was checked; a unit whose user cannot read its
+    file, or write the recordings' folder, failed at every restart. Checked by owner, group and mode."""
+    tmp_path = Path(tempfile.mkdtemp(prefix="sb-service-", dir="/tmp"))  # (pytest's own folder is root's alone)
+    request.addfinalizer(lambda: shutil.rmtree(tmp_path, ignore_errors=True))
+    tmp_path.chmod(0o755)
+    runnable = tmp_path / "sonibus"  # (where this checkout's sonibus is, 'nobody' may not enter: not tested here)
+    runnable.write_text("#!/bin/sh\n")
+    runnable.chmod(0o755)
+    monkeypatch.setattr(service_module, "_sonibus", lambda: runnable)
+    show = tmp_path / "museum.toml"
+    show.write_text(SHOW + '\n[nodes.rec]\nadapter = "recorder"\nhost = "stage"\npath = "recs/show-{time}.mcap"\n')
+    out = tmp_path / "units"
+    out.mkdir()
+    show.chmod(0o600)  # root's alone: 'nobody' cannot read it
+    code, _, err = cli("service", str(show), "--host", "stage", "--user", "nobody", "-o", str(out))
+    assert code != 0 and f"--user 'nobody' cannot read the installation file {show} (mode 600, owner root)" in err
+    assert len(err.strip().splitlines()) == 1 and not list(out.iterdir()), err
+    show.chmod(0o644)  # readable; the recordings' folder is to be made in tmp_path (root's, 755)
+    code, _, err = cli("service", str(show), "--host", "stage", "--user", "nobody", "-o", str(out))
+    assert code != 0 and f"cannot write a folder the show writes {tmp_path / 'recs'} (to be made in {tmp_path}" in err
+    (tmp_path / "recs").mkdir(mode=0o777)
+    (tmp_path / "recs").chmod(0o777)
+    code, _, err = cli("service", str(show), "--host", "stage", "--user", "nobody", "-o", str(out))
+    assert code == 0, err

@@ -433,6 +433,9 @@ class Recorder(Adapter):
     def _now_ns(self) -> int:
         return self._wall0 + time.monotonic_ns() - self._mono0
 
+    def writes(self) -> list[str]:
+        return [os.path.dirname(os.path.abspath(self.resolve(self.config.path)))]
+
     def _folder(self) -> str:
         return os.path.dirname(os.path.abspath(self.path))
 

@@ -35,7 +35,7 @@ import tempfile
 from importlib.metadata import version
 from pathlib import Path
 
-from .. import config, runner
+from .. import access, config, runner
 from ..errors import ConfigError, controls, visible
 from .api import Command, Environment, Exit
 
@@ -63,7 +63,8 @@ def _service(args: argparse.Namespace, env: Environment) -> Exit:
     host = args.host or socket.gethostname()
     _plain("--host", host, "give the machine's name, as `hostname` prints it")
     installation = config.load(path)
-    nodes = [a.name for a in runner.build(installation, None, host)]  # (every error now, not at each restart)
+    adapters = runner.build(installation, None, host)  # (every error now, not at each restart)
+    nodes = [a.name for a in adapters]
     if not args.watchdog_s >= 1 or not args.restart_s >= 0:
         raise ConfigError(f"--watchdog-s {args.watchdog_s:g} / --restart-s {args.restart_s:g}: give a watchdog of "
                           f"1 s or more and a restart delay of 0 or more, e.g. --watchdog-s {WATCHDOG_S:g}")
@@ -74,6 +75,13 @@ def _service(args: argparse.Namespace, env: Environment) -> Exit:
     except KeyError:
         raise ConfigError(f"--user '{user}': no such user on this machine — give the account that runs the "
                           f"show (`id NAME` checks one)") from None
+    folders = [folder for a in adapters for folder in a.writes()]
+    if installation.log.file:
+        folders.append(str(Path(installation.log.file).parent))
+    refused = access.refusals(user, [(_sonibus(), "run", "ExecStart"), (path, "read", "the installation file"),
+                                     *((Path(f), "write", "a folder the show writes") for f in folders)])
+    if refused:
+        raise ConfigError(f"--user '{user}' cannot {refused[0]} — fix its rights, or give another --user")
     name = unit_name(path, host)
     text = unit(path, host, user, nodes, args.watchdog_s, args.restart_s)
     written = Path("-") if args.output == "-" else Path(args.output).absolute() / f"{name}.service"
