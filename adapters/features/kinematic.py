@@ -15,7 +15,7 @@ from ``a`` and ``j`` (Laban Time and Flow): they are published with them.
 >>> d = PointDerivatives(1, window_s=0.2)
 >>> for k in range(20):
 ...     fitted = d.update(k / 50, np.array([[0.1 * k / 50, 0.0, 0.0]]))
->>> np.abs(d.velocity - [[0.1, 0.0, 0.0]]).max() < 1e-9, d.ready
+>>> bool(np.abs(d.velocity - [[0.1, 0.0, 0.0]]).max() < 1e-9), d.ready
 (True, True)
 """
 
