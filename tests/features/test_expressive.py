@@ -136,3 +136,36 @@ def test_time_is_time_weighted_when_frames_are_dropped_unevenly():
     uneven = full[~((full > 0.5) & (full < 1.0) & (np.arange(len(full)) % 5 < 2))]
     assert reach_efforts(full).time == pytest.approx(1.125, rel=5e-3)
     assert reach_efforts(uneven).time == pytest.approx(1.125, rel=5e-3)
+
+
+@pytest.mark.parametrize("fs", [50, 100])
+def test_shoulder_sweep_through_the_real_forward_kinematics(fs):
+    """Only RShoulderPitch turns, at 1 rad/s: the right hand runs on a circle of 0.310452 m about
+    the pitch axis, so the node's curvature is 1/r and its Laban Weight (ωr)²; a still left arm
+    has no curvature (under the speed floor)."""
+    from sonibus.adapters.features import FeaturesConfig
+    from sonibus.adapters.features.catalog import derived
+    from sonibus.adapters.features.compute import RobotFeatures
+    from sonibus.adapters.features.table import describe
+    from sonibus.bus import load_model
+
+    model = load_model("pepper")
+    info = {"model": "pepper", "joints": [j.to_info() for j in model.joints]}
+    config = FeaturesConfig(features=("expressive",))
+    robot = describe("pepper", info)
+    features = RobotFeatures(robot, config)
+    pose = {f"pepper/joints/{j}": 0.0 for j in model.joint_names}
+    pose.update({"pepper/joints/RShoulderRoll": -0.3, "pepper/joints/RElbowYaw": 1.2,
+                 "pepper/joints/RElbowRoll": 0.8, "pepper/joints/RWristYaw": 0.4})
+    last = {}
+    for k in range(int(1.0 * fs)):
+        t = k / fs
+        for key, msg in features.step(t, k + 1, {**pose, "pepper/joints/RShoulderPitch": -0.5 + t}).samples:
+            last[key] = msg["v"]
+    r = 0.310452
+    assert last["pepper/derived/curvature/R"] == pytest.approx(1 / r, rel=RTOL[fs])
+    assert last["pepper/derived/laban_weight/R"] == pytest.approx(r**2, rel=2 * RTOL[fs])
+    assert last["pepper/derived/laban_time/R"] == pytest.approx(r, rel=RTOL[fs])  # |a| = ω²r
+    assert "pepper/derived/curvature/L" not in last and last["pepper/derived/laban_weight/L"] < 1e-20
+    listed = {e["key"] for e in derived(robot, config, {})["derived"]}
+    assert set(last) <= listed  # every value published is described on <robot>/info/derived
