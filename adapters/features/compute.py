@@ -189,7 +189,8 @@ class RobotFeatures:
             return
         kappa = geometry(fit.velocity, fit.acceleration)[0]
         for i, (laban, names) in enumerate(zip(self._efforts, self._expressive_keys, strict=True)):
-            e = laban.update(t, points[i:i + 1], fit.velocity[i:i + 1], fit.acceleration[i:i + 1], fit.jerk[i:i + 1])
+            one = slice(i, i + 1)
+            e = laban.update(fit.time, fit.position[one], fit.velocity[one], fit.acceleration[one], fit.jerk[one])
             values = (e.weight, e.time, e.flow, e.space, float(kappa[i]))
             out.samples += [(key, {"t": t, "seq": seq, "v": v}) for key, v in zip(names, values, strict=True)
                             if np.isfinite(v)]  # Space with no displacement, κ below the speed floor: none

@@ -28,7 +28,7 @@ class FeaturesConfig:
     onset: float = 0.5                        # chain QoM (rad/s) that starts a motion...
     offset: float = 0.2                       # ...and that ends it (lower: hysteresis)
     min_duration_s: float = 0.08              # how long the QoM must stay past a threshold
-    fit_window_s: float = 0.2                 # expressive: the derivative fit's window (kinematic.py)
+    fit_window_s: float = 0.4                 # expressive: the derivative fit's window, read at its middle
     laban_window_s: float = 0.5               # expressive: the Efforts' trailing window
     weights: dict[str, float] | None = None   # QoM weight per joint (default: 1 per rad joint, 0 for hands)
     max_wait_ms: float = 50.0                 # per_joint_keys: a frame missing joints is processed after this

@@ -12,8 +12,9 @@ W_T(k) = {m : t_k − T < t_m ≤ t_k}, Δt_m the frame's own step:
 - Space  = L / d: path length over W_T divided by the displacement over it
   (none; NaN while d is under ``min_displacement``)
 
-⟨x⟩_T = Σ x_m Δt_m / Σ Δt_m over the window (the time-weighted mean; the
-first frame, with no Δt, weighs nothing).
+⟨x⟩_T = Σ ½(x_m + x_(m−1)) Δt_m / Σ Δt_m over the steps inside the window
+(the time-weighted mean, trapezoid rule: exact to second order in Δt however
+unevenly frames are dropped).
 """
 
 from __future__ import annotations
@@ -44,6 +45,7 @@ class LabanEfforts:
         self.alpha = np.asarray(alpha, dtype=float)
         self.window_s, self.min_displacement = window_s, min_displacement
         # per frame: t, Δt, Σα‖v‖², Σα‖a‖, Σα‖j‖, positions, path length of its step
+        self._norms = [0.0, 0.0]  # the last frame's Σα‖a‖, Σα‖j‖
         self._frames: deque[tuple[float, float, float, float, float, np.ndarray, float]] = deque()
 
     def update(self, t: float, p: np.ndarray, v: np.ndarray, a: np.ndarray, j: np.ndarray) -> Efforts:
@@ -55,6 +57,8 @@ class LabanEfforts:
         dt = t - last[0] if last is not None else 0.0
         step = float(self.alpha @ np.linalg.norm(p - last[5], axis=1)) / self.alpha.sum() if last is not None else 0.0
         norms = [float(self.alpha @ np.linalg.norm(x, axis=1)) for x in (a, j)]
+        previous, self._norms = (self._norms if last is not None else norms), norms
+        norms = [(x + y) / 2 for x, y in zip(norms, previous, strict=True)]  # the step's mean (trapezoid)
         self._frames.append((t, dt, float(self.alpha @ np.einsum("ij,ij->i", v, v)), *norms, np.array(p), step))
         while t - self._frames[0][0] > self.window_s * (1 + 1e-9):
             self._frames.popleft()
