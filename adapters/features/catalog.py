@@ -97,7 +97,7 @@ def _hands(robot: Robot, config: FeaturesConfig) -> list[dict[str, Any]]:
                        frame=arms.frame, box={"min": low[a].tolist(), "max": high[a].tolist()})
                 for a, side in enumerate(arms.sides)]
     if config.publishes("expressive"):
-        fit = f"causal degree-5 least-squares fit over {config.fit_window_s:g} s (kinematic.py)"
+        fit = f"degree-5 least-squares fit over {config.fit_window_s:g} s read at its middle (kinematic.py)"
         window = config.laban_window_s
         specs = [("laban_weight", "m²/s²", f"max over {window:g} s of ‖v‖² (Larboulette & Gibet 2015)"),
                  ("laban_time", "m/s²", f"time-weighted mean of ‖a‖ over {window:g} s (Larboulette & Gibet 2015)"),

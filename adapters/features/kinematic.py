@@ -60,7 +60,8 @@ class PointDerivatives:
         while t - self._times[0] > self.window_s * (1 + 1e-9):  # t_k − W < t_m ≤ t_k
             self._times.popleft()
             self._points.popleft()
-        self.ready = len(self._times) > self.degree + 1
+        # enough frames, spanning most of the window: a fit of a few first frames is mostly noise
+        self.ready = len(self._times) > self.degree + 1 and t - self._times[0] >= 0.75 * self.window_s
         if not self.ready:
             return False
         s = (np.fromiter(self._times, float) - t) / self.window_s

@@ -169,3 +169,28 @@ def test_shoulder_sweep_through_the_real_forward_kinematics(fs):
     assert "pepper/derived/curvature/L" not in last and last["pepper/derived/laban_weight/L"] < 1e-20
     listed = {e["key"] for e in derived(robot, config, {})["derived"]}
     assert set(last) <= listed  # every value published is described on <robot>/info/derived
+
+
+FLOOR = {"laban_weight": 1e-3, "laban_time": 0.2, "laban_flow": 5.0}  # docs/features.md, "Noise floor"
+
+
+@pytest.mark.parametrize("fs", [50, 100])
+def test_a_still_robot_with_1_mrad_of_noise_stays_under_the_floor(fs):
+    from sonibus.adapters.features import FeaturesConfig
+    from sonibus.adapters.features.compute import RobotFeatures
+    from sonibus.adapters.features.table import describe
+    from sonibus.bus import load_model
+
+    model = load_model("pepper")
+    info = {"model": "pepper", "joints": [j.to_info() for j in model.joints]}
+    features = RobotFeatures(describe("pepper", info), FeaturesConfig(features=("expressive",)))
+    rng = np.random.default_rng(1)
+    seen: dict[str, float] = {}
+    for k in range(2 * fs):
+        pose = {f"pepper/joints/{j}": 0.3 + 1e-3 * rng.standard_normal() for j in model.joint_names}
+        for key, msg in features.step(k / fs, k + 1, pose).samples:
+            feature = key.split("/")[2]
+            seen[feature] = max(seen.get(feature, 0.0), msg["v"])
+    assert set(seen) == set(FLOOR)  # no Space (no displacement) and no curvature (under 0.05 m/s)
+    for feature, floor in FLOOR.items():
+        assert seen[feature] < floor, feature
