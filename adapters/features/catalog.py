@@ -105,7 +105,7 @@ def _hands(robot: Robot, config: FeaturesConfig) -> list[dict[str, Any]]:
                  ("laban_space", "1", f"path length over displacement in {window:g} s; none under 1 mm"),
                  ("curvature", "1/m", "‖v × a‖/‖v‖³; none under 1 mm/s")]
         out += [_entry(robot.name, feature, side, unit, None, None, definition=text, estimator=fit,
-                       window_s=None if feature == "curvature" else window)
+                       **({} if feature == "curvature" else {"window_s": window}))
                 for feature, unit, text in specs for side in arms.sides]
     if config.publishes("hand_speed"):
         levers = arms.lever_arms()

@@ -12,6 +12,7 @@ from hypothesis import strategies as st
 from monalysa.quality.smoothness import log_dimensionless_jerk
 from monalysa.quality.smoothness import sparc as monalysa_sparc
 
+from sonibus import schemas
 from sonibus.adapters.features.kinematic import PointDerivatives, geometry
 from sonibus.adapters.features.laban import LabanEfforts
 from sonibus.adapters.features.segments import directness, fluidity, ldlj, sparc
@@ -167,7 +168,9 @@ def test_shoulder_sweep_through_the_real_forward_kinematics(fs):
     assert last["pepper/derived/laban_weight/R"] == pytest.approx(r**2, rel=2 * RTOL[fs])
     assert last["pepper/derived/laban_time/R"] == pytest.approx(r, rel=RTOL[fs])  # |a| = ω²r
     assert "pepper/derived/curvature/L" not in last and last["pepper/derived/laban_weight/L"] < 1e-20
-    listed = {e["key"] for e in derived(robot, config, {})["derived"]}
+    reply = derived(robot, config, {"host": "h", "node": "features"})
+    schemas.validate("derived_info", reply)
+    listed = {e["key"] for e in reply["derived"]}
     assert set(last) <= listed  # every value published is described on <robot>/info/derived
 
 
