@@ -27,6 +27,7 @@ from common import free_port, write
 
 from sonibus.adapters.features import Features, FeaturesConfig
 from sonibus.adapters.features.compute import RobotFeatures
+from sonibus.adapters.features.config import DEFAULT
 from sonibus.adapters.features.processor import whole
 from sonibus.adapters.features.table import describe
 from sonibus.adapters.sim import SimConfig, SimRobot
@@ -51,10 +52,12 @@ def frames(n: int) -> list[bytes]:
     return out
 
 
-def per_frame(data: list[bytes], features: bool) -> list[float]:
-    """Seconds per frame for decoding only, or for the processor's whole per-frame work."""
+def per_frame(data: list[bytes], features: bool, expressive: bool = False) -> list[float]:
+    """Seconds per frame for decoding only, or for the processor's whole per-frame work
+    (with the opt-in expressive descriptors if ``expressive``)."""
     info = {"model": "pepper", "joints": [j.to_info() for j in MODEL.joints]}
-    robot = RobotFeatures(describe("pepper", info), FeaturesConfig())
+    config = FeaturesConfig(features=(*DEFAULT, "expressive")) if expressive else FeaturesConfig()
+    robot = RobotFeatures(describe("pepper", info), config)
     key, selection = keys.frame("pepper"), Selection([keys.joints("pepper")])
     times = []
     gc.disable()
@@ -114,12 +117,14 @@ def main() -> None:
     machine = f"{os.cpu_count()} cores, load {os.getloadavg()[0]:.2f}"
     data = frames(args.frames + 100)
     base, full = stats(per_frame(data, False)), stats(per_frame(data, True))
+    expressive = stats(per_frame(data, True, expressive=True))
     bus = on_bus(args.seconds)
     result = {"model": "pepper", "joints": len(MODEL.joints), "rate_hz": RATE_HZ, "machine": machine,
               "decode_only": base, "features": full, "ratio_p50": full["p50_us"] / base["p50_us"],
-              "ratio_p99": full["p99_us"] / base["p99_us"], "on_bus": bus}
+              "ratio_p99": full["p99_us"] / base["p99_us"], "on_bus": bus, "expressive": expressive,
+              "expressive_ratio_p50": expressive["p50_us"] / full["p50_us"]}
     print(f"{'per frame':<12} {'p50 µs':>8} {'p99 µs':>8} {'CPU % @100 Hz':>14}")
-    for name, row in (("decode only", base), ("features", full)):
+    for name, row in (("decode only", base), ("features", full), ("+expressive", expressive)):
         print(f"{name:<12} {row['p50_us']:>8.0f} {row['p99_us']:>8.0f} {row['cpu_percent_at_100hz']:>14.2f}")
     print(f"ratio p50 {result['ratio_p50']:.1f}, p99 {result['ratio_p99']:.1f}")
     print(f"on the bus: {bus['frames_per_s']:.1f} frames/s, worker thread {bus['cpu_percent']:.1f} % of a core "

@@ -132,7 +132,10 @@ def rows_features(r: dict[str, Any]) -> list[Row]:
     f, base = r["features"], r["decode_only"]
     return [("features per Pepper frame, p50 / p99", f"{_us(f['p50_us'])} / {_us(f['p99_us'])}",
              f"{_us(base['p50_us'])} / {_us(base['p99_us'])} (decode only)", f"{f['p50_us'] / base['p50_us']:.1f}×",
-             "", "")]
+             "", "")] + ([("features + expressive per Pepper frame, p50 / p99",
+                           f"{_us(r['expressive']['p50_us'])} / {_us(r['expressive']['p99_us'])}",
+                           f"{_us(f['p50_us'])} / {_us(f['p99_us'])} (features without)",
+                           f"{r['expressive']['p50_us'] / f['p50_us']:.1f}×", "", "")] if "expressive" in r else [])
 
 
 def rows_generic(r: dict[str, Any]) -> list[Row]:

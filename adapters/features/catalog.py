@@ -96,6 +96,17 @@ def _hands(robot: Robot, config: FeaturesConfig) -> list[dict[str, Any]]:
         out += [_entry(robot.name, "hand", side, "m", low[a].min(), high[a].max(), 3, axes=["x", "y", "z"],
                        frame=arms.frame, box={"min": low[a].tolist(), "max": high[a].tolist()})
                 for a, side in enumerate(arms.sides)]
+    if config.publishes("expressive"):
+        fit = f"degree-5 least-squares fit over {config.fit_window_s:g} s read at its middle (kinematic.py)"
+        window = config.laban_window_s
+        specs = [("laban_weight", "m²/s²", f"max over {window:g} s of ‖v‖² (Larboulette & Gibet 2015)"),
+                 ("laban_time", "m/s²", f"time-weighted mean of ‖a‖ over {window:g} s (Larboulette & Gibet 2015)"),
+                 ("laban_flow", "m/s³", f"time-weighted mean of ‖j‖ over {window:g} s (Larboulette & Gibet 2015)"),
+                 ("laban_space", "1", f"path length over displacement in {window:g} s; none under 1 mm"),
+                 ("curvature", "1/m", "‖v × a‖/‖v‖³; none under 1 mm/s")]
+        out += [_entry(robot.name, feature, side, unit, None, None, definition=text, estimator=fit,
+                       **({} if feature == "curvature" else {"window_s": window}))
+                for feature, unit, text in specs for side in arms.sides]
     if config.publishes("hand_speed"):
         levers = arms.lever_arms()
         for a, side in enumerate(arms.sides):

@@ -28,6 +28,8 @@ from sonibus.bus import keys, messages
 from . import catalog
 from .config import FeaturesConfig
 from .filters import VelocityFilter
+from .kinematic import PointDerivatives, geometry
+from .laban import LabanEfforts
 from .motion import OnsetDetector, weights
 from .table import Robot
 
@@ -97,7 +99,7 @@ class RobotFeatures:
         self._detectors = {g: OnsetDetector(config.onset, config.offset, config.min_duration_s)
                            for g, i in groups.items() if g != "Body" and self._weights[i].sum() > 0}
         self._motion_key = keys.event(name, "motion")
-        self._hands = robot.arms is not None and (config.publishes("hand") or config.publishes("hand_speed"))
+        self._hands = robot.arms is not None and any(config.publishes(f) for f in ("hand", "hand_speed", "expressive"))
         if robot.arms is not None:
             sides = robot.arms.sides
             self._hand_keys = [keys.derived(name, "hand", s) for s in sides]
@@ -108,6 +110,10 @@ class RobotFeatures:
             self._hand_velocity = VelocityFilter(3 * len(sides), config.cutoff_hz, config.max_gap_s,
                                                  np.repeat(np.minimum(JUMP * self._speed_range[1],
                                                                       messages.MAX_VALUE), 3))
+            if config.publishes("expressive"):
+                self._fit = PointDerivatives(len(sides), config.fit_window_s)
+                self._efforts = [LabanEfforts(np.ones(1), config.laban_window_s) for _ in sides]
+                self._expressive_keys = [[keys.derived(name, f, s) for f in EXPRESSIVE] for s in sides]
 
     def step(self, t: float, seq: int, values: Mapping[str, Any]) -> Output:
         """The features of the frame ``seq`` taken at ``t``."""
@@ -166,6 +172,8 @@ class RobotFeatures:
         if self.config.publishes("hand"):
             out.samples += [(key, {"t": t, "seq": seq, "v": hand.tolist()})
                             for key, hand in zip(self._hand_keys, hands, strict=True)]
+        if self.config.publishes("expressive"):
+            self._expressive(t, seq, points, out)
         fresh = self._hand_velocity.update(t, points.ravel())
         if self.config.publishes("hand_speed") and fresh.all():
             speeds, usable = out.bounded(np.linalg.norm(self._hand_velocity.velocity.reshape(hands.shape), axis=1),
@@ -173,6 +181,22 @@ class RobotFeatures:
             ok = [True] * len(speeds) if usable is None else usable.tolist()
             out.samples += [(key, {"t": t, "seq": seq, "v": s})
                             for key, s, good in zip(self._speed_keys, speeds.tolist(), ok, strict=True) if good]
+
+
+    def _expressive(self, t: float, seq: int, points: np.ndarray, out: Output) -> None:
+        fit = self._fit
+        if not fit.update(t, points):
+            return
+        kappa = geometry(fit.velocity, fit.acceleration)[0]
+        for i, (laban, names) in enumerate(zip(self._efforts, self._expressive_keys, strict=True)):
+            one = slice(i, i + 1)
+            e = laban.update(fit.time, fit.position[one], fit.velocity[one], fit.acceleration[one], fit.jerk[one])
+            values = (e.weight, e.time, e.flow, e.space, float(kappa[i]))
+            out.samples += [(key, {"t": t, "seq": seq, "v": v}) for key, v in zip(names, values, strict=True)
+                            if np.isfinite(v)]  # Space with no displacement, κ below the speed floor: none
+
+
+EXPRESSIVE = ("laban_weight", "laban_time", "laban_flow", "laban_space", "curvature")
 
 
 def _spans(ranges: dict[str, Range], keys_: list[str], default: tuple[Any, Any]) -> Range:

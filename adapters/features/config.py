@@ -13,7 +13,8 @@ from dataclasses import dataclass
 from sonibus.bus import keys
 from sonibus.bus.options import bad
 
-FEATURES = ("velocity", "hand", "hand_speed", "qom", "motion")
+DEFAULT = ("velocity", "hand", "hand_speed", "qom", "motion")
+FEATURES = (*DEFAULT, "expressive")  # expressive: the hands' Laban Efforts and curvature (opt-in)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -21,12 +22,14 @@ class FeaturesConfig:
     """Options of the ``features`` adapter."""
 
     robots: str | tuple[str, ...] = "*"       # robot names or patterns ("pepper*")
-    features: tuple[str, ...] = FEATURES      # what to publish
+    features: tuple[str, ...] = DEFAULT       # what to publish
     cutoff_hz: float = 5.0                    # velocity low-pass cut-off
     max_gap_s: float = 0.5                    # a longer pause in a joint's samples restarts its filter
     onset: float = 0.5                        # chain QoM (rad/s) that starts a motion...
     offset: float = 0.2                       # ...and that ends it (lower: hysteresis)
     min_duration_s: float = 0.08              # how long the QoM must stay past a threshold
+    fit_window_s: float = 0.4                 # expressive: the derivative fit's window, read at its middle
+    laban_window_s: float = 0.5               # expressive: the Efforts' trailing window
     weights: dict[str, float] | None = None   # QoM weight per joint (default: 1 per rad joint, 0 for hands)
     max_wait_ms: float = 50.0                 # per_joint_keys: a frame missing joints is processed after this
     queue: int = 8192                         # messages buffered before the oldest are dropped
@@ -44,7 +47,7 @@ class FeaturesConfig:
         if unknown or not self.features:
             raise bad("features", f"{unknown[0]!r} is unknown — features: {', '.join(FEATURES)}" if unknown
                       else f"is empty — give some of {', '.join(FEATURES)}")
-        for key in ("cutoff_hz", "max_gap_s", "max_wait_ms"):
+        for key in ("cutoff_hz", "max_gap_s", "max_wait_ms", "fit_window_s", "laban_window_s"):
             if not getattr(self, key) > 0:
                 raise bad(key, f"{getattr(self, key):g} must be more than 0")
         if not 0 <= self.offset < self.onset:

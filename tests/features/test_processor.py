@@ -232,3 +232,24 @@ def test_frames_too_old_to_matter_are_skipped_not_computed_late(net, owner):
 def test_bad_options_are_config_errors(options, fragment):
     with pytest.raises(ConfigError, match=fragment):
         FeaturesConfig(**options)
+
+
+def test_expressive_descriptors_go_on_the_bus_like_any_derived_value(net):
+    """The sim plays Hey_1: the node with ``expressive`` publishes each hand's Laban Efforts and
+    curvature as ``<robot>/derived/...`` samples a sink takes as they are."""
+    watch = net.bus("watch")
+    subscriber, derived = collect(watch, "pepper/derived/**")
+    net.sim("pepper", rate_hz=50)
+    start(net, robots="pepper", features=("expressive",))
+    wait_for(lambda: robot_info(watch, "pepper", timeout=0.5), what="pepper/info")
+    send_command(watch, "pepper", "behavior/run", {"name": HEY})
+    wanted = {f"pepper/derived/{f}/R" for f in ("laban_weight", "laban_time", "laban_flow", "laban_space",
+                                                 "curvature")}
+    wait_for(lambda: wanted <= {k for k, _ in list(derived)}
+             and any(k.endswith("laban_weight/R") and m["v"] > 0.01 for k, m in list(derived)),
+             what="the right hand's expressive values, moving")
+    subscriber.undeclare()
+    for _, message in list(derived):
+        schemas.validate("derived_sample", message)
+    assert {k.split("/")[2] for k, _ in derived} <= {"laban_weight", "laban_time", "laban_flow", "laban_space",
+                                                     "curvature"}
