@@ -99,7 +99,7 @@ def test_send_joints_set_moves_the_robot(net):
     assert abs(sim.body.pose()["HeadYaw"] - 0.3) > 0.1
     result = run_cli("send", "pepper", "joints/set", "names=HeadYaw", "angles=0.3", "speed=0.5", *net.cli_args())
     assert result.returncode == 0, result.stderr
-    assert json.loads(result.stdout) == {}
+    assert json.loads(result.stdout) == {"targets": {"HeadYaw": 0.3}, "speed": 0.5}  # (what it did: issue 37)
     wait_for(lambda: abs(sim.body.pose()["HeadYaw"] - 0.3) < 0.01, what="HeadYaw to reach 0.3")
 
 

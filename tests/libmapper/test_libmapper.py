@@ -148,7 +148,9 @@ def test_a_map_from_headyaw_runs_at_the_robots_rate_and_comes_back_after_either_
     back = [line for line in sonibus.errors if "libmapper: map pepper/joints/HeadYaw -> listener/yaw back, " in line]
     assert len(back) == 2, sonibus.describe()  # (after sonibus's restart, and after the peer's)
     figure("map back after both its ends were on the network", back[-1].split("back, ")[1].split()[0], "ms")
-    wait_for(lambda: json.loads((tmp_path / "maps.json").read_text())["maps"] == [], 5, "the unmapped map forgotten",
+    # (20 s: on a loaded machine the unmap reaches this node's own devices seconds late, and a map
+    # still running there is not taken as removed; a full CI run timed out at 5 s with nothing remade)
+    wait_for(lambda: json.loads((tmp_path / "maps.json").read_text())["maps"] == [], 20, "the unmapped map forgotten",
              lambda: "\n".join(sonibus.errors + [line for line in listener.lines if not line.startswith("value")]))
     assert "removed while both its ends run: forgotten" in "\n".join(sonibus.errors)
     after = len(listener.lines)

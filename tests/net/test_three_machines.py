@@ -97,7 +97,7 @@ def check_commands(museum: Museum, angle: float) -> None:
     asked = time.time()
     done = museum.send("control", "joints/set", "names=HeadYaw", f"angles={angle}", "speed=1.0")
     assert done.returncode == 0, f"control's command: exit {done.returncode}: {done.stderr}\n{museum.topology.report()}"
-    assert json.loads(done.stdout) == {}
+    assert json.loads(done.stdout)["targets"] == {"HeadYaw": angle}
     refused = museum.send("sound", "joints/set", "names=HeadYaw", "angles=-1.0", "speed=1.0")
     assert refused.returncode == 4, f"sound's command: exit {refused.returncode}: {refused.stdout} {refused.stderr}"
     assert REFUSAL in refused.stderr

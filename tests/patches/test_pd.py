@@ -212,7 +212,7 @@ def test_send_commands_the_robot_through_the_gateway_and_prints_its_replies(net,
             fudi.sendto(f"{message};\n".encode(), ("127.0.0.1", control))
 
         type_in("joints/set/HeadYaw 0.3")
-        wait_for(lambda: replied("joints set HeadYaw 1 {}"), what="the joints/set reply in Pd")
+        wait_for(lambda: replied("joints set HeadYaw 1 {"), what="the joints/set reply in Pd")
         wait_for(lambda: head.all() and head.seen[-1]["v"] == pytest.approx(0.3, abs=1e-6), what="HeadYaw at 0.3")
         type_in("say hello world")
         wait_for(lambda: replied("say 1 {"), what="the say reply in Pd")
@@ -220,7 +220,7 @@ def test_send_commands_the_robot_through_the_gateway_and_prints_its_replies(net,
         type_in("joints/set/HeadYaw 3")
         wait_for(lambda: replied("joints set HeadYaw 0 out_of_range"), what="the refusal of 3 rad in Pd")
         type_in("stop")
-        wait_for(lambda: replied("stop 1 {}"), what="the stop reply in Pd")
+        wait_for(lambda: replied("stop 1 {"), what="the stop reply in Pd")
     assert head.steady() == pytest.approx(0.3, abs=1e-6), "3 rad was refused: the head stayed"
     assert len(printed(pd, "reply")) == 4, printed(pd, "reply")
     assert errors(pd) == []

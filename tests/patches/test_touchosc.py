@@ -4,6 +4,7 @@ running OSC gateway with a simulated Pepper behind it."""
 
 from __future__ import annotations
 
+import json
 import re
 import socket
 import subprocess
@@ -149,7 +150,8 @@ def test_the_stop_button_stops_the_robot(net, client):
     text = "a long speech " * 35  # 105 words at half speed, ~80 s: it ends that soon only if stopped
     assert client.ask("/pepper/cmd/say", text.strip(), 1, 50)[1][0] == 1
     wait_for(lambda: seen(speech, state="started"), what="the speech started")
-    assert client.ask(stop.address, *stop.args) == ("/pepper/reply/stop", [1, "{}"])
+    address, (ok, result) = client.ask(stop.address, *stop.args)
+    assert (address, ok) == ("/pepper/reply/stop", 1) and json.loads(result)["held"] is True
     wait_for(lambda: seen(behaviors, name=wave.args[0], state="stopped"), what="the behavior stopped")
     wait_for(lambda: seen(speech, state="done"), what="the speech cut short")
     arm.steady()
