@@ -115,7 +115,8 @@ class RobotEvents:
         NAOqi's ``behaviorStopped`` says neither."""
         with self._cut_lock:
             cut = sorted(self._running) if names is None else list(names)
-            self._cut.update(cut)
+            # (a stop of a behavior that never says it stopped must not grow it: bounded like _running)
+            self._cut.update(cut[:max(0, MAX_RUNNING - len(self._cut))])
         return cut
 
     def _behavior(self, name: Any, state: str) -> None:

@@ -6,7 +6,6 @@ of a sim Pepper and the node, Zenoh in peer mode on the namespace's loopback."""
 from __future__ import annotations
 
 import json
-import os
 import signal
 import sys
 import time
@@ -16,7 +15,7 @@ from pathlib import Path
 import pytest
 
 from ..conftest import wait_for
-from ..net.netns import Host, NsProcess, Topology, ip, remove_stale, root_reason
+from ..net.netns import Host, NsProcess, Topology, ip, remove_stale, require_root
 
 INSTALLATION = """
 [bus]
@@ -43,11 +42,7 @@ PEER = Path(__file__).with_name("peer.py")
 @pytest.fixture(scope="module")
 def host() -> Iterator[Host]:
     """One namespace whose loopback carries multicast (libmapper's bus, 224.0.1.3)."""
-    reason = root_reason()
-    if reason is not None:
-        if os.environ.get("CI"):
-            pytest.fail(reason)
-        pytest.skip(reason)
+    require_root()
     remove_stale()
     topology = Topology()
     try:

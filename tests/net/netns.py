@@ -52,6 +52,17 @@ def root_reason() -> str | None:
     return None
 
 
+def require_root() -> None:
+    """Fail (in CI, which runs as root: a missing capability is a failure there) or skip a test
+    that needs network namespaces where they cannot be made."""
+    reason = root_reason()
+    if reason is None:
+        return
+    if os.environ.get("CI"):
+        pytest.fail(reason)
+    pytest.skip(reason)
+
+
 def ip(*args: str, check: bool = True, timeout: float = 10.0) -> subprocess.CompletedProcess[str]:
     """``ip ARGS``; a failure fails the test with ip's message."""
     done = subprocess.run(["ip", *args], capture_output=True, text=True, timeout=timeout)
