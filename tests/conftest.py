@@ -25,6 +25,7 @@ from sonibus.bus import Bus, BusConfig, open_session
 from sonibus.bus.control import open_control
 
 from .supervisor import Supervisor
+from .watchdog import pytest_runtest_protocol, pytest_unconfigure  # noqa: F401 - hooks, found by name
 
 SONIBUS = str(Path(sys.executable).with_name("sonibus"))
 
