@@ -156,15 +156,24 @@ class Process:
         try:
             out, err = self.popen.communicate(timeout=timeout)
         except subprocess.TimeoutExpired:
-            os.killpg(self.popen.pid, signal.SIGKILL)
-            out, err = self.popen.communicate()
+            self.kill()
             pytest.fail(f"{self.popen.args} did not end within {timeout} s of signal {sig}")
         return self.popen.returncode, out, err
 
     def kill(self) -> None:
-        if self.popen.poll() is None:
-            os.killpg(self.popen.pid, signal.SIGKILL)
-            self.popen.communicate()
+        """SIGKILL its process group; then read what is left, for a bounded time: a grandchild that
+        left the group (a session of its own) can hold the pipes open for ever, and a teardown
+        blocked on them would wait with no timeout left to end it."""
+        if self.popen.poll() is not None:
+            return
+        os.killpg(self.popen.pid, signal.SIGKILL)
+        try:
+            self.popen.communicate(timeout=10)
+        except subprocess.TimeoutExpired:
+            for pipe in (self.popen.stdout, self.popen.stderr):
+                if pipe is not None:
+                    pipe.close()
+            self.popen.wait(timeout=10)
 
 
 @pytest.fixture
