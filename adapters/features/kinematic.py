@@ -34,19 +34,20 @@ STILL_SPEED = 0.05  # m/s: below, no curvature nor a_t, a_n (1 mrad of joint noi
 
 
 class PointDerivatives:
-    """Derivatives of ``n`` 3-D points, ``update(t, points)`` with ``points`` of shape (n, 3)."""
+    """Derivatives of ``n`` points of ``dim`` coordinates (3-D by default; 1 for joint
+    angles), ``update(t, points)`` with ``points`` of shape (n, dim)."""
 
-    def __init__(self, n: int, window_s: float = 0.4, degree: int = 5) -> None:
+    def __init__(self, n: int, window_s: float = 0.4, degree: int = 5, dim: int = 3) -> None:
         if not window_s > 0 or degree < 3:
             raise ValueError(f"window ({window_s} s) must be more than 0 and degree ({degree}) at least 3 for jerk")
-        self.n, self.window_s, self.degree = n, window_s, degree
+        self.n, self.window_s, self.degree, self.dim = n, window_s, degree, dim
         self._times: deque[float] = deque()
         self._points: deque[np.ndarray] = deque()
-        self.position = np.zeros((n, 3))
+        self.position = np.zeros((n, dim))
         self.time = 0.0  # the time the derivatives are read at: the window's middle, window_s/2 ago
-        self.velocity = np.zeros((n, 3))
-        self.acceleration = np.zeros((n, 3))
-        self.jerk = np.zeros((n, 3))
+        self.velocity = np.zeros((n, dim))
+        self.acceleration = np.zeros((n, dim))
+        self.jerk = np.zeros((n, dim))
         self.ready = False  # True once the window holds enough frames for the fit
 
     def update(self, t: float, points: np.ndarray) -> bool:
@@ -56,7 +57,7 @@ class PointDerivatives:
             self._times.clear()
             self._points.clear()
         self._times.append(t)
-        self._points.append(np.asarray(points, dtype=float).reshape(self.n, 3))
+        self._points.append(np.asarray(points, dtype=float).reshape(self.n, self.dim))
         while t - self._times[0] > self.window_s * (1 + 1e-9):  # t_k − W < t_m ≤ t_k
             self._times.popleft()
             self._points.popleft()
@@ -67,7 +68,7 @@ class PointDerivatives:
         s = (np.fromiter(self._times, float) - t) / self.window_s
         design = np.vander(s, self.degree + 1, increasing=True)
         coef = np.linalg.lstsq(design, np.stack(self._points).reshape(len(s), -1), rcond=None)[0]
-        w, c = self.window_s, coef.reshape(self.degree + 1, self.n, 3)
+        w, c = self.window_s, coef.reshape(self.degree + 1, self.n, self.dim)
         powers = [(-0.5) ** k for k in range(self.degree + 1)]  # read at s = −½, the window's middle
 
         def derivative(m: int) -> np.ndarray:
