@@ -35,7 +35,8 @@ DEFINITIONS: dict[str, tuple[str, str, str, bool]] = {
     "laban_flow": ("L/s³", "time-weighted mean of ‖j‖ (the jerk vector's norm) over the window", L_G, True),
     "laban_space": ("1", "path length over displacement in the window, ≥ 1 (directness is 1/Space); none under "
                          "1 mm (0.01 rad in joint space) of displacement", f"{L_G}; Piana et al. 2013", True),
-    "fluidity": ("s", "⟨‖v‖⟩ / ⟨‖a‖⟩, time-weighted over the window; none while ⟨‖v‖⟩ is under 0.05", "Burger et al. 2013 (mcfluidity)", True),
+    "fluidity": ("s", "⟨‖v‖⟩ / ⟨‖a‖⟩, time-weighted over the window; none while ⟨‖v‖⟩ is under 0.05",
+                 "Burger et al. 2013 (mcfluidity)", True),
     "kinetic_energy": ("L²/s²", "½ ‖v‖² per unit mass (joint space: ½ Σ w_j q̇_j², w the QoM weights)",
                        "Camurri, Lagerlöf & Volpe 2003; PyEyesWeb KineticEnergy", False),
     "curvature": ("1/m", "‖v × a‖/‖v‖³; none under 0.05 m/s", "differential geometry", False),

@@ -22,7 +22,7 @@ from pyeyesweb.low_level import GeometricSymmetry, KineticEnergy, PointsDensity
 import sonibus.adapters.sim.engine as sim_engine
 from sonibus.adapters.features import FeaturesConfig
 from sonibus.adapters.features.compute import RobotFeatures
-from sonibus.adapters.features.segments import SegmentRecorder, describe
+from sonibus.adapters.features.segments import SegmentRecorder
 from sonibus.adapters.features.table import describe as describe_robot
 from sonibus.adapters.sim.engine import SimEngine
 from sonibus.bus import load_model

@@ -202,7 +202,7 @@ def test_a_still_robot_with_1_mrad_of_noise_stays_under_the_floor(model, fs):
     legs = ("Leg",) if model == "pepper" else ("LLeg", "RLeg")
     floors = {f"{feature}/{name}": floor for feature_name, floor in FLOOR.items()
               for feature, kind in [feature_name.split("/")]
-              for name in ((("L", "R") if kind == "L" else ("Head", *legs)))}
+              for name in (("L", "R") if kind == "L" else ("Head", *legs))}
     assert set(seen) == set(floors) | {f"{f}/arms" for f in SHAPE_FLOOR}
     for name, floor in floors.items():
         assert max(seen[name]) < floor, name
