@@ -41,40 +41,67 @@ class Efforts:
 
 
 class LabanEfforts:
-    """``update(t, p, v, a, j)`` per frame with arrays (n, 3) of positions and their derivatives."""
+    """``update(t, p, v, a, j)`` per frame with arrays (n, dim) of positions and their derivatives.
+
+    The window's sums are kept running (added as a frame comes, taken off as it leaves, summed
+    anew every ``RESUM`` frames so rounding cannot build up) and Weight's maximum in a
+    monotonic queue: a frame costs the same whatever the window holds."""
+
+    RESUM = 512
 
     def __init__(self, alpha: np.ndarray, window_s: float = 0.5, min_displacement: float = 1e-3,
                  still: float = 0.05) -> None:
         if not window_s > 0:
             raise ValueError(f"Laban window ({window_s} s) must be more than 0")
         self.alpha = np.asarray(alpha, dtype=float)
+        self._mass = float(self.alpha.sum())
         self.window_s, self.min_displacement, self.still = window_s, min_displacement, still
-        # per frame: t, Δt, Σα‖v‖², Σα‖a‖, Σα‖j‖, Σα‖v‖, positions, path length of its step
-        self._norms = [0.0, 0.0, 0.0]  # the last frame's Σα‖a‖, Σα‖j‖, Σα‖v‖
-        self._frames: deque[tuple[float, float, float, float, float, float, np.ndarray, float]] = deque()
+        # per frame: t, its step's (Δt, Δt·mean Σα‖a‖, Δt·mean Σα‖j‖, Δt·mean Σα‖v‖, path length), positions
+        self._frames: deque[tuple[float, np.ndarray, np.ndarray]] = deque()
+        self._sums = np.zeros(5)                       # of the steps of every frame in the window
+        self._heaviest: deque[tuple[float, float]] = deque()  # (t, Σα‖v‖²), decreasing: Weight's max first
+        self._norms = np.zeros(3)                      # the last frame's Σα‖a‖, Σα‖j‖, Σα‖v‖
+        self._count = 0
+
+    def _weighted(self, x: np.ndarray) -> float:
+        return float(self.alpha @ np.sqrt(np.einsum("ij,ij->i", x, x)))
 
     def update(self, t: float, p: np.ndarray, v: np.ndarray, a: np.ndarray, j: np.ndarray) -> Efforts:
         """The Efforts at frame ``t``."""
-        last = self._frames[-1] if self._frames else None
-        if last is not None and not t > last[0]:
-            self._frames.clear()
-            last = None
-        dt = t - last[0] if last is not None else 0.0
-        step = float(self.alpha @ np.linalg.norm(p - last[6], axis=1)) / self.alpha.sum() if last is not None else 0.0
-        norms = [float(self.alpha @ np.linalg.norm(x, axis=1)) for x in (a, j, v)]
-        previous, self._norms = (self._norms if last is not None else norms), norms
-        norms = [(x + y) / 2 for x, y in zip(norms, previous, strict=True)]  # the step's mean (trapezoid)
-        self._frames.append((t, dt, float(self.alpha @ np.einsum("ij,ij->i", v, v)), *norms, np.array(p), step))
-        while t - self._frames[0][0] > self.window_s * (1 + 1e-9):
-            self._frames.popleft()
-        span = sum(f[1] for f in list(self._frames)[1:])
-        inner = list(self._frames)[1:]  # each step lies inside the window
-        time_ = sum(f[1] * f[3] for f in inner) / span if span > 0 else math.nan
-        flow = sum(f[1] * f[4] for f in inner) / span if span > 0 else math.nan
-        speed = sum(f[1] * f[5] for f in inner) / span if span > 0 else math.nan
-        path = sum(f[7] for f in inner)
-        first = self._frames[0][6]
-        d = float(self.alpha @ np.linalg.norm(np.asarray(p) - first, axis=1)) / self.alpha.sum()
+        frames = self._frames
+        if frames and not t > frames[-1][0]:
+            frames.clear()
+            self._heaviest.clear()
+            self._sums[:] = 0.0
+        p = np.array(p, dtype=float)
+        norms = np.array([self._weighted(a), self._weighted(j), self._weighted(v)])
+        step = np.zeros(5)
+        if frames:
+            last_t, _, last_p = frames[-1]
+            dt = t - last_t
+            step[0] = dt
+            step[1:4] = dt * (norms + self._norms) / 2  # the step's mean (trapezoid)
+            step[4] = self._weighted(p - last_p) / self._mass
+        self._norms = norms
+        frames.append((t, step, p))
+        self._sums += step
+        weight = float(self.alpha @ np.einsum("ij,ij->i", v, v))
+        heaviest = self._heaviest
+        while heaviest and heaviest[-1][1] <= weight:
+            heaviest.pop()
+        heaviest.append((t, weight))
+        while t - frames[0][0] > self.window_s * (1 + 1e-9):
+            self._sums -= frames.popleft()[1]
+        while heaviest[0][0] < frames[0][0]:
+            heaviest.popleft()
+        self._count += 1
+        if self._count % self.RESUM == 0:
+            self._sums = np.sum([f[1] for f in frames], axis=0)
+        span, acc, jerk, speed, path = self._sums - frames[0][1]  # each step lies inside the window
+        time_ = acc / span if span > 0 else math.nan
+        flow = jerk / span if span > 0 else math.nan
+        speed = speed / span if span > 0 else math.nan
+        d = self._weighted(p - frames[0][2]) / self._mass
         space = path / d if d > self.min_displacement else math.nan
         fluidity = speed / time_ if speed > self.still and time_ > 0 else math.nan
-        return Efforts(max(f[2] for f in self._frames), time_, flow, space, fluidity)
+        return Efforts(heaviest[0][1], time_, flow, space, fluidity)
