@@ -47,6 +47,10 @@ DEFINITIONS: dict[str, tuple[str, str, str, bool]] = {
                       "on the sagittal plane), M mirrors y: 1 for mirrored hands",
                  "Glowinski et al. 2011; PyEyesWeb GeometricSymmetry", False),
 }
+# what a value can be, in words (min/max where a number is known: a bound sinks can scale with)
+RANGES = {"laban_weight": "≥ 0", "laban_time": "≥ 0", "laban_flow": "≥ 0", "laban_space": "≥ 1 (1: a straight path)",
+          "fluidity": "> 0", "kinetic_energy": "≥ 0", "curvature": "≥ 0 (1/R on a circle of radius R)",
+          "hand_distance": "≥ 0", "points_density": "≥ 0", "symmetry": "[0, 1] (1: mirrored hands)"}
 SEGMENT_UNITS = {"duration_s": "s", "pause_s": "s", "path": "L", "peak_speed": "L/s", "directness": "1",
                  "fluidity": "s", "sparc": "1", "ldlj": "1"}
 
@@ -59,7 +63,8 @@ def _one(robot: Robot, feature: str, name: str, length: str, config: FeaturesCon
          low: float | None = None, high: float | None = None) -> dict[str, Any]:
     unit, definition, source, windowed = DEFINITIONS[feature]
     entry: dict[str, Any] = {"name": f"{feature}/{name}", "key": keys.derived(robot.name, feature, name),
-                             "unit": _unit(unit, length), "size": 1, "definition": definition, "source": source}
+                             "unit": _unit(unit, length), "size": 1, "definition": definition, "source": source,
+                             "range": RANGES[feature]}
     if low is not None and high is not None:
         entry.update(min=round(float(low), 6), max=round(float(high), 6))
     if feature not in BOTH:
