@@ -27,7 +27,7 @@ import numpy as np
 from sonibus.bus import keys, messages
 
 from .config import FeaturesConfig
-from .descriptors import expressive_entries, segment_entry
+from .descriptors import expressive_entries, segment_entries, segment_entry
 from .kinematics import Arms
 from .motion import weights
 from .table import Robot
@@ -63,10 +63,12 @@ def derived(robot: Robot, config: FeaturesConfig, processor: dict[str, str]) -> 
     if config.publishes("qom"):
         out += [_entry(name, "qom", group, "rad/s", 0.0, float(w[i] @ vmax[i]) if known else None,
                        joints=[robot.names[k] for k in i if w[k]]) for group, i in groups.items()]
+    chains = [c for c, i in groups.items() if c != "Body" and w[i].sum() > 0]
+    if config.publishes("expressive"):
+        out += segment_entries(robot, chains)
     reply: dict[str, Any] = {"robot": name, "derived": out, "processor": processor,
                              "filter": {"cutoff_hz": config.cutoff_hz, "max_gap_s": config.max_gap_s}}
     if config.publishes("motion"):
-        chains = [c for c, i in groups.items() if c != "Body" and w[i].sum() > 0]
         reply["events"] = {"motion": {"key": keys.event(name, "motion"), "chains": chains}}
         if config.publishes("expressive"):
             reply["events"]["motion"]["segment"] = segment_entry(robot, chains)

@@ -154,12 +154,16 @@ class RobotFeatures:
                 out.samples.append((key, {"t": t, "seq": seq, "v": qom}))
             detector = self._detectors.get(group)
             change = detector.update(t, qom) if detector is not None else None
-            if change is not None and self.config.publishes("motion"):
-                event = {"t": t, "kind": "motion", "chain": group, "state": change, "seq": seq}
-                if self._expressive is not None:
-                    segment = self._expressive.segment(group, change, detector.crossed_at)
-                    if segment is not None:
-                        event["segment"] = segment
+            if change is None:
+                continue
+            event = {"t": t, "kind": "motion", "chain": group, "state": change, "seq": seq}
+            if self._expressive is not None:
+                segment = self._expressive.segment(group, change, detector.crossed_at)
+                if segment is not None:  # on the offset event, and as derived values
+                    event["segment"] = segment
+                    out.samples += [(key, {"t": t, "seq": seq, "v": v})
+                                    for key, v in self._expressive.segment_samples(group, segment)]
+            if self.config.publishes("motion"):
                 out.events.append((self._motion_key, event))
         return out
 

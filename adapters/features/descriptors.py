@@ -23,7 +23,7 @@ import numpy as np
 from sonibus.bus import keys
 
 from .config import FeaturesConfig
-from .expressive import BOTH, BOTH_NAME, HANDS, JOINT_SPACE, elbow_frame, joint_chains
+from .expressive import BOTH, BOTH_NAME, HANDS, JOINT_SPACE, SEGMENT_FEATURES, elbow_frame, joint_chains
 from .segments import SEGMENT
 from .table import Robot
 
@@ -53,6 +53,18 @@ RANGES = {"laban_weight": "≥ 0", "laban_time": "≥ 0", "laban_flow": "≥ 0",
           "hand_distance": "≥ 0", "points_density": "≥ 0", "symmetry": "[0, 1] (1: mirrored hands)"}
 SEGMENT_UNITS = {"duration_s": "s", "pause_s": "s", "path": "L", "peak_speed": "L/s", "directness": "1",
                  "fluidity": "s", "sparc": "1", "ldlj": "1"}
+SEGMENT_DEFINITIONS = {  # value → (definition, range)
+    "duration_s": ("offset crossing − onset crossing of the chain's QoM", "> 0"),
+    "pause_s": ("onset crossing − the chain's previous offset crossing (none for its first segment)", "≥ 0"),
+    "path": ("Σ‖Δp‖ over the segment's frames", "≥ 0"),
+    "peak_speed": ("max ‖v‖ of the path resampled at the frames' median rate, central differences", "≥ 0"),
+    "directness": ("displacement / path length", "[0, 1] (1: straight)"),
+    "fluidity": ("⟨‖v‖⟩ / ⟨‖a‖⟩ over the segment", "> 0"),
+    "sparc": ("spectral arc length of the speed profile (Balasubramanian et al. 2015; = monalysa 0.2.1)",
+              "≤ 0 (about −1.4 for a smooth reach)"),
+    "ldlj": ("log dimensionless jerk of the speed profile (Balasubramanian et al. 2015; = monalysa 0.2.1)",
+             "< 0 (−5.3 for a minimum-jerk reach)"),
+}
 
 
 def _unit(unit: str, length: str) -> str:
@@ -104,6 +116,16 @@ def expressive_entries(robot: Robot, config: FeaturesConfig, weights: np.ndarray
             entry["space"] = "joint"  # no kinematics: the chain's angles as one point
             out.append(entry)
     return out
+
+
+def segment_entries(robot: Robot, chains: list[str]) -> list[dict[str, Any]]:
+    """The entries of the segment values, published on an offset as ``segment_<value>/<chain>``."""
+    lengths = segment_entry(robot, chains)["length"]
+    return [{"name": f"{feature}/{chain}", "key": keys.derived(robot.name, feature, chain),
+             "unit": _unit(SEGMENT_UNITS[value], lengths[chain]), "size": 1,
+             "definition": SEGMENT_DEFINITIONS[value][0], "range": SEGMENT_DEFINITIONS[value][1],
+             "window": "the segment", **({"min": 0.0, "max": 1.0} if value == "directness" else {})}
+            for chain in chains for value, feature in SEGMENT_FEATURES.items()]
 
 
 def segment_entry(robot: Robot, chains: list[str]) -> dict[str, Any]:

@@ -23,7 +23,7 @@ from sonibus.bus import keys
 from .config import FeaturesConfig
 from .kinematic import PointDerivatives, geometry
 from .laban import Efforts, LabanEfforts
-from .segments import SegmentRecorder
+from .segments import SEGMENT, SegmentRecorder
 from .shape import kinetic_energy, points_density, symmetry
 from .table import Robot
 
@@ -33,6 +33,8 @@ HANDS = ("laban_weight", "laban_time", "laban_flow", "laban_space", "fluidity", 
 JOINT_SPACE = HANDS[:-1]  # no curvature in joint space
 BOTH = ("hand_distance", "points_density", "symmetry")
 BOTH_NAME = "arms"
+# a segment's values as derived values too (reachable like any: OSC, MIDI, recorder, plots), on its offset
+SEGMENT_FEATURES = {v: "segment_" + v.removesuffix("_s") for v in SEGMENT}
 JOINT_DISPLACEMENT = 0.01  # rad: joint-space Space under it is none (1 mrad of noise moves a fitted chain ~3 mrad)
 
 
@@ -77,6 +79,8 @@ class Expressive:
         self._arm_of = {c: a for c, members in robot.chains.items() for a in range(len(self.sides))
                         if arms is not None and arms.joints[a][0] in members}
         self.segments = {c: SegmentRecorder(config.min_duration_s) for c in robot.chains}
+        self._segment_keys = {c: {v: keys.derived(name, f, c) for v, f in SEGMENT_FEATURES.items()}
+                              for c in robot.chains}
 
     def hands(self, t: float, points: np.ndarray, q_arms: np.ndarray, emit: Emit) -> None:
         """The hands' descriptors from this frame's hand ``points`` (arms, 3) and arm angles."""
@@ -128,9 +132,10 @@ class Expressive:
         recorder = self.segments.get(chain)
         return None if recorder is None else recorder.change(state, at)
 
-    def unit(self, chain: str) -> str:
-        """The unit of ``chain``'s segment path: metres for an arm's hand, radians otherwise."""
-        return "m" if chain in self._arm_of else "rad"
+    def segment_samples(self, chain: str, segment: dict[str, float]) -> list[tuple[str, float]]:
+        """``segment``'s values as ``(key, value)`` of derived values ``segment_<value>/<chain>``."""
+        names = self._segment_keys[chain]
+        return [(names[v], value) for v, value in segment.items()]
 
 
 def _values(e: Efforts) -> tuple[float, ...]:

@@ -238,7 +238,7 @@ def test_expressive_descriptors_go_on_the_bus_like_any_derived_value(net):
     """The sim plays Hey_1: the node with ``expressive`` publishes each hand's descriptors, the
     arms' shape and the head's joint-space ones as ``<robot>/derived/...`` samples a sink takes as
     they are, and the right arm's offset event carries its segment."""
-    from sonibus.adapters.features.expressive import BOTH, HANDS, JOINT_SPACE
+    from sonibus.adapters.features.expressive import BOTH, HANDS, JOINT_SPACE, SEGMENT_FEATURES
 
     watch = net.bus("watch")
     subscriber, derived = collect(watch, "pepper/derived/**")
@@ -254,11 +254,15 @@ def test_expressive_descriptors_go_on_the_bus_like_any_derived_value(net):
              what="the right hand's, the arms' and the head's expressive values, moving")
     wait_for(lambda: any(m["chain"] == "RArm" and m["state"] == "offset" for _, m in list(events)),
              timeout=15.0, what="the right arm's offset (Hey_1 lasts 3.1 s)")
+    wait_for(lambda: {"pepper/derived/segment_sparc/RArm"} <= {k for k, _ in list(derived)},
+             what="the segment's values as derived values")
     subscriber.undeclare()
     events_subscriber.undeclare()
     for _, message in list(derived):
         schemas.validate("derived_sample", message)
-    assert {k.split("/")[2] for k, _ in derived} <= {*HANDS, *BOTH}
+    assert {k.split("/")[2] for k, _ in derived} <= {*HANDS, *BOTH, *SEGMENT_FEATURES.values()}
     offset = next(m for _, m in list(events) if m["chain"] == "RArm" and m["state"] == "offset")
     schemas.validate("event", offset)
     assert set(offset["segment"]) >= {"duration_s", "path", "peak_speed", "directness", "sparc", "ldlj"}
+    as_values = {k.split("/")[2]: m["v"] for k, m in list(derived) if k.endswith("/RArm") and m["seq"] == offset["seq"]}
+    assert as_values == {SEGMENT_FEATURES[v]: value for v, value in offset["segment"].items()}
