@@ -60,7 +60,7 @@ class Expressive:
         arms = robot.arms
         self.sides: tuple[str, ...] = arms.sides if arms is not None else ()
         self._fit = PointDerivatives(len(self.sides), fit) if self.sides else None
-        self._efforts = [LabanEfforts(np.ones(1), window) for _ in self.sides]
+        self._efforts = LabanEfforts(np.eye(len(self.sides)), window)  # each hand its own group
         self._hand_keys = [[keys.derived(name, f, s) for f in HANDS] for s in self.sides]
         self._elbow = elbow_frame(arms.joints) if arms is not None else None
         self._pair = tuple(self.sides.index(s) for s in ("L", "R")) if set("LR") <= set(self.sides) else None
@@ -69,11 +69,17 @@ class Expressive:
         self._joints = [i for members in self.chains.values() for i in members]
         self._joint_weights = weights[self._joints]
         self._joint_fit = PointDerivatives(len(self._joints), fit, dim=1) if self._joints else None
-        self._slices, start = [], 0
-        for members in self.chains.values():
-            self._slices.append(slice(start, start + len(members)))
+        # each chain one point of its angles, padded with zeros to the longest chain's length
+        width = max((len(m) for m in self.chains.values()), default=0)
+        self._pad = np.zeros((len(self.chains), width), dtype=int)  # where each padded coordinate is
+        self._padded = np.zeros((len(self.chains), width), dtype=bool)
+        start = 0
+        for row, members in enumerate(self.chains.values()):
+            self._pad[row, :len(members)] = np.arange(start, start + len(members))
+            self._padded[row, len(members):] = True
             start += len(members)
-        self._joint_efforts = [LabanEfforts(np.ones(1), window, JOINT_DISPLACEMENT) for _ in self.chains]
+        self._pad_weights = np.where(self._padded, 0.0, self._joint_weights[self._pad])
+        self._joint_efforts = LabanEfforts(np.eye(len(self.chains)), window, JOINT_DISPLACEMENT)
         self._joint_keys = [[keys.derived(name, f, c) for f in JOINT_SPACE] for c in self.chains]
         # motion segments: an arm chain's is its hand's path, another chain's its joints' path
         self._arm_of = {c: a for c, members in robot.chains.items() for a in range(len(self.sides))
@@ -96,10 +102,9 @@ class Expressive:
             return
         kappa = geometry(fit.velocity, fit.acceleration)[0]
         energy = kinetic_energy(fit.velocity)
-        for i, (laban, names) in enumerate(zip(self._efforts, self._hand_keys, strict=True)):
-            one = slice(i, i + 1)
-            e = laban.update(fit.time, fit.position[one], fit.velocity[one], fit.acceleration[one], fit.jerk[one])
-            _emit_all(emit, names, (*_values(e), float(energy[i]), float(kappa[i])))
+        e = self._efforts.update(fit.time, fit.position, fit.velocity, fit.acceleration, fit.jerk)
+        for i, names in enumerate(self._hand_keys):
+            _emit_all(emit, names, (*_values(e, i), energy[i], kappa[i]))
 
     def joints(self, t: float, positions: np.ndarray, emit: Emit) -> None:
         """The joint-space descriptors of the chains with no kinematics from all joint ``positions``."""
@@ -109,11 +114,12 @@ class Expressive:
         q = positions[self._joints]
         if not np.isfinite(q).all() or not fit.update(t, q[:, None]):
             return
-        for part, laban, names in zip(self._slices, self._joint_efforts, self._joint_keys, strict=True):
-            p, v = fit.position[part].T, fit.velocity[part].T  # the chain as one point of len(part) angles
-            e = laban.update(fit.time, p, v, fit.acceleration[part].T, fit.jerk[part].T)
-            energy = float(0.5 * self._joint_weights[part] @ v[0] ** 2)  # ½ Σ w_j q̇_j²
-            _emit_all(emit, names, (*_values(e), energy))
+        p, v, a, j = (np.where(self._padded, 0.0, x[self._pad, 0])
+                      for x in (fit.position, fit.velocity, fit.acceleration, fit.jerk))
+        e = self._joint_efforts.update(fit.time, p, v, a, j)
+        energy = 0.5 * np.einsum("ij,ij->i", self._pad_weights, v * v)
+        for i, names in enumerate(self._joint_keys):  # ½ Σ w_j q̇_j²
+            _emit_all(emit, names, (*_values(e, i), energy[i]))
 
     def record(self, t: float, positions: np.ndarray, hands: np.ndarray | None) -> None:
         """Add this frame to every chain's segment recorder (an arm chain's only with its hand)."""
@@ -138,8 +144,8 @@ class Expressive:
         return [(names[v], value) for v, value in segment.items()]
 
 
-def _values(e: Efforts) -> tuple[float, ...]:
-    return e.weight, e.time, e.flow, e.space, e.fluidity
+def _values(e: Efforts, i: int) -> tuple[float, ...]:
+    return tuple(float(x[i]) for x in (e.weight, e.time, e.flow, e.space, e.fluidity))  # type: ignore[index]
 
 
 def _emit_all(emit: Emit, names: list[str], values: tuple[float, ...]) -> None:

@@ -18,6 +18,10 @@ W_T(k) = {m : t_k − T < t_m ≤ t_k}, Δt_m the frame's own step:
 ⟨x⟩_T = Σ ½(x_m + x_(m−1)) Δt_m / Σ Δt_m over the steps inside the window
 (the time-weighted mean, trapezoid rule: exact to second order in Δt however
 unevenly frames are dropped).
+
+With weights α of shape (G, n), G groups of the points are worked out at once
+(the node's: each hand its own group, each joint chain one point of its
+angles), and every Effort is an array of G values.
 """
 
 from __future__ import annotations
@@ -31,13 +35,14 @@ import numpy as np
 
 @dataclass(frozen=True)
 class Efforts:
-    """The four Efforts of one frame; NaN where not defined yet."""
+    """The four Efforts and fluidity of one frame (floats, or arrays of one per group); NaN
+    where not defined yet."""
 
-    weight: float
-    time: float
-    flow: float
-    space: float
-    fluidity: float = math.nan
+    weight: float | np.ndarray
+    time: float | np.ndarray
+    flow: float | np.ndarray
+    space: float | np.ndarray
+    fluidity: float | np.ndarray = math.nan
 
 
 class LabanEfforts:
@@ -45,7 +50,7 @@ class LabanEfforts:
 
     The window's sums are kept running (added as a frame comes, taken off as it leaves, summed
     anew every ``RESUM`` frames so rounding cannot build up) and Weight's maximum in a
-    monotonic queue: a frame costs the same whatever the window holds."""
+    monotonic queue per group: a frame costs the same whatever the window holds."""
 
     RESUM = 512
 
@@ -53,29 +58,34 @@ class LabanEfforts:
                  still: float = 0.05) -> None:
         if not window_s > 0:
             raise ValueError(f"Laban window ({window_s} s) must be more than 0")
-        self.alpha = np.asarray(alpha, dtype=float)
-        self._mass = float(self.alpha.sum())
+        alpha = np.asarray(alpha, dtype=float)
+        self._single = alpha.ndim == 1  # one group: floats out
+        self.alpha = alpha[None, :] if self._single else alpha
+        self._mass = self.alpha.sum(axis=1)
         self.window_s, self.min_displacement, self.still = window_s, min_displacement, still
-        # per frame: t, its step's (Δt, Δt·mean Σα‖a‖, Δt·mean Σα‖j‖, Δt·mean Σα‖v‖, path length), positions
+        groups = len(self.alpha)
+        # per frame: t, its step's (Δt, Δt·mean Σα‖a‖, Δt·mean Σα‖j‖, Δt·mean Σα‖v‖, path length) per group,
+        # positions
         self._frames: deque[tuple[float, np.ndarray, np.ndarray]] = deque()
-        self._sums = np.zeros(5)                       # of the steps of every frame in the window
-        self._heaviest: deque[tuple[float, float]] = deque()  # (t, Σα‖v‖²), decreasing: Weight's max first
-        self._norms = np.zeros(3)                      # the last frame's Σα‖a‖, Σα‖j‖, Σα‖v‖
+        self._sums = np.zeros((5, groups))  # of the steps of every frame in the window
+        self._heaviest: list[deque[tuple[float, float]]] = [deque() for _ in range(groups)]  # (t, Σα‖v‖²) falling
+        self._norms = np.zeros((3, groups))  # the last frame's Σα‖a‖, Σα‖j‖, Σα‖v‖
         self._count = 0
 
-    def _weighted(self, x: np.ndarray) -> float:
-        return float(self.alpha @ np.sqrt(np.einsum("ij,ij->i", x, x)))
+    def _weighted(self, x: np.ndarray) -> np.ndarray:
+        return self.alpha @ np.sqrt(np.einsum("ij,ij->i", x, x))
 
     def update(self, t: float, p: np.ndarray, v: np.ndarray, a: np.ndarray, j: np.ndarray) -> Efforts:
         """The Efforts at frame ``t``."""
         frames = self._frames
         if frames and not t > frames[-1][0]:
             frames.clear()
-            self._heaviest.clear()
+            for heaviest in self._heaviest:
+                heaviest.clear()
             self._sums[:] = 0.0
         p = np.array(p, dtype=float)
-        norms = np.array([self._weighted(a), self._weighted(j), self._weighted(v)])
-        step = np.zeros(5)
+        norms = np.stack([self._weighted(a), self._weighted(j), self._weighted(v)])
+        step = np.zeros_like(self._sums)
         if frames:
             last_t, _, last_p = frames[-1]
             dt = t - last_t
@@ -85,23 +95,30 @@ class LabanEfforts:
         self._norms = norms
         frames.append((t, step, p))
         self._sums += step
-        weight = float(self.alpha @ np.einsum("ij,ij->i", v, v))
-        heaviest = self._heaviest
-        while heaviest and heaviest[-1][1] <= weight:
-            heaviest.pop()
-        heaviest.append((t, weight))
         while t - frames[0][0] > self.window_s * (1 + 1e-9):
             self._sums -= frames.popleft()[1]
-        while heaviest[0][0] < frames[0][0]:
-            heaviest.popleft()
+        first = frames[0][0]
+        weight = np.empty(len(self._heaviest))
+        for g, (heaviest, w) in enumerate(zip(self._heaviest, (self.alpha @ np.einsum("ij,ij->i", v, v)).tolist(),
+                                              strict=True)):
+            while heaviest and heaviest[-1][1] <= w:
+                heaviest.pop()
+            heaviest.append((t, w))
+            while heaviest[0][0] < first:
+                heaviest.popleft()
+            weight[g] = heaviest[0][1]
         self._count += 1
         if self._count % self.RESUM == 0:
             self._sums = np.sum([f[1] for f in frames], axis=0)
         span, acc, jerk, speed, path = self._sums - frames[0][1]  # each step lies inside the window
-        time_ = acc / span if span > 0 else math.nan
-        flow = jerk / span if span > 0 else math.nan
-        speed = speed / span if span > 0 else math.nan
-        d = self._weighted(p - frames[0][2]) / self._mass
-        space = path / d if d > self.min_displacement else math.nan
-        fluidity = speed / time_ if speed > self.still and time_ > 0 else math.nan
-        return Efforts(heaviest[0][1], time_, flow, space, fluidity)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            moving = span > 0
+            time_ = np.where(moving, acc / span, np.nan)
+            flow = np.where(moving, jerk / span, np.nan)
+            speed = np.where(moving, speed / span, np.nan)
+            d = self._weighted(p - frames[0][2]) / self._mass
+            space = np.where(d > self.min_displacement, path / d, np.nan)
+            fluidity = np.where((speed > self.still) & (time_ > 0), speed / time_, np.nan)
+        if self._single:
+            return Efforts(float(weight[0]), float(time_[0]), float(flow[0]), float(space[0]), float(fluidity[0]))
+        return Efforts(weight, time_, flow, space, fluidity)
