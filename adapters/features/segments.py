@@ -41,7 +41,8 @@ def ldlj(speed: np.ndarray, fs: float) -> float:
 def directness(points: np.ndarray) -> float:
     """Displacement over path length of a sampled path (n, 3), in [0, 1]; NaN with no path."""
     path = float(np.linalg.norm(np.diff(points, axis=0), axis=1).sum())
-    return float(np.linalg.norm(points[-1] - points[0])) / path if path > 0 else math.nan
+    # (at most 1: a straight path's sum of steps can round below its displacement)
+    return min(1.0, float(np.linalg.norm(points[-1] - points[0])) / path) if path > 0 else math.nan
 
 
 def fluidity(t: np.ndarray, speed: np.ndarray, acc: np.ndarray) -> float:

@@ -8,7 +8,6 @@ from __future__ import annotations
 import json
 import math
 import os
-import types
 from pathlib import Path
 
 import numpy as np
@@ -19,12 +18,12 @@ from monalysa.quality.smoothness import log_dimensionless_jerk
 from monalysa.quality.smoothness import sparc as monalysa_sparc
 from pyeyesweb.low_level import GeometricSymmetry, KineticEnergy, PointsDensity
 
-import sonibus.adapters.sim.engine as sim_engine
+from sonibus import schemas
 from sonibus.adapters.features import FeaturesConfig
 from sonibus.adapters.features.compute import RobotFeatures
 from sonibus.adapters.features.segments import SegmentRecorder
 from sonibus.adapters.features.table import describe as describe_robot
-from sonibus.adapters.sim.engine import SimEngine
+from sonibus.adapters.sim.offline import play
 from sonibus.bus import load_model
 
 GOLDEN = Path(__file__).with_name("hey_1.json")
@@ -219,27 +218,15 @@ def test_symmetry_and_density_scale_as_they_should():
 
 
 def hey_1(fs: int) -> list[dict]:
-    """The motion events of the sim's Hey_1 at ``fs`` (started 0.5 s in, 4.5 s of frames), its
-    engine on a clock of its own (``time`` replaced in its module: no wall time)."""
-    clock = [0.0]
-    saved = sim_engine.time
-    sim_engine.time = types.SimpleNamespace(time=lambda: clock[0], monotonic=lambda: clock[0])
-    try:
-        model = load_model("pepper")
-        engine = SimEngine(model, lambda kind, body: None)
-        features = robot_features("pepper", ("motion", "expressive"))
-        events = []
-        for k in range(int(4.5 * fs)):
-            t = clock[0] = k / fs
-            if k == fs // 2:
-                engine.behavior_run("animations/Stand/Gestures/Hey_1")
-            positions = engine.advance(t, 1 / fs)
-            out = features.step(t, k + 1, {f"pepper/joints/{n}": p
-                                           for n, p in zip(model.joint_names, positions, strict=True)})
-            events += [m for _, m in out.events]
-        return events
-    finally:
-        sim_engine.time = saved
+    """The motion events of the sim's Hey_1 at ``fs`` (started 0.5 s in, 4.5 s of frames)."""
+    model = load_model("pepper")
+    features = robot_features("pepper", ("motion", "expressive"))
+    events = []
+    for k, (t, positions) in enumerate(play(model, "animations/Stand/Gestures/Hey_1", fs, 4.5)):
+        out = features.step(t, k + 1, dict(zip([f"pepper/joints/{n}" for n in model.joint_names], positions,
+                                               strict=True)))
+        events += [m for _, m in out.events]
+    return events
 
 
 @pytest.mark.parametrize("fs", [50, 100])
@@ -251,6 +238,8 @@ def test_hey_1_golden_values(fs):
         kept = json.loads(GOLDEN.read_text()) if GOLDEN.exists() else {}
         GOLDEN.write_text(json.dumps({**kept, str(fs): events}, indent=1) + "\n")
     golden = json.loads(GOLDEN.read_text())[str(fs)]
+    for event in events:
+        schemas.validate("event", event)
     assert [(e["chain"], e["state"], e["seq"]) for e in events] == [(e["chain"], e["state"], e["seq"])
                                                                       for e in golden]
     assert [e["chain"] for e in events if e["state"] == "offset"] == ["Head", "Head", "RArm"]
