@@ -85,6 +85,8 @@ class Expressive:
         self._arm_of = {c: a for c, members in robot.chains.items() for a in range(len(self.sides))
                         if arms is not None and arms.joints[a][0] in members}
         self.segments = {c: SegmentRecorder(config.min_duration_s) for c in robot.chains}
+        groups = robot.groups
+        self._members = {c: np.array(groups[c]) for c in robot.chains}
         self._segment_keys = {c: {v: keys.derived(name, f, c) for v, f in SEGMENT_FEATURES.items()}
                               for c in robot.chains}
 
@@ -129,7 +131,7 @@ class Expressive:
                 if hands is not None:
                     recorder.add(t, hands[arm])
                 continue
-            q = positions[list(self.robot.groups[chain])]
+            q = positions[self._members[chain]]
             if np.isfinite(q).all():
                 recorder.add(t, q)
 

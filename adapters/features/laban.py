@@ -111,14 +111,14 @@ class LabanEfforts:
         if self._count % self.RESUM == 0:
             self._sums = np.sum([f[1] for f in frames], axis=0)
         span, acc, jerk, speed, path = self._sums - frames[0][1]  # each step lies inside the window
-        with np.errstate(divide="ignore", invalid="ignore"):
-            moving = span > 0
-            time_ = np.where(moving, acc / span, np.nan)
-            flow = np.where(moving, jerk / span, np.nan)
-            speed = np.where(moving, speed / span, np.nan)
-            d = self._weighted(p - frames[0][2]) / self._mass
-            space = np.where(d > self.min_displacement, path / d, np.nan)
-            fluidity = np.where((speed > self.still) & (time_ > 0), speed / time_, np.nan)
+        groups = len(weight)
+        if span[0] > 0:  # (the same Δt for every group)
+            time_, flow, speed = acc / span[0], jerk / span[0], speed / span[0]
+        else:
+            time_ = flow = speed = np.full(groups, np.nan)
+        d = self._weighted(p - frames[0][2]) / self._mass
+        space = np.divide(path, d, out=np.full(groups, np.nan), where=d > self.min_displacement)
+        fluidity = np.divide(speed, time_, out=np.full(groups, np.nan), where=(speed > self.still) & (time_ > 0))
         if self._single:
             return Efforts(float(weight[0]), float(time_[0]), float(flow[0]), float(space[0]), float(fluidity[0]))
         return Efforts(weight, time_, flow, space, fluidity)
