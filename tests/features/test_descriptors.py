@@ -248,3 +248,19 @@ def test_hey_1_golden_values(fs):
         assert set(got.get("segment", {})) == set(want.get("segment", {}))
         for name, value in want.get("segment", {}).items():
             assert got["segment"][name] == pytest.approx(value, rel=1e-6, abs=1e-9), (got["chain"], name)
+
+
+def test_a_segment_recorder_keeps_a_bounded_path():
+    """A chain that never stops (70 s at 100 Hz) keeps its last max_s (60 s, trimmed by the
+    second) of frames, not all; its segment still lasts from its onset crossing; a still chain
+    keeps only the little before an onset."""
+    recorder = SegmentRecorder(min_duration_s=0.08, max_s=60.0)
+    recorder.change("onset", 0.0)
+    for k in range(7001):
+        recorder.add(k / 100, np.array([math.cos(k / 100), math.sin(k / 100)]))
+        assert len(recorder._times) <= 61 * 100 + 1
+    segment = recorder.change("offset", 70.0)
+    assert segment["duration_s"] == pytest.approx(70.0) and 60.0 <= segment["path"] <= 61.0  # (1 m/s)
+    for k in range(7001, 9001):
+        recorder.add(k / 100, np.zeros(2))
+    assert len(recorder._times) <= (recorder.keep_s + 1) * 100 + 1
