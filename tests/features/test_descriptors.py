@@ -264,3 +264,35 @@ def test_a_segment_recorder_keeps_a_bounded_path():
     for k in range(7001, 9001):
         recorder.add(k / 100, np.zeros(2))
     assert len(recorder._times) <= (recorder.keep_s + 1) * 100 + 1
+
+
+def test_a_ros2_arm_from_its_urdf_gets_its_chains_descriptors():
+    """A URDF robot (tests/ros2's arm: chains tool, finger, camera, a prismatic joint): each
+    chain's hand descriptors under its own name, no `arms` values (no L and R), every key
+    published described on info/derived."""
+    from sonibus.adapters.features.catalog import derived
+    from sonibus.adapters.ros2.description import describe as describe_urdf
+    from sonibus.adapters.ros2.urdf import parse
+
+    from ..ros2.conftest import ARM_URDF, CHAINS
+
+    arm = describe_urdf(parse(ARM_URDF.read_text(), str(ARM_URDF)), CHAINS)
+    joints = [j.to_info() for j in arm.model.joints]
+    info = {"model": arm.model.name, "joints": joints, "kinematics": arm.kinematics}
+    robot = describe_robot("arm", info)
+    assert robot.arms is not None, robot.unavailable
+    config = FeaturesConfig(features=("motion", "expressive"))
+    features = RobotFeatures(robot, config)
+    seen: set[str] = set()
+    for k in range(100):
+        t = k / 50
+        frame = {f"arm/joints/{j['name']}": (j["min"] + j["max"]) / 2 + 0.2 * (j["max"] - j["min"]) *
+                 math.sin(2 * t + i) for i, j in enumerate(joints)}
+        for key, message in features.step(t, k + 1, frame).samples:
+            assert math.isfinite(message["v"] if isinstance(message["v"], float) else 0.0), key
+            seen.add(key)
+    assert {f"arm/derived/laban_weight/{chain}" for chain in CHAINS} <= seen
+    assert not any(key.endswith("/arms") for key in seen)
+    reply = derived(robot, config, {"host": "h", "node": "features"})
+    schemas.validate("derived_info", reply)
+    assert seen <= {e["key"] for e in reply["derived"]}
