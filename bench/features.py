@@ -7,7 +7,8 @@
   timed per frame. Baseline, same run: only decoding the frame.
 - on the bus: a simulated Pepper at 100 frames/s and the ``features`` node in
   this process, connected over loopback; CPU time of the node's worker thread
-  (it also hands the samples to Zenoh) over the run, as % of one core.
+  (it also hands the samples to Zenoh) over the run, as % of one core; once
+  with the default features (a show's node), once with ``expressive`` added.
 
     .venv/bin/python bench/features.py [--frames 20000] [--seconds 10]
 
@@ -80,13 +81,14 @@ def stats(seconds: list[float]) -> dict[str, float]:
             "mean_us": float(a.mean()), "cpu_percent_at_100hz": float(a.mean() * RATE_HZ / 1e4)}
 
 
-def on_bus(seconds: float) -> dict[str, float]:
+def on_bus(seconds: float, expressive: bool = False) -> dict[str, float]:
     """The features node's worker thread CPU time while a simulated Pepper streams at 100 Hz."""
     endpoint = f"tcp/127.0.0.1:{free_port()}"
     robot_session = open_session(BusConfig(multicast=False, listen=(endpoint,)))
     node_session = open_session(BusConfig(multicast=False, connect=(endpoint,)))
     sim = SimRobot(SimConfig(robot="pepper", rate_hz=RATE_HZ, idle=True), name="sim-pepper")
-    node = Features(FeaturesConfig(robots="pepper"), name="features")
+    config = FeaturesConfig(robots="pepper", features=(*DEFAULT, "expressive") if expressive else DEFAULT)
+    node = Features(config, name="features")
     try:
         sim.start(Bus(robot_session))
         node.start(Bus(node_session))
@@ -118,17 +120,21 @@ def main() -> None:
     data = frames(args.frames + 100)
     base, full = stats(per_frame(data, False)), stats(per_frame(data, True))
     expressive = stats(per_frame(data, True, expressive=True))
-    bus = on_bus(args.seconds)
+    bus, bus_expressive = on_bus(args.seconds), on_bus(args.seconds, expressive=True)
     result = {"model": "pepper", "joints": len(MODEL.joints), "rate_hz": RATE_HZ, "machine": machine,
               "decode_only": base, "features": full, "ratio_p50": full["p50_us"] / base["p50_us"],
               "ratio_p99": full["p99_us"] / base["p99_us"], "on_bus": bus, "expressive": expressive,
-              "expressive_ratio_p50": expressive["p50_us"] / full["p50_us"]}
+              "expressive_ratio_p50": expressive["p50_us"] / full["p50_us"],
+              "expressive_ratio_p99": expressive["p99_us"] / full["p99_us"], "on_bus_expressive": bus_expressive,
+              "on_bus_expressive_ratio": bus_expressive["cpu_percent"] / bus["cpu_percent"]}
     print(f"{'per frame':<12} {'p50 µs':>8} {'p99 µs':>8} {'CPU % @100 Hz':>14}")
     for name, row in (("decode only", base), ("features", full), ("+expressive", expressive)):
         print(f"{name:<12} {row['p50_us']:>8.0f} {row['p99_us']:>8.0f} {row['cpu_percent_at_100hz']:>14.2f}")
     print(f"ratio p50 {result['ratio_p50']:.1f}, p99 {result['ratio_p99']:.1f}")
-    print(f"on the bus: {bus['frames_per_s']:.1f} frames/s, worker thread {bus['cpu_percent']:.1f} % of a core "
-          f"({bus['cpu_us_per_frame']:.0f} µs/frame)")
+    print(f"+expressive / features: p50 {result['expressive_ratio_p50']:.1f}, p99 {result['expressive_ratio_p99']:.1f}")
+    for name, row in (("default", bus), ("+expressive", bus_expressive)):
+        print(f"on the bus, {name}: {row['frames_per_s']:.1f} frames/s, worker thread {row['cpu_percent']:.1f} % "
+              f"of a core ({row['cpu_us_per_frame']:.0f} µs/frame)")
     write("features", result)
     print(machine)
 

@@ -135,7 +135,11 @@ def rows_features(r: dict[str, Any]) -> list[Row]:
              "", "")] + ([("features + expressive per Pepper frame, p50 / p99",
                            f"{_us(r['expressive']['p50_us'])} / {_us(r['expressive']['p99_us'])}",
                            f"{_us(f['p50_us'])} / {_us(f['p99_us'])} (features without)",
-                           f"{r['expressive']['p50_us'] / f['p50_us']:.1f}×", "", "")] if "expressive" in r else [])
+                           f"{r['expressive']['p50_us'] / f['p50_us']:.1f}× / "
+                           f"{r['expressive']['p99_us'] / f['p99_us']:.1f}×", "", "")] if "expressive" in r else []) + (
+        [("features node on the bus, worker CPU: default / + expressive",
+          f"{r['on_bus']['cpu_percent']:.1f} % / {r['on_bus_expressive']['cpu_percent']:.1f} % of a core",
+          "default features", f"{r['on_bus_expressive_ratio']:.1f}×", "", "")] if "on_bus_expressive" in r else [])
 
 
 def rows_generic(r: dict[str, Any]) -> list[Row]:

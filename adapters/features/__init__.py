@@ -8,7 +8,10 @@ For each robot, from its joint frames: ``<robot>/derived/velocity/<Joint>``
 (rad/s), ``<robot>/derived/hand/L|R`` ([x, y, z] m, Torso frame),
 ``<robot>/derived/hand_speed/L|R`` (m/s), ``<robot>/derived/qom/<Chain>|Body``
 (rad/s), motion onsets and offsets on ``<robot>/events/motion``, and their
-units and ranges on ``<robot>/info/derived``. See docs/features.md.
+units and ranges on ``<robot>/info/derived``; opt-in, ``expressive``: Laban
+Efforts, fluidity, kinetic energy, curvature, the arms' distance, density and
+symmetry, joint-space Efforts where there is no kinematics, and per-segment
+values on offsets (``expressive.py``). See docs/features.md.
 """
 
 from .config import FEATURES, FeaturesConfig

@@ -27,6 +27,7 @@ import numpy as np
 from sonibus.bus import keys, messages
 
 from .config import FeaturesConfig
+from .descriptors import expressive_entries, segment_entries, segment_entry
 from .kinematics import Arms
 from .motion import weights
 from .table import Robot
@@ -54,17 +55,23 @@ def derived(robot: Robot, config: FeaturesConfig, processor: dict[str, str]) -> 
                        j.max_velocity) for j in robot.joints]
     out += _hands(robot, config)
     w = weights([j.unit for j in robot.joints], robot.names, config.weights)
+    if config.publishes("expressive"):
+        out += expressive_entries(robot, config, w, _hand_bounds(robot))
     known = all(j.max_velocity for j, weight in zip(robot.joints, w, strict=True) if weight)
     vmax = np.array([j.max_velocity or 0.0 for j in robot.joints])
     groups = robot.groups
     if config.publishes("qom"):
         out += [_entry(name, "qom", group, "rad/s", 0.0, float(w[i] @ vmax[i]) if known else None,
                        joints=[robot.names[k] for k in i if w[k]]) for group, i in groups.items()]
+    chains = [c for c, i in groups.items() if c != "Body" and w[i].sum() > 0]
+    if config.publishes("expressive"):
+        out += segment_entries(robot, chains)
     reply: dict[str, Any] = {"robot": name, "derived": out, "processor": processor,
                              "filter": {"cutoff_hz": config.cutoff_hz, "max_gap_s": config.max_gap_s}}
     if config.publishes("motion"):
-        reply["events"] = {"motion": {"key": keys.event(name, "motion"),
-                                      "chains": [c for c, i in groups.items() if c != "Body" and w[i].sum() > 0]}}
+        reply["events"] = {"motion": {"key": keys.event(name, "motion"), "chains": chains}}
+        if config.publishes("expressive"):
+            reply["events"]["motion"]["segment"] = segment_entry(robot, chains)
     hands = [f for f in ("hand", "hand_speed") if config.publishes(f)]
     if robot.arms is None and hands:
         reply["unavailable"] = dict.fromkeys(hands, robot.unavailable)
@@ -96,23 +103,24 @@ def _hands(robot: Robot, config: FeaturesConfig) -> list[dict[str, Any]]:
         out += [_entry(robot.name, "hand", side, "m", low[a].min(), high[a].max(), 3, axes=["x", "y", "z"],
                        frame=arms.frame, box={"min": low[a].tolist(), "max": high[a].tolist()})
                 for a, side in enumerate(arms.sides)]
-    if config.publishes("expressive"):
-        fit = f"degree-5 least-squares fit over {config.fit_window_s:g} s read at its middle (kinematic.py)"
-        window = config.laban_window_s
-        specs = [("laban_weight", "m²/s²", f"max over {window:g} s of ‖v‖² (Larboulette & Gibet 2015)"),
-                 ("laban_time", "m/s²", f"time-weighted mean of ‖a‖ over {window:g} s (Larboulette & Gibet 2015)"),
-                 ("laban_flow", "m/s³", f"time-weighted mean of ‖j‖ over {window:g} s (Larboulette & Gibet 2015)"),
-                 ("laban_space", "1", f"path length over displacement in {window:g} s; none under 1 mm"),
-                 ("curvature", "1/m", "‖v × a‖/‖v‖³; none under 1 mm/s")]
-        out += [_entry(robot.name, feature, side, unit, None, None, definition=text, estimator=fit,
-                       **({} if feature == "curvature" else {"window_s": window}))
-                for feature, unit, text in specs for side in arms.sides]
     if config.publishes("hand_speed"):
-        levers = arms.lever_arms()
-        for a, side in enumerate(arms.sides):
-            bound = None
-            if all(j.max_velocity for j in joints[a]):
-                arm_levers = levers[a][:len(joints[a])]  # (a shorter chain's padding moves nothing)
-                bound = np.ceil(sum(j.max_velocity * r for j, r in zip(joints[a], arm_levers, strict=True)) * 10) / 10
-            out.append(_entry(robot.name, "hand_speed", side, "m/s", 0.0 if bound else None, bound))
+        out += [_entry(robot.name, "hand_speed", side, "m/s", 0.0 if bound else None, bound)
+                for side, bound in zip(arms.sides, _hand_bounds(robot), strict=True)]
+    return out
+
+
+def _hand_bounds(robot: Robot) -> list[float | None]:
+    """Per arm, a bound on its hand's speed (m/s): Σ max velocity × lever arm; None if a joint's is unknown."""
+    arms, index = robot.arms, robot.arm_joints
+    if arms is None or index is None:
+        return []
+    levers = arms.lever_arms()
+    out: list[float | None] = []
+    for a, names in enumerate(arms.joints):
+        joints = [robot.joints[i] for i in index[a][:len(names)]]
+        bound = None
+        if all(j.max_velocity for j in joints):
+            arm_levers = levers[a][:len(joints)]  # (a shorter chain's padding moves nothing)
+            bound = float(np.ceil(sum(j.max_velocity * r for j, r in zip(joints, arm_levers, strict=True)) * 10) / 10)
+        out.append(bound)
     return out

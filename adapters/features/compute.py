@@ -27,9 +27,8 @@ from sonibus.bus import keys, messages
 
 from . import catalog
 from .config import FeaturesConfig
+from .expressive import Expressive
 from .filters import VelocityFilter
-from .kinematic import PointDerivatives, geometry
-from .laban import LabanEfforts
 from .motion import OnsetDetector, weights
 from .table import Robot
 
@@ -110,10 +109,7 @@ class RobotFeatures:
             self._hand_velocity = VelocityFilter(3 * len(sides), config.cutoff_hz, config.max_gap_s,
                                                  np.repeat(np.minimum(JUMP * self._speed_range[1],
                                                                       messages.MAX_VALUE), 3))
-            if config.publishes("expressive"):
-                self._fit = PointDerivatives(len(sides), config.fit_window_s)
-                self._efforts = [LabanEfforts(np.ones(1), config.laban_window_s) for _ in sides]
-                self._expressive_keys = [[keys.derived(name, f, s) for f in EXPRESSIVE] for s in sides]
+        self._expressive = Expressive(robot, config, self._weights) if config.publishes("expressive") else None
 
     def step(self, t: float, seq: int, values: Mapping[str, Any]) -> Output:
         """The features of the frame ``seq`` taken at ``t``."""
@@ -142,8 +138,11 @@ class RobotFeatures:
             out.samples += [(key, {"t": t, "seq": seq, "v": value})
                             for key, value, now in zip(self._velocity_keys, v.tolist(), fresh.tolist(), strict=True)
                             if now]
-        if self._hands:
-            self._hand_features(t, seq, out)
+        hands = self._hand_features(t, seq, out) if self._hands else None
+        if self._expressive is not None:
+            self._expressive.joints(t, self._positions, lambda key, value: out.samples.append(
+                (key, {"t": t, "seq": seq, "v": value})))
+            self._expressive.record(t, self._positions, hands)
         updated = self._members @ fresh > 0
         qoms, usable = out.bounded(self._members @ (np.abs(v) * self._weights), self._qom_range, updated)
         if usable is not None:
@@ -155,25 +154,35 @@ class RobotFeatures:
                 out.samples.append((key, {"t": t, "seq": seq, "v": qom}))
             detector = self._detectors.get(group)
             change = detector.update(t, qom) if detector is not None else None
-            if change is not None and self.config.publishes("motion"):
-                out.events.append((self._motion_key, {"t": t, "kind": "motion", "chain": group, "state": change,
-                                                      "seq": seq}))
+            if change is None:
+                continue
+            event = {"t": t, "kind": "motion", "chain": group, "state": change, "seq": seq}
+            if self._expressive is not None:
+                segment = self._expressive.segment(group, change, detector.crossed_at)
+                if segment is not None:  # on the offset event, and as derived values
+                    event["segment"] = segment
+                    out.samples += [(key, {"t": t, "seq": seq, "v": v})
+                                    for key, v in self._expressive.segment_samples(group, segment)]
+            if self.config.publishes("motion"):
+                out.events.append((self._motion_key, event))
         return out
 
-    def _hand_features(self, t: float, seq: int, out: Output) -> None:
+    def _hand_features(self, t: float, seq: int, out: Output) -> np.ndarray | None:
+        """Publish the hands' features; their points (arms, 3), None where not known."""
         assert self.robot.arms is not None and self.robot.arm_joints is not None
         angles = self._positions[self.robot.arm_joints]
         if not np.isfinite(angles).all():
-            return  # an arm joint never seen yet
+            return None  # an arm joint never seen yet
         points = self.robot.arms.points(angles)
         hands, usable = out.bounded(points, self._hand_range, self.config.publishes("hand"))
         if usable is not None and not usable.all():
-            return
+            return None
         if self.config.publishes("hand"):
             out.samples += [(key, {"t": t, "seq": seq, "v": hand.tolist()})
                             for key, hand in zip(self._hand_keys, hands, strict=True)]
-        if self.config.publishes("expressive"):
-            self._expressive(t, seq, points, out)
+        if self._expressive is not None:
+            self._expressive.hands(t, points, angles, lambda key, value: out.samples.append(
+                (key, {"t": t, "seq": seq, "v": value})))
         fresh = self._hand_velocity.update(t, points.ravel())
         if self.config.publishes("hand_speed") and fresh.all():
             speeds, usable = out.bounded(np.linalg.norm(self._hand_velocity.velocity.reshape(hands.shape), axis=1),
@@ -181,22 +190,7 @@ class RobotFeatures:
             ok = [True] * len(speeds) if usable is None else usable.tolist()
             out.samples += [(key, {"t": t, "seq": seq, "v": s})
                             for key, s, good in zip(self._speed_keys, speeds.tolist(), ok, strict=True) if good]
-
-
-    def _expressive(self, t: float, seq: int, points: np.ndarray, out: Output) -> None:
-        fit = self._fit
-        if not fit.update(t, points):
-            return
-        kappa = geometry(fit.velocity, fit.acceleration)[0]
-        for i, (laban, names) in enumerate(zip(self._efforts, self._expressive_keys, strict=True)):
-            one = slice(i, i + 1)
-            e = laban.update(fit.time, fit.position[one], fit.velocity[one], fit.acceleration[one], fit.jerk[one])
-            values = (e.weight, e.time, e.flow, e.space, float(kappa[i]))
-            out.samples += [(key, {"t": t, "seq": seq, "v": v}) for key, v in zip(names, values, strict=True)
-                            if np.isfinite(v)]  # Space with no displacement, κ below the speed floor: none
-
-
-EXPRESSIVE = ("laban_weight", "laban_time", "laban_flow", "laban_space", "curvature")
+        return points
 
 
 def _spans(ranges: dict[str, Range], keys_: list[str], default: tuple[Any, Any]) -> Range:

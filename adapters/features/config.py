@@ -14,7 +14,7 @@ from sonibus.bus import keys
 from sonibus.bus.options import bad
 
 DEFAULT = ("velocity", "hand", "hand_speed", "qom", "motion")
-FEATURES = (*DEFAULT, "expressive")  # expressive: the hands' Laban Efforts and curvature (opt-in)
+FEATURES = (*DEFAULT, "expressive")  # expressive (opt-in): Laban Efforts, energy, shape, segments (expressive.py)
 
 
 @dataclass(frozen=True, kw_only=True)

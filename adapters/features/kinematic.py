@@ -30,24 +30,34 @@ from collections import deque
 
 import numpy as np
 
+SAME_TIMES = 1e-6  # window fractions: times closer than this (0.4 µs in 0.4 s) count as the same
 STILL_SPEED = 0.05  # m/s: below, no curvature nor a_t, a_n (1 mrad of joint noise reads up to 0.01 m/s)
 
 
 class PointDerivatives:
-    """Derivatives of ``n`` 3-D points, ``update(t, points)`` with ``points`` of shape (n, 3)."""
+    """Derivatives of ``n`` points of ``dim`` coordinates (3-D by default; 1 for joint
+    angles), ``update(t, points)`` with ``points`` of shape (n, dim)."""
 
-    def __init__(self, n: int, window_s: float = 0.4, degree: int = 5) -> None:
+    def __init__(self, n: int, window_s: float = 0.4, degree: int = 5, dim: int = 3) -> None:
         if not window_s > 0 or degree < 3:
             raise ValueError(f"window ({window_s} s) must be more than 0 and degree ({degree}) at least 3 for jerk")
-        self.n, self.window_s, self.degree = n, window_s, degree
+        self.n, self.window_s, self.degree, self.dim = n, window_s, degree, dim
         self._times: deque[float] = deque()
         self._points: deque[np.ndarray] = deque()
-        self.position = np.zeros((n, 3))
+        self.position = np.zeros((n, dim))
         self.time = 0.0  # the time the derivatives are read at: the window's middle, window_s/2 ago
-        self.velocity = np.zeros((n, 3))
-        self.acceleration = np.zeros((n, 3))
-        self.jerk = np.zeros((n, 3))
+        self.velocity = np.zeros((n, dim))
+        self.acceleration = np.zeros((n, dim))
+        self.jerk = np.zeros((n, dim))
         self.ready = False  # True once the window holds enough frames for the fit
+        # the fit is linear in the samples: (position, v, a, j) = operator @ samples, the operator
+        # depending only on the frames' times in the window; at a steady rate it is the same frame
+        # after frame, and is kept (a least-squares solve per frame cost 4× more)
+        w = window_s
+        self._read = np.array([[math.perm(k, m) * (-0.5) ** (k - m) / w**m if k >= m else 0.0
+                                for k in range(degree + 1)] for m in range(4)])  # at s = −½, the middle
+        self._s: np.ndarray | None = None
+        self._operator = np.zeros((4, 0))
 
     def update(self, t: float, points: np.ndarray) -> bool:
         """Add the frame at ``t``; ``True`` when the derivatives were estimated from it.
@@ -56,7 +66,7 @@ class PointDerivatives:
             self._times.clear()
             self._points.clear()
         self._times.append(t)
-        self._points.append(np.asarray(points, dtype=float).reshape(self.n, 3))
+        self._points.append(np.asarray(points, dtype=float).reshape(self.n, self.dim))
         while t - self._times[0] > self.window_s * (1 + 1e-9):  # t_k − W < t_m ≤ t_k
             self._times.popleft()
             self._points.popleft()
@@ -65,25 +75,21 @@ class PointDerivatives:
         if not self.ready:
             return False
         s = (np.fromiter(self._times, float) - t) / self.window_s
-        design = np.vander(s, self.degree + 1, increasing=True)
-        coef = np.linalg.lstsq(design, np.stack(self._points).reshape(len(s), -1), rcond=None)[0]
-        w, c = self.window_s, coef.reshape(self.degree + 1, self.n, 3)
-        powers = [(-0.5) ** k for k in range(self.degree + 1)]  # read at s = −½, the window's middle
-
-        def derivative(m: int) -> np.ndarray:
-            return sum(math.perm(k, m) * powers[k - m] * c[k] for k in range(m, self.degree + 1)) / w**m
-
-        self.time = t - w / 2
-        self.position, self.velocity = derivative(0), derivative(1)
-        self.acceleration, self.jerk = derivative(2), derivative(3)
+        if self._s is None or len(s) != len(self._s) or np.abs(s - self._s).max() > SAME_TIMES:
+            self._s, self._operator = s, self._read @ np.linalg.pinv(np.vander(s, self.degree + 1, increasing=True))
+        out = (self._operator @ np.stack(self._points).reshape(len(s), -1)).reshape(4, self.n, self.dim)
+        self.time = t - self.window_s / 2
+        self.position, self.velocity, self.acceleration, self.jerk = out
         return True
 
 
 def geometry(v: np.ndarray, a: np.ndarray, still: float = STILL_SPEED) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Curvature κ = ‖v × a‖/‖v‖³ (1/m), tangential a_t = v·a/‖v‖ and normal
     a_n = ‖v × a‖/‖v‖ acceleration (m/s²) per point; NaN where ‖v‖ ≤ ``still``."""
-    speed = np.linalg.norm(v, axis=-1)
-    cross = np.linalg.norm(np.cross(v, a), axis=-1)
+    speed = np.sqrt(np.einsum("...i,...i", v, v))
+    c = np.stack([v[..., 1] * a[..., 2] - v[..., 2] * a[..., 1], v[..., 2] * a[..., 0] - v[..., 0] * a[..., 2],
+                  v[..., 0] * a[..., 1] - v[..., 1] * a[..., 0]], axis=-1)  # v × a (np.cross costs 5× more)
+    cross = np.sqrt(np.einsum("...i,...i", c, c))
     moving = speed > still
     safe = np.where(moving, speed, 1.0)
     nan = np.full_like(speed, np.nan)

@@ -65,18 +65,19 @@ class Arms:
     def points(self, q: np.ndarray, upto: int | None = None) -> np.ndarray:
         """Positions ``(..., arms, 3)`` of frame ``upto`` of each arm (default: the hand;
         ``0`` is the first joint's) for angles ``q`` of shape ``(..., arms, n)``."""
-        q = np.asarray(q, dtype=float)
-        sliding = self.sliding
-        angle = q * (1.0 - sliding)  # type: ignore[operator]
+        n = self.axes.shape[1] if upto is None else upto
+        q = np.asarray(q, dtype=float)[..., :n]  # (the joints past frame upto move nothing before it)
+        sliding = self.sliding[:, :n]  # type: ignore[index]
+        angle = q * (1.0 - sliding)
         c, s = np.cos(angle)[..., None, None], np.sin(angle)[..., None, None]
-        turns = EYE + s * self._cross + (1.0 - c) * self._square  # type: ignore[attr-defined]
-        offsets = turns @ self.translations[:, 1:, :, None]  # each joint's child origin, turned
-        if sliding.any():  # type: ignore[union-attr]
-            offsets = offsets + ((q * sliding)[..., None] * self.axes)[..., None]  # slid along its axis
-        turns = turns @ self.rotations[:, 1:]
+        turns = EYE + s * self._cross[:, :n] + (1.0 - c) * self._square[:, :n]  # type: ignore[attr-defined]
+        offsets = turns @ self.translations[:, 1:n + 1, :, None]  # each joint's child origin, turned
+        if sliding.any():
+            offsets = offsets + ((q * sliding)[..., None] * self.axes[:, :n])[..., None]  # slid along its axis
+        turns = turns @ self.rotations[:, 1:n + 1]
         position = self.translations[:, 0] + np.zeros((*q.shape[:-1], 3))
         rotation = self.rotations[:, 0]
-        for i in range(self.axes.shape[1] if upto is None else upto):
+        for i in range(n):
             position = position + (rotation @ offsets[..., i, :, :])[..., 0]
             rotation = rotation @ turns[..., i, :, :]
         return position

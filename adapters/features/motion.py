@@ -38,6 +38,7 @@ class OnsetDetector:
     min_duration_s: float
     moving: bool = False
     _since: float | None = None  # when the QoM crossed toward the other state, while it stays there
+    crossed_at: float = 0.0      # when the QoM crossed the threshold of the last change (before it was confirmed)
 
     def update(self, t: float, qom: float) -> str | None:
         crossed = qom <= self.offset if self.moving else qom >= self.onset
@@ -48,5 +49,5 @@ class OnsetDetector:
             self._since = t
         if t - self._since < self.min_duration_s - 1e-9:
             return None
-        self.moving, self._since = not self.moving, None
+        self.moving, self.crossed_at, self._since = not self.moving, self._since, None
         return "onset" if self.moving else "offset"

@@ -235,21 +235,34 @@ def test_bad_options_are_config_errors(options, fragment):
 
 
 def test_expressive_descriptors_go_on_the_bus_like_any_derived_value(net):
-    """The sim plays Hey_1: the node with ``expressive`` publishes each hand's Laban Efforts and
-    curvature as ``<robot>/derived/...`` samples a sink takes as they are."""
+    """The sim plays Hey_1: the node with ``expressive`` publishes each hand's descriptors, the
+    arms' shape and the head's joint-space ones as ``<robot>/derived/...`` samples a sink takes as
+    they are, and the right arm's offset event carries its segment."""
+    from sonibus.adapters.features.expressive import BOTH, HANDS, JOINT_SPACE, SEGMENT_FEATURES
+
     watch = net.bus("watch")
     subscriber, derived = collect(watch, "pepper/derived/**")
+    events_subscriber, events = collect(watch, "pepper/events/motion")
     net.sim("pepper", rate_hz=50)
-    start(net, robots="pepper", features=("expressive",))
+    start(net, robots="pepper", features=("motion", "expressive"))
     wait_for(lambda: robot_info(watch, "pepper", timeout=0.5), what="pepper/info")
     send_command(watch, "pepper", "behavior/run", {"name": HEY})
-    wanted = {f"pepper/derived/{f}/R" for f in ("laban_weight", "laban_time", "laban_flow", "laban_space",
-                                                 "curvature")}
+    wanted = ({f"pepper/derived/{f}/R" for f in HANDS} | {f"pepper/derived/{f}/arms" for f in BOTH}
+              | {f"pepper/derived/{f}/Head" for f in JOINT_SPACE})
     wait_for(lambda: wanted <= {k for k, _ in list(derived)}
              and any(k.endswith("laban_weight/R") and m["v"] > 0.01 for k, m in list(derived)),
-             what="the right hand's expressive values, moving")
+             what="the right hand's, the arms' and the head's expressive values, moving")
+    wait_for(lambda: any(m["chain"] == "RArm" and m["state"] == "offset" for _, m in list(events)),
+             timeout=15.0, what="the right arm's offset (Hey_1 lasts 3.1 s)")
+    wait_for(lambda: {"pepper/derived/segment_sparc/RArm"} <= {k for k, _ in list(derived)},
+             what="the segment's values as derived values")
     subscriber.undeclare()
+    events_subscriber.undeclare()
     for _, message in list(derived):
         schemas.validate("derived_sample", message)
-    assert {k.split("/")[2] for k, _ in derived} <= {"laban_weight", "laban_time", "laban_flow", "laban_space",
-                                                     "curvature"}
+    assert {k.split("/")[2] for k, _ in derived} <= {*HANDS, *BOTH, *SEGMENT_FEATURES.values()}
+    offset = next(m for _, m in list(events) if m["chain"] == "RArm" and m["state"] == "offset")
+    schemas.validate("event", offset)
+    assert set(offset["segment"]) >= {"duration_s", "path", "peak_speed", "directness", "sparc", "ldlj"}
+    as_values = {k.split("/")[2]: m["v"] for k, m in list(derived) if k.endswith("/RArm") and m["seq"] == offset["seq"]}
+    assert as_values == {SEGMENT_FEATURES[v]: value for v, value in offset["segment"].items()}

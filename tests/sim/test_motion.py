@@ -388,3 +388,24 @@ def test_a_stop_holds_an_idling_robot_still_until_the_next_move():
     engine.joints_set(["HeadYaw"], [0.5], 0.5)             # the next move: idle motion again after it
     moved = [engine.advance(now + 4 + 0.02 * step, 0.02) for step in range(100)]
     assert moved[-1] != held
+
+
+def test_offline_play_is_what_the_engine_plays(monkeypatch):
+    """adapters/sim/offline.py (Hey_1's golden values in tests/features, the docs' plots) gives,
+    frame for frame, the positions the engine gives on the same clock."""
+    import types
+
+    import sonibus.adapters.sim.engine as engine_module
+    from sonibus.adapters.sim.engine import SimEngine
+    from sonibus.adapters.sim.offline import play
+
+    clock = [0.0]
+    monkeypatch.setattr(engine_module, "time", types.SimpleNamespace(time=lambda: clock[0],
+                                                                     monotonic=lambda: clock[0]))
+    model = load_model("pepper")
+    engine = SimEngine(model, lambda kind, fields: None)
+    for k, (t, positions) in enumerate(play(model, "animations/Stand/Gestures/Hey_1", 50.0, 4.0)):
+        clock[0] = t
+        if k == 25:
+            engine.behavior_run("animations/Stand/Gestures/Hey_1")
+        assert engine.advance(t, 0.02) == positions, t
