@@ -48,6 +48,7 @@ class _Stream:
     heard: float = 0.0          # monotonic time of its last chunk (0: none yet)
     onset_until: float = 0.0    # chunk time (s) until which the onset value is 1
     quiet: bool = True          # said silent since its last chunk
+    onset: float = 0.0          # the onset value said last
     publishers: dict[str, Any] = field(default_factory=dict)
 
 
@@ -100,6 +101,8 @@ class Hear(Adapter):
             for state in self._streams.values():
                 if not state.quiet and now - state.heard >= quiet_s:
                     self._silence(state)
+                elif state.quiet and state.onset and time.time() >= state.onset_until:
+                    self._publish(state, time.time(), FLOOR_DB, 0.0, 0.0)  # (a clap, then silence: its onset ends)
 
     def _hear(self, state: _Stream, chunk: AudioChunk) -> None:
         samples = chunk.samples().astype(np.float32) / FULL_SCALE
@@ -114,14 +117,15 @@ class Hear(Adapter):
         self.record_latency(time.time() - chunk.t)
 
     def _silence(self, state: _Stream) -> None:
-        """No chunk for ``quiet_ms``: the stream is silent (said once), its onset over."""
+        """No chunk for ``quiet_ms``: the stream is silent (said once; an onset still lasts its hold)."""
         state.quiet = True
         state.onsets.quiet()
-        state.onset_until = 0.0
         self.count("quiet")
-        self._publish(state, time.time(), FLOOR_DB, 0.0, 0.0)
+        t = time.time()
+        self._publish(state, t, FLOOR_DB, 0.0, 1.0 if t < state.onset_until else 0.0)
 
     def _publish(self, state: _Stream, t: float, db: float, centroid: float, onset: float) -> None:
         state.seq += 1
+        state.onset = onset
         for feature, value in (("loudness", db), ("centroid", centroid), ("onset", onset)):
             state.publishers[feature].put(codec.encode({"t": t, "seq": state.seq, "v": value}))
