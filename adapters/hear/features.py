@@ -1,6 +1,6 @@
 """Audio features of one chunk, pure numpy (no clocks, no bus): loudness as RMS in dB
-full scale, the spectral centroid in Hz, and onsets from the loudness's jump above its
-recent background.
+full scale, the spectral centroid in Hz, and onsets from the loudness's jump over the chunk
+before.
 
 Why numpy and not a library: librosa (the usual choice) pulls numba and scipy in for
 three formulas of a few lines each, computed here on 10-20 ms chunks as they come;
@@ -48,35 +48,29 @@ def centroid_hz(samples: np.ndarray, rate: int) -> float:
 
 
 class Onsets:
-    """Onsets by level: a chunk ``jump_db`` louder than the background (a slow average of
-    the levels before it, ``background_s``), and louder than ``min_db``, is an onset;
-    another cannot come within ``hold_s`` (a clap's reverberation is not a second clap).
+    """Onsets by level: a chunk ``jump_db`` louder than the chunk before it (the floor
+    after a silence), and at least ``min_db``, is an onset; another cannot come within
+    ``hold_s`` (a clap's reverberation is not a second clap). A steady or slowly rising
+    sound is no onset, whatever its level.
 
     >>> onsets = Onsets()
     >>> [onsets(t / 100, db) for t, db in enumerate([-80, -80, -20, -22, -80, -80])]
     [False, False, True, False, False, False]
     """
 
-    def __init__(self, jump_db: float = 12.0, min_db: float = -50.0, hold_s: float = 0.15,
-                 background_s: float = 0.5) -> None:
-        self.jump_db, self.min_db, self.hold_s, self.background_s = jump_db, min_db, hold_s, background_s
-        self.background = FLOOR_DB
-        self._last_t: float | None = None
+    def __init__(self, jump_db: float = 12.0, min_db: float = -50.0, hold_s: float = 0.15) -> None:
+        self.jump_db, self.min_db, self.hold_s = jump_db, min_db, hold_s
+        self.before = FLOOR_DB          # the level of the chunk before
         self._onset_t = -math.inf
 
     def __call__(self, t: float, db: float) -> bool:
         """Whether the chunk at ``t`` (s) of level ``db`` is an onset."""
-        onset = db >= self.min_db and db - self.background >= self.jump_db and t - self._onset_t >= self.hold_s
+        onset = db >= self.min_db and db - self.before >= self.jump_db and t - self._onset_t >= self.hold_s
         if onset:
             self._onset_t = t
-        dt = 0.0 if self._last_t is None else max(0.0, t - self._last_t)
-        self._last_t = t
-        # the background follows quiet at once and loudness slowly: a loud passage raises it over
-        # background_s, a silence after a clap brings it straight back down
-        alpha = 1.0 if db < self.background else 1.0 - math.exp(-dt / self.background_s) if dt else 0.0
-        self.background += alpha * (db - self.background)
+        self.before = db
         return onset
 
     def quiet(self) -> None:
-        """No sound came (a sender that sends no digital silence): the background is silence."""
-        self.background = FLOOR_DB
+        """No sound came (a sender that sends no digital silence): the chunk before is silence."""
+        self.before = FLOOR_DB
