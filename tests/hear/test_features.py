@@ -50,6 +50,10 @@ def test_two_sines_of_equal_amplitude_have_their_centroid_between_them():
     assert centroid_hz(both, RATE) == pytest.approx(2000, rel=0.01)
 
 
+def test_an_impulse_has_a_flat_spectrum_so_its_centroid_is_half_the_nyquist_frequency():
+    assert centroid_hz(np.eye(1, 4096, 2048)[0], RATE) == pytest.approx(RATE / 4, rel=1e-6)  # (mid-window)
+
+
 def test_an_impulse_in_silence_is_an_onset_and_nothing_else_is():
     onsets = Onsets()
     chunks = [np.zeros(480)] * 20 + [np.eye(1, 480, 100)[0] * 0.9] + [np.zeros(480)] * 20
