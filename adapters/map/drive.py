@@ -24,10 +24,10 @@ from typing import Any
 
 import zenoh
 
-from sonibus.bus import codec, keys, messages
+from sonibus.bus import keys, messages
 from sonibus.bus.adapter import Adapter
 from sonibus.bus.client import Outcome, ask
-from sonibus.bus.commands import error_reply, ok_reply
+from sonibus.bus.commands import serving
 from sonibus.bus.errors import CommandError
 
 from .targets import Target
@@ -197,21 +197,13 @@ class Drive:
 
     def _serve(self, query: zenoh.Query) -> None:
         verb = str(query.key_expr)[len(keys.program(self.node.name, "")):]
-        try:
-            reply = ok_reply(verb, self._answer(verb, query))
-        except CommandError as exc:
-            reply = error_reply(verb, exc)
-        query.reply(query.key_expr, codec.encode(reply), encoding=codec.ENCODING)
+        serving.answer(query, verb, lambda: self._answer(verb, query))
 
     def _answer(self, verb: str, query: zenoh.Query) -> dict[str, Any]:
         if verb not in PROGRAM_VERBS:
             raise CommandError("unknown_verb", f"unknown request '{verb}' — a map node takes "
                                                f"{', '.join(PROGRAM_VERBS)}")
-        payload = query.payload.to_bytes() if query.payload is not None else b""
-        try:
-            args = self._gate.check(keys.Key.parse(str(query.key_expr)), payload) if payload else {}
-        except ValueError as exc:  # messages.BadMessage
-            raise CommandError("bad_request", f"{verb}: {exc}") from None
+        args = serving.arguments(self._gate, query, verb)
         unknown = [k for k in args if k != "robot"] if verb == "resume" else list(args)
         robot = args.get("robot", "")
         if unknown or not isinstance(robot, str):
