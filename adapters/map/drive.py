@@ -53,6 +53,7 @@ class Drive:
         self._angle: dict[str, float] = {}     # map → the last angle sent (joints/set)
         self._flying: dict[str, float] = {}    # map → when its unanswered command left (monotonic)
         self._stop_after: set[str] = set()     # maps whose command was on its way when a stop came
+        self._checked: set[tuple[str, str]] = set()  # (map, robot) whose joint and limits were checked
         self._lock = threading.Lock()          # (stops, shows and resumes come on Zenoh's threads)
         self._gate = messages.Gate(self.bus.limits)
         for robot in self.robots:
@@ -66,13 +67,13 @@ class Drive:
     def take(self, name: str, value: float | None, trigger: str | None) -> None:
         """Map ``name`` computed ``value`` (None: within its deadband) and its threshold's ``trigger``."""
         target = self.targets[name]
-        if target.triggered:
-            request = target.request() if trigger == "on" else None
-        else:
-            request = target.request(value) if value is not None and value != self._angle.get(name) else None
-        if request is None:
-            return
         with self._lock:
+            if target.triggered:
+                request = target.request() if trigger == "on" else None
+            else:
+                request = target.request(value) if value is not None and value != self._angle.get(name) else None
+            if request is None:
+                return
             if target.robot in self.halted:
                 self.node.count("halted")
                 return
@@ -107,6 +108,23 @@ class Drive:
                                                                                           outcome), TIMEOUT_S)
         return wait
 
+    def learned(self, robot: str, joints: dict[str, tuple[float, float]]) -> None:
+        """``robot``'s joints and their limits (from its info): a map whose joint it lacks, or
+        whose ``to`` goes past the joint's limits, is said once (its owner would refuse it)."""
+        for name, target in self.targets.items():
+            if target.robot != robot or target.command != "joints/set" or (name, robot) in self._checked:
+                continue
+            self._checked.add((name, robot))
+            limits = joints.get(target.joint)
+            to = self.node.chains[name].spec.to
+            if limits is None and joints:
+                log.warning("%s: map '%s': %s has no joint '%s' — its joints: %s", self.node.name, name, robot,
+                            target.joint, ", ".join(sorted(joints)))
+            elif limits is not None and not limits[0] <= min(to) <= max(to) <= limits[1]:
+                log.warning("%s: map '%s': to = [%g, %g] goes past %s's limits [%g, %g]: %s refuses the angles "
+                            "past them (nothing moves) — give the map a to within them", self.node.name, name,
+                            *to, target.joint, *limits, robot)
+
     @property
     def busy(self) -> bool:
         """Whether a command waits to be sent."""
@@ -120,9 +138,10 @@ class Drive:
             self._flying.pop(name, None)
             stop_after = name in self._stop_after and target.robot in self.halted
             self._stop_after.discard(name)
+            if isinstance(outcome, CommandError):
+                self._angle.pop(name, None)  # (sent again when the map computes it again)
         if isinstance(outcome, CommandError):
             self.node.count("commands_refused")
-            self._angle.pop(name, None)  # (sent again when the map computes it again)
             self.node.warn(f"refused:{name}", f"map '{name}': {target.robot} refused {target.command} "
                                               f"{_args(request)}: {outcome.code}: {outcome.message} — nothing moved")
         else:

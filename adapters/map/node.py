@@ -80,11 +80,12 @@ class MapNode(Adapter):
         self._info = InfoRequests(self.bus, lambda robot, info: self._queue.put((INFO, (robot, info))),
                                   lambda robot, text: self.warn("info", text), INFO_RETRY_S)
         self._streams = self.own(Streams(self.bus, cfg.patterns, self._queue, per_joint_keys=cfg.per_joint_keys))
-        for robot in {s.pattern.split("/")[0] for spec in cfg.specs for s in spec.sources}:
-            if keys.is_concrete(robot):
-                self._info.ask(robot)  # (before its first sample: the first values are mapped, not waited for)
         targets = {name: chain.spec.target for name, chain in self.chains.items() if chain.spec.target}
         self._drive = Drive(self, targets) if targets else None  # (maps that drive robots: drive.py)
+        for robot in {s.pattern.split("/")[0] for spec in cfg.specs for s in spec.sources} | {
+                t.robot for t in targets.values()}:
+            if keys.is_concrete(robot):
+                self._info.ask(robot)  # (before its first sample: the first values are mapped, not waited for)
         self.spawn(self._run, "map")
 
     def output_key(self, name: str) -> str:
@@ -232,6 +233,8 @@ class MapNode(Adapter):
             return
         self._ranges[robot] = Ranges(info)
         self._bindings.clear()  # (components by axis name are worked out again with this info)
+        if self._drive is not None:
+            self._drive.learned(robot, self._ranges[robot].joints)
 
     # -- silence ----------------------------------------------------------------------
 

@@ -78,6 +78,10 @@ def test_a_closed_show_sends_none_and_an_open_one_again(net):
 def test_an_angle_past_the_limits_is_refused_by_the_owner_and_said(net, caplog):
     rig = Rig(net)
     wait_for(lambda: rig.bus.query(keys.program("moves", "status"), timeout=0.5), what="the map node")
+    # said once the robot's info comes, before any value: the map's to goes past the joint's limits
+    wait_for(lambda: "map 'wide': to = [0, 3] goes past HeadYaw's limits [-2.08567, 2.08567]: pepper refuses "
+                     "the angles past them" in caplog.text, what="the warning about to")
+    assert "map 'look'" not in caplog.text
     with caplog.at_level(logging.WARNING):
         rig.knob("c", 1.0)  # 3 rad: HeadYaw's limits are ±2.0857
         wait_for(lambda: rig.node.stats["commands_refused"] == 1, what="the refusal")
