@@ -8,7 +8,8 @@ from __future__ import annotations
 import logging
 import time
 
-from sonibus.bus import client, keys
+from sonibus.bus import client, codec, keys
+from sonibus.bus.commands import ok_reply
 from sonibus.bus.errors import CommandError
 
 from ..conftest import wait_for
@@ -112,3 +113,35 @@ def test_resume_takes_only_the_robots_the_node_drives(net):
     assert rig.program("resume", {}) == {"resumed": [], "robots": ["pepper"], "halted": {}, "closed": [],
                                          "maps": {"look": "pepper joints/set HeadYaw", "bow": "pepper posture Crouch",
                                                   "wide": "pepper joints/set HeadYaw"}}
+
+
+def test_a_command_on_its_way_when_the_robot_is_stopped_is_followed_by_a_stop_of_the_nodes_own(net):
+    # an owner that holds joints/set unanswered (a busy robot) and says a stop as a real one does: the map's
+    # joints/set may be carried out after the operator's stop, so the node stops the robot once more
+    owner = net.bus("owner")
+    held, stops = [], []
+
+    def serve(query) -> None:
+        verb = keys.command_verb(str(query.key_expr))
+        if verb == "stop":
+            stops.append(time.time())
+            query.reply(keys.command("pepper", "stop"), codec.encode(ok_reply("stop", {"held": True})))
+        else:
+            held.append(query)  # (answered below, after the stop)
+
+    queryable = owner.session.declare_queryable("pepper/cmd/**", serve)
+    node = map_node(net, TEXT, node="moves")
+    lab = net.bus("lab")
+    wait_for(lambda: lab.query(keys.program("moves", "status"), timeout=0.5), what="the map node")
+    lab.put(keys.derived("lab", "knob", "a"), {"t": time.time(), "seq": 1, "v": 1.0})
+    wait_for(lambda: held, what="the map's joints/set at the owner")
+    owner.put(keys.event("pepper", "command"), {"t": time.time(), "kind": "command", "verb": "stop", "args": {},
+                                                "ok": True})
+    wait_for(lambda: "pepper" in node._drive.halted, what="the stop heard")
+    assert stops == []
+    query = held.pop()
+    query.reply(keys.command("pepper", "joints/set"), codec.encode(ok_reply("joints/set", {})))
+    del query
+    wait_for(lambda: stops, what="the node's own stop")
+    assert node.stats["stops_sent"] == 1
+    queryable.undeclare()
