@@ -52,12 +52,15 @@ class Commands:
                 self.seen.append(event)
                 self.changed.notify_all()
 
-    def next(self, count: int, timeout: float = 5.0) -> dict[str, Any]:
-        """The event after the first ``count``."""
+    def next(self, count: int, angle: float, speed: float, timeout: float = 5.0) -> dict[str, Any]:
+        """The first event after the first ``count`` that moved HeadPitch to ``angle`` at ``speed``."""
+        def found() -> dict[str, Any] | None:
+            return next((e for e in self.seen[count:] if e["args"].get("angles") == [angle]
+                         and e["args"].get("speed") == speed), None)
         with self.changed:
-            if not self.changed.wait_for(lambda: len(self.seen) > count, timeout):
-                raise RuntimeError(f"no joints/set within {timeout} s")
-            return self.seen[count]
+            if not self.changed.wait_for(found, timeout):
+                raise RuntimeError(f"no joints/set to {angle} within {timeout} s")
+            return found()  # type: ignore[return-value]
 
 
 def main() -> None:
@@ -72,6 +75,7 @@ def main() -> None:
     robot_session = open_session(BusConfig(multicast=False, listen=(endpoint,)))
     node_session = open_session(BusConfig(multicast=False, connect=(endpoint,)))
     clapped: list[float] = []
+    played = [0, 0]  # frames JACK played, and how many at the last clap
     armed = threading.Event()
     clapper = jack.Client("clapper", no_start_server=True)
     port = clapper.outports.register("clap")
@@ -83,6 +87,8 @@ def main() -> None:
             armed.clear()
             out[0] = 0.9
             clapped.append(time.time())
+            played[1] = played[0]
+        played[0] += frames
 
     clapper.set_process_callback(process)
     clapper.activate()
@@ -115,8 +121,8 @@ def main() -> None:
             count = len(commands.seen)
             sent = time.time()
             client.ask(watch, "pepper", "joints/set", {"names": ["HeadPitch"], "angles": [0.3 * (i % 2)],
-                                                       "speed": 0.6}, lambda outcome: None, 2.0)
-            direct.append(commands.next(count)["t"] - sent)
+                                                       "speed": 0.5}, lambda outcome: None, 2.0)
+            direct.append(commands.next(count, 0.3 * (i % 2), 0.5)["t"] - sent)  # (the map's go at 0.6)
             time.sleep(0.05)
         client.send_command(watch, "pepper", "joints/set", {"names": ["HeadPitch"], "angles": [0.0]})
         time.sleep(0.3)
@@ -125,10 +131,14 @@ def main() -> None:
         for _ in range(args.claps):
             count = len(commands.seen)
             armed.set()
-            down = commands.next(count)
+            down = commands.next(count, 0.3, 0.6)
             nod.append(down["t"] - clapped[-1])
-            commands.next(count + 1)  # (its return to 0, after the onset's hold)
-            time.sleep(0.1)
+            commands.next(count, 0.0, 0.6)  # (its return to 0, after the onset's hold)
+            deadline = time.monotonic() + 5
+            while played[0] - played[1] < 0.3 * 48000:  # (past the onset's hold by JACK's clock, which can lag)
+                if time.monotonic() > deadline:
+                    raise RuntimeError("JACK's clock did not run 0.3 s in 5 s")
+                time.sleep(0.01)
         machine = f"{os.cpu_count()} cores, load {os.getloadavg()[0]:.2f}"
         result: dict[str, Any] = {"claps": args.claps, "machine": machine, "clap_to_joints_set": latency_stats(nod),
                                   "joints_set_direct": latency_stats(direct), "period_ms": 256 / 48}

@@ -12,8 +12,9 @@ processor does:
 each described with its unit and range on ``<robot>/info/derived``, so a map takes
 them as sources with nothing typed (``pepper/derived/onset/speaker``). A sender that
 sends no digital silence (the jack adapter) stops sending when its input is quiet:
-after ``quiet_ms`` without a chunk the stream is said silent once (-100 dB, 0 Hz,
-onset 0), not held at its last loud value.
+after ``quiet_ms`` without a chunk the stream is said silent (-100 dB, 0 Hz, onset 0)
+every ``quiet_ms`` while it lasts, not held at its last loud value; so a map hears a
+quiet room as a signal, and only a node that is gone as silence.
 """
 
 from __future__ import annotations
@@ -47,8 +48,10 @@ class _Stream:
     seq: int = 0
     heard: float = 0.0          # monotonic time of its last chunk (0: none yet)
     onset_until: float = 0.0    # chunk time (s) until which the onset value is 1
-    quiet: bool = True          # said silent since its last chunk
-    onset: float = 0.0          # the onset value said last
+    quiet: bool = True          # silent since its last chunk
+    said: float = 0.0           # monotonic time of its last values published
+    last_t: float = 0.0         # their t: each stream's t only grows (a sink's pacing skips a t that goes back)
+    duration: float = 0.0       # of its last chunk (s)
     publishers: dict[str, Any] = field(default_factory=dict)
 
 
@@ -99,10 +102,9 @@ class Hear(Adapter):
                     self._hear(state, chunk)
             now = time.monotonic()
             for state in self._streams.values():
-                if not state.quiet and now - state.heard >= quiet_s:
-                    self._silence(state)
-                elif state.quiet and state.onset and time.time() >= state.onset_until:
-                    self._publish(state, time.time(), FLOOR_DB, 0.0, 0.0)  # (a clap, then silence: its onset ends)
+                quiet = max(quiet_s, 2 * state.duration)  # (a sender of 100 ms chunks is not silent between them)
+                if now - state.heard >= quiet and now - state.said >= quiet:
+                    self._silence(state, quiet)
 
     def _hear(self, state: _Stream, chunk: AudioChunk) -> None:
         samples = chunk.samples().astype(np.float32) / FULL_SCALE
@@ -111,21 +113,26 @@ class Hear(Adapter):
             state.onset_until = chunk.t + self.config.onset_hold_ms / 1000.0
             self.count("onsets")
         centroid = min(centroid_hz(samples, chunk.rate), self.config.centroid_max_hz) if db > FLOOR_DB else 0.0
-        state.heard, state.quiet = time.monotonic(), False
+        state.heard, state.quiet, state.duration = time.monotonic(), False, chunk.duration
         self._publish(state, chunk.t, db, centroid, 1.0 if chunk.t < state.onset_until else 0.0)
         self.count("chunks")
         self.record_latency(time.time() - chunk.t)
 
-    def _silence(self, state: _Stream) -> None:
-        """No chunk for ``quiet_ms``: the stream is silent (said once; an onset still lasts its hold)."""
-        state.quiet = True
-        state.onsets.quiet()
-        self.count("quiet")
-        t = time.time()
-        self._publish(state, t, FLOOR_DB, 0.0, 1.0 if t < state.onset_until else 0.0)
+    def _silence(self, state: _Stream, quiet: float) -> None:
+        """No chunk for ``quiet_ms``: the stream is silent, said every ``quiet_ms`` while it lasts (a
+        signal, not a gap: a map tells a quiet room from a node that is gone); an onset lasts its hold."""
+        if not state.quiet:
+            state.quiet = True
+            state.onsets.quiet()
+            self.count("quiet")
+        # stamped ``quiet`` ago: the next chunk's t (its first sample's time: before it arrived) must
+        # not be older than this, or the sinks' pacing would skip the clap that ends the silence
+        t = time.time() - quiet
+        self._publish(state, t, FLOOR_DB, 0.0, 1.0 if time.time() < state.onset_until else 0.0)
 
     def _publish(self, state: _Stream, t: float, db: float, centroid: float, onset: float) -> None:
         state.seq += 1
-        state.onset = onset
+        state.said = time.monotonic()
+        t = state.last_t = max(t, state.last_t + 1e-6)
         for feature, value in (("loudness", db), ("centroid", centroid), ("onset", onset)):
             state.publishers[feature].put(codec.encode({"t": t, "seq": state.seq, "v": value}))

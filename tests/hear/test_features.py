@@ -4,6 +4,7 @@ else is); and the ``hear`` node on a real bus publishes them with their ranges."
 
 from __future__ import annotations
 
+import itertools
 import math
 import time
 
@@ -79,16 +80,32 @@ def test_the_node_publishes_the_features_of_a_sine_with_their_ranges(net):
     assert (described["loudness/mic"]["unit"], described["loudness/mic"]["min"], described["loudness/mic"]["max"]) \
         == ("dB", FLOOR_DB, 0.0)
     assert described["centroid/mic"]["unit"] == "Hz" and described["onset/mic"]["max"] == 1.0
+    # before any audio: silence, said as a signal (-100 dB), not nothing
+    wait_for(lambda: heard.on("pepper/derived/loudness/mic"), what="the silence before any audio")
+    assert heard.on("pepper/derived/loudness/mic")[0]["v"] == FLOOR_DB
+    times = []
     for seq in range(5):  # 1 kHz at half scale, 10 ms chunks of 16 kHz (whole periods)
         chunk = AudioChunk.from_samples(time.time(), seq, 16000, sine(1000, 0.5, 160, 16000))
+        times.append(chunk.t)
         publisher.put(codec.encode(chunk.message()))
-    wait_for(lambda: len(heard.on("pepper/derived/centroid/mic")) >= 5, what="five centroids")
-    loudness = [m["v"] for m in heard.on("pepper/derived/loudness/mic")]
-    assert loudness[0] == pytest.approx(20 * math.log10(0.5 / math.sqrt(2)), abs=0.01)  # (int16 rounding)
-    assert heard.on("pepper/derived/centroid/mic")[-1]["v"] == pytest.approx(1000, rel=0.05)  # (100 Hz bins)
-    assert [m["v"] for m in heard.on("pepper/derived/onset/mic")][:2] == [1.0, 1.0]  # (within the onset's hold)
+
+    def of_chunks(feature: str) -> list[float]:
+        return [m["v"] for m in heard.on(f"pepper/derived/{feature}/mic") if m["t"] in times]
+
+    wait_for(lambda: len(of_chunks("centroid")) == 5, what="five centroids")
+    assert of_chunks("loudness") == pytest.approx([20 * math.log10(0.5 / math.sqrt(2))] * 5, abs=0.01)  # (int16)
+    assert of_chunks("centroid")[-1] == pytest.approx(1000, rel=0.05)  # (100 Hz bins)
+    assert of_chunks("onset") == [1.0] * 5  # (the first an onset, the others within its hold)
     # no chunk for quiet_ms: the stream is said silent once, its onset over after the hold
     wait_for(lambda: heard.on("pepper/derived/onset/mic")[-1]["v"] == 0.0, what="the onset's end")
     assert heard.on("pepper/derived/loudness/mic")[-1]["v"] == FLOOR_DB
     assert node.stats["onsets"] == 1
+    # a chunk after the silence, stamped (as a chunk is) with its first sample's time, before it arrived:
+    # the stream's t still only grows, so no sink's pacing skips it as a sample from the past
+    chunk = AudioChunk.from_samples(time.time() - 0.02, 5, 16000, sine(1000, 0.5, 160, 16000))
+    publisher.put(codec.encode(chunk.message()))
+    wait_for(lambda: node.stats["onsets"] == 2, what="the second onset")
+    wait_for(lambda: heard.on("pepper/derived/onset/mic")[-1]["v"] == 0.0, what="its end")
+    stamps = [m["t"] for m in heard.on("pepper/derived/onset/mic")]
+    assert all(a < b for a, b in itertools.pairwise(stamps)), stamps
     publisher.undeclare()

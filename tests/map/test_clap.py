@@ -38,6 +38,8 @@ class Clapper:
         self.client = jack_client.Client("clapper", no_start_server=True, servername=server)
         self.port = self.client.outports.register("clap")
         self.clapped: list[float] = []   # wall-clock time of each impulse's block
+        self.frames = 0                  # frames played: JACK's clock, which the chunks' times follow
+        self._last = -1 << 30            # self.frames at the last impulse
         self._armed = threading.Event()
         self.client.set_process_callback(self._process)
         self.client.activate()
@@ -49,9 +51,14 @@ class Clapper:
             self._armed.clear()
             out[0] = 0.9
             self.clapped.append(time.time())
+            self._last = self.frames
+        self.frames += frames
 
     def clap(self) -> float:
-        """One impulse; the wall-clock time of the block that played it."""
+        """One impulse, 0.3 s of JACK's clock after the last (past the onset's hold, which the hear node
+        measures by the chunks' times: a loaded dummy driver runs slower than the wall clock); the
+        wall-clock time of the block that played it."""
+        wait_for(lambda: self.frames - self._last >= 0.3 * self.client.samplerate, what="0.3 s of JACK's clock")
         count = len(self.clapped)
         self._armed.set()
         wait_for(lambda: len(self.clapped) > count, what="the impulse played")
@@ -84,7 +91,6 @@ def test_a_clap_nods_the_robot_and_a_stop_holds_it_until_resumed(net, jack, figu
     try:
         watch = net.bus("watch")
         events, frames = Listen(watch, "pepper/events/command"), Listen(watch, "pepper/frame")
-        derived = Listen(watch, "pepper/derived/**")
         built(net, text, "robot", SimRobot, speaker=False, body_sound=False)
         built(net, text, "jack", JackBridge, connect_inputs=["clapper:clap"])
         ears = built(net, text, "ears", Hear)
@@ -95,12 +101,14 @@ def test_a_clap_nods_the_robot_and_a_stop_holds_it_until_resumed(net, jack, figu
         low, high = LIMITS["HeadPitch"]
 
         # a clap: the head goes down to 0.3 (to[1]), within its limits
+        before = len(sets(events))  # (the quiet room's 0 may have gone already: the joint follows the signal)
         clapped = clapper.clap()
-        wait_for(lambda: sets(events), timeout=5, what="a joints/set from the map")
-        first = sets(events)[0]
+        first = wait_for(lambda: next((m for m in sets(events)[before:] if m["args"]["angles"] == [0.3]), None),
+                         timeout=5, what="the map's joints/set of the clap")
         assert first["ok"] and first["args"]["names"] == ["HeadPitch"] and first["args"]["angles"] == [0.3]
         assert first["args"]["speed"] == 0.6
         figure("clap to joints/set carried out", (first["t"] - clapped) * 1000, "ms")
+        assert moves.stats.get("skipped", 0) == 0  # (the onset after a silence is no sample going back in time)
         assert first["t"] - clapped < 0.5  # (a generous bound: measured ~25-40 ms here)
         wait_for(lambda: any(abs(v - head_moves(frames, 0)[0]) > 0.01 for v in head_moves(frames, clapped)),
                  what="the head moving")
@@ -112,10 +120,8 @@ def test_a_clap_nods_the_robot_and_a_stop_holds_it_until_resumed(net, jack, figu
         stopped = client.send_command(watch, "pepper", "stop")
         assert stopped["held"] is True
         stop_t = time.time()
-        wait_for(lambda: derived.on("pepper/derived/onset/speaker")[-1]["v"] == 0.0, timeout=5,
-                 what="the clap's onset over (the map's return to 0: held back)")
-        wait_for(lambda: moves.stats["received"] == len(derived.on("pepper/derived/onset/speaker")),
-                 what="the map took it")
+        wait_for(lambda: moves.chains["nod"].value == 0.0 and moves.stats["halted"] >= 1, timeout=5,
+                 what="the clap's onset over, the map's return to 0 held back")
         held = moves.stats["halted"]
         assert held >= 1
         clapper.clap()  # another clap while halted: heard, mapped, not sent
@@ -131,9 +137,9 @@ def test_a_clap_nods_the_robot_and_a_stop_holds_it_until_resumed(net, jack, figu
         resumed = run_cli("resume", "moves", *net.cli_args())
         assert resumed.returncode == 0, resumed.stderr
         assert '"resumed": ["pepper"]' in resumed.stdout
-        count = len(sets(events))
+        count = len(sets(events))  # (the map's output now, 0 in the quiet: sent at once, the joint follows again)
         clapper.clap()
-        wait_for(lambda: len(sets(events)) > count, timeout=5, what="a joints/set after the resume")
-        assert sets(events)[count]["args"]["angles"] == [0.3]
+        wait_for(lambda: [0.3] in [m["args"]["angles"] for m in sets(events)[count:]], timeout=5,
+                 what="the nod after the resume")
     finally:
         clapper.close()

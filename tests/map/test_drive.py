@@ -85,11 +85,11 @@ def test_an_angle_past_the_limits_is_refused_by_the_owner_and_said(net, caplog):
     assert "map 'look'" not in caplog.text
     with caplog.at_level(logging.WARNING):
         rig.knob("c", 1.0)  # 3 rad: HeadYaw's limits are ±2.0857
-        wait_for(lambda: rig.node.stats["commands_refused"] == 1, what="the refusal")
+        wait_for(lambda: "map 'wide': pepper refused joints/set names = ['HeadYaw'], angles = [3.0], speed = 0.3: "
+                         "out_of_range" in caplog.text, what="the refusal said")
     refused = rig.commands("joints/set")[0]
     assert refused["ok"] is False and "outside its limits" in refused["error"]
-    assert "map 'wide': pepper refused joints/set names = ['HeadYaw'], angles = [3.0], speed = 0.3: " \
-           "out_of_range" in caplog.text
+    assert rig.node.stats["commands_refused"] == 1
 
 
 def test_a_threshold_sends_a_posture_once_each_time_it_turns_on(net):
