@@ -25,8 +25,7 @@ from pathlib import Path
 from typing import Any
 
 from common import free_port, latency_stats, write
-from midi_rate import start_jack
-from sink_throughput import stop_process
+from midi_rate import start_jack, stop_jack
 
 from sonibus.adapters.hear import Hear
 from sonibus.adapters.jack import JackBridge
@@ -161,9 +160,7 @@ def main() -> None:
         clapper.close()
         node_session.close()
         robot_session.close()
-        stop_process(server, timeout=5)
-        for leftover in Path("/dev/shm").glob(f"jack_sem.*_{os.environ['JACK_DEFAULT_SERVER']}_*"):
-            leftover.unlink(missing_ok=True)
+        stop_jack(server)
 
 
 if __name__ == "__main__":

@@ -87,6 +87,7 @@ def test_random_source_values_never_make_a_command_outside_the_limits_or_a_nan(s
         out = chain.compute(t)
         if out is None or out.value is None:
             continue
+        assert math.isfinite(out.value), value  # (the map's own output, published beside the command)
         request = target.request(out.value)
         command = commands.validate("joints/set", request, PEPPER)  # the owner's check: raises if refused
         angle = command.args["angles"][0]
