@@ -207,6 +207,11 @@ class Drive:
             log.info("%s: resumed: its maps drive %s again", self.node.name, ", ".join(resumed))
         return resumed
 
+    def metrics(self) -> dict[str, Any]:
+        """For the node's stats: the robots halted (wall-clock time of their stop), and closed."""
+        with self._lock:
+            return {"halted_robots": dict(self.halted), "closed_robots": dict.fromkeys(self.closed, 1)}
+
     def status(self) -> dict[str, Any]:
         with self._lock:
             return {"robots": list(self.robots), "halted": dict(self.halted), "closed": sorted(self.closed),

@@ -107,7 +107,8 @@ class MapNode(Adapter):
         """Each map's last output, and the maps silent now (seconds since their last source value)."""
         now = time.monotonic()
         return {"outputs": {n: c.value for n, c in list(self.chains.items()) if c.value is not None},
-                "silent_maps": {n: round(now - self._heard.get(n, self._started), 1) for n in list(self._silent)}}
+                "silent_maps": {n: round(now - self._heard.get(n, self._started), 1) for n in list(self._silent)},
+                **(self._drive.metrics() if getattr(self, "_drive", None) is not None else {})}
 
     # -- the loop ---------------------------------------------------------------------
 

@@ -65,6 +65,7 @@ def test_a_closed_show_sends_none_and_an_open_one_again(net):
     assert rig.commands("joints/set")[0]["args"]["angles"] == [0.5]
     rig.bus.put(keys.event("pepper", "show"), {"t": time.time(), "kind": "show", "state": "closed"})
     wait_for(lambda: "pepper" in rig.node._drive.closed, what="the show's closing heard")
+    assert rig.node.metrics()["closed_robots"] == {"pepper": 1}
     for value in (0.0, 0.25, 0.75):
         rig.knob("a", value)
     wait_for(lambda: rig.node.stats["closed"] == 3, what="three values held back")
