@@ -17,7 +17,6 @@ Writes bench/results/midi_in_latency.json and prints p50/p99 in µs and their ra
 from __future__ import annotations
 
 import argparse
-import os
 import tempfile
 import threading
 import time
@@ -25,8 +24,7 @@ from pathlib import Path
 from typing import Any
 
 from common import latency_stats, write
-from midi_rate import start_jack
-from sink_throughput import stop_process
+from midi_rate import start_jack, stop_jack
 
 
 def consume(queue: Any, arrived: dict[int, float], count: int, stop: threading.Event) -> None:
@@ -95,9 +93,7 @@ def main() -> None:
     finally:
         stop.set()
         sender.delete()
-        stop_process(server, timeout=5)
-        for leftover in Path("/dev/shm").glob(f"jack_sem.*_{os.environ['JACK_DEFAULT_SERVER']}_*"):
-            leftover.unlink(missing_ok=True)
+        stop_jack(server)
 
 
 if __name__ == "__main__":

@@ -118,6 +118,13 @@ def start_jack(log: Path) -> subprocess.Popen:
     return server
 
 
+def stop_jack(server: subprocess.Popen) -> None:
+    """Stop the server ``start_jack`` started, and remove what it leaves behind."""
+    stop_process(server, timeout=5)
+    for leftover in Path("/dev/shm").glob(f"jack_sem.*_{os.environ['JACK_DEFAULT_SERVER']}_*"):
+        leftover.unlink(missing_ok=True)  # jackd 1.9 leaves its clients' semaphores
+
+
 def read_midi(port: int, ready: Any) -> None:
     """Count MIDI messages arriving on JACK input ``bench-reader:in``; answer the control
     protocol of ``sink_throughput.receive`` on UDP ``port``."""
@@ -283,9 +290,7 @@ def main() -> None:
         finally:
             if reader is not None:
                 reader.close()
-            stop_process(server, timeout=5)
-            for leftover in Path("/dev/shm").glob(f"jack_sem.*_{os.environ['JACK_DEFAULT_SERVER']}_*"):
-                leftover.unlink(missing_ok=True)  # jackd 1.9 leaves its clients' semaphores
+            stop_jack(server)
         xruns = (folder / "jackd.log").read_text(errors="replace").count("XRun")
     refused = [s["offered_per_s"] for s in sink if s["sink"].get("bad") or not s["delivered"]]
     if refused:  # a harness the gate refuses (it once served a partial robot info) must not read as a figure

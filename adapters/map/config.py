@@ -19,12 +19,13 @@ from sonibus.bus.options import bad
 
 from .curves import CURVES, MAX_POINTS, Curve, Exp, Linear, Log, Points, S, default_base
 from .expr import Expression
+from .targets import Target, parse_target
 
 MAX_MAPS = 256     # maps of one node
 MAX_SOURCES = 64   # sources of one map (a hand's x, y, z and a few joints: tens at most)
 SECTIONS = ("joints", "derived", "events")  # what a source may be
 STEPS = ("source", "sources", "expr", "from", "calibrate_s", "to", "unit", "curve", "base", "points", "invert",
-         "clip", "smooth_ms", "one_euro", "rate_limit", "deadband", "threshold", "enabled")
+         "clip", "smooth_ms", "one_euro", "rate_limit", "deadband", "threshold", "enabled", "target")
 ONE_EURO = ("min_cutoff", "beta", "d_cutoff")
 _NAME = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
 _AXIS = re.compile(r"^(.*/[^/.]+)\.([A-Za-z0-9_]+)$")
@@ -65,6 +66,7 @@ class MapSpec:
     deadband: float = 0.0
     threshold: tuple[float, float] | None = None          # on, off (off < on), in destination units
     enabled: bool = True
+    target: Target | None = None                          # a robot command it drives (targets.py)
 
     @property
     def low(self) -> float:
@@ -158,6 +160,8 @@ def parse_map(name: str, table: Any) -> MapSpec:
         if not off < on:
             raise bad(f"{where}.threshold", f"[{on:g}, {off:g}]: [on, off] with off below on (the hysteresis)")
         spec["threshold"] = (on, off)
+    if "target" in table:
+        spec["target"] = parse_target(where, table["target"], "threshold" in table)
     return MapSpec(**spec)
 
 

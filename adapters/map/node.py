@@ -31,6 +31,7 @@ from sonibus.bus.streams import Incoming, Streams
 from . import ranges as spans
 from .chain import Chain
 from .config import MapConfig, Source
+from .drive import Drive
 from .ranges import Ranges
 
 log = logging.getLogger(__name__)
@@ -55,7 +56,7 @@ class MapNode(Adapter):
 
     Config = MapConfig
     counters = ("triggers", "waiting_info", "not_finite", "expr_errors", "clamped", "bad_source",
-                "silent", "unseen", "capped")
+                "silent", "unseen", "capped", *Drive.counters)
 
     def _start(self) -> None:
         cfg: MapConfig = self.config
@@ -79,7 +80,10 @@ class MapNode(Adapter):
         self._info = InfoRequests(self.bus, lambda robot, info: self._queue.put((INFO, (robot, info))),
                                   lambda robot, text: self.warn("info", text), INFO_RETRY_S)
         self._streams = self.own(Streams(self.bus, cfg.patterns, self._queue, per_joint_keys=cfg.per_joint_keys))
-        for robot in {s.pattern.split("/")[0] for spec in cfg.specs for s in spec.sources}:
+        targets = {name: chain.spec.target for name, chain in self.chains.items() if chain.spec.target}
+        self._drive = Drive(self, targets) if targets else None  # (maps that drive robots: drive.py)
+        for robot in {s.pattern.split("/")[0] for spec in cfg.specs for s in spec.sources} | {
+                t.robot for t in targets.values()}:
             if keys.is_concrete(robot):
                 self._info.ask(robot)  # (before its first sample: the first values are mapped, not waited for)
         self.spawn(self._run, "map")
@@ -103,19 +107,22 @@ class MapNode(Adapter):
         """Each map's last output, and the maps silent now (seconds since their last source value)."""
         now = time.monotonic()
         return {"outputs": {n: c.value for n, c in list(self.chains.items()) if c.value is not None},
-                "silent_maps": {n: round(now - self._heard.get(n, self._started), 1) for n in list(self._silent)}}
+                "silent_maps": {n: round(now - self._heard.get(n, self._started), 1) for n in list(self._silent)},
+                **(self._drive.metrics() if getattr(self, "_drive", None) is not None else {})}
 
     # -- the loop ---------------------------------------------------------------------
 
     def _run(self) -> None:
+        wait = 0.2
         while not self.stopping.is_set():
-            for key, payload in self._queue.drain(timeout=0.2):
+            for key, payload in self._queue.drain(timeout=wait):
                 if key == INFO:
                     self._learn(*payload)
                     continue
                 message = self._streams.take(key, payload, self.count, self.warn)
                 if message is not None:
                     self._take(message)
+            wait = min(0.2, self._drive.flush()) if self._drive is not None else 0.2
             self._watch(time.monotonic())
 
     def _take(self, message: Incoming) -> None:
@@ -171,6 +178,8 @@ class MapNode(Adapter):
         chain.frozen.clear()
         if out is None:
             return False
+        if self._drive is not None and chain.spec.target is not None:
+            self._drive.take(name, out.value, out.trigger)
         if name in self._silent:
             del self._silent[name]
             self._back.append(name)
@@ -225,6 +234,8 @@ class MapNode(Adapter):
             return
         self._ranges[robot] = Ranges(info)
         self._bindings.clear()  # (components by axis name are worked out again with this info)
+        if self._drive is not None:
+            self._drive.learned(robot, self._ranges[robot].joints)
 
     # -- silence ----------------------------------------------------------------------
 

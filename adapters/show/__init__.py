@@ -35,9 +35,9 @@ import jsonschema
 import zenoh
 
 from sonibus import schemas
-from sonibus.bus import codec, keys, messages
+from sonibus.bus import keys, messages
 from sonibus.bus.adapter import Adapter
-from sonibus.bus.commands import error_reply, ok_reply
+from sonibus.bus.commands import serving
 from sonibus.bus.errors import CommandError, OwnershipError
 
 from .clock import ShowClock
@@ -108,24 +108,14 @@ class Show(Adapter):
     def _serve(self, query: zenoh.Query) -> None:
         verb = str(query.key_expr)[len(keys.program(self.config.robot, "")):]
         self.count("requests")
-        try:
-            reply = ok_reply(verb, self._answer(verb, query))
-        except CommandError as exc:
-            self.count("requests_refused")
-            reply = error_reply(verb, exc)
-        query.reply(query.key_expr, codec.encode(reply), encoding=codec.ENCODING)
+        serving.answer(query, verb, lambda: self._answer(verb, query), lambda: self.count("requests_refused"))
 
     def _answer(self, verb: str, query: zenoh.Query) -> dict[str, Any]:
         """The result of a request, checked like any command (the gate, then its schema)."""
         if verb not in schemas.program_verbs():
             raise CommandError("unknown_verb", f"unknown request '{verb}' — a show takes "
                                                f"{', '.join(schemas.program_verbs())}")
-        payload = query.payload.to_bytes() if query.payload is not None else b""
-        try:
-            args = self._gate.check(keys.Key.parse(str(query.key_expr)), payload) if payload else {}
-        except ValueError as exc:  # messages.BadMessage
-            self.count("bad")
-            raise CommandError("bad_request", f"{verb}: {exc}") from None
+        args = serving.arguments(self._gate, query, verb, lambda: self.count("bad"))
         error = jsonschema.exceptions.best_match(schemas.validator(f"program/{verb}").iter_errors(args))
         if error is not None:
             where = ".".join(str(p) for p in error.absolute_path) or "arguments"

@@ -9,6 +9,7 @@ import re
 
 import pytest
 
+from sonibus.adapters.hear import Hear
 from sonibus.adapters.map import MapNode
 from sonibus.bus import ConfigError, config, runner
 
@@ -108,7 +109,7 @@ def test_every_toml_example_of_docs_mapping_md_builds():
         if "adapter = " not in block:  # (a map shown alone: in the cutoff example's node)
             block = '[nodes.sound]\nadapter = "map"\n' + block
         adapters = runner.build(config.parse(block, "docs/mapping.md"))
-        assert any(isinstance(a, MapNode) for a in adapters), block
+        assert any(isinstance(a, MapNode | Hear) for a in adapters), block  # (the hear node: its own block)
 
 
 def test_the_curves_picture_of_the_docs_is_what_the_curves_draw():
