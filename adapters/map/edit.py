@@ -104,9 +104,9 @@ class Editor:
         with self._lock:
             before = self._table(name)
             table = {**{k: v for k, v in before.items() if k not in unset}, **given}
-            if "points" in given and "curve" not in given:
-                table["curve"] = "points"
-            elif table.get("curve", "linear") != "points" and "points" not in given:
+            if "points" in given and "curve" not in given and "curve" in table:
+                table["curve"] = "points"   # (breakpoints given: the curve they draw)
+            elif table.get("curve", "points" if "points" in table else "linear") != "points":
                 table.pop("points", None)   # (a curve changed from breakpoints drops them)
             if table.get("curve") not in ("exp", "log") and "base" not in given:
                 table.pop("base", None)
