@@ -13,7 +13,7 @@ from typing import Any
 from sonibus.adapters.map import MapNode
 from sonibus.bus import config, keys, runner
 
-from ..conftest import wait_for
+from ..conftest import run_cli, wait_for
 from ..features.conftest import model_info
 from .conftest import pose
 from .test_node import Listen
@@ -167,3 +167,20 @@ def test_save_keeps_the_comments_and_a_restart_runs_the_edited_maps(net, owner, 
     node.stop()
     start(net, path)
     assert first_output(head, 0.0, time.time()) == 90.0
+
+
+def test_sonibus_map_lists_the_maps_with_their_live_values(net, owner, tmp_path):
+    path = tmp_path / "show.toml"
+    path.write_text(FILE, encoding="utf-8")
+    start(net, path)
+    head = Head(net, owner)
+    wait_for(lambda: first_output(head, 0.5, 0.0) == 75.0, what="the map at yaw 0.5 (x = 0.75 → 75)")
+    result = run_cli("map", "sound", "--count", "2", "--interval", "0.1", *net.cli_args())
+    assert result.returncode == 0, result.stderr
+    views = result.stdout.split("\n\n")
+    assert len(views) == 2, result.stdout
+    assert views[0].splitlines() == [
+        "sound/quiet  pepper/joints/HeadPitch  in     — ▕          ▏  out —   [0, 1] linear  DISABLED",
+        "sound/yaw    pepper/joints/HeadYaw    in 0.750 ▕███████▌  ▏  out 75  [0, 100] points"]
+    missing = run_cli("map", "nosuchnode", "--count", "1", "--timeout", "0.3", *net.cli_args())
+    assert missing.returncode == 3 and "no map node answered on nosuchnode/maps/list" in missing.stderr, missing
