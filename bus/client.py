@@ -68,7 +68,16 @@ def ask_program(bus: Bus, robot: str, verb: str, args: dict[str, Any], done: Cal
     key = keys.program(robot, verb)
     nobody = CommandError("program_not_found", f"{verb}: no program drives robot '{robot}' ({key} is served by "
                                                f"nothing) — start the node that does, on the same bus")
-    _send(bus, key, args, _Pending(robot, verb, done, timeout, nobody))
+    ask_key(bus, key, args, done, timeout, nobody)
+
+
+def ask_key(bus: Bus, key: str, args: dict[str, Any], done: Callable[[Outcome], None], timeout: float,
+            nobody: CommandError) -> None:
+    """Send a request to whatever serves ``key`` (``<robot>/program/<verb>``, a map node's
+    ``<node>/maps/<verb>``), answered as a command is: ``done`` gets the result or a
+    ``CommandError`` (``nobody`` when nothing serves the key), exactly once."""
+    name, _, rest = key.partition("/")
+    _send(bus, key, args, _Pending(name, rest.partition("/")[2], done, timeout, nobody))
 
 
 def _send(bus: Bus, selector: str, args: dict[str, Any], pending: _Pending, urgent: bool = False) -> None:

@@ -25,7 +25,7 @@ from sonibus.bus.errors import CommandError
 from sonibus.bus.text import printable
 from sonibus.bus.web import WebClient, WebServer, close_clients
 
-from . import activity, kiosk, protocol
+from . import activity, kiosk, maps, protocol
 from .auth import Guard
 from .config import Button, WebConfig
 from .kiosk import Stand
@@ -85,6 +85,7 @@ class Pages:
         self.sliders: Coalescer  # made when the server starts (it runs on its loop's clock)
         self._robots: str | None = None   # the latest robots message, for a page that connects
         self._stats: str | None = None
+        self._maps: str | None = None     # the latest maps message (the mappings panel: maps.py)
         app = web_server.app
         app.router.add_get("/", functools.partial(self._page, "operator"))
         app.router.add_get("/kiosk", functools.partial(self._page, "kiosk"))
@@ -105,6 +106,13 @@ class Pages:
 
     def stats(self, nodes: list[dict[str, Any]]) -> None:
         self.web.call(self._set_stats, _dumps({"type": "stats", "nodes": nodes}))
+
+    def maps(self, text: str) -> None:
+        """The map nodes' maps (a ``maps`` message), kept for a page that connects."""
+        self.web.call(self._set_maps, text)
+
+    def to_operators(self, text: str) -> None:
+        self.web.call(self._to_operators, [text])
 
     def event(self, robot: str, kind: str, event: dict[str, Any], shown: bool) -> None:
         """``robot``'s event (``shown``: to the operator's pages too)."""
@@ -164,7 +172,7 @@ class Pages:
             for state in [*self.stand.states.values(), *([self.stand.show] if self.stand.show else [])]:
                 client.send(state)
             return
-        for text in (self._robots, self._stats):
+        for text in (self._robots, self._stats, self._maps):
             if text is not None:
                 client.push(text)
 
@@ -185,6 +193,8 @@ class Pages:
             self._bad(client, request.id, "press is the kiosk's (/kiosk/ws); the operator sends command")
         elif isinstance(request, protocol.Stop):
             self._stop(client, request.id)
+        elif isinstance(request, protocol.MapRequest):
+            maps.forward(self.adapter, self, client, request, self.config.timeout)
         else:
             self._command(client, request)
 
@@ -286,6 +296,10 @@ class Pages:
 
     def _set_robots(self, text: str) -> None:
         self._robots = text
+        self._to_operators([text])
+
+    def _set_maps(self, text: str) -> None:
+        self._maps = text
         self._to_operators([text])
 
     def _set_stats(self, text: str) -> None:
