@@ -59,14 +59,14 @@ class Editor:
 
     def serve(self, query: zenoh.Query) -> None:
         """Answer one request on ``<node>/maps/<verb>``."""
-        verb = str(query.key_expr)[len(keys.maps(self.node.name, "")):]
+        verb = str(query.key_expr).split("/", 2)[2]  # (the query's key: `*/maps/list` asks every map node)
         self.node.count("requests")
         try:
             reply = ok_reply(verb, self.answer(verb, self._args(verb, query)))
         except CommandError as exc:
             self.node.count("requests_refused")
             reply = error_reply(verb, exc)
-        query.reply(query.key_expr, codec.encode(reply), encoding=codec.ENCODING)
+        query.reply(keys.maps(self.node.name, verb), codec.encode(reply), encoding=codec.ENCODING)
 
     def _args(self, verb: str, query: zenoh.Query) -> dict[str, Any]:
         if verb not in schemas.request_verbs("maps"):

@@ -196,8 +196,10 @@
       const maps = node.maps || [];
       const save = el("button", {type: "button", class: "map-save", title: `write the maps into ${node.file || "the file"}`,
         onclick: () => ask(node.node, "save", {}, `save ${node.node}'s maps`, (reply) => {
-          saved.textContent = reply.ok ? `saved into ${reply.result.file}` : reply.error;
-          saved.dataset.kind = reply.ok ? "ok" : "error";
+          const shown = document.querySelector(`.map-node[data-node="${CSS.escape(node.node)}"] .map-saved`);
+          if (!shown) return;  // (the node is gone from the page)
+          shown.textContent = reply.ok ? `saved into ${reply.result.file}` : reply.error;
+          shown.dataset.kind = reply.ok ? "ok" : "error";
         })}, "save");
       const saved = el("output", {class: "map-saved"});
       const block = el("div", {class: "map-node", dataset: {node: node.node}},
