@@ -9,7 +9,6 @@ refreshed in the terminal (each node's ``<node>/maps/list``).
 from __future__ import annotations
 
 import argparse
-import time
 from typing import Any
 
 from sonibus.bus import keys

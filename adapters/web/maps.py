@@ -12,7 +12,7 @@ from __future__ import annotations
 import functools
 import json
 import time
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 from sonibus.bus import client as bus_client
 from sonibus.bus import keys, messages

@@ -5,8 +5,8 @@ the messages the server sends (docs/web.md, "Protocol").
 Command(id=7, robot='pepper', verb='say', args={'text': 'hi'})
 >>> parse('{"type": "stop", "id": 8}')
 Stop(id=8)
->>> parse('{"type": "map", "id": 10, "node": "sound", "verb": "edit", "args": {"map": "cutoff", "set": {"to": [0, 1]}}}')
-MapRequest(id=10, node='sound', verb='edit', args={'map': 'cutoff', 'set': {'to': [0, 1]}})
+>>> parse('{"type": "map", "id": 10, "node": "sound", "verb": "undo", "args": {"map": "cutoff"}}')
+MapRequest(id=10, node='sound', verb='undo', args={'map': 'cutoff'})
 >>> try:
 ...     parse('{"type": "dance", "id": 9}')
 ... except BadMessage as exc:

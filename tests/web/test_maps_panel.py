@@ -74,6 +74,9 @@ def test_a_curve_dragged_on_the_page_runs_at_once_survives_save_and_a_restart(ne
     expected = 100 * Points(((0, 0), (x, y), (1, 1)))(0.5)
     assert first_output(head, 0.0, applied) == pytest.approx(expected, rel=1e-12)
     browser.wait(lambda: browser.text('.map[data-map="yaw"] .map-error') == "", "the refusal cleared")
+    shown = browser.wait(lambda: (browser.text('.map[data-map="yaw"] .map-out') or "50") != "50" and
+                         browser.text('.map[data-map="yaw"] .map-out'), "the new output on the page")
+    assert float(shown) == pytest.approx(expected, rel=1e-5)
     browser.screenshot("mapping-panel.png", tmp_path, publish=True)
 
     browser.find('.map-node[data-node="sound"] .map-save').click()
