@@ -23,12 +23,11 @@ from collections import deque
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-import jsonschema
 import zenoh
 
 from sonibus import schemas
 from sonibus.bus import codec, keys, messages
-from sonibus.bus.commands import error_reply, ok_reply
+from sonibus.bus.commands import error_reply, ok_reply, request_args
 from sonibus.bus.errors import CommandError, ConfigError
 
 from .config import MapSpec, parse_map
@@ -51,6 +50,7 @@ class Editor:
         self.node = node
         self.path = path                   # the installation file ("save"), None when not built from one
         self.tables = copy.deepcopy(tables)
+        self.specs = {name: parse_map(name, table) for name, table in self.tables.items()}  # (checked at load)
         self.history: deque[tuple[str, dict[str, Any]]] = deque(maxlen=MAX_UNDO)  # (map, its table before)
         self._lock = threading.Lock()      # (queries come on several Zenoh threads; learns end on the worker)
         self._gate = messages.Gate(node.bus.limits)
@@ -74,15 +74,11 @@ class Editor:
                                                f"{', '.join(schemas.request_verbs('maps'))}")
         payload = query.payload.to_bytes() if query.payload is not None else b""
         try:
-            args = self._gate.check(keys.Key.parse(str(query.key_expr)), payload) if payload else {}
-        except ValueError as exc:  # messages.BadMessage
-            self.node.count("bad")
-            raise CommandError("bad_request", f"{verb}: {exc}") from None
-        error = jsonschema.exceptions.best_match(schemas.validator(f"maps/{verb}").iter_errors(args))
-        if error is not None:
-            where = ".".join(str(p) for p in error.absolute_path) or "arguments"
-            raise CommandError("bad_request", f"{verb}: {where}: {error.message}")
-        return args
+            return request_args(self._gate, str(query.key_expr), payload, "maps", verb)
+        except CommandError as exc:
+            if isinstance(exc.__cause__, messages.BadMessage):
+                self.node.count("bad")
+            raise
 
     def answer(self, verb: str, args: dict[str, Any]) -> dict[str, Any]:
         """The result of a checked request (``CommandError`` when refused)."""
@@ -133,7 +129,8 @@ class Editor:
     def learn(self, name: str, seconds: float, source: str | None = None) -> dict[str, Any]:
         """Start learning a source's range (its first by default) from its next ``seconds`` of values."""
         with self._lock:
-            spec = parse_map(name, self._table(name))
+            self._table(name)
+            spec = self.specs[name]
         names = [s.name for s in spec.sources]
         source = source or names[0]
         if source not in names:
@@ -149,11 +146,11 @@ class Editor:
         """A learn ended (called by the node's worker): the range becomes the map's ``from``, an
         edit like any other (undo takes it back)."""
         with self._lock:
-            table = self.tables.get(name)
-        if table is None:
+            table, spec = self.tables.get(name), self.specs.get(name)
+        if table is None or spec is None:
             return
         ranges = table.get("from")
-        single = len(parse_map(name, table).sources) == 1
+        single = len(spec.sources) == 1
         value: Any = [span[0], span[1]] if single else {**(ranges if isinstance(ranges, dict) else {}),
                                                         source: [span[0], span[1]]}
         try:
@@ -180,10 +177,10 @@ class Editor:
     def listed(self) -> list[dict[str, Any]]:
         """Every map as ``list`` gives it: its table, whether it runs, its live values, its curve."""
         with self._lock:
-            tables = copy.deepcopy(self.tables)
+            tables, specs = copy.deepcopy(self.tables), dict(self.specs)
         out = []
         for name, table in tables.items():
-            spec = parse_map(name, table)
+            spec = specs[name]
             out.append({"name": name, "table": table, "enabled": spec.enabled, "unit": spec.unit,
                         "to": list(spec.to), "sources": [s.name for s in spec.sources],
                         "curve": [[x, spec.curve(x)] for x in (i / (CURVE_SAMPLES - 1) for i in range(CURVE_SAMPLES))],
@@ -206,5 +203,5 @@ class Editor:
         except ConfigError as exc:
             raise CommandError("bad_request", f"map '{name}': {exc}") from None
         self.node.replace(spec)
-        self.tables[name] = table
+        self.tables[name], self.specs[name] = table, spec
         return spec

@@ -31,13 +31,12 @@ from collections.abc import Callable
 from datetime import datetime
 from typing import Any
 
-import jsonschema
 import zenoh
 
 from sonibus import schemas
 from sonibus.bus import codec, keys, messages
 from sonibus.bus.adapter import Adapter
-from sonibus.bus.commands import error_reply, ok_reply
+from sonibus.bus.commands import error_reply, ok_reply, request_args
 from sonibus.bus.errors import CommandError, OwnershipError
 
 from .clock import ShowClock
@@ -122,14 +121,11 @@ class Show(Adapter):
                                                f"{', '.join(schemas.program_verbs())}")
         payload = query.payload.to_bytes() if query.payload is not None else b""
         try:
-            args = self._gate.check(keys.Key.parse(str(query.key_expr)), payload) if payload else {}
-        except ValueError as exc:  # messages.BadMessage
-            self.count("bad")
-            raise CommandError("bad_request", f"{verb}: {exc}") from None
-        error = jsonschema.exceptions.best_match(schemas.validator(f"program/{verb}").iter_errors(args))
-        if error is not None:
-            where = ".".join(str(p) for p in error.absolute_path) or "arguments"
-            raise CommandError("bad_request", f"{verb}: {where}: {error.message}")
+            args = request_args(self._gate, str(query.key_expr), payload, "program", verb)
+        except CommandError as exc:
+            if isinstance(exc.__cause__, messages.BadMessage):
+                self.count("bad")
+            raise
         if verb == "status":
             return {**self.director.status(), "host": self.bus.host, "node": self.name}
         return self.director.request(args["name"], args.get("by", ""))

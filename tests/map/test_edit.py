@@ -83,12 +83,19 @@ def first_output(head: Head, yaw: float, after: float) -> float:
     return wait_for(back, what="an output after the edit")
 
 
-def test_an_edited_curve_changes_the_output_from_the_next_frame_on(net, owner, tmp_path):
+def running(net, owner, tmp_path: Path) -> tuple[Path, MapNode, Head]:
+    """``FILE`` in a folder of its own, its map node started from it, and pepper's head with
+    the yaw map's output at yaw 0 (x = 0.5 → 50) seen."""
     path = tmp_path / "show.toml"
     path.write_text(FILE, encoding="utf-8")
-    start(net, path)
+    node = start(net, path)
     head = Head(net, owner)
     wait_for(lambda: first_output(head, 0.0, 0.0) == 50.0, what="the map at yaw 0 (x = 0.5 → 50)")
+    return path, node, head
+
+
+def test_an_edited_curve_changes_the_output_from_the_next_frame_on(net, owner, tmp_path):
+    _, _, head = running(net, owner, tmp_path)
     reply = ask(head.watch, "edit", {"map": "yaw", "set": {"points": [[0, 0], [0.5, 0.9], [1, 1]]}})
     answered = time.time()
     assert reply["ok"], reply
@@ -97,11 +104,7 @@ def test_an_edited_curve_changes_the_output_from_the_next_frame_on(net, owner, t
 
 
 def test_an_invalid_edit_is_refused_with_its_reason_and_the_map_runs_as_it_was(net, owner, tmp_path):
-    path = tmp_path / "show.toml"
-    path.write_text(FILE, encoding="utf-8")
-    start(net, path)
-    head = Head(net, owner)
-    wait_for(lambda: first_output(head, 0.0, 0.0) == 50.0, what="the map running")
+    _, _, head = running(net, owner, tmp_path)
     for args, reason in [
         ({"map": "yaw", "set": {"points": [[0, 0], [0.6, 0.9], [0.4, 1]]}},
          "map 'yaw': key 'maps.yaw.points': point 2 [0.4, 1]: x must increase (the one before has x = 0.6)"),
@@ -124,10 +127,7 @@ def test_an_invalid_edit_is_refused_with_its_reason_and_the_map_runs_as_it_was(n
 
 
 def test_enable_learn_and_undo(net, owner, tmp_path):
-    path = tmp_path / "show.toml"
-    path.write_text(FILE, encoding="utf-8")
-    start(net, path)
-    head = Head(net, owner)
+    _, _, head = running(net, owner, tmp_path)
     assert ask(head.watch, "edit", {"map": "quiet", "set": {"enabled": True, "from": [-1, 1]}})["ok"]
     wait_for(lambda: head.output(0.0, "quiet") is not None, what="the map enabled live")  # (pitch 0: the middle)
     reply = ask(head.watch, "learn", {"map": "yaw", "seconds": 0.3})
@@ -152,10 +152,7 @@ def test_enable_learn_and_undo(net, owner, tmp_path):
 
 
 def test_save_keeps_the_comments_and_a_restart_runs_the_edited_maps(net, owner, tmp_path):
-    path = tmp_path / "show.toml"
-    path.write_text(FILE, encoding="utf-8")
-    node = start(net, path)
-    head = Head(net, owner)
+    path, node, head = running(net, owner, tmp_path)
     assert ask(head.watch, "edit", {"map": "yaw", "set": {"points": [[0, 0], [0.5, 0.9], [1, 1]],
                                                           "smooth_ms": 0}})["ok"]
     assert ask(head.watch, "edit", {"map": "yaw", "unset": ["smooth_ms"]})["ok"]
@@ -170,11 +167,8 @@ def test_save_keeps_the_comments_and_a_restart_runs_the_edited_maps(net, owner, 
 
 
 def test_sonibus_map_lists_the_maps_with_their_live_values(net, owner, tmp_path):
-    path = tmp_path / "show.toml"
-    path.write_text(FILE, encoding="utf-8")
-    start(net, path)
-    head = Head(net, owner)
-    wait_for(lambda: first_output(head, 0.5, 0.0) == 75.0, what="the map at yaw 0.5 (x = 0.75 → 75)")
+    _, _, head = running(net, owner, tmp_path)
+    assert first_output(head, 0.5, time.time()) == 75.0  # (x = 0.75)
     result = run_cli("map", "sound", "--count", "2", "--interval", "0.1", *net.cli_args())
     assert result.returncode == 0, result.stderr
     views = result.stdout.split("\n\n")
