@@ -76,11 +76,13 @@ class MapsPanel:
 def forward(adapter: Adapter, pages: Pages, client: Client, request: protocol.MapRequest, timeout: float) -> None:
     """Carry a page's ``map`` request to its node; the node's answer (or why none came) is the reply."""
     adapter.count("commands")
+    client.asking += 1  # (bounded by the server, as a page's commands are: MAX_ASKING)
     key = keys.maps(request.node, request.verb)
     nobody = CommandError("not_found", f"{request.verb}: no map node '{request.node}' on the bus ({key} is served "
                                        "by nothing)")
 
     def answered(outcome: bus_client.Outcome) -> None:
+        client.asking -= 1
         client.answer(protocol.reply(request.id, outcome))
     bus_client.ask_key(adapter.bus, key, request.args, lambda outcome: pages.web.call(answered, outcome), timeout,
-                       nobody)
+                       nobody, f"map node '{request.node}'")

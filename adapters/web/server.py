@@ -194,7 +194,8 @@ class Pages:
         elif isinstance(request, protocol.Stop):
             self._stop(client, request.id)
         elif isinstance(request, protocol.MapRequest):
-            maps.forward(self.adapter, self, client, request, self.config.timeout)
+            if self._room(client, request.id):
+                maps.forward(self.adapter, self, client, request, self.config.timeout)
         else:
             self._command(client, request)
 
@@ -215,11 +216,7 @@ class Pages:
             self.adapter.count("refused")
             client.answer(protocol.reply(request.id, f"{request.verb}: {why}"))
             return
-        if client.asking >= MAX_ASKING:  # (said, never silently lost: the page may send it again)
-            self.adapter.count("commands_dropped")
-            client.answer(protocol.reply(request.id, f"dropped: too many at once — {client.asking} commands of "
-                                                     f"this page wait for their robots' answers (at most "
-                                                     f"{MAX_ASKING}); send it again once some are answered"))
+        if not self._room(client, request.id):
             return
         item = (client, request.id, request.robot, request.verb, args)
         if request.verb != "joints/set":
@@ -230,6 +227,16 @@ class Pages:
         if superseded is not None:
             self.adapter.count("commands_coalesced")
             superseded[0].answer(protocol.reply(superseded[1], {"coalesced": True}))
+
+    def _room(self, client: Client, id_: protocol.Id) -> bool:
+        """Whether ``client`` may have one more request waiting for an answer; if not, it is told."""
+        if client.asking < MAX_ASKING:
+            return True
+        self.adapter.count("commands_dropped")  # (said, never silently lost: the page may send it again)
+        client.answer(protocol.reply(id_, f"dropped: too many at once — {client.asking} commands of this page wait "
+                                          f"for their robots' answers (at most {MAX_ASKING}); send it again once "
+                                          "some are answered"))
+        return False
 
     def _stop(self, client: Client, id_: protocol.Id) -> None:
         """Stop every robot of the bus at once (``client.stop_all``: one query, never queued

@@ -5,13 +5,19 @@ into the installation file with its comments, so a restart runs them as edited."
 
 from __future__ import annotations
 
+import math
 import time
 import tomllib
 from pathlib import Path
 from typing import Any
 
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
 from sonibus.adapters.map import MapNode
+from sonibus.adapters.map.config import STEPS
 from sonibus.bus import config, keys, runner
+from sonibus.bus.errors import CommandError
 
 from ..conftest import run_cli, wait_for
 from ..features.conftest import model_info
@@ -178,3 +184,40 @@ def test_sonibus_map_lists_the_maps_with_their_live_values(net, owner, tmp_path)
         "sound/yaw    pepper/joints/HeadYaw    in 0.750 ▕███████▌  ▏  out 75  [0, 100] points"]
     missing = run_cli("map", "nosuchnode", "--count", "1", "--timeout", "0.3", *net.cli_args())
     assert missing.returncode == 3 and "no map node answered on nosuchnode/maps/list" in missing.stderr, missing
+
+
+def test_any_edit_is_taken_whole_or_refused_in_one_line_and_every_output_stays_in_range(net, tmp_path):
+    """Hypothesis: random steps (known and unknown, values of every JSON type, NaN and
+    infinities too) sent as edits; each is applied whole or refused in one line naming the
+    map, and the map that runs after it gives finite outputs within its declared range."""
+    path = tmp_path / "show.toml"
+    path.write_text(FILE, encoding="utf-8")
+    node = start(net, path)
+    numbers = st.one_of(st.integers(-10**7, 10**7), st.floats(allow_nan=True, allow_infinity=True))
+    value = st.recursive(st.one_of(numbers, st.booleans(), st.text(max_size=12), st.none()),
+                         lambda inner: st.lists(inner, max_size=5) | st.dictionaries(st.text(max_size=4), inner,
+                                                                                     max_size=3), max_leaves=12)
+    steps = st.dictionaries(st.sampled_from([*STEPS, "smoth_ms", "x"]), value | st.lists(numbers, min_size=2,
+                                                                                          max_size=2), max_size=4)
+    taken = refused = 0
+
+    @settings(max_examples=300, deadline=None, derandomize=True)
+    @given(steps, st.lists(st.floats(-3, 3), min_size=1, max_size=5))
+    def edit_then_run(given_steps: dict, raws: list) -> None:
+        nonlocal taken, refused
+        try:
+            node.editor.edit("yaw", given_steps)
+            taken += 1
+        except CommandError as exc:
+            refused += 1
+            assert exc.message.startswith("map 'yaw': ") and "\n" not in exc.message, exc.message
+        spec = node.editor.specs["yaw"]
+        chain = node.chains.get("yaw")
+        assert (chain is not None) == spec.enabled and (chain is None or chain.spec is spec)
+        for i, raw in enumerate(raws):
+            if chain is not None and chain.feed("x", raw, (-1.0, 1.0), float(i)):
+                out = chain.compute(float(i))
+                assert out is None or out.value is None or (math.isfinite(out.value)
+                                                            and spec.low <= out.value <= spec.high), (spec, out)
+    edit_then_run()
+    assert taken > 10 and refused > 100, (taken, refused)

@@ -95,3 +95,17 @@ def test_a_curve_dragged_on_the_page_runs_at_once_survives_save_and_a_restart(ne
                  and abs(float(browser.attribute(POINT, "cy")) - (120 - 8 - y * 104)) < 0.01,
                  "the page drawing the restarted node's curve")
     assert browser.errors() == []
+
+
+def test_a_map_request_to_no_map_node_or_of_no_verb_is_answered_in_one_line(net, websocket):
+    web = start_web(net, token=TOKEN)
+    socket = websocket(f"{web.url.replace('http://', 'ws://')}/ws?token={TOKEN}")
+    socket.wait("hello")
+    socket.send({"type": "map", "id": 1, "node": "nosuch", "verb": "edit", "args": {"map": "x"}})
+    socket.send({"type": "map", "id": 2, "node": "sound", "verb": "dance", "args": {}})
+    socket.send({"type": "map", "id": 3, "node": "a/b", "verb": "edit", "args": {}})
+    assert socket.wait("reply", id=1)["error"] == \
+        "edit: no map node 'nosuch' on the bus (nosuch/maps/edit is served by nothing)"
+    assert socket.wait("reply", id=2)["error"] == \
+        "map: unknown verb 'dance' — a map node takes list, edit, learn, undo, save"
+    assert socket.wait("reply", id=3)["error"].startswith("map: node name 'a/b' must be non-empty without '/'")
