@@ -46,6 +46,7 @@ SCRIPTS: dict[str, tuple[str, list[str], float]] = {
     "demo_hint": ("demo_hint", [], 120),  # a second terminal told about this machine's demo (issue 37)
     "features": ("features", [], 90),
     "map_cpu": ("map_cpu", [], 60),  # the map node's 50 maps at 100 Hz beside a hand-written loop (issue 34)
+    "map_edit": ("map_edit", [], 90),  # a map edited while it runs: round trip, CPU with 20 edits/s (issue 34)
     "zenoh_hop": ("zenoh_hop", [], 90),
     "receive_cpu": ("receive_cpu", [], 60),
     "gate": ("gate", [], 60),

@@ -1,0 +1,118 @@
+"""Editing a map while it runs: 50 maps on a Pepper's frames at 100 Hz (bench/map_cpu.py's),
+and edits of one of them (its breakpoints moved) as the operator page sends them.
+
+- edit round trip: a ``<node>/maps/edit`` request to its reply, the edit applied (p50, p99),
+  beside a query of the same node's ``<node>/info/derived`` (a reply of cached bytes), same run;
+- edit to output: the reply to the first output through the new curve;
+- the worker's CPU while edits come 20 times a second, beside none (same run).
+
+    .venv/bin/python bench/map_edit.py [--edits 200] [--seconds 4]
+
+Writes bench/results/map_edit.json and prints it.
+"""
+
+from __future__ import annotations
+
+import argparse
+import threading
+import time
+from typing import Any
+
+from common import free_port, latency_stats, write
+from map_cpu import MAPS, Robot, tables, thread_cpu
+
+from sonibus.adapters.map import MapConfig, MapNode
+from sonibus.bus import Bus, BusConfig, codec, keys, open_session
+
+
+def points(i: int) -> list[list[float]]:
+    return [[0, 0], [0.5, 0.2 + 0.6 * (i % 2)], [1, 1]]
+
+
+def round_trips(bus: Bus, edits: int) -> dict[str, Any]:
+    edit, described, to_output = [], [], []
+    outputs: list[tuple[float, float]] = []  # (arrival, value) of m1's outputs
+    lock = threading.Lock()
+
+    def take(sample: Any) -> None:
+        with lock:
+            outputs.append((time.perf_counter(), codec.decode(sample.payload.to_bytes())["v"]))
+    subscriber = bus.session.declare_subscriber("sound/derived/map/m1", take)
+    try:
+        for i in range(edits):
+            began = time.perf_counter()
+            answer = bus.query(keys.maps("sound", "edit"), {"map": "m1", "set": {"points": points(i)}}, timeout=5)
+            replied = time.perf_counter()
+            if not (answer and answer[0].get("ok")):
+                raise SystemExit(f"edit refused: {answer}")
+            edit.append(replied - began)
+            began = time.perf_counter()
+            bus.query(keys.derived_info("sound"), timeout=5)
+            described.append(time.perf_counter() - began)
+            deadline = time.monotonic() + 2
+            while time.monotonic() < deadline:  # the first output after the reply: the new curve's?
+                with lock:
+                    later = [o for o in outputs if o[0] > replied]
+                if later:
+                    to_output.append(later[0][0] - replied)
+                    break
+                time.sleep(0.0005)
+    finally:
+        subscriber.undeclare()
+    return {"edit_ms": latency_stats(edit), "info_query_ms": latency_stats(described),
+            "reply_to_next_output_ms": latency_stats(to_output),
+            "ratio_p50": round(latency_stats(edit)["p50"] / latency_stats(described)["p50"], 2)}
+
+
+def cpu_with_edits(bus: Bus, node: MapNode, seconds: float) -> dict[str, Any]:
+    quiet = thread_cpu("sound:map", seconds, lambda: node.stats["sent"])
+    stop = threading.Event()
+
+    def edit() -> None:
+        i = 0
+        while not stop.wait(0.05):
+            bus.query(keys.maps("sound", "edit"), {"map": "m1", "set": {"points": points(i)}}, timeout=5)
+            i += 1
+    editor = threading.Thread(target=edit, daemon=True)
+    editor.start()
+    try:
+        busy = thread_cpu("sound:map", seconds, lambda: node.stats["sent"])
+    finally:
+        stop.set()
+        editor.join()
+    return {"no_edits": quiet, "edits_20_per_s": busy,
+            "ratio": round(busy["cpu_percent"] / max(quiet["cpu_percent"], 1e-9), 2)}
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--edits", type=int, default=200)
+    parser.add_argument("--seconds", type=float, default=4.0)
+    args = parser.parse_args()
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    robot_session = open_session(BusConfig(multicast=False, listen=(endpoint,)))
+    node_session = open_session(BusConfig(multicast=False, connect=(endpoint,)))
+    robot = Robot(Bus(robot_session, node="robot"))
+    node = MapNode(MapConfig(maps=tables()), name="sound")
+    node.start(Bus(node_session))
+    asker = Bus(robot_session, node="asker")  # (the page's side: across the link, as a web node asks)
+    try:
+        deadline = time.monotonic() + 10
+        while node.stats["sent"] < 10 * MAPS:
+            if time.monotonic() > deadline:
+                raise SystemExit(f"the map node sent {node.stats['sent']} outputs in 10 s")
+            time.sleep(0.05)
+        result = {"maps": MAPS, "rate_hz": 100, **round_trips(asker, args.edits),
+                  "cpu": cpu_with_edits(asker, node, args.seconds)}
+    finally:
+        node.stop()
+        robot.close()
+        node_session.close()
+        robot_session.close()
+    write("map_edit", result)
+    for key, value in result.items():
+        print(f"{key}: {value}")
+
+
+if __name__ == "__main__":
+    main()
