@@ -81,12 +81,12 @@ def first_output(head: Head, yaw: float, after: float) -> float:
     """The output of the first frame with ``t`` past ``after`` (sent at ``yaw``)."""
     key = "sound/derived/map/yaw"
 
-    def back() -> float | None:
+    def back() -> list[float] | None:  # (a list: an output of 0.0 is one)
         head.fake.frame(time.time(), pose(HeadYaw=yaw))
         time.sleep(0.01)
         later = [m for m in head.outputs.on(key) if m["t"] > after]
-        return min(later, key=lambda m: m["t"])["v"] if later else None
-    return wait_for(back, what="an output after the edit")
+        return [min(later, key=lambda m: m["t"])["v"]] if later else None
+    return wait_for(back, what="an output after the edit")[0]
 
 
 def running(net, owner, tmp_path: Path) -> tuple[Path, MapNode, Head]:

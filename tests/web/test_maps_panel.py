@@ -24,6 +24,14 @@ from .conftest import TOKEN, start_web
 POINT = '.map[data-map="yaw"] .point[data-index="1"]'
 
 
+def type_in(box, value: str) -> None:
+    """``value`` typed over what a field holds (focused first: the panel leaves a focused field
+    alone when the node's maps come), then Tab: its change is sent."""
+    box.click()
+    box.send_keys(Keys.CONTROL, "a")
+    box.send_keys(value, Keys.TAB)
+
+
 @pytest.fixture
 def head(net, owner) -> Iterator[Head]:  # noqa: F811
     """pepper's head at yaw 0 (x = 0.5 for the map), a frame every 20 ms until the test ends."""
@@ -54,9 +62,7 @@ def test_a_curve_dragged_on_the_page_runs_at_once_survives_save_and_a_restart(ne
     assert browser.js("return document.querySelector('.map[data-map=\"quiet\"] .map-enabled').checked") is False
 
     # a refused edit: its reason under the map, the map running as it was
-    low = browser.find('.map[data-map="yaw"] .map-to-low')
-    low.clear()
-    low.send_keys("100", Keys.TAB)
+    type_in(browser.find('.map[data-map="yaw"] .map-to-low'), "100")
     browser.wait(lambda: "[100, 100] is no range" in (browser.text('.map[data-map="yaw"] .map-error') or ""),
                  "the refusal shown in place")
     assert browser.text('.map[data-map="yaw"] .map-error') == \
@@ -78,6 +84,16 @@ def test_a_curve_dragged_on_the_page_runs_at_once_survives_save_and_a_restart(ne
                          browser.text('.map[data-map="yaw"] .map-out'), "the new output on the page")
     assert float(shown) == pytest.approx(expected, rel=1e-5)
     browser.screenshot("mapping-panel.png", tmp_path, publish=True)
+
+    # the source's range typed (yaw 0 is now its bottom: the curve's start, 0), then undone
+    for field, value in (("low", "0"), ("high", "1")):
+        type_in(browser.find(f'.map[data-map="yaw"] .map-from-{field}'), value)
+    wait_for(lambda: ask(head.watch, "list")["result"]["maps"][0]["table"]["from"] == [0, 1], what="from = [0, 1]",
+             explain=lambda: f"{ask(head.watch, 'list')['result']['maps'][0]['table']}; {browser.text('#status')}")
+    assert first_output(head, 0.0, time.time()) == 0.0
+    browser.find('.map[data-map="yaw"] .map-undo').click()
+    wait_for(lambda: ask(head.watch, "list")["result"]["maps"][0]["table"]["from"] == [-1, 1], what="the undo")
+    assert first_output(head, 0.0, time.time()) == pytest.approx(expected, rel=1e-12)
 
     browser.find('.map-node[data-node="sound"] .map-save').click()
     browser.wait(lambda: (browser.text('.map-node[data-node="sound"] .map-saved') or "").startswith("saved into"),

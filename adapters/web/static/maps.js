@@ -42,6 +42,11 @@
       const field = (cls, title, onchange) => el("input", {type: "number", step: "any", class: cls, title, onchange});
       this.toLow = field("map-to-low", "to: the output at the curve's bottom", () => this.editTo());
       this.toHigh = field("map-to-high", "to: the output at the curve's top", () => this.editTo());
+      this.fromLow = field("map-from-low", "from: the source's value at x = 0 (empty: its info's range)",
+        () => this.editFrom());
+      this.fromHigh = field("map-from-high", "from: the source's value at x = 1 (empty: its info's range)",
+        () => this.editFrom());
+      this.fromRow = el("label", {}, "from ", this.fromLow, " … ", this.fromHigh);
       this.smooth = field("map-smooth", "smoothing time constant, ms (0: none)", () => {
         const ms = Number(this.smooth.value);
         this.edit(ms > 0 ? {smooth_ms: ms} : {}, "smoothing", ms > 0 ? [] : ["smooth_ms"]);
@@ -62,6 +67,7 @@
           el("div", {class: "map-fields"},
             el("div", {class: "map-live"}, "in ", this.inValue, " → out ", this.outValue),
             el("label", {}, "curve ", this.kind),
+            this.fromRow,
             el("label", {}, "to ", this.toLow, " … ", this.toHigh),
             el("label", {}, "smooth ", this.smooth, " ms"))),
         this.error);
@@ -83,7 +89,10 @@
       const kind = table.curve || (table.points ? "points" : "linear");
       this.kind.value = kind;
       const active = document.activeElement;
+      const from = Array.isArray(table.from) ? table.from : ["", ""];  // (one source; several: in the file)
+      this.fromRow.hidden = (map.sources || []).length !== 1;
       for (const [input, value] of [[this.toLow, map.to[0]], [this.toHigh, map.to[1]],
+                                    [this.fromLow, from[0]], [this.fromHigh, from[1]],
                                     [this.smooth, table.smooth_ms || 0]]) {
         if (input !== active) input.value = String(value);
       }
@@ -166,6 +175,12 @@
       }
     }
 
+    editFrom() {
+      const [low, high] = [this.fromLow.value.trim(), this.fromHigh.value.trim()];
+      if (low === "" && high === "") this.edit({}, "source range", ["from"]);  // (back to its info's)
+      else this.edit({from: [low === "" ? null : Number(low), high === "" ? null : Number(high)]}, "source range");
+    }
+
     editTo() {
       this.edit({to: [Number(this.toLow.value), Number(this.toHigh.value)]}, "range");
     }
@@ -187,41 +202,51 @@
 
   function round(v) { return Math.round(v * 1000) / 1000; }
 
+  const blocks = new Map();            // node → its block (kept: a button replaced under a click would lose it)
+
+  function nodeBlock(node) {
+    let block = blocks.get(node);
+    if (block) return block;
+    const save = el("button", {type: "button", class: "map-save", title: "write the maps into the installation file",
+      onclick: () => ask(node, "save", {}, `save ${node}'s maps`, (reply) => {
+        saved.textContent = reply.ok ? `saved into ${reply.result.file}` : reply.error;
+        saved.dataset.kind = reply.ok ? "ok" : "error";
+      })}, "save");
+    const saved = el("output", {class: "map-saved"});
+    block = el("div", {class: "map-node", dataset: {node}}, el("h3", {}, node, " ", save, " ", saved),
+      el("div", {class: "map-list"}));
+    blocks.set(node, block);
+    return block;
+  }
+
   function onMaps(message) {
     const panel = document.getElementById("mappings");
     const container = document.getElementById("maps");
     const seen = new Set();
-    const blocks = [];
+    const shown = [];
     for (const node of message.nodes || []) {
-      const maps = node.maps || [];
-      const save = el("button", {type: "button", class: "map-save", title: `write the maps into ${node.file || "the file"}`,
-        onclick: () => ask(node.node, "save", {}, `save ${node.node}'s maps`, (reply) => {
-          const shown = document.querySelector(`.map-node[data-node="${CSS.escape(node.node)}"] .map-saved`);
-          if (!shown) return;  // (the node is gone from the page)
-          shown.textContent = reply.ok ? `saved into ${reply.result.file}` : reply.error;
-          shown.dataset.kind = reply.ok ? "ok" : "error";
-        })}, "save");
-      const saved = el("output", {class: "map-saved"});
-      const block = el("div", {class: "map-node", dataset: {node: node.node}},
-        el("h3", {}, node.node, " ", save, " ", saved));
-      for (const map of maps) {
+      const block = nodeBlock(node.node);
+      const sections = [];
+      for (const map of node.maps || []) {
         const id = `${node.node}/${map.name}`;
         seen.add(id);
         let view = views.get(id);
         if (view) view.update(map);
         else views.set(id, view = new MapView(node.node, map));
-        block.append(view.section);
+        sections.push(view.section);
       }
-      blocks.push(block);
+      const list = block.querySelector(".map-list");
+      if (sections.some((section, i) => list.children[i] !== section) || list.children.length !== sections.length) {
+        list.replaceChildren(...sections);  // (only when the maps changed: a section is kept under the pointer)
+      }
+      shown.push(block);
     }
     for (const id of [...views.keys()]) if (!seen.has(id)) views.delete(id);
-    const old = new Map([...container.querySelectorAll(".map-node")].map((b) => [b.dataset.node, b]));
-    for (const block of blocks) {  // (a node's save line is kept: its answer stays shown)
-      const before = old.get(block.dataset.node);
-      if (before) block.querySelector(".map-saved").replaceWith(before.querySelector(".map-saved"));
+    for (const node of [...blocks.keys()]) if (!shown.includes(blocks.get(node))) blocks.delete(node);
+    if (shown.some((block, i) => container.children[i] !== block) || container.children.length !== shown.length) {
+      container.replaceChildren(...shown);
     }
-    container.replaceChildren(...blocks);
-    panel.hidden = blocks.length === 0;
+    panel.hidden = shown.length === 0;
   }
 
   function onValues(message) {
