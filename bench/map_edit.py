@@ -19,11 +19,11 @@ import threading
 import time
 from typing import Any
 
-from common import free_port, latency_stats, write
-from map_cpu import MAPS, Robot, tables, thread_cpu
+from common import latency_stats, write
+from map_cpu import MAPS, running, stage, thread_cpu
 
-from sonibus.adapters.map import MapConfig, MapNode
-from sonibus.bus import Bus, BusConfig, codec, keys, open_session
+from sonibus.adapters.map import MapNode
+from sonibus.bus import Bus, codec, keys
 
 
 def points(i: int) -> list[list[float]]:
@@ -91,26 +91,10 @@ def main() -> None:
     parser.add_argument("--seconds", type=float, default=4.0)
     args = parser.parse_args()
     machine = f"{os.cpu_count()} cores, load {os.getloadavg()[0]:.2f}"
-    endpoint = f"tcp/127.0.0.1:{free_port()}"
-    robot_session = open_session(BusConfig(multicast=False, listen=(endpoint,)))
-    node_session = open_session(BusConfig(multicast=False, connect=(endpoint,)))
-    robot = Robot(Bus(robot_session, node="robot"))
-    node = MapNode(MapConfig(maps=tables()), name="sound")
-    node.start(Bus(node_session))
-    asker = Bus(robot_session, node="asker")  # (the page's side: across the link, as a web node asks)
-    try:
-        deadline = time.monotonic() + 10
-        while node.stats["sent"] < 10 * MAPS:
-            if time.monotonic() > deadline:
-                raise SystemExit(f"the map node sent {node.stats['sent']} outputs in 10 s")
-            time.sleep(0.05)
+    with stage() as (robot_session, node_session), running(Bus(node_session)) as node:
+        asker = Bus(robot_session, node="asker")  # (the page's side: across the link, as a web node asks)
         result = {"maps": MAPS, "rate_hz": 100, **round_trips(asker, args.edits),
                   "cpu": cpu_with_edits(asker, node, args.seconds)}
-    finally:
-        node.stop()
-        robot.close()
-        node_session.close()
-        robot_session.close()
     edit, query, cpu = result["edit"], result["info_query"], result["cpu"]
     result["machine"] = machine
     result["summary"] = [
