@@ -20,6 +20,7 @@ import copy
 import logging
 import threading
 from collections import deque
+from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -94,7 +95,7 @@ class Editor:
 
     # -- the verbs -----------------------------------------------------------------------
 
-    def edit(self, name: str, given: dict[str, Any], unset: list[str] = ()) -> dict[str, Any]:  # type: ignore[assignment]
+    def edit(self, name: str, given: dict[str, Any], unset: Sequence[str] = ()) -> dict[str, Any]:
         """Set ``given`` steps of map ``name`` and remove ``unset`` ones; applied, or refused
         with the reason (the running map unchanged)."""
         with self._lock:
