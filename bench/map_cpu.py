@@ -20,12 +20,14 @@ Writes bench/results/map_cpu.json and prints a table.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import math
 import os
 import queue
 import socket
 import threading
 import time
+from collections.abc import Iterator
 from typing import Any
 
 from common import free_port, latency_stats, write
@@ -106,7 +108,9 @@ def thread_cpu(name: str, seconds: float, count: Any) -> dict[str, float]:
             "cpu_us_per_frame": round(1e6 * cpu / max(n / MAPS, 1), 1)}
 
 
-def map_node(bus: Bus, seconds: float) -> dict[str, float]:
+@contextlib.contextmanager
+def running(bus: Bus) -> Iterator[MapNode]:
+    """The map node of the 50 maps on ``bus``, once it has sent 10 frames' outputs; stopped at the end."""
     node = MapNode(MapConfig(maps=tables()), name="sound")
     node.start(bus)
     try:
@@ -115,9 +119,14 @@ def map_node(bus: Bus, seconds: float) -> dict[str, float]:
             if time.monotonic() > deadline:
                 raise SystemExit(f"the map node sent {node.stats['sent']} outputs in 10 s: {dict(node.stats)}")
             time.sleep(0.05)
-        return thread_cpu("sound:map", seconds, lambda: node.stats["sent"])
+        yield node
     finally:
         node.stop()
+
+
+def map_node(bus: Bus, seconds: float) -> dict[str, float]:
+    with running(bus) as node:
+        return thread_cpu("sound:map", seconds, lambda: node.stats["sent"])
 
 
 def harness(bus: Bus, seconds: float) -> dict[str, float]:
@@ -221,23 +230,31 @@ def latency(bus: Bus, seconds: float) -> dict[str, Any]:
             "ratio_p50": round(through["p50_us"] / plain["p50_us"], 2)}
 
 
-def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--seconds", type=float, default=8.0)
-    args = parser.parse_args()
-    machine = f"{os.cpu_count()} cores, load {os.getloadavg()[0]:.2f}"
+@contextlib.contextmanager
+def stage() -> Iterator[tuple[Any, Any]]:
+    """Two sessions over loopback, the robot's (listening; its frames at 100 Hz on it) and
+    the node's (connected to it), closed at the end."""
     endpoint = f"tcp/127.0.0.1:{free_port()}"
     robot_session = open_session(BusConfig(multicast=False, listen=(endpoint,)))
     node_session = open_session(BusConfig(multicast=False, connect=(endpoint,)))
     robot = Robot(Bus(robot_session, node="robot"))
     try:
-        node = map_node(Bus(node_session), args.seconds)
-        plain = harness(Bus(node_session, node="harness"), args.seconds)
-        path = latency(Bus(node_session), args.seconds / 2)
+        yield robot_session, node_session
     finally:
         robot.close()
         node_session.close()
         robot_session.close()
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--seconds", type=float, default=8.0)
+    args = parser.parse_args()
+    machine = f"{os.cpu_count()} cores, load {os.getloadavg()[0]:.2f}"
+    with stage() as (_, node_session):
+        node = map_node(Bus(node_session), args.seconds)
+        plain = harness(Bus(node_session, node="harness"), args.seconds)
+        path = latency(Bus(node_session), args.seconds / 2)
     result = {"maps": MAPS, "rate_hz": RATE_HZ, "machine": machine, "map_node": node, "harness": plain,
               "ratio_cpu": round(node["cpu_percent"] / max(plain["cpu_percent"], 1e-9), 2), "latency": path}
     result["summary"] = [{"scenario": "map node: 50 maps on a Pepper at 100 Hz, CPU of its worker",

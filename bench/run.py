@@ -47,6 +47,7 @@ SCRIPTS: dict[str, tuple[str, list[str], float]] = {
     "features": ("features", [], 90),
     "map_cpu": ("map_cpu", [], 60),  # the map node's 50 maps at 100 Hz beside a hand-written loop (issue 34)
     "clap_nod": ("clap_nod", [], 120),  # a clap into JACK → the robot nods: sound to movement (issue 34)
+    "map_edit": ("map_edit", [], 90),  # a map edited while it runs: round trip, CPU with 20 edits/s (issue 34)
     "zenoh_hop": ("zenoh_hop", [], 90),
     "receive_cpu": ("receive_cpu", [], 60),
     "gate": ("gate", [], 60),

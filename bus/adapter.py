@@ -73,6 +73,7 @@ class Adapter:
         self.robots: list[str] = []       # robots this node owns (see claim_robot)
         self.where: Callable[[str], str] | None = None  # key → "file [nodes.x] line N", when built from a file
         self.folder: Path | None = None   # the installation file's folder, when built from one (for relative paths)
+        self.file: Path | None = None     # the installation file itself, when built from one (a map node saves into it)
         self.since = 0.0                  # when it started (epoch seconds)
         self.address = ""                 # where a person reaches it once started (a page's URL), said by `run`
         self.stats = Counters(BASE + self.counters)  # what it did (count() adds; dropped: its queues')

@@ -68,7 +68,17 @@ def ask_program(bus: Bus, robot: str, verb: str, args: dict[str, Any], done: Cal
     key = keys.program(robot, verb)
     nobody = CommandError("program_not_found", f"{verb}: no program drives robot '{robot}' ({key} is served by "
                                                f"nothing) — start the node that does, on the same bus")
-    _send(bus, key, args, _Pending(robot, verb, done, timeout, nobody))
+    ask_key(bus, key, args, done, timeout, nobody)
+
+
+def ask_key(bus: Bus, key: str, args: dict[str, Any], done: Callable[[Outcome], None], timeout: float,
+            nobody: CommandError, who: str = "") -> None:
+    """Send a request to whatever serves ``key`` (``<robot>/program/<verb>``, a map node's
+    ``<node>/maps/<verb>``), answered as a command is: ``done`` gets the result or a
+    ``CommandError`` (``nobody`` when nothing serves the key; ``timeout`` naming ``who``, by
+    default the robot of the key's first chunk), exactly once."""
+    name, _, rest = key.partition("/")
+    _send(bus, key, args, _Pending(name, rest.partition("/")[2], done, timeout, nobody, who))
 
 
 def _send(bus: Bus, selector: str, args: dict[str, Any], pending: _Pending, urgent: bool = False) -> None:
@@ -88,8 +98,9 @@ class _Pending:
     ends at once)."""
 
     def __init__(self, robot: str, verb: str, done: Callable[[Outcome], None], timeout: float,
-                 nobody: CommandError | None = None) -> None:
+                 nobody: CommandError | None = None, who: str = "") -> None:
         self.robot, self.verb, self.done, self.timeout = robot, verb, done, timeout
+        self.who = who or f"robot '{robot}'"  # (in a timeout's message)
         self.nobody = nobody or RobotNotFound(robot)  # what an answer that ends at once, unanswered, means
         self.started = time.monotonic()
         self.error = ""
@@ -111,8 +122,7 @@ class _Pending:
         if self.standing_by is not None:
             self.finish(self.standing_by)
         elif time.monotonic() - self.started >= self.timeout * 0.9:
-            self.finish(CommandError("timeout", f"robot '{self.robot}' did not answer '{self.verb}' "
-                                                f"within {self.timeout:g} s"))
+            self.finish(CommandError("timeout", f"{self.who} did not answer '{self.verb}' within {self.timeout:g} s"))
         elif self.error:
             self.finish(CommandError("internal", f"{self.verb}: {self.error}"))
         else:

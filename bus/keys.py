@@ -78,6 +78,12 @@ def program(robot: str, verb: str = "**") -> str:
     return f"{robot}/program/{verb}"
 
 
+def maps(node: str, verb: str = "**") -> str:
+    """Where a map node takes requests about its maps (``sound/maps/edit``: list, edit, learn,
+    undo, save; ``adapters/map/edit.py``): a queryable it serves."""
+    return f"{node}/maps/{verb}"
+
+
 def info(robot: str) -> str:
     return f"{robot}/info"
 

@@ -269,6 +269,8 @@ SECTIONS: dict[str, Section] = {section.name: section for section in (
     # <robot>/program/<verb>: requests to a program that drives the robot (a show), checked like a command's
     # arguments; queries, never data: a sink takes none unless a pattern names the section
     Section("program", None, Gate.command, by_name=True),
+    # <node>/maps/<verb>: a map node's requests (list, edit, learn, undo, save), checked like a program's
+    Section("maps", None, Gate.command, by_name=True),
     Section("audio", "audio_chunk", Gate.audio, by_name=True),  # <robot>/audio/mic, <robot>/audio/speaker
     Section("stats", "node_stats", Gate.node_stats, by_name=True),  # sonibus/stats/<host>/<node>: about the bus
 )}

@@ -36,7 +36,8 @@ def build(installation: Installation, only: list[str] | None = None, host: str |
         except AdapterError as exc:
             raise ConfigError(f"{spec.at('adapter')}: key 'adapter': {exc}") from None
         adapter = spec.build(cls)
-        adapter.folder = Path(installation.path).resolve().parent if installation.path else None
+        adapter.file = Path(installation.path).resolve() if installation.path else None
+        adapter.folder = adapter.file.parent if adapter.file else None
         adapters.append(adapter)
     installation.check_owners(_owned_robots(installation))
     return adapters

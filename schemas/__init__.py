@@ -22,7 +22,8 @@ VERSION = 1
 __all__ = ["REQUESTS", "VERSION", "command_schema", "command_verbs", "load", "program_schema", "program_verbs",
            "request_schema", "request_verbs", "validate", "validator"]
 
-REQUESTS = ("cmd", "program")  # the sections whose keys take requests: a robot's commands, a program's
+REQUESTS = ("cmd", "program", "maps")  # the sections whose keys take requests: a robot's commands, a program's,
+                                      # a map node's (``<node>/maps/<verb>``: edit its maps while they run)
 
 
 def _root() -> Any:

@@ -605,7 +605,7 @@ def test_built_in_commands_are_registered_like_plugin_commands():
     env = environment()
     assert main(["--help"], env) == Exit.OK
     listed = re.findall(r"^    (\S+) ", env.stdout.getvalue(), re.MULTILINE)
-    assert set(listed) == {*BUILT_IN, "record", "replay", "info", "recover", "export", "plot", "rehearse",
+    assert set(listed) == {*BUILT_IN, "record", "replay", "info", "recover", "export", "plot", "rehearse", "map",
                            "resume", "jsonl-count"}
     assert listed[-1] == "jsonl-count", "sonibus's own first, then the plug-ins'"
 
@@ -661,7 +661,8 @@ def test_demo_blames_its_flags_and_a_taken_name_gets_another(net):
 
 NOT_BESIDE_A_DEMO = {"router": "a router joins an installation's subnets",
                      "rehearse": "a show's day at speed, from a show file of its own",
-                     "resume": "the demo runs no map node"}
+                     "resume": "the demo runs no map node",
+                     "map": "the demo runs no map node (it joins one with --demo all the same)"}
 
 
 def test_the_demo_banner_names_every_command_that_joins_it_with_demo():

@@ -1,38 +1,96 @@
-"""``sonibus resume NODE [ROBOT]``: let a map node's maps drive their robots again after
-a stop (docs/mapping.md, "Sound to movement"). A stop of a robot halts every map that
-drives it until then: motion never comes back by itself."""
+"""``sonibus map``: every map of the bus's map nodes with its live input and output,
+refreshed in the terminal (each node's ``<node>/maps/list``).
+
+    $ sonibus map --count 1
+    sound/cutoff  pepper/derived/hand/R.z      in 0.412 ▕████▏     ▏  out 515.825 Hz  [200, 2000] exp
+    sound/swing   pepper/derived/hand_speed/R  in 0.020 ▕▏         ▏  out 0.02        [0, 1] linear  SILENT
+"""
 
 from __future__ import annotations
 
 import argparse
-import json
-import threading
+from typing import Any
 
+from sonibus.bus import keys
 from sonibus.bus.cli.api import Command, Environment, Exit, bus_config, joined
-from sonibus.bus.client import Outcome, ask_program
-from sonibus.bus.errors import CommandError
+from sonibus.bus.cli.hints import reach_hint
+from sonibus.bus.errors import ConfigError
+
+BAR = 10          # characters of an input's bar
+PARTS = " ▏▎▍▌▋▊▉█"  # eighths of a character
 
 
 def _arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("node", metavar="NODE", help="the map node (its name in the installation file: moves)")
-    p.add_argument("robot", metavar="ROBOT", nargs="?", default="", help="only this robot (default: all)")
-    p.add_argument("--timeout", type=float, default=5.0, help="seconds to wait for the reply")
+    p.add_argument("node", nargs="?", default="*", metavar="NODE", help="one map node (default: every one)")
+    p.add_argument("--count", type=int, metavar="N", help="print the maps N times, then exit (default: until Ctrl-C)")
+    p.add_argument("--interval", type=float, default=0.5, metavar="S", help="seconds between two views (0.5)")
+    p.add_argument("--timeout", type=float, default=1.0, metavar="S", help="seconds to wait for the nodes' answers")
 
 
-def _resume(args: argparse.Namespace, env: Environment) -> Exit:
-    outcomes: list[Outcome] = []
-    answered = threading.Event()
-    with joined(bus_config(args)) as bus:
-        ask_program(bus, args.node, "resume", {"robot": args.robot} if args.robot else {},
-                    lambda outcome: (outcomes.append(outcome), answered.set()), args.timeout)
-        answered.wait(args.timeout + 1.0)
-    if not outcomes:
-        raise CommandError("timeout", f"map node '{args.node}' did not answer within {args.timeout:g} s")
-    if isinstance(outcomes[0], CommandError):
-        raise outcomes[0]
-    env.say(json.dumps(outcomes[0]))
+def _map(args: argparse.Namespace, env: Environment) -> Exit:
+    if args.node != "*":
+        try:
+            keys.check_name("node", args.node)
+        except ValueError as exc:
+            raise ConfigError(f"map: {exc}") from None
+    if not args.interval > 0 or not args.timeout > 0 or (args.count is not None and args.count < 1):
+        raise ConfigError("map: --interval and --timeout must be more than 0, --count at least 1")
+    cfg = bus_config(args)
+    shown = 0
+    with joined(cfg) as bus:
+        reached = bus.discover()
+        while not env.stop.is_set() and (args.count is None or shown < args.count):
+            answers = [a["result"] for a in bus.query(keys.maps(args.node, "list"), {}, timeout=args.timeout)
+                       if a.get("ok")]
+            if not answers:
+                env.hint(reach_hint(cfg, reached, f"no map node answered on {keys.maps(args.node, 'list')}"))
+                return Exit.NOT_FOUND
+            if shown:
+                env.say("")
+            for line in lines(answers):
+                env.say(line)
+            shown += 1
+            if args.count is None or shown < args.count:
+                env.stop.wait(args.interval)
     return Exit.OK
 
 
-RESUME = Command("resume", "let a map node's maps drive their robots again after a stop", _arguments, _resume,
-                 bus=True)
+def lines(answers: list[dict[str, Any]]) -> list[str]:
+    """One line per map of each node's ``list`` answer, nodes and maps in name order.
+
+    >>> print(lines([{"node": "sound", "maps": [{"name": "cutoff", "enabled": True, "unit": "Hz",
+    ...     "to": [200, 2000], "input": 0.5, "output": 632.456, "silent": False, "learning": None,
+    ...     "table": {"source": "pepper/derived/hand/R.z", "curve": "exp"}}]}])[0])
+    sound/cutoff  pepper/derived/hand/R.z  in 0.500 ▕█████     ▏  out 632.456 Hz  [200, 2000] exp
+    """
+    rows = []
+    for answer in sorted(answers, key=lambda a: str(a.get("node"))):
+        for m in sorted(answer.get("maps", ()), key=lambda m: str(m.get("name"))):
+            table = m.get("table", {})
+            source = table.get("source") or ", ".join(f"{k}={v}" for k, v in (table.get("sources") or {}).items())
+            curve = table.get("curve", "points" if "points" in table else "linear")
+            x, y = m.get("input"), m.get("output")
+            shown_in = f"in {x:.3f} {_bar(x)}" if isinstance(x, int | float) else f"in {'—':>5} {_bar(None)}"
+            shown_out = f"out {y:.6g} {m.get('unit', '')}".rstrip() if isinstance(y, int | float) else "out —"
+            low, high = m.get("to", ("?", "?"))
+            state = "" if m.get("enabled", True) else "  DISABLED"
+            if m.get("silent"):
+                state += "  SILENT"
+            if m.get("learning"):
+                state += f"  LEARNING {m['learning'].get('source')} ({m['learning'].get('seconds'):g} s)"
+            rows.append([f"{answer.get('node')}/{m.get('name')}", source, shown_in, shown_out,
+                         f"[{low:g}, {high:g}] {curve}{state}"])
+    widths = [max((len(r[i]) for r in rows), default=0) for i in range(4)]
+    return ["  ".join(c.ljust(w) for c, w in zip(r[:4], widths, strict=True)) + "  " + r[4] for r in rows]
+
+
+def _bar(x: float | None) -> str:
+    """A fraction 0..1 as a bar of ``BAR`` characters, in eighths."""
+    if x is None:
+        return "▕" + " " * BAR + "▏"
+    eighths = round(max(0.0, min(1.0, x)) * BAR * 8)
+    full, part = divmod(eighths, 8)
+    return "▕" + ("█" * full + (PARTS[part] if part else "")).ljust(BAR) + "▏"
+
+
+MAP = Command("map", "list the map nodes' maps with their live values", _arguments, _map, bus=True)

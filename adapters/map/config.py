@@ -102,8 +102,8 @@ class MapConfig:
 
     @property
     def patterns(self) -> tuple[str, ...]:
-        """Every source's key or pattern (of the maps that run), once."""
-        return tuple(dict.fromkeys(s.pattern for spec in self.specs if spec.enabled for s in spec.sources))
+        """Every source's key or pattern, once (a disabled map's too: an edit may enable it)."""
+        return tuple(dict.fromkeys(s.pattern for spec in self.specs for s in spec.sources))
 
 
 def parse_map(name: str, table: Any) -> MapSpec:

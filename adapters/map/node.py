@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import logging
 import math
+import threading
 import time
 from collections.abc import Iterable
 from typing import Any
@@ -24,15 +25,18 @@ import zenoh
 from sonibus.bus import codec, keys
 from sonibus.bus.adapter import Adapter
 from sonibus.bus.capped import PER_NAME, Capped
+from sonibus.bus.errors import CommandError
 from sonibus.bus.info import InfoRequests
 from sonibus.bus.queue import SampleQueue
 from sonibus.bus.streams import Incoming, Streams
 
 from . import ranges as spans
 from .chain import Chain
-from .config import MapConfig, Source
+from .config import MapConfig, MapSpec, Source
 from .drive import Drive
+from .edit import Editor
 from .ranges import Ranges
+from .steps import Calibration
 
 log = logging.getLogger(__name__)
 
@@ -56,7 +60,7 @@ class MapNode(Adapter):
 
     Config = MapConfig
     counters = ("triggers", "waiting_info", "not_finite", "expr_errors", "clamped", "bad_source",
-                "silent", "unseen", "capped", *Drive.counters)
+                "silent", "unseen", "capped", "requests", "requests_refused", *Drive.counters)
 
     def _start(self) -> None:
         cfg: MapConfig = self.config
@@ -73,14 +77,21 @@ class MapNode(Adapter):
         self._unseen_said = False
         self._seq = 0
         self._publishers = {name: self.own(self.bus.stream_publisher(self.output_key(name))) for name in self.chains}
-        reply = codec.encode(self.described())
+        self._maps_lock = threading.Lock()  # the maps as they run: the worker's, and an edit's that replaces one
+        self._inputs: dict[str, float] = {}        # map → its curve's last input (0..1), for views
+        self._learning: dict[tuple[str, str], Calibration] = {}  # (map, source) → a learn under way
+        self._subscribed = [zenoh.KeyExpr(keys.expr(p)) for p in cfg.patterns]
+        self._reply = codec.encode(self.described())
         where = keys.derived_info(self.name)
-        self.own(self.bus.serve(where, lambda query: query.reply(where, reply, encoding=codec.ENCODING)))
+        self.own(self.bus.serve(where, lambda query: query.reply(where, self._reply, encoding=codec.ENCODING)))
+        self.editor = Editor(self, cfg.maps, self.file)
+        self.own(self.bus.serve(keys.maps(self.name), self.editor.serve))
         self._queue = self.own(SampleQueue(cfg.queue))
         self._info = InfoRequests(self.bus, lambda robot, info: self._queue.put((INFO, (robot, info))),
                                   lambda robot, text: self.warn("info", text), INFO_RETRY_S)
         self._streams = self.own(Streams(self.bus, cfg.patterns, self._queue, per_joint_keys=cfg.per_joint_keys))
         targets = {name: chain.spec.target for name, chain in self.chains.items() if chain.spec.target}
+        self._targets = targets  # (as started: an edit may not change what a map drives, see replace)
         self._drive = Drive(self, targets) if targets else None  # (maps that drive robots: drive.py)
         for robot in {s.pattern.split("/")[0] for spec in cfg.specs for s in spec.sources} | {
                 t.robot for t in targets.values()}:
@@ -103,6 +114,50 @@ class MapNode(Adapter):
                 "events": {s.name: {"key": keys.event(self.name, s.name), "on": s.threshold[0],
                                     "off": s.threshold[1]} for s in specs if s.threshold}}
 
+    # -- live edits (``edit.py``) ------------------------------------------------------------
+
+    def replace(self, spec: MapSpec) -> None:
+        """Run ``spec`` in place of its map from the next value on (its state starts anew);
+        ``CommandError`` for a source the node does not listen to (a restart would)."""
+        if spec.target != self._targets.get(spec.name):  # (the drive's caps and halts are set up at start)
+            raise CommandError("bad_request", f"map '{spec.name}': what a map drives (its 'target') changes only "
+                                              "with a restart — save, then restart the run")
+        for src in spec.sources:
+            if spec.enabled and not any(p.includes(zenoh.KeyExpr(keys.expr(src.pattern))) for p in self._subscribed):
+                raise CommandError("bad_request", f"map '{spec.name}': source '{src.pattern}' is not among those "
+                                                  "this node listens to — save, then restart the run")
+        publisher = None
+        if spec.enabled and spec.name not in self._publishers:
+            publisher = self.own(self.bus.stream_publisher(self.output_key(spec.name)))
+        with self._maps_lock:
+            if publisher is not None:
+                self._publishers[spec.name] = publisher
+            if spec.enabled:
+                self.chains[spec.name] = Chain(spec, self.count)
+            else:
+                self.chains.pop(spec.name, None)
+                self._silent.pop(spec.name, None)
+            self._inputs.pop(spec.name, None)
+            self._learning = {k: v for k, v in self._learning.items() if k[0] != spec.name or spec.enabled}
+            self._matchers = [(zenoh.KeyExpr(keys.expr(source.pattern)), chain, source)
+                              for chain in self.chains.values() for source in chain.spec.sources]
+            self._bindings.clear()
+            self._reply = codec.encode(self.described())
+
+    def start_learning(self, name: str, source: str, seconds: float) -> None:
+        """Learn ``source``'s range over its next ``seconds`` of values (``Editor.learned`` then)."""
+        with self._maps_lock:
+            self._learning[(name, source)] = Calibration(seconds)
+
+    def live(self, name: str) -> dict[str, Any]:
+        """Map ``name``'s live state: its last input and output, silent, what it learns."""
+        with self._maps_lock:
+            chain = self.chains.get(name)
+            learning = [{"source": s, "seconds": c.seconds, "range": c.range}
+                        for (n, s), c in self._learning.items() if n == name]
+            return {"input": self._inputs.get(name), "output": chain.value if chain else None,
+                    "silent": name in self._silent, "learning": learning[0] if learning else None}
+
     def metrics(self) -> dict[str, Any]:
         """Each map's last output, and the maps silent now (seconds since their last source value)."""
         now = time.monotonic()
@@ -121,9 +176,14 @@ class MapNode(Adapter):
                     continue
                 message = self._streams.take(key, payload, self.count, self.warn)
                 if message is not None:
-                    self._take(message)
+                    with self._maps_lock:
+                        self._take(message)
+                        learned = self._learned()
+                    for name, source, span in learned:  # (outside the lock: the edit replaces the map)
+                        self.editor.learned(name, source, span)
             wait = min(0.2, self._drive.flush()) if self._drive is not None else 0.2
-            self._watch(time.monotonic())
+            with self._maps_lock:
+                self._watch(time.monotonic())
 
     def _take(self, message: Incoming) -> None:
         if message.event is not None:  # an event is an impulse: 1, then 0 again (a threshold: on, then off)
@@ -158,6 +218,8 @@ class MapNode(Adapter):
                 name = chain.spec.name
                 self._heard[name] = now
                 self._seen.add(src)
+                if self._learning and (name, src.name) in self._learning:
+                    self._learning[(name, src.name)](t, numbers[max(component, 0)])
                 if chain.feed(src.name, numbers[max(component, 0)], span, t):
                     touched[name] = chain
         sent = sum(self._publish(name, chain, t) for name, chain in touched.items())
@@ -173,6 +235,8 @@ class MapNode(Adapter):
     def _publish(self, name: str, chain: Chain, t: float) -> bool:
         """Compute map ``name`` and publish its output (True) and its threshold's change."""
         out = chain.compute(t)
+        if out is not None:
+            self._inputs[name] = out.fraction
         for source, span in chain.frozen:
             log.info("%s: map '%s': source '%s' calibrated to [%g, %g]", self.name, name, source, *span)
         chain.frozen.clear()
@@ -192,6 +256,15 @@ class MapNode(Adapter):
             return False
         self._publishers[name].put(codec.encode({"t": t, "seq": self._seq, "v": out.value}))
         return True
+
+    def _learned(self) -> list[tuple[str, str, tuple[float, float]]]:
+        """The learns that froze (taken off the list)."""
+        if not self._learning:
+            return []
+        done = [(name, source, c.range) for (name, source), c in self._learning.items() if c.frozen]
+        for name, source, _ in done:
+            del self._learning[(name, source)]
+        return done  # type: ignore[return-value]
 
     def _bound(self, source: keys.Key) -> tuple[Binding, ...]:
         """The maps' sources that ``source`` feeds, with its range when known (worked out once per

@@ -12,7 +12,8 @@ the options, the tokens and the protocol.
 
 Modules: ``config`` (options), ``auth`` (tokens), ``protocol`` (messages), ``server``
 (routes and clients), ``slider`` (coalesced joint moves), ``kiosk`` (the buttons' states),
-``activity`` (what each robot runs and says, for the page's summary lines).
+``activity`` (what each robot runs and says, for the page's summary lines), ``maps`` (the
+mappings panel: the map nodes' maps, live, and the page's edits carried to them).
 """
 
 from __future__ import annotations
@@ -42,6 +43,7 @@ from sonibus.bus.web import WebServer
 
 from . import activity, auth
 from .config import WebConfig
+from .maps import MapsPanel
 from .server import Pages
 
 __all__ = ["WebConfig", "WebPages"]
@@ -105,6 +107,7 @@ class WebPages(Adapter):
         self.own(watch_robots(self.bus, self._robot_changed, self.capped))
         self.spawn(self._push, "push")
         self.spawn(lambda: self._info.keep_asking(self.stopping, self._on_bus), "info")
+        self.spawn(MapsPanel(self, self.pages).run, "maps")
 
     def _images(self) -> dict[str, str]:
         """The kiosk buttons' images by button id, each path from the installation file's folder."""

@@ -5,11 +5,13 @@ the messages the server sends (docs/web.md, "Protocol").
 Command(id=7, robot='pepper', verb='say', args={'text': 'hi'})
 >>> parse('{"type": "stop", "id": 8}')
 Stop(id=8)
+>>> parse('{"type": "map", "id": 10, "node": "sound", "verb": "undo", "args": {"map": "cutoff"}}')
+MapRequest(id=10, node='sound', verb='undo', args={'map': 'cutoff'})
 >>> try:
 ...     parse('{"type": "dance", "id": 9}')
 ... except BadMessage as exc:
 ...     print(exc.id, exc)
-9 unknown message type 'dance' — a page sends command, stop or press
+9 unknown message type 'dance' — a page sends command, stop, map or press
 """
 
 from __future__ import annotations
@@ -22,7 +24,8 @@ from sonibus.bus import keys, messages
 from sonibus.bus.errors import CommandError
 
 MAX_MESSAGE = 64 * 1024  # characters of one client message; longer ones are refused (the connection stays)
-TYPES = ("command", "stop", "press")
+TYPES = ("command", "stop", "map", "press")
+MAP_VERBS = ("list", "edit", "learn", "undo", "save")  # what a map node serves (schemas/v1/maps/)
 
 Id = int | str | None  # the client's own request id, echoed in the reply
 
@@ -52,7 +55,17 @@ class Press:
     button: str
 
 
-Request = Command | Stop | Press
+@dataclass(frozen=True)
+class MapRequest:
+    """Operator: ``verb`` (edit, learn, undo, save) to map node ``node``'s maps (``<node>/maps/<verb>``)."""
+
+    id: Id
+    node: str
+    verb: str
+    args: Any
+
+
+Request = Command | Stop | MapRequest | Press
 
 
 class BadMessage(ValueError):
@@ -88,6 +101,18 @@ def parse(text: str) -> Request:
         return Stop(id_)
     if kind == "press":
         return Press(id_, _name(message, "button", id_))
+    if kind == "map":
+        node, verb = _name(message, "node", id_), _name(message, "verb", id_)
+        try:
+            keys.check_name("node", node)
+        except ValueError as exc:
+            raise BadMessage(f"map: {exc}", id_) from None
+        if verb not in MAP_VERBS:
+            raise BadMessage(f"map: unknown verb {verb[:40]!r} — a map node takes {', '.join(MAP_VERBS)}", id_)
+        args = message.get("args", {})
+        if not isinstance(args, dict):
+            raise BadMessage("map: 'args' must be an object", id_)
+        return MapRequest(id_, node, verb, args)
     robot, verb = _name(message, "robot", id_), _name(message, "verb", id_)
     try:
         for chunk in (robot, *verb.split("/")):

@@ -25,7 +25,7 @@ from sonibus.bus.errors import CommandError
 from sonibus.bus.text import printable
 from sonibus.bus.web import WebClient, WebServer, close_clients
 
-from . import activity, kiosk, protocol
+from . import activity, kiosk, maps, protocol
 from .auth import Guard
 from .config import Button, WebConfig
 from .kiosk import Stand
@@ -85,6 +85,7 @@ class Pages:
         self.sliders: Coalescer  # made when the server starts (it runs on its loop's clock)
         self._robots: str | None = None   # the latest robots message, for a page that connects
         self._stats: str | None = None
+        self._maps: str | None = None     # the latest maps message (the mappings panel: maps.py)
         app = web_server.app
         app.router.add_get("/", functools.partial(self._page, "operator"))
         app.router.add_get("/kiosk", functools.partial(self._page, "kiosk"))
@@ -105,6 +106,13 @@ class Pages:
 
     def stats(self, nodes: list[dict[str, Any]]) -> None:
         self.web.call(self._set_stats, _dumps({"type": "stats", "nodes": nodes}))
+
+    def maps(self, text: str) -> None:
+        """The map nodes' maps (a ``maps`` message), kept for a page that connects."""
+        self.web.call(self._set_maps, text)
+
+    def to_operators(self, text: str) -> None:
+        self.web.call(self._to_operators, [text])
 
     def event(self, robot: str, kind: str, event: dict[str, Any], shown: bool) -> None:
         """``robot``'s event (``shown``: to the operator's pages too)."""
@@ -164,7 +172,7 @@ class Pages:
             for state in [*self.stand.states.values(), *([self.stand.show] if self.stand.show else [])]:
                 client.send(state)
             return
-        for text in (self._robots, self._stats):
+        for text in (self._robots, self._stats, self._maps):
             if text is not None:
                 client.push(text)
 
@@ -185,6 +193,9 @@ class Pages:
             self._bad(client, request.id, "press is the kiosk's (/kiosk/ws); the operator sends command")
         elif isinstance(request, protocol.Stop):
             self._stop(client, request.id)
+        elif isinstance(request, protocol.MapRequest):
+            if self._room(client, request.id):
+                maps.forward(self.adapter, self, client, request, self.config.timeout)
         else:
             self._command(client, request)
 
@@ -205,11 +216,7 @@ class Pages:
             self.adapter.count("refused")
             client.answer(protocol.reply(request.id, f"{request.verb}: {why}"))
             return
-        if client.asking >= MAX_ASKING:  # (said, never silently lost: the page may send it again)
-            self.adapter.count("commands_dropped")
-            client.answer(protocol.reply(request.id, f"dropped: too many at once — {client.asking} commands of "
-                                                     f"this page wait for their robots' answers (at most "
-                                                     f"{MAX_ASKING}); send it again once some are answered"))
+        if not self._room(client, request.id):
             return
         item = (client, request.id, request.robot, request.verb, args)
         if request.verb != "joints/set":
@@ -220,6 +227,16 @@ class Pages:
         if superseded is not None:
             self.adapter.count("commands_coalesced")
             superseded[0].answer(protocol.reply(superseded[1], {"coalesced": True}))
+
+    def _room(self, client: Client, id_: protocol.Id) -> bool:
+        """Whether ``client`` may have one more request waiting for an answer; if not, it is told."""
+        if client.asking < MAX_ASKING:
+            return True
+        self.adapter.count("commands_dropped")  # (said, never silently lost: the page may send it again)
+        client.answer(protocol.reply(id_, f"dropped: too many at once — {client.asking} commands of this page wait "
+                                          f"for their robots' answers (at most {MAX_ASKING}); send it again once "
+                                          "some are answered"))
+        return False
 
     def _stop(self, client: Client, id_: protocol.Id) -> None:
         """Stop every robot of the bus at once (``client.stop_all``: one query, never queued
@@ -286,6 +303,10 @@ class Pages:
 
     def _set_robots(self, text: str) -> None:
         self._robots = text
+        self._to_operators([text])
+
+    def _set_maps(self, text: str) -> None:
+        self._maps = text
         self._to_operators([text])
 
     def _set_stats(self, text: str) -> None:

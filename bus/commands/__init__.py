@@ -20,11 +20,12 @@ from .validate import (
     error_reply,
     expand_stiffness_names,
     ok_reply,
+    request_args,
     validate,
     verbs,
 )
 
 __all__ = [
     "LIMIT_TOLERANCE", "Argument", "Command", "error_reply", "expand_stiffness_names", "from_json", "from_osc",
-    "from_words", "ok_reply", "signature", "validate", "verbs",
+    "from_words", "ok_reply", "request_args", "signature", "validate", "verbs",
 ]

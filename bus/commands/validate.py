@@ -21,6 +21,8 @@ import jsonschema
 
 from ... import schemas
 from ..errors import CommandError
+from ..keys import Key
+from ..messages import BadMessage, Gate
 from ..robot import RobotModel
 
 _RANGE_CHECKS = {"minimum", "maximum", "exclusiveMinimum", "exclusiveMaximum"}
@@ -106,6 +108,23 @@ def _check_against_model(verb: str, args: dict[str, Any], model: RobotModel,
         _known("behavior", args["name"], behaviors, "unknown_behavior")
     elif verb == "say" and not args["text"].strip():
         raise CommandError("bad_request", "say: text is blank")
+
+
+def request_args(gate: Gate, key: str, payload: bytes, section: str, verb: str) -> dict[str, Any]:
+    """The arguments of a request served by a node that is no robot's owner (a show's
+    ``<robot>/program/<verb>``, a map node's ``<node>/maps/<verb>``): the gate's check, then
+    the verb's schema in ``schemas/v1/<section>/``; ``CommandError("bad_request")`` in one
+    line naming the argument (the gate's refusal: ``BadMessage``, a ``ValueError``, counted by
+    the caller)."""
+    try:
+        args = gate.check(Key.parse(key), payload) if payload else {}
+    except BadMessage as exc:
+        raise CommandError("bad_request", f"{verb}: {exc}") from exc
+    error = jsonschema.exceptions.best_match(schemas.validator(f"{section}/{verb}").iter_errors(args))
+    if error is not None:
+        where = ".".join(str(p) for p in error.absolute_path) or "arguments"
+        raise CommandError("bad_request", f"{verb}: {where}: {error.message}")
+    return args
 
 
 def ok_reply(verb: str, result: dict[str, Any] | None = None) -> dict[str, Any]:

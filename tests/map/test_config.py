@@ -121,9 +121,9 @@ def test_the_curves_picture_of_the_docs_is_what_the_curves_draw():
     assert "](img/mapping-curves.svg)" in (ROOT / "docs" / "mapping.md").read_text(encoding="utf-8")
 
 
-def test_a_map_called_map_is_refused_and_a_disabled_map_subscribes_to_nothing():
+def test_a_map_called_map_is_refused_and_a_disabled_map_is_listened_to_so_an_edit_can_enable_it():
     message = refused("", HEAD.replace("[nodes.sound.maps.cutoff]", "[nodes.sound.maps.map]"))
     assert "line 8: key 'maps.map': 'map' is the name of the node's own events" in message, message
     text = HEAD + '\n[nodes.sound.maps.off]\nsource = "nao/joints/HeadYaw"\nenabled = false\n'
     node = config.parse(text, "ok.toml").nodes["sound"].build(MapNode)
-    assert node.config.patterns == ("pepper/derived/hand/R",)
+    assert node.config.patterns == ("pepper/derived/hand/R", "nao/joints/HeadYaw")

@@ -1,0 +1,88 @@
+"""The operator page's mappings panel, on the server's side: every map node's maps, asked
+(``*/maps/list``) ``MAPS_EVERY_S`` while an operator's page is open, and the page's edits
+carried to the node that runs the map (``<node>/maps/<verb>``), its answer the page's reply.
+
+Two messages go to the pages: ``maps`` (each node's maps: tables, curves; sent when they
+change, and to a page that connects) and ``map_values`` (each map's live input, output,
+silence and learn, at every look).
+"""
+
+from __future__ import annotations
+
+import functools
+import json
+import time
+from typing import TYPE_CHECKING
+
+from sonibus.bus import client as bus_client
+from sonibus.bus import keys, messages
+from sonibus.bus.errors import CommandError
+
+from . import protocol
+
+if TYPE_CHECKING:
+    from sonibus.bus.adapter import Adapter
+
+    from .server import Client, Pages
+
+MAPS_EVERY_S = 0.2     # how often the maps' live values are asked while a page is open
+ASK_TIMEOUT_S = 1.0    # how long a look waits for the map nodes' answers
+MAX_MAP_NODES = 16     # map nodes shown (names from the bus)
+MAX_MAPS_BYTES = 4 << 20  # a look's maps, as JSON: past this the nodes past it are left out (said, counted)
+LIVE = ("input", "output", "silent", "learning")  # what changes at every look
+_dumps = functools.partial(json.dumps, allow_nan=False)
+
+
+class MapsPanel:
+    """Looks at the map nodes for ``pages`` (``run`` on a worker of ``adapter``)."""
+
+    def __init__(self, adapter: Adapter, pages: Pages) -> None:
+        self.adapter, self.pages = adapter, pages
+        self._structure = ""  # the last ``maps`` message sent
+
+    def run(self) -> None:
+        while not self.adapter.stopping.wait(MAPS_EVERY_S):
+            if self.pages.operators:
+                self.look()
+
+    def look(self) -> None:
+        """Ask every map node for its maps; tell the pages what changed."""
+        answers = self.adapter.bus.query(keys.maps("*", "list"), {}, timeout=ASK_TIMEOUT_S)
+        nodes, size = [], 0
+        for answer in sorted((a["result"] for a in answers if a.get("ok") and isinstance(a.get("result"), dict)),
+                             key=lambda r: str(r.get("node"))):
+            try:
+                messages.json_like(answer, "maps")
+                text = _dumps(answer)
+            except (messages.BadMessage, ValueError, TypeError) as exc:
+                self.adapter.warn("maps", f"map node {str(answer.get('node'))[:64]!r}: its maps cannot be shown: {exc}")
+                continue
+            size += len(text)
+            if len(nodes) >= MAX_MAP_NODES or size > MAX_MAPS_BYTES:
+                self.adapter.capped(f"map node {str(answer.get('node'))[:64]!r} not shown: already {len(nodes)} "
+                                    f"nodes' maps on the page (at most {MAX_MAP_NODES}, {MAX_MAPS_BYTES >> 20} MiB)")
+                break
+            nodes.append(answer)
+        structure = _dumps({"type": "maps", "nodes": [
+            {"node": n.get("node"), "file": n.get("file"),
+             "maps": [{k: v for k, v in m.items() if k not in LIVE} for m in n.get("maps", ())]} for n in nodes]})
+        if structure != self._structure:
+            self._structure = structure
+            self.pages.maps(structure)
+        self.pages.to_operators(_dumps({"type": "map_values", "t": time.time(), "nodes": {
+            n.get("node"): {m.get("name"): {k: m.get(k) for k in LIVE} for m in n.get("maps", ())} for n in nodes}}))
+
+
+def forward(adapter: Adapter, pages: Pages, client: Client, request: protocol.MapRequest, timeout: float) -> None:
+    """Carry a page's ``map`` request to its node; the node's answer (or why none came) is the reply."""
+    adapter.count("commands")
+    client.asking += 1  # (bounded by the server, as a page's commands are: MAX_ASKING)
+    key = keys.maps(request.node, request.verb)
+    nobody = CommandError("not_found", f"{request.verb}: no map node '{request.node}' on the bus ({key} is served "
+                                       "by nothing)")
+
+    def answered(outcome: bus_client.Outcome) -> None:
+        client.asking -= 1
+        client.answer(protocol.reply(request.id, outcome))
+    bus_client.ask_key(adapter.bus, key, request.args, lambda outcome: pages.web.call(answered, outcome), timeout,
+                       nobody, f"map node '{request.node}'")
