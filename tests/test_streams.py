@@ -23,17 +23,23 @@ REST_OF_PEPPER = tuple(f"pepper/{s}/**" for s in REST)
     (["*/joints/*"], False, Plan(frames=("*/frame",))),
     (["pepper/joints/R*", "nao/joints/*"], False, Plan(frames=("pepper/frame", "nao/frame"))),
     (["*/joints/*", "*/derived/**", "*/events/*"], False,
-     Plan(frames=("*/frame",), keys=("*/derived/**", "*/events/*"))),
+     Plan(frames=("*/frame",), keys=("*/derived/**", "*/events/*"), derived=("*/derived",))),
     # a pattern that does not name audio (or stats) is narrowed to the sections it may take: it does
     # not subscribe to the microphones (their owner publishes them only while someone listens)
     (["**"], False, Plan(frames=("*/frame",), keys=("*/derived/**", "*/events/**", "*/info/**", "*/cmd/**"),
-                         broad=("*/joints/**",))),
-    (["pepper/**"], False, Plan(frames=("pepper/frame",), keys=REST_OF_PEPPER, broad=("pepper/joints/**",))),
+                         broad=("*/joints/**",), derived=("*/derived",))),
+    (["pepper/**"], False, Plan(frames=("pepper/frame",), keys=REST_OF_PEPPER, broad=("pepper/joints/**",),
+                                derived=("pepper/derived",))),
     (["**/HeadYaw"], False, Plan(frames=("*/frame",), keys=tuple(f"*/{s}/**/HeadYaw" for s in REST),
-                                 broad=("*/joints/**/HeadYaw",))),
-    (["pepper/joints/R*", "pepper/**"], True, Plan(keys=("pepper/joints/R$*", "pepper/joints/**", *REST_OF_PEPPER))),
+                                 broad=("*/joints/**/HeadYaw",), derived=("*/derived",))),
+    (["pepper/joints/R*", "pepper/**"], True, Plan(keys=("pepper/joints/R$*", "pepper/joints/**", *REST_OF_PEPPER),
+                                                   derived=("pepper/derived",))),
     (["*/joints/HeadYaw", "pepper/joints/R*"], False, Plan(frames=("*/frame",))),  # overlapping: one frame key
-    (["pepper/**", "*/joints/*"], False, Plan(frames=("*/frame",), keys=REST_OF_PEPPER, broad=("pepper/joints/**",))),
+    (["pepper/**", "*/joints/*"], False, Plan(frames=("*/frame",), keys=REST_OF_PEPPER, broad=("pepper/joints/**",),
+                                              derived=("pepper/derived",))),
+    # derived values: served from the derived frames of the robots named (and from their own keys)
+    (["pepper/derived/qom/*", "nao/derived/**"], False,
+     Plan(keys=("pepper/derived/qom/*", "nao/derived/**"), derived=("pepper/derived", "nao/derived"))),
     (["**/audio/mic"], False, Plan(keys=("**/audio/mic",))),  # audio named after a leading **: kept
     (["pepper/audio/mic", "pepper/*/mic"], False,
      Plan(keys=("pepper/audio/mic", *(f"pepper/{s}/mic" for s in REST)),
