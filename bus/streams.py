@@ -81,7 +81,8 @@ def plan(patterns: Iterable[str], per_joint_keys: bool = False) -> Plan:
     derived: list[str] = []
     for pattern in dict.fromkeys(n for p in patterns for n in narrowed(keys.expr(p))):
         selected = zenoh.KeyExpr(pattern)
-        if named_section(pattern) in ("", "derived") and selected.intersects(_DERIVED) and (key := keys.derived_frame(_robot(pattern))) not in derived:
+        key = keys.derived_frame(_robot(pattern))
+        if named_section(pattern) in ("", "derived") and selected.intersects(_DERIVED) and key not in derived:
             derived.append(key)
         if per_joint_keys or not selected.intersects(_JOINTS):
             direct.append(pattern)  # (subscribed without frame keys: pepper/** would take them twice)
