@@ -113,13 +113,19 @@ class Gate:
 
     # -- sections ---------------------------------------------------------------------
 
-    def frame(self, key: Key, message: dict[str, Any]) -> None:
+    def _columns(self, message: dict[str, Any], most: int, what: str) -> tuple[list[Any], list[Any]]:
+        """A frame's (or derived frame's) ``t`` and ``seq`` checked, and its ``names`` and ``v``:
+        two lists of the same length, at most ``most`` long (``what``: what they list)."""
         self.stamp(message)
         names, values = message["names"], message["v"]
         if names.__class__ is not list or values.__class__ is not list or len(names) != len(values):
             raise BadMessage("names and v are not two lists of the same length")
-        if len(names) > MAX_JOINTS:
-            raise BadMessage(f"{len(names)} joints in one frame, at most {MAX_JOINTS}")
+        if len(names) > most:
+            raise BadMessage(f"{len(names)} {what}, at most {most}")
+        return names, values
+
+    def frame(self, key: Key, message: dict[str, Any]) -> None:
+        names, values = self._columns(message, MAX_JOINTS, "joints in one frame")
         if names != self._last_names.get(key.robot):  # (a robot's names are the same every frame: one comparison)
             self._known(names)
             # (a copy: whoever takes the message may change its list; robot and joint names come from the network)
@@ -165,12 +171,7 @@ class Gate:
             self.derived_frame(key, message)
 
     def derived_frame(self, key: Key, message: dict[str, Any]) -> None:
-        self.stamp(message)
-        names, values = message["names"], message["v"]
-        if names.__class__ is not list or values.__class__ is not list or len(names) != len(values):
-            raise BadMessage("names and v are not two lists of the same length")
-        if len(names) > MAX_DERIVED_VALUES:
-            raise BadMessage(f"{len(names)} values in one derived frame, at most {MAX_DERIVED_VALUES}")
+        names, values = self._columns(message, MAX_DERIVED_VALUES, "values in one derived frame")
         if len(message) != len(FRAME_FIELDS):
             extra = next(field for field in message if field not in FRAME_FIELDS)
             raise BadMessage(f"field {_short(extra)} is not one of a derived frame's ({', '.join(FRAME_FIELDS)})")

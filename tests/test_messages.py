@@ -165,10 +165,9 @@ DERIVED_VALUES = st.one_of(NUMBERS, st.lists(NUMBERS, max_size=3), st.lists(st.f
 
 @st.composite
 def derived_frames(draw: st.DrawFn) -> dict:
-    names = draw(st.lists(DERIVED_NAMES, max_size=5))
-    n = len(names) if draw(st.integers(0, 9)) else draw(st.integers(0, 6))
+    names = draw(st.lists(DERIVED_NAMES, max_size=5))  # (v as long: a schema cannot say "as many as names")
     message = {"t": draw(TIMES), "seq": draw(SEQS), "names": names,
-               "v": draw(st.lists(DERIVED_VALUES, min_size=n, max_size=n))}
+               "v": draw(st.lists(DERIVED_VALUES, min_size=len(names), max_size=len(names)))}
     if not draw(st.integers(0, 9)):
         message[draw(st.sampled_from(["cmd", "x"]))] = 0.5
     return message
@@ -187,6 +186,11 @@ def test_the_gate_accepts_a_derived_frame_exactly_when_the_schema_does(frame):
             accepted = False
         assert accepted == schemas.validator("derived_frame").is_valid(frame), (
             frame, next(schemas.validator("derived_frame").iter_errors(frame), None))
+
+
+def test_a_derived_frame_whose_names_and_values_differ_in_length_is_refused():
+    frame = messages.derived_frame(time.time(), 1, ["qom/Body", "hand/R"], [0.5])
+    assert "names and v are not two lists of the same length" in refused(Key.parse("pepper/derived"), frame)
 
 
 @st.composite
