@@ -153,7 +153,7 @@ class Recording:
         if stats.message_count == 0:
             raise RecordingError(f"{path} is an empty recording: it holds no messages")
         self.start_ns, self.end_ns = stats.message_start_time, stats.message_end_time
-        self.message_count = stats.message_count
+        self._message_count = stats.message_count
         # channels of a data key or a view: a message on any other is skipped (keys are what readers take apart)
         self._channels: dict[int, Channel] = {cid: c for cid, c in summary.channels.items()
                                               if is_view(c.topic) or _data_key(c.topic)}
@@ -182,9 +182,17 @@ class Recording:
                     key = f"{message.key}/{name}"
                     if key in found or len(found) < MAX_CHANNELS:  # (names come from the file)
                         found[key] = found.get(key, 0) + 1
+            frames = sum(n for k, n in self._counts.items() if k in self._derived_frames)
+            self._message_count += sum(found.values()) - frames
             self._counts = {k: n for k, n in self._counts.items() if k not in self._derived_frames} | found
             self._expanded = True
         return self._counts
+
+    @property
+    def message_count(self) -> int:
+        """Messages in the file, as ``messages()`` gives them (a derived frame: its values)."""
+        _ = self.counts
+        return self._message_count
 
     @property
     def keys(self) -> list[str]:

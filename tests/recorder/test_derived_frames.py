@@ -53,6 +53,7 @@ def test_a_file_of_derived_frames_reads_and_exports_as_one_of_derived_keys(tmp_p
     with Recording(framed) as new, Recording(per_key) as old:
         assert new.keys == old.keys and "pepper/derived/hand/R" in new.keys
         assert new.counts == old.counts and new.counts["pepper/derived/hand/R"] == 4
+        assert new.message_count == old.message_count == sum(1 for _ in new.messages())
         wanted = ["pepper/derived/hand/R", "pepper/joints/HeadYaw"]
         for keys in (None, wanted, new.matching(["pepper/derived/qom/*"])):
             assert [(m.key, m.data) for m in new.messages(keys)] == [(m.key, m.data) for m in old.messages(keys)]
