@@ -225,26 +225,37 @@ class Recording:
             raise RecordingError(f"no key in {self.path} matches {' '.join(patterns)} — it holds {shown}")
         return found
 
+    @property
+    def derived_frames(self) -> set[str]:
+        """The channels of derived frames (``pepper/derived``): what ``messages(frames=True)`` gives whole."""
+        return set(self._derived_frames)
+
     def messages(self, keys: Sequence[str] | None = None, start_s: float | None = None,
-                 end_s: float | None = None) -> Iterator[Message]:
+                 end_s: float | None = None, frames: bool = False) -> Iterator[Message]:
         """Messages in the order they were recorded, optionally only ``keys`` and
         only between ``start_s`` and ``end_s`` seconds from the start; what cannot be
         read is skipped and counted (``skipped``). A derived frame comes as the samples
         of its values' keys (``pepper/derived/qom/Body``), in its order, as a recording
-        made before derived frames holds them."""
+        made before derived frames holds them; with ``frames`` (replay) it comes whole,
+        holding only the values of ``keys``."""
         if not self._derived_frames:
             yield from self._raw(keys, start_s, end_s)
             return
         wanted = None if keys is None else set(keys)
-        frames = {f for f in self._derived_frames if wanted is None or any(k.startswith(f + "/") for k in wanted)}
-        for message in self._raw(None if wanted is None else [*wanted, *frames], start_s, end_s):
+        chosen = {f for f in self._derived_frames if wanted is None or any(k.startswith(f + "/") for k in wanted)}
+        for message in self._raw(None if wanted is None else [*wanted, *chosen], start_s, end_s):
             if message.key not in self._derived_frames:
                 yield message
                 continue
-            for name, sample in derived_samples(message.data):
-                key = f"{message.key}/{name}"
-                if wanted is None or key in wanted:
-                    yield Message(key, message.log_ns, message.publish_ns, sample)
+            samples = [(name, sample) for name, sample in derived_samples(message.data)
+                       if wanted is None or f"{message.key}/{name}" in wanted]
+            if not frames:
+                yield from (Message(f"{message.key}/{name}", message.log_ns, message.publish_ns, sample)
+                            for name, sample in samples)
+            elif samples:
+                data = message.data if len(samples) == len(message.data["names"]) else {
+                    **message.data, "names": [n for n, _ in samples], "v": [s["v"] for _, s in samples]}
+                yield Message(message.key, message.log_ns, message.publish_ns, data)
 
     def _raw(self, keys: Sequence[str] | None = None, start_s: float | None = None,
              end_s: float | None = None) -> Iterator[Message]:

@@ -87,6 +87,18 @@ def test_the_recorder_writes_one_message_per_derived_frame_and_reads_back_their_
         assert not any(k.startswith("pepper/derived/") for k in recording._counts)
         read = [(m.key, m.data) for m in recording.messages() if m.key.startswith("pepper/derived/")]
     assert read == on_bus and len(read) > 20 * len(seen) > 0
+    replayed: list[tuple[str, dict]] = []
+    subscriber = watch.session.declare_subscriber("pepper/derived/**", lambda s: replayed.append(
+        (str(s.key_expr), decode(s.payload.to_bytes()))))
+    replay = net.start(Replay(ReplayConfig(path=str(path), speed=4.0, keys=("pepper/derived/qom/*",)), name="replay"))
+    wait_for(lambda: len(replayed) >= 10, what="derived frames replayed")
+    replay.stop()
+    subscriber.undeclare()
+    assert {key for key, _ in replayed} == {"pepper/derived"}  # as they were recorded: a frame each
+    recorded = {(name, tuple(m["v"] for k, m in on_bus if k == f"pepper/derived/{name}")) for name in
+                {n for _, f in replayed for n in f["names"]}}
+    assert all(f["names"] and all(n.startswith("qom/") for n in f["names"]) for _, f in replayed)
+    assert all(v in dict(recorded)[n] for _, f in replayed for n, v in zip(f["names"], f["v"], strict=True))
 
 
 def test_a_recording_made_before_derived_frames_still_reads_exports_and_replays(net, tmp_path):
