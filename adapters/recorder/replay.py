@@ -19,8 +19,9 @@ frame whole on ``<robot>/frame`` (what sinks listen to), then each joint's
 sample on its key while anyone subscribes there (``bus/ownership.py``, shared with
 live owners). Derived values go out as they were recorded: a derived frame
 whole on ``<robot>/derived`` (with only the values ``keys`` selects), or each on
-its key (a recording made before derived frames). The replayed robots are owned like real ones (liveliness, ``<robot>/info``
-from the recording) but take no commands: they answer ``failed``, and ``stop`` ok.
+its key (a recording made before derived frames). The replayed robots are owned
+like real ones (liveliness, ``<robot>/info`` from the recording) but take no
+commands: they answer ``failed``, and ``stop`` ok.
 """
 
 from __future__ import annotations
