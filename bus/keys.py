@@ -37,6 +37,17 @@ def derived(robot: str, feature: str, name: str) -> str:
     return f"{robot}/derived/{feature}/{name}"
 
 
+def derived_frame(robot: str = "*") -> str:
+    """Where a feature processor publishes every derived value of one frame in one message
+    (``pepper/derived``: under ``*/derived/**``, so subscriptions to derived keys see it)."""
+    return f"{robot}/derived"
+
+
+def is_derived_frame(key: str) -> bool:
+    """Whether ``key`` is a robot's derived frame key (``pepper/derived``)."""
+    return key.endswith("/derived") and key.count("/") == 1
+
+
 def event(robot: str, kind: str) -> str:
     return f"{robot}/events/{kind}"
 

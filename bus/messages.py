@@ -34,14 +34,16 @@ from .capped import Capped, size_of
 from .codec import DecodeError, decode
 from .keys import AUDIO_STREAMS, Key
 
-__all__ = ["FRAME_FIELDS", "SECTIONS", "BadMessage", "Gate", "Limits", "Section", "frame", "frame_samples",
-           "schema_of", "valid_part"]
+__all__ = ["FRAME_FIELDS", "SECTIONS", "BadMessage", "Gate", "Limits", "Section", "derived_frame", "derived_samples",
+           "frame", "frame_samples", "schema_of", "valid_part"]
 
 _FRAME = schemas.load("frame")["properties"]
 MAX_JOINTS: int = _FRAME["names"]["maxItems"]          # joints in one frame
 MAX_VALUE: float = _FRAME["v"]["items"]["maximum"]     # |v| of any joint or derived value (a physical bound)
 MAX_SEQ: int = _FRAME["seq"]["maximum"]
 MAX_DERIVED_SIZE: int = schemas.load("derived_sample")["properties"]["v"]["oneOf"][1]["maxItems"]
+_DERIVED_FRAME = schemas.load("derived_frame")["properties"]
+MAX_DERIVED_VALUES: int = _DERIVED_FRAME["names"]["maxItems"]  # derived values in one derived frame
 MAX_STATS_ENTRIES: dict[str, int] = {name: table["maxProperties"] for name, table in
                                      schemas.load("node_stats")["properties"].items() if "maxProperties" in table}
 MAX_DEPTH = 8                                          # nesting of lists and maps in an event
@@ -55,6 +57,7 @@ MAX_RATE: int = _AUDIO["properties"]["rate"]["maximum"]
 MAX_CHANNELS: int = _AUDIO["properties"]["channels"]["maximum"]
 MAX_CHUNK_S: float = _AUDIO["x-max-duration-s"]      # an audio chunk's duration
 _NAME = re.compile(_FRAME["names"]["items"]["pattern"].removesuffix("$") + r"\Z").match  # one plain key chunk
+_DERIVED_NAME = re.compile(_DERIVED_FRAME["names"]["items"]["pattern"].removesuffix("$") + r"\Z").match  # feature/name
 
 
 class BadMessage(ValueError):
@@ -110,13 +113,19 @@ class Gate:
 
     # -- sections ---------------------------------------------------------------------
 
-    def frame(self, key: Key, message: dict[str, Any]) -> None:
+    def _columns(self, message: dict[str, Any], most: int, what: str) -> tuple[list[Any], list[Any]]:
+        """A frame's (or derived frame's) ``t`` and ``seq`` checked, and its ``names`` and ``v``:
+        two lists of the same length, at most ``most`` long (``what``: what they list)."""
         self.stamp(message)
         names, values = message["names"], message["v"]
         if names.__class__ is not list or values.__class__ is not list or len(names) != len(values):
             raise BadMessage("names and v are not two lists of the same length")
-        if len(names) > MAX_JOINTS:
-            raise BadMessage(f"{len(names)} joints in one frame, at most {MAX_JOINTS}")
+        if len(names) > most:
+            raise BadMessage(f"{len(names)} {what}, at most {most}")
+        return names, values
+
+    def frame(self, key: Key, message: dict[str, Any]) -> None:
+        names, values = self._columns(message, MAX_JOINTS, "joints in one frame")
         if names != self._last_names.get(key.robot):  # (a robot's names are the same every frame: one comparison)
             self._known(names)
             # (a copy: whoever takes the message may change its list; robot and joint names come from the network)
@@ -153,6 +162,35 @@ class Gate:
                 numbers((value,), quantity)
         if "v" not in message:
             raise BadMessage("no 'v'")
+
+    def derived(self, key: Key, message: dict[str, Any]) -> None:
+        """A derived frame (``<robot>/derived``) or a derived sample (``<robot>/derived/<feature>/<name>``)."""
+        if key.name:
+            self.derived_sample(key, message)
+        else:
+            self.derived_frame(key, message)
+
+    def derived_frame(self, key: Key, message: dict[str, Any]) -> None:
+        names, values = self._columns(message, MAX_DERIVED_VALUES, "values in one derived frame")
+        if len(message) != len(FRAME_FIELDS):
+            extra = next(field for field in message if field not in FRAME_FIELDS)
+            raise BadMessage(f"field {_short(extra)} is not one of a derived frame's ({', '.join(FRAME_FIELDS)})")
+        if names != self._last_names.get(key.key):  # (a robot's names are the same every frame: one comparison)
+            for name in names:
+                if name.__class__ is not str or not _DERIVED_NAME(name):
+                    raise BadMessage(f"derived name {_short(name)} is not <feature>/<name> of plain key chunks")
+            if len(set(names)) != len(names):
+                raise BadMessage("derived names are not unique")
+            self._last_names.put(key.key, list(names), size_of(names) + len(key.key))
+        if plain_floats(values):
+            return
+        for i, value in enumerate(values):
+            if value.__class__ is list:
+                if not 0 < len(value) <= MAX_DERIVED_SIZE:
+                    raise BadMessage(f"v[{i}] holds {len(value)} numbers, 1..{MAX_DERIVED_SIZE} expected")
+                numbers(value, f"v[{i}]")
+            else:
+                numbers((value,), f"v[{i}]")
 
     def derived_sample(self, key: Key, message: dict[str, Any]) -> None:
         value = message.get("v")
@@ -262,7 +300,8 @@ class Section:
 SECTIONS: dict[str, Section] = {section.name: section for section in (
     Section("frame", "frame", Gate.frame, taken_as="frame"),
     Section("joints", "joint_sample", Gate.joint_sample, taken_as="sample"),
-    Section("derived", "derived_sample", Gate.derived_sample, taken_as="sample"),
+    # <robot>/derived: a derived frame (every value of one frame); <robot>/derived/<feature>/<name>: one value
+    Section("derived", "derived_sample", Gate.derived, taken_as="sample"),
     Section("events", "event", Gate.event),
     Section("info", "robot_info", Gate.info),            # <robot>/info/derived: derived_info
     Section("cmd", None, Gate.command),
@@ -282,6 +321,8 @@ def schema_of(key: Key) -> str | None:
     section = SECTIONS.get(key.section)
     if section is None:
         return None
+    if key.section == "derived" and not key.name:
+        return "derived_frame"
     return "derived_info" if key.section == "info" and key.name == "derived" else section.schema
 
 
@@ -390,6 +431,24 @@ def frame_samples(message: dict[str, Any]) -> list[tuple[str, dict[str, Any]]]:
     extra = {quantity: v for quantity, v in message.items() if quantity not in FRAME_FIELDS}
     return [(name, {"t": t, "seq": seq, "v": value, **{q: v[i] for q, v in extra.items()}})
             for i, (name, value) in enumerate(zip(message["names"], message["v"], strict=True))]
+
+
+def derived_frame(t: float, seq: int, names: Sequence[str], values: Sequence[Any]) -> dict[str, Any]:
+    """A derived frame (``<robot>/derived``): ``values`` (a number or a list of numbers each)
+    in the order of ``names`` (``<feature>/<name>``, their keys below ``<robot>/derived/``)."""
+    return {"t": t, "seq": seq, "names": list(names), "v": list(values)}
+
+
+def derived_samples(message: dict[str, Any]) -> list[tuple[str, dict[str, Any]]]:
+    """Each value of a (checked) derived frame with the sample its own key carries
+    (``<feature>/<name>``, ``{t, seq, v}``): what a processor with per-key publishing puts.
+
+    >>> derived_samples(derived_frame(1.5, 7, ["qom/all", "hand/R"], [0.2, [0.1, 0.0, 0.3]]))[1]
+    ('hand/R', {'t': 1.5, 'seq': 7, 'v': [0.1, 0.0, 0.3]})
+    """
+    t, seq = message["t"], message["seq"]
+    return [(name, {"t": t, "seq": seq, "v": value})
+            for name, value in zip(message["names"], message["v"], strict=True)]
 
 
 def _short(value: Any) -> str:

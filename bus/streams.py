@@ -16,10 +16,19 @@ so a robot's microphones, published only while someone subscribes, stay off for
 an OSC sink of ``pepper/**``. A sink that cannot carry audio refuses a pattern
 naming audio in its configuration (``without_audio``).
 
+Derived values travel the same way: a feature processor publishes every value of
+one frame in one message on ``<robot>/derived`` (``derived``), and a pattern that
+selects derived keys (``*/derived/**``, ``pepper/derived/qom/*``) is served from it
+too; what it selects comes out as the samples its keys would carry (``Incoming.parts``,
+made once here for every sink). Per-key derived samples (a processor with
+``per_key = true``, a map node, a script) still come on their own keys.
+
 >>> plan(["*/joints/*", "*/events/*"])
-Plan(frames=('*/frame',), keys=('*/events/*',), broad=())
+Plan(frames=('*/frame',), keys=('*/events/*',), broad=(), derived=())
 >>> plan(["pepper/**"]).broad, plan(["pepper/joints/R*"], per_joint_keys=True).keys
 (('pepper/joints/**',), ('pepper/joints/R$*',))
+>>> plan(["*/derived/**", "pepper/derived/qom/*"]).derived
+('*/derived',)
 """
 
 from __future__ import annotations
@@ -43,6 +52,7 @@ from .queue import SampleQueue
 log = logging.getLogger(__name__)
 
 _JOINTS = zenoh.KeyExpr(keys.joints())
+_DERIVED = zenoh.KeyExpr("*/derived/*/*/**")  # every derived value's own key
 MAX_KEYS = 10_000  # keys taken apart and remembered
 MAX_FRAMES = 1024  # joint lists of frames remembered (their selection)
 MAX_BYTES = 2 << 20  # of names in each of those tables (a frame's 128 names may fill its 64 KB: a count is no cap)
@@ -53,11 +63,14 @@ _PARSED = 400      # bytes of a parsed key beside its characters (the ``Key`` an
 class Plan:
     """Key expressions to subscribe to: ``frames`` (frame keys), ``keys`` (as given,
     without frame keys) and ``broad`` (patterns that select joints and more:
-    subscribed without their joint and frame keys, which come from ``frames``)."""
+    subscribed without their joint and frame keys, which come from ``frames``);
+    ``derived``: the derived frame keys of the patterns that select derived values
+    (``keys`` and ``broad`` are subscribed without them)."""
 
     frames: tuple[str, ...] = ()
     keys: tuple[str, ...] = ()
     broad: tuple[str, ...] = ()
+    derived: tuple[str, ...] = ()
 
 
 def plan(patterns: Iterable[str], per_joint_keys: bool = False) -> Plan:
@@ -65,20 +78,34 @@ def plan(patterns: Iterable[str], per_joint_keys: bool = False) -> Plan:
     frames: list[str] = []
     direct: list[str] = []
     broad: list[str] = []
+    derived: list[str] = []
     for pattern in dict.fromkeys(n for p in patterns for n in narrowed(keys.expr(p))):
         selected = zenoh.KeyExpr(pattern)
+        key = keys.derived_frame(_robot(pattern))
+        if named_section(pattern) in ("", "derived") and selected.intersects(_DERIVED) and key not in derived:
+            derived.append(key)
         if per_joint_keys or not selected.intersects(_JOINTS):
             direct.append(pattern)  # (subscribed without frame keys: pepper/** would take them twice)
             continue
-        robot = pattern.split("/")[0]
-        frame = keys.frame("*" if "**" in robot else robot)
+        frame = keys.frame(_robot(pattern))
         if frame not in frames:
             frames.append(frame)
         if not _JOINTS.includes(selected):  # it selects more than joints
             broad.append(pattern)
+    return Plan(_one_each(frames, keys.frame()), tuple(direct), tuple(broad), _one_each(derived, keys.derived_frame()))
+
+
+def _robot(pattern: str) -> str:
+    robot = pattern.split("/")[0]
+    return "*" if "**" in robot else robot
+
+
+def _one_each(frames: list[str], every: str) -> tuple[str, ...]:
+    """Frame keys to subscribe to: ``every`` robot's in one subscription if two overlap, or a
+    frame would come twice (``accepts()`` keeps the robots asked)."""
     if any(zenoh.KeyExpr(a).intersects(zenoh.KeyExpr(b)) for a, b in itertools.combinations(frames, 2)):
-        frames = [keys.frame()]  # one subscription, or a frame would come twice; accepts() keeps the robots asked
-    return Plan(tuple(frames), tuple(direct), tuple(broad))
+        return (every,)
+    return tuple(frames)
 
 
 class Selected(NamedTuple):
@@ -105,6 +132,7 @@ class Incoming(NamedTuple):
     seq: int = 0
     values: tuple[float, ...] = ()
     selected: Selected | None = None
+    parts: tuple[Incoming, ...] | None = None  # a derived frame's selected values, as their keys' samples
 
     @property
     def samples(self) -> tuple[Incoming, ...]:
@@ -118,7 +146,9 @@ class Incoming(NamedTuple):
 
     @property
     def joints(self) -> tuple[Incoming, ...]:
-        """The samples it carries: a frame's, or itself."""
+        """The samples it carries: a frame's, a derived frame's (``parts``), or itself."""
+        if self.parts is not None:
+            return self.parts
         return self.samples if self.selected is not None else (self,)
 
 
@@ -157,14 +187,28 @@ class Selection:
             if selected.indices is not None:
                 values = [values[i] for i in selected.indices]
             return Incoming(source, message, None, message["t"], message["seq"], tuple(map(float, values)), selected)
+        if taken_as == "sample" and not source.name:  # <robot>/derived: a derived frame
+            return self._derived_frame(source, message)
         if taken_as == "sample":
             value = message["v"]
             values = tuple(map(float, value)) if isinstance(value, list) else (float(value),)
             return Incoming(source, message, None, message["t"], message["seq"], values)
         return Incoming(source, message, message)
 
-    def selected(self, robot: str, names: list[str]) -> Selected:
-        """The joints of ``robot``'s frames with ``names`` (checked by the gate) that the patterns select."""
+    def _derived_frame(self, source: keys.Key, message: dict[str, Any]) -> Incoming:
+        """A derived frame, with the values the patterns select as the samples of their own keys."""
+        t, seq, values = message["t"], message["seq"], message["v"]
+        selected = self.selected(source.key, message["names"], source.key + "/")
+        chosen = values if selected.indices is None else [values[i] for i in selected.indices]
+        parts = tuple(Incoming(key, {"t": t, "seq": seq, "v": value}, None, t, seq,
+                               tuple(map(float, value)) if value.__class__ is list else (float(value),))
+                      for key, value in zip(selected.sources, chosen, strict=True))
+        return Incoming(source, message, None, t, seq, (), None, parts)
+
+    def selected(self, robot: str, names: list[str], prefix: str = "") -> Selected:
+        """The joints of ``robot``'s frames with ``names`` (checked by the gate) that the patterns select
+        (``prefix``: their keys' beside the names, ``<robot>/joints/`` unless given; a derived frame's
+        are ``<robot>/derived/``, and ``robot`` is then its key)."""
         last = self._last.get(robot)
         if last is not None and last[0] == names:  # (a robot's names are the same every frame: one comparison)
             return last[1]
@@ -172,7 +216,7 @@ class Selection:
         found = self._frames.get(signature)
         size = size_of(names) + len(robot)
         if found is None:
-            prefix = f"{robot}/joints/"
+            prefix = prefix or f"{robot}/joints/"
             indices = tuple(i for i, name in enumerate(names) if self.accepts(prefix + name))
             sources = tuple(self._key(prefix + names[i]) for i in indices)
             found = self._frames.put(signature, Selected(sources, None if len(indices) == len(names) else indices,
@@ -193,7 +237,10 @@ class Selection:
             count("bad", 1)
             warn("bad", f"message on '{key}' refused: {exc}")
             return None
-        count("received", (len(message.values) if message.selected is not None else 0) or 1)
+        if message.parts is not None:
+            count("received", len(message.parts) or 1)
+        else:
+            count("received", (len(message.values) if message.selected is not None else 0) or 1)
         return message
 
     def accepts(self, key: str) -> bool:
@@ -250,9 +297,10 @@ class Streams(Selection):
                      "joint keys only)", bus.node, ", ".join(patterns), ", ".join(self.plan.frames))
         into = _Direct(queue, direct) if direct is not None else queue
         self.subscribers = [bus.subscribe(k, queue=into, stamped=stamped)[0] for k in self.plan.frames]
-        self.subscribers += [bus.subscribe(k, queue=queue, stamped=stamped, skip=_skip(k, keys.is_frame))[0]
+        self.subscribers += [bus.subscribe(k, queue=queue, stamped=stamped)[0] for k in self.plan.derived]
+        self.subscribers += [bus.subscribe(k, queue=queue, stamped=stamped, skip=_skip(k, _frame_keys(k)))[0]
                              for k in self.plan.keys]
-        self.subscribers += [bus.subscribe(k, queue=queue, stamped=stamped, skip=_skip(k, _from_frames))[0]
+        self.subscribers += [bus.subscribe(k, queue=queue, stamped=stamped, skip=_skip(k, _from_frames(k)))[0]
                              for k in self.plan.broad]
 
     def take(self, key: str, payload: bytes | Held, count: Callable[[str, int], None],
@@ -319,9 +367,18 @@ class _Direct(SampleQueue):
             self.queue.put(item)
 
 
-def _from_frames(key: str) -> bool:
-    """Joint and frame keys, which a broad pattern's subscription leaves to the frames."""
-    return keys.is_frame(key) or (key.count("/") == 2 and key.split("/")[1] == "joints")
+def _frame_keys(pattern: str) -> Callable[[str], bool]:
+    """What a subscription to ``pattern`` leaves to the frame subscriptions: frame keys, and
+    derived frame keys if ``pattern`` selects derived values (``Plan.derived`` has them then)."""
+    if not zenoh.KeyExpr(pattern).intersects(_DERIVED):
+        return keys.is_frame
+    return lambda key: keys.is_frame(key) or keys.is_derived_frame(key)
+
+
+def _from_frames(pattern: str) -> Callable[[str], bool]:
+    """``_frame_keys``, and joint keys: what a broad pattern's subscription leaves to the frames."""
+    frame_keys = _frame_keys(pattern)
+    return lambda key: frame_keys(key) or (key.count("/") == 2 and key.split("/")[1] == "joints")
 
 
 def _skip(pattern: str, also: Callable[[str], bool]) -> Callable[[str], bool]:

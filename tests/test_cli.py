@@ -198,6 +198,23 @@ def test_echo_prints_count_samples(net):
     assert seqs == sorted(seqs) and len(set(seqs)) == 5
 
 
+def test_echo_of_derived_values_prints_each_on_its_key_as_before(net):
+    """Issue 35: derived values travel in derived frames (``pepper/derived``); echo shows the
+    values its pattern selects, each on its own key, as when each came on its key."""
+    from sonibus.adapters.features import Features, FeaturesConfig
+    net.sim("pepper", rate_hz=50)
+    net.start(Features(FeaturesConfig(robots="pepper", max_age_ms=0), name="features"))
+    result = run_cli("echo", "pepper/derived/qom/*", "--count", "12", *net.cli_args())
+    assert result.returncode == 0, result.stderr
+    lines = [line.partition(" ") for line in result.stdout.splitlines()]
+    assert len(lines) == 12, result.stdout
+    assert {key for key, _, _ in lines} <= {f"pepper/derived/qom/{c}" for c in ("Head", "LArm", "RArm", "Leg", "Body")}
+    assert len({key for key, _, _ in lines}) > 1
+    for _, _, payload in lines:
+        sample = json.loads(payload)
+        assert set(sample) == {"t", "seq", "v"} and isinstance(sample["v"], float)
+
+
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
 def test_echo_without_count_ends_on_signal(net, spawn, sig):
     net.sim("pepper", rate_hz=50)

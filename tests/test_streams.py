@@ -9,7 +9,7 @@ import time
 import pytest
 
 from sonibus import schemas
-from sonibus.bus import codec, streams
+from sonibus.bus import codec, messages, streams
 from sonibus.bus.queue import SampleQueue
 from sonibus.bus.streams import Incoming, Plan, Selection, Streams, plan
 
@@ -23,17 +23,23 @@ REST_OF_PEPPER = tuple(f"pepper/{s}/**" for s in REST)
     (["*/joints/*"], False, Plan(frames=("*/frame",))),
     (["pepper/joints/R*", "nao/joints/*"], False, Plan(frames=("pepper/frame", "nao/frame"))),
     (["*/joints/*", "*/derived/**", "*/events/*"], False,
-     Plan(frames=("*/frame",), keys=("*/derived/**", "*/events/*"))),
+     Plan(frames=("*/frame",), keys=("*/derived/**", "*/events/*"), derived=("*/derived",))),
     # a pattern that does not name audio (or stats) is narrowed to the sections it may take: it does
     # not subscribe to the microphones (their owner publishes them only while someone listens)
     (["**"], False, Plan(frames=("*/frame",), keys=("*/derived/**", "*/events/**", "*/info/**", "*/cmd/**"),
-                         broad=("*/joints/**",))),
-    (["pepper/**"], False, Plan(frames=("pepper/frame",), keys=REST_OF_PEPPER, broad=("pepper/joints/**",))),
+                         broad=("*/joints/**",), derived=("*/derived",))),
+    (["pepper/**"], False, Plan(frames=("pepper/frame",), keys=REST_OF_PEPPER, broad=("pepper/joints/**",),
+                                derived=("pepper/derived",))),
     (["**/HeadYaw"], False, Plan(frames=("*/frame",), keys=tuple(f"*/{s}/**/HeadYaw" for s in REST),
-                                 broad=("*/joints/**/HeadYaw",))),
-    (["pepper/joints/R*", "pepper/**"], True, Plan(keys=("pepper/joints/R$*", "pepper/joints/**", *REST_OF_PEPPER))),
+                                 broad=("*/joints/**/HeadYaw",), derived=("*/derived",))),
+    (["pepper/joints/R*", "pepper/**"], True, Plan(keys=("pepper/joints/R$*", "pepper/joints/**", *REST_OF_PEPPER),
+                                                   derived=("pepper/derived",))),
     (["*/joints/HeadYaw", "pepper/joints/R*"], False, Plan(frames=("*/frame",))),  # overlapping: one frame key
-    (["pepper/**", "*/joints/*"], False, Plan(frames=("*/frame",), keys=REST_OF_PEPPER, broad=("pepper/joints/**",))),
+    (["pepper/**", "*/joints/*"], False, Plan(frames=("*/frame",), keys=REST_OF_PEPPER, broad=("pepper/joints/**",),
+                                              derived=("pepper/derived",))),
+    # derived values: served from the derived frames of the robots named (and from their own keys)
+    (["pepper/derived/qom/*", "nao/derived/**"], False,
+     Plan(keys=("pepper/derived/qom/*", "nao/derived/**"), derived=("pepper/derived", "nao/derived"))),
     (["**/audio/mic"], False, Plan(keys=("**/audio/mic",))),  # audio named after a leading **: kept
     (["pepper/audio/mic", "pepper/*/mic"], False,
      Plan(keys=("pepper/audio/mic", *(f"pepper/{s}/mic" for s in REST)),
@@ -92,6 +98,36 @@ def test_a_broad_pattern_takes_each_joint_once(net):
     assert all(m.source.section in ("frame", "events") for m in taken), {m.source.key for m in taken}
     assert all(len(m.joints) == 17 for m in taken if m.source.section == "frame")
     watcher.undeclare()
+    streams.undeclare()
+
+
+def test_derived_frames_come_once_as_the_samples_of_the_keys_the_patterns_select(net):
+    """Issue 35: overlapping patterns of derived keys share one subscription to the derived
+    frames, which each come once, as the samples of the selected keys; a value put on its own
+    key (a map node, ``per_key = true``) still comes on it."""
+    sink = net.bus("sink")
+    queue = SampleQueue(100_000)
+    streams = Streams(sink, ["pepper/derived/qom/*", "*/derived/hand/**", "pepper/events/*"], queue, pace=False)
+    robot = net.bus("robot")
+    taken: list[Incoming] = []
+    seq = iter(range(10**6))
+
+    def put() -> bool:
+        frame = messages.derived_frame(time.time(), next(seq), ["qom/Body", "hand/R", "velocity/HeadYaw"],
+                                       [0.5, [0.1, 0.2, 0.3], 1.5])
+        robot.put("pepper/derived", frame)
+        robot.put("pepper/derived/qom/Head", {"t": time.time(), "seq": 7, "v": 0.25})
+        taken.extend(streams.incoming(*item) for item in queue.drain(0.05))
+        return len([m for m in taken if m.parts]) >= 3 and any(m.source.name == "Head" for m in taken)
+    wait_for(put, what="derived frames and a derived sample")
+    framed = [m for m in taken if m.parts is not None]
+    assert len(framed) == len({m.seq for m in framed})  # each once
+    frame = framed[0].message
+    parts = framed[0].joints
+    assert [(p.source.key, p.values, p.message) for p in parts] == [
+        ("pepper/derived/qom/Body", (0.5,), {"t": frame["t"], "seq": frame["seq"], "v": 0.5}),
+        ("pepper/derived/hand/R", (0.1, 0.2, 0.3), {"t": frame["t"], "seq": frame["seq"], "v": [0.1, 0.2, 0.3]})]
+    assert parts[1].source.feature == "hand" and parts[1].source.name == "R"
     streams.undeclare()
 
 

@@ -35,6 +35,7 @@ class FeaturesConfig:
     queue: int = 8192                         # messages buffered before the oldest are dropped
     max_age_ms: float = 100.0                 # an older frame is skipped, not computed late (0: never skip)
     per_joint_keys: bool = False              # joints from <robot>/joints/* instead of <robot>/frame
+    per_key: bool = False                     # each derived value on its own key, not one frame on <robot>/derived
 
     def __post_init__(self) -> None:
         found = (self.robots,) if isinstance(self.robots, str) else tuple(self.robots)

@@ -4,6 +4,11 @@ A node is a loop over events: one worker takes each robot's frames (and robot
 infos) from a queue — whole from ``<robot>/frame``, or with ``per_joint_keys``
 reassembled by ``seq`` from the joint samples — computes the frame's features
 and publishes them; ``<robot>/info/derived`` describes what it publishes.
+
+Every derived value of one frame goes out in one message, a derived frame on
+``<robot>/derived`` (names ``<feature>/<name>``, as their keys below it); with
+``per_key = true`` each goes on its own key ``<robot>/derived/<feature>/<name>``
+instead (for scripts that want them so; sinks take either).
 """
 
 from __future__ import annotations
@@ -14,7 +19,7 @@ from typing import Any
 
 import zenoh
 
-from sonibus.bus import codec, keys, lateness
+from sonibus.bus import codec, keys, lateness, messages
 from sonibus.bus.adapter import Adapter
 from sonibus.bus.frames import Frame, FrameAssembler
 from sonibus.bus.info import InfoRequests
@@ -109,16 +114,25 @@ class Features(Adapter):
             self.count("not_finite", out.dropped)
             self.warn("clamped", f"{frame.robot}: frame {frame.seq}: {out.clamped} derived value(s) clamped into "
                                  f"their declared ranges, {out.dropped} not finite and left out")
-        for key, message in out.samples:
-            publisher = self._publishers.get(key)
-            if publisher is None:
-                publisher = self._publishers[key] = self.own(self.bus.stream_publisher(key))
-            publisher.put(codec.encode(message))
+        if self.config.per_key:
+            for key, message in out.samples:
+                self._publisher(key).put(codec.encode(message))
+        elif out.samples:
+            key = keys.derived_frame(frame.robot)
+            cut = len(key) + 1  # (each value's name is its key below <robot>/derived/)
+            self._publisher(key).put(codec.encode(messages.derived_frame(
+                frame.t, frame.seq, [k[cut:] for k, _ in out.samples], [m["v"] for _, m in out.samples])))
         self.count("sent", len(out.samples))
         self.record_latency(time.time() - frame.t)
         for key, message in out.events:
             self.bus.put(key, message)
         self.count("events", len(out.events))
+
+    def _publisher(self, key: str) -> zenoh.Publisher:
+        publisher = self._publishers.get(key)
+        if publisher is None:
+            publisher = self._publishers[key] = self.own(self.bus.stream_publisher(key))
+        return publisher
 
     # -- robots -----------------------------------------------------------------------
 

@@ -42,7 +42,7 @@ from sonibus.bus.web import Limits, WebServer
 
 from . import wire
 from .hub import MAX_CHANNELS, Hub
-from .views import DERIVED_INFO, LOG, Views, joint_samples
+from .views import DERIVED_INFO, LOG, Views, samples_of
 
 log = logging.getLogger(__name__)
 
@@ -176,8 +176,7 @@ class FoxgloveServer(Adapter):
             self._infos[key] = incoming.message
         elif robot not in self._info_seen:
             self._info.ask(robot)
-        samples = joint_samples(incoming) if incoming.source.section == "frame" else [(key, incoming.message)]
-        for channel_key, message in [*samples, *self._views.of(incoming)]:
+        for channel_key, message in [*samples_of(incoming), *self._views.of(incoming)]:
             self._log(channel_key, message)
 
     def _log(self, key: str, message: dict[str, Any]) -> None:

@@ -89,6 +89,17 @@ class Views:
             self.on_derived_info(reply.key, reply.payload)
 
 
+def samples_of(incoming: Incoming) -> list[tuple[str, dict[str, Any]]]:
+    """What a message brings, each on its own key: a frame's selected joints (``joint_samples``),
+    a derived frame's selected values (``Incoming.parts``, as each came on its key before derived
+    frames), or the message itself."""
+    if incoming.parts is not None:
+        return [(part.source.key, part.message) for part in incoming.parts]
+    if incoming.source.section == "frame":
+        return joint_samples(incoming)
+    return [(incoming.source.key, incoming.message)]
+
+
 def joint_samples(frame: Incoming) -> list[tuple[str, dict[str, Any]]]:
     """The samples of a frame's selected joints (``Incoming.samples``), each on its joint's key."""
     robot = frame.source.robot

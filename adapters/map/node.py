@@ -191,6 +191,9 @@ class MapNode(Adapter):
             self._map([(message.source, (1.0,))], t)
             self._map([(message.source, (0.0,))], t + IMPULSE_S)
             return
+        if message.parts is not None:  # a derived frame: its values, each as its key's sample
+            self._map([(part.source, part.values) for part in message.parts], message.t)
+            return
         self._map([(message.source, message.values)] if message.selected is None else
                   zip(message.selected.sources, ((v,) for v in message.values), strict=True), message.t)
 

@@ -213,7 +213,10 @@ class OscSink(Adapter):
             self.warn("stale", f"samples older than max_age_ms = {self.config.max_age_ms:g} dropped ('{key}' was "
                                f"{age * 1000:.0f} ms old: {lateness.why_late(self.bus, message.source.robot)})")
             return
-        if message.selected is None:
+        if message.parts is not None:  # a derived frame: its values, as the samples of their keys
+            if message.parts:
+                self._samples(message.parts, now)
+        elif message.selected is None:
             self._samples((message,), now)
         elif message.values:
             self._frame(message, now)

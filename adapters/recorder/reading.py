@@ -36,7 +36,7 @@ from mcap.stream_reader import StreamReader
 from sonibus.bus import keys
 from sonibus.bus.errors import SonibusError
 from sonibus.bus.keys import Key
-from sonibus.bus.messages import SECTIONS, BadMessage, Gate, Limits
+from sonibus.bus.messages import SECTIONS, BadMessage, Gate, Limits, derived_samples
 
 from . import lock
 from .bounded import (
@@ -153,11 +153,14 @@ class Recording:
         if stats.message_count == 0:
             raise RecordingError(f"{path} is an empty recording: it holds no messages")
         self.start_ns, self.end_ns = stats.message_start_time, stats.message_end_time
-        self.message_count = stats.message_count
+        self._message_count = stats.message_count
         # channels of a data key or a view: a message on any other is skipped (keys are what readers take apart)
         self._channels: dict[int, Channel] = {cid: c for cid, c in summary.channels.items()
                                               if is_view(c.topic) or _data_key(c.topic)}
-        self.counts = {c.topic: stats.channel_message_counts.get(cid, 0) for cid, c in self._channels.items()}
+        self._counts = {c.topic: stats.channel_message_counts.get(cid, 0) for cid, c in self._channels.items()}
+        # derived frames (<robot>/derived, one message a frame): read as the samples of their values' keys
+        self._derived_frames = {c.topic for c in self._channels.values() if keys.is_derived_frame(c.topic)}
+        self._expanded = not self._derived_frames
         self.metadata: dict[str, dict[str, str]] = {}
         try:
             for index in summary.metadata_indexes:
@@ -167,6 +170,29 @@ class Recording:
                         self.metadata[record.name] = dict(record.metadata)
         except DAMAGE as exc:
             raise RecordingError(f"{path} is damaged ({_why(exc)}); {_RECOVER.format(path=path)}") from None
+
+    @property
+    def counts(self) -> dict[str, int]:
+        """Messages per key recorded; a derived frame's values counted on their own keys, as
+        if each had been recorded on its key (as the recorder did before derived frames)."""
+        if not self._expanded:
+            found: dict[str, int] = {}
+            for message in self._raw(list(self._derived_frames)):
+                for name in message.data["names"]:
+                    key = f"{message.key}/{name}"
+                    if key in found or len(found) < MAX_CHANNELS:  # (names come from the file)
+                        found[key] = found.get(key, 0) + 1
+            frames = sum(n for k, n in self._counts.items() if k in self._derived_frames)
+            self._message_count += sum(found.values()) - frames
+            self._counts = {k: n for k, n in self._counts.items() if k not in self._derived_frames} | found
+            self._expanded = True
+        return self._counts
+
+    @property
+    def message_count(self) -> int:
+        """Messages in the file, as ``messages()`` gives them (a derived frame: its values)."""
+        _ = self.counts
+        return self._message_count
 
     @property
     def keys(self) -> list[str]:
@@ -199,11 +225,41 @@ class Recording:
             raise RecordingError(f"no key in {self.path} matches {' '.join(patterns)} — it holds {shown}")
         return found
 
+    @property
+    def derived_frames(self) -> set[str]:
+        """The channels of derived frames (``pepper/derived``): what ``messages(frames=True)`` gives whole."""
+        return set(self._derived_frames)
+
     def messages(self, keys: Sequence[str] | None = None, start_s: float | None = None,
-                 end_s: float | None = None) -> Iterator[Message]:
+                 end_s: float | None = None, frames: bool = False) -> Iterator[Message]:
         """Messages in the order they were recorded, optionally only ``keys`` and
         only between ``start_s`` and ``end_s`` seconds from the start; what cannot be
-        read is skipped and counted (``skipped``)."""
+        read is skipped and counted (``skipped``). A derived frame comes as the samples
+        of its values' keys (``pepper/derived/qom/Body``), in its order, as a recording
+        made before derived frames holds them; with ``frames`` (replay) it comes whole,
+        holding only the values of ``keys``."""
+        if not self._derived_frames:
+            yield from self._raw(keys, start_s, end_s)
+            return
+        wanted = None if keys is None else set(keys)
+        chosen = {f for f in self._derived_frames if wanted is None or any(k.startswith(f + "/") for k in wanted)}
+        for message in self._raw(None if wanted is None else [*wanted, *chosen], start_s, end_s):
+            if message.key not in self._derived_frames:
+                yield message
+                continue
+            samples = [(name, sample) for name, sample in derived_samples(message.data)
+                       if wanted is None or f"{message.key}/{name}" in wanted]
+            if not frames:
+                yield from (Message(f"{message.key}/{name}", message.log_ns, message.publish_ns, sample)
+                            for name, sample in samples)
+            elif samples:
+                data = message.data if len(samples) == len(message.data["names"]) else {
+                    **message.data, "names": [n for n, _ in samples], "v": [s["v"] for _, s in samples]}
+                yield Message(message.key, message.log_ns, message.publish_ns, data)
+
+    def _raw(self, keys: Sequence[str] | None = None, start_s: float | None = None,
+             end_s: float | None = None) -> Iterator[Message]:
+        """``messages`` as recorded: a derived frame whole."""
         start = self.start_ns + int(start_s * 1e9) if start_s is not None else 0
         end = self.start_ns + int(end_s * 1e9) if end_s is not None else None
         wanted = {cid for cid, c in self._channels.items() if keys is None or c.topic in set(keys)}

@@ -17,8 +17,11 @@ out like the robot's, with the ``AUDIO`` QoS. No wait is longer than ``max_gap_s
 is shortened to it, with a warning. The joint samples of one frame go out like a robot owner's: the
 frame whole on ``<robot>/frame`` (what sinks listen to), then each joint's
 sample on its key while anyone subscribes there (``bus/ownership.py``, shared with
-live owners). The replayed robots are owned like real ones (liveliness, ``<robot>/info``
-from the recording) but take no commands: they answer ``failed``, and ``stop`` ok.
+live owners). Derived values go out as they were recorded: a derived frame
+whole on ``<robot>/derived`` (with only the values ``keys`` selects), or each on
+its key (a recording made before derived frames). The replayed robots are owned
+like real ones (liveliness, ``<robot>/info`` from the recording) but take no
+commands: they answer ``failed``, and ``stop`` ok.
 """
 
 from __future__ import annotations
@@ -146,8 +149,11 @@ class Replay(Adapter):
             self.own(self.bus.serve(keys.command(name), self._refuse))
         rates = [float(i.get("rate_hz") or 0) for i in infos.values()]
         self._gap_s = 1.0 / max(rates) if rates and max(rates) > 0 else 0.01
+        # (derived values recorded in derived frames go out as derived frames, on <robot>/derived)
+        framed = {f"{key.partition('/')[0]}/derived" for key in self.keys if Key.parse(key).section == "derived"}
+        played = [*self.keys, *(framed & self.recording.derived_frames)]
         self._publishers = {self._renamed(key): self.own(self.bus.stream_publisher(self._renamed(key), qos))
-                            for key in self.keys if (qos := STREAMED.get(Key.parse(key).section)) is not None}
+                            for key in played if (qos := STREAMED.get(Key.parse(key).section)) is not None}
         for robot in {k.partition("/")[0] for k in self.keys if Key.parse(k).section == "joints"}:
             self._owners[self.names[robot]].declare_publishers()
         for name in self.names.values():
@@ -198,13 +204,13 @@ class Replay(Adapter):
         while not self.stopping.is_set():
             seq_shift = {counter: last_seq[counter] + 1 - first for counter, first in first_seq.items()}
             timeline = Timeline(cfg.max_gap_s)
-            ahead = itertools.islice(self.recording.messages(self.keys, cfg.start, cfg.end), OFFSETS)
+            ahead = itertools.islice(self.recording.messages(self.keys, cfg.start, cfg.end, frames=True), OFFSETS)
             timeline.prime((m.publish_ns - m.log_ns) / 1e9 for m in ahead)
             if start is None:  # (after the first reading: its time must not make the first messages late)
                 start = time.monotonic() + LEAD_S
             self._clock = (start, 0.0)
-            for framed, moment in ReadAhead(_moments(self.recording.messages(self.keys, cfg.start, cfg.end)),
-                                            self.stopping):
+            reading = self.recording.messages(self.keys, cfg.start, cfg.end, frames=True)
+            for framed, moment in ReadAhead(_moments(reading), self.stopping):
                 message = moment[0]
                 # the robot's timeline (a frame leaves whole), as far as it agrees with the recorder's
                 published_s = (message.publish_ns - origin_ns) / 1e9

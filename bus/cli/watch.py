@@ -8,7 +8,9 @@ import json
 import time
 from typing import Any
 
-from .. import codec, connection, health, keys, ownership, registry
+import zenoh
+
+from .. import codec, connection, health, keys, messages, ownership, registry, streams
 from ..client import robot_info
 from ..errors import ConfigError
 from ..node import Bus
@@ -129,7 +131,11 @@ def _echo(args: argparse.Namespace, env: Environment) -> Exit:
     if missing:  # said at once (known in a millisecond); it waits on, and joins the demo once it runs
         env.hint(f"{missing}; echo waits for it")
     with joined(cfg) as bus:
-        subscriber, queue = bus.subscribe(args.keyexpr, 65536)
+        # derived values come in derived frames (<robot>/derived): shown as each value's own key, as before
+        frames = streams.plan([args.keyexpr]).derived
+        subscriber, queue = bus.subscribe(args.keyexpr, 65536, skip=keys.is_derived_frame if frames else None)
+        others = [bus.subscribe(k, queue=queue)[0] for k in frames]
+        wanted = zenoh.KeyExpr(keys.expr(args.keyexpr))
         hint_at = float("inf") if missing else time.monotonic() + SILENCE_S
         last = time.monotonic()  # (the last sample, or the start)
         try:
@@ -151,17 +157,34 @@ def _echo(args: argparse.Namespace, env: Environment) -> Exit:
                     continue
                 key, payload = item
                 last = time.monotonic()
-                try:
-                    shown = json.dumps(codec.decode(payload), separators=(", ", ": "), default=_unprintable)
-                except codec.DecodeError:
-                    shown = repr(payload)
-                env.say(f"{key} {shown}")
-                seen += 1
+                for line in _lines(key, payload, wanted if frames else None):
+                    if args.count is not None and seen >= args.count:
+                        break
+                    env.say(line)
+                    seen += 1
             if not seen and hint_at < float("inf"):  # ended before the hint was due
                 env.hint(_echo_hint(bus, cfg, args.keyexpr))
         finally:
-            subscriber.undeclare()
+            for each in (subscriber, *others):
+                each.undeclare()
     return Exit.OK
+
+
+def _lines(key: str, payload: bytes, derived: zenoh.KeyExpr | None) -> list[str]:
+    """What ``echo`` prints of a sample: ``key message``; a derived frame, when ``derived`` (the
+    pattern) asked for derived values, as the value of each key it selects (``key sample``)."""
+    try:
+        message = codec.decode(payload)
+    except codec.DecodeError:
+        return [f"{key} {payload!r}"]
+    if derived is None or not keys.is_derived_frame(key):
+        return [f"{key} {json.dumps(message, separators=(', ', ': '), default=_unprintable)}"]
+    try:
+        return [f"{key}/{name} {json.dumps(sample, separators=(', ', ': '), default=_unprintable)}"
+                for name, sample in messages.derived_samples(message)
+                if derived.intersects(zenoh.KeyExpr(f"{key}/{name}"))]
+    except (KeyError, TypeError, ValueError, zenoh.ZError):  # (not a derived frame, or a bad name: as it is)
+        return [f"{key} {json.dumps(message, separators=(', ', ': '), default=_unprintable)}"]
 
 
 def _unprintable(value: object) -> str:

@@ -10,10 +10,11 @@ import threading
 import time
 
 import pytest
+import zenoh
 
 from sonibus import schemas
 from sonibus.adapters.features import Features, FeaturesConfig
-from sonibus.bus import ConfigError, decode, encode, keys, load_model, robot_info, send_command
+from sonibus.bus import ConfigError, decode, encode, keys, load_model, messages, robot_info, send_command
 from sonibus.bus.info import InfoRequests
 
 from ..conftest import wait_for
@@ -28,16 +29,37 @@ def start(net, **options) -> Features:
     return net.start(Features(FeaturesConfig(**{"max_age_ms": 0, **options}), name="features"))
 
 
+class _Both:
+    def __init__(self, *subscribers) -> None:
+        self.subscribers = subscribers
+
+    def undeclare(self) -> None:
+        for subscriber in self.subscribers:
+            subscriber.undeclare()
+
+
 def collect(bus, pattern: str) -> tuple[object, list[tuple[str, dict]]]:
-    """Every message on ``pattern`` as (key, decoded message), gathered as it comes."""
+    """Every message on ``pattern`` as (key, decoded message), gathered as it comes; derived
+    values come in derived frames (``<robot>/derived``): each of those on ``pattern`` as the
+    sample its own key would carry."""
     got: list[tuple[str, dict]] = []
     lock = threading.Lock()
+    wanted = zenoh.KeyExpr(keys.expr(pattern))
 
     def take(sample) -> None:
+        key, message = str(sample.key_expr), decode(sample.payload.to_bytes())
         with lock:
-            got.append((str(sample.key_expr), decode(sample.payload.to_bytes())))
+            if keys.is_derived_frame(key):
+                got.extend((f"{key}/{name}", part) for name, part in messages.derived_samples(message)
+                           if wanted.intersects(zenoh.KeyExpr(f"{key}/{name}")))
+            else:
+                got.append((key, message))
 
-    return bus.session.declare_subscriber(keys.expr(pattern), take), got
+    robot = pattern.split("/")[0]
+    own = bus.session.declare_subscriber(wanted, take)
+    if "derived" not in pattern or wanted.includes(zenoh.KeyExpr(keys.derived_frame(robot))):
+        return own, got  # (pepper/derived/** takes pepper/derived too)
+    return _Both(own, bus.session.declare_subscriber(keys.derived_frame(robot), take)), got
 
 
 def test_derived_values_carry_their_frames_t_and_seq(net):
@@ -68,6 +90,31 @@ def test_derived_values_carry_their_frames_t_and_seq(net):
     assert checked >= 0.9 * len(derived)
     hand = [m["v"] for k, m in derived if k == "pepper/derived/hand/R"]
     assert all(-0.6 < x < 0.6 for v in hand for x in v)
+
+
+def test_every_derived_value_of_a_frame_goes_in_one_message_or_on_its_own_key(net):
+    """By default one derived frame per robot and frame (issue 35: a sink paid per message for
+    ~26 a frame), none on the per-value keys; ``per_key = true`` puts each on its own key, as before."""
+    watch = net.bus("watch")
+    got: list[tuple[str, dict]] = []
+    subscriber = watch.session.declare_subscriber("pepper/derived/**", lambda s: got.append(
+        (str(s.key_expr), decode(s.payload.to_bytes()))))
+    net.sim("pepper", rate_hz=50)
+    features = start(net, robots="pepper")
+    wait_for(lambda: len(got) >= 5, what="derived frames")
+    assert {key for key, _ in list(got)} == {"pepper/derived"}
+    for _, message in list(got):
+        schemas.validate("derived_frame", message)
+    seqs = [m["seq"] for _, m in list(got)]
+    assert len(seqs) == len(set(seqs))  # one message a frame
+    assert "qom/Body" in got[-1][1]["names"] and "hand/R" in got[-1][1]["names"]  # (the first has no velocities)
+    features.stop()
+    got.clear()
+    net.start(Features(FeaturesConfig(max_age_ms=0, robots="pepper", per_key=True), name="features2"))
+    wait_for(lambda: len(got) >= 60, what="derived samples on their own keys")
+    assert "pepper/derived" not in {key for key, _ in list(got)}
+    assert "pepper/derived/qom/Body" in {key for key, _ in list(got)}
+    subscriber.undeclare()
 
 
 def test_a_behavior_gives_one_onset_and_one_offset_for_the_arm_that_moves(net):

@@ -40,12 +40,13 @@ def test_pd_gets_sound_cutoff_as_the_exp_curve_of_the_hand_height_smoothed(net, 
     def take(sample):
         message = codec.decode(sample.payload.to_bytes())
         with lock:
-            if str(sample.key_expr) == "pepper/derived/hand/R":
-                heights.append((message["t"], message["v"][2]))
+            if str(sample.key_expr) == "pepper/derived":  # (a derived frame: every value of one frame)
+                heights.extend((message["t"], v[2]) for n, v in zip(message["names"], message["v"], strict=True)
+                               if n == "hand/R")
             else:
                 used.add(message["t"])
 
-    subscriber = watch.session.declare_subscriber("pepper/derived/hand/R", take)
+    subscriber = watch.session.declare_subscriber("pepper/derived", take)
     outputs = watch.session.declare_subscriber("sound/derived/map/cutoff", take)
     try:
         net.start(OscSink(OscSinkConfig(subscribe=("sound/derived/**",), targets=(receiver.target,),

@@ -35,13 +35,13 @@ def stalling(monkeypatch):
     def install(which: str, at: int) -> None:
         readings: list[int] = []
 
-        def messages(self, keys=None, start_s=None, end_s=None):
+        def messages(self, keys=None, start_s=None, end_s=None, frames=False):
             if keys is not None and all(k.endswith("/info") for k in keys):  # (its info, read at start)
-                yield from original(self, keys, start_s, end_s)
+                yield from original(self, keys, start_s, end_s, frames)
                 return
             readings.append(1)
             stalls = len(readings) == (1 if which == "prime" else 2)
-            for i, message in enumerate(original(self, keys, start_s, end_s)):
+            for i, message in enumerate(original(self, keys, start_s, end_s, frames)):
                 if stalls and i == at:
                     time.sleep(STALL_S)
                 yield message

@@ -1,0 +1,70 @@
+"""Issue 35: derived values come as one derived frame per robot and tick (``<robot>/derived``);
+the OSC sink sends what it sent when each came on its own key, byte for byte — per message,
+with ``t``/``seq``, normalized by ``<robot>/info/derived``'s ranges, in bundles with the
+joints of their frame, and PepperOSC's profile. Two sinks take the same values in their
+queues, as their subscriptions put them: one per key (the format before), one in frames."""
+
+from __future__ import annotations
+
+import time
+
+import pytest
+
+from sonibus.adapters.osc import OscSink, OscSinkConfig
+from sonibus.bus import encode, keys
+from sonibus.bus.messages import derived_frame, derived_samples, frame
+
+from ..conftest import wait_for
+from .test_frame_bytes import CONFIGS, toy_info
+
+DERIVED = ["qom/Body", "hand/R", "velocity/A", "hand_speed/R"]
+RANGES = {"qom/Body": (0.0, 4.0), "hand/R": (-1.0, 1.0), "velocity/A": (-2.0, 2.0)}  # hand_speed/R: none
+
+
+def derived_info() -> dict:
+    return {"robot": "toy", "processor": {"host": "h", "node": "features"},
+            "derived": [{"name": name, "key": f"toy/derived/{name}", "unit": "x", "size": 3 if "hand/" in name else 1,
+                         **({"min": RANGES[name][0], "max": RANGES[name][1]} if name in RANGES else {})}
+                        for name in DERIVED]}
+
+
+@pytest.mark.parametrize("options", CONFIGS.values(), ids=CONFIGS.keys())
+def test_a_derived_frame_goes_out_as_its_values_did_on_their_own_keys(net, receivers, options):
+    toy = net.bus("toy")
+    served = [toy.serve(key, lambda query, key=key, info=info: query.reply(key, encode(info)))
+              for key, info in (("toy/info", toy_info()), ("toy/info/derived", derived_info()))]
+    per_key, framed = receivers(), receivers()
+    config = {"subscribe": ("toy/joints/*", "toy/derived/**"), "max_age_ms": 0, **options}
+    before = net.start(OscSink(OscSinkConfig(targets=(per_key.target,), **config), name="per-key"))
+    after = net.start(OscSink(OscSinkConfig(targets=(framed.target,), **config), name="framed"))
+    base = time.time()
+
+    def put(seq: int) -> None:
+        """One joint frame and its derived values into both queues, taken by both before the next."""
+        t = base + 1e-4 * seq
+        joints = encode(frame(t, seq, ["A", "B", "C", "D", "Unranged"], [0.1 * seq, 1.0, -0.5, 5.0, 3.0]))
+        values = derived_frame(t, seq, DERIVED, [0.5 * seq, [0.1 * seq, -0.2, 2.0], -1.5 + seq, 0.25])
+        was = [sink.stats["received"] for sink in (before, after)]
+        for sink in (before, after):
+            sink._queue.put(("toy/frame", joints))
+        for name, sample in derived_samples(values):
+            before._queue.put((keys.derived_frame("toy") + "/" + name, encode(sample)))
+        after._queue.put(("toy/derived", encode(values)))
+        wait_for(lambda: before.stats["received"] >= was[0] + 9 and after.stats["received"] >= was[1] + 9,
+                 what=f"frame {seq} taken by both sinks")
+
+    first = 0
+    if options.get("values") == "normalized":  # the ranges, asked for at the first message, in both sinks
+        wait_for(lambda: put(first) or all("qom/Body" in sink._described.get("toy", ()) for sink in (before, after)),
+                 what="both sinks knowing toy's derived ranges")
+        first = 1_000
+    for seq in range(first, first + 8):
+        put(seq)
+    wait_for(lambda: len(per_key.data()) >= 8 and len(per_key.data()) == len(framed.data()),
+             what="the frames at both targets")
+    sent = per_key.data()
+    assert framed.data() == sent
+    if options.get("profile") != "pepperosc":  # (PepperOSC's profile sends joints only)
+        assert any(b"/toy/derived/hand/R" in d for d in sent)
+    for served_ in served:
+        served_.undeclare()
