@@ -190,6 +190,15 @@ class Bus:
                 history=zenoh.ext.HistoryConfig(detect_late_publishers=True)), queue
         return self.session.declare_subscriber(keyexpr, callback), queue
 
+    def on_sample(self, keyexpr: str, take: Callable[[str, bytes | codec.Oversize], None], what: str) -> Any:
+        """Call ``take(key, payload)`` on Zenoh's thread for each sample of ``keyexpr``, with no
+        queue between (for what must act at once: a stop seen on a robot's events); ``take``
+        must only store or signal. A payload over the gate's limit comes as ``codec.Oversize``."""
+        def call(sample: zenoh.Sample) -> None:
+            key = str(sample.key_expr)
+            take(key, self._kept(key, sample.payload))
+        return self.session.declare_subscriber(keys.expr(keyexpr), self.guarded(call, what))
+
     def _kept(self, key: str, payload: zenoh.ZBytes, limit: int | None = None) -> bytes | codec.Oversize:
         """The bytes of ``payload``, or only its size when it is over the gate's limit (or ``limit``)."""
         size = len(payload)

@@ -24,7 +24,7 @@ from typing import Any
 
 import zenoh
 
-from sonibus.bus import keys, messages
+from sonibus.bus import codec, keys, messages
 from sonibus.bus.adapter import Adapter
 from sonibus.bus.client import Outcome, ask
 from sonibus.bus.commands import serving
@@ -58,8 +58,7 @@ class Drive:
         self._gate = messages.Gate(self.bus.limits)
         for robot in self.robots:
             for kind in ("command", "show"):
-                node.own(self.bus.session.declare_subscriber(
-                    keys.event(robot, kind), self.bus.guarded(self._event, f"{robot}'s {kind} events")))
+                node.own(self.bus.on_sample(keys.event(robot, kind), self._event, f"{robot}'s {kind} events"))
         node.own(self.bus.serve(keys.program(node.name), self._serve))
 
     # -- from the map node's worker ---------------------------------------------------
@@ -156,10 +155,11 @@ class Drive:
                     self.node.name, robot)
         ask(self.bus, robot, "stop", {}, lambda outcome: None, TIMEOUT_S)
 
-    def _event(self, sample: zenoh.Sample) -> None:
-        key = str(sample.key_expr)
+    def _event(self, key: str, payload: bytes | codec.Oversize) -> None:
+        if not isinstance(payload, bytes):  # (over the gate's size: no event of ours)
+            return
         try:
-            event = self._gate.check(keys.Key.parse(key), sample.payload.to_bytes())
+            event = self._gate.check(keys.Key.parse(key), payload)
         except ValueError:  # (the gate's refusal: a rogue's event moves nothing here)
             return
         robot = key.split("/")[0]

@@ -88,8 +88,13 @@ class JackMidiIn:
 
     def link(self) -> bool:
         """Connect to the first output port matching ``connect`` (True if one did)."""
-        names = [p.name for p in self.client.get_ports(is_midi=True, is_output=True)
-                 if not p.name.startswith(self.client.name + ":")]
+        try:
+            names = [p.name for p in self.client.get_ports(is_midi=True, is_output=True)
+                     if not p.name.startswith(self.client.name + ":")]
+        except jack.JackError as exc:  # a port went while JACK listed them (python-jack looks each name up)
+            log.debug("listing ports for %s: %s", self.name, exc)
+            self.changed.set()  # (look again at once)
+            return False
         index = find_port(names, self.wanted)
         if index is None:
             return False
@@ -106,9 +111,14 @@ class JackMidiIn:
         if self.failure is not None:
             raise self.failure
         self.changed.clear()
-        now = frozenset(p.name for p in self.port.connections)
-        if self.wanted and not now and self.link():
+        try:
             now = frozenset(p.name for p in self.port.connections)
+            if self.wanted and not now and self.link():
+                now = frozenset(p.name for p in self.port.connections)
+        except jack.JackError as exc:  # a port went while JACK listed the connections: look again at once
+            log.debug("listing %s's connections: %s", self.name, exc)
+            self.changed.set()
+            return set(), set()
         came, left = set(now - self.connected), set(self.connected - now)
         self.connected = now
         return came, left

@@ -8,6 +8,8 @@ import signal
 import sys
 from pathlib import Path
 
+import jack as python_jack
+
 from sonibus.adapters.midi import MidiController, MidiControllerConfig
 from sonibus.bus import decode
 
@@ -58,3 +60,29 @@ def test_the_jack_server_going_away_fails_the_node_in_one_line(net, jack_server)
     assert node.state == "failed" and f"JACK server '{name}' went away" in node.failure
     assert len(node.failure.splitlines()) == 1
     node.stop()  # (closing a client whose server is gone returns)
+
+
+def test_a_port_that_goes_while_jack_lists_the_ports_leaves_the_node_up(net, jack, spawn, monkeypatch):
+    """python-jack lists port names, then looks each one up: a controller that goes in between
+    raises JackError("Port '…' not available") from the listing (a full run's node died of it)."""
+    first = spawn(sys.executable, SURFACE, "note", "60", collect=True)
+    wait_for(lambda: "ready" in first.lines, 10, "the first controller's port")
+    node = net.start(MidiController(MidiControllerConfig(api="jack", connect="surface:fader"), name="surface-in"))
+    wait_for(lambda: "connected" in first.lines, 10, "the node to connect to the first controller")
+    client = node._jack.client
+    real = client.get_ports
+    vanished: list[bool] = []
+
+    def vanishing(*args, **kwargs):
+        if not vanished:
+            vanished.append(True)
+            raise python_jack.JackError("Port 'surface:fader' not available")
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(client, "get_ports", vanishing)
+    first.popen.send_signal(signal.SIGKILL)
+    first.popen.wait(5)
+    wait_for(lambda: vanished, 10, "the node to list the ports once the controller left")
+    again = spawn(sys.executable, SURFACE, "note", "60", collect=True)
+    wait_for(lambda: "connected" in again.lines, 10, "the node to connect to the next controller")
+    assert node.state == "running" and not node.failure
