@@ -8,6 +8,7 @@ import argparse
 import json
 import threading
 
+from sonibus.bus import keys
 from sonibus.bus.cli.api import Command, Environment, Exit, bus_config, joined
 from sonibus.bus.client import Outcome, ask_program
 from sonibus.bus.errors import CommandError
@@ -23,6 +24,7 @@ def _resume(args: argparse.Namespace, env: Environment) -> Exit:
     outcomes: list[Outcome] = []
     answered = threading.Event()
     with joined(bus_config(args)) as bus:
+        bus.discover(keys.program(args.node, "resume"))  # (a new session: its peers' queryables known first)
         ask_program(bus, args.node, "resume", {"robot": args.robot} if args.robot else {},
                     lambda outcome: (outcomes.append(outcome), answered.set()), args.timeout)
         answered.wait(args.timeout + 1.0)
