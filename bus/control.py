@@ -4,7 +4,7 @@ A process's data session takes each link's messages in order on one Zenoh
 thread: when a subscription's callback channel (zenoh-python's, 256 samples) is
 full, that thread waits for Python, and a ``stop`` that came over the same link
 waits behind the flood (0.3-0.9 s after 2,000 frames at 5,000/s, issue 33).
-So every process that owns robots or sends stops opens one more session, the
+So every process that owns robots (and ``sonibus top``) opens one more session, the
 control session, with the data session's config (mode, namespace, login, TLS,
 access control) but links of its own. It listens nowhere and dials: where the data
 session connects (the data session itself when that is a plain listener), then, told
