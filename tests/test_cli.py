@@ -744,3 +744,22 @@ def test_a_log_line_shows_the_control_characters_of_a_name_off_the_bus_as_printa
     record = logging.LogRecord("sonibus.x", logging.WARNING, __file__, 1, "robot %s left", ("a\x1b[2J\nb",), None)
     assert PrintableFormatter("sonibus: %(levelname)s: %(message)s").format(record) == \
         "sonibus: WARNING: robot a\ufffd[2J\ufffdb left"
+
+
+def test_each_line_the_cli_says_is_one_write():
+    """print() writes a line and its newline apart: unbuffered, another thread's log line came
+    between them on the same pipe ('... --no-multicastsonibus: WARNING: ...', a full CI run)."""
+    class Writes(io.StringIO):
+        def __init__(self) -> None:
+            super().__init__()
+            self.calls: list[str] = []
+
+        def write(self, text: str) -> int:
+            self.calls.append(text)
+            return super().write(text)
+
+    env = Environment(stdout=Writes(), stderr=Writes())
+    env.say("sonibus: running pepper (sim) on vm")
+    env.hint("start the demo")
+    assert env.stdout.calls == ["sonibus: running pepper (sim) on vm\n"]
+    assert env.stderr.calls == ["sonibus: hint: start the demo\n"]

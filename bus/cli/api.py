@@ -62,11 +62,18 @@ class Environment:
 
     def say(self, text: str) -> None:
         """A line on stdout; ``BrokenPipeError`` once its reader went away (the CLI ends quietly)."""
-        print(text, file=self.stdout, flush=True)
+        line(self.stdout, text)
 
     def hint(self, text: str) -> None:
         """A ``sonibus: hint: ...`` line on stderr."""
-        print(f"sonibus: hint: {text}", file=self.stderr, flush=True)
+        line(self.stderr, f"sonibus: hint: {text}")
+
+
+def line(stream: TextIO, text: str) -> None:
+    """``text`` and its newline in one write: ``print`` writes them apart, and unbuffered (as
+    under PYTHONUNBUFFERED) a log line from another thread came between, on the same pipe."""
+    stream.write(text + "\n")
+    stream.flush()
 
 
 @dataclass(frozen=True)

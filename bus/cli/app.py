@@ -19,7 +19,7 @@ from .. import installed
 from ..client import UNANSWERED
 from ..errors import CommandError, ConfigError, OwnershipError, RobotNotFound, SonibusError
 from ..text import PrintableFormatter
-from .api import COMMAND_GROUP, Command, Environment, Exit, add_bus_arguments
+from .api import COMMAND_GROUP, Command, Environment, Exit, add_bus_arguments, line
 
 log = logging.getLogger(__name__)
 
@@ -148,7 +148,7 @@ def _run(args: argparse.Namespace, env: Environment, run: Callable[[argparse.Nam
     except Exception as exc:
         if args.traceback:
             raise
-        print(f"sonibus: error: {_one_line(exc)}", file=env.stderr, flush=True)
+        line(env.stderr, f"sonibus: error: {_one_line(exc)}")
         return int(_status(exc))
 
 
