@@ -11,6 +11,9 @@ case: 0.3-0.9 s before the control session, ``bus/control.py``), on one path:
 - page's STOP: ``{"type": "stop"}`` on the operator's WebSocket (aiohttp's client, as the
   page talks), until its reply is back (the web node's ``stop_all`` from the show's
   control session);
+- page's STOP, own process: the same from a web node in a ``sonibus run`` of its own that
+  owns no robot, so opens no control session (``bus/runner.py``): its stop leaves from its
+  data session and reaches the owner's control session over the link that one dialled;
 - top's ``s y``: what top runs once ``y`` is typed, ``stop_all`` from a process with its
   control session (as ``sonibus top`` joins), until every robot answered.
 
@@ -37,6 +40,7 @@ import contextlib
 import json
 import os
 import signal
+import socket
 import subprocess
 import sys
 import tempfile
@@ -56,8 +60,15 @@ adapter = "osc"
 subscribe = ["*/frame", "*/joints/*", "*/derived/**"]
 targets = ["127.0.0.1:9"]
 """  # web.py's show (pepper at 100 frames/s, the web node) and a sink that follows all the flood
+WEB_ONLY = """[bus]
+multicast = false
+
+[nodes.web]
+adapter = "web"
+listen = "127.0.0.1:{port}"
+"""  # a page served by a process that owns no robot
 KEYS = {"frames": "nao/frame", "derived": "pepper/derived/flood/x"}
-PATHS = ("bus query", "page's STOP", "top's s y")
+PATHS = ("bus query", "page's STOP", "page's STOP, own process", "top's s y")
 CONDITIONS = ("alone", "frames, same link", "frames, other link", "derived, same link", "derived, other link")
 JOINTS = [f"J{i}" for i in range(20)]
 
@@ -92,20 +103,25 @@ def flooder(endpoint: str, count: int, rate: float) -> None:
 
 
 @contextlib.contextmanager
-def show(endpoint: str) -> Iterator[tuple[Any, str]]:
-    """The show in a ``sonibus run`` of its own, and this process's bus (with its control
-    session) on it, once pepper answers: the ``Bus`` and the page's WebSocket URL."""
+def show(endpoint: str) -> Iterator[tuple[Any, str, str]]:
+    """The show in a ``sonibus run`` of its own, a page's web node in another, and this
+    process's bus (with its control session) on it, once pepper answers: the ``Bus`` and
+    the two pages' WebSocket URLs (the show's, the other process's)."""
     from sonibus.bus import Bus, BusConfig, open_session, robot_info
     from sonibus.bus.control import open_control
 
-    port = free_port()
+    port, web_port = free_port(), free_port()
     with tempfile.TemporaryDirectory() as folder, contextlib.ExitStack() as closing:
-        config = Path(folder) / "show.toml"
+        config, web_only = Path(folder) / "show.toml", Path(folder) / "web.toml"
         config.write_text(SHOW.format(port=port))
+        web_only.write_text(WEB_ONLY.format(port=web_port))
         process = subprocess.Popen([SONIBUS, "run", str(config), "--no-multicast", "--listen", endpoint],
                                    stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
                                    start_new_session=True)
         closing.callback(stop_process, process)
+        web = subprocess.Popen([SONIBUS, "run", str(web_only), "--no-multicast", "--connect", endpoint],
+                               stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, start_new_session=True)
+        closing.callback(stop_process, web)
         cfg = BusConfig(multicast=False, connect=(endpoint,))
         session = closing.enter_context(contextlib.closing(open_session(cfg)))
         control = closing.enter_context(contextlib.closing(open_control(cfg, session)))
@@ -114,7 +130,18 @@ def show(endpoint: str) -> Iterator[tuple[Any, str]]:
         while robot_info(bus, "pepper", timeout=0.5) is None:
             if process.poll() is not None or time.monotonic() > deadline:
                 raise RuntimeError(f"the show did not come up: {process.stderr.read()[-1000:]}")
-        yield bus, f"ws://127.0.0.1:{port}/ws"
+        while not answers(web_port):  # (the other page's process up, and serving)
+            if web.poll() is not None or time.monotonic() > deadline:
+                raise RuntimeError(f"the page's own process did not come up: {web.stderr.read()[-1000:]}")
+            time.sleep(0.1)
+        yield bus, f"ws://127.0.0.1:{port}/ws", f"ws://127.0.0.1:{web_port}/ws"
+
+
+def answers(port: int) -> bool:
+    """Whether something accepts TCP connections on 127.0.0.1:``port``."""
+    with contextlib.suppress(OSError), socket.create_connection(("127.0.0.1", port), timeout=0.5):
+        return True
+    return False
 
 
 def stop_all_once(bus: Any) -> None:
@@ -128,7 +155,7 @@ def stop_all_once(bus: Any) -> None:
         raise RuntimeError("stop_all: no answer within 6 s")
 
 
-async def measure(bus: Any, url: str, other: subprocess.Popen[str], tries: int, count: int,
+async def measure(bus: Any, urls: tuple[str, str], other: subprocess.Popen[str], tries: int, count: int,
                   rate: float) -> dict[str, dict[str, list[float]]]:
     import aiohttp
 
@@ -136,22 +163,26 @@ async def measure(bus: Any, url: str, other: subprocess.Popen[str], tries: int, 
 
     publishers = {kind: bus.session.declare_publisher(key) for kind, key in KEYS.items()}
     times: dict[str, dict[str, list[float]]] = {c: {p: [] for p in (*PATHS, "baseline")} for c in CONDITIONS}
-    async with aiohttp.ClientSession() as session, session.ws_connect(url) as ws:
+    async with aiohttp.ClientSession() as session, session.ws_connect(urls[0]) as show_ws, \
+            session.ws_connect(urls[1]) as own_ws:
         ids = iter(range(1 << 30))
 
-        async def page_stop() -> None:
+        async def page_stop(ws: Any) -> None:
             sent = next(ids)
             await ws.send_str(json.dumps({"type": "stop", "id": sent}))
             while True:
                 answer = json.loads((await ws.receive(timeout=10)).data)
                 if answer.get("type") == "reply" and answer["id"] == sent:
+                    if "pepper" not in json.dumps(answer):
+                        raise RuntimeError(f"the page's stop did not reach pepper: {answer}")
                     return
 
         def bus_stop() -> None:
             send_command(bus, "pepper", "stop", timeout=5.0)
 
         paths: dict[str, Callable[[], Any]] = {"bus query": lambda: asyncio.to_thread(bus_stop),
-                                               "page's STOP": page_stop,
+                                               "page's STOP": lambda: page_stop(show_ws),
+                                               "page's STOP, own process": lambda: page_stop(own_ws),
                                                "top's s y": lambda: asyncio.to_thread(stop_all_once, bus)}
         for condition in CONDITIONS:
             kind, _, link = condition.partition(", ")
@@ -188,7 +219,7 @@ def main() -> None:
         return
     machine = f"{os.cpu_count()} cores, load {os.getloadavg()[0]:.2f}"
     endpoint = f"tcp/127.0.0.1:{free_port()}"
-    with show(endpoint) as (bus, url):
+    with show(endpoint) as (bus, *urls):
         other = subprocess.Popen([sys.executable, __file__, "--flooder", endpoint, "--flood", str(args.flood),
                                   "--rate", str(args.rate)], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
                                  text=True, start_new_session=True)
@@ -196,7 +227,7 @@ def main() -> None:
             assert other.stdout is not None
             if other.stdout.readline().strip() != "ready":
                 raise RuntimeError("the flooding process did not start")
-            times = asyncio.run(measure(bus, url, other, args.tries, args.flood, args.rate))
+            times = asyncio.run(measure(bus, (urls[0], urls[1]), other, args.tries, args.flood, args.rate))
         finally:
             if other.stdin is not None:
                 other.stdin.close()  # (its loop ends: it closes its session)
@@ -217,9 +248,9 @@ def main() -> None:
                   f"{rows[c][p]['p99_us'] / rows[c]['baseline']['p99_us']:.2f}×",
          "goal": "p99 ≤ 50 ms", "met": "yes" if rows[c][p]["p99_us"] <= 50_000 else "no"}
         for c in CONDITIONS for p in PATHS]
-    print(f"ms, {args.tries} tries, p50 / p99{'':<14}" + "".join(f"{p:>18}" for p in (*PATHS, "baseline")))
+    print(f"ms, {args.tries} tries, p50 / p99{'':<14}" + "".join(f"{p:>26}" for p in (*PATHS, "baseline")))
     for c in CONDITIONS:
-        print(f"{c:<36}" + "".join(f"{rows[c][p]['p50_us'] / 1000:>8.1f} / {rows[c][p]['p99_us'] / 1000:>5.1f}  "
+        print(f"{c:<36}" + "".join(f"{rows[c][p]['p50_us'] / 1000:>16.1f} / {rows[c][p]['p99_us'] / 1000:>5.1f}  "
                                    for p in (*PATHS, "baseline")))
     print(f"goal: p99 ≤ 50 ms on every path — {'met' if worst <= 50_000 else 'not met'} (worst {worst / 1000:.1f} ms); "
           f"{machine}")

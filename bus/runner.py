@@ -79,8 +79,8 @@ def run(adapters: list[Adapter], bus_config: BusConfig, stop: threading.Event,
     with contextlib.ExitStack() as closing:
         with watchdog.joining(f"joining the bus ({_joining(bus_config)})"):
             session = closing.enter_context(contextlib.closing(open_session(bus_config, wait=True)))
-        # a control session only where robots are owned (see bus/control.py: with one at both ends of
-        # a link, a robot cut off was said lost after ~11 s instead of its 1.5 s lease; cause not found)
+        # a control session only where robots are owned: a sink's stop leaves from its data session and
+        # reaches the owner's control session over the link that one dialled (docs/design.md)
         owner = any(isinstance(adapter, RobotAdapter) for adapter in adapters)
         control = closing.enter_context(contextlib.closing(open_control(bus_config, session))) if owner else None
         bus = Bus(session, host=host, limits=Limits(max_future_s=bus_config.max_future_s), control=control)

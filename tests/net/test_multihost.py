@@ -227,8 +227,9 @@ def test_two_subnets_joined_only_by_a_zenoh_router(topology, tmp_path):
 # -- 3-5. cut links and killed robots --------------------------------------------------
 
 
-def point_to_point(tmp_path: Path, robot: Host, extra: str = "", rate: int = RATE) -> str:
-    """The robot host listens on its address, the sound host connects to it; no multicast."""
+def point_to_point(tmp_path: Path, robot: Host, extra: str = "", rate: int = RATE, nodes: str = "") -> str:
+    """The robot host listens on its address, the sound host connects to it; no multicast;
+    ``nodes``: more node tables."""
     return show(tmp_path, f"""
         [bus]
         mode = "peer"
@@ -248,6 +249,7 @@ def point_to_point(tmp_path: Path, robot: Host, extra: str = "", rate: int = RAT
         host = "sound"
         subscribe = ["pepper/joints/*", "pepper/events/*"]
         {SINK}
+        {nodes}
         """)
 
 
@@ -285,9 +287,19 @@ def test_short_cut_within_the_lease_brings_no_stale_burst(topology, tmp_path, fi
     assert not connection(dump, "lost"), "a 5 s cut within a 10 s lease was reported as a lost robot"
 
 
-def test_cut_longer_than_the_lease_is_lost_then_connected_again(topology, tmp_path, figure):
+# "sound owns a robot too": both processes open a control session (bus/control.py); a close that
+# held one of Zenoh's 2 link-reading threads for 10 s made "lost" take 11.5 s in 3 of 6 runs
+# (ZENOH_RUNTIME in bus/session.py)
+@pytest.mark.parametrize("sound_owns_a_robot", [False, True], ids=["sink only", "sound owns a robot too"])
+def test_cut_longer_than_the_lease_is_lost_then_connected_again(topology, tmp_path, figure, sound_owns_a_robot):
     robot, sound = topology.lan("robot", "sound")
-    dump, _, _ = start_pair(topology, point_to_point(tmp_path, robot), robot, sound)
+    nao = f"""
+        [nodes.nao]
+        host = "sound"
+        robot = "nao"
+        {SIM}
+        """ if sound_owns_a_robot else ""
+    dump, _, _ = start_pair(topology, point_to_point(tmp_path, robot, nodes=nao), robot, sound)
     until(topology, lambda: connection(dump, "connected"), 5.0, '"connected" at start')
 
     cut = topology.cut(robot)
