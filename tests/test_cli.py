@@ -494,6 +494,13 @@ def test_main_send_usage_error_in_process():
     assert one_error_line(env.stderr.getvalue()).startswith("sonibus: error: joints/set has no argument 'bogus'")
 
 
+def test_a_joint_given_as_an_argument_is_told_the_form_that_works():
+    env = environment()
+    assert main(["send", "pepper", "joints/set", "HeadYaw=0.4"], env) == 2
+    line = one_error_line(env.stderr.getvalue())
+    assert line.endswith("(for a joint: names=HeadYaw angles=<radians>)"), line
+
+
 def test_main_argparse_usage_error_in_process(capsys):
     env = environment()
     assert main(["frobnicate"], env) == 2

@@ -315,7 +315,9 @@ def _is_number(value: Any) -> bool:
 def _known(sig: Signature, name: str) -> Argument:
     arg = sig.get(name)
     if arg is None:
-        raise _bad(f"{sig.verb} has no argument {name[:40]!r} — arguments: {sig.names}")
+        joint = (f" (for a joint: names={name[:40]} angles=<radians>)"
+                 if sig.get("names") is not None and sig.get("angles") is not None else "")
+        raise _bad(f"{sig.verb} has no argument {name[:40]!r} — arguments: {sig.names}{joint}")
     return arg
 
 
