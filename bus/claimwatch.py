@@ -43,6 +43,7 @@ log = logging.getLogger(__name__)
 CHANNEL = 4096  # claim changes held for the worker; past that the oldest are dropped and the table re-read
 SAY_EVERY_S = 10.0  # the line that says the claims were read again, at most this often
 RESYNC_TIMEOUT_S = 2.0  # the liveliness query that re-reads the claims after the channel overflowed
+MAX_LEFT_OUT = 16 * MAX_ROBOTS  # claims left out remembered, so a re-read neither counts nor tells them again
 
 
 @dataclass
@@ -70,6 +71,7 @@ class ClaimWatch:
         self.bus, self.channel = bus, channel
         self.max_future_s = bus.limits.max_future_s
         self.ignored = 0  # claims left out: no room (``MAX_ROBOTS``, ``MAX_RIVALS``)
+        self._left_out: set[str] = set()  # their keys (at most ``MAX_LEFT_OUT``): each counted and told once
         self.resyncs = 0  # times the channel overflowed and the claims were read again
         self._said = -1e18
         self._claims: dict[str, dict[str, Claim]] = {}
@@ -164,6 +166,7 @@ class ClaimWatch:
         held = self._claims.get(claim.robot)
         if not alive:
             if held is None or held.pop(claim.key, None) is None:
+                self._left_out.discard(claim.key)
                 return ""
             if held:
                 return ""
@@ -172,6 +175,10 @@ class ClaimWatch:
         if held is not None and claim.key in held:
             return ""
         if (held is None and len(self._claims) >= MAX_ROBOTS) or (held is not None and len(held) >= MAX_RIVALS):
+            if claim.key in self._left_out:  # (seen again: a re-read after an overflow, or Zenoh twice)
+                return ""
+            if len(self._left_out) < MAX_LEFT_OUT:
+                self._left_out.add(claim.key)
             self.ignored += 1
             return "full"
         self._claims.setdefault(claim.robot, {})[claim.key] = claim

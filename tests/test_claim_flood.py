@@ -87,6 +87,26 @@ def test_the_watcher_of_claims_reads_them_again_when_its_channel_overflows_and_t
     late.undeclare()
 
 
+def test_a_claim_left_out_is_counted_and_told_once_across_re_reads(net, monkeypatch):
+    """With room for 10 robots and a ring channel of 8 changes, 60 claims at once: the channel
+    overflows, the worker reads the claims again, and the 50 left out must not be counted or
+    told again (a re-read counted every one of them once more)."""
+    monkeypatch.setattr("sonibus.bus.claimwatch.MAX_ROBOTS", 10)
+    rogue = net.bus("rogue")
+    watcher = ClaimWatch(net.bus("watcher"), channel=8)
+    capped: list[str] = []
+    watching = watcher.watch(watcher.bus, lambda robot, alive: None, capped.append)
+    since = int(time.time() * 1000)
+    tokens = [rogue.token(f"{keys.ROBOTS}/r{i:03d}/{since}/rogue/x") for i in range(60)]  # noqa: F841 (held)
+    wait_for(lambda: len(watcher.robots()) == 10 and watcher.resyncs >= 1 and watcher.ignored >= 50, timeout=20.0,
+             what="10 robots followed, the rest left out, the claims read again",
+             explain=lambda: f"{len(watcher.robots())} robots, {watcher.ignored} left out, {watcher.resyncs} re-reads")
+    watcher._resync()  # (once more, for certain: what a later overflow does)
+    assert watcher.ignored == 50, f"{watcher.ignored} claims counted as left out, of 50"
+    assert len(capped) == 50, f"{len(capped)} lines for 50 claims left out"
+    watching.undeclare()
+
+
 def test_the_claims_alive_are_read_whatever_their_number(net):
     """``Bus.alive`` with 300 tokens on the bus: the default channel (256 replies) blocked Zenoh
     inside ``get`` for ever (a recorder that asked with 1,200 made-up claims on the bus hung)."""
