@@ -106,7 +106,7 @@ class MapNode(Adapter):
     def described(self) -> dict[str, Any]:
         """The ``<node>/info/derived`` reply: each map's output with its unit and range, and its events."""
         specs = [chain.spec for chain in self.chains.values()]
-        return {"robot": self.name, "processor": {"host": self.bus.host, "node": self.name},
+        return {"robot": self.name, "alone": True, "processor": {"host": self.bus.host, "node": self.name},
                 "derived": [{"name": f"{FEATURE}/{s.name}", "key": self.output_key(s.name), "unit": s.unit, "size": 1,
                              "min": s.low, "max": s.high, "sources": [src.pattern + (f".{src.axis}" if src.axis
                                                                                      else "") for src in s.sources]}
