@@ -148,3 +148,15 @@ def alone(derived: list[dict[str, Any]], unavailable: dict[str, Any]) -> dict[st
     if unavailable:
         info["unavailable"] = dict(unavailable)
     return info
+
+
+def watch_nodes(bus: Bus, on_change: Callable[[str, bool], None]) -> Any:
+    """Call ``on_change(node, alive)`` for every node on the bus now and whenever one comes
+    or goes (its token ``sonibus/nodes/<host>/<node>``), on a Zenoh thread (store, never
+    wait): a source of derived values that is no robot has no claim, and is on the bus while
+    its node is. Undeclare what it returns to stop."""
+    def changed(key: str, alive: bool) -> None:
+        node = key[len(keys.NODES) + 1:].partition("/")[2]
+        if node:
+            on_change(node, alive)
+    return bus.watch_tokens(f"{keys.NODES}/*/*", changed)

@@ -16,6 +16,7 @@ from ..conftest import wait_for
 from ..features.conftest import model_info
 from ..midi.conftest import FakeRobot
 from ..osc.test_sink_delivery import messages
+from ..oscquery.conftest import serve
 from .conftest import map_node, pose
 
 TEXT = '''[nodes.sound]
@@ -89,3 +90,17 @@ def test_midi_plays_a_maps_output_on_its_cc_scaled_by_the_maps_range(net, reader
     finally:
         bot.queryable.undeclare()
     assert set(midi.cc(1, 74)) == {95}, midi.cc(1, 74)
+
+
+def test_oscquery_serves_a_maps_output_with_its_range_and_drops_it_when_the_node_goes(net, owner):
+    """Listed at /sound/derived/map/head with its RANGE and current VALUE; PATH gone when the map node stops."""
+    pepper = owner("pepper", model_info("pepper"))
+    served = serve(net)
+    node = map_node(net, TEXT)
+    with frames(pepper):
+        described = served.wait_node("/sound/derived/map/head")
+        assert described["RANGE"] == [{"MIN": 0, "MAX": 127}], described
+        assert wait_for(lambda: served.json("/sound/derived/map/head?VALUE").get("VALUE") == [95.25],
+                        what="the map's value served")
+        node.stop()
+        wait_for(lambda: served.get("/sound").status_code == 404, what="the map node's paths removed")
