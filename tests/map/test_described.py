@@ -48,6 +48,16 @@ def frames(robot, yaw: float = 0.5) -> Iterator[None]:
         feeder.join()
 
 
+def test_osc_raw_sends_a_maps_output_in_its_own_unit(net, owner, receivers):
+    pepper = owner("pepper", model_info("pepper"))
+    raw = receivers()
+    net.start(OscSink(OscSinkConfig(subscribe="sound/derived/**", targets=(raw.target,)), name="osc"))
+    map_node(net, TEXT)
+    with frames(pepper):
+        wait_for(lambda: messages(raw, "/sound/derived/map/head"), timeout=10, what="the map's output over OSC")
+    assert messages(raw, "/sound/derived/map/head")[0][1] == [95.25]
+
+
 def test_osc_normalized_scales_a_maps_output_by_its_declared_range_at_once(net, owner, receivers):
     """0.5 rad → 95.25 of 0..127 → 0.75; not held back UNDESCRIBED_WAIT_S (3 s) and then sent raw."""
     pepper = owner("pepper", model_info("pepper"))
