@@ -74,7 +74,8 @@ class Editor:
     def answer(self, verb: str, args: dict[str, Any]) -> dict[str, Any]:
         """The result of a checked request (``CommandError`` when refused)."""
         if verb == "list":
-            return {"node": self.node.name, "file": str(self.path or ""), "maps": self.listed()}
+            return {"node": self.node.name, "file": str(self.path or ""), "maps": self.listed(),
+                    "halted": self.node.halted()}
         if verb == "edit":
             return self.edit(args["map"], args.get("set", {}), args.get("unset", []))
         if verb == "learn":

@@ -158,6 +158,10 @@ class MapNode(Adapter):
             return {"input": self._inputs.get(name), "output": chain.value if chain else None,
                     "silent": name in self._silent, "learning": learning[0] if learning else None}
 
+    def halted(self) -> dict[str, float]:
+        """The robots a stop halted the maps of, until resumed (wall-clock time of the stop)."""
+        return self._drive.status()["halted"] if self._drive is not None else {}
+
     def metrics(self) -> dict[str, Any]:
         """Each map's last output, and the maps silent now (seconds since their last source value)."""
         now = time.monotonic()

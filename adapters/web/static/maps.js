@@ -213,8 +213,19 @@
         saved.dataset.kind = reply.ok ? "ok" : "error";
       })}, "save");
     const saved = el("output", {class: "map-saved"});
+    // after a stop, the robots whose maps it halted, and the button that asks the node to resume them
+    // (<node>/program/resume, as `sonibus resume` does); the node's answer shown as it came
+    const resumed = el("output", {class: "map-resumed"});
+    const resume = el("button", {type: "button", class: "map-resume", title: "let these maps move their robots again",
+      onclick: () => ask(node, "resume", {}, `resume ${node}'s maps`, (reply) => {
+        const robots = reply.ok ? reply.result.resumed || [] : [];
+        resumed.textContent = !reply.ok ? reply.error
+          : robots.length ? `resumed: ${robots.join(", ")}` : "resumed: none was halted";
+        resumed.dataset.kind = reply.ok ? "ok" : "error";
+      })}, "resume");
+    const halted = el("p", {class: "map-halted", hidden: true}, el("span", {class: "map-halted-robots"}), " ", resume);
     block = el("div", {class: "map-node", dataset: {node}}, el("h3", {}, node, " ", save, " ", saved),
-      el("div", {class: "map-list"}));
+      halted, resumed, el("div", {class: "map-list"}));
     blocks.set(node, block);
     return block;
   }
@@ -250,6 +261,12 @@
   }
 
   function onValues(message) {
+    for (const [node, robots] of Object.entries(message.halted || {})) {
+      const line = blocks.get(node)?.querySelector(".map-halted");
+      if (!line) continue;
+      line.hidden = robots.length === 0;
+      line.querySelector(".map-halted-robots").textContent = `${robots.join(", ")}: halted by stop —`;
+    }
     for (const [node, maps] of Object.entries(message.nodes || {})) {
       for (const [name, values] of Object.entries(maps || {})) {
         const view = views.get(`${node}/${name}`);
