@@ -26,7 +26,8 @@ from sonibus.bus.errors import CommandError
 MAX_MESSAGE = 64 * 1024  # characters of one client message; longer ones are refused (the connection stays)
 TYPES = ("command", "stop", "map", "press")
 RESUME = "resume"  # a map node's <node>/program/resume: its maps drive their robots again after a stop
-MAP_VERBS = ("list", "edit", "learn", "undo", "save", RESUME)  # what a map node serves (schemas/v1/maps/, program)
+# what a map node serves (schemas/v1/maps/; resume: its program)
+MAP_VERBS = ("list", "edit", "learn", "undo", "save", "add", "remove", RESUME)
 
 Id = int | str | None  # the client's own request id, echoed in the reply
 

@@ -125,7 +125,7 @@ def test_a_map_request_to_no_map_node_or_of_no_verb_is_answered_in_one_line(net,
     assert socket.wait("reply", id=1)["error"] == \
         "edit: no map node 'nosuch' on the bus (nosuch/maps/edit is served by nothing)"
     assert socket.wait("reply", id=2)["error"] == \
-        "map: unknown verb 'dance' — a map node takes list, edit, learn, undo, save, resume"
+        "map: unknown verb 'dance' — a map node takes list, edit, learn, undo, save, add, remove, resume"
     assert socket.wait("reply", id=3)["error"].startswith("map: node name 'a/b' must be non-empty without '/'")
 
 
