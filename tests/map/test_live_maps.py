@@ -5,12 +5,13 @@ added after a stop, is halted until resumed like the others."""
 
 from __future__ import annotations
 
+import json
 import time
 import tomllib
 
 from sonibus.bus import client, keys
 
-from ..conftest import wait_for
+from ..conftest import run_cli, wait_for
 from .test_drive import Rig
 from .test_edit import ask, first_output, running
 
@@ -117,3 +118,22 @@ def client_ask(rig, verb: str, args: dict) -> dict:
     answers = rig.bus.query(keys.maps("moves", verb), args, timeout=5.0)
     assert len(answers) == 1, answers
     return answers[0]
+
+
+def test_sonibus_map_add_and_remove(net, owner, tmp_path):
+    """The terminal's way: each argument a line of the map's table; a refusal in one line, exit not 0."""
+    _, _, head = running(net, owner, tmp_path)
+    added = run_cli("map", "add", "sound", "swing", 'source = "pepper/joints/HeadYaw"', "from = [-1, 1]",
+                    "to = [0, 10]", *net.cli_args())
+    assert added.returncode == 0, added.stderr
+    assert json.loads(added.stdout)["added"] is True
+    wait_for(lambda: head.output(0.5, "swing") == 7.5, what="the added map's output")
+    refused = run_cli("map", "add", "sound", "twirl", 'source = "pepper/joints/HeadYaw"', 'curve = "expo"',
+                      *net.cli_args())
+    assert refused.returncode != 0
+    assert "'expo' is not a curve" in refused.stderr and len(refused.stderr.strip().splitlines()) == 1, refused.stderr
+    bad = run_cli("map", "add", "sound", "twirl", "source = pepper", *net.cli_args())
+    assert bad.returncode != 0 and "the map's table is not TOML" in bad.stderr, bad.stderr
+    removed = run_cli("map", "remove", "sound", "swing", *net.cli_args())
+    assert removed.returncode == 0, removed.stderr
+    assert [m["name"] for m in ask(head.watch, "list")["result"]["maps"]] == ["yaw", "quiet"]
