@@ -162,3 +162,38 @@ def test_a_stop_shows_the_halted_maps_and_the_pages_resume_lets_them_drive_again
     browser.wait(lambda: browser.text('.map-node[data-node="moves"] .map-resumed') == "resumed: none was halted",
                  "the second answer")
     assert browser.errors() == []
+
+
+def test_maps_added_and_removed_on_the_page(net, head, browser, tmp_path):
+    """A map added from the panel runs and shows its output; a refused add says why in place;
+    remove takes a map out of the node and the panel; the node's undo brings it back."""
+    path = tmp_path / "show.toml"
+    path.write_text(FILE, encoding="utf-8")
+    start(net, path)
+    web = start_web(net, token=TOKEN)
+    browser.open(f"{web.url}/?token={TOKEN}")
+    block = '.map-node[data-node="sound"]'
+    browser.wait(lambda: browser.text('.map[data-map="yaw"] .map-out') == "50", "the yaw map's live output")
+
+    def add(name: str, source: str) -> None:
+        for field, value in (("name", name), ("source", source)):
+            box = browser.find(f"{block} .map-add-{field}")
+            box.clear()
+            box.send_keys(value)
+        browser.find(f"{block} .map-add").click()
+
+    add("swing", "pepper/joints/HeadRoll")
+    browser.wait(lambda: "not among those this node listens to" in (browser.text(f"{block} .map-add-error") or ""),
+                 "the refused add's reason")
+    assert [m["name"] for m in ask(head.watch, "list")["result"]["maps"]] == ["yaw", "quiet"]
+    add("swing", "pepper/joints/HeadYaw")
+    browser.wait(lambda: (browser.text('.map[data-map="swing"] .map-out') or "–") != "–", "the added map's output")
+    assert browser.text(f"{block} .map-add-error") == ""
+    assert [m["name"] for m in ask(head.watch, "list")["result"]["maps"]] == ["yaw", "quiet", "swing"]
+
+    browser.find('.map[data-map="yaw"] .map-remove').click()
+    browser.wait(lambda: browser.text('.map[data-map="yaw"] .map-out') is None, "the removed map gone from the page")
+    assert [m["name"] for m in ask(head.watch, "list")["result"]["maps"]] == ["quiet", "swing"]
+    browser.find(f"{block} .map-node-undo").click()
+    browser.wait(lambda: browser.text('.map[data-map="yaw"] .map-out') == "50", "the removal undone")
+    assert browser.errors() == []
