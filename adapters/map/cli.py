@@ -13,15 +13,16 @@ from __future__ import annotations
 
 import argparse
 import json
-import threading
 import tomllib
 from typing import Any
 
 from sonibus.bus import keys
 from sonibus.bus.cli.api import Command, Environment, Exit, bus_config, joined
 from sonibus.bus.cli.hints import reach_hint
-from sonibus.bus.client import Outcome, ask_key
+from sonibus.bus.client import ask_key
 from sonibus.bus.errors import CommandError, ConfigError
+
+from .resume import asked
 
 BAR = 10          # characters of an input's bar
 PARTS = " ▏▎▍▌▋▊▉█"  # eighths of a character
@@ -101,19 +102,9 @@ def request(verb: str, words: list[str]) -> tuple[str, dict[str, Any]]:
 def _change(args: argparse.Namespace, env: Environment) -> Exit:
     node, message = request(args.node, args.words)
     key = keys.maps(node, args.node)
-    outcomes: list[Outcome] = []
-    answered = threading.Event()
-    with joined(bus_config(args)) as bus:
-        bus.discover(key)  # (a new session: its peers' queryables known first)
-        ask_key(bus, key, message, lambda outcome: (outcomes.append(outcome), answered.set()), args.timeout,
-                CommandError("not_found", f"{args.node}: no map node '{node}' on the bus ({key} is served by "
-                                          "nothing)"), f"map node '{node}'")
-        answered.wait(args.timeout + 1.0)
-    if not outcomes:
-        raise CommandError("timeout", f"map node '{node}' did not answer within {args.timeout:g} s")
-    if isinstance(outcomes[0], CommandError):
-        raise outcomes[0]
-    env.say(json.dumps(outcomes[0]))
+    nobody = CommandError("not_found", f"{args.node}: no map node '{node}' on the bus ({key} is served by nothing)")
+    env.say(json.dumps(asked(args, key, node, lambda bus, done: ask_key(bus, key, message, done, args.timeout, nobody,
+                                                                         f"map node '{node}'"))))
     return Exit.OK
 
 

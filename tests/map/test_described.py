@@ -18,15 +18,7 @@ from ..midi.conftest import FakeRobot
 from ..osc.test_sink_delivery import messages
 from ..oscquery.conftest import serve
 from .conftest import map_node, pose
-
-TEXT = '''[nodes.sound]
-adapter = "map"
-[nodes.sound.maps.head]
-source = "pepper/joints/HeadYaw"
-from = [-1, 1]
-to = [0, 127]
-unit = "cc"
-'''
+from .test_sinks import TEXT
 
 
 @contextmanager
@@ -74,14 +66,8 @@ def test_osc_normalized_scales_a_maps_output_by_its_declared_range_at_once(net, 
     assert took < 2.5, took  # (described, not waited out: UNDESCRIBED_WAIT_S is 3 s)
 
 
-MIDI_TEXT = '''[nodes.sound]
-adapter = "map"
-[nodes.sound.maps.cutoff]
-source = "bot/joints/A"
-from = [-2, 2]
-to = [0, 200]
-unit = "Hz"
-'''
+MIDI_TEXT = TEXT.replace("head", "cutoff").replace("pepper/joints/HeadYaw", "bot/joints/A").replace(
+    "from = [-1, 1]", "from = [-2, 2]").replace("to = [0, 127]", "to = [0, 200]").replace('"cc"', '"Hz"')
 
 
 def test_midi_plays_a_maps_output_on_its_cc_scaled_by_the_maps_range(net, reader):
