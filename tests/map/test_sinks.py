@@ -76,6 +76,7 @@ def test_foxglove_advertises_a_maps_output_and_sends_it(net, owner):
         async with aiohttp.ClientSession() as session:
             client = await connect(session, server.port)
             await client.until(lambda _: "sound/derived/map/head" in client.channels)
+            await client.until(lambda _: "sound/info/derived" in client.channels)  # (what describes it)
             await client.subscribe({1: "sound/derived/map/head"})
             return await client.until(lambda got: len(got) >= 10)
 
