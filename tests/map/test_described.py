@@ -9,6 +9,8 @@ import time
 from collections.abc import Iterator
 from contextlib import contextmanager
 
+from pythonosc.osc_message import OscMessage
+
 from sonibus.adapters.midi import MidiSink, MidiSinkConfig
 from sonibus.adapters.osc import OscSink, OscSinkConfig
 
@@ -88,8 +90,9 @@ def test_midi_plays_a_maps_output_on_its_cc_scaled_by_the_maps_range(net, reader
     assert set(midi.cc(1, 74)) == {95}, midi.cc(1, 74)
 
 
-def test_oscquery_serves_a_maps_output_with_its_range_and_drops_it_when_the_node_goes(net, owner):
-    """Listed at /sound/derived/map/head with its RANGE and current VALUE; PATH gone when the map node stops."""
+def test_oscquery_serves_a_maps_output_with_its_range_and_drops_it_when_the_node_goes(net, owner, websocket):
+    """Listed at /sound/derived/map/head with its RANGE and current VALUE, streamed to a client that
+    LISTENs; PATH gone when the map node stops."""
     pepper = owner("pepper", model_info("pepper"))
     served = serve(net)
     node = map_node(net, TEXT)
@@ -98,5 +101,10 @@ def test_oscquery_serves_a_maps_output_with_its_range_and_drops_it_when_the_node
         assert described["RANGE"] == [{"MIN": 0, "MAX": 127}], described
         assert wait_for(lambda: served.json("/sound/derived/map/head?VALUE").get("VALUE") == [95.25],
                         what="the map's value served")
+        client = websocket(served.url)
+        client.send({"COMMAND": "LISTEN", "DATA": "/sound/derived/map/head"})
+        streamed = wait_for(lambda: [OscMessage(m) for m in list(client.messages) if isinstance(m, bytes)],
+                            what="the map's output streamed to a LISTENer")
+        assert (streamed[0].address, streamed[0].params) == ("/sound/derived/map/head", [95.25])
         node.stop()
         wait_for(lambda: served.get("/sound").status_code == 404, what="the map node's paths removed")
