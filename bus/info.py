@@ -7,7 +7,12 @@ One query covers ``<robot>/info/**``: the owner's description, and what
 feature processors say on ``<robot>/info/derived`` about the derived keys they
 publish. ``on_info`` gets the owner's info with those ``derived`` entries (and
 ``unavailable`` reasons) added, once the query is over; without an owner's
-answer it is not called.
+answer it is not called, unless ``derived_alone`` is set and ``<name>/info/derived`` answered
+with ``"alone": true`` (its processor's own name, not a robot's): then ``name`` is a source of
+derived values that is no robot (a ``map`` node publishing ``<node>/derived/map/<name>``), and
+``on_info`` gets ``alone(derived, unavailable)``: its ``derived`` entries, no joints, and
+``DERIVED_ALONE`` set, so a sink describes its values as it would a robot's without knowing
+what kind of node it is.
 """
 
 from __future__ import annotations
@@ -22,6 +27,7 @@ from . import keys, messages
 from .node import Bus, Reply
 
 MAX_ROBOTS = 1024  # robots asked about and remembered (their retry time)
+DERIVED_ALONE = "derived_alone"  # set in the info of a source of derived values that is no robot
 UNANSWERED_RETRY_S = 0.25  # a robot whose info nobody answered is asked again this soon (at most 4 a second)
 
 
@@ -29,8 +35,9 @@ class InfoRequests:
     """``ask(robot)``; answers arrive as ``on_info(robot, info)``, bad ones as ``on_error(robot, text)``."""
 
     def __init__(self, bus: Bus, on_info: Callable[[str, dict[str, Any]], None],
-                 on_error: Callable[[str, str], None], retry_s: float = 2.0) -> None:
+                 on_error: Callable[[str, str], None], retry_s: float = 2.0, derived_alone: bool = False) -> None:
         self.bus, self.on_info, self.on_error, self.retry_s = bus, on_info, on_error, retry_s
+        self.derived_alone = derived_alone  # a name with info/derived and no owner's info is described by the first
         self._asked: dict[str, float] = {}
         self._misses: dict[str, int] = {}  # robot → queries in a row nobody answered
         self._gate = messages.Gate(bus.limits)
@@ -45,7 +52,7 @@ class InfoRequests:
             if len(self._asked) >= MAX_ROBOTS:  # (all asked just now: this one waits for room)
                 return
         self._asked[robot] = now
-        merge = _Merge(robot, self._answered, self.on_error, self._gate, self._unanswered)
+        merge = _Merge(robot, self._answered, self.on_error, self._gate, self._unanswered, self.derived_alone)
         self.bus.ask(keys.info(robot) + "/**", merge.take, merge.finish, timeout=self.retry_s)
 
     def keep_asking(self, stopping: threading.Event, robots: Callable[[], Iterable[str]]) -> None:
@@ -75,12 +82,14 @@ class _Merge:
 
     def __init__(self, robot: str, on_info: Callable[[str, dict[str, Any]], None],
                  on_error: Callable[[str, str], None], gate: messages.Gate,
-                 on_none: Callable[[str], None] = lambda robot: None) -> None:
+                 on_none: Callable[[str], None] = lambda robot: None, derived_alone: bool = False) -> None:
         self.robot, self.on_info, self.on_error, self.gate, self.on_none = robot, on_info, on_error, gate, on_none
+        self.derived_alone = derived_alone
         self.main: dict[str, Any] | None = None
         self.answered = False  # by an owner (a bad info too: that one is asked again only after retry_s)
         self.derived: list[dict[str, Any]] = []
         self.unavailable: dict[str, Any] = {}
+        self.alone = False  # a processor answered for its own name: no owner's info will come
         self._lock = threading.Lock()
 
     def take(self, reply: Reply) -> None:
@@ -103,17 +112,51 @@ class _Merge:
                 self.main = message
             else:
                 self.derived.extend(message["derived"])
+                self.alone |= message.get("alone") is True
                 self.unavailable.update(message.get("unavailable", {}))
 
     def finish(self) -> None:
         with self._lock:
-            if self.main is None:
-                if not self.answered:
-                    self.on_none(self.robot)
+            if self.main is not None:
+                info = self._merged()
+            elif self.answered:  # (an owner's info the gate refused: said already)
                 return
-            info = dict(self.main)
-            if self.derived:
-                info["derived"] = [*info.get("derived", ()), *self.derived]
-            if self.unavailable:
-                info["unavailable"] = {**info.get("unavailable", {}), **self.unavailable}
+            elif self.derived_alone and self.alone:
+                info = alone(self.derived, self.unavailable)
+            else:
+                self.on_none(self.robot)
+                return
         self.on_info(self.robot, info)
+
+    def _merged(self) -> dict[str, Any]:
+        """The owner's info with the processors' derived entries and unavailable reasons added."""
+        info = dict(self.main)
+        if self.derived:
+            info["derived"] = [*info.get("derived", ()), *self.derived]
+        if self.unavailable:
+            info["unavailable"] = {**info.get("unavailable", {}), **self.unavailable}
+        return info
+
+
+def alone(derived: list[dict[str, Any]], unavailable: dict[str, Any]) -> dict[str, Any]:
+    """The info of a source of derived values that is no robot: what its ``info/derived`` says.
+
+    >>> alone([{"name": "map/head", "min": 0, "max": 127, "unit": "cc"}], {})
+    {'joints': [], 'derived': [{'name': 'map/head', 'min': 0, 'max': 127, 'unit': 'cc'}], 'derived_alone': True}
+    """
+    info: dict[str, Any] = {"joints": [], "derived": list(derived), DERIVED_ALONE: True}
+    if unavailable:
+        info["unavailable"] = dict(unavailable)
+    return info
+
+
+def watch_nodes(bus: Bus, on_change: Callable[[str, bool], None]) -> Any:
+    """Call ``on_change(node, alive)`` for every node on the bus now and whenever one comes
+    or goes (its token ``sonibus/nodes/<host>/<node>``), on a Zenoh thread (store, never
+    wait): a source of derived values that is no robot has no claim, and is on the bus while
+    its node is. Undeclare what it returns to stop."""
+    def changed(key: str, alive: bool) -> None:
+        node = key[len(keys.NODES) + 1:].partition("/")[2]
+        if node:
+            on_change(node, alive)
+    return bus.watch_tokens(f"{keys.NODES}/*/*", changed)

@@ -44,3 +44,37 @@ def test_a_robot_whose_info_is_unusable_waits_the_full_retry(net):
     finally:
         served.undeclare()
     assert len(errors) == 1, errors
+
+
+def derived_info(robot: str, alone: bool) -> dict:
+    return {"robot": robot, "processor": {"host": "h", "node": "n"}, **({"alone": True} if alone else {}),
+            "derived": [{"name": "map/head", "key": f"{robot}/derived/map/head", "unit": "cc", "size": 1,
+                         "min": 0, "max": 127}]}
+
+
+def test_a_source_that_is_no_robot_is_described_by_its_derived_info_alone_only_when_it_says_so(net):
+    """A map node's info/derived says "alone": taken without an owner's info, by those who ask so. A
+    features node's, for a robot whose owner serves no info yet, is not: that robot is no robot with no joints."""
+    node, watcher = net.bus("node"), net.bus("watcher")
+    answers: dict[str, dict] = {}
+    served = [node.serve(keys.derived_info(name), lambda q, name=name, alone=alone: q.reply(
+        keys.derived_info(name), encode(derived_info(name, alone)))) for name, alone in (("sound", True),
+                                                                                        ("pepper", False))]
+    alone = InfoRequests(watcher, lambda robot, info: answers.setdefault(robot, info), lambda robot, text: None,
+                         retry_s=0.5, derived_alone=True)
+    robots_only = InfoRequests(watcher, lambda robot, info: answers.setdefault(f"robots-only:{robot}", info),
+                               lambda robot, text: None, retry_s=0.5)
+    try:
+        wait_for(lambda: alone.ask("sound") or robots_only.ask("sound") or "sound" in answers,
+                 what="the map node's derived info, alone")
+        deadline = time.monotonic() + 1.5
+        while time.monotonic() < deadline:                     # (an absence: asked again and again)
+            for requests in (alone, robots_only):
+                requests.ask("pepper")
+                requests.ask("sound")
+            time.sleep(0.05)
+    finally:
+        for queryable in served:
+            queryable.undeclare()
+    assert answers["sound"] == {"joints": [], "derived": derived_info("sound", True)["derived"], "derived_alone": True}
+    assert sorted(answers) == ["sound"], sorted(answers)

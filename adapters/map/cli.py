@@ -4,30 +4,48 @@ refreshed in the terminal (each node's ``<node>/maps/list``).
     $ sonibus map --count 1
     sound/cutoff  pepper/derived/hand/R.z      in 0.412 ▕████▏     ▏  out 515.825 Hz  [200, 2000] exp
     sound/swing   pepper/derived/hand_speed/R  in 0.020 ▕▏         ▏  out 0.02        [0, 1] linear  SILENT
+
+``sonibus map add NODE MAP 'key = value' ...`` adds a map while the node runs (each argument a
+line of its table, as in the installation file); ``sonibus map remove NODE MAP`` takes one out.
 """
 
 from __future__ import annotations
 
 import argparse
+import json
+import tomllib
 from typing import Any
 
 from sonibus.bus import keys
 from sonibus.bus.cli.api import Command, Environment, Exit, bus_config, joined
 from sonibus.bus.cli.hints import reach_hint
-from sonibus.bus.errors import ConfigError
+from sonibus.bus.client import ask_key
+from sonibus.bus.errors import CommandError, ConfigError
+
+from .resume import asked
 
 BAR = 10          # characters of an input's bar
 PARTS = " ▏▎▍▌▋▊▉█"  # eighths of a character
 
 
+CHANGES = ("add", "remove")  # the first word that makes `sonibus map` change a node's maps
+
+
 def _arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("node", nargs="?", default="*", metavar="NODE", help="one map node (default: every one)")
+    p.add_argument("node", nargs="?", default="*", metavar="NODE",
+                   help="one map node (default: every one); or add NODE MAP 'key = value'..., remove NODE MAP")
+    p.add_argument("words", nargs="*", metavar="...", help=argparse.SUPPRESS)
     p.add_argument("--count", type=int, metavar="N", help="print the maps N times, then exit (default: until Ctrl-C)")
     p.add_argument("--interval", type=float, default=0.5, metavar="S", help="seconds between two views (0.5)")
     p.add_argument("--timeout", type=float, default=1.0, metavar="S", help="seconds to wait for the nodes' answers")
 
 
 def _map(args: argparse.Namespace, env: Environment) -> Exit:
+    if args.node in CHANGES:
+        return _change(args, env)
+    if args.words:
+        raise ConfigError(f"map: unexpected {' '.join(args.words)!r} — list with `sonibus map [NODE]`, change with "
+                          "`sonibus map add NODE MAP 'key = value'...` or `sonibus map remove NODE MAP`")
     if args.node != "*":
         try:
             keys.check_name("node", args.node)
@@ -52,6 +70,41 @@ def _map(args: argparse.Namespace, env: Environment) -> Exit:
             shown += 1
             if args.count is None or shown < args.count:
                 env.stop.wait(args.interval)
+    return Exit.OK
+
+
+def request(verb: str, words: list[str]) -> tuple[str, dict[str, Any]]:
+    """The node and the request of ``sonibus map add|remove`` with ``words``; ``ConfigError`` in one line.
+
+    >>> request("add", ["sound", "swing", 'source = "pepper/joints/HeadYaw"', "to = [0, 10]"])
+    ('sound', {'map': 'swing', 'table': {'source': 'pepper/joints/HeadYaw', 'to': [0, 10]}})
+    >>> request("remove", ["sound", "swing"])
+    ('sound', {'map': 'swing'})
+    """
+    usage = "give NODE MAP 'key = value'..." if verb == "add" else "give NODE MAP"
+    if len(words) < 2 or (verb == "remove" and len(words) != 2) or (verb == "add" and len(words) < 3):
+        raise ConfigError(f"map {verb}: {usage} (got {len(words)} word{'s' if len(words) != 1 else ''})")
+    node, name = words[0], words[1]
+    try:
+        keys.check_name("node", node)
+    except ValueError as exc:
+        raise ConfigError(f"map {verb}: {exc}") from None
+    if verb == "remove":
+        return node, {"map": name}
+    try:
+        table = tomllib.loads("\n".join(words[2:]))
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError(f"map add: the map's table is not TOML ({exc}) — give each step as its own argument, "
+                          "'to = [0, 10]', strings quoted: 'source = \"pepper/joints/HeadYaw\"'") from None
+    return node, {"map": name, "table": table}
+
+
+def _change(args: argparse.Namespace, env: Environment) -> Exit:
+    node, message = request(args.node, args.words)
+    key = keys.maps(node, args.node)
+    nobody = CommandError("not_found", f"{args.node}: no map node '{node}' on the bus ({key} is served by nothing)")
+    env.say(json.dumps(asked(args, key, node, lambda bus, done: ask_key(bus, key, message, done, args.timeout, nobody,
+                                                                         f"map node '{node}'"))))
     return Exit.OK
 
 
@@ -93,4 +146,5 @@ def _bar(x: float | None) -> str:
     return "▕" + ("█" * full + (PARTS[part] if part else "")).ljust(BAR) + "▏"
 
 
-MAP = Command("map", "list the map nodes' maps with their live values", _arguments, _map, bus=True)
+MAP = Command("map", "list the map nodes' maps with their live values; add or remove one", _arguments, _map,
+              bus=True)

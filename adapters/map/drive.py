@@ -57,16 +57,40 @@ class Drive:
         self._lock = threading.Lock()          # (stops, shows and resumes come on Zenoh's threads)
         self._gate = messages.Gate(self.bus.limits)
         for robot in self.robots:
-            for kind in ("command", "show"):
-                node.own(self.bus.on_sample(keys.event(robot, kind), self._event, f"{robot}'s {kind} events"))
+            self._listen(robot)
         node.own(self.bus.serve(keys.program(node.name), self._serve))
+
+    def _listen(self, robot: str) -> None:
+        """Hear ``robot``'s stops and its show's state (its owner says them on its events)."""
+        for kind in ("command", "show"):
+            self.node.own(self.bus.on_sample(keys.event(robot, kind), self._event, f"{robot}'s {kind} events"))
+
+    def set_target(self, name: str, target: Target | None) -> None:
+        """Map ``name`` drives ``target`` from now on (None: nothing): a map added, removed or
+        retargeted live. What waited for its old target is dropped; the caps are the new
+        target's; a robot halted by a stop stays halted until resumed, whatever maps drive it."""
+        with self._lock:
+            targets = {n: t for n, t in self.targets.items() if n != name}
+            if target is not None:
+                targets[name] = target
+            self.targets = targets  # (a new dict: the worker iterates the old one without the lock)
+            for table in (self._waiting, self._angle, self._last_sent):
+                table.pop(name, None)
+            self._checked = {c for c in self._checked if c[0] != name}
+            new = target is not None and target.robot not in self.robots
+            if new:
+                self.robots = sorted({*self.robots, target.robot})
+        if new:
+            self._listen(target.robot)
 
     # -- from the map node's worker ---------------------------------------------------
 
     def take(self, name: str, value: float | None, trigger: str | None) -> None:
         """Map ``name`` computed ``value`` (None: within its deadband) and its threshold's ``trigger``."""
-        target = self.targets[name]
         with self._lock:
+            target = self.targets.get(name)
+            if target is None:  # (retargeted to nothing, or removed, while this value was computed)
+                return
             if target.triggered:
                 request = target.request() if trigger == "on" else None
             else:
@@ -88,7 +112,7 @@ class Drive:
         sending = []
         with self._lock:
             for name, request in list(self._waiting.items()):
-                target = self.targets[name]
+                target = self.targets[name]  # (set_target drops what waits for a target it takes away)
                 flying = self._flying.get(name)
                 if flying is not None and now - flying < TIMEOUT_S:
                     continue  # (its answer sends the next)
@@ -111,11 +135,12 @@ class Drive:
         """``robot``'s joints and their limits (from its info): a map whose joint it lacks, or
         whose ``to`` goes past the joint's limits, is said once (its owner would refuse it)."""
         for name, target in self.targets.items():
-            if target.robot != robot or target.command != "joints/set" or (name, robot) in self._checked:
+            chain = self.node.chains.get(name)
+            if target.robot != robot or target.command != "joints/set" or (name, robot) in self._checked or not chain:
                 continue
             self._checked.add((name, robot))
             limits = joints.get(target.joint)
-            to = self.node.chains[name].spec.to
+            to = chain.spec.to
             if limits is None and joints:
                 log.warning("%s: map '%s': %s has no joint '%s' — its joints: %s", self.node.name, name, robot,
                             target.joint, ", ".join(sorted(joints)))
@@ -183,7 +208,7 @@ class Drive:
             first = robot not in self.halted
             self.halted.setdefault(robot, time.time())
             self._drop(robot)
-            self._stop_after.update(n for n in self._flying if self.targets[n].robot == robot)
+            self._stop_after.update(n for n in self._flying if n in self.targets and self.targets[n].robot == robot)
         if first:
             maps = ", ".join(n for n, t in self.targets.items() if t.robot == robot)
             log.warning("%s: %s was stopped: its maps (%s) move it no more until resumed — "

@@ -5,7 +5,9 @@ then ``{"ok": true, "result": ...}`` or ``{"ok": false, "error": {"code", "messa
     list                              every map: its table, live input and output, curve
     edit  {map, set: {...}, unset: [...]}   steps of one map changed, as in the file
     learn {map, seconds?, source?}    the next N seconds of a source set its `from`
-    undo  {map?}                      the last edit taken back
+    undo  {map?}                      the last change taken back (an add's: the map removed)
+    add   {map, table}                a new map, its table as in the file
+    remove {map}                      a map taken out (its output, what it drives)
     save                              the maps as they run, written into the file
 
 An edit is checked exactly as the installation file is (``parse_map``): refused with the
@@ -31,7 +33,7 @@ from sonibus.bus import keys, messages
 from sonibus.bus.commands import serving
 from sonibus.bus.errors import CommandError, ConfigError
 
-from .config import MapSpec, parse_map
+from .config import MAX_MAPS, MapSpec, parse_map
 from .save import SaveError, save
 
 if TYPE_CHECKING:
@@ -52,7 +54,9 @@ class Editor:
         self.path = path                   # the installation file ("save"), None when not built from one
         self.tables = copy.deepcopy(tables)
         self.specs = {name: parse_map(name, table) for name, table in self.tables.items()}  # (checked at load)
-        self.history: deque[tuple[str, dict[str, Any]]] = deque(maxlen=MAX_UNDO)  # (map, its table before)
+        # (map, its table before; None: it was not there, an add's)
+        self.history: deque[tuple[str, dict[str, Any] | None]] = deque(maxlen=MAX_UNDO)
+        self.removed: set[str] = set()     # maps removed live: save takes them out of the file
         self._lock = threading.Lock()      # (queries come on several Zenoh threads; learns end on the worker)
         self._gate = messages.Gate(node.bus.limits)
 
@@ -74,13 +78,18 @@ class Editor:
     def answer(self, verb: str, args: dict[str, Any]) -> dict[str, Any]:
         """The result of a checked request (``CommandError`` when refused)."""
         if verb == "list":
-            return {"node": self.node.name, "file": str(self.path or ""), "maps": self.listed()}
+            return {"node": self.node.name, "file": str(self.path or ""), "maps": self.listed(),
+                    "halted": self.node.halted()}
         if verb == "edit":
             return self.edit(args["map"], args.get("set", {}), args.get("unset", []))
         if verb == "learn":
             return self.learn(args["map"], float(args.get("seconds", LEARN_S)), args.get("source"))
         if verb == "undo":
             return self.undo(args.get("map"))
+        if verb == "add":
+            return self.add(args["map"], args["table"])
+        if verb == "remove":
+            return self.remove(args["map"])
         return self.save()
 
     # -- the verbs -----------------------------------------------------------------------
@@ -112,10 +121,40 @@ class Editor:
                 raise CommandError("bad_request", f"undo: nothing to undo{f' for map {name!r}' if name else ''} "
                                                   f"(the last {MAX_UNDO} changes are kept)")
             which, table = self.history[at]
-            self._apply(which, table)
+            if table is not None and which not in self.tables and len(self.tables) >= MAX_MAPS:
+                raise CommandError("bad_request", f"undo: taking back the removal of {which!r} would run more than "
+                                                  f"{MAX_MAPS} maps in one node — remove one first")
+            if table is None:
+                self._take_out(which)
+            else:
+                self._apply(which, table)
             del self.history[at]
-        log.info("%s: map '%s': last edit undone", self.node.name, which)
+        log.info("%s: map '%s': last %s undone", self.node.name, which, "add" if table is None else "change")
         return {"map": which, "table": table, "undone": True}
+
+    def add(self, name: str, table: dict[str, Any]) -> dict[str, Any]:
+        """Run a new map ``name`` of ``table`` (as in the file), checked as the file is; refused
+        with the reason, the other maps running on."""
+        with self._lock:
+            if name in self.tables:
+                raise CommandError("bad_request", f"add: node '{self.node.name}' already has a map {name!r} — "
+                                                  "edit it, or remove it first")
+            if len(self.tables) >= MAX_MAPS:
+                raise CommandError("bad_request", f"add: node '{self.node.name}' runs {len(self.tables)} maps, at "
+                                                  f"most {MAX_MAPS} in one node — remove one, or add a node")
+            self._apply(name, copy.deepcopy(table))
+            self.history.append((name, None))
+        log.info("%s: map '%s' added", self.node.name, name)
+        return {"map": name, "table": self.tables[name], "added": True}
+
+    def remove(self, name: str) -> dict[str, Any]:
+        """Take map ``name`` out: its output stops, what it drives is sent no more (undo adds it back)."""
+        with self._lock:
+            table = self._table(name)
+            self._take_out(name)
+            self.history.append((name, table))
+        log.info("%s: map '%s' removed", self.node.name, name)
+        return {"map": name, "removed": True}
 
     def learn(self, name: str, seconds: float, source: str | None = None) -> dict[str, Any]:
         """Start learning a source's range (its first by default) from its next ``seconds`` of values."""
@@ -157,9 +196,9 @@ class Editor:
             raise CommandError("bad_request", "save: this node was not started from an installation file — "
                                               "nothing to write into")
         with self._lock:
-            tables = copy.deepcopy(self.tables)
+            tables, removed = copy.deepcopy(self.tables), set(self.removed)
         try:
-            save(self.path, self.node.name, tables)
+            save(self.path, self.node.name, tables, removed)
         except SaveError as exc:
             raise CommandError("internal", f"save: {self.path}: {exc}") from None
         log.info("%s: maps saved into %s", self.node.name, self.path)
@@ -195,4 +234,11 @@ class Editor:
             raise CommandError("bad_request", f"map '{name}': {exc}") from None
         self.node.replace(spec)
         self.tables[name], self.specs[name] = table, spec
+        self.removed.discard(name)
         return spec
+
+    def _take_out(self, name: str) -> None:
+        """Stop map ``name`` and forget its table (under ``_lock``)."""
+        self.node.remove(name)
+        del self.tables[name], self.specs[name]
+        self.removed.add(name)

@@ -37,6 +37,7 @@ from .drive import Drive
 from .edit import Editor
 from .ranges import Ranges
 from .steps import Calibration
+from .targets import Target
 
 log = logging.getLogger(__name__)
 
@@ -91,8 +92,8 @@ class MapNode(Adapter):
                                   lambda robot, text: self.warn("info", text), INFO_RETRY_S)
         self._streams = self.own(Streams(self.bus, cfg.patterns, self._queue, per_joint_keys=cfg.per_joint_keys))
         targets = {name: chain.spec.target for name, chain in self.chains.items() if chain.spec.target}
-        self._targets = targets  # (as started: an edit may not change what a map drives, see replace)
         self._drive = Drive(self, targets) if targets else None  # (maps that drive robots: drive.py)
+        self._drive_lock = threading.Lock()  # (a Drive made when a map added live is the first with a target)
         for robot in {s.pattern.split("/")[0] for spec in cfg.specs for s in spec.sources} | {
                 t.robot for t in targets.values()}:
             if keys.is_concrete(robot):
@@ -106,7 +107,7 @@ class MapNode(Adapter):
     def described(self) -> dict[str, Any]:
         """The ``<node>/info/derived`` reply: each map's output with its unit and range, and its events."""
         specs = [chain.spec for chain in self.chains.values()]
-        return {"robot": self.name, "processor": {"host": self.bus.host, "node": self.name},
+        return {"robot": self.name, "alone": True, "processor": {"host": self.bus.host, "node": self.name},
                 "derived": [{"name": f"{FEATURE}/{s.name}", "key": self.output_key(s.name), "unit": s.unit, "size": 1,
                              "min": s.low, "max": s.high, "sources": [src.pattern + (f".{src.axis}" if src.axis
                                                                                      else "") for src in s.sources]}
@@ -117,11 +118,9 @@ class MapNode(Adapter):
     # -- live edits (``edit.py``) ------------------------------------------------------------
 
     def replace(self, spec: MapSpec) -> None:
-        """Run ``spec`` in place of its map from the next value on (its state starts anew);
-        ``CommandError`` for a source the node does not listen to (a restart would)."""
-        if spec.target != self._targets.get(spec.name):  # (the drive's caps and halts are set up at start)
-            raise CommandError("bad_request", f"map '{spec.name}': what a map drives (its 'target') changes only "
-                                              "with a restart — save, then restart the run")
+        """Run ``spec`` in place of its map (or as a new one) from the next value on (its state
+        starts anew; what it drives, its ``target``, too); ``CommandError`` for a source the
+        node does not listen to (a restart would)."""
         for src in spec.sources:
             if spec.enabled and not any(p.includes(zenoh.KeyExpr(keys.expr(src.pattern))) for p in self._subscribed):
                 raise CommandError("bad_request", f"map '{spec.name}': source '{src.pattern}' is not among those "
@@ -143,6 +142,34 @@ class MapNode(Adapter):
                               for chain in self.chains.values() for source in chain.spec.sources]
             self._bindings.clear()
             self._reply = codec.encode(self.described())
+        self._set_target(spec.name, spec.target if spec.enabled else None)
+
+    def remove(self, name: str) -> None:
+        """Stop running map ``name``: its output and what it drives (an edit that disables it, and
+        ``list`` no more; the editor keeps its table for undo)."""
+        with self._maps_lock:
+            self.chains.pop(name, None)
+            self._silent.pop(name, None)
+            self._inputs.pop(name, None)
+            self._heard.pop(name, None)
+            self._learning = {k: v for k, v in self._learning.items() if k[0] != name}
+            self._matchers = [(zenoh.KeyExpr(keys.expr(source.pattern)), chain, source)
+                              for chain in self.chains.values() for source in chain.spec.sources]
+            self._bindings.clear()
+            self._reply = codec.encode(self.described())
+        self._set_target(name, None)
+
+    def _set_target(self, name: str, target: Target | None) -> None:
+        """Map ``name`` drives ``target`` (None: nothing) from now on: the drive's caps, and its
+        halts (a robot stopped stays halted until resumed, for a map added after the stop too)."""
+        with self._drive_lock:
+            if self._drive is None:
+                if target is None:
+                    return
+                self._drive = Drive(self, {})
+            self._drive.set_target(name, target)
+        if target is not None and keys.is_concrete(target.robot):
+            self._info.ask(target.robot)  # (its joints' limits: a map past them is said)
 
     def start_learning(self, name: str, source: str, seconds: float) -> None:
         """Learn ``source``'s range over its next ``seconds`` of values (``Editor.learned`` then)."""
@@ -157,6 +184,10 @@ class MapNode(Adapter):
                         for (n, s), c in self._learning.items() if n == name]
             return {"input": self._inputs.get(name), "output": chain.value if chain else None,
                     "silent": name in self._silent, "learning": learning[0] if learning else None}
+
+    def halted(self) -> dict[str, float]:
+        """The robots a stop halted the maps of, until resumed (wall-clock time of the stop)."""
+        return self._drive.status()["halted"] if self._drive is not None else {}
 
     def metrics(self) -> dict[str, Any]:
         """Each map's last output, and the maps silent now (seconds since their last source value)."""

@@ -7,11 +7,14 @@ from __future__ import annotations
 import argparse
 import json
 import threading
+from collections.abc import Callable
+from typing import Any
 
 from sonibus.bus import keys
 from sonibus.bus.cli.api import Command, Environment, Exit, bus_config, joined
 from sonibus.bus.client import Outcome, ask_program
 from sonibus.bus.errors import CommandError
+from sonibus.bus.node import Bus
 
 
 def _arguments(p: argparse.ArgumentParser) -> None:
@@ -21,19 +24,27 @@ def _arguments(p: argparse.ArgumentParser) -> None:
 
 
 def _resume(args: argparse.Namespace, env: Environment) -> Exit:
+    def send(bus: Bus, done: Callable[[Outcome], None]) -> None:
+        ask_program(bus, args.node, "resume", {"robot": args.robot} if args.robot else {}, done, args.timeout)
+    env.say(json.dumps(asked(args, keys.program(args.node, "resume"), args.node, send)))
+    return Exit.OK
+
+
+def asked(args: argparse.Namespace, key: str, node: str, send: Callable[[Bus, Callable[[Outcome], None]], None]) -> Any:
+    """The result of one request to map node ``node`` on ``key``, sent by ``send(bus, done)`` from a
+    session of its own (``args``: the bus options, ``timeout``); ``CommandError`` when refused or
+    unanswered."""
     outcomes: list[Outcome] = []
     answered = threading.Event()
     with joined(bus_config(args)) as bus:
-        bus.discover(keys.program(args.node, "resume"))  # (a new session: its peers' queryables known first)
-        ask_program(bus, args.node, "resume", {"robot": args.robot} if args.robot else {},
-                    lambda outcome: (outcomes.append(outcome), answered.set()), args.timeout)
+        bus.discover(key)  # (a new session: its peers' queryables known first)
+        send(bus, lambda outcome: (outcomes.append(outcome), answered.set()))
         answered.wait(args.timeout + 1.0)
     if not outcomes:
-        raise CommandError("timeout", f"map node '{args.node}' did not answer within {args.timeout:g} s")
+        raise CommandError("timeout", f"map node '{node}' did not answer within {args.timeout:g} s")
     if isinstance(outcomes[0], CommandError):
         raise outcomes[0]
-    env.say(json.dumps(outcomes[0]))
-    return Exit.OK
+    return outcomes[0]
 
 
 RESUME = Command("resume", "let a map node's maps drive their robots again after a stop", _arguments, _resume,

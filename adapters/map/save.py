@@ -19,6 +19,16 @@ source = "pepper/derived/hand/R.z"
 to = [200, 4000]   # Hz
 curve = "exp"
 smooth_ms = 80
+
+A map removed live and one added:
+
+>>> print(rewritten(text, "sound", {"swing": {"source": "pepper/derived/hand_speed/R"}}, {"cutoff"}), end="")
+# the show
+[nodes.sound]
+adapter = "map"
+<BLANKLINE>
+[nodes.sound.maps.swing]
+source = "pepper/derived/hand_speed/R"
 """
 
 from __future__ import annotations
@@ -26,6 +36,7 @@ from __future__ import annotations
 import os
 import tempfile
 import tomllib
+from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
 
@@ -38,10 +49,11 @@ class SaveError(ValueError):
     """The file cannot take the maps (not found, not the node's, not writable): its one-line reason."""
 
 
-def rewritten(text: str, node: str, tables: dict[str, dict[str, Any]]) -> str:
+def rewritten(text: str, node: str, tables: dict[str, dict[str, Any]], removed: Iterable[str] = ()) -> str:
     """``text`` (an installation file) with ``[nodes.<node>.maps.<name>]`` set to ``tables``: keys
-    changed, added and removed; everything else as it was. Checked: the result reads back to the
-    same maps, or ``SaveError``."""
+    changed, added and removed, a map added live a table of its own at the end, maps ``removed``
+    live taken out; everything else as it was. Checked: the result reads back to the same maps,
+    or ``SaveError``."""
     try:
         doc = tomlkit.parse(text)
     except tomlkit.exceptions.TOMLKitError as exc:
@@ -50,12 +62,17 @@ def rewritten(text: str, node: str, tables: dict[str, dict[str, Any]]) -> str:
         maps = doc["nodes"][node]["maps"]  # type: ignore[index]
     except (KeyError, TypeError):
         raise SaveError(f"the file has no [nodes.{node}.maps] (was it changed since the start?)") from None
+    gone = [name for name in removed if name not in tables]
+    for name in gone:
+        if name in maps:
+            del maps[name]
     for name, table in tables.items():
-        if name not in maps:
-            raise SaveError(f"the file has no map '{name}' in [nodes.{node}.maps] (was it changed since the start?)")
+        if name not in maps:  # (added live)
+            maps[name] = tomlkit.table()
         _update(maps[name], table)
     out = tomlkit.dumps(doc)
-    if tomllib.loads(out)["nodes"][node]["maps"] != {**tomllib.loads(text)["nodes"][node]["maps"], **tables}:
+    kept = {k: v for k, v in tomllib.loads(text)["nodes"][node]["maps"].items() if k not in gone}
+    if tomllib.loads(out)["nodes"][node]["maps"] != {**kept, **tables}:
         raise SaveError("the maps written would not read back as they run (a layout tomlkit cannot edit)")
     return out
 
@@ -69,13 +86,13 @@ def _update(current: Any, table: dict[str, Any]) -> None:
             current[key] = value
 
 
-def save(path: Path, node: str, tables: dict[str, dict[str, Any]]) -> None:
+def save(path: Path, node: str, tables: dict[str, dict[str, Any]], removed: Iterable[str] = ()) -> None:
     """Rewrite ``path`` with the maps (``rewritten``), atomically: a crash leaves the old file or the new one."""
     try:
         text = path.read_text(encoding="utf-8")
     except OSError as exc:
         raise SaveError(f"cannot read {path}: {exc.strerror}") from None
-    out = rewritten(text, node, tables)
+    out = rewritten(text, node, tables, removed)
     try:
         fd, temp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
         try:

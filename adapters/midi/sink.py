@@ -80,7 +80,8 @@ class MidiSink(Adapter):
         self.own(ports.Closer(self._out))
         self._queue = self.own(SampleQueue(cfg.queue))
         self._info = InfoRequests(self.bus, lambda robot, info: self._queue.put((INFO, (robot, info))),
-                                  lambda robot, text: self.warn("info", text), INFO_RETRY_S)
+                                  lambda robot, text: self.warn("info", text), INFO_RETRY_S,
+                                  derived_alone=True)
         self._streams = self.own(Streams(self.bus, cfg.subscribe, self._queue, per_joint_keys=cfg.per_joint_keys))
         self._presence = self.own(presence.connection_events(self.bus, self._queue, cfg.subscribe,
                                                              self.capped))  # loss, return

@@ -102,7 +102,7 @@ class OscSink(Adapter):
         self._first_seen: dict[tuple[str, str], float] = {}  # (robot, derived value) → when it first came
         self._heard: dict[str, float] = {}  # robot → when its data was last told to presence
         self._info = InfoRequests(self.bus, self._take_info, lambda robot, text: self.warn("info", text),
-                                  INFO_RETRY_S)
+                                  INFO_RETRY_S, derived_alone=True)
         self._links = [_Link(t, _resolve(t.to)) for t in cfg.resolved_targets()]
         self.address = "OSC to " + ", ".join(f"udp {t.to} ({t.profile})" for t in cfg.resolved_targets())
         self._sample_links = [link for link in self._links if not link.target.framed]

@@ -23,7 +23,7 @@ from typing import Any
 from sonibus.adapters.osc import encode
 from sonibus.adapters.osc.profiles import event_args
 from sonibus.bus.adapter import Adapter
-from sonibus.bus.info import InfoRequests
+from sonibus.bus.info import DERIVED_ALONE, InfoRequests, watch_nodes
 from sonibus.bus.presence import watch_robots
 from sonibus.bus.queue import SampleQueue
 from sonibus.bus.streams import Incoming, Streams
@@ -39,6 +39,7 @@ __all__ = ["OscQuery", "OscQueryConfig"]
 log = logging.getLogger(__name__)
 
 SUBSCRIBE = ("*/joints/*", "*/derived/**", "*/events/*")
+MAX_NODES = 4096  # node names remembered (a source of derived values is served while its node is on the bus)
 MAX_SERVED = 64  # robots in the namespace (names made up on the bus must not grow it, nor its rebuilds)
 INFO_EVERY_S = 2.0  # how often the info of each robot on the bus is asked again (behaviors installed...)
 # The spec's optional attributes and notifications, and whether this server gives them.
@@ -61,11 +62,13 @@ class OscQuery(Adapter):
         self.live = Live(normalized=cfg.values == "normalized")
         self.web = WebServer(self, cfg.host, cfg.port, key="listen", limits=cfg.limits, browsers=True)
         self.server = QueryServer(self, self.web, self.live, self._host_info())
-        self._present: set[str] = set()
+        self._present: set[str] = set()  # robots on the bus (their claims)
+        self._alone: set[str] = set()  # sources of derived values that are no robot (map nodes), served
+        self._nodes: set[str] = set()  # nodes on the bus (their tokens): a source is served while its node is
         self._left_out: dict[str, int] = {}  # robot → a fingerprint of the unusable info it was left out for
         self._present_lock = threading.Lock()
         self._info = InfoRequests(self.bus, self._take_info, lambda robot, text: self.warn("info", text),
-                                  INFO_EVERY_S)
+                                  INFO_EVERY_S, derived_alone=True)
         self.web.start()
         self.url = self.web.url  # the bound one (port 0: any free port)
         self.address = f"OSCQuery on {self.url} (WebSocket on the same port)"
@@ -75,6 +78,7 @@ class OscQuery(Adapter):
         self.spawn(self._forward, "forward")  # before anything else is declared: nothing waits in the queue
         self.own(self._streams)
         self.own(watch_robots(self.bus, self._robot_changed, self.capped))
+        self.own(watch_nodes(self.bus, self._node_changed))
         self.spawn(lambda: self._info.keep_asking(self.stopping, self._on_bus), "info")
         if cfg.mdns:
             self._advertise(cfg)
@@ -120,20 +124,38 @@ class OscQuery(Adapter):
                 self._present.add(robot)
             else:
                 self._present.discard(robot)
-                self._left_out.pop(robot, None)
-                if self.live.drop_robot(robot):
-                    self.server.announce("PATH_REMOVED", f"/{robot}")
-                    self.server.announce("PATH_CHANGED", "/")  # (the spec: a method removed changes its parent)
+                self._drop(robot)
         if alive:
             self._info.ask(robot)
 
+    def _node_changed(self, node: str, alive: bool) -> None:
+        with self._present_lock:
+            if alive:
+                if len(self._nodes) < MAX_NODES:
+                    self._nodes.add(node)
+                return
+            self._nodes.discard(node)
+            if node in self._alone and node not in self._present:
+                self._alone.discard(node)
+                self._drop(node)
+
+    def _drop(self, robot: str) -> None:
+        """Take ``robot``'s paths out (its claims or its node went); with ``_present_lock``."""
+        self._left_out.pop(robot, None)
+        if self.live.drop_robot(robot):
+            self.server.announce("PATH_REMOVED", f"/{robot}")
+            self.server.announce("PATH_CHANGED", "/")  # (the spec: a method removed changes its parent)
+
     def _on_bus(self) -> list[str]:
         with self._present_lock:
-            return list(self._present)
+            return [*self._present, *self._alone]
 
     def _take_info(self, robot: str, info: dict[str, Any]) -> None:
         with self._present_lock:
-            if robot not in self._present:  # it left while its info was on the way
+            alone = info.get(DERIVED_ALONE) is True and robot not in self._present
+            if alone and robot not in self._nodes:  # (its node went while its info was on the way)
+                return
+            if robot not in self._present and not alone:  # it left while its info was on the way
                 return
             if robot not in self.live.robots and len(self.live.robots) >= MAX_SERVED:
                 self.capped(f"robot '{robot}' not served: already {MAX_SERVED} robots in the namespace")
@@ -149,6 +171,8 @@ class OscQuery(Adapter):
                                            f"({type(exc).__name__}: {exc})")
                 return
             self._left_out.pop(robot, None)
+            if alone:
+                self._alone.add(robot)
             if change is not None:
                 log.info("%s: %s /%s", self.name, change, robot)
                 self.server.announce(change, f"/{robot}")
@@ -168,6 +192,9 @@ class OscQuery(Adapter):
         else:
             for sample in message.joints:
                 source = sample.source
+                robot = source.robot
+                if source.section == "derived" and robot not in self._present and robot not in self._alone:
+                    self._info.ask(robot)  # (no robot's: a map node's outputs, described by it alone)
                 span = source.name if source.section == "joints" else f"{source.feature}/{source.name}"
                 self._value(f"/{source.key}", sample.values, span, out)
             if out:

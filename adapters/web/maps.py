@@ -19,6 +19,7 @@ from sonibus.bus import keys, messages
 from sonibus.bus.errors import CommandError
 
 from . import protocol
+from .protocol import RESUME
 
 if TYPE_CHECKING:
     from sonibus.bus.adapter import Adapter
@@ -70,14 +71,21 @@ class MapsPanel:
             self._structure = structure
             self.pages.maps(structure)
         self.pages.to_operators(_dumps({"type": "map_values", "t": time.time(), "nodes": {
-            n.get("node"): {m.get("name"): {k: m.get(k) for k in LIVE} for m in n.get("maps", ())} for n in nodes}}))
+            n.get("node"): {m.get("name"): {k: m.get(k) for k in LIVE} for m in n.get("maps", ())} for n in nodes},
+            "halted": {n.get("node"): _halted(n.get("halted")) for n in nodes}}))
+
+
+def _halted(given: object) -> list[str]:
+    """The robots a node's ``list`` says a stop halted (names from the bus: at most 64, each shortened)."""
+    return sorted(str(robot)[:64] for robot in given)[:64] if isinstance(given, dict) else []
 
 
 def forward(adapter: Adapter, pages: Pages, client: Client, request: protocol.MapRequest, timeout: float) -> None:
     """Carry a page's ``map`` request to its node; the node's answer (or why none came) is the reply."""
     adapter.count("commands")
     client.asking += 1  # (bounded by the server, as a page's commands are: MAX_ASKING)
-    key = keys.maps(request.node, request.verb)
+    # resume is what `sonibus resume` asks: the node's <node>/program/resume, not one of its maps/ verbs
+    key = keys.program(request.node, "resume") if request.verb == RESUME else keys.maps(request.node, request.verb)
     nobody = CommandError("not_found", f"{request.verb}: no map node '{request.node}' on the bus ({key} is served "
                                        "by nothing)")
 

@@ -25,7 +25,9 @@ from sonibus.bus.errors import CommandError
 
 MAX_MESSAGE = 64 * 1024  # characters of one client message; longer ones are refused (the connection stays)
 TYPES = ("command", "stop", "map", "press")
-MAP_VERBS = ("list", "edit", "learn", "undo", "save")  # what a map node serves (schemas/v1/maps/)
+RESUME = "resume"  # a map node's <node>/program/resume: its maps drive their robots again after a stop
+# what a map node serves (schemas/v1/maps/; resume: its program)
+MAP_VERBS = ("list", "edit", "learn", "undo", "save", "add", "remove", RESUME)
 
 Id = int | str | None  # the client's own request id, echoed in the reply
 
@@ -57,7 +59,8 @@ class Press:
 
 @dataclass(frozen=True)
 class MapRequest:
-    """Operator: ``verb`` (edit, learn, undo, save) to map node ``node``'s maps (``<node>/maps/<verb>``)."""
+    """Operator: ``verb`` (edit, learn, undo, save) to map node ``node``'s maps (``<node>/maps/<verb>``),
+    or ``resume`` (``<node>/program/resume``)."""
 
     id: Id
     node: str

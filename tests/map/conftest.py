@@ -14,6 +14,9 @@ from sonibus.adapters.map import MapNode
 from sonibus.bus import config
 
 from ..features.conftest import FakeOwner, model_info, owner  # noqa: F401  (the owner fixture)
+from ..midi.conftest import jack, jack_server, reader  # noqa: F401  (JACK and its MIDI ports: test_described)
+from ..osc.conftest import receivers  # noqa: F401  (UDP receivers)
+from ..oscquery.conftest import websocket  # noqa: F401  (a WebSocket client of OSCQuery)
 
 ROOT = Path(__file__).resolve().parents[2]
 PEPPER_JOINTS = [j["name"] for j in model_info("pepper")["joints"]]

@@ -122,8 +122,6 @@ def test_an_invalid_edit_is_refused_with_its_reason_and_the_map_runs_as_it_was(n
         ({"map": "nope", "set": {"to": [0, 1]}}, "no map 'nope' in node 'sound' — maps: yaw, quiet"),
         ({"map": "yaw", "set": {"to": "loud"}}, "key 'maps.yaw.to': 'loud' is not [LOW, HIGH]"),
         ({"map": "yaw", "sett": {}}, "edit: arguments: Additional properties are not allowed ('sett' was unexpected)"),
-        ({"map": "yaw", "set": {"target": {"robot": "pepper", "command": "joints/set", "joint": "HeadPitch"}}},
-         "map 'yaw': what a map drives (its 'target') changes only with a restart"),  # (no robot driven unchecked)
     ]:
         reply = ask(head.watch, "edit", args)
         assert not reply["ok"] and reason in reply["error"]["message"], (args, reply)

@@ -51,6 +51,11 @@ def test_the_recorder_writes_a_maps_output_as_any_derived_value(net, owner, tmp_
     assert len(found) >= 15, len(found)
     for _, message in found:
         assert abs(message["v"] - sent[message["t"]]) < 1e-9, message
+    with path.open("rb") as file:  # and what describes it, for Foxglove's panels and for replay
+        described = [json.loads(message.data) for _, _, message
+                     in make_reader(file).iter_messages(topics=["sound/info/derived"])]
+    assert described and described[-1]["derived"][0]["name"] == "map/head", described
+    assert (described[-1]["derived"][0]["min"], described[-1]["derived"][0]["max"]) == (0, 127)
 
 
 def test_foxglove_advertises_a_maps_output_and_sends_it(net, owner):
@@ -71,6 +76,7 @@ def test_foxglove_advertises_a_maps_output_and_sends_it(net, owner):
         async with aiohttp.ClientSession() as session:
             client = await connect(session, server.port)
             await client.until(lambda _: "sound/derived/map/head" in client.channels)
+            await client.until(lambda _: "sound/info/derived" in client.channels)  # (what describes it)
             await client.subscribe({1: "sound/derived/map/head"})
             return await client.until(lambda got: len(got) >= 10)
 

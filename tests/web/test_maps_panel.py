@@ -14,10 +14,12 @@ from selenium.webdriver.common.action_chains import ActionChains
 from selenium.webdriver.common.keys import Keys
 
 from sonibus.adapters.map.curves import Points
+from sonibus.bus import client
 
 from ..conftest import wait_for
 from ..features.conftest import owner  # noqa: F401  (the owner fixture)
 from ..map.conftest import pose
+from ..map.test_drive import Rig
 from ..map.test_edit import FILE, Head, ask, first_output, start
 from .conftest import TOKEN, start_web
 
@@ -123,5 +125,75 @@ def test_a_map_request_to_no_map_node_or_of_no_verb_is_answered_in_one_line(net,
     assert socket.wait("reply", id=1)["error"] == \
         "edit: no map node 'nosuch' on the bus (nosuch/maps/edit is served by nothing)"
     assert socket.wait("reply", id=2)["error"] == \
-        "map: unknown verb 'dance' — a map node takes list, edit, learn, undo, save"
+        "map: unknown verb 'dance' — a map node takes list, edit, learn, undo, save, add, remove, resume"
     assert socket.wait("reply", id=3)["error"].startswith("map: node name 'a/b' must be non-empty without '/'")
+
+
+def test_a_stop_shows_the_halted_maps_and_the_pages_resume_lets_them_drive_again(net, browser):
+    """The robot's stop halts the maps that drive it; the panel says so with a resume button that
+    asks <node>/program/resume (as `sonibus resume` does) and shows the node's answer as it came."""
+    rig = Rig(net)  # a simulated pepper, map node 'moves' whose map 'look' turns its head from knob 'a'
+    web = start_web(net, token=TOKEN)
+    browser.open(f"{web.url}/?token={TOKEN}")
+    halted = '.map-node[data-node="moves"] .map-halted'
+    browser.wait(lambda: browser.attribute(halted, "hidden") is not None, "the moves node's block, nothing halted")
+    rig.knob("a", 1.0)
+    wait_for(lambda: rig.commands("joints/set"), what="the map driving the head")
+
+    stopped = client.send_command(rig.bus, "pepper", "stop")
+    assert stopped["held"] is True
+    browser.wait(lambda: browser.text(halted + " .map-halted-robots") == "pepper: halted by stop —"
+                 and browser.attribute(halted, "hidden") is None, "the halt shown")
+    assert browser.text(halted + " .map-resume") == "resume"
+    sent = len(rig.commands("joints/set"))
+    rig.knob("a", 0.0)
+    wait_for(lambda: rig.node.stats["halted"] >= 1, what="the knob's value held back")
+    assert len(rig.commands("joints/set")) == sent
+
+    browser.find('.map-node[data-node="moves"] .map-resume').click()
+    browser.wait(lambda: browser.text('.map-node[data-node="moves"] .map-resumed') == "resumed: pepper",
+                 "the node's answer")
+    assert rig.node.halted() == {}
+    browser.wait(lambda: browser.attribute(halted, "hidden") is not None, "the halt line gone")
+    rig.knob("a", 0.25)
+    wait_for(lambda: len(rig.commands("joints/set")) > sent, what="the map driving the head again")
+    # asked again with nothing halted (the button hidden: clicked by script): the answer says so
+    browser.js("document.querySelector('.map-node[data-node=\"moves\"] .map-resume').click()")
+    browser.wait(lambda: browser.text('.map-node[data-node="moves"] .map-resumed') == "resumed: none was halted",
+                 "the second answer")
+    assert browser.errors() == []
+
+
+def test_maps_added_and_removed_on_the_page(net, head, browser, tmp_path):
+    """A map added from the panel runs and shows its output; a refused add says why in place;
+    remove takes a map out of the node and the panel; the node's undo brings it back."""
+    path = tmp_path / "show.toml"
+    path.write_text(FILE, encoding="utf-8")
+    start(net, path)
+    web = start_web(net, token=TOKEN)
+    browser.open(f"{web.url}/?token={TOKEN}")
+    block = '.map-node[data-node="sound"]'
+    browser.wait(lambda: browser.text('.map[data-map="yaw"] .map-out') == "50", "the yaw map's live output")
+
+    def add(name: str, source: str) -> None:
+        for field, value in (("name", name), ("source", source)):
+            box = browser.find(f"{block} .map-add-{field}")
+            box.clear()
+            box.send_keys(value)
+        browser.find(f"{block} .map-add").click()
+
+    add("swing", "pepper/joints/HeadRoll")
+    browser.wait(lambda: "not among those this node listens to" in (browser.text(f"{block} .map-add-error") or ""),
+                 "the refused add's reason")
+    assert [m["name"] for m in ask(head.watch, "list")["result"]["maps"]] == ["yaw", "quiet"]
+    add("swing", "pepper/joints/HeadYaw")
+    browser.wait(lambda: (browser.text('.map[data-map="swing"] .map-out') or "–") != "–", "the added map's output")
+    assert browser.text(f"{block} .map-add-error") == ""
+    assert [m["name"] for m in ask(head.watch, "list")["result"]["maps"]] == ["yaw", "quiet", "swing"]
+
+    browser.find('.map[data-map="yaw"] .map-remove').click()
+    browser.wait(lambda: browser.text('.map[data-map="yaw"] .map-out') is None, "the removed map gone from the page")
+    assert [m["name"] for m in ask(head.watch, "list")["result"]["maps"]] == ["quiet", "swing"]
+    browser.find(f"{block} .map-node-undo").click()
+    browser.wait(lambda: browser.text('.map[data-map="yaw"] .map-out') == "50", "the removal undone")
+    assert browser.errors() == []

@@ -62,7 +62,11 @@
                 (reply) => this.answered(reply))}, "learn"),
             el("button", {type: "button", class: "map-undo", title: "take back the last change",
               onclick: () => ask(node, "undo", {map: map.name}, `undo ${map.name}`,
-                (reply) => this.answered(reply))}, "undo"))),
+                (reply) => this.answered(reply))}, "undo"),
+            el("button", {type: "button", class: "map-remove",
+              title: "take this map out (its output stops; the node's undo brings it back)",
+              onclick: () => ask(node, "remove", {map: map.name}, `remove ${map.name}`,
+                (reply) => this.answered(reply))}, "remove"))),
         el("div", {class: "map-body"}, this.curve,
           el("div", {class: "map-fields"},
             el("div", {class: "map-live"}, "in ", this.inValue, " → out ", this.outValue),
@@ -213,8 +217,33 @@
         saved.dataset.kind = reply.ok ? "ok" : "error";
       })}, "save");
     const saved = el("output", {class: "map-saved"});
+    // after a stop, the robots whose maps it halted, and the button that asks the node to resume them
+    // (<node>/program/resume, as `sonibus resume` does); the node's answer shown as it came
+    const resumed = el("output", {class: "map-resumed"});
+    const resume = el("button", {type: "button", class: "map-resume", title: "let these maps move their robots again",
+      onclick: () => ask(node, "resume", {}, `resume ${node}'s maps`, (reply) => {
+        const robots = reply.ok ? reply.result.resumed || [] : [];
+        resumed.textContent = !reply.ok ? reply.error
+          : robots.length ? `resumed: ${robots.join(", ")}` : "resumed: none was halted";
+        resumed.dataset.kind = reply.ok ? "ok" : "error";
+      })}, "resume");
+    const halted = el("p", {class: "map-halted", hidden: true}, el("span", {class: "map-halted-robots"}), " ", resume);
+    // a map added live: its name and source (the rest: edited in place once it runs); the node's
+    // last change of any map taken back (a removal too)
+    const name = el("input", {type: "text", class: "map-add-name", placeholder: "name", size: 10});
+    const source = el("input", {type: "text", class: "map-add-source", placeholder: "source: pepper/joints/HeadYaw",
+      size: 28});
+    const added = el("output", {class: "map-add-error", role: "alert"});
+    const shown = (reply) => { added.textContent = reply.ok ? "" : reply.error; };
+    const add = el("button", {type: "button", class: "map-add", title: "run a new map of this source",
+      onclick: () => ask(node, "add", {map: name.value.trim(), table: {source: source.value.trim()}},
+        `add ${name.value.trim()}`, (reply) => { shown(reply); if (reply.ok) name.value = source.value = ""; })},
+      "add");
+    const undo = el("button", {type: "button", class: "map-node-undo", title: "take back the node's last change",
+      onclick: () => ask(node, "undo", {}, `undo ${node}'s last change`, shown)}, "undo");
     block = el("div", {class: "map-node", dataset: {node}}, el("h3", {}, node, " ", save, " ", saved),
-      el("div", {class: "map-list"}));
+      halted, resumed, el("div", {class: "map-list"}),
+      el("p", {class: "map-adding"}, name, " ", source, " ", add, " ", undo, " ", added));
     blocks.set(node, block);
     return block;
   }
@@ -250,6 +279,12 @@
   }
 
   function onValues(message) {
+    for (const [node, robots] of Object.entries(message.halted || {})) {
+      const line = blocks.get(node)?.querySelector(".map-halted");
+      if (!line) continue;
+      line.hidden = robots.length === 0;
+      line.querySelector(".map-halted-robots").textContent = `${robots.join(", ")}: halted by stop —`;
+    }
     for (const [node, maps] of Object.entries(message.nodes || {})) {
       for (const [name, values] of Object.entries(maps || {})) {
         const view = views.get(`${node}/${name}`);
