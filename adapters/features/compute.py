@@ -173,7 +173,11 @@ class RobotFeatures:
         angles = self._positions[self.robot.arm_joints]
         if not np.isfinite(angles).all():
             return None  # an arm joint never seen yet
-        points = self.robot.arms.points(angles)
+        elbow = None if self._expressive is None else self._expressive.elbow
+        if elbow is None:
+            points, elbows = self.robot.arms.points(angles), None
+        else:  # (the expressive descriptors' points density takes the elbows too: one pass along the arms)
+            points, elbows = self.robot.arms.points_at(angles, (self.robot.arms.axes.shape[1], elbow))
         hands, usable = out.bounded(points, self._hand_range, self.config.publishes("hand"))
         if usable is not None and not usable.all():
             return None
@@ -181,7 +185,7 @@ class RobotFeatures:
             out.samples += [(key, {"t": t, "seq": seq, "v": hand.tolist()})
                             for key, hand in zip(self._hand_keys, hands, strict=True)]
         if self._expressive is not None:
-            self._expressive.hands(t, points, angles, lambda key, value: out.samples.append(
+            self._expressive.hands(t, points, elbows, lambda key, value: out.samples.append(
                 (key, {"t": t, "seq": seq, "v": value})))
         fresh = self._hand_velocity.update(t, points.ravel())
         if self.config.publishes("hand_speed") and fresh.all():

@@ -13,6 +13,7 @@ what ``RobotFeatures`` calls for them, and the keys they go out on.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from typing import Any
 
@@ -21,10 +22,10 @@ import numpy as np
 from sonibus.bus import keys
 
 from .config import FeaturesConfig
-from .kinematic import PointDerivatives, geometry
-from .laban import Efforts, LabanEfforts
+from .kinematic import FitOperator, PointDerivatives, curvature
+from .laban import LabanEfforts
 from .segments import SEGMENT, SegmentRecorder
-from .shape import kinetic_energy, points_density, symmetry
+from .shape import points_density, symmetry
 from .table import Robot
 
 Emit = Callable[[str, float], None]  # (key, value) of this frame
@@ -52,33 +53,34 @@ def joint_chains(robot: Robot, weights: np.ndarray) -> dict[str, list[int]]:
 
 
 class Expressive:
-    """The expressive descriptors of one robot; ``hands``, ``joints`` and ``record`` per frame."""
+    """The expressive descriptors of one robot; ``hands``, ``joints`` and ``record`` per frame.
+
+    A frame's fits share one ``FitOperator`` (the hands' and the joint chains' windows hold the
+    same frames), and what follows the fits is worked out in plain floats: a hand is 3 numbers,
+    a chain a few angles, and numpy's cost per call is more than their arithmetic."""
 
     def __init__(self, robot: Robot, config: FeaturesConfig, weights: np.ndarray) -> None:
         self.robot, name = robot, robot.name
         window, fit = config.laban_window_s, config.fit_window_s
         arms = robot.arms
+        operator = FitOperator(fit)
         self.sides: tuple[str, ...] = arms.sides if arms is not None else ()
-        self._fit = PointDerivatives(len(self.sides), fit) if self.sides else None
+        self._fit = PointDerivatives(len(self.sides), fit, operator=operator) if self.sides else None
         self._efforts = LabanEfforts(np.eye(len(self.sides)), window)  # each hand its own group
         self._hand_keys = [[keys.derived(name, f, s) for f in HANDS] for s in self.sides]
-        self._elbow = elbow_frame(arms.joints) if arms is not None else None
+        self.elbow = elbow_frame(arms.joints) if arms is not None else None  # FK frame whose points to add
         self._pair = tuple(self.sides.index(s) for s in ("L", "R")) if set("LR") <= set(self.sides) else None
         self._both_keys = [keys.derived(name, f, BOTH_NAME) for f in BOTH]
         self.chains = joint_chains(robot, weights)
         self._joints = [i for members in self.chains.values() for i in members]
-        self._joint_weights = weights[self._joints]
-        self._joint_fit = PointDerivatives(len(self._joints), fit, dim=1) if self._joints else None
-        # each chain one point of its angles, padded with zeros to the longest chain's length
-        width = max((len(m) for m in self.chains.values()), default=0)
-        self._pad = np.zeros((len(self.chains), width), dtype=int)  # where each padded coordinate is
-        self._padded = np.zeros((len(self.chains), width), dtype=bool)
+        self._joint_fit = PointDerivatives(len(self._joints), fit, dim=1, operator=operator) if self._joints else None
+        # each chain one point of its angles: which of the fitted joints, and their QoM weights
+        self._chain_index: list[list[int]] = []
         start = 0
-        for row, members in enumerate(self.chains.values()):
-            self._pad[row, :len(members)] = np.arange(start, start + len(members))
-            self._padded[row, len(members):] = True
+        for members in self.chains.values():
+            self._chain_index.append(list(range(start, start + len(members))))
             start += len(members)
-        self._pad_weights = np.where(self._padded, 0.0, self._joint_weights[self._pad])
+        self._chain_weights = [weights[m].tolist() for m in self.chains.values()]
         self._joint_efforts = LabanEfforts(np.eye(len(self.chains)), window, JOINT_DISPLACEMENT)
         self._joint_keys = [[keys.derived(name, f, c) for f in JOINT_SPACE] for c in self.chains]
         # motion segments: an arm chain's is its hand's path, another chain's its joints' path
@@ -90,23 +92,24 @@ class Expressive:
         self._segment_keys = {c: {v: keys.derived(name, f, c) for v, f in SEGMENT_FEATURES.items()}
                               for c in robot.chains}
 
-    def hands(self, t: float, points: np.ndarray, q_arms: np.ndarray, emit: Emit) -> None:
-        """The hands' descriptors from this frame's hand ``points`` (arms, 3) and arm angles."""
+    def hands(self, t: float, points: np.ndarray, elbows: np.ndarray | None, emit: Emit) -> None:
+        """The hands' descriptors from this frame's hand ``points`` (arms, 3) and elbow points
+        (FK frame ``elbow``; None without)."""
         if self._pair is not None:
-            left, right = points[self._pair[0]], points[self._pair[1]]
-            both = [points] if self._elbow is None else [points, self.robot.arms.points(q_arms, self._elbow)]
-            for key, value in zip(self._both_keys, (float(np.linalg.norm(left - right)),
-                                                    points_density(np.concatenate(both)), symmetry(left, right)),
+            rows = points.tolist()
+            left, right = rows[self._pair[0]], rows[self._pair[1]]
+            density = points_density(rows if elbows is None else rows + elbows.tolist())
+            for key, value in zip(self._both_keys, (math.dist(left, right), density, symmetry(left, right)),
                                   strict=True):
                 emit(key, value)
         fit = self._fit
         if fit is None or not fit.update(t, points):
             return
-        kappa = geometry(fit.velocity, fit.acceleration)[0]
-        energy = kinetic_energy(fit.velocity)
-        e = self._efforts.update(fit.time, fit.position, fit.velocity, fit.acceleration, fit.jerk)
-        for i, names in enumerate(self._hand_keys):
-            _emit_all(emit, names, (*_values(e, i), energy[i], kappa[i]))
+        p, v, a, j = fit.derivatives.tolist()
+        for names, efforts, vi, ai in zip(self._hand_keys, self._efforts.rows(fit.time, p, v, a, j), v, a,
+                                          strict=True):
+            _emit_all(emit, names, (*efforts, 0.5 * (vi[0] * vi[0] + vi[1] * vi[1] + vi[2] * vi[2]),
+                                    curvature(vi, ai)))
 
     def joints(self, t: float, positions: np.ndarray, emit: Emit) -> None:
         """The joint-space descriptors of the chains with no kinematics from all joint ``positions``."""
@@ -116,12 +119,11 @@ class Expressive:
         q = positions[self._joints]
         if not np.isfinite(q).all() or not fit.update(t, q[:, None]):
             return
-        p, v, a, j = (np.where(self._padded, 0.0, x[self._pad, 0])
-                      for x in (fit.position, fit.velocity, fit.acceleration, fit.jerk))
-        e = self._joint_efforts.update(fit.time, p, v, a, j)
-        energy = 0.5 * np.einsum("ij,ij->i", self._pad_weights, v * v)
-        for i, names in enumerate(self._joint_keys):  # ½ Σ w_j q̇_j²
-            _emit_all(emit, names, (*_values(e, i), energy[i]))
+        p, v, a, j = ([[x[i] for i in index] for index in self._chain_index]
+                      for x in fit.derivatives[..., 0].tolist())
+        rows = self._joint_efforts.rows(fit.time, p, v, a, j)
+        for names, efforts, vc, w in zip(self._joint_keys, rows, v, self._chain_weights, strict=True):
+            _emit_all(emit, names, (*efforts, 0.5 * sum(wi * x * x for wi, x in zip(w, vc, strict=True))))
 
     def record(self, t: float, positions: np.ndarray, hands: np.ndarray | None) -> None:
         """Add this frame to every chain's segment recorder (an arm chain's only with its hand)."""
@@ -146,11 +148,7 @@ class Expressive:
         return [(names[v], value) for v, value in segment.items()]
 
 
-def _values(e: Efforts, i: int) -> tuple[float, ...]:
-    return tuple(float(x[i]) for x in (e.weight, e.time, e.flow, e.space, e.fluidity))  # type: ignore[index]
-
-
 def _emit_all(emit: Emit, names: list[str], values: tuple[float, ...]) -> None:
     for key, value in zip(names, values, strict=True):
-        if np.isfinite(value):  # Space with no displacement, κ below the speed floor: none
-            emit(key, float(value))
+        if math.isfinite(value):  # Space with no displacement, κ below the speed floor: none
+            emit(key, value)

@@ -52,7 +52,7 @@ def test_kinetic_energy_points_density_and_symmetry_equal_pyeyesweb():
     features = robot_features()
     arms = features.robot.arms
     index = features.robot.arm_joints
-    elbow = features._expressive._elbow
+    elbow = features._expressive.elbow
     assert elbow is not None
     checked = 0
     for k in range(60):
