@@ -140,8 +140,8 @@ class RobotFeatures:
                             if now]
         hands = self._hand_features(t, seq, out) if self._hands else None
         if self._expressive is not None:
-            self._expressive.joints(t, self._positions, lambda key, value: out.samples.append(
-                (key, {"t": t, "seq": seq, "v": value})))
+            out.samples += [(key, {"t": t, "seq": seq, "v": v})
+                            for key, v in self._expressive.joints(t, self._positions)]
             self._expressive.record(t, self._positions, hands)
         updated = self._members @ fresh > 0
         qoms, usable = out.bounded(self._members @ (np.abs(v) * self._weights), self._qom_range, updated)
@@ -185,8 +185,7 @@ class RobotFeatures:
             out.samples += [(key, {"t": t, "seq": seq, "v": hand.tolist()})
                             for key, hand in zip(self._hand_keys, hands, strict=True)]
         if self._expressive is not None:
-            self._expressive.hands(t, points, elbows, lambda key, value: out.samples.append(
-                (key, {"t": t, "seq": seq, "v": value})))
+            out.samples += [(key, {"t": t, "seq": seq, "v": v}) for key, v in self._expressive.hands(t, points, elbows)]
         fresh = self._hand_velocity.update(t, points.ravel())
         if self.config.publishes("hand_speed") and fresh.all():
             speeds, usable = out.bounded(np.linalg.norm(self._hand_velocity.velocity.reshape(hands.shape), axis=1),

@@ -14,7 +14,6 @@ what ``RobotFeatures`` calls for them, and the keys they go out on.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -28,7 +27,7 @@ from .segments import SEGMENT, SegmentRecorder
 from .shape import points_density, symmetry
 from .table import Robot
 
-Emit = Callable[[str, float], None]  # (key, value) of this frame
+Values = list[tuple[str, float]]  # (key, value) of this frame
 
 HANDS = ("laban_weight", "laban_time", "laban_flow", "laban_space", "fluidity", "kinetic_energy", "curvature")
 JOINT_SPACE = HANDS[:-1]  # no curvature in joint space
@@ -75,10 +74,10 @@ class Expressive:
         self._joints = [i for members in self.chains.values() for i in members]
         self._joint_fit = PointDerivatives(len(self._joints), fit, dim=1, operator=operator) if self._joints else None
         # each chain one point of its angles: which of the fitted joints, and their QoM weights
-        self._chain_index: list[list[int]] = []
+        self._chain_slices: list[tuple[int, int]] = []  # where each chain's joints are among the fitted
         start = 0
         for members in self.chains.values():
-            self._chain_index.append(list(range(start, start + len(members))))
+            self._chain_slices.append((start, start + len(members)))
             start += len(members)
         self._chain_weights = [weights[m].tolist() for m in self.chains.values()]
         self._joint_efforts = LabanEfforts(np.eye(len(self.chains)), window, JOINT_DISPLACEMENT)
@@ -88,53 +87,55 @@ class Expressive:
                         if arms is not None and arms.joints[a][0] in members}
         self.segments = {c: SegmentRecorder(config.min_duration_s) for c in robot.chains}
         groups = robot.groups
-        self._members = {c: np.array(groups[c]) for c in robot.chains}
+        self._members = {c: list(groups[c]) for c in robot.chains}
         self._segment_keys = {c: {v: keys.derived(name, f, c) for v, f in SEGMENT_FEATURES.items()}
                               for c in robot.chains}
 
-    def hands(self, t: float, points: np.ndarray, elbows: np.ndarray | None, emit: Emit) -> None:
+    def hands(self, t: float, points: np.ndarray, elbows: np.ndarray | None) -> Values:
         """The hands' descriptors from this frame's hand ``points`` (arms, 3) and elbow points
         (FK frame ``elbow``; None without)."""
+        out: Values = []
         if self._pair is not None:
             rows = points.tolist()
             left, right = rows[self._pair[0]], rows[self._pair[1]]
             density = points_density(rows if elbows is None else rows + elbows.tolist())
-            for key, value in zip(self._both_keys, (math.dist(left, right), density, symmetry(left, right)),
-                                  strict=True):
-                emit(key, value)
+            out += zip(self._both_keys, (math.dist(left, right), density, symmetry(left, right)), strict=True)
         fit = self._fit
         if fit is None or not fit.update(t, points):
-            return
+            return out
         p, v, a, j = fit.derivatives.tolist()
         for names, efforts, vi, ai in zip(self._hand_keys, self._efforts.rows(fit.time, p, v, a, j), v, a,
                                           strict=True):
-            _emit_all(emit, names, (*efforts, 0.5 * (vi[0] * vi[0] + vi[1] * vi[1] + vi[2] * vi[2]),
-                                    curvature(vi, ai)))
+            _finite(out, names, (*efforts, 0.5 * (vi[0] * vi[0] + vi[1] * vi[1] + vi[2] * vi[2]), curvature(vi, ai)))
+        return out
 
-    def joints(self, t: float, positions: np.ndarray, emit: Emit) -> None:
+    def joints(self, t: float, positions: np.ndarray) -> Values:
         """The joint-space descriptors of the chains with no kinematics from all joint ``positions``."""
+        out: Values = []
         fit = self._joint_fit
         if fit is None:
-            return
+            return out
         q = positions[self._joints]
-        if not np.isfinite(q).all() or not fit.update(t, q[:, None]):
-            return
-        p, v, a, j = ([[x[i] for i in index] for index in self._chain_index]
-                      for x in fit.derivatives[..., 0].tolist())
+        if not np.isfinite(q).all() or not fit.update(t, q):
+            return out
+        p, v, a, j = ([x[i:k] for i, k in self._chain_slices] for x in fit.derivatives[..., 0].tolist())
         rows = self._joint_efforts.rows(fit.time, p, v, a, j)
         for names, efforts, vc, w in zip(self._joint_keys, rows, v, self._chain_weights, strict=True):
-            _emit_all(emit, names, (*efforts, 0.5 * sum(wi * x * x for wi, x in zip(w, vc, strict=True))))
+            _finite(out, names, (*efforts, 0.5 * sum(wi * x * x for wi, x in zip(w, vc, strict=True))))
+        return out
 
     def record(self, t: float, positions: np.ndarray, hands: np.ndarray | None) -> None:
         """Add this frame to every chain's segment recorder (an arm chain's only with its hand)."""
+        angles = positions.tolist()
+        points = None if hands is None else hands.tolist()
         for chain, recorder in self.segments.items():
             arm = self._arm_of.get(chain)
             if arm is not None:
-                if hands is not None:
-                    recorder.add(t, hands[arm])
+                if points is not None:
+                    recorder.add(t, points[arm])
                 continue
-            q = positions[self._members[chain]]
-            if np.isfinite(q).all():
+            q = [angles[i] for i in self._members[chain]]
+            if all(map(math.isfinite, q)):
                 recorder.add(t, q)
 
     def segment(self, chain: str, state: str, at: float) -> dict[str, Any] | None:
@@ -148,7 +149,7 @@ class Expressive:
         return [(names[v], value) for v, value in segment.items()]
 
 
-def _emit_all(emit: Emit, names: list[str], values: tuple[float, ...]) -> None:
-    for key, value in zip(names, values, strict=True):
-        if math.isfinite(value):  # Space with no displacement, κ below the speed floor: none
-            emit(key, value)
+def _finite(out: Values, names: list[str], values: tuple[float, ...]) -> None:
+    """Add ``values`` under ``names``, those not finite left out (Space with no displacement,
+    κ below the speed floor: none)."""
+    out += [(key, value) for key, value in zip(names, values, strict=True) if math.isfinite(value)]

@@ -61,7 +61,8 @@ class FitOperator:
     def __call__(self, s: np.ndarray) -> np.ndarray:
         """The operator (4, len(s)) for sample times ``s``."""
         for i, (known, operator) in enumerate(self._kept):
-            if len(known) == len(s) and np.abs(s - known).max() <= SAME_TIMES:
+            # (the oldest frame's time first: frames that come at their own times miss on it, cheaply)
+            if len(known) == len(s) and abs(s[0] - known[0]) <= SAME_TIMES and np.abs(s - known).max() <= SAME_TIMES:
                 if i:
                     self._kept.insert(0, self._kept.pop(i))
                 return operator

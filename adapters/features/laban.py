@@ -27,6 +27,7 @@ angles), and every Effort is an array of G values.
 from __future__ import annotations
 
 import math
+import operator
 from collections import deque
 from dataclasses import dataclass
 
@@ -66,6 +67,7 @@ class LabanEfforts:
         self.alpha = alpha[None, :] if self._single else alpha
         # per group its points' (index, weight), those of weight 0 left out
         self._terms = [[(i, w) for i, w in enumerate(row) if w != 0] for row in self.alpha.tolist()]
+        self._unit = self._terms == [[(g, 1.0)] for g in range(len(self._terms))]  # each group one point (the node's)
         self._mass = self.alpha.sum(axis=1).tolist()
         self.window_s, self.min_displacement, self.still = window_s, min_displacement, still
         # per frame: t, its step (Δt, then per group Δt·mean Σα‖a‖, Δt·mean Σα‖j‖, Δt·mean Σα‖v‖,
@@ -135,9 +137,13 @@ class LabanEfforts:
 
     def _weighted(self, values: list[float]) -> list[float]:
         """Σ α_i x_i per group of the points' ``values``."""
+        if self._unit:
+            return values
         return [sum(w * values[i] for i, w in terms) for terms in self._terms]
 
     def _distances(self, p: list[list[float]], q: list[list[float]]) -> list[float]:
         """Σ α_i ‖p_i − q_i‖ / Σ α_i per group."""
-        moved = [math.hypot(*(x - y for x, y in zip(pi, qi, strict=True))) for pi, qi in zip(p, q, strict=True)]
+        moved = [math.hypot(*map(operator.sub, pi, qi)) for pi, qi in zip(p, q, strict=True)]
+        if self._unit:
+            return moved
         return [x / m for x, m in zip(self._weighted(moved), self._mass, strict=True)]
