@@ -40,22 +40,32 @@ class FitOperator:
     same frames (the hands' and the joint chains'), and kept for the last few time patterns:
     at a steady rate the same operator serves frame after frame.
 
-    The fit is by least squares in the shifted Legendre basis of ``x = 2s + 1`` (its normal
-    equations are well conditioned, so an inverse of the 6×6 Gram matrix is as exact as a
-    pseudo-inverse of the power basis and costs half as much)."""
+    The fit is by least squares in the shifted Legendre basis of ``x = 2s + 1``: its 6×6 Gram
+    matrix G is well conditioned, so its inverse is as exact as a pseudo-inverse of the power
+    basis. Frames that come at their own times (a robot's clock) make a new operator each frame,
+    and G then differs from the last frame's by the jitter: G⁻¹ is refined from the last one by
+    Newton–Schulz steps (X ← X + X(I − GX), each squaring the error) to where ‖I − GX‖ is at
+    rounding level, with only products of small arrays; ``np.linalg.inv`` (and ``np.vander``)
+    cost 4-8× more on a node's worker thread, whose caches other threads have cooled between
+    frames, than these steps (bench/features.py on the bus)."""
 
     KEEP = 4  # time patterns kept (a steady rate alternates between two window lengths)
+    STEPS = 6  # Newton–Schulz steps at most, before a new inverse from scratch
+    EXACT = 1e-14  # max |I − GX|: rounding level (G's condition number is ~10)
 
     def __init__(self, window_s: float, degree: int = 5) -> None:
         eye = np.eye(degree + 1)
         self.degree = degree
-        self._basis = np.zeros((degree + 1, degree + 1))  # powers of x → Legendre polynomials
+        basis = np.zeros((degree + 1, degree + 1))  # powers of x → Legendre polynomials
         for k in range(degree + 1):
             c = legendre.leg2poly(eye[k])
-            self._basis[:len(c), k] = c
+            basis[:len(c), k] = c
+        self._basis = basis.T.copy()  # (Legendre, power)
         # d^m/dt^m of each P_k(2s + 1) at the middle (s = −½, x = 0): P_k^(m)(0) (2/W)^m
         self._read = np.array([[legendre.legval(0.0, legendre.legder(eye[k], m)) * (2.0 / window_s) ** m
                                 for k in range(degree + 1)] for m in range(4)])
+        self._eye = eye
+        self._inverses: dict[int, np.ndarray] = {}  # the last G⁻¹ per window length (frames)
         self._kept: list[tuple[np.ndarray, np.ndarray]] = []
 
     def __call__(self, s: np.ndarray) -> np.ndarray:
@@ -66,11 +76,34 @@ class FitOperator:
                 if i:
                     self._kept.insert(0, self._kept.pop(i))
                 return operator
-        v = np.vander(2.0 * s + 1.0, self.degree + 1, increasing=True) @ self._basis
-        operator = (self._read @ np.linalg.inv(v.T @ v)) @ v.T
+        x = 2.0 * s + 1.0
+        powers = np.empty((self.degree + 1, len(s)))
+        powers[0] = 1.0
+        powers[1] = x
+        for k in range(2, self.degree + 1):
+            np.multiply(powers[k - 1], x, out=powers[k])
+        v = self._basis @ powers  # (Legendre, sample)
+        gram = v @ v.T
+        operator = (self._read @ self._inverted(gram, len(s))) @ v
         self._kept.insert(0, (s, operator))
         del self._kept[self.KEEP:]
         return operator
+
+    def _inverted(self, gram: np.ndarray, frames: int) -> np.ndarray:
+        """G⁻¹ of a window of ``frames`` frames, from the last one of as many frames by
+        Newton–Schulz steps where they reach rounding level."""
+        inverse = self._inverses.get(frames)
+        if inverse is not None:
+            for _ in range(self.STEPS):
+                residual = self._eye - gram @ inverse
+                if np.abs(residual).max() <= self.EXACT:
+                    self._inverses[frames] = inverse
+                    return inverse
+                inverse = inverse + inverse @ residual
+        if len(self._inverses) >= self.KEEP and frames not in self._inverses:
+            self._inverses.pop(next(iter(self._inverses)))
+        self._inverses[frames] = inverse = np.linalg.inv(gram)
+        return inverse
 
 
 class PointDerivatives:
