@@ -67,6 +67,16 @@ class FitOperator:
         self._eye = eye
         self._inverses: dict[int, np.ndarray] = {}  # the last G⁻¹ per window length (frames)
         self._kept: list[tuple[np.ndarray, np.ndarray]] = []
+        self._window: tuple[float, float, int] | None = None  # the last window asked for, and its operator
+        self._last = np.zeros((4, 0))
+
+    def window(self, times: np.ndarray, t: float, window_s: float) -> np.ndarray:
+        """The operator for a window of frames at ``times`` read from the newest, ``t``: the
+        last one again for the same window (another fit over the same frames)."""
+        key = (t, float(times[0]), len(times))
+        if key != self._window:
+            self._window, self._last = key, self((times - t) / window_s)
+        return self._last
 
     def __call__(self, s: np.ndarray) -> np.ndarray:
         """The operator (4, len(s)) for sample times ``s``."""
@@ -94,12 +104,20 @@ class FitOperator:
         Newton–Schulz steps where they reach rounding level."""
         inverse = self._inverses.get(frames)
         if inverse is not None:
-            for _ in range(self.STEPS):
+            residual = self._eye - gram @ inverse
+            error, steps = float(np.abs(residual).max()), 0
+            while error > self.EXACT and steps < self.STEPS:
+                # the error after k steps is about error^(2^k): take as many as that needs, then look
+                k = math.ceil(math.log2(math.log(self.EXACT) / math.log(error))) if error < 0.5 else 1
+                for _ in range(min(k, self.STEPS - steps)):
+                    inverse = inverse + inverse @ residual
+                    residual = residual @ residual  # (I − G X') = (I − G X)², up to rounding: looked at below
+                steps += k
                 residual = self._eye - gram @ inverse
-                if np.abs(residual).max() <= self.EXACT:
-                    self._inverses[frames] = inverse
-                    return inverse
-                inverse = inverse + inverse @ residual
+                error = float(np.abs(residual).max())
+            if error <= self.EXACT:
+                self._inverses[frames] = inverse
+                return inverse
         if len(self._inverses) >= self.KEEP and frames not in self._inverses:
             self._inverses.pop(next(iter(self._inverses)))
         self._inverses[frames] = inverse = np.linalg.inv(gram)
@@ -120,6 +138,7 @@ class PointDerivatives:
         self._t = np.zeros(64)
         self._y = np.zeros((64, n * dim))
         self._first = self._end = 0
+        self._last_t = 0.0
         self.derivatives = np.zeros((4, n, dim))  # position, velocity, acceleration, jerk
         self.position, self.velocity, self.acceleration, self.jerk = self.derivatives
         self.time = 0.0  # the time the derivatives are read at: the window's middle, window_s/2 ago
@@ -132,8 +151,9 @@ class PointDerivatives:
         """Add the frame at ``t``; ``True`` when the derivatives were estimated from it.
         A time that does not advance starts the window over."""
         first, end = self._first, self._end
-        if end > first and not t > self._t[end - 1]:
+        if end > first and not t > self._last_t:
             first = end = 0
+        self._last_t = t
         if end == len(self._t):  # full: move the window to the front (or grow)
             count = end - first
             if count > len(self._t) // 2:
@@ -141,18 +161,20 @@ class PointDerivatives:
                 self._y = np.concatenate([self._y, np.zeros_like(self._y)])
             self._t[:count], self._y[:count] = self._t[first:end], self._y[first:end]
             first, end = 0, count
-        self._t[end] = t
-        self._y[end] = np.ravel(points)
-        end += 1
         times = self._t
-        while t - times[first] > self.window_s * (1 + 1e-9):  # t_k − W < t_m ≤ t_k
+        times[end] = t
+        self._y[end] = points.reshape(-1)
+        end += 1
+        oldest = float(times[first])
+        while t - oldest > self.window_s * (1 + 1e-9):  # t_k − W < t_m ≤ t_k
             first += 1
+            oldest = float(times[first])
         self._first, self._end = first, end
         # enough frames, spanning most of the window: a fit of a few first frames is mostly noise
-        self.ready = bool(end - first > self.degree + 1 and t - times[first] >= 0.75 * self.window_s)
+        self.ready = end - first > self.degree + 1 and t - oldest >= 0.75 * self.window_s
         if not self.ready:
             return False
-        operator = self._operator((times[first:end] - t) / self.window_s)
+        operator = self._operator.window(times[first:end], t, self.window_s)
         self.derivatives = (operator @ self._y[first:end]).reshape(4, self.n, self.dim)
         self.time = t - self.window_s / 2
         self.position, self.velocity, self.acceleration, self.jerk = self.derivatives
