@@ -52,6 +52,7 @@ class FitOperator:
     KEEP = 4  # time patterns kept (a steady rate alternates between two window lengths)
     STEPS = 6  # Newton–Schulz steps at most, before a new inverse from scratch
     EXACT = 1e-14  # max |I − GX|: rounding level (G's condition number is ~10)
+    CONVERGES = 0.5  # n · max |I − GX| under this: the steps start (else an inverse from scratch)
 
     def __init__(self, window_s: float, degree: int = 5) -> None:
         eye = np.eye(degree + 1)
@@ -106,10 +107,11 @@ class FitOperator:
         if inverse is not None:
             residual = self._eye - gram @ inverse
             error, steps = float(np.abs(residual).max()), 0
-            while error > self.EXACT and steps < self.STEPS:
-                # the error after k steps is about error^(2^k): take as many as that needs, then look
-                k = math.ceil(math.log2(math.log(self.EXACT) / math.log(error))) if error < 0.5 else 1
-                for _ in range(min(k, self.STEPS - steps)):
+            while error > self.EXACT and len(gram) * error < self.CONVERGES and steps < self.STEPS:
+                # ‖I − GX‖∞ ≤ n·error < 1: the steps converge, each squaring it; take as many as that
+                # needs to reach EXACT, then look
+                k = min(self.STEPS - steps, math.ceil(math.log2(math.log(self.EXACT) / math.log(len(gram) * error))))
+                for _ in range(k):
                     inverse = inverse + inverse @ residual
                     residual = residual @ residual  # (I − G X') = (I − G X)², up to rounding: looked at below
                 steps += k

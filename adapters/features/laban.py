@@ -95,14 +95,18 @@ class LabanEfforts:
             for heaviest in self._heaviest:
                 heaviest.clear()
             self._sums = [0.0] * len(self._sums)
-        speeds = [math.hypot(*x) for x in v]
-        norms = [*self._weighted([math.hypot(*x) for x in a]), *self._weighted([math.hypot(*x) for x in j]),
-                 *self._weighted(speeds)]
+        hypot = math.hypot
+        speeds = [hypot(*x) for x in v]
+        if self._unit:
+            norms = [hypot(*x) for x in a] + [hypot(*x) for x in j] + speeds
+        else:
+            norms = (self._weighted([hypot(*x) for x in a]) + self._weighted([hypot(*x) for x in j])
+                     + self._weighted(speeds))
         if frames:
             last_t, _, last_p = frames[-1]
             dt = t - last_t
-            step = [dt, *(dt * (x + y) / 2 for x, y in zip(norms, self._norms, strict=True)),  # the step's mean
-                    *self._distances(p, last_p)]
+            step = [dt] + [dt * (x + y) / 2 for x, y in zip(norms, self._norms, strict=True)]  # the step's mean
+            step += self._distances(p, last_p)
         else:
             step = [0.0] * len(self._sums)
         self._norms = norms
@@ -115,9 +119,9 @@ class LabanEfforts:
             sums = [math.fsum(column) for column in zip(*(f[1] for f in frames), strict=True)]
         self._sums = sums
         first_t, first_step, first_p = frames[0]
-        inside = [x - y for x, y in zip(sums, first_step, strict=True)]  # each step lies inside the window
-        span, groups = inside[0], len(self._terms)
-        heavy = self._weighted([s * s for s in speeds])
+        span = sums[0] - first_step[0]  # (each step lies inside the window, the first frame's before it)
+        groups = len(self._terms)
+        heavy = self._weighted([x * x for x in speeds])
         out = []
         for g, (heaviest, w, d) in enumerate(zip(self._heaviest, heavy, self._distances(p, first_p), strict=True)):
             while heaviest and heaviest[-1][1] <= w:
@@ -125,14 +129,16 @@ class LabanEfforts:
             heaviest.append((t, w))
             while heaviest[0][0] < first_t:
                 heaviest.popleft()
-            acc, jerk, speed, path = inside[1 + g::groups]
-            if span > 0:
-                time_, flow, speed = acc / span, jerk / span, speed / span
-            else:
-                time_ = flow = speed = math.nan
+            path = sums[1 + 3 * groups + g] - first_step[1 + 3 * groups + g]
             space = path / d if d > self.min_displacement else math.nan
-            fluidity = speed / time_ if speed > self.still and time_ > 0 else math.nan
-            out.append((heaviest[0][1], time_, flow, space, fluidity))
+            if span > 0:
+                time_ = (sums[1 + g] - first_step[1 + g]) / span
+                flow = (sums[1 + groups + g] - first_step[1 + groups + g]) / span
+                speed = (sums[1 + 2 * groups + g] - first_step[1 + 2 * groups + g]) / span
+                fluidity = speed / time_ if speed > self.still and time_ > 0 else math.nan
+                out.append((heaviest[0][1], time_, flow, space, fluidity))
+            else:
+                out.append((heaviest[0][1], math.nan, math.nan, space, math.nan))
         return out
 
     def _weighted(self, values: list[float]) -> list[float]:

@@ -37,14 +37,16 @@ def kinetic_energy(v: np.ndarray, alpha: np.ndarray | float = 1.0) -> np.ndarray
 def points_density(points: np.ndarray | list[list[float]]) -> float:
     """Mean distance of ``points`` (n, 3) from their barycentre (m)."""
     rows = points.tolist() if isinstance(points, np.ndarray) else points  # (a few points: floats beat numpy)
-    centre = [sum(c) / len(rows) for c in zip(*rows, strict=True)]
-    return sum(math.hypot(*(x - c for x, c in zip(p, centre, strict=True))) for p in rows) / len(rows)
+    n = len(rows)
+    xs, ys, zs = zip(*rows, strict=True)
+    cx, cy, cz = sum(xs) / n, sum(ys) / n, sum(zs) / n
+    return sum(math.hypot(x - cx, y - cy, z - cz) for x, y, z in rows) / n
 
 
 def symmetry(left: np.ndarray | list[float], right: np.ndarray | list[float], lateral: int = LATERAL) -> float:
     """Left/right symmetry of two points given relative to a point of the sagittal plane, in [0, 1]."""
-    left, right = (list(map(float, x)) for x in (left, right))
-    mirrored = [-x if i == lateral else x for i, x in enumerate(right)]
-    error = math.hypot(*(x - y for x, y in zip(left, mirrored, strict=True))) / (
-        math.hypot(*left) + math.hypot(*right) + EPSILON)
+    left, right = (x.tolist() if isinstance(x, np.ndarray) else x for x in (left, right))
+    mirrored = list(right)
+    mirrored[lateral] = -mirrored[lateral]
+    error = math.dist(left, mirrored) / (math.hypot(*left) + math.hypot(*right) + EPSILON)
     return max(0.0, 1.0 - error)
