@@ -21,7 +21,7 @@ import numpy as np
 from sonibus.bus import keys
 
 from .config import FeaturesConfig
-from .kinematic import FitOperator, PointDerivatives, curvature
+from .kinematic import PointDerivatives, curvature
 from .laban import LabanEfforts
 from .segments import SEGMENT, SegmentRecorder
 from .shape import points_density, symmetry
@@ -52,36 +52,38 @@ def joint_chains(robot: Robot, weights: np.ndarray) -> dict[str, list[int]]:
 
 
 class Expressive:
-    """The expressive descriptors of one robot; ``hands``, ``joints`` and ``record`` per frame.
+    """The expressive descriptors of one robot; ``frame`` and ``record`` per frame.
 
-    A frame's fits share one ``FitOperator`` (the hands' and the joint chains' windows hold the
-    same frames), and what follows the fits is worked out in plain floats: a hand is 3 numbers,
-    a chain a few angles, and numpy's cost per call is more than their arithmetic."""
+    One fit takes the hands' coordinates and the joint-space chains' angles together (one
+    operator, one product a frame), and one ``LabanEfforts`` their groups (each hand, each
+    chain); what follows the fit is worked out in plain floats: a hand is 3 numbers, a chain a
+    few angles, and numpy's cost per call is more than their arithmetic. So the windows hold
+    the frames that had all of them: a frame before every arm and chain joint was seen (a
+    robot's first frames) gives no Efforts, only the arms' shape where the hands are known."""
 
     def __init__(self, robot: Robot, config: FeaturesConfig, weights: np.ndarray) -> None:
         self.robot, name = robot, robot.name
-        window, fit = config.laban_window_s, config.fit_window_s
+        window = config.laban_window_s
         arms = robot.arms
-        operator = FitOperator(fit)
         self.sides: tuple[str, ...] = arms.sides if arms is not None else ()
-        self._fit = PointDerivatives(len(self.sides), fit, operator=operator) if self.sides else None
-        self._efforts = LabanEfforts(np.eye(len(self.sides)), window)  # each hand its own group
         self._hand_keys = [[keys.derived(name, f, s) for f in HANDS] for s in self.sides]
         self.elbow = elbow_frame(arms.joints) if arms is not None else None  # FK frame whose points to add
         self._pair = tuple(self.sides.index(s) for s in ("L", "R")) if set("LR") <= set(self.sides) else None
         self._both_keys = [keys.derived(name, f, BOTH_NAME) for f in BOTH]
         self.chains = joint_chains(robot, weights)
         self._joints = [i for members in self.chains.values() for i in members]
-        self._joint_fit = PointDerivatives(len(self._joints), fit, dim=1, operator=operator) if self._joints else None
-        # each chain one point of its angles: which of the fitted joints, and their QoM weights
-        self._chain_slices: list[tuple[int, int]] = []  # where each chain's joints are among the fitted
-        start = 0
-        for members in self.chains.values():
-            self._chain_slices.append((start, start + len(members)))
-            start += len(members)
-        self._chain_weights = [weights[m].tolist() for m in self.chains.values()]
-        self._joint_efforts = LabanEfforts(np.eye(len(self.chains)), window, JOINT_DISPLACEMENT)
         self._joint_keys = [[keys.derived(name, f, c) for f in JOINT_SPACE] for c in self.chains]
+        self._chain_weights = [weights[m].tolist() for m in self.chains.values()]
+        # the fit's columns: each hand's x, y, z, then each chain's angles; a group each
+        hands = 3 * len(self.sides)
+        self._row = np.zeros(hands + len(self._joints))
+        self._slices = [(3 * a, 3 * a + 3) for a in range(len(self.sides))]
+        for members in self.chains.values():
+            start = self._slices[-1][1] if self._slices else 0
+            self._slices.append((start, start + len(members)))
+        self._fit = PointDerivatives(len(self._row), config.fit_window_s, dim=1) if len(self._row) else None
+        self._efforts = LabanEfforts(np.eye(len(self._slices)), window, [1e-3] * len(self.sides)
+                                     + [JOINT_DISPLACEMENT] * len(self.chains))
         # motion segments: an arm chain's is its hand's path, another chain's its joints' path
         self._arm_of = {c: a for c, members in robot.chains.items() for a in range(len(self.sides))
                         if arms is not None and arms.joints[a][0] in members}
@@ -91,37 +93,40 @@ class Expressive:
         self._segment_keys = {c: {v: keys.derived(name, f, c) for v, f in SEGMENT_FEATURES.items()}
                               for c in robot.chains}
 
-    def hands(self, t: float, points: np.ndarray, elbows: np.ndarray | None) -> Values:
-        """The hands' descriptors from this frame's hand ``points`` (arms, 3) and elbow points
-        (FK frame ``elbow``; None without)."""
+    @property
+    def hand_velocity(self) -> np.ndarray:
+        """The hands' velocities (arms, 3) from the last fit."""
+        return self._fit.velocity[:3 * len(self.sides), 0].reshape(-1, 3) if self._fit else np.zeros((0, 3))
+
+    def frame(self, t: float, positions: np.ndarray, points: np.ndarray | None, elbows: np.ndarray | None) -> Values:
+        """This frame's descriptors from all joint ``positions``, the hand ``points`` (arms, 3;
+        None where not known) and elbow points (FK frame ``elbow``; None without)."""
         out: Values = []
-        if self._pair is not None:
+        if points is not None and self._pair is not None:
             rows = points.tolist()
             left, right = rows[self._pair[0]], rows[self._pair[1]]
             density = points_density(rows if elbows is None else rows + elbows.tolist())
             out += zip(self._both_keys, (math.dist(left, right), density, symmetry(left, right)), strict=True)
         fit = self._fit
-        if fit is None or not fit.update(t, points):
+        if fit is None or (points is None and self.sides):
             return out
-        p, v, a, j = fit.derivatives.tolist()
-        for names, efforts, vi, ai in zip(self._hand_keys, self._efforts.rows(fit.time, p, v, a, j), v, a,
-                                          strict=True):
-            _finite(out, names, (*efforts, 0.5 * (vi[0] * vi[0] + vi[1] * vi[1] + vi[2] * vi[2]), curvature(vi, ai)))
-        return out
-
-    def joints(self, t: float, positions: np.ndarray) -> Values:
-        """The joint-space descriptors of the chains with no kinematics from all joint ``positions``."""
-        out: Values = []
-        fit = self._joint_fit
-        if fit is None:
+        row, hands = self._row, 3 * len(self.sides)
+        if hands:
+            row[:hands] = points.reshape(-1)
+        if self._joints:
+            q = positions[self._joints]
+            if not np.isfinite(q).all():
+                return out
+            row[hands:] = q
+        if not fit.update(t, row):
             return out
-        q = positions[self._joints]
-        if not np.isfinite(q).all() or not fit.update(t, q):
-            return out
-        p, v, a, j = ([x[i:k] for i, k in self._chain_slices] for x in fit.derivatives[..., 0].tolist())
-        rows = self._joint_efforts.rows(fit.time, p, v, a, j)
-        for names, efforts, vc, w in zip(self._joint_keys, rows, v, self._chain_weights, strict=True):
-            _finite(out, names, (*efforts, 0.5 * sum(wi * x * x for wi, x in zip(w, vc, strict=True))))
+        p, v, a, j = ([x[i:k] for i, k in self._slices] for x in fit.derivatives[..., 0].tolist())
+        efforts = self._efforts.rows(fit.time, p, v, a, j)
+        for names, e, vi, ai in zip(self._hand_keys, efforts, v, a, strict=False):  # (the hands first)
+            _finite(out, names, (*e, 0.5 * (vi[0] * vi[0] + vi[1] * vi[1] + vi[2] * vi[2]), curvature(vi, ai)))
+        for names, e, vc, w in zip(self._joint_keys, efforts[len(self.sides):], v[len(self.sides):],
+                                   self._chain_weights, strict=True):
+            _finite(out, names, (*e, 0.5 * sum(wi * x * x for wi, x in zip(w, vc, strict=True))))  # ½ Σ w_j q̇_j²
         return out
 
     def record(self, t: float, positions: np.ndarray, hands: np.ndarray | None) -> None:

@@ -58,8 +58,9 @@ class LabanEfforts:
 
     RESUM = 512
 
-    def __init__(self, alpha: np.ndarray, window_s: float = 0.5, min_displacement: float = 1e-3,
+    def __init__(self, alpha: np.ndarray, window_s: float = 0.5, min_displacement: float | list[float] = 1e-3,
                  still: float = 0.05) -> None:
+        """``min_displacement``: Space's floor, one for every group or one per group."""
         if not window_s > 0:
             raise ValueError(f"Laban window ({window_s} s) must be more than 0")
         alpha = np.asarray(alpha, dtype=float)
@@ -70,6 +71,8 @@ class LabanEfforts:
         self._unit = self._terms == [[(g, 1.0)] for g in range(len(self._terms))]  # each group one point (the node's)
         self._mass = self.alpha.sum(axis=1).tolist()
         self.window_s, self.min_displacement, self.still = window_s, min_displacement, still
+        self._floors = (list(min_displacement) if isinstance(min_displacement, list | tuple)
+                        else [min_displacement] * len(self._terms))
         # per frame: t, its step (Δt, then per group Δt·mean Σα‖a‖, Δt·mean Σα‖j‖, Δt·mean Σα‖v‖,
         # path length), positions
         self._frames: deque[tuple[float, list[float], list[list[float]]]] = deque()
@@ -130,7 +133,7 @@ class LabanEfforts:
             while heaviest[0][0] < first_t:
                 heaviest.popleft()
             path = sums[1 + 3 * groups + g] - first_step[1 + 3 * groups + g]
-            space = path / d if d > self.min_displacement else math.nan
+            space = path / d if d > self._floors[g] else math.nan
             if span > 0:
                 time_ = (sums[1 + g] - first_step[1 + g]) / span
                 flow = (sums[1 + groups + g] - first_step[1 + groups + g]) / span
