@@ -36,18 +36,18 @@ STILL_SPEED = 0.05  # m/s: below, no curvature nor a_t, a_n (1 mrad of joint noi
 
 class FitOperator:
     """The linear map from a window's samples to (position, v, a, j) at its middle, for
-    sample times ``s`` (fractions of the window, in (−1, 0]); shared by every fit over the
-    same frames (the hands' and the joint chains'), and kept for the last few time patterns:
-    at a steady rate the same operator serves frame after frame.
+    sample times ``s`` (fractions of the window, in (−1, 0]), kept for the last few time
+    patterns: at a steady rate the same operator serves frame after frame.
 
     The fit is by least squares in the shifted Legendre basis of ``x = 2s + 1``: its 6×6 Gram
     matrix G is well conditioned, so its inverse is as exact as a pseudo-inverse of the power
     basis. Frames that come at their own times (a robot's clock) make a new operator each frame,
     and G then differs from the last frame's by the jitter: G⁻¹ is refined from the last one by
     Newton–Schulz steps (X ← X + X(I − GX), each squaring the error) to where ‖I − GX‖ is at
-    rounding level, with only products of small arrays; ``np.linalg.inv`` (and ``np.vander``)
-    cost 4-8× more on a node's worker thread, whose caches other threads have cooled between
-    frames, than these steps (bench/features.py on the bus)."""
+    rounding level, with only products of small arrays. On a node's worker thread (whose caches
+    other threads cool between frames) ``np.linalg.inv`` and ``np.vander`` cost ~35 µs a frame
+    more than these steps, though they run fewer instructions (two expressive nodes side by side
+    on one bus, 3 runs: 1.53 vs 1.46× a default node's CPU)."""
 
     KEEP = 4  # time patterns kept (a steady rate alternates between two window lengths)
     STEPS = 6  # Newton–Schulz steps at most, before a new inverse from scratch
@@ -67,23 +67,15 @@ class FitOperator:
                                 for k in range(degree + 1)] for m in range(4)])
         self._eye = eye
         self._inverses: dict[int, np.ndarray] = {}  # the last G⁻¹ per window length (frames)
-        self._kept: list[tuple[np.ndarray, np.ndarray]] = []
-        self._window: tuple[float, float, int] | None = None  # the last window asked for, and its operator
-        self._last = np.zeros((4, 0))
-
-    def window(self, times: np.ndarray, t: float, window_s: float) -> np.ndarray:
-        """The operator for a window of frames at ``times`` read from the newest, ``t``: the
-        last one again for the same window (another fit over the same frames)."""
-        key = (t, float(times[0]), len(times))
-        if key != self._window:
-            self._window, self._last = key, self((times - t) / window_s)
-        return self._last
+        self._kept: list[tuple[np.ndarray, float, np.ndarray]] = []  # (s, s[0], operator), the last used first
 
     def __call__(self, s: np.ndarray) -> np.ndarray:
         """The operator (4, len(s)) for sample times ``s``."""
-        for i, (known, operator) in enumerate(self._kept):
+        first, frames = float(s[0]), len(s)
+        for i, (known, known_first, operator) in enumerate(self._kept):
             # (the oldest frame's time first: frames that come at their own times miss on it, cheaply)
-            if len(known) == len(s) and abs(s[0] - known[0]) <= SAME_TIMES and np.abs(s - known).max() <= SAME_TIMES:
+            if (len(known) == frames and abs(first - known_first) <= SAME_TIMES
+                    and np.abs(s - known).max() <= SAME_TIMES):
                 if i:
                     self._kept.insert(0, self._kept.pop(i))
                 return operator
@@ -96,7 +88,7 @@ class FitOperator:
         v = self._basis @ powers  # (Legendre, sample)
         gram = v @ v.T
         operator = (self._read @ self._inverted(gram, len(s))) @ v
-        self._kept.insert(0, (s, operator))
+        self._kept.insert(0, (s, first, operator))
         del self._kept[self.KEEP:]
         return operator
 
@@ -128,11 +120,10 @@ class FitOperator:
 
 class PointDerivatives:
     """Derivatives of ``n`` points of ``dim`` coordinates (3-D by default; 1 for joint
-    angles), ``update(t, points)`` with ``points`` of shape (n, dim). ``operator``: a
-    ``FitOperator`` of the same window and degree to share with other fits."""
+    angles), ``update(t, points)`` with ``points`` of shape (n, dim); ``derivatives`` stacks
+    ``position``, ``velocity``, ``acceleration`` and ``jerk`` (4, n, dim)."""
 
-    def __init__(self, n: int, window_s: float = 0.4, degree: int = 5, dim: int = 3,
-                 operator: FitOperator | None = None) -> None:
+    def __init__(self, n: int, window_s: float = 0.4, degree: int = 5, dim: int = 3) -> None:
         if not window_s > 0 or degree < 3:
             raise ValueError(f"window ({window_s} s) must be more than 0 and degree ({degree}) at least 3 for jerk")
         self.n, self.window_s, self.degree, self.dim = n, window_s, degree, dim
@@ -142,12 +133,11 @@ class PointDerivatives:
         self._first = self._end = 0
         self._last_t = 0.0
         self.derivatives = np.zeros((4, n, dim))  # position, velocity, acceleration, jerk
-        self.position, self.velocity, self.acceleration, self.jerk = self.derivatives
         self.time = 0.0  # the time the derivatives are read at: the window's middle, window_s/2 ago
         self.ready = False  # True once the window holds enough frames for the fit
         # the fit is linear in the samples: (position, v, a, j) = operator @ samples, the operator
         # depending only on the frames' times in the window
-        self._operator = FitOperator(window_s, degree) if operator is None else operator
+        self._operator = FitOperator(window_s, degree)
 
     def update(self, t: float, points: np.ndarray) -> bool:
         """Add the frame at ``t``; ``True`` when the derivatives were estimated from it.
@@ -176,11 +166,27 @@ class PointDerivatives:
         self.ready = end - first > self.degree + 1 and t - oldest >= 0.75 * self.window_s
         if not self.ready:
             return False
-        operator = self._operator.window(times[first:end], t, self.window_s)
+        operator = self._operator((times[first:end] - t) / self.window_s)
         self.derivatives = (operator @ self._y[first:end]).reshape(4, self.n, self.dim)
         self.time = t - self.window_s / 2
-        self.position, self.velocity, self.acceleration, self.jerk = self.derivatives
         return True
+
+    @property
+    def position(self) -> np.ndarray:
+        """The fitted positions (n, dim) at ``time``."""
+        return self.derivatives[0]
+
+    @property
+    def velocity(self) -> np.ndarray:
+        return self.derivatives[1]
+
+    @property
+    def acceleration(self) -> np.ndarray:
+        return self.derivatives[2]
+
+    @property
+    def jerk(self) -> np.ndarray:
+        return self.derivatives[3]
 
 
 def curvature(v: list[float], a: list[float], still: float = STILL_SPEED) -> float:
