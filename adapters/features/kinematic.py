@@ -166,22 +166,11 @@ class PointDerivatives:
         self.time = t - self.window_s / 2
         return True
 
-    @property
-    def position(self) -> np.ndarray:
-        """The fitted positions (n, dim) at ``time``."""
-        return self.derivatives[0]
-
-    @property
-    def velocity(self) -> np.ndarray:
-        return self.derivatives[1]
-
-    @property
-    def acceleration(self) -> np.ndarray:
-        return self.derivatives[2]
-
-    @property
-    def jerk(self) -> np.ndarray:
-        return self.derivatives[3]
+    # views on demand (unpacking four views a frame cost more than the reads)
+    position = property(lambda self: self.derivatives[0], doc="The fitted positions (n, dim) at ``time``.")
+    velocity = property(lambda self: self.derivatives[1], doc="The velocities (n, dim) at ``time``.")
+    acceleration = property(lambda self: self.derivatives[2], doc="The accelerations (n, dim) at ``time``.")
+    jerk = property(lambda self: self.derivatives[3], doc="The jerks (n, dim) at ``time``.")
 
 
 def curvature(v: list[float], a: list[float], still: float = STILL_SPEED) -> float:

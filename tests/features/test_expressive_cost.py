@@ -151,3 +151,24 @@ def test_one_fk_pass_gives_every_frame_as_its_own_pass():
     together = arms.points_at(q, (n, 2, 0, 3))
     for got, upto in zip(together, (n, 2, 0, 3), strict=True):
         np.testing.assert_allclose(got, arms.points(q, upto), rtol=0, atol=1e-15)
+
+
+def test_the_efforts_wait_for_every_arm_and_chain_joint():
+    """The hands and the chains share one fit: while a Head joint has never been seen (a robot's
+    first frames), no Efforts go out, the arms' shape does; once it comes, hands and chains start
+    together, 3/4 of a fit window (0.3 s) later."""
+    features = pepper_features()
+    model = load_model("pepper")
+    middle = np.array([(j.min + j.max) / 2 for j in model.joints])
+    first: dict[str, float] = {}
+    for k in range(150):
+        t = T0 + k / 100
+        values = middle + 0.2 * np.sin(2 * math.pi * 0.5 * k / 100 + np.arange(len(middle)))
+        frame = {f"pepper/joints/{j}": float(v) for j, v in zip(model.joint_names, values, strict=True)}
+        if k < 50:
+            frame["pepper/joints/HeadPitch"] = math.nan
+        for key, _ in features.step(t, k, frame).samples:
+            first.setdefault(key.split("/", 2)[2], t)
+    assert first["symmetry/arms"] == T0
+    assert first["laban_time/L"] == first["laban_time/Head"] == first["laban_time/Leg"]
+    assert first["laban_time/L"] == pytest.approx(T0 + 0.5 + 0.3, abs=0.025)  # (Time: two fitted frames)
