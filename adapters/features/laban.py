@@ -123,23 +123,23 @@ class LabanEfforts:
         self._sums = sums
         first_t, first_step, first_p = frames[0]
         span = sums[0] - first_step[0]  # (each step lies inside the window, the first frame's before it)
-        groups = len(self._terms)
-        heavy = self._weighted([x * x for x in speeds])
+        inside = [x - y for x, y in zip(sums, first_step, strict=True)]  # each step lies inside the window
+        groups, still = len(self._terms), self.still
         out = []
-        for g, (heaviest, w, d) in enumerate(zip(self._heaviest, heavy, self._distances(p, first_p), strict=True)):
+        for heaviest, w, d, floor, time_, flow, speed, path in zip(
+                self._heaviest, self._weighted([x * x for x in speeds]), self._distances(p, first_p), self._floors,
+                inside[1:1 + groups], inside[1 + groups:1 + 2 * groups], inside[1 + 2 * groups:1 + 3 * groups],
+                inside[1 + 3 * groups:], strict=True):
             while heaviest and heaviest[-1][1] <= w:
                 heaviest.pop()
             heaviest.append((t, w))
             while heaviest[0][0] < first_t:
                 heaviest.popleft()
-            path = sums[1 + 3 * groups + g] - first_step[1 + 3 * groups + g]
-            space = path / d if d > self._floors[g] else math.nan
+            space = path / d if d > floor else math.nan
             if span > 0:
-                time_ = (sums[1 + g] - first_step[1 + g]) / span
-                flow = (sums[1 + groups + g] - first_step[1 + groups + g]) / span
-                speed = (sums[1 + 2 * groups + g] - first_step[1 + 2 * groups + g]) / span
-                fluidity = speed / time_ if speed > self.still and time_ > 0 else math.nan
-                out.append((heaviest[0][1], time_, flow, space, fluidity))
+                time_, flow, speed = time_ / span, flow / span, speed / span
+                out.append((heaviest[0][1], time_, flow, space, speed / time_ if speed > still and time_ > 0
+                            else math.nan))
             else:
                 out.append((heaviest[0][1], math.nan, math.nan, space, math.nan))
         return out

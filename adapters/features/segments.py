@@ -82,7 +82,7 @@ class SegmentRecorder:
             self._times.clear()
             self._points.clear()
         self._times.append(t)
-        self._points.append(point.tolist() if isinstance(point, np.ndarray) else [float(x) for x in point])
+        self._points.append(point.tolist() if isinstance(point, np.ndarray) else list(map(float, point)))
         horizon = t - (self.max_s if self._moving else self.keep_s)
         if self._times[0] < horizon - 1.0:  # trim in batches, not every frame
             cut = int(np.searchsorted(self._times, horizon))
