@@ -138,10 +138,10 @@ class RobotFeatures:
             out.samples += [(key, {"t": t, "seq": seq, "v": value})
                             for key, value, now in zip(self._velocity_keys, v.tolist(), fresh.tolist(), strict=True)
                             if now]
-        hands = self._hand_features(t, seq, out) if self._hands else None
+        hands, elbows = self._hand_features(t, seq, out) if self._hands else (None, None)
         if self._expressive is not None:
-            self._expressive.joints(t, self._positions, lambda key, value: out.samples.append(
-                (key, {"t": t, "seq": seq, "v": value})))
+            out.samples += [(key, {"t": t, "seq": seq, "v": v})
+                            for key, v in self._expressive.frame(t, self._positions, hands, elbows)]
             self._expressive.record(t, self._positions, hands)
         updated = self._members @ fresh > 0
         qoms, usable = out.bounded(self._members @ (np.abs(v) * self._weights), self._qom_range, updated)
@@ -167,22 +167,24 @@ class RobotFeatures:
                 out.events.append((self._motion_key, event))
         return out
 
-    def _hand_features(self, t: float, seq: int, out: Output) -> np.ndarray | None:
-        """Publish the hands' features; their points (arms, 3), None where not known."""
+    def _hand_features(self, t: float, seq: int, out: Output) -> tuple[np.ndarray | None, np.ndarray | None]:
+        """Publish the hands' features; their points (arms, 3) and, for the expressive
+        descriptors, the elbows' (None where not known)."""
         assert self.robot.arms is not None and self.robot.arm_joints is not None
         angles = self._positions[self.robot.arm_joints]
         if not np.isfinite(angles).all():
-            return None  # an arm joint never seen yet
-        points = self.robot.arms.points(angles)
+            return None, None  # an arm joint never seen yet
+        elbow = None if self._expressive is None else self._expressive.elbow
+        if elbow is None:
+            points, elbows = self.robot.arms.points(angles), None
+        else:  # (the expressive descriptors' points density takes the elbows too: one pass along the arms)
+            points, elbows = self.robot.arms.points_at(angles, (self.robot.arms.axes.shape[1], elbow))
         hands, usable = out.bounded(points, self._hand_range, self.config.publishes("hand"))
         if usable is not None and not usable.all():
-            return None
+            return None, None
         if self.config.publishes("hand"):
             out.samples += [(key, {"t": t, "seq": seq, "v": hand.tolist()})
                             for key, hand in zip(self._hand_keys, hands, strict=True)]
-        if self._expressive is not None:
-            self._expressive.hands(t, points, angles, lambda key, value: out.samples.append(
-                (key, {"t": t, "seq": seq, "v": value})))
         fresh = self._hand_velocity.update(t, points.ravel())
         if self.config.publishes("hand_speed") and fresh.all():
             speeds, usable = out.bounded(np.linalg.norm(self._hand_velocity.velocity.reshape(hands.shape), axis=1),
@@ -190,7 +192,7 @@ class RobotFeatures:
             ok = [True] * len(speeds) if usable is None else usable.tolist()
             out.samples += [(key, {"t": t, "seq": seq, "v": s})
                             for key, s, good in zip(self._speed_keys, speeds.tolist(), ok, strict=True) if good]
-        return points
+        return points, elbows
 
 
 def _spans(ranges: dict[str, Range], keys_: list[str], default: tuple[Any, Any]) -> Range:

@@ -65,7 +65,11 @@ class Arms:
     def points(self, q: np.ndarray, upto: int | None = None) -> np.ndarray:
         """Positions ``(..., arms, 3)`` of frame ``upto`` of each arm (default: the hand;
         ``0`` is the first joint's) for angles ``q`` of shape ``(..., arms, n)``."""
-        n = self.axes.shape[1] if upto is None else upto
+        return self.points_at(q, (self.axes.shape[1] if upto is None else upto,))[0]
+
+    def points_at(self, q: np.ndarray, frames: tuple[int, ...]) -> list[np.ndarray]:
+        """``points(q, upto)`` for each ``upto`` of ``frames``, in one pass along the arms."""
+        n = max(frames)
         q = np.asarray(q, dtype=float)[..., :n]  # (the joints past frame upto move nothing before it)
         sliding = self.sliding[:, :n]  # type: ignore[index]
         angle = q * (1.0 - sliding)
@@ -77,10 +81,13 @@ class Arms:
         turns = turns @ self.rotations[:, 1:n + 1]
         position = self.translations[:, 0] + np.zeros((*q.shape[:-1], 3))
         rotation = self.rotations[:, 0]
+        found = {0: position}
         for i in range(n):
             position = position + (rotation @ offsets[..., i, :, :])[..., 0]
-            rotation = rotation @ turns[..., i, :, :]
-        return position
+            found[i + 1] = position
+            if i + 1 < n:
+                rotation = rotation @ turns[..., i, :, :]
+        return [found[f] for f in frames]
 
     def hands(self, angles: Mapping[str, float]) -> np.ndarray:
         """Each arm's hand point ``(arms, 3)`` for joint angles by name (a joint not given is at 0)."""

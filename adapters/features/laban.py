@@ -27,6 +27,7 @@ angles), and every Effort is an array of G values.
 from __future__ import annotations
 
 import math
+import operator
 from collections import deque
 from dataclasses import dataclass
 
@@ -46,79 +47,112 @@ class Efforts:
 
 
 class LabanEfforts:
-    """``update(t, p, v, a, j)`` per frame with arrays (n, dim) of positions and their derivatives.
+    """``update(t, p, v, a, j)`` per frame with arrays (n, dim) of positions and their derivatives
+    (``rows`` with the same as nested lists: what the node calls).
 
     The window's sums are kept running (added as a frame comes, taken off as it leaves, summed
     anew every ``RESUM`` frames so rounding cannot build up) and Weight's maximum in a
-    monotonic queue per group: a frame costs the same whatever the window holds."""
+    monotonic queue per group: a frame costs the same whatever the window holds. A group's
+    points are few (a hand; a chain's angles), so a frame is worked out in plain floats:
+    numpy's cost per call is more than the arithmetic."""
 
     RESUM = 512
 
-    def __init__(self, alpha: np.ndarray, window_s: float = 0.5, min_displacement: float = 1e-3,
+    def __init__(self, alpha: np.ndarray, window_s: float = 0.5, min_displacement: float | list[float] = 1e-3,
                  still: float = 0.05) -> None:
+        """``min_displacement``: Space's floor, one for every group or one per group."""
         if not window_s > 0:
             raise ValueError(f"Laban window ({window_s} s) must be more than 0")
         alpha = np.asarray(alpha, dtype=float)
         self._single = alpha.ndim == 1  # one group: floats out
         self.alpha = alpha[None, :] if self._single else alpha
-        self._mass = self.alpha.sum(axis=1)
+        # per group its points' (index, weight), those of weight 0 left out
+        self._terms = [[(i, w) for i, w in enumerate(row) if w != 0] for row in self.alpha.tolist()]
+        self._unit = self._terms == [[(g, 1.0)] for g in range(len(self._terms))]  # each group one point (the node's)
+        self._mass = self.alpha.sum(axis=1).tolist()
         self.window_s, self.min_displacement, self.still = window_s, min_displacement, still
-        groups = len(self.alpha)
-        # per frame: t, its step's (Δt, Δt·mean Σα‖a‖, Δt·mean Σα‖j‖, Δt·mean Σα‖v‖, path length) per group,
-        # positions
-        self._frames: deque[tuple[float, np.ndarray, np.ndarray]] = deque()
-        self._sums = np.zeros((5, groups))  # of the steps of every frame in the window
-        self._heaviest: list[deque[tuple[float, float]]] = [deque() for _ in range(groups)]  # (t, Σα‖v‖²) falling
-        self._norms = np.zeros((3, groups))  # the last frame's Σα‖a‖, Σα‖j‖, Σα‖v‖
+        self._floors = (list(min_displacement) if isinstance(min_displacement, list | tuple)
+                        else [min_displacement] * len(self._terms))
+        # per frame: t, its step (Δt, then per group Δt·mean Σα‖a‖, Δt·mean Σα‖j‖, Δt·mean Σα‖v‖,
+        # path length), positions
+        self._frames: deque[tuple[float, list[float], list[list[float]]]] = deque()
+        self._sums = [0.0] * (1 + 4 * len(self._terms))  # of the steps of every frame in the window
+        self._heaviest: list[deque[tuple[float, float]]] = [deque() for _ in self._terms]  # (t, Σα‖v‖²) falling
+        self._norms: list[float] = []  # the last frame's Σα‖a‖, Σα‖j‖, Σα‖v‖ per group
         self._count = 0
-
-    def _weighted(self, x: np.ndarray) -> np.ndarray:
-        return self.alpha @ np.sqrt(np.einsum("ij,ij->i", x, x))
 
     def update(self, t: float, p: np.ndarray, v: np.ndarray, a: np.ndarray, j: np.ndarray) -> Efforts:
         """The Efforts at frame ``t``."""
+        rows = self.rows(t, *(np.asarray(x, dtype=float).tolist() for x in (p, v, a, j)))
+        if self._single:
+            return Efforts(*rows[0])
+        return Efforts(*(np.array(column) for column in zip(*rows, strict=True)))
+
+    def rows(self, t: float, p: list[list[float]], v: list[list[float]], a: list[list[float]],
+             j: list[list[float]]) -> list[tuple[float, float, float, float, float]]:
+        """Per group (weight, time, flow, space, fluidity) at frame ``t``, from each point's
+        position and derivatives as lists of coordinates."""
         frames = self._frames
         if frames and not t > frames[-1][0]:
             frames.clear()
             for heaviest in self._heaviest:
                 heaviest.clear()
-            self._sums[:] = 0.0
-        p = np.array(p, dtype=float)
-        norms = np.stack([self._weighted(a), self._weighted(j), self._weighted(v)])
-        step = np.zeros_like(self._sums)
+            self._sums = [0.0] * len(self._sums)
+        hypot = math.hypot
+        speeds = [hypot(*x) for x in v]
+        if self._unit:
+            norms = [hypot(*x) for x in a] + [hypot(*x) for x in j] + speeds
+        else:
+            norms = (self._weighted([hypot(*x) for x in a]) + self._weighted([hypot(*x) for x in j])
+                     + self._weighted(speeds))
         if frames:
             last_t, _, last_p = frames[-1]
             dt = t - last_t
-            step[0] = dt
-            step[1:4] = dt * (norms + self._norms) / 2  # the step's mean (trapezoid)
-            step[4] = self._weighted(p - last_p) / self._mass
+            step = [dt] + [dt * (x + y) / 2 for x, y in zip(norms, self._norms, strict=True)]  # the step's mean
+            step += self._distances(p, last_p)
+        else:
+            step = [0.0] * len(self._sums)
         self._norms = norms
         frames.append((t, step, p))
-        self._sums += step
+        sums = [x + y for x, y in zip(self._sums, step, strict=True)]
         while t - frames[0][0] > self.window_s * (1 + 1e-9):
-            self._sums -= frames.popleft()[1]
-        first = frames[0][0]
-        weight = np.empty(len(self._heaviest))
-        for g, (heaviest, w) in enumerate(zip(self._heaviest, (self.alpha @ np.einsum("ij,ij->i", v, v)).tolist(),
-                                              strict=True)):
+            sums = [x - y for x, y in zip(sums, frames.popleft()[1], strict=True)]
+        self._count += 1
+        if self._count % self.RESUM == 0:
+            sums = [math.fsum(column) for column in zip(*(f[1] for f in frames), strict=True)]
+        self._sums = sums
+        first_t, first_step, first_p = frames[0]
+        span = sums[0] - first_step[0]  # (each step lies inside the window, the first frame's before it)
+        inside = [x - y for x, y in zip(sums, first_step, strict=True)]  # each step lies inside the window
+        groups, still = len(self._terms), self.still
+        out = []
+        for heaviest, w, d, floor, time_, flow, speed, path in zip(
+                self._heaviest, self._weighted([x * x for x in speeds]), self._distances(p, first_p), self._floors,
+                inside[1:1 + groups], inside[1 + groups:1 + 2 * groups], inside[1 + 2 * groups:1 + 3 * groups],
+                inside[1 + 3 * groups:], strict=True):
             while heaviest and heaviest[-1][1] <= w:
                 heaviest.pop()
             heaviest.append((t, w))
-            while heaviest[0][0] < first:
+            while heaviest[0][0] < first_t:
                 heaviest.popleft()
-            weight[g] = heaviest[0][1]
-        self._count += 1
-        if self._count % self.RESUM == 0:
-            self._sums = np.sum([f[1] for f in frames], axis=0)
-        span, acc, jerk, speed, path = self._sums - frames[0][1]  # each step lies inside the window
-        groups = len(weight)
-        if span[0] > 0:  # (the same Δt for every group)
-            time_, flow, speed = acc / span[0], jerk / span[0], speed / span[0]
-        else:
-            time_ = flow = speed = np.full(groups, np.nan)
-        d = self._weighted(p - frames[0][2]) / self._mass
-        space = np.divide(path, d, out=np.full(groups, np.nan), where=d > self.min_displacement)
-        fluidity = np.divide(speed, time_, out=np.full(groups, np.nan), where=(speed > self.still) & (time_ > 0))
-        if self._single:
-            return Efforts(float(weight[0]), float(time_[0]), float(flow[0]), float(space[0]), float(fluidity[0]))
-        return Efforts(weight, time_, flow, space, fluidity)
+            space = path / d if d > floor else math.nan
+            if span > 0:
+                time_, flow, speed = time_ / span, flow / span, speed / span
+                out.append((heaviest[0][1], time_, flow, space, speed / time_ if speed > still and time_ > 0
+                            else math.nan))
+            else:
+                out.append((heaviest[0][1], math.nan, math.nan, space, math.nan))
+        return out
+
+    def _weighted(self, values: list[float]) -> list[float]:
+        """Σ α_i x_i per group of the points' ``values``."""
+        if self._unit:
+            return values
+        return [sum(w * values[i] for i, w in terms) for terms in self._terms]
+
+    def _distances(self, p: list[list[float]], q: list[list[float]]) -> list[float]:
+        """Σ α_i ‖p_i − q_i‖ / Σ α_i per group."""
+        moved = [math.hypot(*map(operator.sub, pi, qi)) for pi, qi in zip(p, q, strict=True)]
+        if self._unit:
+            return moved
+        return [x / m for x, m in zip(self._weighted(moved), self._mass, strict=True)]

@@ -118,10 +118,7 @@ class Features(Adapter):
             for key, message in out.samples:
                 self._publisher(key).put(codec.encode(message))
         elif out.samples:
-            key = keys.derived_frame(frame.robot)
-            cut = len(key) + 1  # (each value's name is its key below <robot>/derived/)
-            self._publisher(key).put(codec.encode(messages.derived_frame(
-                frame.t, frame.seq, [k[cut:] for k, _ in out.samples], [m["v"] for _, m in out.samples])))
+            self._publisher(keys.derived_frame(frame.robot)).put(derived_frame(frame, out.samples))
         self.count("sent", len(out.samples))
         self.record_latency(time.time() - frame.t)
         for key, message in out.events:
@@ -172,3 +169,10 @@ class Features(Adapter):
 def whole(message: Incoming) -> Frame:
     """The frame of a message taken from ``<robot>/frame``: joint key → position."""
     return Frame(message.source.robot, message.seq, message.t, {s.source.key: s.values[0] for s in message.samples})
+
+
+def derived_frame(frame: Frame, samples: list[tuple[str, dict[str, Any]]]) -> bytes:
+    """The message on ``<robot>/derived`` carrying every derived value of ``frame``, encoded."""
+    cut = len(keys.derived_frame(frame.robot)) + 1  # (each value's name is its key below <robot>/derived/)
+    return codec.encode(messages.derived_frame(frame.t, frame.seq, [k[cut:] for k, _ in samples],
+                                               [m["v"] for _, m in samples]))

@@ -72,17 +72,17 @@ class SegmentRecorder:
         self.keep_s = 2 * min_duration_s + 0.2  # before an onset: enough to reach back to its crossing
         self.max_s = max_s                      # a motion longer than this keeps its last max_s
         self._times: list[float] = []
-        self._points: list[np.ndarray] = []
+        self._points: list[list[float]] = []  # (lists: a frame's copy costs less than an array's)
         self._moving = False
         self._start: float | None = None
         self._last_offset: float | None = None
 
-    def add(self, t: float, point: np.ndarray) -> None:
+    def add(self, t: float, point: np.ndarray | list[float]) -> None:
         if self._times and not t > self._times[-1]:
             self._times.clear()
             self._points.clear()
         self._times.append(t)
-        self._points.append(np.array(point, dtype=float))
+        self._points.append(point.tolist() if isinstance(point, np.ndarray) else list(map(float, point)))
         horizon = t - (self.max_s if self._moving else self.keep_s)
         if self._times[0] < horizon - 1.0:  # trim in batches, not every frame
             cut = int(np.searchsorted(self._times, horizon))
@@ -103,7 +103,7 @@ class SegmentRecorder:
             out["pause_s"] = start - self._last_offset
         self._last_offset = at
         if inside.sum() >= 2:
-            out.update(describe(times[inside], np.stack([p for p, i in zip(self._points, inside, strict=True) if i])))
+            out.update(describe(times[inside], np.array([p for p, i in zip(self._points, inside, strict=True) if i])))
         return {k: float(v) for k, v in out.items() if math.isfinite(v)}
 
 

@@ -21,6 +21,8 @@ which the tests compare them with.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 EPSILON = 1e-10  # PyEyesWeb's: a symmetry of two points at the origin is 1, not 0/0
@@ -32,14 +34,19 @@ def kinetic_energy(v: np.ndarray, alpha: np.ndarray | float = 1.0) -> np.ndarray
     return 0.5 * np.asarray(alpha) * np.einsum("ij,ij->i", v, v)
 
 
-def points_density(points: np.ndarray) -> float:
+def points_density(points: np.ndarray | list[list[float]]) -> float:
     """Mean distance of ``points`` (n, 3) from their barycentre (m)."""
-    return float(np.linalg.norm(points - points.mean(axis=0), axis=1).mean())
+    rows = points.tolist() if isinstance(points, np.ndarray) else points  # (a few points: floats beat numpy)
+    n = len(rows)
+    xs, ys, zs = zip(*rows, strict=True)
+    cx, cy, cz = sum(xs) / n, sum(ys) / n, sum(zs) / n
+    return sum(math.hypot(x - cx, y - cy, z - cz) for x, y, z in rows) / n
 
 
-def symmetry(left: np.ndarray, right: np.ndarray, lateral: int = LATERAL) -> float:
+def symmetry(left: np.ndarray | list[float], right: np.ndarray | list[float], lateral: int = LATERAL) -> float:
     """Left/right symmetry of two points given relative to a point of the sagittal plane, in [0, 1]."""
-    mirrored = np.array(right, dtype=float)
+    left, right = (x.tolist() if isinstance(x, np.ndarray) else x for x in (left, right))
+    mirrored = list(right)
     mirrored[lateral] = -mirrored[lateral]
-    error = np.linalg.norm(left - mirrored) / (np.linalg.norm(left) + np.linalg.norm(right) + EPSILON)
-    return float(max(0.0, 1.0 - error))
+    error = math.dist(left, mirrored) / (math.hypot(*left) + math.hypot(*right) + EPSILON)
+    return max(0.0, 1.0 - error)

@@ -52,7 +52,7 @@ def test_kinetic_energy_points_density_and_symmetry_equal_pyeyesweb():
     features = robot_features()
     arms = features.robot.arms
     index = features.robot.arm_joints
-    elbow = features._expressive._elbow
+    elbow = features._expressive.elbow
     assert elbow is not None
     checked = 0
     for k in range(60):
@@ -69,7 +69,7 @@ def test_kinetic_energy_points_density_and_symmetry_equal_pyeyesweb():
         assert got["symmetry/arms"] == pytest.approx(sym, rel=1e-12)
         assert got["hand_distance/arms"] == pytest.approx(np.linalg.norm(hands[0] - hands[1]), rel=1e-12)
         if "kinetic_energy/L" in got:  # from the fit's velocity, as its Laban Weight is
-            v = features._expressive._fit.velocity
+            v = features._expressive.hand_velocity
             energy = KineticEnergy().compute(v).joints
             assert got["kinetic_energy/L"] == pytest.approx(energy["0"]["total"], rel=1e-12)
             assert got["kinetic_energy/R"] == pytest.approx(energy["1"]["total"], rel=1e-12)
