@@ -43,7 +43,7 @@ from typing import TYPE_CHECKING, Any
 
 from aiohttp import WSMessage, WSMsgType, web
 
-from sonibus.bus.web import WebClient, WebServer, close_clients
+from sonibus.bus.web import CLIENT_BACKLOG, CLIENT_BACKLOG_BYTES, WebClient, WebServer, close_clients
 
 from . import wire
 
@@ -57,6 +57,7 @@ MAX_OUTBOX = 8192           # messages waiting for the server's loop; past it a 
 HEARTBEAT_S = 10.0          # a ping this often; a client that does not answer within half of it is dropped
 HISTORY = 256               # messages an event channel keeps for a subscription taken a moment after advertising
 HISTORY_BYTES = 16 << 20    # bytes of JSON all event channels keep together (past it: the latest only)
+WRITE_BYTES = 64 << 10      # bytes of a client's messages written in one go (then its socket's room is checked)
 
 
 @dataclass
@@ -70,14 +71,61 @@ class _Channel:
 
 
 class _Client(WebClient):
-    """A client and its subscriptions (subscription id → channel id)."""
+    """A client and its subscriptions (subscription id → channel id). What it is due waits in
+    its backlog as WebSocket frames in parts (a message's parts are shared by every client:
+    only its 4-byte subscription id is the client's own), bounded as ``WebClient``'s; the
+    sender writes all that waits in one transport write (up to ``WRITE_BYTES``), not one
+    ``send`` per message, and waits for the client to take it when its socket is full."""
 
-    def __init__(self, ws: web.WebSocketResponse, on_drop: Callable[[], None], transport: Any) -> None:
-        super().__init__(ws, on_drop, transport)
+    def __init__(self, ws: web.WebSocketResponse, on_drop: Callable[[], None], request: web.Request,
+                 on_write: Callable[[], None]) -> None:
+        super().__init__(ws, on_drop, request.transport)
+        self.on_write = on_write
+        self.protocol = request.protocol  # (its flow control: paused while the socket's buffer is full)
         self.subscriptions: dict[int, int] = {}
         self.advertised: set[int] = set()  # channel ids told to it (an advertisement never goes twice)
         self.since: dict[int, int] = {}    # channel id → the number of its first message since it was told of it
                                            # (until its first subscription; on the loop)
+        self.backlog: deque[tuple[int, tuple[bytes, ...]]] = deque()  # type: ignore[assignment]  # (size, parts)
+
+    def push(self, message: str | bytes, kept: bool = False) -> None:
+        """A text (``str``) or binary message, framed; ``kept`` is not served here (the hub
+        replies with statuses, which may be dropped like the rest)."""
+        data = message.encode() if isinstance(message, str) else message
+        self.put((wire.frame_header(wire.TEXT if isinstance(message, str) else wire.BINARY, len(data)), data))
+
+    def put(self, parts: tuple[bytes, ...]) -> None:
+        """A WebSocket frame, as parts to be joined (parts shared with other clients are not copied)."""
+        size = sum(map(len, parts))
+        self.backlog.append((size, parts))
+        self.size += size
+        while len(self.backlog) > CLIENT_BACKLOG or (self.size > CLIENT_BACKLOG_BYTES and len(self.backlog) > 1):
+            self.size -= self.backlog.popleft()[0]
+            self.on_drop()
+        self.waiting.set()
+
+    async def send_all(self) -> None:
+        backlog, transport = self.backlog, self.transport
+        while not self.ws.closed:
+            await self.waiting.wait()
+            self.waiting.clear()
+            while backlog and not self.ws.closed:
+                size, parts = backlog.popleft()
+                batch = list(parts)
+                while backlog and size < WRITE_BYTES:
+                    more, parts = backlog.popleft()
+                    batch.extend(parts)
+                    size += more
+                self.size -= size
+                if transport is None or transport.is_closing():
+                    return  # the client went away; its handler ends the connection
+                transport.write(b"".join(batch))  # (whole frames: aiohttp's own, a ping, go between them)
+                self.on_write()
+                if self.protocol.writing_paused:
+                    try:
+                        await self.protocol._drain_helper()  # (as aiohttp's own writer waits)
+                    except ConnectionError:
+                        return
 
 
 class Hub:
@@ -192,8 +240,9 @@ class Hub:
             raise web.HTTPBadRequest(text=f"400: offer the WebSocket subprotocol {' or '.join(wire.SUBPROTOCOLS)} "
                                           "(Foxglove's WebSocket protocol)\n")
         async with self.web.accept(request, protocols=wire.SUBPROTOCOLS, max_msg_size=MAX_WS_MESSAGE,
-                                   heartbeat=HEARTBEAT_S) as ws:
-            client = _Client(ws, lambda: self.adapter.count("dropped_for_clients"), request.transport)
+                                   heartbeat=HEARTBEAT_S, compress=False) as ws:  # (frames written as they are)
+            client = _Client(ws, lambda: self.adapter.count("dropped_for_clients"), request,
+                             lambda: self.adapter.count("writes"))
             client.push(json.dumps(wire.server_info(self.name, self.session, self.metadata)))
             with self._lock:
                 known = [c.described for c in self._channels.values()]
@@ -231,8 +280,9 @@ class Hub:
                 client.push(json.dumps(wire.unadvertise(told)))
 
     def _send(self, subscribers: list[tuple[_Client, int]], payload: bytes, log_time_ns: int) -> None:
+        head, tail = wire.data_frame(log_time_ns, payload)  # (once for every client)
         for client, subscription in subscribers:
-            client.push(wire.message_data(subscription, log_time_ns, payload))
+            client.put((head, wire.subscription(subscription), tail))
 
     def _receive(self, client: _Client, message: WSMessage) -> None:
         if message.type == WSMsgType.BINARY:

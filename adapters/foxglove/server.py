@@ -77,9 +77,9 @@ class FoxgloveServer(Adapter):
     """Robots live in Foxglove: joints, frames, arm transforms and events as logs, over its WebSocket protocol."""
 
     Config = FoxgloveConfig
-    # sent: messages to clients (one per subscriber); clients: connections so far; dropped_for_clients: lost by a
-    # client that does not read
-    counters = ("sent", "clients", "dropped_for_clients")
+    # sent: messages to clients (one per subscriber); writes: transport writes that sent them (several messages
+    # each); clients: connections so far; dropped_for_clients: lost by a client that does not read
+    counters = ("sent", "writes", "clients", "dropped_for_clients")
 
     def __init__(self, config: FoxgloveConfig | None = None, *, name: str = "") -> None:
         super().__init__(config, name=name)
