@@ -31,7 +31,7 @@ from sonibus.bus.web import WebServer
 
 from . import mdns
 from .config import OscQueryConfig
-from .live import Live
+from .live import Live, span_of, values_of
 from .server import QueryServer
 
 __all__ = ["OscQuery", "OscQueryConfig"]
@@ -58,7 +58,7 @@ class OscQuery(Adapter):
 
     def _start(self) -> None:
         cfg: OscQueryConfig = self.config
-        self.live = Live(normalized=cfg.values == "normalized")
+        self.live = Live(normalized=cfg.values == "normalized", on_unfit=self._unfit)
         self.web = WebServer(self, cfg.host, cfg.port, key="listen", limits=cfg.limits, browsers=True)
         self.server = QueryServer(self, self.web, self.live, self._host_info())
         self._present: set[str] = set()
@@ -162,17 +162,24 @@ class OscQuery(Adapter):
             self._serve(message)
 
     def _serve(self, message: Incoming) -> None:
+        """An event at once; a frame kept as it came (``Live.keep``), the values of it that
+        clients LISTEN to served at once, the rest taken apart only when asked for; another
+        message (a single key's value) at once."""
         out: list[tuple[str, bytes]] = []
         if message.event is not None:
             self._event(message.source.robot, message.source.name, message.event, out)
+        elif message.selected is not None or message.parts is not None:
+            self.live.keep(message)
+            if self.server.listened:  # (else nothing more to do for this frame)
+                listened = self.server.listened
+                for source, values in values_of(message):
+                    if (path := "/" + source.key) in listened:
+                        self._value(path, values, span_of(source), out)
         else:
-            for sample in message.joints:
-                source = sample.source
-                span = source.name if source.section == "joints" else f"{source.feature}/{source.name}"
-                self._value(f"/{source.key}", sample.values, span, out)
-            if out:
-                self.record_latency(time.time() - message.t)
+            self._value(f"/{message.source.key}", message.values, span_of(message.source), out)
         if out:
+            if message.event is None:
+                self.record_latency(time.time() - message.t)
             self.server.send_osc(out)
 
     def _event(self, robot: str, kind: str, event: dict[str, Any], out: list[tuple[str, bytes]]) -> None:
