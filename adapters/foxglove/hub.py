@@ -145,6 +145,7 @@ class Hub:
         self._history_bytes = 0  # what every event channel's history holds (under _lock)
         self._lock = Lock()  # channels, latest messages, subscribers: the adapter's thread and the loop
         self._outbox: list[tuple[Callable[..., None], tuple[Any, ...]]] = []  # for the loop, in order (under _lock)
+        self._waiting = 0  # messages in the outbox's batches (under _lock)
         web_server.app.router.add_get("/{path:.*}", self._websocket)  # (a client may name any path)
         web_server.app.on_shutdown.append(lambda app: close_clients(list(self._clients)))
 
@@ -163,33 +164,59 @@ class Hub:
         ``history``: a channel of events, whose messages since a client was told of it reach
         its subscription (see the module's docstring). From any thread; what ``to_json``
         raises (not strict JSON) reaches the caller."""
-        payload = self.to_json(message) if history else None  # (events: a few a second)
-        with self._lock:
-            channel = self._channels.get(topic)
-            if channel is None:
-                if len(self._channels) >= MAX_CHANNELS:
-                    return False
-                self._last_id += 1
-                channel = _Channel(describe(self._last_id), history=deque() if history else None)
-                self._channels[topic] = self._by_id[channel.described.id] = channel
-                self._later(self._advertise, channel.described)
-            channel.latest = (message, log_time_ns)
-            channel.logged += 1
-            if payload is not None and channel.history is not None:
-                self._keep(channel, (channel.logged, log_time_ns, payload))
-            subscribers = list(channel.subscribers.items())
-        if subscribers:
-            if payload is None:
-                payload = self.to_json(message)
-            with self._lock:
-                waiting = len(self._outbox)
-                if waiting < MAX_OUTBOX:
-                    self._later(self._send, subscribers, payload, log_time_ns)
-            if waiting >= MAX_OUTBOX:
-                self.adapter.count("dropped_for_clients", len(subscribers))
-            else:
-                self.adapter.count("sent", len(subscribers))
+        for _, problem in self.log_all([(topic, message, history)], log_time_ns, lambda id_, _: describe(id_)):
+            if isinstance(problem, Exception):
+                raise problem
+            return False
         return True
+
+    def log_all(self, items: list[tuple[str, Any, bool]], log_time_ns: int,
+                describe: Callable[[int, str], wire.Channel]) -> list[tuple[str, Exception | None]]:
+        """Each ``(topic, message, history)`` as ``log`` logs it, in order, all at ``log_time_ns``
+        (what one message from the bus gives: a frame's joints, its views), with one hold of
+        the lock and one batch for the server's loop (issue 35: what was paid per message,
+        once). What could not be logged, with why: ``(topic, None)`` for a channel that cannot
+        be made (``MAX_CHANNELS``), ``(topic, exception)`` for what ``to_json`` raised."""
+        problems: list[tuple[str, Exception | None]] = []
+        kept: list[tuple[str, Any, bool, bytes | None]] = []
+        for topic, message, history in items:
+            try:  # (events: a few a second)
+                kept.append((topic, message, history, self.to_json(message) if history else None))
+            except (ValueError, TypeError) as exc:
+                problems.append((topic, exc))
+        due: list[tuple[list[tuple[_Client, int]], str, Any, bytes | None]] = []
+        with self._lock:
+            for topic, message, history, payload in kept:
+                channel = self._channels.get(topic)
+                if channel is None:
+                    if len(self._channels) >= MAX_CHANNELS:
+                        problems.append((topic, None))
+                        continue
+                    self._last_id += 1
+                    channel = _Channel(describe(self._last_id, topic), history=deque() if history else None)
+                    self._channels[topic] = self._by_id[channel.described.id] = channel
+                    self._later(self._advertise, channel.described)
+                channel.latest = (message, log_time_ns)
+                channel.logged += 1
+                if payload is not None and channel.history is not None:
+                    self._keep(channel, (channel.logged, log_time_ns, payload))
+                if channel.subscribers:
+                    due.append((list(channel.subscribers.items()), topic, message, payload))
+        sends: list[tuple[list[tuple[_Client, int]], bytes]] = []
+        for subscribers, topic, message, payload in due:
+            try:
+                sends.append((subscribers, self.to_json(message) if payload is None else payload))
+            except (ValueError, TypeError) as exc:
+                problems.append((topic, exc))
+        if sends:
+            count = sum(len(subscribers) for subscribers, _ in sends)
+            with self._lock:
+                room = self._waiting + len(sends) <= MAX_OUTBOX
+                if room:
+                    self._waiting += len(sends)
+                    self._later(self._send, sends, log_time_ns)
+            self.adapter.count("sent" if room else "dropped_for_clients", count)
+        return problems
 
     def _keep(self, channel: _Channel, entry: tuple[int, int, bytes]) -> None:
         """``entry`` in ``channel``'s history, within ``HISTORY`` and ``HISTORY_BYTES`` (under ``_lock``)."""
@@ -223,10 +250,11 @@ class Hub:
         self._outbox.append((function, args))
         if len(self._outbox) == 1 and not self.web.call(self._flush):
             self._outbox.clear()  # (the server is not running: nobody to tell)
+            self._waiting = 0
 
     def _flush(self) -> None:
         with self._lock:
-            outbox, self._outbox = self._outbox, []
+            outbox, self._outbox, self._waiting = self._outbox, [], 0
         for function, args in outbox:
             function(*args)
 
@@ -279,10 +307,11 @@ class Hub:
                     client.since.pop(channel_id, None)
                 client.push(json.dumps(wire.unadvertise(told)))
 
-    def _send(self, subscribers: list[tuple[_Client, int]], payload: bytes, log_time_ns: int) -> None:
-        head, tail = wire.data_frame(log_time_ns, payload)  # (once for every client)
-        for client, subscription in subscribers:
-            client.put((head, wire.subscription(subscription), tail))
+    def _send(self, sends: list[tuple[list[tuple[_Client, int]], bytes]], log_time_ns: int) -> None:
+        for subscribers, payload in sends:
+            head, tail = wire.data_frame(log_time_ns, payload)  # (once for every client)
+            for client, subscription in subscribers:
+                client.put((head, wire.subscription(subscription), tail))
 
     def _receive(self, client: _Client, message: WSMessage) -> None:
         if message.type == WSMsgType.BINARY:

@@ -176,19 +176,22 @@ class FoxgloveServer(Adapter):
             self._infos[key] = incoming.message
         elif robot not in self._info_seen:
             self._info.ask(robot)
-        for channel_key, message in [*samples_of(incoming), *self._views.of(incoming)]:
-            self._log(channel_key, message)
+        self._log_all([*samples_of(incoming), *self._views.of(incoming)])
 
     def _log(self, key: str, message: dict[str, Any]) -> None:
         """``message`` on the channel of ``key`` (advertised now if new), to the clients subscribed."""
-        try:
-            made = self.hub.log(key, message, time.time_ns(), lambda id_: _describe(id_, key), history=_events(key))
-        except (ValueError, TypeError) as exc:  # (past the gate: rare) not strict JSON
-            self.count("bad")
-            self.warn("unsendable", f"message on '{key}' not sent: {exc}")
-            return
-        if not made:
-            self.warn("channels", f"'{key}' not served: {MAX_CHANNELS} channels already")
+        self._log_all([(key, message)])
+
+    def _log_all(self, messages: list[tuple[str, dict[str, Any]]]) -> None:
+        """Each ``(key, message)`` on its channel, in one go (``Hub.log_all``)."""
+        problems = self.hub.log_all([(key, message, _events(key)) for key, message in messages], time.time_ns(),
+                                    _describe)
+        for key, exc in problems:
+            if exc is None:
+                self.warn("channels", f"'{key}' not served: {MAX_CHANNELS} channels already")
+            else:  # (past the gate: rare) not strict JSON
+                self.count("bad")
+                self.warn("unsendable", f"message on '{key}' not sent: {exc}")
 
 
 def _events(key: str) -> bool:
