@@ -113,7 +113,6 @@ def recorder_floor(endpoint: str, folder: str, ready: Any, done: Any) -> None:
     import queue
 
     import msgpack
-    import zenoh
     from mcap.writer import CompressionType, Writer
 
     waiting: queue.SimpleQueue[tuple[str, bytes, int] | None] = queue.SimpleQueue()
@@ -139,27 +138,27 @@ def recorder_floor(endpoint: str, folder: str, ready: Any, done: Any) -> None:
 
     thread = threading.Thread(target=write)
     thread.start()
-    session = zenoh.open(zenoh_config(listen=endpoint))
-    subscriber = session.declare_subscriber(
-        "*/frame", lambda sample: waiting.put((str(sample.key_expr), sample.payload.to_bytes(), time.time_ns())))
-    ready.set()
-    done.wait()
-    subscriber.undeclare()
-    session.close()
+    subscribed(endpoint, lambda sample: waiting.put((str(sample.key_expr), sample.payload.to_bytes(), time.time_ns())),
+               ready, done)
     waiting.put(None)
     thread.join()
 
 
 def oscquery_floor(endpoint: str, ready: Any, done: Any) -> None:
     """Each frame's payload kept as the latest of its key."""
-    import zenoh
     latest: dict[str, bytes] = {}
 
     def keep(sample: Any) -> None:
         latest[str(sample.key_expr)] = sample.payload.to_bytes()
 
+    subscribed(endpoint, keep, ready, done)
+
+
+def subscribed(endpoint: str, each: Any, ready: Any, done: Any) -> None:
+    """``each(sample)`` for every frame, on a session listening on ``endpoint``, until ``done``."""
+    import zenoh
     session = zenoh.open(zenoh_config(listen=endpoint))
-    subscriber = session.declare_subscriber("*/frame", keep)
+    subscriber = session.declare_subscriber("*/frame", each)
     ready.set()
     done.wait()
     subscriber.undeclare()
