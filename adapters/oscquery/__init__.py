@@ -71,7 +71,12 @@ class OscQuery(Adapter):
         self.address = f"OSCQuery on {self.url} (WebSocket on the same port)"
         log.info("%s: %s", self.name, self.address)
         self._queue = self.own(SampleQueue(cfg.queue))
-        self._streams = Streams(self.bus, SUBSCRIBE, self._queue)
+        # Frames are taken where they arrive (a thread hand-off less, as the OSC sink's), the rest from the
+        # queue by the forward worker; one lock between them guards what they share (pacing, the namespace's
+        # values, what goes to the clients in order).
+        self._state = threading.Lock()
+        self._streams: Streams | None = None  # (a frame that arrives while Streams subscribes: queued)
+        self._streams = Streams(self.bus, SUBSCRIBE, self._queue, direct=self._direct)
         self.spawn(self._forward, "forward")  # before anything else is declared: nothing waits in the queue
         self.own(self._streams)
         self.own(watch_robots(self.bus, self._robot_changed, self.capped))
@@ -158,7 +163,27 @@ class OscQuery(Adapter):
     # -- values ------------------------------------------------------------------------
 
     def _forward(self) -> None:
-        for message in self._streams.each(self.stopping, self.count, self.warn):
+        while not self.stopping.is_set():
+            item = self._queue.get(timeout=0.2)
+            if item is not None:
+                with self._state:
+                    self._take(*item)
+
+    def _direct(self, key: str, payload: Any) -> bool:
+        """A frame, on its subscription's callback thread (``Streams``' ``direct``); into the
+        queue instead (False) while the forward worker holds the state: Zenoh's callback
+        threads serve the whole session and must never wait on a node."""
+        if self._streams is None or not self._state.acquire(blocking=False):
+            return False
+        try:
+            self._take(key, payload)
+        finally:
+            self._state.release()
+        return True
+
+    def _take(self, key: str, payload: Any) -> None:  # (holding _state)
+        message = self._streams.take(key, payload, self.count, self.warn)  # checked by the gate, paced
+        if message is not None:
             self._serve(message)
 
     def _serve(self, message: Incoming) -> None:
