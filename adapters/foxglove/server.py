@@ -23,6 +23,7 @@ first failed ``accept`` (EMFILE), and has no limits, timeouts or ``Origin`` chec
 from __future__ import annotations
 
 import logging
+import threading
 import time
 from collections import deque
 from dataclasses import dataclass, field
@@ -96,7 +97,12 @@ class FoxgloveServer(Adapter):
         self._robots: set[str] = set()  # robots served: their messages pass, and their state is kept
         self._info = InfoRequests(self.bus, self._take_info, lambda robot, text: self.warn("info", text))
         self._views = Views(self.bus, self._take_derived_info)
-        self._streams = Streams(self.bus, cfg.subscribe, self._queue, per_joint_keys=cfg.per_joint_keys)
+        # Frames are taken where they arrive (a thread hand-off less, as the OSC sink's), the rest from the
+        # queue by the serve worker; one lock between them guards the node's state and the order of its messages.
+        self._state = threading.Lock()
+        self._streams: Streams | None = None  # (a frame that arrives while Streams subscribes: queued)
+        self._streams = Streams(self.bus, cfg.subscribe, self._queue, per_joint_keys=cfg.per_joint_keys,
+                                direct=self._direct)
         self._comings: deque[tuple[str, bool]] = deque(maxlen=4096)  # robots come or gone (a Zenoh thread)
         self._gone: dict[str, None] = {}  # robots gone and not back: what of them is still in flight is dropped
         self.own(watch_robots(self.bus, lambda robot, alive: self._comings.append((robot, alive)), self.capped))
@@ -125,15 +131,35 @@ class FoxgloveServer(Adapter):
     def _serve(self) -> None:
         again = time.monotonic() + self.config.info_every_s
         while not self.stopping.is_set():
-            while self._comings:  # (before the messages: those of a robot gone are dropped, not advertised again)
-                self._robot_changed(*self._comings.popleft())
-            for key, payload in self._queue.drain(timeout=0.2):
-                if key.partition("/")[0] not in self._gone:
-                    self._take(key, payload)
-            if time.monotonic() >= again:
-                again = time.monotonic() + self.config.info_every_s
-                for key, message in list(self._infos.items()):
-                    self._log(key, message)
+            items = self._queue.drain(timeout=0.2)
+            with self._state:
+                self._changes()
+                for key, payload in items:
+                    if key.partition("/")[0] not in self._gone:
+                        self._take(key, payload)
+                if time.monotonic() >= again:
+                    again = time.monotonic() + self.config.info_every_s
+                    for key, message in list(self._infos.items()):
+                        self._log(key, message)
+
+    def _direct(self, key: str, payload: Any) -> bool:
+        """A frame, on its subscription's callback thread (``Streams``' ``direct``); into the
+        queue instead (False) while the serve worker holds the state: Zenoh's callback
+        threads serve the whole session and must never wait on a node."""
+        if self._streams is None or not self._state.acquire(blocking=False):
+            return False
+        try:
+            self._changes()
+            if key.partition("/")[0] not in self._gone:
+                self._take(key, payload)
+        finally:
+            self._state.release()
+        return True
+
+    def _changes(self) -> None:  # (holding _state)
+        """Robots come or gone, before any message: those of a robot gone are dropped, not advertised again."""
+        while self._comings:
+            self._robot_changed(*self._comings.popleft())
 
     def _robot_changed(self, robot: str, alive: bool) -> None:
         """A robot gone: its channels unadvertised, what was kept of it forgotten (its info is asked
