@@ -44,6 +44,7 @@ from pathlib import Path
 from typing import Any
 
 import aiohttp
+import node_floors
 from common import free_port, write, zenoh_config
 from floor import CONTEXT, Case, cpu_ns, floor_sink, publish
 from midi_rate import start_jack
@@ -316,7 +317,7 @@ def main() -> None:
         jack = start_jack(folder / "jackd.log")
         try:
             for index in range(args.rounds):
-                got = {"floors": measure_floors(args.seconds)}
+                got = {"floors": {**measure_floors(args.seconds), **node_floors.measure(args.seconds, WARMUP_S)}}
                 for split in ((True, False) if index % 2 == 0 else (False, True)):
                     got["split" if split else "one"] = measure_show(folder, args.seconds, split)
                 rounds.append(got)
@@ -339,6 +340,8 @@ def main() -> None:
     for node, cpu in med["split"].items():
         base = floors["publisher"] if node == "sim" else floors["osc sink"] if node == "osc" else receive
         label = "publisher" if node == "sim" else "minimal OSC sink" if node == "osc" else "empty subscriber"
+        if node in node_floors.NODES:  # (their own: bench/node_floors.py)
+            base, label = floors[node], f"{node} floor"
         summary.append({"scenario": f"(show) {node} node, own process: CPU", "sonibus": f"{cpu:.1f} %",
                         "baseline": f"{base:.1f} % ({label})", "ratio": f"{cpu / base:.1f}×"})
     write(args.name, {"machine": machine, "tree": tree, "rate_hz": RATE_HZ, "seconds": args.seconds,

@@ -43,7 +43,7 @@ from typing import TYPE_CHECKING, Any
 
 from aiohttp import WSMessage, WSMsgType, web
 
-from sonibus.bus.web import WebClient, WebServer, close_clients
+from sonibus.bus.web import CLIENT_BACKLOG, CLIENT_BACKLOG_BYTES, WebClient, WebServer, close_clients
 
 from . import wire
 
@@ -57,6 +57,7 @@ MAX_OUTBOX = 8192           # messages waiting for the server's loop; past it a 
 HEARTBEAT_S = 10.0          # a ping this often; a client that does not answer within half of it is dropped
 HISTORY = 256               # messages an event channel keeps for a subscription taken a moment after advertising
 HISTORY_BYTES = 16 << 20    # bytes of JSON all event channels keep together (past it: the latest only)
+WRITE_BYTES = 64 << 10      # bytes of a client's messages written in one go (then its socket's room is checked)
 
 
 @dataclass
@@ -70,14 +71,61 @@ class _Channel:
 
 
 class _Client(WebClient):
-    """A client and its subscriptions (subscription id → channel id)."""
+    """A client and its subscriptions (subscription id → channel id). What it is due waits in
+    its backlog as WebSocket frames in parts (a message's parts are shared by every client:
+    only its 4-byte subscription id is the client's own), bounded as ``WebClient``'s; the
+    sender writes all that waits in one transport write (up to ``WRITE_BYTES``), not one
+    ``send`` per message, and waits for the client to take it when its socket is full."""
 
-    def __init__(self, ws: web.WebSocketResponse, on_drop: Callable[[], None], transport: Any) -> None:
-        super().__init__(ws, on_drop, transport)
+    def __init__(self, ws: web.WebSocketResponse, on_drop: Callable[[], None], request: web.Request,
+                 on_write: Callable[[], None]) -> None:
+        super().__init__(ws, on_drop, request.transport)
+        self.on_write = on_write
+        self.protocol = request.protocol  # (its flow control: paused while the socket's buffer is full)
         self.subscriptions: dict[int, int] = {}
         self.advertised: set[int] = set()  # channel ids told to it (an advertisement never goes twice)
         self.since: dict[int, int] = {}    # channel id → the number of its first message since it was told of it
                                            # (until its first subscription; on the loop)
+        self.backlog: deque[tuple[int, tuple[bytes, ...]]] = deque()  # type: ignore[assignment]  # (size, parts)
+
+    def push(self, message: str | bytes, kept: bool = False) -> None:
+        """A text (``str``) or binary message, framed; ``kept`` is not served here (the hub
+        replies with statuses, which may be dropped like the rest)."""
+        data = message.encode() if isinstance(message, str) else message
+        self.put((wire.frame_header(wire.TEXT if isinstance(message, str) else wire.BINARY, len(data)), data))
+
+    def put(self, parts: tuple[bytes, ...]) -> None:
+        """A WebSocket frame, as parts to be joined (parts shared with other clients are not copied)."""
+        size = sum(map(len, parts))
+        self.backlog.append((size, parts))
+        self.size += size
+        while len(self.backlog) > CLIENT_BACKLOG or (self.size > CLIENT_BACKLOG_BYTES and len(self.backlog) > 1):
+            self.size -= self.backlog.popleft()[0]
+            self.on_drop()
+        self.waiting.set()
+
+    async def send_all(self) -> None:
+        backlog, transport = self.backlog, self.transport
+        while not self.ws.closed:
+            await self.waiting.wait()
+            self.waiting.clear()
+            while backlog and not self.ws.closed:
+                size, parts = backlog.popleft()
+                batch = list(parts)
+                while backlog and size < WRITE_BYTES:
+                    more, parts = backlog.popleft()
+                    batch.extend(parts)
+                    size += more
+                self.size -= size
+                if transport is None or transport.is_closing():
+                    return  # the client went away; its handler ends the connection
+                transport.write(b"".join(batch))  # (whole frames: aiohttp's own, a ping, go between them)
+                self.on_write()
+                if self.protocol.writing_paused:
+                    try:
+                        await self.protocol._drain_helper()  # (as aiohttp's own writer waits)
+                    except ConnectionError:
+                        return
 
 
 class Hub:
@@ -97,6 +145,7 @@ class Hub:
         self._history_bytes = 0  # what every event channel's history holds (under _lock)
         self._lock = Lock()  # channels, latest messages, subscribers: the adapter's thread and the loop
         self._outbox: list[tuple[Callable[..., None], tuple[Any, ...]]] = []  # for the loop, in order (under _lock)
+        self._waiting = 0  # messages in the outbox's batches (under _lock)
         web_server.app.router.add_get("/{path:.*}", self._websocket)  # (a client may name any path)
         web_server.app.on_shutdown.append(lambda app: close_clients(list(self._clients)))
 
@@ -115,33 +164,59 @@ class Hub:
         ``history``: a channel of events, whose messages since a client was told of it reach
         its subscription (see the module's docstring). From any thread; what ``to_json``
         raises (not strict JSON) reaches the caller."""
-        payload = self.to_json(message) if history else None  # (events: a few a second)
-        with self._lock:
-            channel = self._channels.get(topic)
-            if channel is None:
-                if len(self._channels) >= MAX_CHANNELS:
-                    return False
-                self._last_id += 1
-                channel = _Channel(describe(self._last_id), history=deque() if history else None)
-                self._channels[topic] = self._by_id[channel.described.id] = channel
-                self._later(self._advertise, channel.described)
-            channel.latest = (message, log_time_ns)
-            channel.logged += 1
-            if payload is not None and channel.history is not None:
-                self._keep(channel, (channel.logged, log_time_ns, payload))
-            subscribers = list(channel.subscribers.items())
-        if subscribers:
-            if payload is None:
-                payload = self.to_json(message)
-            with self._lock:
-                waiting = len(self._outbox)
-                if waiting < MAX_OUTBOX:
-                    self._later(self._send, subscribers, payload, log_time_ns)
-            if waiting >= MAX_OUTBOX:
-                self.adapter.count("dropped_for_clients", len(subscribers))
-            else:
-                self.adapter.count("sent", len(subscribers))
+        for _, problem in self.log_all([(topic, message, history)], log_time_ns, lambda id_, _: describe(id_)):
+            if isinstance(problem, Exception):
+                raise problem
+            return False
         return True
+
+    def log_all(self, items: list[tuple[str, Any, bool]], log_time_ns: int,
+                describe: Callable[[int, str], wire.Channel]) -> list[tuple[str, Exception | None]]:
+        """Each ``(topic, message, history)`` as ``log`` logs it, in order, all at ``log_time_ns``
+        (what one message from the bus gives: a frame's joints, its views), with one hold of
+        the lock and one batch for the server's loop (issue 35: what was paid per message,
+        once). What could not be logged, with why: ``(topic, None)`` for a channel that cannot
+        be made (``MAX_CHANNELS``), ``(topic, exception)`` for what ``to_json`` raised."""
+        problems: list[tuple[str, Exception | None]] = []
+        kept: list[tuple[str, Any, bool, bytes | None]] = []
+        for topic, message, history in items:
+            try:  # (events: a few a second)
+                kept.append((topic, message, history, self.to_json(message) if history else None))
+            except (ValueError, TypeError) as exc:
+                problems.append((topic, exc))
+        due: list[tuple[list[tuple[_Client, int]], str, Any, bytes | None]] = []
+        with self._lock:
+            for topic, message, history, payload in kept:
+                channel = self._channels.get(topic)
+                if channel is None:
+                    if len(self._channels) >= MAX_CHANNELS:
+                        problems.append((topic, None))
+                        continue
+                    self._last_id += 1
+                    channel = _Channel(describe(self._last_id, topic), history=deque() if history else None)
+                    self._channels[topic] = self._by_id[channel.described.id] = channel
+                    self._later(self._advertise, channel.described)
+                channel.latest = (message, log_time_ns)
+                channel.logged += 1
+                if payload is not None and channel.history is not None:
+                    self._keep(channel, (channel.logged, log_time_ns, payload))
+                if channel.subscribers:
+                    due.append((list(channel.subscribers.items()), topic, message, payload))
+        sends: list[tuple[list[tuple[_Client, int]], bytes]] = []
+        for subscribers, topic, message, payload in due:
+            try:
+                sends.append((subscribers, self.to_json(message) if payload is None else payload))
+            except (ValueError, TypeError) as exc:
+                problems.append((topic, exc))
+        if sends:
+            count = sum(len(subscribers) for subscribers, _ in sends)
+            with self._lock:
+                room = self._waiting + len(sends) <= MAX_OUTBOX
+                if room:
+                    self._waiting += len(sends)
+                    self._later(self._send, sends, log_time_ns)
+            self.adapter.count("sent" if room else "dropped_for_clients", count)
+        return problems
 
     def _keep(self, channel: _Channel, entry: tuple[int, int, bytes]) -> None:
         """``entry`` in ``channel``'s history, within ``HISTORY`` and ``HISTORY_BYTES`` (under ``_lock``)."""
@@ -175,10 +250,11 @@ class Hub:
         self._outbox.append((function, args))
         if len(self._outbox) == 1 and not self.web.call(self._flush):
             self._outbox.clear()  # (the server is not running: nobody to tell)
+            self._waiting = 0
 
     def _flush(self) -> None:
         with self._lock:
-            outbox, self._outbox = self._outbox, []
+            outbox, self._outbox, self._waiting = self._outbox, [], 0
         for function, args in outbox:
             function(*args)
 
@@ -192,8 +268,9 @@ class Hub:
             raise web.HTTPBadRequest(text=f"400: offer the WebSocket subprotocol {' or '.join(wire.SUBPROTOCOLS)} "
                                           "(Foxglove's WebSocket protocol)\n")
         async with self.web.accept(request, protocols=wire.SUBPROTOCOLS, max_msg_size=MAX_WS_MESSAGE,
-                                   heartbeat=HEARTBEAT_S) as ws:
-            client = _Client(ws, lambda: self.adapter.count("dropped_for_clients"), request.transport)
+                                   heartbeat=HEARTBEAT_S, compress=False) as ws:  # (frames written as they are)
+            client = _Client(ws, lambda: self.adapter.count("dropped_for_clients"), request,
+                             lambda: self.adapter.count("writes"))
             client.push(json.dumps(wire.server_info(self.name, self.session, self.metadata)))
             with self._lock:
                 known = [c.described for c in self._channels.values()]
@@ -230,9 +307,11 @@ class Hub:
                     client.since.pop(channel_id, None)
                 client.push(json.dumps(wire.unadvertise(told)))
 
-    def _send(self, subscribers: list[tuple[_Client, int]], payload: bytes, log_time_ns: int) -> None:
-        for client, subscription in subscribers:
-            client.push(wire.message_data(subscription, log_time_ns, payload))
+    def _send(self, sends: list[tuple[list[tuple[_Client, int]], bytes]], log_time_ns: int) -> None:
+        for subscribers, payload in sends:
+            head, tail = wire.data_frame(log_time_ns, payload)  # (once for every client)
+            for client, subscription in subscribers:
+                client.put((head, wire.subscription(subscription), tail))
 
     def _receive(self, client: _Client, message: WSMessage) -> None:
         if message.type == WSMsgType.BINARY:

@@ -23,6 +23,7 @@ first failed ``accept`` (EMFILE), and has no limits, timeouts or ``Origin`` chec
 from __future__ import annotations
 
 import logging
+import threading
 import time
 from collections import deque
 from dataclasses import dataclass, field
@@ -77,9 +78,9 @@ class FoxgloveServer(Adapter):
     """Robots live in Foxglove: joints, frames, arm transforms and events as logs, over its WebSocket protocol."""
 
     Config = FoxgloveConfig
-    # sent: messages to clients (one per subscriber); clients: connections so far; dropped_for_clients: lost by a
-    # client that does not read
-    counters = ("sent", "clients", "dropped_for_clients")
+    # sent: messages to clients (one per subscriber); writes: transport writes that sent them (several messages
+    # each); clients: connections so far; dropped_for_clients: lost by a client that does not read
+    counters = ("sent", "writes", "clients", "dropped_for_clients")
 
     def __init__(self, config: FoxgloveConfig | None = None, *, name: str = "") -> None:
         super().__init__(config, name=name)
@@ -96,7 +97,12 @@ class FoxgloveServer(Adapter):
         self._robots: set[str] = set()  # robots served: their messages pass, and their state is kept
         self._info = InfoRequests(self.bus, self._take_info, lambda robot, text: self.warn("info", text))
         self._views = Views(self.bus, self._take_derived_info)
-        self._streams = Streams(self.bus, cfg.subscribe, self._queue, per_joint_keys=cfg.per_joint_keys)
+        # Frames are taken where they arrive (a thread hand-off less, as the OSC sink's), the rest from the
+        # queue by the serve worker; one lock between them guards the node's state and the order of its messages.
+        self._state = threading.Lock()
+        self._streams: Streams | None = None  # (a frame that arrives while Streams subscribes: queued)
+        self._streams = Streams(self.bus, cfg.subscribe, self._queue, per_joint_keys=cfg.per_joint_keys,
+                                direct=self._direct)
         self._comings: deque[tuple[str, bool]] = deque(maxlen=4096)  # robots come or gone (a Zenoh thread)
         self._gone: dict[str, None] = {}  # robots gone and not back: what of them is still in flight is dropped
         self.own(watch_robots(self.bus, lambda robot, alive: self._comings.append((robot, alive)), self.capped))
@@ -125,15 +131,35 @@ class FoxgloveServer(Adapter):
     def _serve(self) -> None:
         again = time.monotonic() + self.config.info_every_s
         while not self.stopping.is_set():
-            while self._comings:  # (before the messages: those of a robot gone are dropped, not advertised again)
-                self._robot_changed(*self._comings.popleft())
-            for key, payload in self._queue.drain(timeout=0.2):
-                if key.partition("/")[0] not in self._gone:
-                    self._take(key, payload)
-            if time.monotonic() >= again:
-                again = time.monotonic() + self.config.info_every_s
-                for key, message in list(self._infos.items()):
-                    self._log(key, message)
+            items = self._queue.drain(timeout=0.2)
+            with self._state:
+                self._changes()
+                for key, payload in items:
+                    if key.partition("/")[0] not in self._gone:
+                        self._take(key, payload)
+                if time.monotonic() >= again:
+                    again = time.monotonic() + self.config.info_every_s
+                    for key, message in list(self._infos.items()):
+                        self._log(key, message)
+
+    def _direct(self, key: str, payload: Any) -> bool:
+        """A frame, on its subscription's callback thread (``Streams``' ``direct``); into the
+        queue instead (False) while the serve worker holds the state: Zenoh's callback
+        threads serve the whole session and must never wait on a node."""
+        if self._streams is None or not self._state.acquire(blocking=False):
+            return False
+        try:
+            self._changes()
+            if key.partition("/")[0] not in self._gone:
+                self._take(key, payload)
+        finally:
+            self._state.release()
+        return True
+
+    def _changes(self) -> None:  # (holding _state)
+        """Robots come or gone, before any message: those of a robot gone are dropped, not advertised again."""
+        while self._comings:
+            self._robot_changed(*self._comings.popleft())
 
     def _robot_changed(self, robot: str, alive: bool) -> None:
         """A robot gone: its channels unadvertised, what was kept of it forgotten (its info is asked
@@ -176,19 +202,22 @@ class FoxgloveServer(Adapter):
             self._infos[key] = incoming.message
         elif robot not in self._info_seen:
             self._info.ask(robot)
-        for channel_key, message in [*samples_of(incoming), *self._views.of(incoming)]:
-            self._log(channel_key, message)
+        self._log_all([*samples_of(incoming), *self._views.of(incoming)])
 
     def _log(self, key: str, message: dict[str, Any]) -> None:
         """``message`` on the channel of ``key`` (advertised now if new), to the clients subscribed."""
-        try:
-            made = self.hub.log(key, message, time.time_ns(), lambda id_: _describe(id_, key), history=_events(key))
-        except (ValueError, TypeError) as exc:  # (past the gate: rare) not strict JSON
-            self.count("bad")
-            self.warn("unsendable", f"message on '{key}' not sent: {exc}")
-            return
-        if not made:
-            self.warn("channels", f"'{key}' not served: {MAX_CHANNELS} channels already")
+        self._log_all([(key, message)])
+
+    def _log_all(self, messages: list[tuple[str, dict[str, Any]]]) -> None:
+        """Each ``(key, message)`` on its channel, in one go (``Hub.log_all``)."""
+        problems = self.hub.log_all([(key, message, _events(key)) for key, message in messages], time.time_ns(),
+                                    _describe)
+        for key, exc in problems:
+            if exc is None:
+                self.warn("channels", f"'{key}' not served: {MAX_CHANNELS} channels already")
+            else:  # (past the gate: rare) not strict JSON
+                self.count("bad")
+                self.warn("unsendable", f"message on '{key}' not sent: {exc}")
 
 
 def _events(key: str) -> bool:

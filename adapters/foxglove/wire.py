@@ -12,6 +12,8 @@ viewer keeps its own clock), so a client sends only ``subscribe`` and ``unsubscr
 {'op': 'unadvertise', 'channelIds': [3, 4]}
 >>> message_data(7, 1_500_000_000, b'{"v":1}').hex(" ")
 '01 07 00 00 00 00 2f 68 59 00 00 00 00 7b 22 76 22 3a 31 7d'
+>>> [frame_header(TEXT, n).hex(" ") for n in (5, 126, 70_000)]  # a WebSocket frame's, the server's
+['81 05', '81 7e 00 7e', '81 7f 00 00 00 00 00 01 11 70']
 >>> parse('{"op": "subscribe", "subscriptions": [{"id": 1, "channelId": 3}]}')
 ('subscribe', [(1, 3)])
 >>> parse('{"op": "unsubscribe", "subscriptionIds": [1]}')
@@ -29,11 +31,14 @@ import struct
 from dataclasses import dataclass
 from typing import Any
 
+TEXT, BINARY = 0x1, 0x2  # WebSocket opcodes (RFC 6455 5.2)
 SUBPROTOCOLS = ("foxglove.sdk.v1", "foxglove.websocket.v1")  # the SDK's name, and ws-protocol's (Lichtblick)
 MESSAGE_DATA = 1     # the server's binary opcode of a message
 WARNING, ERROR = 1, 2  # a status message's levels (0: info)
 MAX_ID = 2**32 - 1   # ids are uint32
 _HEADER = struct.Struct("<BIQ")
+_SUBSCRIPTION = struct.Struct("<I")
+_TIME = struct.Struct("<Q")
 
 
 class Refused(ValueError):
@@ -75,6 +80,29 @@ def status(message: str, level: int = ERROR) -> dict[str, Any]:
 def message_data(subscription: int, log_time_ns: int, payload: bytes) -> bytes:
     """One message of a subscription, as the client decodes it (little-endian ids and time)."""
     return _HEADER.pack(MESSAGE_DATA, subscription, log_time_ns) + payload
+
+
+def frame_header(opcode: int, length: int) -> bytes:
+    """The header of a whole, unmasked WebSocket frame of ``length`` bytes (a server's: RFC 6455
+    5.2, FIN set, no extension), as aiohttp writes it: the hub writes what is due to a client
+    in one transport write, frames and all (docs/foxglove.md, "How messages are sent")."""
+    if length < 126:
+        return bytes((0x80 | opcode, length))
+    if length < 1 << 16:
+        return bytes((0x80 | opcode, 126)) + length.to_bytes(2, "big")
+    return bytes((0x80 | opcode, 127)) + length.to_bytes(8, "big")
+
+
+def data_frame(log_time_ns: int, payload: bytes) -> tuple[bytes, bytes]:
+    """A message's WebSocket frame but for its subscription id, made once for every client:
+    ``(head, tail)``; a client's frame is ``head + subscription(id) + tail``."""
+    return (frame_header(BINARY, _HEADER.size + len(payload)) + bytes((MESSAGE_DATA,)),
+            _TIME.pack(log_time_ns) + payload)
+
+
+def subscription(id_: int) -> bytes:
+    """A subscription id as a message carries it (between ``data_frame``'s head and tail)."""
+    return _SUBSCRIPTION.pack(id_)
 
 
 def parse(text: str) -> tuple[str, list[Any]]:

@@ -31,7 +31,7 @@ from sonibus.bus.web import WebServer
 
 from . import mdns
 from .config import OscQueryConfig
-from .live import Live
+from .live import Live, span_of, values_of
 from .server import QueryServer
 
 __all__ = ["OscQuery", "OscQueryConfig"]
@@ -59,7 +59,7 @@ class OscQuery(Adapter):
 
     def _start(self) -> None:
         cfg: OscQueryConfig = self.config
-        self.live = Live(normalized=cfg.values == "normalized")
+        self.live = Live(normalized=cfg.values == "normalized", on_unfit=self._unfit)
         self.web = WebServer(self, cfg.host, cfg.port, key="listen", limits=cfg.limits, browsers=True)
         self.server = QueryServer(self, self.web, self.live, self._host_info())
         self._present: set[str] = set()  # robots on the bus (their claims)
@@ -74,7 +74,12 @@ class OscQuery(Adapter):
         self.address = f"OSCQuery on {self.url} (WebSocket on the same port)"
         log.info("%s: %s", self.name, self.address)
         self._queue = self.own(SampleQueue(cfg.queue))
-        self._streams = Streams(self.bus, SUBSCRIBE, self._queue)
+        # Frames are taken where they arrive (a thread hand-off less, as the OSC sink's), the rest from the
+        # queue by the forward worker; one lock between them guards what they share (pacing, the namespace's
+        # values, what goes to the clients in order).
+        self._state = threading.Lock()
+        self._streams: Streams | None = None  # (a frame that arrives while Streams subscribes: queued)
+        self._streams = Streams(self.bus, SUBSCRIBE, self._queue, direct=self._direct)
         self.spawn(self._forward, "forward")  # before anything else is declared: nothing waits in the queue
         self.own(self._streams)
         self.own(watch_robots(self.bus, self._robot_changed, self.capped))
@@ -182,24 +187,51 @@ class OscQuery(Adapter):
     # -- values ------------------------------------------------------------------------
 
     def _forward(self) -> None:
-        for message in self._streams.each(self.stopping, self.count, self.warn):
+        while not self.stopping.is_set():
+            item = self._queue.get(timeout=0.2)
+            if item is not None:
+                with self._state:
+                    self._take(*item)
+
+    def _direct(self, key: str, payload: Any) -> bool:
+        """A frame, on its subscription's callback thread (``Streams``' ``direct``); into the
+        queue instead (False) while the forward worker holds the state: Zenoh's callback
+        threads serve the whole session and must never wait on a node."""
+        if self._streams is None or not self._state.acquire(blocking=False):
+            return False
+        try:
+            self._take(key, payload)
+        finally:
+            self._state.release()
+        return True
+
+    def _take(self, key: str, payload: Any) -> None:  # (holding _state)
+        message = self._streams.take(key, payload, self.count, self.warn)  # checked by the gate, paced
+        if message is not None:
             self._serve(message)
 
     def _serve(self, message: Incoming) -> None:
+        """An event at once; a frame kept as it came (``Live.keep``), the values of it that
+        clients LISTEN to served at once, the rest taken apart only when asked for; another
+        message (a single key's value) at once."""
         out: list[tuple[str, bytes]] = []
         if message.event is not None:
             self._event(message.source.robot, message.source.name, message.event, out)
+        elif message.selected is not None or message.parts is not None:
+            self.live.keep(message)
+            if self.server.listened:  # (else nothing more to do for this frame)
+                listened = self.server.listened
+                for source, values in values_of(message):
+                    if (path := "/" + source.key) in listened:
+                        self._value(path, values, span_of(source), out)
         else:
-            for sample in message.joints:
-                source = sample.source
-                robot = source.robot
-                if source.section == "derived" and robot not in self._present and robot not in self._alone:
-                    self._info.ask(robot)  # (no robot's: a map node's outputs, described by it alone)
-                span = source.name if source.section == "joints" else f"{source.feature}/{source.name}"
-                self._value(f"/{source.key}", sample.values, span, out)
-            if out:
-                self.record_latency(time.time() - message.t)
+            source = message.source
+            if source.section == "derived" and source.robot not in self._present and source.robot not in self._alone:
+                self._info.ask(source.robot)  # (no robot's: a map node's outputs, described by it alone)
+            self._value(f"/{source.key}", message.values, span_of(source), out)
         if out:
+            if message.event is None:
+                self.record_latency(time.time() - message.t)
             self.server.send_osc(out)
 
     def _event(self, robot: str, kind: str, event: dict[str, Any], out: list[tuple[str, bytes]]) -> None:

@@ -85,25 +85,50 @@ class RecordingWriter:
         publish time when it is within ``MAX_CLOCK_OFFSET_S`` of ``log_ns``, else
         ``log_ns`` is. ``BadRecord`` if it cannot be written (nothing is), ``WriteError``
         if the file cannot."""
+        refused = self.write_all([(key, message)], log_ns)
+        if refused:
+            raise refused[0][1]
+
+    def write_all(self, messages: list[tuple[str, dict[str, Any]]], log_ns: int) -> list[tuple[str, BadRecord]]:
+        """Several ``(key, message)`` received at ``log_ns`` (a frame's joints and views), each
+        as ``write`` writes it, in one go (issue 35: what was paid per message, once); those it
+        cannot write are skipped and returned with why, the others written. ``WriteError`` if
+        the file cannot be written."""
         if self.closed or self.failed:
             raise WriteError(f"cannot write {self.path}: it is {'closed' if self.closed else 'failed'}")
-        data = _data(key, message)
         if log_ns.__class__ is not int or not 0 <= log_ns < TIME_LIMIT_NS:
-            raise BadRecord(f"log time {log_ns!r} is not in 0..2^64 ns")
-        channel = self._channels.get(key)
-        if channel is None:  # (bounds its readers keep too: bounded.py)
-            if len(self._channels) >= MAX_CHANNELS:
-                raise BadRecord(f"a file holds at most {MAX_CHANNELS} keys; '{key[:80]}' would be one more")
-            if len(key) > MAX_TOPIC:
-                raise BadRecord(f"a key of {len(key)} characters ('{key[:40]}...'), more than a file's may "
-                                f"({MAX_TOPIC})")
-            channel = self._channels[key] = self._do(self._channel, key)
-        sequence = self._sequence[channel] = (self._sequence.get(channel, -1) + 1) & 0xFFFFFFFF  # uint32: wraps
-        self._do(self._writer.add_message, channel, log_time=log_ns, data=data,
-                 publish_time=_publish_ns(message.get("t"), log_ns), sequence=sequence)
-        self.messages += 1
+            return [(key, BadRecord(f"log time {log_ns!r} is not in 0..2^64 ns")) for key, _ in messages]
+        refused: list[tuple[str, BadRecord]] = []
+        channels, sequences, add = self._channels, self._sequence, self._writer.add_message
+        try:
+            for key, message in messages:
+                try:
+                    data = _data(key, message)
+                    channel = channels.get(key)
+                    if channel is None:
+                        channel = channels[key] = self._new_channel(key)
+                except BadRecord as exc:
+                    refused.append((key, exc))
+                    continue
+                sequence = sequences[channel] = (sequences.get(channel, -1) + 1) & 0xFFFFFFFF  # uint32: wraps
+                add(channel, log_time=log_ns, data=data, publish_time=_publish_ns(message.get("t"), log_ns),
+                    sequence=sequence)
+                self.messages += 1
+        except OSError as exc:
+            self.failed = True
+            raise WriteError(f"cannot write {self.path}: {exc.strerror or exc}") from exc
         if time.monotonic() - self._last_flush >= self.flush_s:
             self.flush()
+        return refused
+
+    def _new_channel(self, key: str) -> int:
+        """The channel of a key not written yet (bounds its readers keep too: bounded.py)."""
+        if len(self._channels) >= MAX_CHANNELS:
+            raise BadRecord(f"a file holds at most {MAX_CHANNELS} keys; '{key[:80]}' would be one more")
+        if len(key) > MAX_TOPIC:
+            raise BadRecord(f"a key of {len(key)} characters ('{key[:40]}...'), more than a file's may "
+                            f"({MAX_TOPIC})")
+        return self._channel(key)
 
     def add_metadata(self, name: str, data: dict[str, str]) -> None:
         self._do(self._writer.add_metadata, name, data)

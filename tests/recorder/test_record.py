@@ -98,13 +98,13 @@ def test_a_key_expression_records_only_what_it_selects(net, tmp_path):
 def test_a_full_queue_is_counted_and_reported(net, tmp_path):
     recorder = net.start(Recorder(RecorderConfig(path=str(tmp_path / "slow.mcap"), queue=16), name="logger"))
     disk = threading.Event()
-    write = recorder._series.writer.write
+    write = recorder._series.writer.write_all
 
     def slow_disk(*args):  # a disk that stalls: the queue must fill and say so
         disk.wait(10)
-        write(*args)
+        return write(*args)
 
-    recorder._series.writer.write = slow_disk
+    recorder._series.writer.write_all = slow_disk
     net.sim("pepper", rate_hz=100)
     wait_for(lambda: recorder.status()["dropped"] > 0, what="drops to be counted")
     disk.set()

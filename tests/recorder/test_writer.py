@@ -4,6 +4,7 @@ time no clock could have given falls back to the log time."""
 
 from __future__ import annotations
 
+import contextlib
 import math
 import time
 
@@ -96,3 +97,32 @@ def test_a_closed_writer_says_so(tmp_path):
     out.close()  # twice is fine
     with pytest.raises(WriteError, match="it is closed"):
         out.write("pepper/joints/HeadYaw", NOW_NS, good(0))
+
+
+def test_a_frame_written_in_one_go_is_the_same_file_as_message_by_message_and_a_bad_one_is_refused_alone(tmp_path):
+    """``write_all`` (a frame's joints and views in one call, issue 35) writes what ``write``
+    would have, message for message (topics, times, sequences, bytes), and skips only a
+    message it cannot write, returning it with why."""
+    frames = [[(f"pepper/joints/J{j}", {**good(seq), "v": j / 10}) for j in range(17)] +
+              [("pepper/frame", {"t": NOW_NS / 1e9 + seq / 100, "seq": seq, "names": ["J0"], "v": [0.0]})]
+              for seq in range(5)]
+    frames[2][3] = ("pepper/joints/J3", UNWRITABLE["NaN"][0])
+    one, many = tmp_path / "one.mcap", tmp_path / "many.mcap"
+    with RecordingWriter(str(one), flush_s=1e9) as out:
+        for seq, frame in enumerate(frames):
+            for key, message in frame:
+                with contextlib.suppress(BadRecord):
+                    out.write(key, NOW_NS + seq, message)
+    refused = []
+    with RecordingWriter(str(many), flush_s=1e9) as out:
+        for seq, frame in enumerate(frames):
+            refused += out.write_all(frame, NOW_NS + seq)
+        assert out.messages == 5 * 18 - 1
+    assert [(key, "not strict JSON" in str(exc)) for key, exc in refused] == [("pepper/joints/J3", True)]
+    first, second = records(one), records(many)
+    assert first == second and len(first) == 5 * 18 - 1
+
+
+def records(path):
+    with open(path, "rb") as f:
+        return [(c.topic, m.sequence, m.log_time, m.publish_time, m.data) for _, c, m in make_reader(f).iter_messages()]
