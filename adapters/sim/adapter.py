@@ -78,6 +78,11 @@ class SimRobot(RobotAdapter):
             self.speaker = audio.SimSpeaker(self, self.robot, self.config.speaker_latency_ms)
             self.spawn(self.speaker.run, "speaker")
 
+    def _stop(self) -> None:
+        super()._stop()
+        if self.config.speaker and hasattr(self, "speaker"):
+            self.speaker.close()  # (a silent speaker waits on its queue: now, not at its next wake-up)
+
     def behaviors(self) -> Sequence[str]:
         return self.engine.behaviors()
 

@@ -3,7 +3,9 @@
 ``SimMic`` publishes the body's servo whine (``whine.py``) on ``<robot>/audio/mic``
 in chunks, only while anyone subscribes there (nothing is rendered otherwise).
 ``SimSpeaker`` takes ``<robot>/audio/speaker`` into a jitter buffer and drains it
-at the speaker's rate, as a sound card would, keeping the last seconds it played.
+at the speaker's rate, as a sound card would, keeping the last seconds it played;
+while it has nothing to play it waits for a chunk (up to ``IDLE_S``) instead of
+pulling silence every 20 ms, and counts the silence it played when it wakes.
 Both run on monotonic deadlines (``bus/pacing.py``): a stall skips, never bursts.
 """
 
@@ -30,6 +32,7 @@ from sonibus.bus.robot import RobotModel
 from .whine import Whine
 
 MIC_COUNTERS = ("mic_chunks",)
+IDLE_S = 0.2  # a silent speaker wakes this often at most (20 ms ticks cost the sim ~1 % of a core for silence)
 SPEAKER_COUNTERS = ("speaker_frames", "speaker_underruns", "speaker_overruns", "speaker_gaps", "speaker_refused")
 
 
@@ -112,7 +115,9 @@ class SimSpeaker:
 
         def tick(frame: int) -> None:
             nonlocal last
-            for key, payload in self._queue.drain(0):
+            # silent: wait for a chunk (or IDLE_S); the pacer then skips the ticks slept through, and
+            # the next tick plays their silence at once, as a stalled card would
+            for key, payload in self._queue.drain(IDLE_S if self.buffer.silent and frame == last + 1 else 0):
                 self._take(key, payload)
             frames = self.fmt.frames * (frame - last)  # a stalled card still plays what the skipped ticks would
             last = frame
@@ -120,6 +125,10 @@ class SimSpeaker:
             self.node.count("speaker_frames", frames)
 
         Pacer(1000.0 / self.fmt.chunk_ms).run(tick, self.node.stopping)
+
+    def close(self) -> None:
+        """Wake ``run`` from its wait on the queue (the node is stopping)."""
+        self._queue.close()
 
     def _buffer_stat(self, name: str) -> int:
         return self.buffer.stats[name]

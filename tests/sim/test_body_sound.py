@@ -240,3 +240,20 @@ def test_stopping_the_sim_ends_its_audio_threads(net):
     assert {f"{sim.name}:mic", f"{sim.name}:speaker"} <= names
     sim.stop()
     assert [t.name for t in threading.enumerate() if t.name.startswith(f"{sim.name}:")] == []
+
+
+def test_a_silent_speaker_waits_for_sound_instead_of_pulling_silence_every_tick(net):
+    """Nothing to play: the speaker still counts its silence in real time, but in a few long
+    blocks (it waits on its queue), not a 20 ms block per tick; sound sent then plays at once."""
+    sim = net.sim(speaker_latency_ms=60)
+    client = net.bus("client")
+    wait_for(lambda: sim.stats["speaker_frames"] > 0, what="the speaker to run")
+    frames, blocks = sim.stats["speaker_frames"], len(sim.speaker.played)
+    wait_for(lambda: sim.stats["speaker_frames"] >= frames + 48000, what="a second of silence played")
+    ticks = len(sim.speaker.played) - blocks
+    assert ticks <= 20, f"{ticks} blocks for a second of silence (a block per 20 ms tick: 50)"
+    play(client, sine_chunks(440.0, 48000, 2, 0.5))
+    wait_for(lambda: sim.speaker.buffer.stats["underruns"] >= 1, what="the speaker to run dry after the sine")
+    played = np.concatenate(list(sim.speaker.played))
+    assert peak_hz(played, 48000) == pytest.approx(440.0, abs=4.0)
+    assert sim.stats["speaker_frames"] % 960 == 0
