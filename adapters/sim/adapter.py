@@ -80,8 +80,9 @@ class SimRobot(RobotAdapter):
 
     def _stop(self) -> None:
         super()._stop()
-        if self.config.speaker and hasattr(self, "speaker"):
-            self.speaker.close()  # (a silent speaker waits on its queue: now, not at its next wake-up)
+        for audio_part in (getattr(self, "mic", None), getattr(self, "speaker", None)):
+            if audio_part is not None:
+                audio_part.close()  # (a silent speaker, an unheard mic, wait: now, not at their next wake-up)
 
     def behaviors(self) -> Sequence[str]:
         return self.engine.behaviors()

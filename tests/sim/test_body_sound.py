@@ -175,6 +175,19 @@ def test_the_mic_publishes_only_while_anyone_listens(net):
     assert sim.stats["mic_chunks"] <= sent + 1  # (one chunk may have been under way)
 
 
+def test_an_unheard_mic_waits_for_a_listener_instead_of_ticking(net):
+    """Nobody listens: the mic's loop sleeps through its 20 ms ticks (waits for a listener,
+    up to 0.2 s at a time) rather than waking for each; a listener gets chunks at once."""
+    sim = net.sim(idle=True)
+    client = net.bus("client")
+    wait_for(lambda: sim.stats["speaker_frames"] > 0, what="the sim's audio running")
+    skipped, started = sim.mic.pacer.skipped, time.monotonic()
+    wait_for(lambda: time.monotonic() - started >= 1.0, what="a second")
+    assert sim.mic.pacer.skipped - skipped >= 25  # (a tick per 20 ms: 50 a second, most of them slept through)
+    chunks = Chunks(client)
+    wait_for(lambda: len(chunks.poll()) >= 5, what="5 mic chunks once someone listens")
+
+
 def test_the_mic_level_follows_a_joint_move(net):
     sim = net.sim()
     client = net.bus("client")
