@@ -10,12 +10,16 @@ private JACK server, dummy driver). Two layouts, each round:
 
 - one process (``sonibus run show.toml``, as one machine runs an installation):
   its CPU;
-- a process per node (``--only NODE``; the sim's listens, the others connect):
-  each node's CPU, its own Zenoh session included.
+- a process per node (``--only NODE``, each connected to a ``sonibus router``): each
+  node's CPU, its own Zenoh session included (the router's said apart). The sim's
+  session sends each frame to every session that subscribes to it (seven nodes here);
+  its floor, a publisher, to one.
 
 Beside them, the floors: a zenoh-python publisher of the same frames at the same
 rate (the sim's), a subscriber of them with an empty callback (what any sink pays
-to receive), and ``floor.py``'s minimal OSC sink. CPU is each process's, from
+to receive), and ``floor.py``'s minimal OSC sink, of the frames alone and of the
+frames with a derived frame beside each (the OSC node's work in the show: it sends
+the features node's derived values too). CPU is each process's, from
 ``/proc/<pid>/task/*/schedstat`` over the window after a warm-up; medians of rounds.
 
     .venv/bin/python bench/show.py [--rounds 2] [--seconds 8] [--name show]
@@ -222,12 +226,15 @@ def measure_show(folder: Path, seconds: float, split: bool) -> dict[str, float]:
     counts, ready, done = manager.dict(), CONTEXT.Event(), CONTEXT.Event()
     client = None
     try:
-        if split:
-            processes["sim"] = sonibus(config, folder / "sim.log", "--only", "sim", "--listen", endpoint)
-            started(folder / "sim.log", processes["sim"])
-            for node in NODES[1:]:
+        if split:  # (every node connects to a router, no node's process the others' meeting point; peers
+            # still link to each other directly, learnt by gossip: the router's CPU is said apart, ~0.7 %)
+            with open(folder / "router.log", "w") as out:
+                processes["router"] = subprocess.Popen([SONIBUS, "router", "--no-multicast", "--listen", endpoint],
+                                                       stdout=out, stderr=subprocess.STDOUT, start_new_session=True)
+            started(folder / "router.log", processes["router"], "sonibus router")
+            for node in NODES:
                 processes[node] = sonibus(config, folder / f"{node}.log", "--only", node, "--connect", endpoint)
-            for node in NODES[1:]:
+            for node in NODES:
                 started(folder / f"{node}.log", processes[node])
         else:
             processes["show"] = sonibus(config, folder / "show.log", "--listen", endpoint)
@@ -256,37 +263,42 @@ def measure_show(folder: Path, seconds: float, split: bool) -> dict[str, float]:
 
 
 def measure_floors(seconds: float) -> dict[str, float]:
-    """The minimal harnesses: publisher (the sim's floor), an empty subscriber (a sink's floor)
-    and floor.py's OSC sink, one robot × 17 joints at ``RATE_HZ``."""
+    """The minimal harnesses: publisher (the sim's floor), an empty subscriber (a sink's floor),
+    floor.py's OSC sink, one robot × 17 joints at ``RATE_HZ``, and the same sink fed a derived
+    frame beside each frame (``floor.DERIVED``, a features node's shape): the show's OSC node
+    sends joints and derived values, a datagram each."""
     case = Case(1, 17)
-    endpoint, osc_endpoint = f"tcp/127.0.0.1:{free_port()}", f"tcp/127.0.0.1:{free_port()}"
+    endpoints = [f"tcp/127.0.0.1:{free_port()}" for _ in range(3)]
     receiver = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     receiver.bind(("127.0.0.1", 0))
     ready, done = CONTEXT.Event(), CONTEXT.Event()
-    empty = CONTEXT.Process(target=empty_subscriber, args=(endpoint, ready, done), daemon=True)
-    osc_ready = CONTEXT.Event()
-    osc = CONTEXT.Process(target=floor_sink, args=(osc_endpoint, receiver.getsockname()[1], case, osc_ready, done),
-                          daemon=True)
-    empty.start()
-    osc.start()
+    empty = CONTEXT.Process(target=empty_subscriber, args=(endpoints[0], ready, done), daemon=True)
+    sinks, readies = [], [ready]
+    for endpoint, derived in zip(endpoints[1:], (False, True), strict=True):
+        readies.append(CONTEXT.Event())
+        sinks.append(CONTEXT.Process(target=floor_sink, args=(endpoint, receiver.getsockname()[1], case, readies[-1],
+                                                              done), kwargs={"derived": derived}, daemon=True))
+    for process in (empty, *sinks):
+        process.start()
     feeders = []
     try:
-        if not ready.wait(30) or not osc_ready.wait(30):
+        if not all(event.wait(30) for event in readies):
             raise RuntimeError("the floor harnesses did not start")
         handles = []  # (kept until the end: a queue collected here is gone for the child too)
-        for target in (endpoint, osc_endpoint):
+        for endpoint, derived in zip(endpoints, (False, False, True), strict=True):
             fed, out = CONTEXT.Event(), CONTEXT.Queue()
-            feeders.append(CONTEXT.Process(target=publish, args=(target, case, seconds + WARMUP_S + 1, fed, out),
-                                           kwargs={"rate_hz": RATE_HZ}, daemon=True))
+            feeders.append(CONTEXT.Process(target=publish, args=(endpoint, case, seconds + WARMUP_S + 1, fed, out),
+                                           kwargs={"rate_hz": RATE_HZ, "derived": derived}, daemon=True))
             feeders[-1].start()
             handles.append((fed, out))
         if not all(fed.wait(30) for fed, _ in handles):
             raise RuntimeError("the floor publishers did not find their subscribers")
         time.sleep(WARMUP_S)
-        return window({"publisher": feeders[0].pid, "subscriber": empty.pid, "osc sink": osc.pid}, seconds)
+        return window({"publisher": feeders[0].pid, "subscriber": empty.pid, "osc sink": sinks[0].pid,
+                       "osc sink + derived": sinks[1].pid}, seconds)
     finally:
         done.set()
-        for process in (*feeders, empty, osc):
+        for process in (*feeders, empty, *sinks):
             process.join(10)
             if process.is_alive():
                 process.kill()
@@ -334,16 +346,23 @@ def main() -> None:
     machine = f"{os.cpu_count()} cores, load {min(load):.2f}–{max(load):.2f}"
     tree = os.environ.get("PYTHONPATH", "") or "this tree"
     receive, floors = med["floors"]["subscriber"], med["floors"]
+    nodes = {node: cpu for node, cpu in med["split"].items() if node != "router"}
     summary = [{"scenario": f"(show) one process, every node, 1 robot at {RATE_HZ} Hz, clients attached: CPU",
                 "sonibus": f"{med['one']['show']:.1f} %",
-                "baseline": f"{sum(med['split'].values()):.1f} % as a process per node", "ratio": ""}]
-    for node, cpu in med["split"].items():
-        base = floors["publisher"] if node == "sim" else floors["osc sink"] if node == "osc" else receive
-        label = "publisher" if node == "sim" else "minimal OSC sink" if node == "osc" else "empty subscriber"
+                "baseline": f"{sum(nodes.values()):.1f} % as a process per node (and their router "
+                            f"{med['split'].get('router', 0.0):.1f} %)", "ratio": ""}]
+    for node, cpu in nodes.items():
+        base = floors["publisher"] if node == "sim" else floors["osc sink + derived"] if node == "osc" else receive
+        label = ("publisher" if node == "sim" else "minimal OSC sink of joints and derived values" if node == "osc"
+                 else "empty subscriber")
         if node in node_floors.NODES:  # (their own: bench/node_floors.py)
             base, label = floors[node], f"{node} floor"
+        ratio = f"{cpu / base:.2f}×"
+        if node == "osc":
+            label += f"; of joints only {floors['osc sink']:.1f} %"
+            ratio += f" ({cpu / floors['osc sink']:.2f}× the joints-only floor)"
         summary.append({"scenario": f"(show) {node} node, own process: CPU", "sonibus": f"{cpu:.1f} %",
-                        "baseline": f"{base:.1f} % ({label})", "ratio": f"{cpu / base:.1f}×"})
+                        "baseline": f"{base:.1f} % ({label})", "ratio": ratio})
     write(args.name, {"machine": machine, "tree": tree, "rate_hz": RATE_HZ, "seconds": args.seconds,
                       "rounds": rounds, "median": med, "summary": summary})
     for layout, values in med.items():

@@ -109,6 +109,14 @@ class JitterBuffer:
         """Frames waiting to be played."""
         return self._end - self._start
 
+    @property
+    def silent(self) -> bool:
+        """Whether ``pull`` would give nothing but silence until something is pushed: nothing
+        buffered, not playing, no fade-out left (a player may then wait for a push rather
+        than pull silence block by block)."""
+        with self._lock:
+            return not self._playing and self._end == self._start and not len(self._tail)
+
     def push(self, chunk: AudioChunk) -> None:
         """Queue ``chunk`` (of any rate and channel count), after silence for the
         chunks missing before it; drop it if its ``seq`` goes back."""

@@ -275,7 +275,8 @@ class Streams(Selection):
     only drop what is old; this keeps what is young from arriving all at once.
 
     ``direct``: a sink that takes frames where they arrive (on the subscription's callback
-    thread, guarding its state with a lock of its own) is given each frame there, as
+    thread, guarding its state with a lock of its own) is given each frame there (a robot's
+    ``<robot>/frame`` and a derived frame, ``<robot>/derived``), as
     ``direct(key, payload)``, instead of through ``queue`` (what it returns False for goes
     into ``queue``); everything else still comes through ``queue``. It saves a thread
     hand-off per frame (docs/performance.md, "The queue hop"), but a sink that falls
@@ -297,7 +298,9 @@ class Streams(Selection):
                      "joint keys only)", bus.node, ", ".join(patterns), ", ".join(self.plan.frames))
         into = _Direct(queue, direct) if direct is not None else queue
         self.subscribers = [bus.subscribe(k, queue=into, stamped=stamped)[0] for k in self.plan.frames]
-        self.subscribers += [bus.subscribe(k, queue=queue, stamped=stamped)[0] for k in self.plan.derived]
+        # (derived frames too: one a tick beside the robot's, as quick to take; through the queue, the
+        # worker's wake-up cost an OSC sink more than the frame's work: docs/performance.md)
+        self.subscribers += [bus.subscribe(k, queue=into, stamped=stamped)[0] for k in self.plan.derived]
         self.subscribers += [bus.subscribe(k, queue=queue, stamped=stamped, skip=_skip(k, _frame_keys(k)))[0]
                              for k in self.plan.keys]
         self.subscribers += [bus.subscribe(k, queue=queue, stamped=stamped, skip=_skip(k, _from_frames(k)))[0]

@@ -78,6 +78,12 @@ class SimRobot(RobotAdapter):
             self.speaker = audio.SimSpeaker(self, self.robot, self.config.speaker_latency_ms)
             self.spawn(self.speaker.run, "speaker")
 
+    def _stop(self) -> None:
+        super()._stop()
+        for audio_part in (getattr(self, "mic", None), getattr(self, "speaker", None)):
+            if audio_part is not None:
+                audio_part.close()  # (a silent speaker, an unheard mic, wait: now, not at their next wake-up)
+
     def behaviors(self) -> Sequence[str]:
         return self.engine.behaviors()
 

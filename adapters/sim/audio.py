@@ -1,15 +1,19 @@
 """The sim robot's audio: microphones that hear its motors, a speaker that plays in real time.
 
 ``SimMic`` publishes the body's servo whine (``whine.py``) on ``<robot>/audio/mic``
-in chunks, only while anyone subscribes there (nothing is rendered otherwise).
+in chunks, only while anyone subscribes there (nothing is rendered otherwise, and it
+waits for a listener rather than waking every 20 ms).
 ``SimSpeaker`` takes ``<robot>/audio/speaker`` into a jitter buffer and drains it
-at the speaker's rate, as a sound card would, keeping the last seconds it played.
+at the speaker's rate, as a sound card would, keeping the last seconds it played;
+while it has nothing to play it waits for a chunk (up to ``IDLE_S``) instead of
+pulling silence every 20 ms, and counts the silence it played when it wakes.
 Both run on monotonic deadlines (``bus/pacing.py``): a stall skips, never bursts.
 """
 
 from __future__ import annotations
 
 import functools
+import threading
 import time
 from collections import deque
 from collections.abc import Callable, Mapping
@@ -30,6 +34,7 @@ from sonibus.bus.robot import RobotModel
 from .whine import Whine
 
 MIC_COUNTERS = ("mic_chunks",)
+IDLE_S = 0.2  # a silent speaker, an unheard mic, wake this often at most (20 ms ticks: ~1 % of a core for nothing)
 SPEAKER_COUNTERS = ("speaker_frames", "speaker_underruns", "speaker_overruns", "speaker_gaps", "speaker_refused")
 
 
@@ -64,12 +69,22 @@ class SimMic:
         key = keys.audio(robot, "mic")
         self._publisher = node.own(node.bus.stream_publisher(key, AUDIO))
         self.listening = False
+        self._listened = threading.Event()  # set while anyone listens (or the node stops): a silent mic waits on it
         node.own(node.bus.watch_subscribers(key, self._wanted))
         self._seq = -1
         self._last: int | None = None  # the frame of the last chunk sent, while listening
+        self.pacer = Pacer(1000.0 / fmt.chunk_ms)  # (its skipped ticks: mostly waits for a listener)
 
     def _wanted(self, matching: bool) -> None:
         self.listening = matching
+        if matching:
+            self._listened.set()
+        else:
+            self._listened.clear()
+
+    def close(self) -> None:
+        """Wake ``run`` from its wait for a listener (the node is stopping)."""
+        self._listened.set()
 
     def run(self) -> None:
         period = self.fmt.chunk_ms / 1000.0
@@ -78,6 +93,8 @@ class SimMic:
         def tick(frame: int) -> None:
             if not self.listening or not self.node.ownership.active:  # (standing by: the owner's mic speaks)
                 self._last = None
+                if not self.listening:  # nobody listens: wait for one (up to IDLE_S), not a wake-up per chunk
+                    self._listened.wait(IDLE_S)
                 return
             # frames the pacer skipped while listening show as a gap in seq
             self._seq += 1 if self._last is None else frame - self._last
@@ -87,7 +104,7 @@ class SimMic:
             self._publisher.put(codec.encode(chunk.message()))
             self.node.count("mic_chunks")
 
-        Pacer(1.0 / period).run(tick, self.node.stopping)
+        self.pacer.run(tick, self.node.stopping)
 
 
 class SimSpeaker:
@@ -112,7 +129,9 @@ class SimSpeaker:
 
         def tick(frame: int) -> None:
             nonlocal last
-            for key, payload in self._queue.drain(0):
+            # silent: wait for a chunk (or IDLE_S); the pacer then skips the ticks slept through, and
+            # the next tick plays their silence at once, as a stalled card would
+            for key, payload in self._queue.drain(IDLE_S if self.buffer.silent and frame == last + 1 else 0):
                 self._take(key, payload)
             frames = self.fmt.frames * (frame - last)  # a stalled card still plays what the skipped ticks would
             last = frame
@@ -120,6 +139,10 @@ class SimSpeaker:
             self.node.count("speaker_frames", frames)
 
         Pacer(1000.0 / self.fmt.chunk_ms).run(tick, self.node.stopping)
+
+    def close(self) -> None:
+        """Wake ``run`` from its wait on the queue (the node is stopping)."""
+        self._queue.close()
 
     def _buffer_stat(self, name: str) -> int:
         return self.buffer.stats[name]

@@ -68,3 +68,34 @@ def test_a_derived_frame_goes_out_as_its_values_did_on_their_own_keys(net, recei
         assert any(b"/toy/derived/hand/R" in d for d in sent)
     for served_ in served:
         served_.undeclare()
+
+
+def test_a_derived_frame_is_taken_where_it_arrives_not_through_the_queue(net, receivers):
+    """Derived frames, one a tick beside the robot's, are taken on the subscription's
+    callback thread as the robot's frames are (a thread hand-off a frame less: the worker's
+    wake-up cost the show's OSC node more than the frame's work, docs/performance.md)."""
+    receiver = receivers()
+    sink = net.start(OscSink(OscSinkConfig(targets=(receiver.target,), subscribe="toy/derived/**", max_age_ms=0,
+                                           values="raw"), name="derived"))
+    queued: list[str] = []
+    put = sink._queue.put
+
+    def spy(item, *args, **kwargs):  # (what the subscriptions put into the sink's queue)
+        queued.append(item[0])
+        return put(item, *args, **kwargs)
+
+    sink._queue.put = spy
+    robot = net.bus("toy")
+    seq = iter(range(10 ** 6))
+
+    def tick() -> None:
+        robot.put("toy/derived", derived_frame(time.time(), next(seq), ["qom/Body"], [0.5]))
+        time.sleep(0.02)  # (a tick's spacing: not paced)
+
+    wait_for(lambda: tick() or receiver.data(), what="the sessions to see each other")
+    queued.clear()
+    sent = len(receiver.data())
+    for _ in range(10):
+        tick()
+    wait_for(lambda: len(receiver.data()) >= sent + 10, what="ten derived frames at the target")
+    assert queued.count("toy/derived") <= 1, queued  # (one may meet the worker holding the state)

@@ -175,6 +175,19 @@ def test_the_mic_publishes_only_while_anyone_listens(net):
     assert sim.stats["mic_chunks"] <= sent + 1  # (one chunk may have been under way)
 
 
+def test_an_unheard_mic_waits_for_a_listener_instead_of_ticking(net):
+    """Nobody listens: the mic's loop sleeps through its 20 ms ticks (waits for a listener,
+    up to 0.2 s at a time) rather than waking for each; a listener gets chunks at once."""
+    sim = net.sim(idle=True)
+    client = net.bus("client")
+    wait_for(lambda: sim.stats["speaker_frames"] > 0, what="the sim's audio running")
+    skipped, started = sim.mic.pacer.skipped, time.monotonic()
+    wait_for(lambda: time.monotonic() - started >= 1.0, what="a second")
+    assert sim.mic.pacer.skipped - skipped >= 25  # (a tick per 20 ms: 50 a second, most of them slept through)
+    chunks = Chunks(client)
+    wait_for(lambda: len(chunks.poll()) >= 5, what="5 mic chunks once someone listens")
+
+
 def test_the_mic_level_follows_a_joint_move(net):
     sim = net.sim()
     client = net.bus("client")
@@ -240,3 +253,20 @@ def test_stopping_the_sim_ends_its_audio_threads(net):
     assert {f"{sim.name}:mic", f"{sim.name}:speaker"} <= names
     sim.stop()
     assert [t.name for t in threading.enumerate() if t.name.startswith(f"{sim.name}:")] == []
+
+
+def test_a_silent_speaker_waits_for_sound_instead_of_pulling_silence_every_tick(net):
+    """Nothing to play: the speaker still counts its silence in real time, but in a few long
+    blocks (it waits on its queue), not a 20 ms block per tick; sound sent then plays at once."""
+    sim = net.sim(speaker_latency_ms=60)
+    client = net.bus("client")
+    wait_for(lambda: sim.stats["speaker_frames"] > 0, what="the speaker to run")
+    frames, blocks = sim.stats["speaker_frames"], len(sim.speaker.played)
+    wait_for(lambda: sim.stats["speaker_frames"] >= frames + 48000, what="a second of silence played")
+    ticks = len(sim.speaker.played) - blocks
+    assert ticks <= 20, f"{ticks} blocks for a second of silence (a block per 20 ms tick: 50)"
+    play(client, sine_chunks(440.0, 48000, 2, 0.5))
+    wait_for(lambda: sim.speaker.buffer.stats["underruns"] >= 1, what="the speaker to run dry after the sine")
+    played = np.concatenate(list(sim.speaker.played))
+    assert peak_hz(played, 48000) == pytest.approx(440.0, abs=4.0)
+    assert sim.stats["speaker_frames"] % 960 == 0
