@@ -6,6 +6,7 @@ into the installation file with its comments, so a restart runs them as edited."
 from __future__ import annotations
 
 import math
+import threading
 import time
 import tomllib
 from pathlib import Path
@@ -175,7 +176,20 @@ def test_save_keeps_the_comments_and_a_restart_runs_the_edited_maps(net, owner, 
 def test_sonibus_map_lists_the_maps_with_their_live_values(net, owner, tmp_path):
     _, _, head = running(net, owner, tmp_path)
     assert first_output(head, 0.5, time.time()) == 75.0  # (x = 0.75)
-    result = run_cli("map", "sound", "--count", "2", "--interval", "0.1", *net.cli_args())
+    # frames go on while the command starts and lists: the map must not fall silent (silent_s = 1 s),
+    # which it did when a loaded machine took over a second to start the command
+    done = threading.Event()
+
+    def feed() -> None:
+        while not done.wait(0.02):
+            head.fake.frame(time.time(), pose(HeadYaw=0.5))
+    feeder = threading.Thread(target=feed, daemon=True)
+    feeder.start()
+    try:
+        result = run_cli("map", "sound", "--count", "2", "--interval", "0.1", *net.cli_args())
+    finally:
+        done.set()
+        feeder.join(5)
     assert result.returncode == 0, result.stderr
     views = result.stdout.split("\n\n")
     assert len(views) == 2, result.stdout
