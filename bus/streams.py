@@ -370,6 +370,20 @@ class _Direct(SampleQueue):
             self.queue.put(item)
 
 
+def if_free(lock: threading.Lock, take: Callable[[], None]) -> bool:
+    """``take()`` holding ``lock`` if nobody holds it now (True); else nothing (False). What a
+    sink's ``direct`` does: Zenoh's callback threads serve every subscription and query of the
+    session and must never wait on a sink (a batch of thousands of fuzzed samples held them
+    for seconds), so while its worker holds the sink's state the frame goes to its queue."""
+    if not lock.acquire(blocking=False):
+        return False
+    try:
+        take()
+    finally:
+        lock.release()
+    return True
+
+
 def _frame_keys(pattern: str) -> Callable[[str], bool]:
     """What a subscription to ``pattern`` leaves to the frame subscriptions: frame keys, and
     derived frame keys if ``pattern`` selects derived values (``Plan.derived`` has them then)."""

@@ -38,7 +38,7 @@ from sonibus.bus.info import InfoRequests
 from sonibus.bus.options import bad
 from sonibus.bus.presence import watch_robots
 from sonibus.bus.queue import SampleQueue
-from sonibus.bus.streams import Streams, without_audio
+from sonibus.bus.streams import Streams, if_free, without_audio
 from sonibus.bus.web import Limits, WebServer
 
 from . import wire
@@ -144,17 +144,13 @@ class FoxgloveServer(Adapter):
 
     def _direct(self, key: str, payload: Any) -> bool:
         """A frame, on its subscription's callback thread (``Streams``' ``direct``); into the
-        queue instead (False) while the serve worker holds the state: Zenoh's callback
-        threads serve the whole session and must never wait on a node."""
-        if self._streams is None or not self._state.acquire(blocking=False):
-            return False
-        try:
-            self._changes()
-            if key.partition("/")[0] not in self._gone:
-                self._take(key, payload)
-        finally:
-            self._state.release()
-        return True
+        queue instead (False) while the serve worker holds the state (``if_free``)."""
+        return self._streams is not None and if_free(self._state, lambda: self._serve_one(key, payload))
+
+    def _serve_one(self, key: str, payload: Any) -> None:  # (holding _state)
+        self._changes()
+        if key.partition("/")[0] not in self._gone:
+            self._take(key, payload)
 
     def _changes(self) -> None:  # (holding _state)
         """Robots come or gone, before any message: those of a robot gone are dropped, not advertised again."""

@@ -19,7 +19,7 @@ from sonibus.bus.frames import Frame, FrameAssembler
 from sonibus.bus.info import InfoRequests
 from sonibus.bus.keys import Key
 from sonibus.bus.queue import SampleQueue
-from sonibus.bus.streams import Incoming, Selected, Streams
+from sonibus.bus.streams import Incoming, Selected, Streams, if_free
 
 from . import scale
 from .config import OscSinkConfig, Target, parse_target
@@ -152,16 +152,9 @@ class OscSink(Adapter):
 
     def _direct(self, key: str, payload: Any) -> bool:
         """A frame, on its subscription's callback thread (``Streams``' ``direct``); into the
-        queue instead (False) while the forward worker holds the state: Zenoh's callback
-        threads serve every subscription and query of the session and must never wait on
-        a sink (a batch of thousands of fuzzed samples held them for seconds)."""
-        if self._streams is None or not self._state.acquire(blocking=False):
-            return False  # (not yet subscribed everywhere, or the worker holds the state: the queue)
-        try:
-            self._take(key, payload, time.monotonic())
-        finally:
-            self._state.release()
-        return True
+        queue instead (False) before it subscribed everywhere or while the forward worker
+        holds the state (``if_free``)."""
+        return self._streams is not None and if_free(self._state, lambda: self._take(key, payload, time.monotonic()))
 
     def _wait(self) -> float:
         soonest = [0.2]

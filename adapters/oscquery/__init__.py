@@ -26,7 +26,7 @@ from sonibus.bus.adapter import Adapter
 from sonibus.bus.info import DERIVED_ALONE, InfoRequests, watch_nodes
 from sonibus.bus.presence import watch_robots
 from sonibus.bus.queue import SampleQueue
-from sonibus.bus.streams import Incoming, Streams
+from sonibus.bus.streams import Incoming, Streams, if_free
 from sonibus.bus.web import WebServer
 
 from . import mdns
@@ -195,15 +195,8 @@ class OscQuery(Adapter):
 
     def _direct(self, key: str, payload: Any) -> bool:
         """A frame, on its subscription's callback thread (``Streams``' ``direct``); into the
-        queue instead (False) while the forward worker holds the state: Zenoh's callback
-        threads serve the whole session and must never wait on a node."""
-        if self._streams is None or not self._state.acquire(blocking=False):
-            return False
-        try:
-            self._take(key, payload)
-        finally:
-            self._state.release()
-        return True
+        queue instead (False) while the forward worker holds the state (``if_free``)."""
+        return self._streams is not None and if_free(self._state, lambda: self._take(key, payload))
 
     def _take(self, key: str, payload: Any) -> None:  # (holding _state)
         message = self._streams.take(key, payload, self.count, self.warn)  # checked by the gate, paced
