@@ -88,9 +88,9 @@ def test_the_watcher_of_claims_reads_them_again_when_its_channel_overflows_and_t
 
 
 def test_a_claim_left_out_is_counted_and_told_once_across_re_reads(net, monkeypatch):
-    """With room for 10 robots and a ring channel of 8 changes, 60 claims at once: the channel
-    overflows, the worker reads the claims again, and the 50 left out must not be counted or
-    told again (a re-read counted every one of them once more)."""
+    """With room for 10 robots, 60 claims at once: when the worker reads the claims again (as
+    after its channel overflowed), the 50 left out must not be counted or told again (a
+    re-read counted every one of them once more)."""
     monkeypatch.setattr("sonibus.bus.claimwatch.MAX_ROBOTS", 10)
     rogue = net.bus("rogue")
     watcher = ClaimWatch(net.bus("watcher"), channel=8)
@@ -98,10 +98,10 @@ def test_a_claim_left_out_is_counted_and_told_once_across_re_reads(net, monkeypa
     watching = watcher.watch(watcher.bus, lambda robot, alive: None, capped.append)
     since = int(time.time() * 1000)
     tokens = [rogue.token(f"{keys.ROBOTS}/r{i:03d}/{since}/rogue/x") for i in range(60)]  # noqa: F841 (held)
-    wait_for(lambda: len(watcher.robots()) == 10 and watcher.resyncs >= 1 and watcher.ignored >= 50, timeout=20.0,
-             what="10 robots followed, the rest left out, the claims read again",
+    wait_for(lambda: len(watcher.robots()) == 10 and watcher.ignored >= 50, timeout=20.0,
+             what="10 robots followed, the rest left out",
              explain=lambda: f"{len(watcher.robots())} robots, {watcher.ignored} left out, {watcher.resyncs} re-reads")
-    watcher._resync()  # (once more, for certain: what a later overflow does)
+    watcher._resync()  # (what an overflow does; the small channel may or may not have overflowed by itself)
     assert watcher.ignored == 50, f"{watcher.ignored} claims counted as left out, of 50"
     assert len(capped) == 50, f"{len(capped)} lines for 50 claims left out"
     watching.undeclare()
