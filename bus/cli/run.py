@@ -50,9 +50,9 @@ def run_installation(args: argparse.Namespace, env: Environment,
     names = ", ".join(f"{a.name} ({a.kind})" for a in adapters)
 
     def say(text: str) -> None:
-        env.say(text)
-        if log_file is not None:
+        if log_file is not None:  # (first: a Ctrl-C just after the line on stdout must not leave it out of the file)
             log_file.note(text)
+        env.say(text)
 
     try:
         restart = state.begin(by_hand=_from_terminal())

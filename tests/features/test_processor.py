@@ -112,8 +112,12 @@ def test_every_derived_value_of_a_frame_goes_in_one_message_or_on_its_own_key(ne
     got.clear()
     net.start(Features(FeaturesConfig(max_age_ms=0, robots="pepper", per_key=True), name="features2"))
     wait_for(lambda: len(got) >= 60, what="derived samples on their own keys")
-    assert "pepper/derived" not in {key for key, _ in list(got)}
-    assert "pepper/derived/qom/Body" in {key for key, _ in list(got)}
+    keys = [key for key, _ in list(got)]
+    # (a frame of the first node still on its way when it stopped may come after the clear: what counts is
+    # everything from the second node's first sample on, which one link delivers in order behind it)
+    first = next(i for i, key in enumerate(keys) if key != "pepper/derived")
+    assert "pepper/derived" not in keys[first:], keys
+    assert "pepper/derived/qom/Body" in keys[first:]
     subscriber.undeclare()
 
 
