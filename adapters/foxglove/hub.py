@@ -119,8 +119,8 @@ class _Client(WebClient):
                 self.size -= size
                 if transport is None or transport.is_closing():
                     return  # the client went away; its handler ends the connection
+                self.on_write()  # (counted first: a client may read what is written before this line runs)
                 transport.write(b"".join(batch))  # (whole frames: aiohttp's own, a ping, go between them)
-                self.on_write()
                 if self.protocol.writing_paused:
                     try:
                         await self.protocol._drain_helper()  # (as aiohttp's own writer waits)
