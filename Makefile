@@ -29,10 +29,12 @@ $(TESTS): $(STAMP) tests/plugin/pyproject.toml
 demo: $(STAMP)
 	trap true INT; $(BIN)/sonibus demo $(DEMO_ARGS) || test $$? -eq 130
 
-# the suite waits on processes and networks more than it computes: one worker per core;
-# a worker that crashes ends the run (xdist's replacement worker once left the run waiting for ever);
-# the 15 slowest tests are listed, so a suite creeping toward CI's 15 minutes shows where
-TEST_WORKERS ?= 2
+# the suite waits on processes and networks more than it computes (2 workers kept 2 cores ~35 % busy):
+# three workers on two cores; the few tests that need the machine to keep up (steady audio) are marked
+# realtime and run alone (tests/turns.py); a worker that crashes ends the run (xdist's replacement
+# worker once left the run waiting for ever); the 15 slowest tests are listed, so a suite creeping
+# toward CI's 15 minutes shows where
+TEST_WORKERS ?= 3
 test: $(TESTS)
 	bash scripts/test-tools.sh
 	$(BIN)/ruff check .

@@ -24,8 +24,13 @@ from sonibus.adapters.sim import SimConfig, SimRobot
 from sonibus.bus import Bus, BusConfig, open_session
 from sonibus.bus.control import open_control
 
+from . import turns
 from .supervisor import Supervisor
 from .watchdog import pytest_runtest_protocol, pytest_unconfigure  # noqa: F401 - hooks, found by name
+
+
+def pytest_configure(config: pytest.Config) -> None:
+    config.pluginmanager.register(turns, "sonibus-turns")  # (its hook has the watchdog's name)
 
 SONIBUS = str(Path(sys.executable).with_name("sonibus"))
 

@@ -66,6 +66,7 @@ def info_of(bus: Any) -> dict[str, Any]:
 # Fixture order: peer (its JACK server) before rig and net, so that the nodes stop first, then the
 # fake robot, then the server.
 
+@pytest.mark.realtime
 def test_a_sine_into_the_jack_adapter_is_played_by_the_robot(peer, net, spawn, qi_client, tmp_path, figure):
     # Each side in a process of its own, as on two machines: the robot (naoqi-sim and the naoqi
     # adapter) and the sound tool's jack adapter. In this process they would share one
@@ -120,6 +121,7 @@ def test_a_sine_into_the_jack_adapter_is_played_by_the_robot(peer, net, spawn, q
     figure("speaker calls, mean frames", speaker["speaker_frames"] / max(1, speaker["speaker_calls"]), "")
 
 
+@pytest.mark.realtime
 def test_the_robots_whine_comes_out_of_the_jack_adapter_and_follows_a_joint_move(peer, rig, net, figure):
     r = rig()
     fake = r.fake

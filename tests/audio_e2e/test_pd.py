@@ -46,6 +46,7 @@ def pd_ports(server: str) -> list[str]:
         probe.close()
 
 
+@pytest.mark.realtime
 def test_the_pd_example_plays_into_the_robot_and_records_its_microphones(jack, net, spawn, qi_client,
                                                                          tmp_path, figure):
     pd = require_tool("pd", "puredata")

@@ -32,6 +32,7 @@ def bridge(net, name: str = "jack", **options) -> JackBridge:
     return net.start(JackBridge(JackConfig(robot="pepper", **options), name=name))
 
 
+@pytest.mark.realtime
 def test_a_sine_into_an_input_port_arrives_on_the_speaker_key(net, peer, figure):
     listener = net.bus("listener")
     subscriber, queue = listener.subscribe(keys.audio("pepper", "speaker"), maxlen=4096)
@@ -76,6 +77,7 @@ def test_digital_silence_is_not_sent_unless_asked(net, jack, send_silence):
         assert arrived == 0 and node.stats["chunks_sent"] == 0, dict(node.stats)
 
 
+@pytest.mark.realtime
 def test_chunks_on_the_mic_key_come_out_of_an_output_port(net, peer, figure):
     node = bridge(net, to_robot=False, outputs=2, connect_outputs=("tester:ear",), target_ms=60)
     robot = net.bus("robot")

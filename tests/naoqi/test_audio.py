@@ -146,6 +146,7 @@ def qi_client() -> Iterator[Any]:
 # -- speaker -----------------------------------------------------------------------------------
 
 
+@pytest.mark.realtime
 def test_a_sine_on_the_speaker_key_is_played_at_its_frequency_without_gaps(rig, figure):
     # 250 ms of jitter buffer: the test's publisher shares a busy 2-core machine with the adapter
     r, device = speaker_rig(rig, speaker_latency_ms=250)

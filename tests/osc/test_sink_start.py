@@ -12,6 +12,8 @@ from __future__ import annotations
 import logging
 import time
 
+import pytest
+
 from sonibus.adapters.features import Features, FeaturesConfig, catalog
 from sonibus.adapters.osc import OscSink, OscSinkConfig
 
@@ -23,6 +25,7 @@ def stale_warnings(caplog) -> list[str]:
     return [r.getMessage() for r in caplog.records if r.levelno >= logging.WARNING and "older than" in r.getMessage()]
 
 
+@pytest.mark.realtime
 def test_starting_robots_features_and_a_sink_drops_nothing_as_stale(net, receivers, caplog):
     """As ``sonibus run`` starts a file holding two robots, a features node and a sink, in that
     order, in one process (one Zenoh session). Before, the derived values of the frames queued
