@@ -8,7 +8,9 @@ essential work with the same libraries and no sonibus, fed the same frames as
 - **recorder**: a subscriber that decodes each frame, makes it JSON and adds it to an
   MCAP file (``mcap``'s ``Writer``, zstd chunks of 1 MiB, as the recorder's);
 - **oscquery**: a subscriber that keeps each frame's payload as the latest (what
-  answering a question needs; nothing is sent).
+  answering a question needs) and sends each of its values as an OSC message (address
+  bytes made once, ``struct.pack``), one binary WebSocket message each (aiohttp), to the
+  one client connected: the show's OSCQuery client LISTENs to every joint.
 
 The nodes do more than their floors (the features node's derived frames and the robot's
 events come in too, Foxglove's views and per-joint channels go out, the recorder writes
@@ -80,7 +82,7 @@ def foxglove_floor(endpoint: str, port: int, ready: Any, done: Any) -> None:
 
 
 def reader(port: int, ready: Any, done: Any) -> None:
-    """The foxglove floor's client: connects and reads all it is sent (not measured)."""
+    """A floor's client (Foxglove's, OSCQuery's): connects and reads all it is sent (not measured)."""
     import aiohttp
 
     async def main() -> None:
@@ -144,14 +146,60 @@ def recorder_floor(endpoint: str, folder: str, ready: Any, done: Any) -> None:
     thread.join()
 
 
-def oscquery_floor(endpoint: str, ready: Any, done: Any) -> None:
-    """Each frame's payload kept as the latest of its key."""
+def oscquery_floor(endpoint: str, port: int, ready: Any, done: Any) -> None:
+    """Each frame's payload kept as the latest of its key, and each of its values as an OSC
+    message in a binary WebSocket message to the client connected on ``port``."""
+    import msgpack
+    import zenoh
+    from aiohttp import web
+
     latest: dict[str, bytes] = {}
+    addresses: dict[tuple[str, str], bytes] = {}
 
-    def keep(sample: Any) -> None:
-        latest[str(sample.key_expr)] = sample.payload.to_bytes()
+    def address(robot: str, name: str) -> bytes:
+        text = f"/{robot}/joints/{name}".encode() + b"\0"
+        return text + b"\0" * (-len(text) % 4) + b",f\0\0"
 
-    subscribed(endpoint, keep, ready, done)
+    async def main() -> None:
+        loop = asyncio.get_running_loop()
+        clients: set[web.WebSocketResponse] = set()
+
+        async def websocket(request: web.Request) -> web.WebSocketResponse:
+            ws = web.WebSocketResponse(compress=False)
+            await ws.prepare(request)
+            clients.add(ws)
+            async for _ in ws:
+                pass
+            clients.discard(ws)
+            return ws
+
+        async def send(robot: str, payload: bytes) -> None:
+            frame = msgpack.unpackb(payload)
+            for name, value in zip(frame["names"], frame["v"], strict=True):
+                prefix = addresses.get((robot, name)) or addresses.setdefault((robot, name), address(robot, name))
+                data = prefix + struct.pack(">f", value)
+                for ws in list(clients):
+                    await ws.send_bytes(data)
+
+        def keep(sample: Any) -> None:
+            key, payload = str(sample.key_expr), sample.payload.to_bytes()
+            latest[key] = payload
+            asyncio.run_coroutine_threadsafe(send(key.partition("/")[0], payload), loop)
+
+        app = web.Application()
+        app.router.add_get("/", websocket)
+        runner = web.AppRunner(app)
+        await runner.setup()
+        await web.TCPSite(runner, "127.0.0.1", port).start()
+        session = zenoh.open(zenoh_config(listen=endpoint))
+        subscriber = session.declare_subscriber("*/frame", keep)
+        ready.set()
+        await asyncio.to_thread(done.wait)
+        subscriber.undeclare()
+        session.close()
+        await runner.cleanup()
+
+    asyncio.run(main())
 
 
 def subscribed(endpoint: str, each: Any, ready: Any, done: Any) -> None:
@@ -170,16 +218,16 @@ def measure(seconds: float, warmup_s: float = 3.0) -> dict[str, float]:
     publisher of one robot × 17 joints at ``RATE_HZ``."""
     done = CONTEXT.Event()
     endpoints = {name: f"tcp/127.0.0.1:{free_port()}" for name in NODES}
-    web_port = free_port()
-    readies = {name: CONTEXT.Event() for name in (*endpoints, "reader")}
+    web_ports = {name: free_port() for name in ("foxglove", "oscquery")}  # (each with a client reading)
+    readies = {name: CONTEXT.Event() for name in (*endpoints, *(f"{name} client" for name in web_ports))}
     with tempfile.TemporaryDirectory() as folder:
         floors = {
-            "foxglove": CONTEXT.Process(target=foxglove_floor, args=(endpoints["foxglove"], web_port,
+            "foxglove": CONTEXT.Process(target=foxglove_floor, args=(endpoints["foxglove"], web_ports["foxglove"],
                                                                      readies["foxglove"], done), daemon=True),
             "recorder": CONTEXT.Process(target=recorder_floor, args=(endpoints["recorder"], folder,
                                                                      readies["recorder"], done), daemon=True),
-            "oscquery": CONTEXT.Process(target=oscquery_floor, args=(endpoints["oscquery"], readies["oscquery"],
-                                                                     done), daemon=True),
+            "oscquery": CONTEXT.Process(target=oscquery_floor, args=(endpoints["oscquery"], web_ports["oscquery"],
+                                                                     readies["oscquery"], done), daemon=True),
         }
         others: list[Any] = []
         try:
@@ -187,10 +235,12 @@ def measure(seconds: float, warmup_s: float = 3.0) -> dict[str, float]:
                 process.start()
             if not all(readies[name].wait(30) for name in floors):
                 raise RuntimeError("the node floors did not start")
-            others.append(CONTEXT.Process(target=reader, args=(web_port, readies["reader"], done), daemon=True))
-            others[-1].start()
-            if not readies["reader"].wait(30):
-                raise RuntimeError("the foxglove floor's client did not connect")
+            for name, port in web_ports.items():
+                others.append(CONTEXT.Process(target=reader, args=(port, readies[f"{name} client"], done),
+                                              daemon=True))
+                others[-1].start()
+            if not all(readies[f"{name} client"].wait(30) for name in web_ports):
+                raise RuntimeError("the node floors' clients did not connect")
             handles = []  # (kept until the end: a queue collected here is gone for the child too)
             for endpoint in endpoints.values():
                 fed, out = CONTEXT.Event(), CONTEXT.Queue()
