@@ -74,7 +74,7 @@ def per_frame(data: list[bytes]) -> dict[str, list[float]]:
         for name, robot in robots.items():
             started = clock()
             frame = whole(selection.incoming(key, payload))
-            derived_frame(frame, robot.step(frame.t, frame.seq, frame.values).samples)  # as the node publishes it
+            derived_frame(robot.step(frame.t, frame.seq, frame.values))  # as the node publishes it
             times[name].append(clock() - started)
     gc.enable()
     return {name: seconds[100:] for name, seconds in times.items()}  # warm caches first

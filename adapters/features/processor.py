@@ -27,7 +27,7 @@ from sonibus.bus.queue import SampleQueue
 from sonibus.bus.streams import Incoming, Streams
 
 from . import catalog, table
-from .compute import RobotFeatures
+from .compute import Output, RobotFeatures
 from .config import FeaturesConfig
 
 log = logging.getLogger(__name__)
@@ -117,9 +117,9 @@ class Features(Adapter):
         if self.config.per_key:
             for key, message in out.samples:
                 self._publisher(key).put(codec.encode(message))
-        elif out.samples:
-            self._publisher(keys.derived_frame(frame.robot)).put(derived_frame(frame, out.samples))
-        self.count("sent", len(out.samples))
+        elif out.names:
+            self._publisher(keys.derived_frame(frame.robot)).put(derived_frame(out))
+        self.count("sent", len(out.names))
         self.record_latency(time.time() - frame.t)
         for key, message in out.events:
             self.bus.put(key, message)
@@ -171,8 +171,6 @@ def whole(message: Incoming) -> Frame:
     return Frame(message.source.robot, message.seq, message.t, {s.source.key: s.values[0] for s in message.samples})
 
 
-def derived_frame(frame: Frame, samples: list[tuple[str, dict[str, Any]]]) -> bytes:
-    """The message on ``<robot>/derived`` carrying every derived value of ``frame``, encoded."""
-    cut = len(keys.derived_frame(frame.robot)) + 1  # (each value's name is its key below <robot>/derived/)
-    return codec.encode(messages.derived_frame(frame.t, frame.seq, [k[cut:] for k, _ in samples],
-                                               [m["v"] for _, m in samples]))
+def derived_frame(out: Output) -> bytes:
+    """The message on ``<robot>/derived`` carrying every derived value of a frame, encoded."""
+    return codec.encode(messages.derived_frame(out.t, out.seq, out.names, out.values))
