@@ -98,37 +98,47 @@ class VelocityFilter:
         """``update`` with floats in and out: which signals have a velocity (``values``) for ``t``."""
         values, known, last_q, last_t, last_r, last_dt = (self.values, self._known, self._last_q, self._last_t,
                                                           self._last_r, self._last_dt)
-        gap, rates = self.max_gap_s, self._rates
+        gap, tau = self.max_gap_s, self.tau
+        step_dt, e, delta = self._dt, self._e, self._delta  # (the signals of a frame share their Δt)
         t = float(t)  # (a numpy scalar would make every velocity one)
         fresh = [False] * len(q)
         refusals: list[int] = []
-        for i, x in enumerate(q):
+        for i, (x, rate) in enumerate(zip(q, self._rates, strict=True)):
             if x - x != 0.0:  # not finite
                 if x == x:  # ±inf: refused, and nothing to start over from
                     refusals.append(i)
-                    values[i], known[i], last_q[i], last_t[i] = 0.0, False, NAN, NAN
+                    values[i] = 0.0
+                    known[i] = False
+                    last_q[i] = last_t[i] = NAN
                 continue  # (NaN is no sample: the signal keeps its state)
             dt = t - last_t[i]
-            if 0.0 < dt <= gap and abs(x - last_q[i]) <= rates[i] * dt:
-                if dt != self._dt:
-                    e = math.exp(-dt / self.tau)
-                    self._dt, self._e = dt, e
-                    self._delta = dt / 2 - self.tau + dt * e / (1.0 - e) if e != 1.0 else math.inf
-                e = self._e
-                r = (x - last_q[i]) / dt
+            moved = x - last_q[i]
+            if 0.0 < dt <= gap and abs(moved) <= rate * dt:
+                if dt != step_dt:
+                    step_dt = dt
+                    e = math.exp(-dt / tau)
+                    delta = dt / 2 - tau + dt * e / (1.0 - e) if e != 1.0 else math.inf
+                r = moved / dt
                 slope = (r - last_r[i]) / ((dt + last_dt[i]) / 2) if known[i] else 0.0
-                v = e * values[i] + (1.0 - e) * (r + slope * self._delta)
+                v = e * values[i] + (1.0 - e) * (r + slope * delta)
                 if v - v != 0.0:  # a rate beyond float, where max_rate is unknown: never kept
                     refusals.append(i)
-                    values[i], known[i], last_q[i], last_t[i] = 0.0, False, NAN, NAN
+                    values[i] = 0.0
+                    known[i] = False
+                    last_q[i] = last_t[i] = NAN
                     continue
                 values[i] = v if abs(v) >= STILL else 0.0  # a decay to rest ends at rest, not at 1.9e-228
-                known[i], last_r[i], last_dt[i], fresh[i] = True, r, dt, True
+                known[i] = fresh[i] = True
+                last_r[i] = r
+                last_dt[i] = dt
             else:  # a first sample, one after a gap: start over from it; so too from a jump or time going back
                 if dt < 0.0 or 0.0 < dt <= gap:
                     refusals.append(i)
-                values[i], known[i] = 0.0, False
-            last_q[i], last_t[i] = x, t
+                values[i] = 0.0
+                known[i] = False
+            last_q[i] = x
+            last_t[i] = t
+        self._dt, self._e, self._delta = step_dt, e, delta
         self.rejected += len(refusals)
         self.refusals = refusals
         return fresh
