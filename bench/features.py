@@ -18,7 +18,7 @@
   frame off the queue, checks it, and hands the derived frame to Zenoh) over the
   run, as % of one core, and their ratios (issue 36: expressive at most 1.5×).
 
-    .venv/bin/python bench/features.py [--frames 20000] [--seconds 10] [--counted 300]
+    .venv/bin/python bench/features.py [--frames 20000] [--seconds 10] [--counted 200]
 
 Writes bench/results/features.json and prints a table.
 """
@@ -213,7 +213,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--frames", type=int, default=20_000)
     parser.add_argument("--seconds", type=float, default=10.0)
-    parser.add_argument("--counted", type=int, default=300, help="frames counted by callgrind per variant (0: none)")
+    parser.add_argument("--counted", type=int, default=200, help="frames counted by callgrind per variant (0: none)")
     parser.add_argument("--segments", type=int, help=argparse.SUPPRESS)  # (the run under callgrind)
     args = parser.parse_args()
     if args.segments:
