@@ -44,7 +44,7 @@ SCRIPTS: dict[str, tuple[str, list[str], float]] = {
     "stop_flood": ("stop_flood", [], 400),  # stop on each path alone and right after floods (issue 33)
     "stop_flood_heavy": ("stop_flood", ["--flood", "5000", "--rate", "50000", "--name", "stop_flood_heavy"], 400),
     "demo_hint": ("demo_hint", [], 120),  # a second terminal told about this machine's demo (issue 37)
-    "features": ("features", [], 180),  # with its instruction counts under callgrind (issue 35)
+    "features": ("features", [], 240),  # with its instruction counts under callgrind (issue 35)
     "map_cpu": ("map_cpu", [], 60),  # the map node's 50 maps at 100 Hz beside a hand-written loop (issue 34)
     "clap_nod": ("clap_nod", [], 120),  # a clap into JACK → the robot nods: sound to movement (issue 34)
     "map_edit": ("map_edit", [], 90),  # a map edited while it runs: round trip, CPU with 20 edits/s (issue 34)
