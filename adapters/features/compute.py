@@ -116,13 +116,16 @@ class RobotFeatures:
         vmax = np.array([j.max_velocity or messages.MAX_VALUE for j in robot.joints])
         self._velocity = VelocityFilter(len(names), config.cutoff_hz, config.max_gap_s,
                                         np.minimum(JUMP * vmax, messages.MAX_VALUE))
-        self._velocity_names = [f"velocity/{j}" for j in names]
-        self._velocity_range = _spans(ranges, self._named("velocity", names), (-vmax, vmax))
+        velocity_keys = [keys.derived(name, "velocity", j) for j in names]
+        self._velocity_names = self._below(velocity_keys)
+        self._velocity_range = _spans(ranges, velocity_keys, (-vmax, vmax))
         self._weights = weights([j.unit for j in robot.joints], names, config.weights)
         groups = robot.groups
-        self._groups = [(f"qom/{g}", g, members, [(j, w) for j in members if (w := float(self._weights[j]))])
-                        for g, members in groups.items()]  # (name, group, joints, weighted joints)
-        self._qom_range = _spans(ranges, self._named("qom", groups), (0.0, messages.MAX_VALUE))
+        qom_keys = [keys.derived(name, "qom", g) for g in groups]
+        self._groups = [(qom_name, g, members, [(j, w) for j in members if (w := float(self._weights[j]))])
+                        for qom_name, (g, members) in zip(self._below(qom_keys), groups.items(), strict=True)]
+        # (name, group, joints, weighted joints)
+        self._qom_range = _spans(ranges, qom_keys, (0.0, messages.MAX_VALUE))
         self._detectors = {g: OnsetDetector(config.onset, config.offset, config.min_duration_s)
                            for g, i in groups.items() if g != "Body" and self._weights[i].sum() > 0}
         self._motion_key = keys.event(name, "motion")
@@ -130,18 +133,20 @@ class RobotFeatures:
         if robot.arms is not None:
             sides = robot.arms.sides
             self._arm_joints = robot.arm_joints.tolist()  # type: ignore[union-attr]
-            self._hand_names = [f"hand/{s}" for s in sides]
-            self._speed_names = [f"hand_speed/{s}" for s in sides]
+            hand_keys = [keys.derived(name, "hand", s) for s in sides]
+            speed_keys = [keys.derived(name, "hand_speed", s) for s in sides]
+            self._hand_names, self._speed_names = self._below(hand_keys), self._below(speed_keys)
             unbounded = np.full((len(sides), 3), messages.MAX_VALUE)
-            self._hand_range = _spans(ranges, self._named("hand", sides), (-unbounded, unbounded))
-            self._speed_range = _spans(ranges, self._named("hand_speed", sides), (0.0, messages.MAX_VALUE))
+            self._hand_range = _spans(ranges, hand_keys, (-unbounded, unbounded))
+            self._speed_range = _spans(ranges, speed_keys, (0.0, messages.MAX_VALUE))
             self._hand_velocity = VelocityFilter(3 * len(sides), config.cutoff_hz, config.max_gap_s,
                                                  np.repeat(np.minimum(JUMP * np.array(self._speed_range[1]),
                                                                       messages.MAX_VALUE), 3))
         self._expressive = Expressive(robot, config, self._weights) if config.publishes("expressive") else None
 
-    def _named(self, feature: str, names: Any) -> list[str]:
-        return [keys.derived(self.robot.name, feature, n) for n in names]
+    def _below(self, keys_: list[str]) -> list[str]:
+        """The names of derived keys in a derived frame: below ``<robot>/derived/``."""
+        return [key[len(self._prefix):] for key in keys_]
 
     def step(self, t: float, seq: int, values: Mapping[str, Any]) -> Output:
         """The features of the frame ``seq`` taken at ``t``."""
