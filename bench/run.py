@@ -44,7 +44,7 @@ SCRIPTS: dict[str, tuple[str, list[str], float]] = {
     "stop_flood": ("stop_flood", [], 400),  # stop on each path alone and right after floods (issue 33)
     "stop_flood_heavy": ("stop_flood", ["--flood", "5000", "--rate", "50000", "--name", "stop_flood_heavy"], 400),
     "demo_hint": ("demo_hint", [], 120),  # a second terminal told about this machine's demo (issue 37)
-    "features": ("features", [], 90),
+    "features": ("features", [], 240),  # with its instruction counts under callgrind (issue 35)
     "map_cpu": ("map_cpu", [], 60),  # the map node's 50 maps at 100 Hz beside a hand-written loop (issue 34)
     "clap_nod": ("clap_nod", [], 120),  # a clap into JACK → the robot nods: sound to movement (issue 34)
     "map_edit": ("map_edit", [], 90),  # a map edited while it runs: round trip, CPU with 20 edits/s (issue 34)
@@ -132,9 +132,25 @@ def rows_naoqi_rate(r: dict[str, Any]) -> list[Row]:
 
 def rows_features(r: dict[str, Any]) -> list[Row]:
     f, base = r["features"], r["decode_only"]
+    before = [("features per Pepper frame against before issue 35's per-frame work, p50 / p99",
+               f"{_us(f['p50_us'])} / {_us(f['p99_us'])}",
+               f"{_us(r['before']['p50_us'])} / {_us(r['before']['p99_us'])} (before)",
+               f"{r['after_to_before_p50']:.2f}× / {r['after_to_before_p99']:.2f}×", "", "")] if "before" in r else []
+    counted = r.get("instructions_per_frame") or {}
+    if counted:
+        before.append(("features per Pepper frame, instructions (callgrind)",
+                       f"{counted['features'] / 1000:,.0f}k ({counted['features'] / counted['decode_only']:.1f}× "
+                       "decode only)", f"{counted['before'] / 1000:,.0f}k (before), decode only "
+                       f"{counted['decode_only'] / 1000:,.0f}k", f"{counted['features'] / counted['before']:.2f}×",
+                       "", ""))
+    if "on_bus_before" in r:
+        before.append(("features node on the bus, worker CPU, against before issue 35's per-frame work",
+                       f"{r['on_bus']['cpu_percent']:.1f} % of a core",
+                       f"{r['on_bus_before']['cpu_percent']:.1f} % (before)", f"{r['on_bus_after_to_before']:.2f}×",
+                       "", ""))
     return [("features per Pepper frame, p50 / p99", f"{_us(f['p50_us'])} / {_us(f['p99_us'])}",
              f"{_us(base['p50_us'])} / {_us(base['p99_us'])} (decode only)", f"{f['p50_us'] / base['p50_us']:.1f}×",
-             "", "")] + ([("features + expressive per Pepper frame, p50 / p99",
+             "", "")] + before + ([("features + expressive per Pepper frame, p50 / p99",
                            f"{_us(r['expressive']['p50_us'])} / {_us(r['expressive']['p99_us'])}",
                            f"{_us(f['p50_us'])} / {_us(f['p99_us'])} (features without)",
                            f"{r['expressive']['p50_us'] / f['p50_us']:.1f}× / "

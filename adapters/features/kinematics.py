@@ -19,7 +19,8 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from functools import cache
+from functools import cache, cached_property
+from math import cos, sin
 from typing import Any
 
 import numpy as np
@@ -89,6 +90,80 @@ class Arms:
                 rotation = rotation @ turns[..., i, :, :]
         return [found[f] for f in frames]
 
+    def hand_points(self, angles: Sequence[Sequence[float]]) -> list[float]:
+        """``points(angles).ravel()`` as floats, for one pose (``angles[arm][joint]``, ``n`` each):
+        what a processor computes per frame. Nested from the hand inwards (Horner: each joint
+        turns one vector, not a rotation matrix; turns about x, y or z touch two coordinates),
+        in plain floats: ~4× fewer operations than the matrix products, and no numpy call
+        (whose cost per call was most of ``points`` for one pose). Equal to ``points`` within
+        rounding (1e-15 m)."""
+        out: list[float] = []
+        for (x0, y0, z0, base), steps, q in zip(self._plans, self._steps, angles, strict=True):
+            px = py = pz = 0.0
+            for j, kind, ax, ay, az, tx, ty, tz, rot in steps:
+                if rot is None:  # u = t_(j+1) + rot_(j+1) · p: the child's origin, and the rest of the arm
+                    ux, uy, uz = tx + px, ty + py, tz + pz
+                else:
+                    ux = tx + rot[0] * px + rot[1] * py + rot[2] * pz
+                    uy = ty + rot[3] * px + rot[4] * py + rot[5] * pz
+                    uz = tz + rot[6] * px + rot[7] * py + rot[8] * pz
+                a = q[j]
+                if kind == _X:  # p = turn_j · u (a sliding joint: u + q·axis)
+                    c, s = cos(a), ax * sin(a)
+                    px, py, pz = ux, c * uy - s * uz, s * uy + c * uz
+                elif kind == _Y:
+                    c, s = cos(a), ay * sin(a)
+                    px, py, pz = c * ux + s * uz, uy, c * uz - s * ux
+                elif kind == _Z:
+                    c, s = cos(a), az * sin(a)
+                    px, py, pz = c * ux - s * uy, s * ux + c * uy, uz
+                elif kind == _ANY:  # Rodrigues: u cos + (k × u) sin + k (k · u)(1 − cos)
+                    c, s = cos(a), sin(a)
+                    d = (ax * ux + ay * uy + az * uz) * (1.0 - c)
+                    px = ux * c + (ay * uz - az * uy) * s + ax * d
+                    py = uy * c + (az * ux - ax * uz) * s + ay * d
+                    pz = uz * c + (ax * uy - ay * ux) * s + az * d
+                elif kind == _SLIDE:
+                    px, py, pz = ux + a * ax, uy + a * ay, uz + a * az
+                else:  # a padding joint
+                    px, py, pz = ux, uy, uz
+            if base is None:
+                out += (x0 + px, y0 + py, z0 + pz)
+            else:
+                out += (x0 + base[0] * px + base[1] * py + base[2] * pz,
+                        y0 + base[3] * px + base[4] * py + base[5] * pz,
+                        z0 + base[6] * px + base[7] * py + base[8] * pz)
+        return out
+
+    @cached_property
+    def _plans(self) -> list[tuple[float, float, float, tuple[float, ...] | None]]:
+        """Per arm its first origin and rotation (None: none)."""
+        return [(*self.translations[a, 0].tolist(), _turned(self.rotations[a, 0])) for a in range(len(self.sides))]
+
+    @cached_property
+    def _steps(self) -> list[list[tuple[Any, ...]]]:
+        """Per arm, from the hand inwards, each joint's ``(joint, kind, axis..., child origin..., child
+        rotation or None)``: what ``hand_points`` needs, as floats."""
+        n = self.axes.shape[1]
+        plans = []
+        for a in range(len(self.sides)):
+            steps = []
+            for j in reversed(range(n)):
+                axis = self.axes[a, j]
+                principal = np.flatnonzero(axis)
+                if self.sliding[a, j]:  # type: ignore[index]
+                    kind = _SLIDE
+                elif not axis.any():
+                    kind = _NONE
+                elif len(principal) == 1 and abs(axis[principal[0]]) == 1.0:
+                    kind = (_X, _Y, _Z)[principal[0]]
+                else:
+                    kind = _ANY
+                rot = None if j == n - 1 else _turned(self.rotations[a, j + 1])  # (the hand point's turns nothing)
+                steps.append((j, kind, *axis.tolist(), *self.translations[a, j + 1].tolist(), rot))
+            plans.append(steps)
+        return plans
+
     def hands(self, angles: Mapping[str, float]) -> np.ndarray:
         """Each arm's hand point ``(arms, 3)`` for joint angles by name (a joint not given is at 0)."""
         n = self.axes.shape[1]
@@ -128,6 +203,14 @@ class Arms:
         lengths = np.linalg.norm(self.translations, axis=-1)
         levers = np.array([[arm[i + 1:].sum() for i in range(self.axes.shape[1])] for arm in lengths])
         return np.where(self.sliding > 0, 1.0, levers)  # type: ignore[operator]
+
+
+_X, _Y, _Z, _ANY, _SLIDE, _NONE = range(6)  # how a joint moves the hand point (hand_points)
+
+
+def _turned(rotation: np.ndarray) -> tuple[float, ...] | None:
+    """A rotation's 9 entries, row by row; None for none (the identity)."""
+    return None if np.array_equal(rotation, EYE) else tuple(rotation.ravel().tolist())
 
 
 def chains(sides: Sequence[str], links: Sequence[Sequence[Mapping[str, Any]]], frame: str = "Torso") -> Arms:

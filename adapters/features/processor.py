@@ -27,7 +27,7 @@ from sonibus.bus.queue import SampleQueue
 from sonibus.bus.streams import Incoming, Streams
 
 from . import catalog, table
-from .compute import RobotFeatures
+from .compute import Output, RobotFeatures
 from .config import FeaturesConfig
 
 log = logging.getLogger(__name__)
@@ -56,6 +56,7 @@ class Features(Adapter):
                                   lambda robot, text: self.warn("info", text))
         self._streams = self.own(Streams(self.bus, [keys.joints(r) for r in cfg.robots], self._queue,
                                          per_joint_keys=cfg.per_joint_keys))
+        self._tally = self.stats.tally(("received", "frames", "sent", "events"))  # (the worker's alone: no lock)
         self.spawn(self._run, "features")
 
     # -- the loop ---------------------------------------------------------------------
@@ -73,7 +74,7 @@ class Features(Adapter):
         if key == INFO:
             self._learn(*payload)
             return
-        message = self._streams.take(key, payload, self.count, self.warn)  # checked by the gate, counted
+        message = self._streams.take(key, payload, self._counted, self.warn)  # checked by the gate, counted
         if message is None:
             return
         robot = message.source.robot
@@ -87,6 +88,14 @@ class Features(Adapter):
         for frame in self._assembler.add(robot, key, message.seq, message.t, message.values[0]):
             self.process(frame)
 
+    def _counted(self, kind: str, n: int = 1) -> None:
+        """``count``, on the worker: what every frame counts goes to the tally."""
+        tally = self._tally
+        if kind in tally:
+            tally[kind] += n
+        else:
+            self.count(kind, n)
+
     def process(self, frame: Frame) -> None:
         """Compute and publish the features of one frame."""
         features = self.robot_features[frame.robot]
@@ -98,7 +107,8 @@ class Features(Adapter):
                                f"{lateness.why_late(self.bus, frame.robot)})")
             return
         out = features.step(frame.t, frame.seq, frame.values)
-        self.count("frames")
+        tally = self._tally
+        tally["frames"] += 1
         if (out.missing or out.nan) and features.frames > 1:  # the first frame began before the robot's info came
             self.count("missing", out.missing)
             self.count("nan", out.nan)
@@ -117,13 +127,13 @@ class Features(Adapter):
         if self.config.per_key:
             for key, message in out.samples:
                 self._publisher(key).put(codec.encode(message))
-        elif out.samples:
-            self._publisher(keys.derived_frame(frame.robot)).put(derived_frame(frame, out.samples))
-        self.count("sent", len(out.samples))
+        elif out.names:
+            self._publisher(keys.derived_frame(frame.robot)).put(derived_frame(out))
+        tally["sent"] += len(out.names)
         self.record_latency(time.time() - frame.t)
         for key, message in out.events:
             self.bus.put(key, message)
-        self.count("events", len(out.events))
+        tally["events"] += len(out.events)
 
     def _publisher(self, key: str) -> zenoh.Publisher:
         publisher = self._publishers.get(key)
@@ -168,11 +178,11 @@ class Features(Adapter):
 
 def whole(message: Incoming) -> Frame:
     """The frame of a message taken from ``<robot>/frame``: joint key → position."""
-    return Frame(message.source.robot, message.seq, message.t, {s.source.key: s.values[0] for s in message.samples})
+    assert message.selected is not None
+    return Frame(message.source.robot, message.seq, message.t,
+                 dict(zip([source.key for source in message.selected.sources], message.values, strict=True)))
 
 
-def derived_frame(frame: Frame, samples: list[tuple[str, dict[str, Any]]]) -> bytes:
-    """The message on ``<robot>/derived`` carrying every derived value of ``frame``, encoded."""
-    cut = len(keys.derived_frame(frame.robot)) + 1  # (each value's name is its key below <robot>/derived/)
-    return codec.encode(messages.derived_frame(frame.t, frame.seq, [k[cut:] for k, _ in samples],
-                                               [m["v"] for _, m in samples]))
+def derived_frame(out: Output) -> bytes:
+    """The message on ``<robot>/derived`` carrying every derived value of a frame, encoded."""
+    return codec.encode(messages.derived_frame(out.t, out.seq, out.names, out.values))
