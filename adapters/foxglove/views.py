@@ -54,18 +54,19 @@ class Views:
         self._asked: dict[str, float] = {}
         self.derived_seen: set[str] = set()  # robots whose info/derived has been taken
 
-    def of(self, incoming: Incoming) -> list[tuple[str, dict[str, Any]]]:
-        """The views of one message (a robot's info gives none: it tells its model)."""
+    def of(self, incoming: Incoming, frame: bool = True) -> list[tuple[str, dict[str, Any]]]:
+        """The views of one message (a robot's info gives none: it tells its model); without
+        ``frame`` a frame's view of itself is left out (the recorder writes the frame as it is)."""
         robot, section = incoming.source.robot, incoming.source.section
         if section == "info" and not incoming.source.name:
             self._arms[robot] = arm_frames(incoming.message)
         elif section == "events":
             return [(view(robot, LOG), log_message(robot, incoming.message))]
         elif section == "frame" and incoming.samples:
-            frame = selected(incoming)
+            whole = selected(incoming)
             arms = self._arms.get(robot)
-            out = [(view(robot, FRAME), frame)]
-            return out if arms is None else [*out, (view(robot, TF), arms.transforms(robot, frame))]
+            out = [(view(robot, FRAME), whole)] if frame else []
+            return out if arms is None else [*out, (view(robot, TF), arms.transforms(robot, whole))]
         elif section == "derived" and robot not in self.derived_seen:
             self._ask(robot)
         return []

@@ -60,7 +60,7 @@ from typing import Any
 
 import zenoh
 
-from sonibus.adapters.foxglove.views import DERIVED_INFO, Views, joint_samples
+from sonibus.adapters.foxglove.views import DERIVED_INFO, Views, selected
 from sonibus.bus import codec, keys
 from sonibus.bus.adapter import Adapter
 from sonibus.bus.errors import ConfigError
@@ -380,7 +380,9 @@ class Recorder(Adapter):
         incoming = self._streams.take(key, payload, self.count, self.warn)  # checked by the gate, counted
         if incoming is None:
             return
-        samples = joint_samples(incoming) if incoming.source.section == "frame" else [(key, incoming.message)]
+        framed = incoming.source.section == "frame"
+        # a frame is written whole, its selected joints, one message (issue 35: was a message per joint)
+        samples = ([(key, selected(incoming))] if incoming.samples else []) if framed else [(key, incoming.message)]
         robot = key.partition("/")[0]
         if key.endswith("/info"):
             if robot in self._info_seen:
@@ -392,7 +394,7 @@ class Recorder(Adapter):
         if self._series.writer is None:  # paused
             self.count("unrecorded", len(samples))
             return
-        views = self._views.of(incoming) if self._views is not None else []
+        views = self._views.of(incoming, frame=not framed) if self._views is not None else []
         refused = self._series.writer.write_all([*samples, *views], log_ns)  # (in one go: issue 35)
         for refused_key, exc in refused:  # (past the gate, rare): skipped whole, the file stays readable
             self.count("bad")
