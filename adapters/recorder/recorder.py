@@ -383,6 +383,8 @@ class Recorder(Adapter):
         framed = incoming.source.section == "frame"
         # a frame is written whole, its selected joints, one message (issue 35: was a message per joint)
         samples = ([(key, selected(incoming))] if incoming.samples else []) if framed else [(key, incoming.message)]
+        # counted as readers give them (Recording.counts): a frame's joints, a derived frame's values
+        held = len(samples[0][1]["names"]) if samples and (framed or keys.is_derived_frame(key)) else len(samples)
         robot = key.partition("/")[0]
         if key.endswith("/info"):
             if robot in self._info_seen:
@@ -392,7 +394,7 @@ class Recorder(Adapter):
         elif robot not in self._info_seen:
             self._info.ask(robot)
         if self._series.writer is None:  # paused
-            self.count("unrecorded", len(samples))
+            self.count("unrecorded", held)
             return
         views = self._views.of(incoming, frame=not framed) if self._views is not None else []
         refused = self._series.writer.write_all([*samples, *views], log_ns)  # (in one go: issue 35)
@@ -400,7 +402,8 @@ class Recorder(Adapter):
             self.count("bad")
             self.warn("unwritable", f"message on '{refused_key}' not recorded: {exc}")
         gone = {refused_key for refused_key, _ in refused}
-        self.count("written", sum(sample_key not in gone for sample_key, _ in samples))
+        if samples and samples[0][0] not in gone:
+            self.count("written", held)
         if views:
             self.count("foxglove", sum(view not in gone for view, _ in views))
 
