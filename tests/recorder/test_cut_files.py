@@ -56,8 +56,8 @@ def passes_every_reader(path, tmp_path):
         recording.infos()
         samples = sum(1 for _ in recording.messages())
         assert sum(len(moment) for _, moment in _moments(recording.messages())) == samples
-        assert sum(len(moment) for _, moment in _moments(recording.messages(frames=True))) == len(
-            found := [(m.key, m.log_ns, m.data) for m in recording.messages(frames=True)])
+        found = [(m.key, m.log_ns, m.data) for m in recording.messages(frames=True)]
+        assert sum(len(moment) for _, moment in _moments(recording.messages(frames=True))) == len(found)
     return found
 
 

@@ -32,7 +32,7 @@ from .conftest import HEY, record_sim
 
 
 @pytest.fixture(scope="module")
-def with_views(tmp_path_factory: pytest.TempPathFactory) -> tuple[Any, Any, dict[str, Any], list[tuple[str, dict[str, Any]]]]:
+def with_views(tmp_path_factory: pytest.TempPathFactory) -> tuple[Any, Any, dict[str, Any], list[Any]]:
     """A recording with the Foxglove views (a feature processor beside the robot), the
     recorder's stats, and what the bus carried on the joint keys meanwhile."""
     path = tmp_path_factory.mktemp("fox") / "pepper.mcap"
