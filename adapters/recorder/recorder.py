@@ -382,7 +382,7 @@ class Recorder(Adapter):
             return
         framed = incoming.source.section == "frame"
         # a frame is written whole, its selected joints, one message (issue 35: was a message per joint)
-        samples = ([(key, selected(incoming))] if incoming.samples else []) if framed else [(key, incoming.message)]
+        samples = ([(key, selected(incoming))] if incoming.values else []) if framed else [(key, incoming.message)]
         # counted as readers give them (Recording.counts): a frame's joints, a derived frame's values
         held = len(samples[0][1]["names"]) if samples and (framed or keys.is_derived_frame(key)) else len(samples)
         robot = key.partition("/")[0]
@@ -396,7 +396,8 @@ class Recorder(Adapter):
         if self._series.writer is None:  # paused
             self.count("unrecorded", held)
             return
-        views = self._views.of(incoming, frame=not framed) if self._views is not None else []
+        views = self._views.of(incoming, frame=not framed, whole=samples[0][1] if framed and samples else None) \
+            if self._views is not None else []
         refused = self._series.writer.write_all([*samples, *views], log_ns)  # (in one go: issue 35)
         for refused_key, exc in refused:  # (past the gate, rare): skipped whole, the file stays readable
             self.count("bad")
