@@ -14,10 +14,12 @@ live bus added; ``t`` is moved to now and ``seq`` keeps
 counting across loops (each audio key's on its own), so sinks' stale-sample
 checks, frame reassembly and jitter buffers work unchanged. Audio chunks go
 out like the robot's, with the ``AUDIO`` QoS. No wait is longer than ``max_gap_s`` (``timeline.py``): a longer gap
-is shortened to it, with a warning. The joint samples of one frame go out like a robot owner's: the
+is shortened to it, with a warning. A frame goes out like a robot owner's: the
 frame whole on ``<robot>/frame`` (what sinks listen to), then each joint's
 sample on its key while anyone subscribes there (``bus/ownership.py``, shared with
-live owners). Derived values go out as they were recorded: a derived frame
+live owners); a frame recorded whole (issue 35) as it is, with only the joints
+``keys`` selects, a file of before's joint samples of one frame gathered back.
+Derived values go out as they were recorded: a derived frame
 whole on ``<robot>/derived`` (with only the values ``keys`` selects), or each on
 its key (a recording made before derived frames). The replayed robots are owned
 like real ones (liveliness, ``<robot>/info`` from the recording) but take no
