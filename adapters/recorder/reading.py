@@ -247,7 +247,8 @@ class Recording:
         read is skipped and counted (``skipped``). A frame comes as the samples of its
         keys (``pepper/joints/HeadYaw``, ``pepper/derived/qom/Body``), in its order, as a
         recording made before frames were recorded whole holds them; with ``frames``
-        (replay) it comes whole, holding only the joints or values of ``keys``."""
+        (replay) it comes whole, holding only the joints or values of ``keys``; and whole when
+        ``keys`` names its channel (``pepper/frame``, as Foxglove's view of a file of before)."""
         if not self._frames:
             yield from self._raw(keys, start_s, end_s)
             return
@@ -256,7 +257,7 @@ class Recording:
                   if wanted is None or any(k.startswith(prefix) for k in wanted)}
         for message in self._raw(None if wanted is None else [*wanted, *chosen], start_s, end_s):
             prefix = self._frames.get(message.key)
-            if prefix is None:
+            if prefix is None or (wanted is not None and message.key in wanted):  # (asked for by its own name)
                 yield message
                 continue
             data = message.data

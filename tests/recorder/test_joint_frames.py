@@ -65,6 +65,9 @@ def test_a_new_file_reads_exports_and_says_what_an_old_one_of_the_same_input_doe
                   if m.key == "pepper/frame"]
         assert len(frames) == 51 and all(f["names"] == ["HeadYaw", "HipRoll"] and len(f["v"]) == 2 for f in frames)
         assert new_file.infos() == old_file.infos()
+        # the frames asked for by their channel: whole, as the view of an old file gives them
+        assert [m.data for m in new_file.messages(["pepper/frame"])] == \
+            [m.data for m in old_file.messages(["pepper/frame"])]
     paths = {}
     for name, path in (("old", OLD), ("new", new)):
         with Recording(str(path)) as recording:
