@@ -32,28 +32,13 @@ from typing import Any
 import node_floors
 from common import free_port, write
 from floor import CONTEXT, Case, publish
-from show import WARMUP_S, started, window
+from show import SHOW, WARMUP_S, started, window
 from sink_throughput import SONIBUS, stop_process, thread_cpu
 
 RATE_HZ = 50
-CONFIG = """[bus]
-multicast = false
-
-[nodes.sim]
-adapter = "sim"
-robot = "pepper"
-rate_hz = {rate}
-idle = true
-
-[nodes.features]
-adapter = "features"
-robots = "pepper"
-
-[nodes.recorder]
-adapter = "recorder"
-path = "{folder}/after-{{time}}.mcap"
-status_every_s = 0
-
+# show.py's installation (its sim, features and recorder are run here; the recorder writes show-*.mcap),
+# and the recorder of the older tree beside it
+BEFORE = """
 [nodes.recorder_before]
 adapter = "recorder"
 path = "{folder}/before-{{time}}.mcap"
@@ -99,7 +84,8 @@ def held(folder: Path, prefix: str) -> dict[str, Any]:
 def measure(seconds: float, before: str | None) -> dict[str, Any]:
     folder = Path(tempfile.mkdtemp(prefix="recorder-node-"))
     config = folder / "show.toml"
-    config.write_text(CONFIG.format(rate=RATE_HZ, folder=folder))
+    ports = {name: free_port() for name in ("osc", "gateway", "web", "oscquery", "foxglove")}  # (not run here)
+    config.write_text(SHOW.format(rate=RATE_HZ, folder=folder, **ports) + BEFORE.format(folder=folder))
     endpoint = f"tcp/127.0.0.1:{free_port()}"
     processes: dict[str, subprocess.Popen[bytes]] = {}
     done, ready = CONTEXT.Event(), CONTEXT.Event()
@@ -159,7 +145,7 @@ def main() -> None:
     for n in range(args.rounds):
         found = measure(args.seconds, args.before)
         rounds.append(found["cpu"])
-        files = {prefix: held(found["folder"], prefix) for prefix in ("after", "before") if
+        files = {prefix: held(found["folder"], prefix) for prefix in ("show", "before") if
                  glob.glob(str(found["folder"] / f"{prefix}-*.mcap"))}
         print(f"round {n + 1}: " + ", ".join(f"{k} {v:.2f}" for k, v in found["cpu"].items()), flush=True)
     median = {k: round(statistics.median(r[k] for r in rounds), 2) for k in rounds[0]}
