@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import math
 import os
-from collections.abc import Iterator, Sequence
+from collections.abc import Collection, Iterator, Sequence
 from dataclasses import dataclass
 from typing import Any, BinaryIO
 
@@ -360,7 +360,7 @@ class Checks:
 
     REMEMBERED = 1 << 16  # places skipped that are remembered, not counted twice (replay reads a file again)
 
-    def __init__(self, path: str, data: set[str] = frozenset()) -> None:  # type: ignore[assignment]
+    def __init__(self, path: str, data: Collection[str] = ()) -> None:
         self.path = path
         self.data = data  # channels named like a view that hold bus data (a robot's frames: ``_frames``)
         self.skipped: dict[str, int] = {"messages": 0, "chunks": 0}

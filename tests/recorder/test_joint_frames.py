@@ -83,22 +83,29 @@ def test_a_new_file_reads_exports_and_says_what_an_old_one_of_the_same_input_doe
     assert said["new"]["messages"] == said["old"]["messages"] - 51  # (the frames' view, now the joints themselves)
 
 
-def replayed(net, path: Path, name: str, seen: list) -> Replay:
-    """A replay of ``path`` as ``name`` to its end, what it sent on the frame and joint keys gathered in ``seen``."""
+def replayed(net, paths: dict[str, Path]) -> dict[str, tuple[Replay, list]]:
+    """Each of ``paths`` (bus name → file) replayed to its end at once, with what each sent on its frame and
+    joint keys."""
     lock = threading.Lock()
+    watch = net.bus("watch")
+    out: dict[str, tuple[Replay, list]] = {}
+    subscribers = []
+    for name, path in paths.items():
+        seen: list = []
 
-    def take(sample) -> None:
-        with lock:
-            seen.append((str(sample.key_expr), decode(sample.payload.to_bytes())))
+        def take(sample, seen=seen) -> None:
+            with lock:
+                seen.append((str(sample.key_expr), decode(sample.payload.to_bytes())))
 
-    watch = net.bus(f"watch-{name}")
-    subscribers = [watch.session.declare_subscriber(f"{name}/{what}", take) for what in ("frame", "joints/*")]
-    replay = net.start(Replay(ReplayConfig(path=str(path), speed=10.0, rename={"pepper": name}), name=name))
-    wait_for(replay.finished.is_set, timeout=20, what=f"the end of the replay of {path.name}")
-    settle(lambda: len(seen))
+        subscribers += [watch.session.declare_subscriber(f"{name}/{what}", take) for what in ("frame", "joints/*")]
+        out[name] = (net.start(Replay(ReplayConfig(path=str(path), speed=10.0, rename={"pepper": name}), name=name)),
+                     seen)
+    for name, (replay, _) in out.items():
+        wait_for(replay.finished.is_set, timeout=20, what=f"the end of the replay of {paths[name].name}")
+    settle(lambda: [len(seen) for _, seen in out.values()])
     for subscriber in subscribers:
         subscriber.undeclare()
-    return replay
+    return out
 
 
 def test_an_old_and_a_new_file_of_the_same_input_replay_the_same_frames_and_joint_samples(net, tmp_path):
@@ -106,9 +113,7 @@ def test_an_old_and_a_new_file_of_the_same_input_replay_the_same_frames_and_join
     with Recording(str(OLD)) as recording:
         recorded = [{q: v for q, v in m.data.items() if q != "t"} for m in recording._raw(["pepper/frame"])]
     assert len(recorded) == 51
-    for path, name in ((OLD, "take_old"), (new, "take_new")):
-        seen: list = []
-        replay = replayed(net, path, name, seen)
+    for name, (replay, seen) in replayed(net, {"take_old": OLD, "take_new": new}).items():
         frames = [m for key, m in seen if key == f"{name}/frame"]
         # every frame as recorded, in order (one more than 100 ms late on a stalled machine: skipped whole, counted)
         got = [{q: v for q, v in f.items() if q != "t"} for f in frames]  # (t: moved to now)
@@ -136,8 +141,7 @@ def test_a_bad_frame_in_a_file_is_skipped_with_one_line_and_the_rest_exports_and
     assert line.startswith(f"sonibus: WARNING: {path}: skipped 2 messages (the first: pepper/frame: "), line
     rows = (tmp_path / "csv" / "pepper.csv").read_text(encoding="utf-8").splitlines()
     assert [row.split(",")[2] for row in rows[1:]] == ["0", "1", "3", "5"]  # (seq: the good frames, whole)
-    seen: list = []
-    replay = replayed(net, path, "take1", seen)
+    ((replay, seen),) = replayed(net, {"take1": path}).values()
     assert replay.stats["frames"] + replay.stats["late"] // len(names) == 4
     assert "skipped 2 messages (the first: pepper/frame: " in replay.problems
     assert {m["seq"] for key, m in seen if key == "take1/frame"} <= {0, 1, 3, 5}
