@@ -14,7 +14,8 @@ essential work with the same libraries and no sonibus, fed the same frames as
 
 The nodes do more than their floors (the features node's derived frames and the robot's
 events come in too, Foxglove's views and per-joint channels go out, the recorder writes
-a frame's joints one message each): the ratio says what that and sonibus's own work cost.
+each frame's transforms beside it, and each derived frame): the ratio says what that and
+sonibus's own work cost. (Before issue 35 the recorder wrote a frame's joints a message each.)
 
     from node_floors import measure
     measure(8.0, warmup_s=3.0)  # {"foxglove": CPU %, "recorder": ..., "oscquery": ...}

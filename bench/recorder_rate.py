@@ -6,9 +6,10 @@ robot owner does (``RobotAdapter.publish_frame``; ``sink_throughput.publish``):
 each frame of 17 joints whole on ``botN/frame`` (``messages.frame``,
 ``Bus.stream_publisher``), then its samples on ``botN/joints/JK``; the
 recorder is its own process (``sonibus run`` with ``adapter = "recorder"``,
-``subscribe = ["*/joints/*"]``, so it takes the frames and writes each joint's
-sample; a fresh file each step, listening on loopback TCP). Rates and counts
-are joint samples (a frame of 17 joints is 17). When the publishers are done
+``subscribe = ["*/joints/*"]``, so it takes the frames and writes each one
+whole, one MCAP message, since issue 35; a fresh file each step, listening on
+loopback TCP). Rates and counts are joint samples (a frame of 17 joints is 17,
+as ``Recording.message_count`` reads it). When the publishers are done
 the recorder is stopped (SIGTERM: it writes what is still queued, then the
 summary); the file's message count and the
 recorder's ``sonibus.stats`` metadata (``dropped``: its queue was full) say

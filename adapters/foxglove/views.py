@@ -54,18 +54,21 @@ class Views:
         self._asked: dict[str, float] = {}
         self.derived_seen: set[str] = set()  # robots whose info/derived has been taken
 
-    def of(self, incoming: Incoming) -> list[tuple[str, dict[str, Any]]]:
-        """The views of one message (a robot's info gives none: it tells its model)."""
+    def of(self, incoming: Incoming, frame: bool = True,
+           whole: dict[str, Any] | None = None) -> list[tuple[str, dict[str, Any]]]:
+        """The views of one message (a robot's info gives none: it tells its model); without
+        ``frame`` a frame's view of itself is left out (the recorder writes the frame as it is);
+        ``whole``: the frame's ``selected``, when the caller has it already."""
         robot, section = incoming.source.robot, incoming.source.section
         if section == "info" and not incoming.source.name:
             self._arms[robot] = arm_frames(incoming.message)
         elif section == "events":
             return [(view(robot, LOG), log_message(robot, incoming.message))]
-        elif section == "frame" and incoming.samples:
-            frame = selected(incoming)
+        elif section == "frame" and incoming.values:
+            whole = selected(incoming) if whole is None else whole
             arms = self._arms.get(robot)
-            out = [(view(robot, FRAME), frame)]
-            return out if arms is None else [*out, (view(robot, TF), arms.transforms(robot, frame))]
+            out = [(view(robot, FRAME), whole)] if frame else []
+            return out if arms is None else [*out, (view(robot, TF), arms.transforms(robot, whole))]
         elif section == "derived" and robot not in self.derived_seen:
             self._ask(robot)
         return []
@@ -109,12 +112,12 @@ def joint_samples(frame: Incoming) -> list[tuple[str, dict[str, Any]]]:
 
 
 def selected(frame: Incoming) -> dict[str, Any]:
-    """A frame with only the joints a sink's patterns select (the frame itself when that is all of them)."""
+    """A frame with only the joints a sink's patterns select (the frame itself when that is all of them;
+    from its ``Selected``, worked out once per joint list: no sample made per joint)."""
     message = frame.message
-    if len(frame.samples) == len(message["names"]):
+    if frame.selected is None or frame.selected.indices is None:
         return message
-    chosen = {sample.source.name for sample in frame.samples}
-    index = [i for i, name in enumerate(message["names"]) if name in chosen]
+    index = frame.selected.indices
     extra = {q: message[q] for q in message if q not in messages.FRAME_FIELDS}
     return messages.frame(message["t"], message["seq"], [message["names"][i] for i in index],
                           [message["v"][i] for i in index], {q: [v[i] for i in index] for q, v in extra.items()})

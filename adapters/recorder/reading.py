@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import math
 import os
-from collections.abc import Iterator, Sequence
+from collections.abc import Collection, Iterator, Sequence
 from dataclasses import dataclass
 from typing import Any, BinaryIO
 
@@ -36,7 +36,7 @@ from mcap.stream_reader import StreamReader
 from sonibus.bus import keys
 from sonibus.bus.errors import SonibusError
 from sonibus.bus.keys import Key
-from sonibus.bus.messages import SECTIONS, BadMessage, Gate, Limits, derived_samples
+from sonibus.bus.messages import SECTIONS, BadMessage, Gate, Limits, derived_samples, frame_samples
 
 from . import lock
 from .bounded import (
@@ -103,7 +103,7 @@ class Recording:
         except BaseException:
             self._file.close()
             raise
-        self.checks = Checks(path)
+        self.checks = Checks(path, data=set(self._frames))
 
     @property
     def skipped(self) -> dict[str, int]:
@@ -158,9 +158,12 @@ class Recording:
         self._channels: dict[int, Channel] = {cid: c for cid, c in summary.channels.items()
                                               if is_view(c.topic) or _data_key(c.topic)}
         self._counts = {c.topic: stats.channel_message_counts.get(cid, 0) for cid, c in self._channels.items()}
-        # derived frames (<robot>/derived, one message a frame): read as the samples of their values' keys
-        self._derived_frames = {c.topic for c in self._channels.values() if keys.is_derived_frame(c.topic)}
-        self._expanded = not self._derived_frames
+        # frames (one message a frame) read as the samples of their keys: derived frames (<robot>/derived), and
+        # a robot's frames (<robot>/frame) when the file holds no joint key of it (else they are Foxglove's view of
+        # those joints, as the recorder wrote them before issue 35)
+        self._frames = _frames(self._counts)
+        self._derived_frames = {f for f, prefix in self._frames.items() if prefix.endswith("/derived/")}
+        self._expanded = not self._frames
         self.metadata: dict[str, dict[str, str]] = {}
         try:
             for index in summary.metadata_indexes:
@@ -173,18 +176,19 @@ class Recording:
 
     @property
     def counts(self) -> dict[str, int]:
-        """Messages per key recorded; a derived frame's values counted on their own keys, as
-        if each had been recorded on its key (as the recorder did before derived frames)."""
+        """Messages per key recorded; a frame's joints and a derived frame's values counted on
+        their own keys, as if each had been recorded on its key (as the recorder did before)."""
         if not self._expanded:
             found: dict[str, int] = {}
-            for message in self._raw(list(self._derived_frames)):
+            for message in self._raw(list(self._frames)):
+                prefix = self._frames[message.key]
                 for name in message.data["names"]:
-                    key = f"{message.key}/{name}"
+                    key = prefix + name
                     if key in found or len(found) < MAX_CHANNELS:  # (names come from the file)
                         found[key] = found.get(key, 0) + 1
-            frames = sum(n for k, n in self._counts.items() if k in self._derived_frames)
+            frames = sum(n for k, n in self._counts.items() if k in self._frames)
             self._message_count += sum(found.values()) - frames
-            self._counts = {k: n for k, n in self._counts.items() if k not in self._derived_frames} | found
+            self._counts = {k: n for k, n in self._counts.items() if k not in self._frames} | found
             self._expanded = True
         return self._counts
 
@@ -230,36 +234,48 @@ class Recording:
         """The channels of derived frames (``pepper/derived``): what ``messages(frames=True)`` gives whole."""
         return set(self._derived_frames)
 
+    @property
+    def frames(self) -> set[str]:
+        """The channels read as the samples of their keys (``pepper/frame``: its joints;
+        ``pepper/derived``: its values): what ``messages(frames=True)`` gives whole."""
+        return set(self._frames)
+
     def messages(self, keys: Sequence[str] | None = None, start_s: float | None = None,
                  end_s: float | None = None, frames: bool = False) -> Iterator[Message]:
         """Messages in the order they were recorded, optionally only ``keys`` and
         only between ``start_s`` and ``end_s`` seconds from the start; what cannot be
-        read is skipped and counted (``skipped``). A derived frame comes as the samples
-        of its values' keys (``pepper/derived/qom/Body``), in its order, as a recording
-        made before derived frames holds them; with ``frames`` (replay) it comes whole,
-        holding only the values of ``keys``."""
-        if not self._derived_frames:
+        read is skipped and counted (``skipped``). A frame comes as the samples of its
+        keys (``pepper/joints/HeadYaw``, ``pepper/derived/qom/Body``), in its order, as a
+        recording made before frames were recorded whole holds them; with ``frames``
+        (replay) it comes whole, holding only the joints or values of ``keys``; and whole when
+        ``keys`` names its channel (``pepper/frame``, as Foxglove's view of a file of before)."""
+        if not self._frames:
             yield from self._raw(keys, start_s, end_s)
             return
         wanted = None if keys is None else set(keys)
-        chosen = {f for f in self._derived_frames if wanted is None or any(k.startswith(f + "/") for k in wanted)}
+        chosen = {f for f, prefix in self._frames.items()
+                  if wanted is None or any(k.startswith(prefix) for k in wanted)}
         for message in self._raw(None if wanted is None else [*wanted, *chosen], start_s, end_s):
-            if message.key not in self._derived_frames:
+            prefix = self._frames.get(message.key)
+            if prefix is None or (wanted is not None and message.key in wanted):  # (asked for by its own name)
                 yield message
                 continue
-            samples = [(name, sample) for name, sample in derived_samples(message.data)
-                       if wanted is None or f"{message.key}/{name}" in wanted]
+            data = message.data
+            every = derived_samples(data) if prefix.endswith("/derived/") else frame_samples(data)
             if not frames:
-                yield from (Message(f"{message.key}/{name}", message.log_ns, message.publish_ns, sample)
-                            for name, sample in samples)
-            elif samples:
-                data = message.data if len(samples) == len(message.data["names"]) else {
-                    **message.data, "names": [n for n, _ in samples], "v": [s["v"] for _, s in samples]}
-                yield Message(message.key, message.log_ns, message.publish_ns, data)
+                yield from (Message(prefix + name, message.log_ns, message.publish_ns, sample)
+                            for name, sample in every if wanted is None or prefix + name in wanted)
+                continue
+            index = [i for i, name in enumerate(data["names"]) if wanted is None or prefix + name in wanted]
+            if len(index) == len(data["names"]):
+                yield message
+            elif index:
+                yield Message(message.key, message.log_ns, message.publish_ns, {
+                    q: [v[i] for i in index] if q not in ("t", "seq") else v for q, v in data.items()})
 
     def _raw(self, keys: Sequence[str] | None = None, start_s: float | None = None,
              end_s: float | None = None) -> Iterator[Message]:
-        """``messages`` as recorded: a derived frame whole."""
+        """``messages`` as recorded: a frame whole."""
         start = self.start_ns + int(start_s * 1e9) if start_s is not None else 0
         end = self.start_ns + int(end_s * 1e9) if end_s is not None else None
         wanted = {cid for cid, c in self._channels.items() if keys is None or c.topic in set(keys)}
@@ -344,8 +360,9 @@ class Checks:
 
     REMEMBERED = 1 << 16  # places skipped that are remembered, not counted twice (replay reads a file again)
 
-    def __init__(self, path: str) -> None:
+    def __init__(self, path: str, data: Collection[str] = ()) -> None:
         self.path = path
+        self.data = data  # channels named like a view that hold bus data (a robot's frames: ``_frames``)
         self.skipped: dict[str, int] = {"messages": 0, "chunks": 0}
         self._first: dict[str, str] = {}  # what, of each kind, was skipped first
         self._seen: set[object] = set()
@@ -362,7 +379,7 @@ class Checks:
             data = from_data(channel.message_encoding, message.data)
             if data.__class__ is not dict:
                 raise BadMessage(f"a {type(data).__name__}, not a map")
-            if not is_view(channel.topic):
+            if not is_view(channel.topic) or channel.topic in self.data:
                 key = self._keys.get(channel.topic) or self._keys.setdefault(channel.topic, Key.parse(channel.topic))
                 SECTIONS[key.section].check(self._gate, key, data)
         except (BadMessage, KeyError, TypeError, ValueError, RecursionError, OverflowError) as exc:
@@ -425,6 +442,18 @@ def head(path: str) -> dict[str, str]:
     except (OSError, *DAMAGE):
         pass
     return {}
+
+
+def _frames(counts: dict[str, int]) -> dict[str, str]:
+    """Of a file's channels (``counts``: messages on each), those whose messages are frames read as
+    the samples of their keys, each with its keys' prefix: every derived frame (``pepper/derived`` →
+    ``pepper/derived/``), and a robot's frames (``pepper/frame`` → ``pepper/joints/``) unless the file
+    holds joint keys of that robot: a recorder before issue 35 wrote a message per joint, and the
+    frames beside them were Foxglove's view of the same samples."""
+    per_joint = {k.partition("/")[0] for k, n in counts.items() if n and k.partition("/")[2].startswith("joints/")}
+    framed = {k: k + "/" for k in counts if keys.is_derived_frame(k)}
+    return framed | {k: keys.joint(k.partition("/")[0], "") for k in counts
+                     if keys.is_frame(k) and k.partition("/")[0] not in per_joint}
 
 
 def _data_key(topic: str) -> bool:

@@ -14,10 +14,12 @@ live bus added; ``t`` is moved to now and ``seq`` keeps
 counting across loops (each audio key's on its own), so sinks' stale-sample
 checks, frame reassembly and jitter buffers work unchanged. Audio chunks go
 out like the robot's, with the ``AUDIO`` QoS. No wait is longer than ``max_gap_s`` (``timeline.py``): a longer gap
-is shortened to it, with a warning. The joint samples of one frame go out like a robot owner's: the
+is shortened to it, with a warning. A frame goes out like a robot owner's: the
 frame whole on ``<robot>/frame`` (what sinks listen to), then each joint's
 sample on its key while anyone subscribes there (``bus/ownership.py``, shared with
-live owners). Derived values go out as they were recorded: a derived frame
+live owners); a frame recorded whole (issue 35) as it is, with only the joints
+``keys`` selects, a file of before's joint samples of one frame gathered back.
+Derived values go out as they were recorded: a derived frame
 whole on ``<robot>/derived`` (with only the values ``keys`` selects), or each on
 its key (a recording made before derived frames). The replayed robots are owned
 like real ones (liveliness, ``<robot>/info`` from the recording) but take no
@@ -268,18 +270,25 @@ class Replay(Adapter):
         robot, _, rest = key.partition("/")
         return f"{self.names[robot]}/{rest}"
 
-    def _publish_frame(self, samples: list[Message], t_origin: float, seq: int, late: bool) -> None:
-        """One robot's joint samples of one frame: the frame whole, then each sample on its key."""
+    def _publish_frame(self, moment: list[Message], t_origin: float, seq: int, late: bool) -> None:
+        """One robot's frame (recorded whole, or as its joint samples): the frame whole, then each
+        joint's sample on its key."""
+        first = moment[0]
+        if keys.is_frame(first.key):  # (recorded whole: issue 35)
+            data = first.data
+            names, values = data["names"], data["v"]
+            extra = {q: v for q, v in data.items() if q not in messages.FRAME_FIELDS}
+        else:
+            values, extra = _join([m.data for m in moment])
+            names = [Key.parse(m.key).name for m in moment]
         if late:
-            self.count("late", len(samples))
+            self.count("late", len(names))
             return
-        values, extra = _join([m.data for m in samples])
-        names = [Key.parse(m.key).name for m in samples]
-        t = self._moved(samples[0].data["t"], t_origin)
-        owner = self._owners[self.names[samples[0].key.partition("/")[0]]]
+        t = self._moved(first.data["t"], t_origin)
+        owner = self._owners[self.names[first.key.partition("/")[0]]]
         if owner.publish_frame(messages.frame(t, seq, names, values, extra)):  # per joint too, while wanted
             self.count("frames")
-            self.count("sent", len(samples))
+            self.count("sent", len(names))
 
     def _publish(self, message: Message, t_origin: float, seq: Any, late: bool) -> None:
         key = self._renamed(message.key)
@@ -373,19 +382,21 @@ def _in_frame(message: Message) -> bool:
 
 
 def _moments(messages: Iterable[Message]) -> Iterator[tuple[bool, list[Message]]]:
-    """The messages grouped as they are due: ``(True, samples)`` for the joint samples
-    of one robot and one frame (the same ``seq`` and ``t``, recorded within
-    ``GATHER_NS`` of the first: per-joint recordings interleave robots),
-    ``(False, [message])`` for any other message; in the order they were recorded."""
-    waiting: deque[tuple[tuple[str, int, float] | None, list[Message]]] = deque()
+    """The messages grouped as they are due: ``(True, [frame])`` for a frame recorded whole,
+    ``(True, samples)`` for the joint samples of one robot and one frame (the same ``seq``
+    and ``t``, recorded within ``GATHER_NS`` of the first: per-joint recordings, before
+    issue 35, interleave robots), ``(False, [message])`` for any other message; in the
+    order they were recorded."""
+    waiting: deque[tuple[tuple[str, int, float] | bool, list[Message]]] = deque()  # (False: alone; True: a frame)
     gathering: dict[tuple[str, int, float], list[Message]] = {}
     for message in messages:
-        while waiting and (waiting[0][0] is None or message.log_ns - waiting[0][1][0].log_ns > GATHER_NS):
+        while waiting and (waiting[0][0].__class__ is bool or message.log_ns - waiting[0][1][0].log_ns > GATHER_NS):
             frame, moment = waiting.popleft()
-            gathering.pop(frame, None)  # type: ignore[arg-type]
-            yield frame is not None, moment
+            if frame.__class__ is not bool:
+                gathering.pop(frame, None)  # type: ignore[arg-type]
+            yield frame is not False, moment
         if not _in_frame(message):
-            waiting.append((None, [message]))
+            waiting.append((keys.is_frame(message.key), [message]))
             continue
         frame = (message.key.partition("/")[0], message.data["seq"], message.data["t"])
         if frame in gathering and len(gathering[frame]) < MOMENT:
@@ -394,7 +405,7 @@ def _moments(messages: Iterable[Message]) -> Iterator[tuple[bool, list[Message]]
             gathering[frame] = [message]
             waiting.append((frame, gathering[frame]))
     for frame, moment in waiting:
-        yield frame is not None, moment
+        yield frame is not False, moment
 
 
 def _join(samples: Sequence[dict[str, Any]]) -> tuple[list[float], dict[str, list[float]]]:

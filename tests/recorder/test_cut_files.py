@@ -47,15 +47,17 @@ def cli(*argv):
 
 def passes_every_reader(path, tmp_path):
     """``info``, ``export`` and what replay reads (its keys, the robots' info, every message, grouped as it
-    sends them) all work on ``path``; returns its messages."""
+    sends them) all work on ``path``; returns its messages as recorded (a frame whole: one MCAP message)."""
     for argv in (["info", str(path)], ["export", str(path), "--csv", str(tmp_path / "csv")]):
         status, err = cli(*argv)
         assert status == 0 and err == "", (argv, err)
     with Recording(str(path)) as recording:
         assert recording.keys and recording.matching(["pepper/**"])
         recording.infos()
-        found = [(m.key, m.log_ns, m.data) for m in recording.messages()]
-        assert sum(len(moment) for _, moment in _moments(recording.messages())) == len(found)
+        samples = sum(1 for _ in recording.messages())
+        assert sum(len(moment) for _, moment in _moments(recording.messages())) == samples
+        found = [(m.key, m.log_ns, m.data) for m in recording.messages(frames=True)]
+        assert sum(len(moment) for _, moment in _moments(recording.messages(frames=True))) == len(found)
     return found
 
 

@@ -82,8 +82,9 @@ def test_garbage_on_the_bus_is_counted_and_recording_goes_on(net, tmp_path, spaw
 
 @pytest.fixture
 def small_disk():
-    """A 256 KiB file system of its own."""
-    with tmpfs("256k") as folder:
+    """A 1 MiB file system of its own (a chunk of the frames below, which no compression shrinks
+    much, takes ~0.4 MB on disk: 256 KiB held none since frames are one message each, issue 35)."""
+    with tmpfs("1m") as folder:
         yield folder
 
 
@@ -120,7 +121,7 @@ def test_a_full_disk_ends_the_recorder_loudly_and_leaves_a_recoverable_file(net,
     shutil.copy(path, copy)
     out = tmp_path / "show.recovered.mcap"
     kept, _ = recover(str(copy), str(out))
-    assert kept >= 100 * 10
+    assert kept >= 10  # frames of 100 joints, one message each
     passes_every_reader(out, tmp_path)
 
 

@@ -32,17 +32,17 @@ from .conftest import HEY, record_sim
 
 
 @pytest.fixture(scope="module")
-def with_views(tmp_path_factory: pytest.TempPathFactory) -> tuple[Any, Any, dict[str, Any]]:
-    """A recording with the Foxglove views (a feature processor beside the robot), and the
-    recorder's stats."""
+def with_views(tmp_path_factory: pytest.TempPathFactory) -> tuple[Any, Any, dict[str, Any], list[Any]]:
+    """A recording with the Foxglove views (a feature processor beside the robot), the
+    recorder's stats, and what the bus carried on the joint keys meanwhile."""
     path = tmp_path_factory.mktemp("fox") / "pepper.mcap"
     network = Network()
     try:
         network.start(Features(FeaturesConfig(robots="pepper"), name="features"))
-        recorder, _ = record_sim(network, path, frames=150, foxglove=True)
+        recorder, reference = record_sim(network, path, frames=150, foxglove=True)
     finally:
         network.close()
-    return path, read(path), dict(recorder.stats)
+    return path, read(path), dict(recorder.stats), reference
 
 
 def read(path: Any) -> tuple[dict[str, Any], dict[str, list[tuple[int, dict[str, Any]]]]]:
@@ -60,7 +60,7 @@ def read(path: Any) -> tuple[dict[str, Any], dict[str, list[tuple[int, dict[str,
 
 
 def test_every_view_has_its_schema_and_its_messages_fit_it(with_views):
-    _, (channels, messages), stats = with_views
+    _, (channels, messages), stats, _ = with_views
     assert {"pepper/frame", "pepper/log", "pepper/tf", "pepper/info/derived"} <= channels.keys()
     expected = {"pepper/log": ("foxglove.Log", foxglove.load("foxglove.Log")),
                 "pepper/tf": ("foxglove.FrameTransforms", foxglove.load("foxglove.FrameTransforms")),
@@ -73,20 +73,25 @@ def test_every_view_has_its_schema_and_its_messages_fit_it(with_views):
         assert messages[topic], f"nothing on {topic}"
         for _, message in messages[topic][:5] + messages[topic][-5:]:
             jsonschema.validate(message, json.loads(data))
-    assert stats["foxglove"] == sum(len(messages[t]) for t in expected)
-    assert stats["written"] == sum(len(m) for t, m in messages.items() if t not in expected)
+    # (pepper/frame is the joints' own channel since issue 35, not a view: counted as the joints it holds)
+    assert stats["foxglove"] == sum(len(messages[t]) for t in expected if t != "pepper/frame")
+    assert stats["written"] == sum(len(d["names"]) if t in ("pepper/frame", "pepper/derived") else 1
+                                   for t, m in messages.items() if t not in expected or t == "pepper/frame"
+                                   for _, d in m)
+    assert not any(t.startswith("pepper/joints/") for t in messages)
 
 
 def test_frames_whole_and_transforms_at_the_fk_hand_positions(with_views):
-    _, (_, messages), _ = with_views
+    _, (_, messages), _, reference = with_views
     frames = messages["pepper/frame"]
-    joints = {seq: {} for _, f in frames for seq in [f["seq"]]}
-    for topic, found in messages.items():
-        if topic.startswith("pepper/joints/"):
-            for _, sample in found:
-                joints.get(sample["seq"], {})[topic.rpartition("/")[2]] = sample["v"]
+    joints: dict[int, dict[str, float]] = defaultdict(dict)
+    for key, sample in reference:  # what the joint keys carried on the bus
+        if key.startswith("pepper/joints/"):
+            joints[sample["seq"]][key.rpartition("/")[2]] = sample["v"]
     assert len(frames) >= 140
-    for _, frame in frames:  # the frame whole: every joint, as its joint keys carried it
+    compared = [f for _, f in frames if len(joints.get(f["seq"], ())) == 17]  # (the watcher may miss an end's)
+    assert len(compared) >= len(frames) - 2
+    for frame in compared:  # the frame whole: every joint, as its joint keys carried it
         assert len(frame["names"]) == 17 and dict(zip(frame["names"], frame["v"], strict=True)) == joints[frame["seq"]]
     # every frame after the robot's info has its transforms, logged with it
     transforms = dict(messages["pepper/tf"])
@@ -105,7 +110,7 @@ def test_frames_whole_and_transforms_at_the_fk_hand_positions(with_views):
 
 
 def test_the_log_says_what_happened(with_views):
-    _, (_, messages), _ = with_views
+    _, (_, messages), _, _ = with_views
     lines = [(m["name"], m["message"], m["level"]) for _, m in messages["pepper/log"]]
     assert ("pepper/behavior", f"behavior {HEY} started", 2) in lines
     assert ("pepper/speech", 'speech "hello there" started', 2) in lines
@@ -117,7 +122,7 @@ def test_the_log_says_what_happened(with_views):
 
 
 def test_info_derived_holds_units_and_ranges(with_views):
-    _, (_, messages), _ = with_views
+    _, (_, messages), _, _ = with_views
     (_, derived), *_ = messages["pepper/info/derived"]
     entries = {d["name"]: d for d in derived["derived"]}
     assert entries["velocity/HeadYaw"]["unit"] == "rad/s" and entries["velocity/HeadYaw"]["max"] > 0
@@ -125,9 +130,9 @@ def test_info_derived_holds_units_and_ranges(with_views):
 
 
 def test_bus_readers_do_not_see_the_views(with_views, tmp_path, net):
-    path, _, _ = with_views
+    path, _, _, _ = with_views
     with Recording(str(path)) as recording:
-        assert recording.views == ["pepper/frame", "pepper/info/derived", "pepper/log", "pepper/tf"]
+        assert recording.views == ["pepper/info/derived", "pepper/log", "pepper/tf"]  # (frame: the joints')
         assert not set(recording.views) & set(recording.keys)
         assert all(k.startswith(("pepper/joints/", "pepper/events/", "pepper/derived/")) or k == "pepper/info"
                    for k in recording.keys)

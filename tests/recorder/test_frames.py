@@ -22,6 +22,7 @@ from sonibus.adapters.recorder.replay import Replay, ReplayConfig
 from sonibus.adapters.sim import SimRobot
 from sonibus.bus import SampleQueue, config, decode, encode, runner
 from sonibus.bus.messages import frame as frame_message
+from sonibus.bus.messages import frame_samples
 
 from ..conftest import SONIBUS, Network, wait_for
 from ..osc.pd import Datagrams
@@ -52,18 +53,26 @@ def with_extras(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, list[tu
 
 
 def by_seq(messages) -> dict[int, dict[str, tuple[int, dict]]]:
-    """Joint samples of a file by frame: seq → joint key → (log time, sample)."""
+    """Joint samples of a file by frame: seq → joint key → (log time, sample); a frame (one MCAP message
+    since issue 35) taken apart with ``frame_samples``."""
     frames: dict[int, dict[str, tuple[int, dict]]] = defaultdict(dict)
     for topic, log_ns, _, data, _ in messages:
         if "/joints/" in topic:
             frames[data["seq"]][topic] = (log_ns, data)
+        elif topic.endswith("/frame"):
+            for name, sample in frame_samples(data):
+                frames[data["seq"]][f"{topic.partition('/')[0]}/joints/{name}"] = (log_ns, sample)
     return frames
 
 
-def test_a_frame_is_written_as_the_samples_of_its_joint_keys_with_extras(with_extras):
+def test_a_frame_is_written_whole_and_read_as_the_samples_of_its_joint_keys_with_extras(with_extras):
     path, reference = with_extras
     _, messages, metadata = read_back(path)
+    whole = [data["seq"] for topic, _, _, data, _ in messages if topic == "pepper/frame"]
+    assert whole == sorted(set(whole)) and not any("/joints/" in topic for topic, *_ in messages)  # one a frame
     frames = by_seq(messages)
+    with Recording(str(path)) as recording:  # what readers give: each joint's sample on its key
+        assert by_seq([(m.key, m.log_ns, m.publish_ns, m.data, None) for m in recording.messages()]) == frames
     assert len(frames) >= 60  # frames the robot skipped (a VM stall) are on no key: compared below
     for seq, joints in frames.items():
         assert len(joints) == JOINTS, f"frame {seq}: {len(joints)} joints"
@@ -148,9 +157,11 @@ def test_a_bad_frame_is_counted_and_the_recording_goes_on(net, tmp_path):
     assert recorder.state == "running"
     recorder.stop()
     _, messages, metadata = read_back(path)
-    assert [(t, d) for t, _, _, d, _ in messages] == [
-        ("bot/joints/A", {"t": good["t"], "seq": seq, "v": 0.1, "cmd": 0.3}) if j == "A" else
-        ("bot/joints/B", {"t": good["t"], "seq": seq, "v": 0.2, "cmd": 0.4}) for seq in (0, 1) for j in "AB"]
+    assert [(t, d) for t, _, _, d, _ in messages] == [("bot/frame", {**good, "seq": seq}) for seq in (0, 1)]
+    with Recording(str(path)) as recording:
+        assert [(m.key, m.data) for m in recording.messages()] == [
+            ("bot/joints/A", {"t": good["t"], "seq": seq, "v": 0.1, "cmd": 0.3}) if j == "A" else
+            ("bot/joints/B", {"t": good["t"], "seq": seq, "v": 0.2, "cmd": 0.4}) for seq in (0, 1) for j in "AB"]
     assert metadata["sonibus.stats"]["bad"] == str(len(bad))
 
 

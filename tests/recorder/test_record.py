@@ -19,8 +19,10 @@ from mcap.records import Message as McapMessage
 from mcap.stream_reader import StreamReader
 
 from sonibus.adapters.recorder.channels import from_data
+from sonibus.adapters.recorder.reading import Recording
 from sonibus.adapters.recorder.recorder import Recorder, RecorderConfig
 from sonibus.bus import ConfigError
+from sonibus.bus.messages import frame_samples
 
 from ..conftest import SONIBUS, run_cli, wait_for
 from .conftest import HEY, record_sim
@@ -43,7 +45,12 @@ def test_every_sample_is_in_the_file_in_order_and_schema_valid(recorded):
     summary, messages, metadata = read_back(path)
     by_key = defaultdict(list)
     for topic, _, _, data, _ in messages:
+        if topic == "pepper/frame":  # (issue 35: a frame is one message, its joints' samples in it)
+            for name, sample in frame_samples(data):
+                by_key[f"pepper/joints/{name}"].append(sample)
         by_key[topic].append(data)
+    assert not any(topic.startswith("pepper/joints/") for topic, *_ in messages)
+    assert len(by_key["pepper/frame"]) == len(by_key["pepper/joints/HeadYaw"])  # one message a frame
     seen = defaultdict(list)
     for key, data in reference:
         seen[key].append(data)
@@ -92,7 +99,11 @@ def test_a_key_expression_records_only_what_it_selects(net, tmp_path):
     path = tmp_path / "head.mcap"
     record_sim(net, path, frames=20, subscribe=("pepper/joints/Head*",), foxglove=False)  # (views: test_foxglove)
     _, messages, _ = read_back(path)
-    assert {topic for topic, *_ in messages} == {"pepper/joints/HeadYaw", "pepper/joints/HeadPitch", "pepper/info"}
+    assert {topic for topic, *_ in messages} == {"pepper/frame", "pepper/info"}
+    assert {tuple(data["names"]) for topic, _, _, data, _ in messages if topic == "pepper/frame"} == \
+        {("HeadYaw", "HeadPitch")}
+    with Recording(str(path)) as recording:
+        assert recording.keys == ["pepper/info", "pepper/joints/HeadPitch", "pepper/joints/HeadYaw"]
 
 
 def test_a_full_queue_is_counted_and_reported(net, tmp_path):
