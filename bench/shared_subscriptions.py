@@ -13,10 +13,10 @@ into its own queue drained by a worker thread of its own (as a node's): either
 - ``shared``: each from ``Bus.for_node`` of one ``Bus`` (as ``sonibus run`` gives its
   nodes): one Zenoh subscriber for the N.
 
-The same code both ways; the receiving process's CPU from
-``/proc/<pid>/task/*/schedstat`` over a window after a warm-up, both ways in each
-round (their order alternating), medians of rounds; every frame counted by every
-subscription.
+The same code both ways. The two receiving processes run side by side, fed the same
+frames by one publisher over the same window (a shared machine's load weighs on both
+alike); each one's CPU from ``/proc/<pid>/task/*/schedstat`` over the window after a
+warm-up; medians of rounds; every frame counted by every subscription.
 
     .venv/bin/python bench/shared_subscriptions.py [--rounds 3] [--seconds 5]
 
@@ -38,6 +38,7 @@ KEY = "pepper/frame"
 WARMUP_S = 1.5
 COUNTS = (1, 4, 8)
 RATES = (50, 100)
+WAYS = ("separate", "shared")
 
 
 def frame(seq: int) -> bytes:
@@ -81,44 +82,56 @@ def receiver(endpoint: str, count: int, shared: bool, ready: Any, done: Any, out
     out.put({"taken": taken, "declared": declared})
 
 
-def measure(count: int, shared: bool, rate: int, seconds: float) -> dict[str, Any]:
-    """CPU % of one core of the receiving process, frames each subscription took, subscribers declared."""
+def measure(count: int, rate: int, seconds: float) -> dict[str, dict[str, Any]]:
+    """Both ways side by side, fed the same frames over the same window (the machine's load
+    the same for both): CPU % of one core of each receiving process, frames each of its
+    subscriptions took (the fewest), Zenoh subscribers it declared."""
     import zenoh
     endpoint = f"tcp/127.0.0.1:{free_port()}"
     session = zenoh.open(zenoh_config(listen=endpoint))
     publisher = session.declare_publisher(KEY, congestion_control=zenoh.CongestionControl.BLOCK)
-    ready, done, out = CONTEXT.Event(), CONTEXT.Event(), CONTEXT.Queue()
-    process = CONTEXT.Process(target=receiver, args=(endpoint, count, shared, ready, done, out), daemon=True)
-    process.start()
+    done = CONTEXT.Event()
+    ways = {}
+    for way in WAYS:
+        ready, out = CONTEXT.Event(), CONTEXT.Queue()
+        process = CONTEXT.Process(target=receiver, args=(endpoint, count, way == "shared", ready, done, out),
+                                  daemon=True)
+        ways[way] = (process, ready, out)
+        process.start()
     try:
-        if not ready.wait(60):
-            raise RuntimeError("the receiving process did not start")
+        for way, (_, ready, _) in ways.items():
+            if not ready.wait(60):
+                raise RuntimeError(f"the {way} receiving process did not start")
         deadline = time.monotonic() + 20
-        while not publisher.matching_status.matching:
+        while len(session.info.peers_zid()) < len(WAYS) or not publisher.matching_status.matching:
             if time.monotonic() > deadline:
-                raise RuntimeError("the publisher never matched the receiver")
+                raise RuntimeError("the publisher never matched both receivers")
             time.sleep(0.02)
+        time.sleep(0.5)  # (the second receiver's subscription on its way too: Zenoh says matching at the first)
         sent, start = 0, time.monotonic()
-        measured: dict[str, float] = {}
+        at: dict[str, Any] = {}
         while True:
             now = time.monotonic()
-            if not measured and now - start >= WARMUP_S:
-                measured = {"cpu": cpu_ns(process.pid), "at": now, "sent": sent}
-            if measured and now - measured["at"] >= seconds:
-                cpu = 100.0 * (cpu_ns(process.pid) - measured["cpu"]) / 1e9 / (now - measured["at"])
+            if not at and now - start >= WARMUP_S:
+                at = {"cpu": {way: cpu_ns(p.pid) for way, (p, _, _) in ways.items()}, "t": now}
+            if at and now - at["t"] >= seconds:
+                cpu = {way: 100.0 * (cpu_ns(p.pid) - at["cpu"][way]) / 1e9 / (now - at["t"])
+                       for way, (p, _, _) in ways.items()}
                 break
             publisher.put(frame(sent))
             sent += 1
             time.sleep(max(0.0, start + sent / rate - time.monotonic()))
         time.sleep(0.3)  # (the last frames on their way)
         done.set()
-        got = out.get(timeout=20)
-        return {"cpu_pct": cpu, "sent": sent, "taken_min": min(got["taken"]), "declared": got["declared"]}
+        got = {way: out.get(timeout=20) for way, (_, _, out) in ways.items()}
+        return {way: {"cpu_pct": cpu[way], "sent": sent, "taken_min": min(got[way]["taken"]),
+                      "declared": got[way]["declared"]} for way in WAYS}
     finally:
         done.set()
-        process.join(10)
-        if process.is_alive():
-            process.kill()
+        for process, _, _ in ways.values():
+            process.join(10)
+            if process.is_alive():
+                process.kill()
         publisher.undeclare()
         session.close()
 
@@ -136,13 +149,12 @@ def main() -> None:
         for rate in args.rates:
             for count in args.counts:
                 case = runs.setdefault(f"{count}x{rate}", {"separate": [], "shared": []})
-                for shared in ((False, True) if index % 2 == 0 else (True, False)):
-                    got = measure(count, shared, rate, args.seconds)
-                    case["shared" if shared else "separate"].append(got)
-                    print(f"round {index + 1}, {count} subscription(s), {rate} frames/s, "
-                          f"{'shared' if shared else 'separate'}: {got['cpu_pct']:.2f} % "
-                          f"({got['declared']} Zenoh subscriber(s), every subscription took ≥ {got['taken_min']} "
-                          f"of {got['sent']})", flush=True)
+                got = measure(count, rate, args.seconds)
+                for way in WAYS:
+                    case[way].append(got[way])
+                print(f"round {index + 1}, {count} subscription(s), {rate} frames/s: " + "; ".join(
+                    f"{way} {got[way]['cpu_pct']:.2f} % ({got[way]['declared']} Zenoh subscriber(s), each "
+                    f"subscription took ≥ {got[way]['taken_min']} of {got[way]['sent']})" for way in WAYS), flush=True)
         load.append(os.getloadavg()[0])
     machine = f"{os.cpu_count()} cores, load {min(load):.2f}–{max(load):.2f}"
     median = {case: {way: statistics.median(r["cpu_pct"] for r in got[way]) for way in got}

@@ -13,6 +13,7 @@ import msgpack
 from sonibus.bus import Adapter, codec
 
 from .conftest import wait_for
+from .test_node_failure import Fussy  # (its skip raises on a key ending in "surprise")
 
 KEY = "pepper/events/fanout"
 
@@ -77,23 +78,6 @@ def test_one_undeclared_the_other_still_gets_them_and_the_last_undeclares_the_su
     assert publisher.matching_status.matching
     second.undeclare()
     wait_for(lambda: not publisher.matching_status.matching, what="the Zenoh subscriber to be undeclared")
-
-
-class Fussy(Adapter):
-    """A node whose subscription's ``skip`` raises on a key it did not expect (a bug of its own)."""
-
-    @dataclass(frozen=True)
-    class Config:
-        pass
-
-    def _start(self) -> None:
-        def skip(key: str) -> bool:
-            if key.endswith("surprise"):
-                raise KeyError(key)
-            return False
-
-        subscriber, self.queue = self.bus.subscribe("pepper/events/*", skip=skip)
-        self.own(subscriber)
 
 
 class Listener(Adapter):
