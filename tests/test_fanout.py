@@ -4,9 +4,9 @@ options say; one undeclared or failing leaves the others served."""
 
 from __future__ import annotations
 
-import os
 import threading
 from dataclasses import dataclass
+from pathlib import Path
 
 import msgpack
 
@@ -19,8 +19,17 @@ KEY = "pepper/events/fanout"
 
 
 def _threads() -> int:
-    """Native threads of this process (zenoh-python starts one per subscriber with a Python callback)."""
-    return len(os.listdir("/proc/self/task"))
+    """Python's native threads in this process: zenoh-python starts one per subscriber with a
+    Python callback (named as the process is; Zenoh's own runtime threads have names of their
+    own, and may come and go)."""
+    python = Path("/proc/self/comm").read_text()
+    count = 0
+    for task in Path("/proc/self/task").iterdir():
+        try:
+            count += (task / "comm").read_text() == python
+        except FileNotFoundError:  # (a thread that just ended)
+            continue
+    return count
 
 
 def _publisher(net, key: str = KEY):
