@@ -9,6 +9,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import msgpack
+import zenoh
 
 from sonibus.bus import Adapter, codec
 
@@ -33,7 +34,9 @@ def _threads() -> int:
 
 
 def _publisher(net, key: str = KEY):
-    publisher = net.bus("robot").session.declare_publisher(key)
+    # (reliable and blocking: Zenoh's default drops under congestion, and these tests count every sample)
+    publisher = net.bus("robot").session.declare_publisher(key, congestion_control=zenoh.CongestionControl.BLOCK,
+                                                           reliability=zenoh.Reliability.RELIABLE)
     wait_for(lambda: publisher.matching_status.matching, what="the subscriptions")
     return publisher
 
