@@ -71,7 +71,7 @@ def receiver(endpoint: str, count: int, shared: bool, ready: Any, done: Any, out
         subscriptions.append(subscription)
         threads.append(threading.Thread(target=drain, args=(index, queue), daemon=True))
         threads[-1].start()
-    declared = sum(b._fanout().declared for b in ({id(b._shared): b for b in buses}.values()))
+    declared = sum(fanout.declared for fanout in {id(b._subscriptions): b._subscriptions for b in buses}.values())
     ready.set()
     done.wait()
     for thread in threads:

@@ -100,13 +100,16 @@ class Bus:
         self.limits = limits or Limits()  # what the gate of each node on this bus lets through
         self._shared: dict[str, Any] = {}  # per session, for every node's Bus on it (see ``shared``)
         self._lock = threading.Lock()
+        # the session's subscriptions, one Zenoh subscriber per key expression (``bus/fanout.py``), shared
+        # by every node's Bus like ``_shared`` (not in it: a view made by ``shared`` may subscribe)
+        self._subscriptions = Fanout(lambda keyexpr, callback: session.declare_subscriber(keyexpr, callback))
         # what a callback of this node that raised is handed to (its adapter's ``fail``): Zenoh would
         # print it and go on, and the node would report itself well while hearing nothing
         self.on_error: Callable[[str, BaseException], None] | None = None
 
     def for_node(self, node: str) -> Bus:
         bus = Bus(self.session, node, self.host, self.limits, self.control)
-        bus._shared, bus._lock = self._shared, self._lock
+        bus._shared, bus._lock, bus._subscriptions = self._shared, self._lock, self._subscriptions
         return bus
 
     def guarded(self, callback: Callable[..., Any], what: str) -> Callable[..., Any]:
@@ -194,18 +197,14 @@ class Bus:
                 self.session, keyexpr, self.guarded(lambda sample: enqueue(*self._taken(sample, fits)),
                                                     f"subscriber to {keyexpr}"),
                 history=zenoh.ext.HistoryConfig(detect_late_publishers=True)), queue
-        return self._fanout().join(keyexpr, callback, fits), queue
+        return self._subscriptions.join(keyexpr, callback, fits), queue
 
     def on_sample(self, keyexpr: str, take: Callable[[str, bytes | codec.Oversize], None], what: str) -> Any:
         """Call ``take(key, payload)`` on Zenoh's thread for each sample of ``keyexpr``, with no
         queue between (for what must act at once: a stop seen on a robot's events); ``take``
         must only store or signal. A payload over the gate's limit comes as ``codec.Oversize``."""
-        return self._fanout().join(keys.expr(keyexpr), self.guarded(lambda key, payload, sample: take(key, payload),
-                                                                    what), self._fits(None))
-
-    def _fanout(self) -> Fanout:
-        """The session's subscriptions, one Zenoh subscriber per key expression (``bus/fanout.py``)."""
-        return self.shared("subscriptions", lambda bus: Fanout(bus.session.declare_subscriber))
+        return self._subscriptions.join(
+            keys.expr(keyexpr), self.guarded(lambda key, payload, sample: take(key, payload), what), self._fits(None))
 
     def _fits(self, limit: int | None) -> Callable[[str, int], bool]:
         """Whether a payload of a size on a key is kept whole: at most ``limit`` bytes, or

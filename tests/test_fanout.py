@@ -167,3 +167,14 @@ def test_nodes_declaring_and_undeclaring_at_once_leave_the_others_served(net):
     assert _drained(steady, 50) == [(KEY, str(n).encode()) for n in range(50)]
     subscription.undeclare()  # the last one left: nothing of the churn holds the Zenoh subscriber
     wait_for(lambda: not publisher.matching_status.matching, what="the Zenoh subscriber to be undeclared")
+
+
+def test_a_view_made_by_bus_shared_may_subscribe(net):
+    """``Bus.shared`` makes a view under the Bus's lock; subscribing there must not wait on it."""
+    show = net.bus("show")
+    made: list = []
+    maker = threading.Thread(target=lambda: made.append(show.shared("view", lambda bus: bus.subscribe(KEY))),
+                             daemon=True)
+    maker.start()
+    maker.join(5)
+    assert made, "Bus.shared's make could not subscribe (waiting on the Bus's own lock)"
