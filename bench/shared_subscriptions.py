@@ -18,9 +18,9 @@ frames by one publisher over the same window (a shared machine's load weighs on 
 alike); each one's CPU from ``/proc/<pid>/task/*/schedstat`` over the window after a
 warm-up; medians of rounds; every frame counted by every subscription.
 
-    .venv/bin/python bench/shared_subscriptions.py [--rounds 3] [--seconds 5]
+    .venv/bin/python bench/shared_subscriptions.py [--rounds 3] [--seconds 5] [--name shared_subscriptions]
 
-Writes bench/results/shared_subscriptions.json.
+Writes bench/results/<name>.json.
 """
 
 from __future__ import annotations
@@ -142,6 +142,7 @@ def main() -> None:
     parser.add_argument("--seconds", type=float, default=5.0, help="measuring window of each case")
     parser.add_argument("--counts", type=int, nargs="+", default=list(COUNTS))
     parser.add_argument("--rates", type=int, nargs="+", default=list(RATES))
+    parser.add_argument("--name", default="shared_subscriptions", help="results file name")
     args = parser.parse_args()
     load = [os.getloadavg()[0]]
     runs: dict[str, dict[str, list[dict[str, Any]]]] = {}
@@ -170,7 +171,7 @@ def main() -> None:
                         "goal": "≥ 10 % saved" if int(count) > 1 else "", "met": (
                             "yes" if saved >= 0.10 else "no") if int(count) > 1 else ""})
         print(f"{case}: separate {cpu['separate']:.2f} %, shared {cpu['shared']:.2f} % ({100 * saved:.0f} % saved)")
-    write("shared_subscriptions", {"machine": machine, "rounds": args.rounds, "seconds": args.seconds,
+    write(args.name, {"machine": machine, "rounds": args.rounds, "seconds": args.seconds,
                                    "runs": runs, "median": median, "summary": summary})
     print(machine)
 
