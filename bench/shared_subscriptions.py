@@ -32,7 +32,7 @@ import time
 from typing import Any
 
 from common import free_port, write, zenoh_config
-from floor import CONTEXT, cpu_ns
+from floor import CONTEXT, cpu_ns, switches
 
 KEY = "pepper/frame"
 WARMUP_S = 1.5
@@ -113,10 +113,13 @@ def measure(count: int, rate: int, seconds: float) -> dict[str, dict[str, Any]]:
         while True:
             now = time.monotonic()
             if not at and now - start >= WARMUP_S:
-                at = {"cpu": {way: cpu_ns(p.pid) for way, (p, _, _) in ways.items()}, "t": now}
+                at = {"cpu": {way: cpu_ns(p.pid) for way, (p, _, _) in ways.items()},
+                      "switches": {way: switches(p.pid) for way, (p, _, _) in ways.items()}, "t": now}
             if at and now - at["t"] >= seconds:
                 cpu = {way: 100.0 * (cpu_ns(p.pid) - at["cpu"][way]) / 1e9 / (now - at["t"])
                        for way, (p, _, _) in ways.items()}
+                waits = {way: (switches(p.pid) - at["switches"][way]) / (now - at["t"])
+                         for way, (p, _, _) in ways.items()}
                 break
             publisher.put(frame(sent))
             sent += 1
@@ -124,8 +127,8 @@ def measure(count: int, rate: int, seconds: float) -> dict[str, dict[str, Any]]:
         time.sleep(0.3)  # (the last frames on their way)
         done.set()
         got = {way: out.get(timeout=20) for way, (_, _, out) in ways.items()}
-        return {way: {"cpu_pct": cpu[way], "sent": sent, "taken_min": min(got[way]["taken"]),
-                      "declared": got[way]["declared"]} for way in WAYS}
+        return {way: {"cpu_pct": cpu[way], "switches_per_s": waits[way], "sent": sent,
+                      "taken_min": min(got[way]["taken"]), "declared": got[way]["declared"]} for way in WAYS}
     finally:
         done.set()
         for process, _, _ in ways.values():
@@ -154,12 +157,15 @@ def main() -> None:
                 for way in WAYS:
                     case[way].append(got[way])
                 print(f"round {index + 1}, {count} subscription(s), {rate} frames/s: " + "; ".join(
-                    f"{way} {got[way]['cpu_pct']:.2f} % ({got[way]['declared']} Zenoh subscriber(s), each "
+                    f"{way} {got[way]['cpu_pct']:.2f} %, {got[way]['switches_per_s']:.0f} switches/s "
+                    f"({got[way]['declared']} Zenoh subscriber(s), each "
                     f"subscription took ≥ {got[way]['taken_min']} of {got[way]['sent']})" for way in WAYS), flush=True)
         load.append(os.getloadavg()[0])
     machine = f"{os.cpu_count()} cores, load {min(load):.2f}–{max(load):.2f}"
     median = {case: {way: statistics.median(r["cpu_pct"] for r in got[way]) for way in got}
               for case, got in runs.items()}
+    waits = {case: {way: statistics.median(r["switches_per_s"] for r in got[way]) for way in got}
+             for case, got in runs.items()}
     summary = []
     for case, cpu in median.items():
         count, rate = case.split("x")
@@ -170,9 +176,10 @@ def main() -> None:
                         "ratio": f"{cpu['shared'] / cpu['separate']:.2f}× ({100 * saved:.0f} % saved)",
                         "goal": "≥ 10 % saved" if int(count) > 1 else "", "met": (
                             "yes" if saved >= 0.10 else "no") if int(count) > 1 else ""})
-        print(f"{case}: separate {cpu['separate']:.2f} %, shared {cpu['shared']:.2f} % ({100 * saved:.0f} % saved)")
+        print(f"{case}: separate {cpu['separate']:.2f} %, shared {cpu['shared']:.2f} % ({100 * saved:.0f} % saved); "
+              f"switches/s {waits[case]['separate']:.0f} → {waits[case]['shared']:.0f}")
     write(args.name, {"machine": machine, "rounds": args.rounds, "seconds": args.seconds,
-                                   "runs": runs, "median": median, "summary": summary})
+                                   "runs": runs, "median": median, "switches_per_s": waits, "summary": summary})
     print(machine)
 
 

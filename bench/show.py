@@ -50,7 +50,7 @@ from typing import Any
 import aiohttp
 import node_floors
 from common import free_port, write, zenoh_config
-from floor import CONTEXT, Case, cpu_ns, floor_sink, publish
+from floor import CONTEXT, Case, cpu_ns, floor_sink, publish, switches
 from midi_rate import start_jack
 from sink_throughput import SONIBUS, stop_process
 
@@ -216,9 +216,11 @@ def window(pids: dict[str, int], seconds: float) -> dict[str, float]:
     return {name: 100.0 * (cpu_ns(pid) - before[name]) / 1e9 / wall for name, pid in pids.items()}
 
 
-def measure_show(folder: Path, seconds: float, split: bool, tree: str = "") -> dict[str, float]:
+def measure_show(folder: Path, seconds: float, split: bool, tree: str = "",
+                 waits: dict[str, float] | None = None) -> dict[str, float]:
     """The show in one process (``{"show": cpu}``) or in a process per node (cpu by node), clients
-    attached; ``tree``: the one process on another tree (see ``sonibus``)."""
+    attached; ``tree``: the one process on another tree (see ``sonibus``); ``waits``: filled with
+    each process's voluntary context switches a second over the same window."""
     ports = {name: free_port(socket.SOCK_DGRAM if name in ("osc", "gateway") else socket.SOCK_STREAM)
              for name in ("osc", "gateway", "web", "oscquery", "foxglove")}
     config = folder / "show.toml"
@@ -253,7 +255,11 @@ def measure_show(folder: Path, seconds: float, split: bool, tree: str = "") -> d
                 raise RuntimeError(f"a client received nothing: {dict(counts)}; {logs}")
             time.sleep(0.2)
         time.sleep(WARMUP_S)
-        return window({name: p.pid for name, p in processes.items()}, seconds)
+        before = {name: switches(p.pid) for name, p in processes.items()}
+        cpu = window({name: p.pid for name, p in processes.items()}, seconds)
+        if waits is not None:
+            waits.update({name: (switches(p.pid) - before[name]) / seconds for name, p in processes.items()})
+        return cpu
     finally:
         done.set()
         if client is not None:
@@ -386,17 +392,23 @@ def one_process(args: argparse.Namespace) -> None:
     load = [os.getloadavg()[0]]
     trees = {"this tree": "", **({args.against: args.against} if args.against else {})}
     rounds: list[dict[str, float]] = []
+    switched: list[dict[str, float]] = []  # voluntary context switches a second, by tree
     with tempfile.TemporaryDirectory() as name:
         folder = Path(name)
         jack = start_jack(folder / "jackd.log")
         try:
             for index in range(args.rounds):
                 order = list(trees.items()) if index % 2 == 0 else list(reversed(trees.items()))
-                got = {label: measure_show(folder, args.seconds, False, tree)["show"] for label, tree in order}
+                got, waits = {}, {}
+                for label, tree in order:
+                    counted: dict[str, float] = {}
+                    got[label] = measure_show(folder, args.seconds, False, tree, counted)["show"]
+                    waits[label] = counted["show"]
                 rounds.append(got)
+                switched.append(waits)
                 load.append(os.getloadavg()[0])
-                print(f"round {index + 1}: " + ", ".join(f"{label} {cpu:.1f} %" for label, cpu in got.items()),
-                      flush=True)
+                print(f"round {index + 1}: " + ", ".join(f"{label} {cpu:.1f} % ({waits[label]:.0f} switches/s)"
+                                                         for label, cpu in got.items()), flush=True)
         finally:
             stop_process(jack, timeout=5)
             for leftover in Path("/dev/shm").glob(f"jack_sem.*_{os.environ.get('JACK_DEFAULT_SERVER')}_*"):
@@ -408,7 +420,7 @@ def one_process(args: argparse.Namespace) -> None:
                 "baseline": f"{med[args.against]:.1f} % ({args.against})" if args.against else "",
                 "ratio": f"{med['this tree'] / med[args.against]:.2f}×" if args.against else ""}]
     write(args.name, {"machine": machine, "rate_hz": RATE_HZ, "seconds": args.seconds, "rounds": rounds,
-                      "median": med, "summary": summary})
+                      "median": med, "switches_per_s": switched, "summary": summary})
     print(", ".join(f"{label} {cpu:.2f} %" for label, cpu in med.items()), machine)
 
 
