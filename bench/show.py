@@ -50,7 +50,7 @@ from typing import Any
 import aiohttp
 import node_floors
 from common import free_port, write, zenoh_config
-from floor import CONTEXT, Case, cpu_ns, floor_sink, publish
+from floor import CONTEXT, Case, cpu_ns, floor_sink, publish, switches
 from midi_rate import start_jack
 from sink_throughput import SONIBUS, stop_process
 
@@ -200,10 +200,12 @@ def started(log: Path, process: subprocess.Popen[bytes], marker: str = "sonibus:
         time.sleep(0.1)
 
 
-def sonibus(config: Path, log: Path, *args: str) -> subprocess.Popen[bytes]:
+def sonibus(config: Path, log: Path, *args: str, tree: str = "") -> subprocess.Popen[bytes]:
+    """``sonibus run config``; ``tree``: a folder holding another tree's ``sonibus/`` (PYTHONPATH)."""
+    env = {**os.environ, "PYTHONPATH": tree} if tree else None
     with open(log, "w") as out:
         return subprocess.Popen([SONIBUS, "run", str(config), "--no-multicast", *args], stdout=out,
-                                stderr=subprocess.STDOUT, start_new_session=True)
+                                stderr=subprocess.STDOUT, start_new_session=True, env=env)
 
 
 def window(pids: dict[str, int], seconds: float) -> dict[str, float]:
@@ -214,8 +216,11 @@ def window(pids: dict[str, int], seconds: float) -> dict[str, float]:
     return {name: 100.0 * (cpu_ns(pid) - before[name]) / 1e9 / wall for name, pid in pids.items()}
 
 
-def measure_show(folder: Path, seconds: float, split: bool) -> dict[str, float]:
-    """The show in one process (``{"show": cpu}``) or in a process per node (cpu by node), clients attached."""
+def measure_show(folder: Path, seconds: float, split: bool, tree: str = "",
+                 waits: dict[str, float] | None = None) -> dict[str, float]:
+    """The show in one process (``{"show": cpu}``) or in a process per node (cpu by node), clients
+    attached; ``tree``: the one process on another tree (see ``sonibus``); ``waits``: filled with
+    each process's voluntary context switches a second over the same window."""
     ports = {name: free_port(socket.SOCK_DGRAM if name in ("osc", "gateway") else socket.SOCK_STREAM)
              for name in ("osc", "gateway", "web", "oscquery", "foxglove")}
     config = folder / "show.toml"
@@ -237,7 +242,7 @@ def measure_show(folder: Path, seconds: float, split: bool) -> dict[str, float]:
             for node in NODES:
                 started(folder / f"{node}.log", processes[node])
         else:
-            processes["show"] = sonibus(config, folder / "show.log", "--listen", endpoint)
+            processes["show"] = sonibus(config, folder / "show.log", "--listen", endpoint, tree=tree)
             started(folder / "show.log", processes["show"])
         client = CONTEXT.Process(target=clients, args=(ports, counts, ready, done), daemon=True)
         client.start()
@@ -250,7 +255,11 @@ def measure_show(folder: Path, seconds: float, split: bool) -> dict[str, float]:
                 raise RuntimeError(f"a client received nothing: {dict(counts)}; {logs}")
             time.sleep(0.2)
         time.sleep(WARMUP_S)
-        return window({name: p.pid for name, p in processes.items()}, seconds)
+        before = {name: switches(p.pid) for name, p in processes.items()}
+        cpu = window({name: p.pid for name, p in processes.items()}, seconds)
+        if waits is not None:
+            waits.update({name: (switches(p.pid) - before[name]) / seconds for name, p in processes.items()})
+        return cpu
     finally:
         done.set()
         if client is not None:
@@ -321,7 +330,14 @@ def main() -> None:
     parser.add_argument("--rounds", type=int, default=2)
     parser.add_argument("--seconds", type=float, default=8.0, help="measuring window of each layout and round")
     parser.add_argument("--name", default="show", help="results file name (show_before: an older tree)")
+    parser.add_argument("--one-process", action="store_true",
+                        help="only the show in one process (no floors, no process per node)")
+    parser.add_argument("--against", metavar="DIR", default="",
+                        help="with --one-process: each round also the show on the tree in DIR (DIR/sonibus/{bus,...})")
     args = parser.parse_args()
+    if args.one_process:
+        one_process(args)
+        return
     load = [os.getloadavg()[0]]
     rounds: list[dict[str, dict[str, float]]] = []
     with tempfile.TemporaryDirectory() as name:
@@ -368,6 +384,44 @@ def main() -> None:
     for layout, values in med.items():
         print(f"{layout:>7}: " + ", ".join(f"{node} {cpu:.2f} %" for node, cpu in values.items()))
     print(machine, tree)
+
+
+def one_process(args: argparse.Namespace) -> None:
+    """The show in one process only, and (``--against``) on another tree in the same rounds,
+    their order alternating: a change's before and after, nothing else between."""
+    load = [os.getloadavg()[0]]
+    trees = {"this tree": "", **({args.against: args.against} if args.against else {})}
+    rounds: list[dict[str, float]] = []
+    switched: list[dict[str, float]] = []  # voluntary context switches a second, by tree
+    with tempfile.TemporaryDirectory() as name:
+        folder = Path(name)
+        jack = start_jack(folder / "jackd.log")
+        try:
+            for index in range(args.rounds):
+                order = list(trees.items()) if index % 2 == 0 else list(reversed(trees.items()))
+                got, waits = {}, {}
+                for label, tree in order:
+                    counted: dict[str, float] = {}
+                    got[label] = measure_show(folder, args.seconds, False, tree, counted)["show"]
+                    waits[label] = counted["show"]
+                rounds.append(got)
+                switched.append(waits)
+                load.append(os.getloadavg()[0])
+                print(f"round {index + 1}: " + ", ".join(f"{label} {cpu:.1f} % ({waits[label]:.0f} switches/s)"
+                                                         for label, cpu in got.items()), flush=True)
+        finally:
+            stop_process(jack, timeout=5)
+            for leftover in Path("/dev/shm").glob(f"jack_sem.*_{os.environ.get('JACK_DEFAULT_SERVER')}_*"):
+                leftover.unlink(missing_ok=True)
+    med = {label: statistics.median(r[label] for r in rounds) for label in trees}
+    machine = f"{os.cpu_count()} cores, load {min(load):.2f}–{max(load):.2f}"
+    summary = [{"scenario": f"(show) one process, every node, 1 robot at {RATE_HZ} Hz, clients attached: CPU",
+                "sonibus": f"{med['this tree']:.1f} %",
+                "baseline": f"{med[args.against]:.1f} % ({args.against})" if args.against else "",
+                "ratio": f"{med['this tree'] / med[args.against]:.2f}×" if args.against else ""}]
+    write(args.name, {"machine": machine, "rate_hz": RATE_HZ, "seconds": args.seconds, "rounds": rounds,
+                      "median": med, "switches_per_s": switched, "summary": summary})
+    print(", ".join(f"{label} {cpu:.2f} %" for label, cpu in med.items()), machine)
 
 
 if __name__ == "__main__":

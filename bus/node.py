@@ -24,6 +24,7 @@ import zenoh.ext
 
 from . import codec, keys
 from .control import URGENT
+from .fanout import Fanout
 from .messages import Limits
 from .queue import SampleQueue
 from .session import discover, lease_s, listening
@@ -99,13 +100,16 @@ class Bus:
         self.limits = limits or Limits()  # what the gate of each node on this bus lets through
         self._shared: dict[str, Any] = {}  # per session, for every node's Bus on it (see ``shared``)
         self._lock = threading.Lock()
+        # the session's subscriptions, one Zenoh subscriber per key expression (``bus/fanout.py``), shared
+        # by every node's Bus like ``_shared`` (not in it: a view made by ``shared`` may subscribe)
+        self._subscriptions = Fanout(lambda keyexpr, callback: session.declare_subscriber(keyexpr, callback))
         # what a callback of this node that raised is handed to (its adapter's ``fail``): Zenoh would
         # print it and go on, and the node would report itself well while hearing nothing
         self.on_error: Callable[[str, BaseException], None] | None = None
 
     def for_node(self, node: str) -> Bus:
         bus = Bus(self.session, node, self.host, self.limits, self.control)
-        bus._shared, bus._lock = self._shared, self._lock
+        bus._shared, bus._lock, bus._subscriptions = self._shared, self._lock, self._subscriptions
         return bus
 
     def guarded(self, callback: Callable[..., Any], what: str) -> Callable[..., Any]:
@@ -171,47 +175,59 @@ class Bus:
         traffic (ROS 2 over rmw_zenoh): ``attachment`` queues each sample's attachment
         (bytes, or None) after its payload, ``history`` asks publishers with a cache for
         what they hold, late joiners too (zenoh-ext's advanced subscriber), and
-        ``max_payload`` replaces the gate's size limit."""
+        ``max_payload`` replaces the gate's size limit.
+
+        The subscriptions of one session to the same key expression share one Zenoh
+        subscriber and its thread (``bus/fanout.py``; not those with ``history``): what this
+        returns undeclares this subscription alone, the last one the Zenoh subscriber."""
         keyexpr = keys.expr(keyexpr)
         queue = queue if queue is not None else SampleQueue(maxlen)
 
-        def enqueue(sample: zenoh.Sample) -> None:
-            key = str(sample.key_expr)
+        def enqueue(key: str, payload: bytes | codec.Oversize, sample: zenoh.Sample) -> None:
             if skip is None or not skip(key):
-                item: tuple[Any, ...] = (key, self._kept(key, sample.payload, max_payload))
+                item: tuple[Any, ...] = (key, payload)
                 if attachment:
                     item += (sample.attachment.to_bytes() if sample.attachment is not None else None,)
                 queue.put((*item, time.monotonic_ns()) if stamped else item)
 
         callback = self.guarded(enqueue, f"subscriber to {keyexpr}")
-        if history:
+        fits = self._fits(max_payload)
+        if history:  # (an advanced subscriber of its own: what it asks publishers for is its alone)
             return zenoh.ext.declare_advanced_subscriber(
-                self.session, keyexpr, callback,
+                self.session, keyexpr, self.guarded(lambda sample: enqueue(*self._taken(sample, fits)),
+                                                    f"subscriber to {keyexpr}"),
                 history=zenoh.ext.HistoryConfig(detect_late_publishers=True)), queue
-        return self.session.declare_subscriber(keyexpr, callback), queue
+        return self._subscriptions.join(keyexpr, callback, fits), queue
 
     def on_sample(self, keyexpr: str, take: Callable[[str, bytes | codec.Oversize], None], what: str) -> Any:
         """Call ``take(key, payload)`` on Zenoh's thread for each sample of ``keyexpr``, with no
         queue between (for what must act at once: a stop seen on a robot's events); ``take``
         must only store or signal. A payload over the gate's limit comes as ``codec.Oversize``."""
-        def call(sample: zenoh.Sample) -> None:
-            key = str(sample.key_expr)
-            take(key, self._kept(key, sample.payload))
-        return self.session.declare_subscriber(keys.expr(keyexpr), self.guarded(call, what))
+        return self._subscriptions.join(
+            keys.expr(keyexpr), self.guarded(lambda key, payload, sample: take(key, payload), what), self._fits(None))
 
-    def _kept(self, key: str, payload: zenoh.ZBytes, limit: int | None = None) -> bytes | codec.Oversize:
-        """The bytes of ``payload``, or only its size when it is over the gate's limit (or ``limit``)."""
-        size = len(payload)
+    def _fits(self, limit: int | None) -> Callable[[str, int], bool]:
+        """Whether a payload of a size on a key is kept whole: at most ``limit`` bytes, or
+        (``limit`` None) within the gate's limit of the key's section."""
         if limit is not None:
-            return payload.to_bytes() if size <= limit else codec.Oversize(size)
-        if size > self.limits.max_payload:
+            return lambda key, size: size <= limit
+
+        def within(key: str, size: int) -> bool:
+            if size <= self.limits.max_payload:
+                return True
             try:
                 section = keys.Key.parse(key).section
             except ValueError:
                 section = ""
-            if size > self.limits.payload_limit(section):
-                return codec.Oversize(size)
-        return payload.to_bytes()
+            return size <= self.limits.payload_limit(section)
+        return within
+
+    @staticmethod
+    def _taken(sample: zenoh.Sample, fits: Callable[[str, int], bool]) -> tuple[str, bytes | codec.Oversize, Any]:
+        """``sample`` as a subscription takes it: its key, its payload (or only its size, past ``fits``)."""
+        key, payload = str(sample.key_expr), sample.payload
+        size = len(payload)
+        return key, payload.to_bytes() if fits(key, size) else codec.Oversize(size), sample
 
     # -- presence (liveliness tokens) ---------------------------------------------------
 
