@@ -30,6 +30,7 @@ import struct
 import tempfile
 import threading
 import time
+from collections.abc import Awaitable, Callable
 from typing import Any
 
 from common import free_port, zenoh_config
@@ -40,9 +41,10 @@ NODES = ("foxglove", "recorder", "oscquery")  # the nodes with a floor here
 HEADER = struct.Struct("<BIQ")  # Foxglove's message data: opcode 1, subscription id, log time (ns)
 
 
-def foxglove_floor(endpoint: str, port: int, ready: Any, done: Any) -> None:
-    """Each frame as JSON in one binary WebSocket message to the client connected on ``port``."""
-    import msgpack
+def websocket_floor(endpoint: str, port: int, ready: Any, done: Any,
+                    take: Callable[[set[Any], str, bytes], Awaitable[None]]) -> None:
+    """Frames from a session listening on ``endpoint``, each handed to ``take(clients, key,
+    payload)`` on the loop of an aiohttp WebSocket server on ``port`` (its clients connected)."""
     import zenoh
     from aiohttp import web
 
@@ -59,20 +61,14 @@ def foxglove_floor(endpoint: str, port: int, ready: Any, done: Any) -> None:
             clients.discard(ws)
             return ws
 
-        async def send(payload: bytes) -> None:
-            frame = msgpack.unpackb(payload)
-            data = HEADER.pack(1, 1, time.time_ns()) + json.dumps(frame).encode()
-            for ws in list(clients):
-                await ws.send_bytes(data)
-
         app = web.Application()
         app.router.add_get("/", websocket)
         runner = web.AppRunner(app)
         await runner.setup()
         await web.TCPSite(runner, "127.0.0.1", port).start()
         session = zenoh.open(zenoh_config(listen=endpoint))
-        subscriber = session.declare_subscriber(
-            "*/frame", lambda sample: asyncio.run_coroutine_threadsafe(send(sample.payload.to_bytes()), loop))
+        subscriber = session.declare_subscriber("*/frame", lambda sample: asyncio.run_coroutine_threadsafe(
+            take(clients, str(sample.key_expr), sample.payload.to_bytes()), loop))
         ready.set()
         await asyncio.to_thread(done.wait)
         subscriber.undeclare()
@@ -80,6 +76,19 @@ def foxglove_floor(endpoint: str, port: int, ready: Any, done: Any) -> None:
         await runner.cleanup()
 
     asyncio.run(main())
+
+
+def foxglove_floor(endpoint: str, port: int, ready: Any, done: Any) -> None:
+    """Each frame as JSON in one binary WebSocket message to the client connected on ``port``."""
+    import msgpack
+
+    async def send(clients: set[Any], key: str, payload: bytes) -> None:
+        frame = msgpack.unpackb(payload)
+        data = HEADER.pack(1, 1, time.time_ns()) + json.dumps(frame).encode()
+        for ws in list(clients):
+            await ws.send_bytes(data)
+
+    websocket_floor(endpoint, port, ready, done, send)
 
 
 def reader(port: int, ready: Any, done: Any) -> None:
@@ -151,8 +160,6 @@ def oscquery_floor(endpoint: str, port: int, ready: Any, done: Any) -> None:
     """Each frame's payload kept as the latest of its key, and each of its values as an OSC
     message in a binary WebSocket message to the client connected on ``port``."""
     import msgpack
-    import zenoh
-    from aiohttp import web
 
     latest: dict[str, bytes] = {}
     addresses: dict[tuple[str, str], bytes] = {}
@@ -161,46 +168,16 @@ def oscquery_floor(endpoint: str, port: int, ready: Any, done: Any) -> None:
         text = f"/{robot}/joints/{name}".encode() + b"\0"
         return text + b"\0" * (-len(text) % 4) + b",f\0\0"
 
-    async def main() -> None:
-        loop = asyncio.get_running_loop()
-        clients: set[web.WebSocketResponse] = set()
+    async def send(clients: set[Any], key: str, payload: bytes) -> None:
+        latest[key] = payload
+        robot, frame = key.partition("/")[0], msgpack.unpackb(payload)
+        for name, value in zip(frame["names"], frame["v"], strict=True):
+            prefix = addresses.get((robot, name)) or addresses.setdefault((robot, name), address(robot, name))
+            data = prefix + struct.pack(">f", value)
+            for ws in list(clients):
+                await ws.send_bytes(data)
 
-        async def websocket(request: web.Request) -> web.WebSocketResponse:
-            ws = web.WebSocketResponse(compress=False)
-            await ws.prepare(request)
-            clients.add(ws)
-            async for _ in ws:
-                pass
-            clients.discard(ws)
-            return ws
-
-        async def send(robot: str, payload: bytes) -> None:
-            frame = msgpack.unpackb(payload)
-            for name, value in zip(frame["names"], frame["v"], strict=True):
-                prefix = addresses.get((robot, name)) or addresses.setdefault((robot, name), address(robot, name))
-                data = prefix + struct.pack(">f", value)
-                for ws in list(clients):
-                    await ws.send_bytes(data)
-
-        def keep(sample: Any) -> None:
-            key, payload = str(sample.key_expr), sample.payload.to_bytes()
-            latest[key] = payload
-            asyncio.run_coroutine_threadsafe(send(key.partition("/")[0], payload), loop)
-
-        app = web.Application()
-        app.router.add_get("/", websocket)
-        runner = web.AppRunner(app)
-        await runner.setup()
-        await web.TCPSite(runner, "127.0.0.1", port).start()
-        session = zenoh.open(zenoh_config(listen=endpoint))
-        subscriber = session.declare_subscriber("*/frame", keep)
-        ready.set()
-        await asyncio.to_thread(done.wait)
-        subscriber.undeclare()
-        session.close()
-        await runner.cleanup()
-
-    asyncio.run(main())
+    websocket_floor(endpoint, port, ready, done, send)
 
 
 def subscribed(endpoint: str, each: Any, ready: Any, done: Any) -> None:
