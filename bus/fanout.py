@@ -104,11 +104,14 @@ class Fanout:
             shared = self._shared.get(keyexpr)
             if shared is None:
                 shared = _Shared()
-                # (under the lock: a second node joining now must find this subscriber, not declare one)
+                # (joined before Zenoh is asked: a sample that comes as soon as it is declared is this one's;
+                # under the lock: a second node joining now must find this subscriber, not declare one)
+                shared.subscriptions = (subscription,)
                 shared.subscriber = self._declare(keyexpr, shared.dispatch)
                 self._shared[keyexpr] = shared
                 self.declared += 1
-            shared.subscriptions += (subscription,)
+            else:
+                shared.subscriptions += (subscription,)
         return subscription
 
     def subscriptions(self, keyexpr: str) -> int:

@@ -12,6 +12,7 @@ import msgpack
 import zenoh
 
 from sonibus.bus import Adapter, codec
+from sonibus.bus.fanout import Fanout
 
 from .conftest import wait_for
 from .test_node_failure import Fussy  # (its skip raises on a key ending in "surprise")
@@ -178,3 +179,32 @@ def test_a_view_made_by_bus_shared_may_subscribe(net):
     maker.start()
     maker.join(5)
     assert made, "Bus.shared's make could not subscribe (waiting on the Bus's own lock)"
+
+
+def test_a_sample_that_comes_as_the_first_subscription_is_declared_is_its():
+    """Zenoh may call a subscriber back as soon as it is declared (from its own thread, before
+    ``declare_subscriber`` returns here): the first subscription was added only after, and such
+    a sample went to nobody. A declare that calls back at once, as that race does."""
+    class Payload(bytes):
+        def to_bytes(self) -> bytes:
+            return bytes(self)
+
+    @dataclass
+    class Sample:
+        key_expr: str
+        payload: Payload
+
+    class Subscriber:
+        def undeclare(self) -> None:
+            pass
+
+    def declare(keyexpr: str, callback) -> Subscriber:
+        callback(Sample(keyexpr, Payload(b"early")))
+        return Subscriber()
+
+    got: list[tuple[str, bytes]] = []
+    fanout = Fanout(declare)
+    first = fanout.join("pepper/frame", lambda key, payload, sample: got.append((key, payload)),
+                        lambda key, size: True)
+    assert got == [("pepper/frame", b"early")]
+    first.undeclare()

@@ -450,7 +450,9 @@ def _frames(counts: dict[str, int]) -> dict[str, str]:
     ``pepper/derived/``), and a robot's frames (``pepper/frame`` → ``pepper/joints/``) unless the file
     holds joint keys of that robot: a recorder before issue 35 wrote a message per joint, and the
     frames beside them were Foxglove's view of the same samples."""
-    per_joint = {k.partition("/")[0] for k, n in counts.items() if n and k.partition("/")[2].startswith("joints/")}
+    # (a joint channel counts whether or not the file's statistics give it messages: a writer may leave its
+    # counts out, and the frames beside an old file's joints would then be read as joints a second time)
+    per_joint = {k.partition("/")[0] for k in counts if k.partition("/")[2].startswith("joints/")}
     framed = {k: k + "/" for k in counts if keys.is_derived_frame(k)}
     return framed | {k: keys.joint(k.partition("/")[0], "") for k in counts
                      if keys.is_frame(k) and k.partition("/")[0] not in per_joint}

@@ -58,6 +58,7 @@ from __future__ import annotations
 import contextlib
 import logging
 import os
+import threading
 import time
 from dataclasses import dataclass
 from typing import Any
@@ -85,6 +86,7 @@ MICROPHONES = "*/audio/mic"
 DISK_EVERY_S = 1.0   # how often the disk guard looks at the free space
 RETRY_S = 10.0       # a recorder paused by a failed write tries a new file this often (once space allows)
 GATHER_S = 0.05      # the writer takes what came at most this often (a wake-up costs ~50-90 µs on a small VM)
+UNDECLARED_S = 2.0   # at stop, how long the writer waits for the subscriptions to end before its last drain
 
 
 @dataclass(frozen=True)
@@ -143,6 +145,7 @@ class Recorder(Adapter):
 
     def _start(self) -> None:
         cfg: RecorderConfig = self.config
+        self._undeclared = threading.Event()  # set by ``_stop``: nothing more comes into the queue
         self.paused = ""  # why the recorder is not writing, while it is not
         self._wall0, self._mono0 = time.time_ns(), time.monotonic_ns()
         metadata = {"host": self.bus.host, "node": self.name, "subscribe": " ".join(cfg.subscribe)}
@@ -193,8 +196,12 @@ class Recorder(Adapter):
             log.info("%s: %s starts with the robots' info", self.name, self.path)
 
     def _stop(self) -> None:
-        if hasattr(self, "_streams"):  # first, so the writer drains all that came
-            self._streams.undeclare()
+        try:
+            if hasattr(self, "_streams"):  # first, so the writer drains all that came
+                self._streams.undeclare()
+        finally:
+            if hasattr(self, "_undeclared"):
+                self._undeclared.set()
 
     def describe(self) -> dict[str, Any]:
         """As every node's, and while paused why (``failure``: what ``sonibus nodes`` and ``top``
@@ -249,6 +256,9 @@ class Recorder(Adapter):
                 self._tick()
                 if batch:  # (what comes meanwhile waits, stamped: one wake-up a batch, not one a message)
                     self.stopping.wait(GATHER_S)
+            # (stop wakes the writer before the subscriptions end: what they still queue meanwhile is
+            # taken too, not left in a queue nobody reads — with the 50 ms gathering, most stops lost some)
+            self._undeclared.wait(UNDECLARED_S)
             while (item := self._queue.get(timeout=0)) is not None:  # what arrived before stop
                 self._take(*item)
             self._series.close(dict(self.stats))

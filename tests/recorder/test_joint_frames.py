@@ -15,6 +15,7 @@ import threading
 from pathlib import Path
 
 from mcap.reader import make_reader
+from mcap.writer import Writer
 
 from sonibus.adapters.recorder.channels import from_data
 from sonibus.adapters.recorder.export import export_csv
@@ -145,3 +146,29 @@ def test_a_bad_frame_in_a_file_is_skipped_with_one_line_and_the_rest_exports_and
     assert replay.stats["frames"] + replay.stats["late"] // len(names) == 4
     assert "skipped 2 messages (the first: pepper/frame: " in replay.problems
     assert {m["seq"] for key, m in seen if key == "take1/frame"} <= {0, 1, 3, 5}
+
+
+def test_an_old_file_whose_statistics_count_no_channel_is_not_read_twice(tmp_path):
+    """MCAP lets a writer leave the per-channel counts out of its statistics (a tool's copy, a
+    hand-made file): the old layout was then told by joint channels *with messages*, found none,
+    and read Foxglove's view of the frames as the joints a second time."""
+    copy = tmp_path / "no-channel-counts.mcap"
+    with open(OLD, "rb") as f, open(copy, "wb") as out:
+        reader = make_reader(f)
+        writer = Writer(out)
+        writer.start(profile="", library="a tool that counts no channel")
+        schemas: dict[int, int] = {}
+        channels: dict[int, int] = {}
+        for schema, channel, message in reader.iter_messages(log_time_order=False):
+            if channel.id not in channels:
+                if schema is not None and schema.id not in schemas:
+                    schemas[schema.id] = writer.register_schema(schema.name, schema.encoding, schema.data)
+                channels[channel.id] = writer.register_channel(
+                    channel.topic, channel.message_encoding, schemas.get(schema.id, 0) if schema else 0,
+                    dict(channel.metadata))
+            writer.add_message(channels[channel.id], message.log_time, message.data, message.publish_time,
+                               message.sequence)
+        writer._Writer__statistics.channel_message_counts.clear()  # (what such a writer leaves out)
+        writer.finish()
+    with Recording(str(OLD)) as old, Recording(str(copy)) as crafted:
+        assert [(m.key, m.log_ns) for m in crafted.messages()] == [(m.key, m.log_ns) for m in old.messages()]

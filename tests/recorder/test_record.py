@@ -8,6 +8,7 @@ import json
 import re
 import signal
 import threading
+import time
 from collections import defaultdict
 
 import jsonschema
@@ -22,7 +23,8 @@ from sonibus.adapters.recorder.channels import from_data
 from sonibus.adapters.recorder.reading import Recording
 from sonibus.adapters.recorder.recorder import Recorder, RecorderConfig
 from sonibus.bus import ConfigError
-from sonibus.bus.messages import frame_samples
+from sonibus.bus.codec import encode
+from sonibus.bus.messages import frame, frame_samples
 
 from ..conftest import SONIBUS, run_cli, wait_for
 from .conftest import HEY, record_sim
@@ -234,3 +236,38 @@ def test_a_recorders_relative_path_is_the_installation_files_folder(tmp_path, sp
     code, _, err = run.stop(signal.SIGINT, timeout=5)
     assert code in (0, 130), err
     assert not (elsewhere / "recs").exists()
+
+
+def test_what_comes_while_the_recorder_stops_is_written_not_left_in_its_queue(net, tmp_path):
+    """Stop woke the writer (gathering 50 ms at a time) before the subscriptions ended: what they
+    queued meanwhile stayed in a queue nobody read, counted nowhere. A robot publishing as fast
+    as it can while the recorder stops: nothing is left behind."""
+    recorder = net.start(Recorder(RecorderConfig(path=str(tmp_path / "stop.mcap"), foxglove=False), name="rec"))
+    robot = net.bus("robot")
+    publisher = robot.stream_publisher("pepper/frame")
+    publishing = threading.Event()
+    publishing.set()
+
+    def publish() -> None:
+        seq = 0
+        while publishing.is_set():
+            seq += 1
+            publisher.put(encode(frame(time.time(), seq, ["HeadYaw"], [0.1])))
+            time.sleep(0.0002)
+
+    undeclare = recorder._streams.undeclare
+
+    def slowly() -> None:  # (as on a busy machine: the subscriptions end a moment after stop is said)
+        time.sleep(0.2)
+        undeclare()
+
+    recorder._streams.undeclare = slowly
+    thread = threading.Thread(target=publish)
+    thread.start()
+    try:
+        wait_for(lambda: recorder.stats["written"] > 50, what="frames written")
+        recorder.stop()
+    finally:
+        publishing.clear()
+        thread.join(5)
+    assert len(recorder._queue) == 0, f"{len(recorder._queue)} samples left in the queue at stop"
