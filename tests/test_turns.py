@@ -4,25 +4,25 @@ worker's test does, and ordinary tests arriving meanwhile do not keep it waiting
 from __future__ import annotations
 
 import threading
-import uuid
 
 from .conftest import wait_for
 from .turns import turn
 
 
-def test_a_realtime_test_waits_for_the_running_ones_and_then_runs_alone(monkeypatch):
-    monkeypatch.setenv("PYTEST_XDIST_TESTRUNUID", f"test-{uuid.uuid4().hex}")  # (a run of its own)
+def test_a_realtime_test_waits_for_the_running_ones_and_then_runs_alone(monkeypatch, tmp_path):
+    monkeypatch.setenv("PYTEST_XDIST_TESTRUNUID", "a run of its own")
+    folder = tmp_path / "turns"
     said: list[str] = []
     first_may_end, late_may_start = threading.Event(), threading.Event()
 
     def ordinary(name: str, until: threading.Event) -> None:
-        with turn(alone=False):
+        with turn(alone=False, folder=folder):
             said.append(f"{name} runs")
             until.wait(10)
         said.append(f"{name} ended")
 
     def realtime() -> None:
-        with turn(alone=True):
+        with turn(alone=True, folder=folder):
             said.append("realtime runs")
             late_may_start.set()  # (the late one tries now, and must wait for this to end)
             wait_for(lambda: late.is_alive(), what="the late ordinary test to try")
@@ -46,7 +46,8 @@ def test_a_realtime_test_waits_for_the_running_ones_and_then_runs_alone(monkeypa
         < said.index("late runs"), said
 
 
-def test_outside_xdist_nobody_waits(monkeypatch):
+def test_outside_xdist_nobody_waits(monkeypatch, tmp_path):
     monkeypatch.delenv("PYTEST_XDIST_TESTRUNUID", raising=False)
-    with turn(alone=True), turn(alone=True):  # (the same worker twice: it would wait for itself in a run)
+    # (the same worker twice: in a run it would wait for itself)
+    with turn(alone=True, folder=tmp_path), turn(alone=True, folder=tmp_path):
         pass

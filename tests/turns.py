@@ -7,11 +7,14 @@ namespaces can starve them for a moment, and they fail for the machine, not for 
 code. Marked ``@pytest.mark.realtime``, such a test waits until the tests running on
 the other workers of this run have ended, and none starts until it has.
 
-Two ``flock``s shared by the run's workers (xdist's run id names them): every test
+Two ``flock``s shared by the run's workers (in the run's temporary folder): every test
 holds the *running* lock shared; a realtime test holds it alone. The *turnstile* is
 taken briefly by every test before it and held by a realtime test while it waits,
 so a stream of ordinary tests cannot keep it waiting for ever. The kernel releases
 both when a worker dies. Outside xdist there is nobody to wait for.
+
+Only the tests themselves wait: a module's fixture started on another worker (a show,
+a JACK server) keeps running meanwhile, so "alone" is among the tests, not the machine.
 """
 
 from __future__ import annotations
@@ -19,7 +22,6 @@ from __future__ import annotations
 import contextlib
 import fcntl
 import os
-import tempfile
 import time
 from collections.abc import Iterator
 from pathlib import Path
@@ -42,13 +44,12 @@ def _lock(file: int, how: int, what: str) -> None:
 
 
 @contextlib.contextmanager
-def turn(alone: bool) -> Iterator[None]:
-    """Hold this run's running lock, shared, or ``alone`` (with the turnstile held while waiting)."""
-    run = os.environ.get("PYTEST_XDIST_TESTRUNUID")
-    if not run:
+def turn(alone: bool, folder: Path) -> Iterator[None]:
+    """Hold this run's running lock (its files in ``folder``, the same for every worker of the
+    run), shared, or ``alone`` (with the turnstile held while waiting)."""
+    if not os.environ.get("PYTEST_XDIST_TESTRUNUID"):
         yield
         return
-    folder = Path(tempfile.gettempdir()) / f"sonibus-turns-{run}"
     folder.mkdir(exist_ok=True)
     turnstile = os.open(folder / "turnstile", os.O_RDWR | os.O_CREAT, 0o600)
     running = os.open(folder / "running", os.O_RDWR | os.O_CREAT, 0o600)
@@ -67,5 +68,7 @@ def turn(alone: bool) -> Iterator[None]:
 
 @pytest.hookimpl(hookwrapper=True, tryfirst=True)
 def pytest_runtest_protocol(item: pytest.Item) -> Iterator[None]:
-    with turn(alone=item.get_closest_marker("realtime") is not None):
+    # (beside the workers' own temporary folders, in the run's: pytest removes it with them, later)
+    folder = item.config._tmp_path_factory.getbasetemp().parent / "turns"
+    with turn(alone=item.get_closest_marker("realtime") is not None, folder=folder):
         yield
