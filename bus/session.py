@@ -309,7 +309,8 @@ def discover(session: zenoh.Session, served: str = "") -> list[str]:
         querier = session.declare_querier(served)
         try:
             settled = time.monotonic() + joined.settle_s
-            while not querier.matching_status and time.monotonic() < settled:
+            # (``.matching``: the status object itself is always true, and this wait ended at once)
+            while not querier.matching_status.matching and time.monotonic() < settled:
                 time.sleep(0.002)
         finally:
             querier.undeclare()

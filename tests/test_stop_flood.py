@@ -86,7 +86,12 @@ def test_a_stop_runs_once_whichever_way_it_comes(net):
     send_command(asker, "pepper", "stop")                      # id alone
     send_command(plain, "pepper", "stop", owner=owner)         # from a process with no control session
     assert plain.query(keys.command("pepper", "stop"), {})     # a raw query: no id
-    _subscriber2, later = net.bus("later").subscribe(keys.event("pepper", "command"))
+    # (a subscriber of pepper's events that the owner's session knows before the last stop: a probe only it
+    # matches says so; a stop put before the owner knew it went past it, and the wait below ran out)
+    _subscriber2, later = net.bus("later").subscribe("pepper/events/**")
+    probe = show.session.declare_publisher("pepper/events/probe/later")
+    wait_for(lambda: probe.matching_status.matching, what="the owner's session to know the later subscriber")
+    probe.undeclare()
     send_command(plain, "pepper", "stop")                      # its event comes after every earlier one's
     wait_for(lambda: StopEvents(later).count() >= 1, what="the last stop's event")
     wait_for(lambda: stops.count() >= 6, what="six stop events")
