@@ -130,6 +130,7 @@ def campaign(show: Show, plan: Plan, out: Path) -> checks.Report:
             _after(fuzzer, report, before, "bursts")
         _reset(fuzzer)
         report.figures["rounds"] = rounds
+        report.figures["midi_reader_deaths"] = show.midi.deaths if show.midi else []  # (the test's, restarted)
         report.figures["burst_rate_per_s"] = round(min(burst_rates, default=0.0))
         fuzzer.settle()
         ended = time.monotonic()

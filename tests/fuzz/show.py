@@ -182,24 +182,46 @@ class MidiReader:
     input runs in a process of its own: its callback thread crashed the process that held it
     (SIGSEGV in _rtmidi: a soak's, and this test's worker, which took the whole run down)."""
 
+    RESTARTS = 5  # a reader that dies is started again this often: its crash is not the node's silence
+
     def __init__(self, port: str) -> None:
-        self.child = subprocess.Popen([sys.executable, "-c", _MIDI_CHILD, port], stdin=subprocess.PIPE,
-                                      stdout=subprocess.PIPE, text=True)
-        assert self.child.stdout is not None
-        said = self.child.stdout.readline().strip()
-        if said != "ready":
-            self.close()
-            raise ShowError(f"no JACK MIDI port '{port}' among {said or '(the reader died)'}")
+        self.port, self.closing = port, False
+        self.deaths: list[int | None] = []  # the exit status of each reader that died (said by ``died``)
         self.messages: list[tuple[float, list[int]]] = []
+        self.child = self._spawn()
         self._reader = threading.Thread(target=self._read, name="midi-reader", daemon=True)
         self._reader.start()
 
+    def _spawn(self) -> subprocess.Popen[str]:
+        child = subprocess.Popen([sys.executable, "-c", _MIDI_CHILD, self.port], stdin=subprocess.PIPE,
+                                 stdout=subprocess.PIPE, text=True)
+        assert child.stdout is not None
+        said = child.stdout.readline().strip()
+        if said != "ready":
+            self.child = child
+            self.close()
+            raise ShowError(f"no JACK MIDI port '{self.port}' among {said or '(the reader died)'}")
+        return child
+
     def _read(self) -> None:
-        assert self.child.stdout is not None
-        for line in self.child.stdout:
-            read, _, status = line.partition(" ")
-            with contextlib.suppress(ValueError):
-                self.messages.append((float(read), [int(status)]))
+        while True:
+            assert self.child.stdout is not None
+            for line in self.child.stdout:
+                read, _, status = line.partition(" ")
+                with contextlib.suppress(ValueError):
+                    self.messages.append((float(read), [int(status)]))
+            if self.closing or len(self.deaths) >= self.RESTARTS:
+                return
+            self.deaths.append(self.child.wait())  # (its stdout ended: the reader died, not the node)
+            try:
+                self.child = self._spawn()
+            except ShowError:
+                return
+
+    @property
+    def died(self) -> str:
+        """Whether the test's own reader died (and was started again): said beside a silence."""
+        return f" (the test's MIDI reader died {len(self.deaths)} time(s), exit {self.deaths})" if self.deaths else ""
 
     def count(self, since: float, status_high: int | None = None) -> int:
         """Messages read at or after ``since``; ``status_high`` 0xB0 (CC) or 0xE0 (pitch bend) selects."""
@@ -212,6 +234,7 @@ class MidiReader:
         return n
 
     def close(self) -> None:
+        self.closing = True
         with contextlib.suppress(OSError, ValueError):
             self.child.stdin.close()  # type: ignore[union-attr]
         try:
