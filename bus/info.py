@@ -40,18 +40,23 @@ class InfoRequests:
         self.derived_alone = derived_alone  # a name with info/derived and no owner's info is described by the first
         self._asked: dict[str, float] = {}
         self._misses: dict[str, int] = {}  # robot → queries in a row nobody answered
+        # ``ask`` comes from a node's threads, the answers and misses from Zenoh's: a miss counted while
+        # ``ask`` made room took a node down ("dictionary changed size during iteration", a fuzz campaign)
+        self._lock = threading.Lock()
         self._gate = messages.Gate(bus.limits)
 
     def ask(self, robot: str) -> None:
         now = time.monotonic()
-        if now - self._asked.get(robot, -math.inf) < self.retry_s:
-            return
-        if robot not in self._asked and len(self._asked) >= MAX_ROBOTS:  # names made up must not grow it for ever
-            self._asked = {r: at for r, at in self._asked.items() if now - at < self.retry_s}
-            self._misses = {r: n for r, n in self._misses.items() if r in self._asked}
-            if len(self._asked) >= MAX_ROBOTS:  # (all asked just now: this one waits for room)
+        with self._lock:
+            if now - self._asked.get(robot, -math.inf) < self.retry_s:
                 return
-        self._asked[robot] = now
+            if robot not in self._asked and len(self._asked) >= MAX_ROBOTS:  # names made up must not grow it for ever
+                self._asked = {r: at for r, at in self._asked.items() if now - at < self.retry_s}
+                self._misses = {r: n for r, n in self._misses.items() if r in self._asked}
+                if len(self._asked) >= MAX_ROBOTS:  # (all asked just now: this one waits for room)
+                    return
+            self._asked[robot] = now
+        # (not under the lock: a query that ends at once calls ``_unanswered`` from inside ``ask``)
         merge = _Merge(robot, self._answered, self.on_error, self._gate, self._unanswered, self.derived_alone)
         self.bus.ask(keys.info(robot) + "/**", merge.take, merge.finish, timeout=self.retry_s)
 
@@ -63,7 +68,8 @@ class InfoRequests:
                 self.ask(robot)
 
     def _answered(self, robot: str, info: dict[str, Any]) -> None:
-        self._misses.pop(robot, None)
+        with self._lock:
+            self._misses.pop(robot, None)
         self.on_info(robot, info)
 
     def _unanswered(self, robot: str) -> None:
@@ -71,10 +77,11 @@ class InfoRequests:
         # UNANSWERED_RETRY_S, not retry_s (a page showed a robot's frames 2.7 s before its controls), then
         # twice as late each time nobody answers, up to retry_s (a claim nobody stands behind: a made-up
         # robot asked 4 times a second, times a thousand of them, is a flood of queries of our own)
-        if robot in self._asked:
-            misses = self._misses[robot] = self._misses.get(robot, 0) + 1
-            wait = min(self.retry_s, UNANSWERED_RETRY_S * 2 ** min(misses - 1, 16))
-            self._asked[robot] = min(self._asked[robot], time.monotonic() - self.retry_s + wait)
+        with self._lock:
+            if robot in self._asked:
+                misses = self._misses[robot] = self._misses.get(robot, 0) + 1
+                wait = min(self.retry_s, UNANSWERED_RETRY_S * 2 ** min(misses - 1, 16))
+                self._asked[robot] = min(self._asked[robot], time.monotonic() - self.retry_s + wait)
 
 
 class _Merge:

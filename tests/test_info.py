@@ -3,10 +3,13 @@ serves its info (it is still connecting), so an unanswered robot is asked again 
 
 from __future__ import annotations
 
+import sys
+import threading
 import time
 
 from sonibus.bus import encode, keys
 from sonibus.bus.info import UNANSWERED_RETRY_S, InfoRequests
+from sonibus.bus.messages import Limits
 
 from .conftest import wait_for
 
@@ -78,3 +81,37 @@ def test_a_source_that_is_no_robot_is_described_by_its_derived_info_alone_only_w
             queryable.undeclare()
     assert answers["sound"] == {"joints": [], "derived": derived_info("sound", True)["derived"], "derived_alone": True}
     assert sorted(answers) == ["sound"], sorted(answers)
+
+
+def test_asking_from_a_node_while_zenoh_counts_misses_takes_no_node_down():
+    """``ask`` (a node's thread) made room among 1,024 made-up robots while Zenoh's threads
+    counted queries nobody answered: "dictionary changed size during iteration" took the
+    OSCQuery node, and with it ``sonibus run``, down in a fuzz campaign. Queries here end at
+    once, unanswered, on threads of their own, as a thousand made-up robots' do."""
+    class Bus:  # (what InfoRequests uses of a Bus: its limits, and ask)
+        limits = Limits()
+
+        def ask(self, selector, take, finish, timeout):
+            threading.Thread(target=finish).start()
+
+    failures: list[BaseException] = []
+    requests = InfoRequests(Bus(), lambda robot, info: None, lambda robot, text: None, retry_s=0.001)
+
+    def asking(first: int) -> None:
+        try:
+            for i in range(first, first + 3000):
+                requests.ask(f"made-up{i % 1500}")
+        except BaseException as exc:
+            failures.append(exc)
+
+    threads = [threading.Thread(target=asking, args=(n * 700,)) for n in range(3)]
+    interval = sys.getswitchinterval()
+    sys.setswitchinterval(1e-6)  # (threads taking turns as often as they can: the race, not the machine's luck)
+    try:
+        for thread in threads:
+            thread.start()
+        for thread in threads:
+            thread.join(60)
+    finally:
+        sys.setswitchinterval(interval)
+    assert failures == []
