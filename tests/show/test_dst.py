@@ -110,10 +110,17 @@ def show_events(rig: Any) -> list[tuple[str, str]]:
 
 
 def past(rig: Any, until: str) -> dict[str, Any]:
-    """The show's status once its clock is past ``until``."""
+    """The show's status once its clock is past ``until`` (an answer that is an error, a request that
+    timed out on a busy machine, is asked again; the last one is said if the clock never gets there)."""
     end = datetime.fromisoformat(until).timestamp()
-    return wait_for(lambda: (s := ask(rig, "status", {})) and datetime.fromisoformat(s["clock"]).timestamp() >= end
-                    and s, 20, f"the show's clock past {until}")
+    last: list[Any] = [None]
+
+    def reached() -> dict[str, Any] | None:
+        status = last[0] = ask(rig, "status", {})
+        if isinstance(status, dict) and datetime.fromisoformat(status["clock"]).timestamp() >= end:
+            return status
+        return None
+    return wait_for(reached, 20, f"the show's clock past {until}", explain=lambda: f"the last answer: {last[0]}")
 
 
 def rehearsed(net: Any, begin: str) -> tuple[Any, Show]:
