@@ -4,6 +4,7 @@ without a terminal it says so in one line."""
 
 from __future__ import annotations
 
+import contextlib
 import fcntl
 import os
 import pty
@@ -29,7 +30,8 @@ class Terminal:
     def __init__(self, *args: str, prefix: Sequence[str] = ()) -> None:
         self.master, slave = pty.openpty()
         fcntl.ioctl(slave, termios.TIOCSWINSZ, struct.pack("HHHH", 48, 160, 0, 0))
-        env = {**os.environ, "TERM": "xterm-256color", "COLUMNS": "160", "LINES": "48"}
+        # (faulthandler: a top that does not end is made to say where it is stuck, see ``ended_within``)
+        env = {**os.environ, "TERM": "xterm-256color", "COLUMNS": "160", "LINES": "48", "PYTHONFAULTHANDLER": "1"}
         self.process = subprocess.Popen([*prefix, SONIBUS, "top", *args], stdin=slave, stdout=slave, stderr=slave,
                                         env=env, start_new_session=True, close_fds=True)
         os.close(slave)
@@ -56,7 +58,14 @@ class Terminal:
         try:
             status = self.process.wait(timeout=seconds)
         except subprocess.TimeoutExpired:
-            pytest.fail(f"sonibus top still runs {seconds} s later; its screen ended with {self.tail()!r}")
+            screen = self.tail()
+            self.process.send_signal(signal.SIGABRT)  # faulthandler prints every thread's stack on the pty
+            with contextlib.suppress(subprocess.TimeoutExpired):
+                self.process.wait(timeout=5)
+            self._reader.join(2.0)
+            stacks = bytes(self.output).rpartition(b"Fatal Python error")[2].decode(errors="replace")
+            pytest.fail(f"sonibus top still runs {seconds} s later; its screen ended with {screen!r}; "
+                        f"its threads were at: Fatal Python error{stacks}")
         return status, time.monotonic() - started
 
     def tail(self) -> bytes:
