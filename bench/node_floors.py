@@ -37,7 +37,7 @@ from common import free_port, zenoh_config
 from floor import CONTEXT, Case, cpu_ns, publish
 
 RATE_HZ = 50
-NODES = ("foxglove", "recorder", "oscquery")  # the nodes with a floor here
+NODES = ("foxglove", "recorder", "oscquery", "web", "midi", "features")  # the nodes with a floor here
 HEADER = struct.Struct("<BIQ")  # Foxglove's message data: opcode 1, subscription id, log time (ns)
 
 
@@ -180,6 +180,223 @@ def oscquery_floor(endpoint: str, port: int, ready: Any, done: Any) -> None:
     websocket_floor(endpoint, port, ready, done, send)
 
 
+def web_floor(endpoint: str, port: int, ready: Any, done: Any, update_hz: float = 25.0) -> None:
+    """Each frame decoded (msgpack) and kept as its robot's latest, on Zenoh's callback thread;
+    every ``1 / update_hz`` s the latest frame of each robot that sent one since, as the web
+    node's ``frame`` message (JSON text), to the page connected on ``port`` (aiohttp)."""
+    import msgpack
+    import zenoh
+    from aiohttp import web
+
+    latest: dict[str, dict[str, Any]] = {}
+    lock = threading.Lock()
+
+    def take(sample: Any) -> None:
+        frame = msgpack.unpackb(sample.payload.to_bytes())
+        with lock:
+            latest[str(sample.key_expr).partition("/")[0]] = frame
+
+    async def main() -> None:
+        clients: set[web.WebSocketResponse] = set()
+
+        async def websocket(request: web.Request) -> web.WebSocketResponse:
+            ws = web.WebSocketResponse(compress=False)
+            await ws.prepare(request)
+            clients.add(ws)
+            async for _ in ws:
+                pass
+            clients.discard(ws)
+            return ws
+
+        async def push() -> None:
+            period, due = 1.0 / update_hz, time.monotonic()
+            while True:
+                due += period
+                await asyncio.sleep(max(0.0, due - time.monotonic()))
+                with lock:
+                    frames = latest.copy()
+                    latest.clear()
+                for robot, frame in frames.items():
+                    text = json.dumps({"type": "frame", "robot": robot, "t": frame["t"], "seq": frame["seq"],
+                                       "names": frame["names"], "v": frame["v"]}, allow_nan=False)
+                    for ws in list(clients):
+                        await ws.send_str(text)
+
+        app = web.Application()
+        app.router.add_get("/", websocket)
+        runner = web.AppRunner(app)
+        await runner.setup()
+        await web.TCPSite(runner, "127.0.0.1", port).start()
+        session = zenoh.open(zenoh_config(listen=endpoint))
+        subscriber = session.declare_subscriber("*/frame", take)
+        pusher = asyncio.create_task(push())
+        ready.set()
+        await asyncio.to_thread(done.wait)
+        pusher.cancel()
+        subscriber.undeclare()
+        session.close()
+        await runner.cleanup()
+
+    asyncio.run(main())
+
+
+MIDI_RANGE = (-8.0, 8.0)  # the floor's joints' range, mapped onto 0..127: a few messages a joint a second
+
+
+def midi_floor(endpoint: str, ready: Any, done: Any) -> None:
+    """Each frame decoded (msgpack) on Zenoh's callback thread, each joint ``i`` scaled into
+    0..127 (``MIDI_RANGE``) and, if its number changed, sent as control change 20 + i on
+    channel 1 through a python-rtmidi virtual output port on JACK (the default server)."""
+    import msgpack
+    import rtmidi
+
+    out = rtmidi.MidiOut(rtmidi.API_UNIX_JACK, "midi-floor")
+    out.open_virtual_port("floor")
+    low, high = MIDI_RANGE
+    last: dict[tuple[str, int], int] = {}
+
+    def take(sample: Any) -> None:
+        robot, frame = str(sample.key_expr).partition("/")[0], msgpack.unpackb(sample.payload.to_bytes())
+        for i, value in enumerate(frame["v"]):
+            number = round(min(1.0, max(0.0, (value - low) / (high - low))) * 127)
+            if last.get((robot, i)) != number:
+                last[robot, i] = number
+                out.send_message([0xB0, 20 + i, number])
+
+    try:
+        subscribed(endpoint, take, ready, done)
+    finally:
+        out.close_port()
+        out.delete()
+
+
+# the features floor's robot: a Pepper's joint table as the floor's frames carry it (J0..J16 in
+# Pepper's order), its chains, arms and their geometry (the features node's, from its model)
+PEPPER_CHAINS = {"Head": (0, 1), "LArm": (2, 3, 4, 5, 6, 7), "Leg": (8, 9, 10), "RArm": (11, 12, 13, 14, 15, 16)}
+PEPPER_ARMS = (((-0.057, 0.14974, 0.08682), (2, 3, 4, 5, 6), 0.015), ((-0.057, -0.14974, 0.08682),
+                                                                       (11, 12, 13, 14, 15), -0.015))
+PEPPER_VMAX = (7.34, 9.23, 7.34, 9.23, 7.34, 9.23, 17.38, 12.56, 2.27, 2.93, 2.93, 7.34, 9.23, 7.34, 9.23, 17.38,
+               12.56)
+
+
+class FloorVelocity:
+    """Velocities of ``n`` signals: the features node's filter (a first-order low-pass of
+    each step's mean velocity, slope-corrected, from the samples' own times) in plain floats,
+    refusing jumps faster than ``rate`` per signal."""
+
+    def __init__(self, n: int, cutoff_hz: float = 5.0, rates: tuple[float, ...] | None = None) -> None:
+        import math
+        self.tau, self.rates = 1.0 / (2.0 * math.pi * cutoff_hz), rates or (math.inf,) * n
+        self.values, self.last_q, self.last_r, self.last_t = [0.0] * n, [math.nan] * n, [0.0] * n, math.nan
+        self.last_dt = 1.0
+
+    def step(self, t: float, q: list[float]) -> bool:
+        """Take ``q`` at ``t``; whether ``values`` hold velocities for ``t``."""
+        import math
+        dt = t - self.last_t
+        fresh = 0.0 < dt <= 0.5
+        if fresh:
+            tau, e = self.tau, math.exp(-dt / self.tau)
+            delta = dt / 2 - tau + dt * e / (1.0 - e)
+            values, last_r, span = self.values, self.last_r, (dt + self.last_dt) / 2
+            for i, (x, was, rate) in enumerate(zip(q, self.last_q, self.rates, strict=True)):
+                moved = x - was
+                if not abs(moved) <= rate * dt:
+                    values[i] = 0.0
+                    continue
+                r = moved / dt
+                v = e * values[i] + (1.0 - e) * (r + (r - last_r[i]) / span * delta)
+                values[i], last_r[i] = (v if abs(v) >= 1e-9 else 0.0), r
+            self.last_dt = dt
+        self.last_q, self.last_t = list(q), t
+        return fresh
+
+
+def features_floor(endpoint: str, ready: Any, done: Any) -> None:
+    """Each frame decoded (msgpack) on Zenoh's callback thread, its default features worked out
+    as the features node's plain-float step does — 17 joint velocities (``FloorVelocity``), both
+    hands' positions (forward kinematics of each arm's 5 joints, one vector turned per joint), their
+    speeds (a velocity filter of the 6 coordinates), the quantity of motion of each chain and of the
+    body, motion onsets and offsets of each chain (hysteresis) — each clamped into a range, and put
+    as one derived frame (``{t, seq, names, v}``, msgpack) on ``<robot>/derived``."""
+    import math
+
+    import msgpack
+    import zenoh
+
+    session = zenoh.open(zenoh_config(listen=endpoint))
+    publishers: dict[str, Any] = {}
+    joints = len(PEPPER_VMAX)
+    velocity = FloorVelocity(joints, rates=tuple(10 * v for v in PEPPER_VMAX))
+    hands = FloorVelocity(6)
+    groups = [*PEPPER_CHAINS.items(), ("Body", tuple(range(joints)))]
+    names = ([f"velocity/J{j}" for j in range(joints)] + ["hand/L", "hand/R", "hand_speed/L", "hand_speed/R"]
+             + [f"qom/{g}" for g, _ in groups])
+    moving = {g: False for g in PEPPER_CHAINS}
+    events: list[dict[str, Any]] = []
+
+    def hand(base: tuple[float, float, float], arm: tuple[int, ...], y: float, q: list[float]) -> list[float]:
+        # from the hand inwards: wrist yaw (x), elbow roll (z), elbow yaw (x), shoulder roll (z, its
+        # offset tilted), shoulder pitch (y)
+        c, s = math.cos(q[arm[4]]), math.sin(q[arm[4]])
+        px, py, pz = 0.025, 0.0, 0.0
+        px, py, pz = px, c * py - s * pz, s * py + c * pz
+        c, s = math.cos(q[arm[3]]), math.sin(q[arm[3]])
+        ux = 0.15 + px
+        px, py, pz = c * ux - s * py, s * ux + c * py, pz
+        c, s = math.cos(q[arm[2]]), math.sin(q[arm[2]])
+        px, py, pz = px, c * py - s * pz, s * py + c * pz
+        ux = 0.1812 + 0.98769 * px - 0.15643 * pz
+        uy, uz = y + py, 0.00013 + 0.15643 * px + 0.98769 * pz
+        c, s = math.cos(q[arm[1]]), math.sin(q[arm[1]])
+        px, py, pz = c * ux - s * uy, s * ux + c * uy, uz
+        c, s = math.cos(q[arm[0]]), math.sin(q[arm[0]])
+        return [base[0] + c * px + s * pz, base[1] + py, base[2] + c * pz - s * px]
+
+    def take(sample: Any) -> None:
+        robot, frame = str(sample.key_expr).partition("/")[0], msgpack.unpackb(sample.payload.to_bytes())
+        t, q = frame["t"], [float(x) for x in frame["v"]]
+        if not velocity.step(t, q):
+            return
+        v = [min(hi, max(-hi, x)) for x, hi in zip(velocity.values, PEPPER_VMAX, strict=True)]
+        points = [x for base, arm, y in PEPPER_ARMS for x in hand(base, arm, y, q)]
+        hands.step(t, points)
+        hv = hands.values
+        speeds = [min(10.0, math.sqrt(hv[i] * hv[i] + hv[i + 1] * hv[i + 1] + hv[i + 2] * hv[i + 2]))
+                  for i in (0, 3)]
+        qoms = [sum([abs(v[j]) for j in members], 0.0) for _, members in groups]
+        for (group, _), qom in zip(groups, qoms, strict=True):
+            if group in moving and moving[group] != (qom > (0.2 if moving[group] else 0.5)):
+                moving[group] = not moving[group]
+                events.append({"t": t, "kind": "motion", "chain": group, "seq": frame["seq"],
+                               "state": "started" if moving[group] else "stopped"})
+        key = f"{robot}/derived"
+        publisher = publishers.get(key) or publishers.setdefault(key, session.declare_publisher(key))
+        publisher.put(msgpack.packb({"t": t, "seq": frame["seq"], "names": names,
+                                     "v": [*v, points[:3], points[3:], *speeds, *qoms]}))
+        while events:
+            session.put(f"{robot}/events/motion", msgpack.packb(events.pop()))
+
+    subscriber = session.declare_subscriber("*/frame", take)
+    ready.set()
+    done.wait()
+    subscriber.undeclare()
+    for publisher in publishers.values():
+        publisher.undeclare()
+    session.close()
+
+
+def derived_reader(endpoint: str, ready: Any, done: Any) -> None:
+    """The features floor's one subscriber of derived frames (not measured): the node's have several."""
+    import zenoh
+    session = zenoh.open(zenoh_config(connect=endpoint))
+    subscriber = session.declare_subscriber("*/derived", lambda sample: None)
+    ready.set()
+    done.wait()
+    subscriber.undeclare()
+    session.close()
+
+
 def subscribed(endpoint: str, each: Any, ready: Any, done: Any) -> None:
     """``each(sample)`` for every frame, on a session listening on ``endpoint``, until ``done``."""
     import zenoh
@@ -196,7 +413,7 @@ def measure(seconds: float, warmup_s: float = 3.0) -> dict[str, float]:
     publisher of one robot × 17 joints at ``RATE_HZ``."""
     done = CONTEXT.Event()
     endpoints = {name: f"tcp/127.0.0.1:{free_port()}" for name in NODES}
-    web_ports = {name: free_port() for name in ("foxglove", "oscquery")}  # (each with a client reading)
+    web_ports = {name: free_port() for name in ("foxglove", "oscquery", "web")}  # (each with a client reading)
     readies = {name: CONTEXT.Event() for name in (*endpoints, *(f"{name} client" for name in web_ports))}
     with tempfile.TemporaryDirectory() as folder:
         floors = {
@@ -206,6 +423,11 @@ def measure(seconds: float, warmup_s: float = 3.0) -> dict[str, float]:
                                                                      readies["recorder"], done), daemon=True),
             "oscquery": CONTEXT.Process(target=oscquery_floor, args=(endpoints["oscquery"], web_ports["oscquery"],
                                                                      readies["oscquery"], done), daemon=True),
+            "web": CONTEXT.Process(target=web_floor, args=(endpoints["web"], web_ports["web"], readies["web"], done),
+                                   daemon=True),
+            "midi": CONTEXT.Process(target=midi_floor, args=(endpoints["midi"], readies["midi"], done), daemon=True),
+            "features": CONTEXT.Process(target=features_floor, args=(endpoints["features"], readies["features"],
+                                                                     done), daemon=True),
         }
         others: list[Any] = []
         try:
@@ -217,7 +439,11 @@ def measure(seconds: float, warmup_s: float = 3.0) -> dict[str, float]:
                 others.append(CONTEXT.Process(target=reader, args=(port, readies[f"{name} client"], done),
                                               daemon=True))
                 others[-1].start()
-            if not all(readies[f"{name} client"].wait(30) for name in web_ports):
+            derived = CONTEXT.Event()
+            others.append(CONTEXT.Process(target=derived_reader, args=(endpoints["features"], derived, done),
+                                          daemon=True))
+            others[-1].start()
+            if not all(readies[f"{name} client"].wait(30) for name in web_ports) or not derived.wait(30):
                 raise RuntimeError("the node floors' clients did not connect")
             handles = []  # (kept until the end: a queue collected here is gone for the child too)
             for endpoint in endpoints.values():
