@@ -42,9 +42,13 @@ HEADER = struct.Struct("<BIQ")  # Foxglove's message data: opcode 1, subscriptio
 
 
 def websocket_floor(endpoint: str, port: int, ready: Any, done: Any,
-                    take: Callable[[set[Any], str, bytes], Awaitable[None]]) -> None:
+                    take: Callable[[set[Any], str, bytes], Awaitable[None]] | None,
+                    arrive: Callable[[Any], None] | None = None,
+                    pace: Callable[[set[Any]], Awaitable[None]] | None = None) -> None:
     """Frames from a session listening on ``endpoint``, each handed to ``take(clients, key,
-    payload)`` on the loop of an aiohttp WebSocket server on ``port`` (its clients connected)."""
+    payload)`` on the loop of an aiohttp WebSocket server on ``port`` (its clients connected);
+    or to ``arrive(sample)`` where they arrive (Zenoh's callback thread), with ``pace(clients)``
+    running on the loop meanwhile."""
     import zenoh
     from aiohttp import web
 
@@ -67,10 +71,14 @@ def websocket_floor(endpoint: str, port: int, ready: Any, done: Any,
         await runner.setup()
         await web.TCPSite(runner, "127.0.0.1", port).start()
         session = zenoh.open(zenoh_config(listen=endpoint))
-        subscriber = session.declare_subscriber("*/frame", lambda sample: asyncio.run_coroutine_threadsafe(
-            take(clients, str(sample.key_expr), sample.payload.to_bytes()), loop))
+        subscriber = session.declare_subscriber("*/frame", arrive or (
+            lambda sample: asyncio.run_coroutine_threadsafe(take(clients, str(sample.key_expr),  # type: ignore[misc]
+                                                                 sample.payload.to_bytes()), loop)))
+        paced = asyncio.create_task(pace(clients)) if pace is not None else None
         ready.set()
         await asyncio.to_thread(done.wait)
+        if paced is not None:
+            paced.cancel()
         subscriber.undeclare()
         session.close()
         await runner.cleanup()
@@ -185,59 +193,30 @@ def web_floor(endpoint: str, port: int, ready: Any, done: Any, update_hz: float 
     every ``1 / update_hz`` s the latest frame of each robot that sent one since, as the web
     node's ``frame`` message (JSON text), to the page connected on ``port`` (aiohttp)."""
     import msgpack
-    import zenoh
-    from aiohttp import web
 
     latest: dict[str, dict[str, Any]] = {}
     lock = threading.Lock()
 
-    def take(sample: Any) -> None:
+    def keep(sample: Any) -> None:
         frame = msgpack.unpackb(sample.payload.to_bytes())
         with lock:
             latest[str(sample.key_expr).partition("/")[0]] = frame
 
-    async def main() -> None:
-        clients: set[web.WebSocketResponse] = set()
+    async def push(clients: set[Any]) -> None:
+        period, due = 1.0 / update_hz, time.monotonic()
+        while True:
+            due += period
+            await asyncio.sleep(max(0.0, due - time.monotonic()))
+            with lock:
+                frames = latest.copy()
+                latest.clear()
+            for robot, frame in frames.items():
+                text = json.dumps({"type": "frame", "robot": robot, "t": frame["t"], "seq": frame["seq"],
+                                   "names": frame["names"], "v": frame["v"]}, allow_nan=False)
+                for ws in list(clients):
+                    await ws.send_str(text)
 
-        async def websocket(request: web.Request) -> web.WebSocketResponse:
-            ws = web.WebSocketResponse(compress=False)
-            await ws.prepare(request)
-            clients.add(ws)
-            async for _ in ws:
-                pass
-            clients.discard(ws)
-            return ws
-
-        async def push() -> None:
-            period, due = 1.0 / update_hz, time.monotonic()
-            while True:
-                due += period
-                await asyncio.sleep(max(0.0, due - time.monotonic()))
-                with lock:
-                    frames = latest.copy()
-                    latest.clear()
-                for robot, frame in frames.items():
-                    text = json.dumps({"type": "frame", "robot": robot, "t": frame["t"], "seq": frame["seq"],
-                                       "names": frame["names"], "v": frame["v"]}, allow_nan=False)
-                    for ws in list(clients):
-                        await ws.send_str(text)
-
-        app = web.Application()
-        app.router.add_get("/", websocket)
-        runner = web.AppRunner(app)
-        await runner.setup()
-        await web.TCPSite(runner, "127.0.0.1", port).start()
-        session = zenoh.open(zenoh_config(listen=endpoint))
-        subscriber = session.declare_subscriber("*/frame", take)
-        pusher = asyncio.create_task(push())
-        ready.set()
-        await asyncio.to_thread(done.wait)
-        pusher.cancel()
-        subscriber.undeclare()
-        session.close()
-        await runner.cleanup()
-
-    asyncio.run(main())
+    websocket_floor(endpoint, port, ready, done, None, keep, push)
 
 
 MIDI_RANGE = (-8.0, 8.0)  # the floor's joints' range, mapped onto 0..127: a few messages a joint a second
@@ -312,19 +291,20 @@ class FloorVelocity:
         return fresh
 
 
-def features_floor(endpoint: str, ready: Any, done: Any) -> None:
+def features_floor(endpoint: str, reader: str, ready: Any, done: Any) -> None:
     """Each frame decoded (msgpack) on Zenoh's callback thread, its default features worked out
     as the features node's plain-float step does — 17 joint velocities (``FloorVelocity``), both
     hands' positions (forward kinematics of each arm's 5 joints, one vector turned per joint), their
     speeds (a velocity filter of the 6 coordinates), the quantity of motion of each chain and of the
     body, motion onsets and offsets of each chain (hysteresis) — each clamped into a range, and put
-    as one derived frame (``{t, seq, names, v}``, msgpack) on ``<robot>/derived``."""
+    as one derived frame (``{t, seq, names, v}``, msgpack) on ``<robot>/derived``, to the
+    ``derived_reader`` listening on ``reader``."""
     import math
 
     import msgpack
     import zenoh
 
-    session = zenoh.open(zenoh_config(listen=endpoint))
+    session = zenoh.open(zenoh_config(listen=endpoint, connect=reader))
     publishers: dict[str, Any] = {}
     joints = len(PEPPER_VMAX)
     velocity = FloorVelocity(joints, rates=tuple(10 * v for v in PEPPER_VMAX))
@@ -387,21 +367,17 @@ def features_floor(endpoint: str, ready: Any, done: Any) -> None:
 
 
 def derived_reader(endpoint: str, ready: Any, done: Any) -> None:
-    """The features floor's one subscriber of derived frames (not measured): the node's have several."""
-    import zenoh
-    session = zenoh.open(zenoh_config(connect=endpoint))
-    subscriber = session.declare_subscriber("*/derived", lambda sample: None)
-    ready.set()
-    done.wait()
-    subscriber.undeclare()
-    session.close()
+    """The features floor's one subscriber of derived frames, listening on ``endpoint`` (not
+    measured): the node's have several."""
+    subscribed(endpoint, lambda sample: None, ready, done, "*/derived")
 
 
-def subscribed(endpoint: str, each: Any, ready: Any, done: Any) -> None:
-    """``each(sample)`` for every frame, on a session listening on ``endpoint``, until ``done``."""
+def subscribed(endpoint: str, each: Any, ready: Any, done: Any, key: str = "*/frame") -> None:
+    """``each(sample)`` for every frame (or sample on ``key``), on a session listening on
+    ``endpoint``, until ``done``."""
     import zenoh
     session = zenoh.open(zenoh_config(listen=endpoint))
-    subscriber = session.declare_subscriber("*/frame", each)
+    subscriber = session.declare_subscriber(key, each)
     ready.set()
     done.wait()
     subscriber.undeclare()
@@ -415,6 +391,7 @@ def measure(seconds: float, warmup_s: float = 3.0) -> dict[str, float]:
     endpoints = {name: f"tcp/127.0.0.1:{free_port()}" for name in NODES}
     web_ports = {name: free_port() for name in ("foxglove", "oscquery", "web")}  # (each with a client reading)
     readies = {name: CONTEXT.Event() for name in (*endpoints, *(f"{name} client" for name in web_ports))}
+    derived, derived_at = CONTEXT.Event(), f"tcp/127.0.0.1:{free_port()}"  # (the features floor's reader)
     with tempfile.TemporaryDirectory() as folder:
         floors = {
             "foxglove": CONTEXT.Process(target=foxglove_floor, args=(endpoints["foxglove"], web_ports["foxglove"],
@@ -426,11 +403,12 @@ def measure(seconds: float, warmup_s: float = 3.0) -> dict[str, float]:
             "web": CONTEXT.Process(target=web_floor, args=(endpoints["web"], web_ports["web"], readies["web"], done),
                                    daemon=True),
             "midi": CONTEXT.Process(target=midi_floor, args=(endpoints["midi"], readies["midi"], done), daemon=True),
-            "features": CONTEXT.Process(target=features_floor, args=(endpoints["features"], readies["features"],
-                                                                     done), daemon=True),
+            "features": CONTEXT.Process(target=features_floor, args=(endpoints["features"], derived_at,
+                                                                     readies["features"], done), daemon=True),
         }
-        others: list[Any] = []
+        others: list[Any] = [CONTEXT.Process(target=derived_reader, args=(derived_at, derived, done), daemon=True)]
         try:
+            others[0].start()
             for process in floors.values():
                 process.start()
             if not all(readies[name].wait(30) for name in floors):
@@ -439,10 +417,6 @@ def measure(seconds: float, warmup_s: float = 3.0) -> dict[str, float]:
                 others.append(CONTEXT.Process(target=reader, args=(port, readies[f"{name} client"], done),
                                               daemon=True))
                 others[-1].start()
-            derived = CONTEXT.Event()
-            others.append(CONTEXT.Process(target=derived_reader, args=(endpoints["features"], derived, done),
-                                          daemon=True))
-            others[-1].start()
             if not all(readies[f"{name} client"].wait(30) for name in web_ports) or not derived.wait(30):
                 raise RuntimeError("the node floors' clients did not connect")
             handles = []  # (kept until the end: a queue collected here is gone for the child too)
