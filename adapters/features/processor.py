@@ -82,7 +82,10 @@ class Features(Adapter):
     def _direct(self, key: str, payload: Any) -> bool:
         """A frame, on its subscription's callback thread (``Streams``' ``direct``); into the
         queue instead (False) before it subscribed everywhere or while the worker holds the
-        state (``if_free``)."""
+        state (``if_free``); left once the node is stopping (its publishers, made after the
+        subscriptions, are undeclared before them)."""
+        if self.stopping.is_set():
+            return True
         return self._streams is not None and if_free(self._state, lambda: self._take(key, payload))
 
     def _take(self, key: str, payload: Any) -> None:
