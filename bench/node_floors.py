@@ -1,4 +1,4 @@
-"""The floors of three of the show's sinks (issue 35): minimal harnesses that do a node's
+"""The floors of six of the show's sinks (issue 35): minimal harnesses that do a node's
 essential work with the same libraries and no sonibus, fed the same frames as
 ``show.py``'s other floors (one robot × 17 joints at its rate, msgpack, zenoh-python).
 
@@ -10,7 +10,10 @@ essential work with the same libraries and no sonibus, fed the same frames as
 - **oscquery**: a subscriber that keeps each frame's payload as the latest (what
   answering a question needs) and sends each of its values as an OSC message (address
   bytes made once, ``struct.pack``), one binary WebSocket message each (aiohttp), to the
-  one client connected: the show's OSCQuery client LISTENs to every joint.
+  one client connected: the show's OSCQuery client LISTENs to every joint;
+- **web**, **midi**, **features**: the web node's frames at the page's rate, the MIDI
+  sink's control changes on JACK, the features node's derived frames (their docstrings
+  below, each with what the node does beyond it).
 
 The nodes do more than their floors (the features node's derived frames and the robot's
 events come in too, Foxglove's views and per-joint channels go out, the recorder writes
@@ -191,7 +194,12 @@ def oscquery_floor(endpoint: str, port: int, ready: Any, done: Any) -> None:
 def web_floor(endpoint: str, port: int, ready: Any, done: Any, update_hz: float = 25.0) -> None:
     """Each frame decoded (msgpack) and kept as its robot's latest, on Zenoh's callback thread;
     every ``1 / update_hz`` s the latest frame of each robot that sent one since, as the web
-    node's ``frame`` message (JSON text), to the page connected on ``port`` (aiohttp)."""
+    node's ``frame`` message (JSON text), to the page connected on ``port`` (aiohttp).
+
+    The node beyond it: each frame checked by the gate and counted, the robot's events (to the
+    page, and followed for its summary line), every node's stats (checked against their schema,
+    sent to the pages once a second), each robot's info asked every second, the maps panel
+    asked 5 times a second (``map_values`` to the page each time), the kiosk, its commands."""
     import msgpack
 
     latest: dict[str, dict[str, Any]] = {}
@@ -225,7 +233,12 @@ MIDI_RANGE = (-8.0, 8.0)  # the floor's joints' range, mapped onto 0..127: a few
 def midi_floor(endpoint: str, ready: Any, done: Any) -> None:
     """Each frame decoded (msgpack) on Zenoh's callback thread, each joint ``i`` scaled into
     0..127 (``MIDI_RANGE``) and, if its number changed, sent as control change 20 + i on
-    channel 1 through a python-rtmidi virtual output port on JACK (the default server)."""
+    channel 1 through a python-rtmidi virtual output port on JACK (the default server).
+
+    The node beyond it: each frame checked by the gate and counted, the robot's info (its
+    joints' ranges and order), events as notes, presence (a robot's silence warned of), the
+    latency of each frame noted; its idle Pepper sends ~10 messages a second where this floor's
+    sine frames send more (a send is a few µs)."""
     import msgpack
     import rtmidi
 
@@ -298,7 +311,12 @@ def features_floor(endpoint: str, reader: str, ready: Any, done: Any) -> None:
     speeds (a velocity filter of the 6 coordinates), the quantity of motion of each chain and of the
     body, motion onsets and offsets of each chain (hysteresis) — each clamped into a range, and put
     as one derived frame (``{t, seq, names, v}``, msgpack) on ``<robot>/derived``, to the
-    ``derived_reader`` listening on ``reader``."""
+    ``derived_reader`` listening on ``reader``.
+
+    The node beyond it: each frame checked by the gate and counted, a robot's info worked out
+    into its tables and served on ``<robot>/info/derived``, missing and refused joints counted
+    and warned of, stale frames skipped, each frame's latency noted; its derived frames go to
+    every sink that takes them (five sessions in the show), the floor's to one."""
     import math
 
     import msgpack
