@@ -1,4 +1,4 @@
-"""The floors of three of the show's sinks (issue 35): minimal harnesses that do a node's
+"""The floors of six of the show's sinks (issue 35): minimal harnesses that do a node's
 essential work with the same libraries and no sonibus, fed the same frames as
 ``show.py``'s other floors (one robot × 17 joints at its rate, msgpack, zenoh-python).
 
@@ -10,7 +10,10 @@ essential work with the same libraries and no sonibus, fed the same frames as
 - **oscquery**: a subscriber that keeps each frame's payload as the latest (what
   answering a question needs) and sends each of its values as an OSC message (address
   bytes made once, ``struct.pack``), one binary WebSocket message each (aiohttp), to the
-  one client connected: the show's OSCQuery client LISTENs to every joint.
+  one client connected: the show's OSCQuery client LISTENs to every joint;
+- **web**, **midi**, **features**: the web node's frames at the page's rate, the MIDI
+  sink's control changes on JACK, the features node's derived frames (their docstrings
+  below, each with what the node does beyond it).
 
 The nodes do more than their floors (the features node's derived frames and the robot's
 events come in too, Foxglove's views and per-joint channels go out, the recorder writes
@@ -37,14 +40,18 @@ from common import free_port, zenoh_config
 from floor import CONTEXT, Case, cpu_ns, publish
 
 RATE_HZ = 50
-NODES = ("foxglove", "recorder", "oscquery")  # the nodes with a floor here
+NODES = ("foxglove", "recorder", "oscquery", "web", "midi", "features")  # the nodes with a floor here
 HEADER = struct.Struct("<BIQ")  # Foxglove's message data: opcode 1, subscription id, log time (ns)
 
 
 def websocket_floor(endpoint: str, port: int, ready: Any, done: Any,
-                    take: Callable[[set[Any], str, bytes], Awaitable[None]]) -> None:
+                    take: Callable[[set[Any], str, bytes], Awaitable[None]] | None,
+                    arrive: Callable[[Any], None] | None = None,
+                    pace: Callable[[set[Any]], Awaitable[None]] | None = None) -> None:
     """Frames from a session listening on ``endpoint``, each handed to ``take(clients, key,
-    payload)`` on the loop of an aiohttp WebSocket server on ``port`` (its clients connected)."""
+    payload)`` on the loop of an aiohttp WebSocket server on ``port`` (its clients connected);
+    or to ``arrive(sample)`` where they arrive (Zenoh's callback thread), with ``pace(clients)``
+    running on the loop meanwhile."""
     import zenoh
     from aiohttp import web
 
@@ -67,10 +74,14 @@ def websocket_floor(endpoint: str, port: int, ready: Any, done: Any,
         await runner.setup()
         await web.TCPSite(runner, "127.0.0.1", port).start()
         session = zenoh.open(zenoh_config(listen=endpoint))
-        subscriber = session.declare_subscriber("*/frame", lambda sample: asyncio.run_coroutine_threadsafe(
-            take(clients, str(sample.key_expr), sample.payload.to_bytes()), loop))
+        subscriber = session.declare_subscriber("*/frame", arrive or (
+            lambda sample: asyncio.run_coroutine_threadsafe(take(clients, str(sample.key_expr),  # type: ignore[misc]
+                                                                 sample.payload.to_bytes()), loop)))
+        paced = asyncio.create_task(pace(clients)) if pace is not None else None
         ready.set()
         await asyncio.to_thread(done.wait)
+        if paced is not None:
+            paced.cancel()
         subscriber.undeclare()
         session.close()
         await runner.cleanup()
@@ -180,11 +191,211 @@ def oscquery_floor(endpoint: str, port: int, ready: Any, done: Any) -> None:
     websocket_floor(endpoint, port, ready, done, send)
 
 
-def subscribed(endpoint: str, each: Any, ready: Any, done: Any) -> None:
-    """``each(sample)`` for every frame, on a session listening on ``endpoint``, until ``done``."""
+def web_floor(endpoint: str, port: int, ready: Any, done: Any, update_hz: float = 25.0) -> None:
+    """Each frame decoded (msgpack) and kept as its robot's latest, on Zenoh's callback thread;
+    every ``1 / update_hz`` s the latest frame of each robot that sent one since, as the web
+    node's ``frame`` message (JSON text), to the page connected on ``port`` (aiohttp).
+
+    The node beyond it: each frame checked by the gate and counted, the robot's events (to the
+    page, and followed for its summary line), every node's stats (checked against their schema,
+    sent to the pages once a second), each robot's info asked every second, the maps panel
+    asked 5 times a second (``map_values`` to the page each time), the kiosk, its commands."""
+    import msgpack
+
+    latest: dict[str, dict[str, Any]] = {}
+    lock = threading.Lock()
+
+    def keep(sample: Any) -> None:
+        frame = msgpack.unpackb(sample.payload.to_bytes())
+        with lock:
+            latest[str(sample.key_expr).partition("/")[0]] = frame
+
+    async def push(clients: set[Any]) -> None:
+        period, due = 1.0 / update_hz, time.monotonic()
+        while True:
+            due += period
+            await asyncio.sleep(max(0.0, due - time.monotonic()))
+            with lock:
+                frames = latest.copy()
+                latest.clear()
+            for robot, frame in frames.items():
+                text = json.dumps({"type": "frame", "robot": robot, "t": frame["t"], "seq": frame["seq"],
+                                   "names": frame["names"], "v": frame["v"]}, allow_nan=False)
+                for ws in list(clients):
+                    await ws.send_str(text)
+
+    websocket_floor(endpoint, port, ready, done, None, keep, push)
+
+
+MIDI_RANGE = (-8.0, 8.0)  # the floor's joints' range, mapped onto 0..127: a few messages a joint a second
+
+
+def midi_floor(endpoint: str, ready: Any, done: Any) -> None:
+    """Each frame decoded (msgpack) on Zenoh's callback thread, each joint ``i`` scaled into
+    0..127 (``MIDI_RANGE``) and, if its number changed, sent as control change 20 + i on
+    channel 1 through a python-rtmidi virtual output port on JACK (the default server).
+
+    The node beyond it: each frame checked by the gate and counted, the robot's info (its
+    joints' ranges and order), events as notes, presence (a robot's silence warned of), the
+    latency of each frame noted; its idle Pepper sends ~10 messages a second where this floor's
+    sine frames send more (a send is a few µs)."""
+    import msgpack
+    import rtmidi
+
+    out = rtmidi.MidiOut(rtmidi.API_UNIX_JACK, "midi-floor")
+    out.open_virtual_port("floor")
+    low, high = MIDI_RANGE
+    last: dict[tuple[str, int], int] = {}
+
+    def take(sample: Any) -> None:
+        robot, frame = str(sample.key_expr).partition("/")[0], msgpack.unpackb(sample.payload.to_bytes())
+        for i, value in enumerate(frame["v"]):
+            number = round(min(1.0, max(0.0, (value - low) / (high - low))) * 127)
+            if last.get((robot, i)) != number:
+                last[robot, i] = number
+                out.send_message([0xB0, 20 + i, number])
+
+    try:
+        subscribed(endpoint, take, ready, done)
+    finally:
+        out.close_port()
+        out.delete()
+
+
+# the features floor's robot: a Pepper's joint table as the floor's frames carry it (J0..J16 in
+# Pepper's order), its chains, arms and their geometry (the features node's, from its model)
+PEPPER_CHAINS = {"Head": (0, 1), "LArm": (2, 3, 4, 5, 6, 7), "Leg": (8, 9, 10), "RArm": (11, 12, 13, 14, 15, 16)}
+PEPPER_ARMS = (((-0.057, 0.14974, 0.08682), (2, 3, 4, 5, 6), 0.015), ((-0.057, -0.14974, 0.08682),
+                                                                       (11, 12, 13, 14, 15), -0.015))
+PEPPER_VMAX = (7.34, 9.23, 7.34, 9.23, 7.34, 9.23, 17.38, 12.56, 2.27, 2.93, 2.93, 7.34, 9.23, 7.34, 9.23, 17.38,
+               12.56)
+
+
+class FloorVelocity:
+    """Velocities of ``n`` signals: the features node's filter (a first-order low-pass of
+    each step's mean velocity, slope-corrected, from the samples' own times) in plain floats,
+    refusing jumps faster than ``rate`` per signal."""
+
+    def __init__(self, n: int, cutoff_hz: float = 5.0, rates: tuple[float, ...] | None = None) -> None:
+        import math
+        self.tau, self.rates = 1.0 / (2.0 * math.pi * cutoff_hz), rates or (math.inf,) * n
+        self.values, self.last_q, self.last_r, self.last_t = [0.0] * n, [math.nan] * n, [0.0] * n, math.nan
+        self.last_dt = 1.0
+
+    def step(self, t: float, q: list[float]) -> bool:
+        """Take ``q`` at ``t``; whether ``values`` hold velocities for ``t``."""
+        import math
+        dt = t - self.last_t
+        fresh = 0.0 < dt <= 0.5
+        if fresh:
+            tau, e = self.tau, math.exp(-dt / self.tau)
+            delta = dt / 2 - tau + dt * e / (1.0 - e)
+            values, last_r, span = self.values, self.last_r, (dt + self.last_dt) / 2
+            for i, (x, was, rate) in enumerate(zip(q, self.last_q, self.rates, strict=True)):
+                moved = x - was
+                if not abs(moved) <= rate * dt:
+                    values[i] = 0.0
+                    continue
+                r = moved / dt
+                v = e * values[i] + (1.0 - e) * (r + (r - last_r[i]) / span * delta)
+                values[i], last_r[i] = (v if abs(v) >= 1e-9 else 0.0), r
+            self.last_dt = dt
+        self.last_q, self.last_t = list(q), t
+        return fresh
+
+
+def features_floor(endpoint: str, reader: str, ready: Any, done: Any) -> None:
+    """Each frame decoded (msgpack) on Zenoh's callback thread, its default features worked out
+    as the features node's plain-float step does — 17 joint velocities (``FloorVelocity``), both
+    hands' positions (forward kinematics of each arm's 5 joints, one vector turned per joint), their
+    speeds (a velocity filter of the 6 coordinates), the quantity of motion of each chain and of the
+    body, motion onsets and offsets of each chain (hysteresis) — each clamped into a range, and put
+    as one derived frame (``{t, seq, names, v}``, msgpack) on ``<robot>/derived``, to the
+    ``derived_reader`` listening on ``reader``.
+
+    The node beyond it: each frame checked by the gate and counted, a robot's info worked out
+    into its tables and served on ``<robot>/info/derived``, missing and refused joints counted
+    and warned of, stale frames skipped, each frame's latency noted; its derived frames go to
+    every sink that takes them (five sessions in the show), the floor's to one."""
+    import math
+
+    import msgpack
+    import zenoh
+
+    session = zenoh.open(zenoh_config(listen=endpoint, connect=reader))
+    publishers: dict[str, Any] = {}
+    joints = len(PEPPER_VMAX)
+    velocity = FloorVelocity(joints, rates=tuple(10 * v for v in PEPPER_VMAX))
+    hands = FloorVelocity(6)
+    groups = [*PEPPER_CHAINS.items(), ("Body", tuple(range(joints)))]
+    names = ([f"velocity/J{j}" for j in range(joints)] + ["hand/L", "hand/R", "hand_speed/L", "hand_speed/R"]
+             + [f"qom/{g}" for g, _ in groups])
+    moving = {g: False for g in PEPPER_CHAINS}
+    events: list[dict[str, Any]] = []
+
+    def hand(base: tuple[float, float, float], arm: tuple[int, ...], y: float, q: list[float]) -> list[float]:
+        # from the hand inwards: wrist yaw (x), elbow roll (z), elbow yaw (x), shoulder roll (z, its
+        # offset tilted), shoulder pitch (y)
+        c, s = math.cos(q[arm[4]]), math.sin(q[arm[4]])
+        px, py, pz = 0.025, 0.0, 0.0
+        px, py, pz = px, c * py - s * pz, s * py + c * pz
+        c, s = math.cos(q[arm[3]]), math.sin(q[arm[3]])
+        ux = 0.15 + px
+        px, py, pz = c * ux - s * py, s * ux + c * py, pz
+        c, s = math.cos(q[arm[2]]), math.sin(q[arm[2]])
+        px, py, pz = px, c * py - s * pz, s * py + c * pz
+        ux = 0.1812 + 0.98769 * px - 0.15643 * pz
+        uy, uz = y + py, 0.00013 + 0.15643 * px + 0.98769 * pz
+        c, s = math.cos(q[arm[1]]), math.sin(q[arm[1]])
+        px, py, pz = c * ux - s * uy, s * ux + c * uy, uz
+        c, s = math.cos(q[arm[0]]), math.sin(q[arm[0]])
+        return [base[0] + c * px + s * pz, base[1] + py, base[2] + c * pz - s * px]
+
+    def take(sample: Any) -> None:
+        robot, frame = str(sample.key_expr).partition("/")[0], msgpack.unpackb(sample.payload.to_bytes())
+        t, q = frame["t"], [float(x) for x in frame["v"]]
+        if not velocity.step(t, q):
+            return
+        v = [min(hi, max(-hi, x)) for x, hi in zip(velocity.values, PEPPER_VMAX, strict=True)]
+        points = [x for base, arm, y in PEPPER_ARMS for x in hand(base, arm, y, q)]
+        hands.step(t, points)
+        hv = hands.values
+        speeds = [min(10.0, math.sqrt(hv[i] * hv[i] + hv[i + 1] * hv[i + 1] + hv[i + 2] * hv[i + 2]))
+                  for i in (0, 3)]
+        qoms = [sum([abs(v[j]) for j in members], 0.0) for _, members in groups]
+        for (group, _), qom in zip(groups, qoms, strict=True):
+            if group in moving and moving[group] != (qom > (0.2 if moving[group] else 0.5)):
+                moving[group] = not moving[group]
+                events.append({"t": t, "kind": "motion", "chain": group, "seq": frame["seq"],
+                               "state": "started" if moving[group] else "stopped"})
+        key = f"{robot}/derived"
+        publisher = publishers.get(key) or publishers.setdefault(key, session.declare_publisher(key))
+        publisher.put(msgpack.packb({"t": t, "seq": frame["seq"], "names": names,
+                                     "v": [*v, points[:3], points[3:], *speeds, *qoms]}))
+        while events:
+            session.put(f"{robot}/events/motion", msgpack.packb(events.pop()))
+
+    subscriber = session.declare_subscriber("*/frame", take)
+    ready.set()
+    done.wait()
+    subscriber.undeclare()
+    for publisher in publishers.values():
+        publisher.undeclare()
+    session.close()
+
+
+def derived_reader(endpoint: str, ready: Any, done: Any) -> None:
+    """The features floor's one subscriber of derived frames, listening on ``endpoint`` (not
+    measured): the node's have several."""
+    subscribed(endpoint, lambda sample: None, ready, done, "*/derived")
+
+
+def subscribed(endpoint: str, each: Any, ready: Any, done: Any, key: str = "*/frame") -> None:
+    """``each(sample)`` for every frame (or sample on ``key``), on a session listening on
+    ``endpoint``, until ``done``."""
     import zenoh
     session = zenoh.open(zenoh_config(listen=endpoint))
-    subscriber = session.declare_subscriber("*/frame", each)
+    subscriber = session.declare_subscriber(key, each)
     ready.set()
     done.wait()
     subscriber.undeclare()
@@ -196,8 +407,9 @@ def measure(seconds: float, warmup_s: float = 3.0) -> dict[str, float]:
     publisher of one robot × 17 joints at ``RATE_HZ``."""
     done = CONTEXT.Event()
     endpoints = {name: f"tcp/127.0.0.1:{free_port()}" for name in NODES}
-    web_ports = {name: free_port() for name in ("foxglove", "oscquery")}  # (each with a client reading)
+    web_ports = {name: free_port() for name in ("foxglove", "oscquery", "web")}  # (each with a client reading)
     readies = {name: CONTEXT.Event() for name in (*endpoints, *(f"{name} client" for name in web_ports))}
+    derived, derived_at = CONTEXT.Event(), f"tcp/127.0.0.1:{free_port()}"  # (the features floor's reader)
     with tempfile.TemporaryDirectory() as folder:
         floors = {
             "foxglove": CONTEXT.Process(target=foxglove_floor, args=(endpoints["foxglove"], web_ports["foxglove"],
@@ -206,9 +418,15 @@ def measure(seconds: float, warmup_s: float = 3.0) -> dict[str, float]:
                                                                      readies["recorder"], done), daemon=True),
             "oscquery": CONTEXT.Process(target=oscquery_floor, args=(endpoints["oscquery"], web_ports["oscquery"],
                                                                      readies["oscquery"], done), daemon=True),
+            "web": CONTEXT.Process(target=web_floor, args=(endpoints["web"], web_ports["web"], readies["web"], done),
+                                   daemon=True),
+            "midi": CONTEXT.Process(target=midi_floor, args=(endpoints["midi"], readies["midi"], done), daemon=True),
+            "features": CONTEXT.Process(target=features_floor, args=(endpoints["features"], derived_at,
+                                                                     readies["features"], done), daemon=True),
         }
-        others: list[Any] = []
+        others: list[Any] = [CONTEXT.Process(target=derived_reader, args=(derived_at, derived, done), daemon=True)]
         try:
+            others[0].start()
             for process in floors.values():
                 process.start()
             if not all(readies[name].wait(30) for name in floors):
@@ -217,7 +435,7 @@ def measure(seconds: float, warmup_s: float = 3.0) -> dict[str, float]:
                 others.append(CONTEXT.Process(target=reader, args=(port, readies[f"{name} client"], done),
                                               daemon=True))
                 others[-1].start()
-            if not all(readies[f"{name} client"].wait(30) for name in web_ports):
+            if not all(readies[f"{name} client"].wait(30) for name in web_ports) or not derived.wait(30):
                 raise RuntimeError("the node floors' clients did not connect")
             handles = []  # (kept until the end: a queue collected here is gone for the child too)
             for endpoint in endpoints.values():

@@ -67,6 +67,20 @@ def wait_for(predicate: Callable[[], Any], timeout: float = 5.0, what: str = "co
         time.sleep(0.01)
 
 
+def queued_keys(queue: Any) -> list[str]:
+    """The keys of what is put into ``queue`` (a node's ``SampleQueue``) from now on, as they
+    come: a sink that takes frames where they arrive (``Streams(direct=...)``) queues none."""
+    keys_: list[str] = []
+    put = queue.put
+
+    def spy(item: Any, *args: Any, **kwargs: Any) -> Any:
+        keys_.append(item[0])
+        return put(item, *args, **kwargs)
+
+    queue.put = spy
+    return keys_
+
+
 def require_tool(name: str, package: str) -> str:
     """The path of an external tool; a missing tool fails the test (never skips)."""
     path = shutil.which(name)

@@ -1,9 +1,11 @@
 """The ``features`` adapter: joint frames in, derived values and motion events out.
 
-A node is a loop over events: one worker takes each robot's frames (and robot
-infos) from a queue — whole from ``<robot>/frame``, or with ``per_joint_keys``
-reassembled by ``seq`` from the joint samples — computes the frame's features
-and publishes them; ``<robot>/info/derived`` describes what it publishes.
+A node is a loop over events: a robot's whole frames (``<robot>/frame``) are
+worked out where they arrive, on the subscription's callback thread; one worker
+takes the rest from a queue — robots' infos, joint samples reassembled by ``seq``
+(``per_joint_keys``), a frame that found the state busy — under the same lock.
+Each frame's features are computed and published; ``<robot>/info/derived``
+describes what it publishes.
 
 Every derived value of one frame goes out in one message, a derived frame on
 ``<robot>/derived`` (names ``<feature>/<name>``, as their keys below it); with
@@ -14,6 +16,7 @@ instead (for scripts that want them so; sinks take either).
 from __future__ import annotations
 
 import logging
+import threading
 import time
 from typing import Any
 
@@ -24,7 +27,7 @@ from sonibus.bus.adapter import Adapter
 from sonibus.bus.frames import Frame, FrameAssembler
 from sonibus.bus.info import InfoRequests
 from sonibus.bus.queue import SampleQueue
-from sonibus.bus.streams import Incoming, Streams
+from sonibus.bus.streams import Incoming, Streams, if_free
 
 from . import catalog, table
 from .compute import Output, RobotFeatures
@@ -54,9 +57,14 @@ class Features(Adapter):
         lateness.follow(self.bus)  # (where each robot's node runs: a stale frame's warning names the likely cause)
         self._info = InfoRequests(self.bus, lambda robot, info: self._queue.put((INFO, (robot, info))),
                                   lambda robot, text: self.warn("info", text))
+        self._tally = self.stats.tally(("received", "frames", "sent", "events"))  # (counted under self._state)
+        # Whole frames are worked out where they arrive (a thread hand-off a frame less: the worker's
+        # wake-up cost about what the frame's features do), the rest by the worker from the queue;
+        # one lock between them guards the state.
+        self._state = threading.Lock()
+        self._streams: Streams | None = None  # (a frame may arrive while Streams subscribes: queued, see _direct)
         self._streams = self.own(Streams(self.bus, [keys.joints(r) for r in cfg.robots], self._queue,
-                                         per_joint_keys=cfg.per_joint_keys))
-        self._tally = self.stats.tally(("received", "frames", "sent", "events"))  # (the worker's alone: no lock)
+                                         per_joint_keys=cfg.per_joint_keys, direct=self._direct))
         self.spawn(self._run, "features")
 
     # -- the loop ---------------------------------------------------------------------
@@ -65,16 +73,27 @@ class Features(Adapter):
         while not self.stopping.is_set():
             expiry = self._assembler.next_expiry()
             item = self._queue.get(timeout=0.2 if expiry is None else max(0.0, min(0.2, expiry - time.monotonic())))
-            if item is not None:
-                self._take(*item)
-            for frame in self._assembler.expire():
-                self.process(frame)
+            with self._state:
+                if item is not None:
+                    self._take(*item)
+                for frame in self._assembler.expire():
+                    self.process(frame)
+
+    def _direct(self, key: str, payload: Any) -> bool:
+        """A frame, on its subscription's callback thread (``Streams``' ``direct``); into the
+        queue instead (False) before it subscribed everywhere or while the worker holds the
+        state (``if_free``); left once the node is stopping (its publishers, made after the
+        subscriptions, are undeclared before them)."""
+        if self.stopping.is_set():
+            return True
+        return self._streams is not None and if_free(self._state, lambda: self._take(key, payload))
 
     def _take(self, key: str, payload: Any) -> None:
         if key == INFO:
             self._learn(*payload)
             return
-        message = self._streams.take(key, payload, self._counted, self.warn)  # checked by the gate, counted
+        message = self._streams.take(key, payload, self._counted, self.warn)  # type: ignore[union-attr]
+        # (checked by the gate, counted)
         if message is None:
             return
         robot = message.source.robot
@@ -89,7 +108,7 @@ class Features(Adapter):
             self.process(frame)
 
     def _counted(self, kind: str, n: int = 1) -> None:
-        """``count``, on the worker: what every frame counts goes to the tally."""
+        """``count``, under ``_state``: what every frame counts goes to the tally."""
         tally = self._tally
         if kind in tally:
             tally[kind] += n

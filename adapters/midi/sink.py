@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import logging
 import math
+import threading
 import time
 from dataclasses import dataclass, field
 from typing import Any
@@ -14,7 +15,7 @@ from sonibus.bus.adapter import Adapter
 from sonibus.bus.info import InfoRequests
 from sonibus.bus.keys import Key
 from sonibus.bus.queue import SampleQueue
-from sonibus.bus.streams import Streams
+from sonibus.bus.streams import Streams, if_free
 
 from . import mapping, ports
 from .config import MidiSinkConfig
@@ -26,6 +27,7 @@ HARDWARE_MESSAGES_PER_S = 1000   # 31250 baud / 30 bits per 3-byte message ≈ 1
 MAX_ROBOTS = 64                  # robots played (16 channels): names made up on the bus must not grow the tables
 MAX_CONTROLLERS = 4096           # keys mapped (or found unmappable) at most
 INFO = "\0info"                  # queue items carrying a robot's info, so only the worker touches state
+HEARD_EVERY_S = 0.5              # how often a robot's data is told to presence (its silence is warned of after 3 s)
 
 
 @dataclass
@@ -76,15 +78,22 @@ class MidiSink(Adapter):
         self._held: set[str] = set()
         self._sounding: set[tuple[int, int]] = set()
         self._interval = 1.0 / cfg.max_rate_hz if cfg.max_rate_hz else 0.0
+        self._heard: dict[str, float] = {}  # robot → when its data was last told to presence
         self._out = ports.open_output(cfg.api, cfg.port, cfg.connect, client=self.name)
         self.own(ports.Closer(self._out))
         self._queue = self.own(SampleQueue(cfg.queue))
+        self._tally = self.stats.tally(("received", "sent"))  # (counted under self._state: no lock of their own)
         self._info = InfoRequests(self.bus, lambda robot, info: self._queue.put((INFO, (robot, info))),
                                   lambda robot, text: self.warn("info", text), INFO_RETRY_S,
                                   derived_alone=True)
-        self._streams = self.own(Streams(self.bus, cfg.subscribe, self._queue, per_joint_keys=cfg.per_joint_keys))
         self._presence = self.own(presence.connection_events(self.bus, self._queue, cfg.subscribe,
                                                              self.capped))  # loss, return
+        # Frames are taken where they arrive (a thread hand-off less, as the OSC sink's) unless held
+        # controllers (max_rate_hz) need the worker's timing; one lock between them guards the state.
+        self._state = threading.Lock()
+        self._streams: Streams | None = None  # (a frame may arrive while Streams subscribes: queued, see _direct)
+        self._streams = self.own(Streams(self.bus, cfg.subscribe, self._queue, per_joint_keys=cfg.per_joint_keys,
+                                         direct=None if cfg.max_rate_hz else self._direct))
         self.spawn(lambda: self._presence.watch(self.stopping), "silence")
         self.spawn(self._forward, "forward")
         self.address = f"MIDI out on {f'{cfg.connect!r}' if cfg.connect else f'virtual port {cfg.port!r}'}"
@@ -101,12 +110,20 @@ class MidiSink(Adapter):
         try:
             while not self.stopping.is_set():
                 item = self._queue.get(timeout=self._wait())
-                now = time.monotonic()
-                if item is not None:
-                    self._take(*item, now)
-                self._tick(now)
+                with self._state:
+                    now = time.monotonic()  # (once the lock is had: a frame taken where it arrived may have held it)
+                    if item is not None:
+                        self._take(*item, now)
+                    self._tick(now)
         finally:
-            self._notes_off()
+            with self._state:
+                self._notes_off()
+
+    def _direct(self, key: str, payload: Any) -> bool:
+        """A frame, on its subscription's callback thread (``Streams``' ``direct``); into the
+        queue instead (False) before it subscribed everywhere or while the worker holds the
+        state (``if_free``)."""
+        return self._streams is not None and if_free(self._state, lambda: self._take(key, payload, time.monotonic()))
 
     def _wait(self) -> float:
         if not self._held:
@@ -128,21 +145,36 @@ class MidiSink(Adapter):
         if key == INFO:
             self._learn(*payload)
             return
-        message = self._streams.take(key, payload, self.count, self.warn)
+        message = self._streams.take(key, payload, self._counted, self.warn)  # type: ignore[union-attr]
         if message is None:
             return
-        if message.source.robot not in self._robots and len(self._robots) >= MAX_ROBOTS:
-            self.capped(f"robot '{message.source.robot}' not played: already {MAX_ROBOTS} robots (16 channels)")
+        source = message.source
+        if source.robot not in self._robots and len(self._robots) >= MAX_ROBOTS:
+            self.capped(f"robot '{source.robot}' not played: already {MAX_ROBOTS} robots (16 channels)")
             return
-        if message.source.section in ("frame", "joints"):
-            self._presence.heard_from(message.source.robot)
+        if source.section in ("frame", "joints") and now - self._heard.get(source.robot, -math.inf) >= HEARD_EVERY_S:
+            if len(self._heard) >= 4096:  # (robot names come from the network)
+                self._heard.clear()
+            self._heard[source.robot] = now
+            self._presence.heard_from(source.robot)
         if message.event is not None:
-            if self._presence.passes(message.source.robot, message.event):
-                self._event(message.source, message.event)
+            if self._presence.passes(source.robot, message.event):
+                self._event(source, message.event)
             return
-        for sample in message.joints:
-            self._sample(sample.source, sample.values[0], now)
+        if message.selected is not None:  # a frame: its selected joints, without a sample made of each
+            for joint, value in zip(message.selected.sources, message.values, strict=True):
+                self._sample(joint, value, now)
+        else:
+            for sample in message.joints:
+                self._sample(sample.source, sample.values[0], now)
         self.record_latency(time.time() - message.t)
+
+    def _counted(self, kind: str, n: int = 1) -> None:
+        """``count``, under ``_state``: what every frame counts goes to the tally."""
+        if kind == "received":
+            self._tally[kind] += n
+        else:
+            self.count(kind, n)
 
     def _sample(self, source: Key, value: float, now: float) -> None:
         if source.section not in ("joints", "derived"):
@@ -171,7 +203,7 @@ class MidiSink(Adapter):
     def _send(self, message: list[int]) -> None:
         try:
             self._out.send_message(message)
-            self.count("sent")
+            self._tally["sent"] += 1
         except Exception as exc:  # rtmidi raises its own errors for a port gone away
             self.count("send_errors")
             self.warn("send", f"cannot send MIDI: {exc}")

@@ -18,6 +18,7 @@ mappings panel: the map nodes' maps, live, and the page's edits carried to them)
 
 from __future__ import annotations
 
+import asyncio
 import json
 import logging
 import threading
@@ -34,10 +35,9 @@ from sonibus.bus.errors import ConfigError
 from sonibus.bus.info import InfoRequests
 from sonibus.bus.messages import Gate
 from sonibus.bus.monitor import LOSSES
-from sonibus.bus.pacing import Pacer
 from sonibus.bus.presence import watch_robots
 from sonibus.bus.queue import SampleQueue
-from sonibus.bus.streams import Incoming, Streams
+from sonibus.bus.streams import Incoming, Streams, if_free
 from sonibus.bus.text import printable
 from sonibus.bus.web import WebServer
 
@@ -93,7 +93,11 @@ class WebPages(Adapter):
         log.info("%s: %s", self.name, self.address)
         self._queue = self.own(SampleQueue(cfg.queue))
         patterns = [f"{robot}/joints/*" for robot in cfg.robots] + ["*/events/*"]
-        self._streams = Streams(self.bus, patterns, self._queue)
+        # (frames are taken where they arrive, the newest of each robot kept for the pages' next tick:
+        # a thread hand-off a frame less; events, and a frame that finds the state busy, come by the queue)
+        self._taking = threading.Lock()  # Streams' tables and pacing: the feed worker's, or a frame's where it arrives
+        self._streams: Streams | None = None
+        self._streams = Streams(self.bus, patterns, self._queue, direct=self._direct)
         self.spawn(self._feed, "feed")
         self.own(self._streams)
         # nodes' stats wait in a queue of their own, short: a node says one a second, and a flood of
@@ -105,7 +109,7 @@ class WebPages(Adapter):
         self.spawn(self._take_stats, "stats")
         owners(self.bus)  # (the view of robots' owners a command names, kept from now: the first one too)
         self.own(watch_robots(self.bus, self._robot_changed, self.capped))
-        self.spawn(self._push, "push")
+        self.web.call(self._push)  # (on the server's loop: no thread of its own, no hand-off to the loop a tick)
         self.spawn(lambda: self._info.keep_asking(self.stopping, self._on_bus), "info")
         self.spawn(MapsPanel(self, self.pages).run, "maps")
 
@@ -207,18 +211,46 @@ class WebPages(Adapter):
     # -- what comes off the bus ---------------------------------------------------------
 
     def _feed(self) -> None:
-        for message in self._streams.each(self.stopping, self.count, self.warn):
-            self._take(message)
+        streams = self._streams
+        assert streams is not None
+        while not self.stopping.is_set():
+            item = self._queue.get(timeout=0.2)
+            if item is None:
+                continue
+            with self._taking:
+                message = streams.take(item[0], item[1], self.count, self.warn)
+            if message is not None:
+                self._take(message)
+
+    def _direct(self, key: str, payload: Any) -> bool:
+        """A robot's frame, on its subscription's callback thread (``Streams``' ``direct``):
+        checked and kept as the robot's newest (``_keep``); into the queue instead (False)
+        before ``Streams`` is made or while the feed worker takes a message (``if_free``)."""
+        streams = self._streams
+        if streams is None:
+            return False
+
+        def keep() -> None:
+            message = streams.take(key, payload, self.count, self.warn)
+            if message is not None:
+                with self._lock:
+                    self._keep(message)
+        return if_free(self._taking, keep)
+
+    def _keep(self, message: Incoming) -> None:
+        """A frame as the newest of its robot, for the pages' next tick (``self._lock`` held)."""
+        robot = message.source.robot
+        if robot not in self._robots:  # (a page shows the frames of the robots it was told of)
+            return
+        if robot in self._latest:
+            self.count("frames_coalesced")
+        self._latest[robot] = message.message  # (made JSON when pushed: most are replaced first)
 
     def _take(self, message: Incoming) -> None:
         source = message.source
         if source.section == "frame":
             with self._lock:
-                if source.robot not in self._robots:  # (a page shows the frames of the robots it was told of)
-                    return
-                if source.robot in self._latest:
-                    self.count("frames_coalesced")
-                self._latest[source.robot] = message.message  # (made JSON when pushed: most are replaced first)
+                self._keep(message)
         elif message.event is not None:
             robot, kind = source.robot, source.name
             if kind == "connection":
@@ -286,19 +318,31 @@ class WebPages(Adapter):
                     self._nodes[tuple(key.split("/")[2:4])] = (time.monotonic(), _shown_stats(stats))
 
     def _push(self) -> None:
-        next_stats = time.monotonic()
+        """On the server's loop: each robot's newest frame to the operators' pages ``update_hz``
+        times a second, and the nodes' stats every ``STATS_EVERY_S``, against deadlines fixed now
+        (skip, never burst: a tick late by more than a period skips those it missed, as ``Pacer``)."""
+        loop = asyncio.get_running_loop()
+        period, start, next_stats = 1.0 / self.config.update_hz, loop.time(), time.monotonic()
+        frame = 0
 
-        def tick(_: int) -> None:
-            nonlocal next_stats
+        def tick() -> None:
+            nonlocal frame, next_stats
+            if self.stopping.is_set():
+                return
             with self._lock:
                 latest, self._latest = self._latest, {}
             if latest and self.pages.operators:
-                self.pages.frames([_frame(robot, frame) for robot, frame in latest.items()])
+                self.pages.push_frames([_frame(robot, frame) for robot, frame in latest.items()])
                 self.count("frames_pushed", len(latest))
             if time.monotonic() >= next_stats:
                 next_stats += STATS_EVERY_S
                 self.pages.stats(self._node_stats())
-        Pacer(self.config.update_hz).run(tick, self.stopping)
+            frame += 1
+            late = loop.time() - (start + frame * period)
+            if late > period:
+                frame += int(late / period)
+            loop.call_at(start + frame * period, tick)
+        tick()
 
     def _node_stats(self) -> list[dict[str, Any]]:
         now = time.monotonic()

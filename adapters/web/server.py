@@ -101,9 +101,6 @@ class Pages:
     def robots(self, robots: dict[str, Any]) -> None:
         self.web.call(self._set_robots, _dumps({"type": "robots", "robots": robots}))
 
-    def frames(self, texts: list[str]) -> None:
-        self.web.call(self._to_operators, texts)
-
     def stats(self, nodes: list[dict[str, Any]]) -> None:
         self.web.call(self._set_stats, _dumps({"type": "stats", "nodes": nodes}))
 
@@ -300,6 +297,10 @@ class Pages:
         self.stand.answered(button, outcome, press)
 
     # -- what the bus says (on the loop) ---------------------------------------------
+
+    def push_frames(self, texts: list[str]) -> None:
+        """Robots' ``frame`` messages to the operators' pages (the node's tick, on the loop)."""
+        self._to_operators(texts)
 
     def _set_robots(self, text: str) -> None:
         self._robots = text

@@ -17,7 +17,7 @@ from sonibus.adapters.features import Features, FeaturesConfig
 from sonibus.bus import ConfigError, decode, encode, keys, load_model, messages, robot_info, send_command
 from sonibus.bus.info import InfoRequests
 
-from ..conftest import wait_for
+from ..conftest import queued_keys, wait_for
 from .conftest import T0, model_info
 
 HEY = "animations/Stand/Gestures/Hey_1"
@@ -317,3 +317,20 @@ def test_expressive_descriptors_go_on_the_bus_like_any_derived_value(net):
     assert set(offset["segment"]) >= {"duration_s", "path", "peak_speed", "directness", "sparc", "ldlj"}
     as_values = {k.split("/")[2]: m["v"] for k, m in list(derived) if k.endswith("/RArm") and m["seq"] == offset["seq"]}
     assert as_values == {SEGMENT_FEATURES[v]: value for v, value in offset["segment"].items()}
+
+
+def test_frames_are_worked_out_where_they_arrive_not_through_the_queue(net, owner):
+    """A robot's whole frames are worked out on the subscription's callback thread (a thread
+    hand-off a frame less: the worker's wake-up cost about what a frame's features do; issue 35)."""
+    fake = owner("pepper", model_info("pepper"))
+    features = start(net, robots="pepper")
+    subscriber, derived = collect(net.bus("watch"), "pepper/derived/qom/Body")
+    pose = PEPPER.posture("StandInit")
+    last = pump(fake, lambda seq: pose, lambda: derived, "the body's QoM")
+    queued = queued_keys(features._queue)
+    for seq in range(last + 1, last + 11):  # (a tick's spacing, in t too: not paced)
+        fake.frame(T0 + seq * 0.01, pose)
+        time.sleep(0.01)
+    wait_for(lambda: any(m["seq"] == last + 10 for _, m in list(derived)), what="the tenth frame's features")
+    subscriber.undeclare()
+    assert queued.count("pepper/frame") <= 1, queued  # (one may meet the worker holding the state)

@@ -16,7 +16,7 @@ from sonibus.adapters.midi.mapping import behavior_note
 from sonibus.adapters.sim.behaviors import LIBRARY
 from sonibus.bus import ConfigError, encode, keys
 
-from ..conftest import wait_for
+from ..conftest import queued_keys, wait_for
 
 
 def sink(net, **options):
@@ -235,3 +235,19 @@ def test_the_docs_give_the_simulators_behavior_notes():
     text = (Path(__file__).resolve().parents[2] / "docs" / "midi.md").read_text(encoding="utf-8")
     documented = {name: int(note) for note, name in re.findall(r"^\| (\d+) \| `(animations/[^`]+)` \|$", text, re.M)}
     assert documented == {name: behavior_note(name) for name in LIBRARY}
+
+
+def test_frames_are_played_where_they_arrive_not_through_the_queue(net, fake, reader):
+    """A robot's frames are played on the subscription's callback thread, as the OSC sink
+    sends them (a thread hand-off a frame less: issue 35, docs/performance.md)."""
+    daw = sink(net)
+    midi = reader("daw:sonibus")
+    bot = fake()
+    until_sent(bot, "A", -2.0, midi, lambda r: r.cc(1, 20)[-1:] == [0], "A at its minimum")
+    queued = queued_keys(daw._queue)
+    for step in range(1, 11):  # (a tick's spacing: not paced)
+        bot.frame({"A": -2.0 + 0.4 * step}, joints=False)
+        time.sleep(0.02)
+    wait_for(lambda: midi.cc(1, 20)[-1:] == [127], what="A at its maximum, ten frames on")
+    assert len(midi.cc(1, 20)) >= 11
+    assert queued.count("bot/frame") <= 1, queued  # (one may meet the worker holding the state)

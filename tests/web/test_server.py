@@ -26,7 +26,7 @@ from sonibus.bus.client import send_command
 from sonibus.bus.config import parse
 from sonibus.bus.errors import CommandError
 
-from ..conftest import SONIBUS, Process, free_port, run_cli, wait_for
+from ..conftest import SONIBUS, Process, free_port, queued_keys, run_cli, wait_for
 from .conftest import HELLO, KIOSK_TOKEN, RATE, TOKEN, WAVE, start_web
 
 STOP_WITHIN_S = 3.0  # the node's contract (docs/adapters.md)
@@ -82,6 +82,20 @@ def test_frames_are_pushed_at_most_update_hz_per_robot(net, websocket, figure):
     figure("frames pushed per robot", pushed / seconds, "/s (update_hz 5)")
     assert pushed <= seconds * 5 * 1.5 + 2, (pushed, published)
     assert node.stats["frames_coalesced"] > 0
+
+
+def test_frames_are_kept_where_they_arrive_not_through_the_queue(net, websocket):
+    """A robot's frames are checked and kept as its newest on the subscription's callback
+    thread, and pushed at update_hz from the server's loop: no thread hand-off a frame (the
+    feed worker's wake-up cost the show's web node more than the frame's work; issue 35)."""
+    net.sim("pepper", rate_hz=RATE)
+    node = start_web(net)
+    page = websocket(node.url.replace("http", "ws") + "/ws")
+    page.wait("frame", robot="pepper")
+    queued = queued_keys(node._queue)
+    seen = len(page.of("frame"))
+    wait_for(lambda: len(page.of("frame")) >= seen + 10, 10, "ten frames more at the page")
+    assert queued.count("pepper/frame") <= 1, queued  # (one may meet the feed worker taking an event)
 
 
 def test_a_command_goes_through_the_owners_validation_and_its_reply_comes_back(stage, websocket):
