@@ -63,3 +63,39 @@ def jack_server(spawn, monkeypatch) -> Iterator[tuple[str, Process]]:
     """Instead of ``jack``, for a test that stops the server itself: its name and its process."""
     with running(spawn, monkeypatch) as server:
         yield server
+
+
+class MidiInput:
+    """A JACK MIDI input of the test's own (python-rtmidi), connected to the first port whose
+    name holds ``connect``, or a virtual port ``virtual``; ``messages`` is what came so far.
+
+    Polled, never a Python callback: rtmidi's JACK thread calling into Python needs the GIL,
+    and closing a JACK client waits for that thread's cycle while holding it. A suite's
+    worker once hung for good there (``jack_client_close`` in ``delete``, the callback's
+    thread waiting on the GIL), where no alarm or watchdog thread could reach it."""
+
+    def __init__(self, client: str, connect: str = "", virtual: str = "") -> None:
+        import rtmidi
+
+        self.port = rtmidi.MidiIn(rtmidi.API_UNIX_JACK, client, queue_size_limit=65536)
+        self._messages: list[list[int]] = []
+        if virtual:
+            self.port.open_virtual_port(virtual)
+        else:
+            names = self.port.get_ports()
+            wanted = [i for i, n in enumerate(names) if connect.lower() in n.lower()]
+            if not wanted:
+                self.port.delete()
+                raise AssertionError(f"no port '{connect}' among {names}")
+            self.port.open_port(wanted[0], "in")
+
+    @property
+    def messages(self) -> list[list[int]]:
+        """Every message so far, oldest first (what rtmidi's queue holds taken in now)."""
+        while (got := self.port.get_message()) is not None:
+            self._messages.append(got[0])
+        return self._messages
+
+    def close(self) -> None:
+        self.port.close_port()
+        self.port.delete()

@@ -23,6 +23,11 @@ from collections.abc import Iterator
 import pytest
 
 GRACE_S = 60.0  # past the test's own timeout, for pytest-timeout to act first
+# past the watchdog's own time, for faulthandler's: a native call that holds the GIL (python-rtmidi's
+# ``delete`` waiting on a JACK server) keeps every Python thread out, this one too, so the last
+# bound is faulthandler's C thread, which needs no GIL: it prints every thread and ends the process
+# (the processes it started are left then: they are killed only by ``_end``, which could not run)
+BACKSTOP_S = 30.0
 EXIT_GRACE_S = 60.0  # from the end of the run to the end of the process
 HUNG = 70  # the exit status of a process ended by the watchdog
 
@@ -68,10 +73,12 @@ def pytest_runtest_protocol(item: pytest.Item) -> Iterator[None]:
                             (f"{item.nodeid} did not end {GRACE_S:.0f} s after its timeout",))
     timer.daemon = True
     timer.start()
+    _backstop(_timeout_s(item) + GRACE_S + BACKSTOP_S)
     try:
         yield
     finally:
         timer.cancel()
+        faulthandler.cancel_dump_traceback_later()
 
 
 def pytest_unconfigure(config: pytest.Config) -> None:
@@ -79,3 +86,11 @@ def pytest_unconfigure(config: pytest.Config) -> None:
     timer = threading.Timer(EXIT_GRACE_S, _end, ("the run is over, but this process did not end",))
     timer.daemon = True
     timer.start()
+    _backstop(EXIT_GRACE_S + BACKSTOP_S)
+
+
+def _backstop(seconds: float) -> None:
+    """faulthandler's bound: every thread's stack, then the process's end, ``seconds`` from now."""
+    out = sys.__stderr__
+    if out is not None:
+        faulthandler.dump_traceback_later(seconds, exit=True, file=out)

@@ -18,24 +18,14 @@ jack = jackd.jack  # the fixtures, shared with tests/jack
 jack_server = jackd.jack_server
 
 
-class Reader:
-    """A JACK MIDI input connected to a port; messages gathered as they come."""
+class Reader(jackd.MidiInput):
+    """A JACK MIDI input connected to a port; its messages as they came (polled: ``jackd.MidiInput``)."""
 
     def __init__(self, port: str) -> None:
-        self.port = rtmidi.MidiIn(rtmidi.API_UNIX_JACK, "reader")
-        names = self.port.get_ports()
-        wanted = [i for i, n in enumerate(names) if port in n]
-        assert wanted, f"no port '{port}' among {names}"
-        self.messages: list[list[int]] = []
-        self.port.set_callback(lambda event, data: self.messages.append(event[0]))
-        self.port.open_port(wanted[0], "in")
+        super().__init__("reader", connect=port)
 
     def cc(self, channel: int, number: int) -> list[int]:
         return [m[2] for m in self.messages if m[0] == 0xB0 | (channel - 1) and m[1] == number]
-
-    def close(self) -> None:
-        self.port.close_port()
-        self.port.delete()
 
 
 @pytest.fixture

@@ -9,6 +9,7 @@ from sonibus.adapters.midi import MidiController, MidiControllerConfig, MidiSink
 from sonibus.bus import ConfigError
 
 from ..conftest import wait_for
+from ..jackd import MidiInput
 
 
 def test_the_sink_opens_a_virtual_port_others_see(net, jack):
@@ -32,14 +33,10 @@ def test_an_unknown_port_is_an_error_listing_the_ports(net, jack, writer):
 
 
 def test_connect_opens_an_existing_port_by_substring(net, jack):
-    synth = rtmidi.MidiIn(rtmidi.API_UNIX_JACK, "synth")
-    synth.open_virtual_port("keys")
-    got: list[list[int]] = []
-    synth.set_callback(lambda event, data: got.append(event[0]))
+    synth = MidiInput("synth", virtual="keys")
     try:
         net.start(MidiSink(MidiSinkConfig(api="jack", connect="KEYS"), name="daw"))
         net.sim("pepper", rate_hz=50)
-        wait_for(lambda: len(got) >= 5, what="MIDI at the connected port")
+        wait_for(lambda: len(synth.messages) >= 5, what="MIDI at the connected port")
     finally:
-        synth.close_port()
-        synth.delete()
+        synth.close()

@@ -19,7 +19,6 @@ import logging
 import time
 
 import pytest
-import rtmidi
 
 from sonibus.adapters.midi import MidiSink, MidiSinkConfig
 from sonibus.adapters.osc import OscSink, OscSinkConfig
@@ -29,7 +28,7 @@ from sonibus.bus.cli.top import GONE, TopApp, robot_cells
 from sonibus.bus.monitor import Monitor
 
 from ..conftest import free_port, run_cli, wait_for
-from ..jackd import jack  # noqa: F401 (the fixture)
+from ..jackd import MidiInput, jack  # noqa: F401 (the fixture)
 from ..osc.pd import Patch, osc_input, oscdump_lines, printed, start_oscdump, start_pd
 from ..web.browser import Browser
 from ..web.conftest import websocket  # noqa: F401 (the fixture)
@@ -126,18 +125,11 @@ def test_sinks_started_after_the_owner_hear_its_state_and_the_silence_names_the_
         midi.close()
 
 
-class Synth:
-    """A JACK MIDI input of its own (``synth:din``), its messages gathered as they come."""
+class Synth(MidiInput):
+    """A JACK MIDI input of its own (``synth:din``), its messages as they came (polled: ``MidiInput``)."""
 
     def __init__(self) -> None:
-        self.port = rtmidi.MidiIn(rtmidi.API_UNIX_JACK, "synth")
-        self.messages: list[list[int]] = []
-        self.port.set_callback(lambda event, data: self.messages.append(event[0]))
-        self.port.open_virtual_port("din")
-
-    def close(self) -> None:
-        self.port.close_port()
-        self.port.delete()
+        super().__init__("synth", virtual="din")
 
 
 def silence(caplog) -> list[str]:
