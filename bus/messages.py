@@ -77,6 +77,9 @@ class Limits:
         return self.max_info_payload if section == "info" else self.max_payload
 
 
+DEFAULT_LIMITS = Limits()  # (one object: gates of the defaults share verdicts by identity, bus/verdicts.py)
+
+
 class Gate:
     """``check(key, payload)``: the decoded, checked message, or ``BadMessage``.
 
@@ -87,7 +90,7 @@ class Gate:
     MAX_KNOWN_BYTES = 2 << 20  # of names in each table (a count alone let 1,024 lists of 128 long names pile up)
 
     def __init__(self, limits: Limits | None = None) -> None:
-        self.limits = limits or Limits()
+        self.limits = limits or DEFAULT_LIMITS
         self._known_names: Capped[tuple[str, ...], bool] = Capped(self.MAX_KNOWN, self.MAX_KNOWN_BYTES)
         # robot → the (checked) names of its last frame
         self._last_names: Capped[str, list[str]] = Capped(self.MAX_KNOWN, self.MAX_KNOWN_BYTES)
@@ -154,6 +157,8 @@ class Gate:
         self._known_names.put(signature, True, size_of(signature))  # (names made up on the fly: capped)
 
     def joint_sample(self, key: Key, message: dict[str, Any]) -> None:
+        if not key.name:  # (<robot>/joints alone: a sink of pepper/** took it for a derived frame and failed)
+            raise BadMessage(f"{key.key} names no joint: a joint's sample goes on <robot>/joints/<Joint>")
         self.stamp(message)
         for quantity, value in message.items():
             if quantity not in ("t", "seq"):

@@ -48,6 +48,7 @@ from .errors import ConfigError
 from .node import Bus
 from .pacing import Spacing
 from .queue import SampleQueue
+from .verdicts import VERDICTS
 
 log = logging.getLogger(__name__)
 
@@ -179,15 +180,21 @@ class Selection:
         """What came on ``key``, checked by the gate (a frame keeps the selected joints);
         ``messages.BadMessage`` saying what is wrong otherwise."""
         source = self._key(key)
-        message = self.gate.check(source, payload)  # (a key of no section is refused here)
-        taken_as = messages.SECTIONS[source.section].taken_as
+        section = messages.SECTIONS.get(source.section)
+        taken_as = section.taken_as if section is not None else ""
+        derived = source.section == "derived" and not source.name  # <robot>/derived: a derived frame
+        if taken_as == "frame" or derived:  # (the process's other nodes take the same bytes: checked once
+            # for them all, each given a message of its own; bus/verdicts.py)
+            message = VERDICTS.check(self.gate, source, payload, nested=derived)
+        else:
+            message = self.gate.check(source, payload)  # (a key of no section is refused here)
         if taken_as == "frame":
             values = message["v"]
             selected = self.selected(source.robot, message["names"])
             if selected.indices is not None:
                 values = [values[i] for i in selected.indices]
             return Incoming(source, message, None, message["t"], message["seq"], tuple(map(float, values)), selected)
-        if taken_as == "sample" and not source.name:  # <robot>/derived: a derived frame
+        if derived:
             return self._derived_frame(source, message)
         if taken_as == "sample":
             value = message["v"]
