@@ -36,6 +36,7 @@ from __future__ import annotations
 import itertools
 import logging
 import threading
+import weakref
 from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass
 from typing import Any, NamedTuple
@@ -168,6 +169,8 @@ class Selection:
 
     def __init__(self, patterns: Iterable[str], limits: messages.Limits | None = None) -> None:
         self.gate = messages.Gate(limits)
+        VERDICTS.join()  # (the frames this takes are checked once for the process: bus/verdicts.py)
+        weakref.finalize(self, VERDICTS.leave)
         self._selected = [zenoh.KeyExpr(keys.expr(p)) for p in patterns]
         # (keys, robots and joint names come from the network: every table is capped, count and bytes)
         self._accepted: Capped[str, bool] = Capped(MAX_KEYS, MAX_BYTES)

@@ -14,12 +14,14 @@ Each caller gets a message of its own (the map and its lists copied; a copy cost
 added) reaches no other node, nor the remembered one. A refused payload is refused
 for each, with the same reason. Only what comes often is remembered (robots' frames
 and derived frames, ``Selection.incoming``); events, info and commands are few and
-checked by each node.
+checked by each node. And only while two nodes or more take frames (``join``): a
+process of one sink gains nothing by remembering, and would pay for it.
 
 >>> from sonibus.bus.codec import encode
 >>> from sonibus.bus.keys import Key
 >>> from sonibus.bus.messages import Gate, frame
 >>> verdicts, gate = Verdicts(), Gate()
+>>> verdicts.join(); verdicts.join()  # (two nodes: what ``Selection`` does)
 >>> payload = encode(frame(1.5, 7, ["HeadYaw"], [0.1]))
 >>> mine = verdicts.check(gate, Key.parse("pepper/frame"), payload)
 >>> mine["v"][0] = 99.0  # (a node's own copy)
@@ -55,14 +57,26 @@ class Verdicts:
         self._table: Capped[tuple[str, bytes], tuple[Limits, dict[str, Any] | str]] = Capped(items, size)
         self._lock = threading.Lock()  # (gets are dict lookups; puts count bytes and may clear)
         self.checked = 0  # payloads the gate was asked about (the others were remembered)
+        self.takers = 0  # what takes frames in this process (``join``, ``leave``): remembered only if two or more
+
+    def join(self) -> None:
+        """One more taker of frames (a ``Selection``); ``leave`` when it is gone."""
+        with self._lock:
+            self.takers += 1
+
+    def leave(self) -> None:
+        with self._lock:
+            self.takers -= 1
+            if self.takers < 2:
+                self._table.clear()
 
     def check(self, gate: Gate, key: Key, payload: bytes, nested: bool = False) -> dict[str, Any]:
         """``gate.check(key, payload)``, or what it said of the same bytes on ``key`` with the
         same limits before: a message of the caller's own, or ``BadMessage``. ``nested``: the
         message's ``v`` may hold lists (a derived frame's), copied too."""
         limits = gate.limits
-        if payload.__class__ is not bytes:  # (an oversize marker: refused by the gate at once)
-            return gate.check(key, payload)
+        if self.takers < 2 or payload.__class__ is not bytes:  # (alone: nobody to share with; an oversize
+            return gate.check(key, payload)  # marker: refused by the gate at once)
         entry = (key.key, payload)
         found = self._table.get(entry)
         if found is None or (found[0] is not limits and found[0] != limits):  # (one bus's nodes: the same object)
@@ -92,6 +106,9 @@ def own(message: dict[str, Any], nested: bool = False) -> dict[str, Any]:
     numbers and strings in lists one deep (the gate refuses anything else), a derived frame's
     ``v`` lists of numbers besides."""
     out = message.copy()
+    if not nested and len(out) == 4:  # (the usual frame: t, seq, names, v; no call a field)
+        out["names"], out["v"] = out["names"].copy(), out["v"].copy()
+        return out
     for field, value in out.items():  # (values replaced, none added: iterating stays valid)
         if value.__class__ is list:
             out[field] = [x.copy() if x.__class__ is list else x for x in value] if nested and field == "v" \

@@ -79,18 +79,30 @@ def test_nodes_with_different_limits_each_get_their_own_verdict(checks):
         assert verdicts[lenient] == pytest.approx(time.time() + 60, abs=5)
     # and two nodes with the same limits (one bus's) share the check
     same = Limits(max_future_s=5)
-    payload, before = _frame(99), len(checks)
-    assert Selection(["*/joints/*"], same).incoming("pepper/frame", payload).seq == \
-        Selection(["*/joints/*"], same).incoming("pepper/frame", payload).seq == 99
+    payload, before, nodes = _frame(99), len(checks), [Selection(["*/joints/*"], same) for _ in range(2)]
+    assert [node.incoming("pepper/frame", payload).seq for node in nodes] == [99, 99]
     assert len(checks) == before + 1
+
+
+def test_a_process_of_one_node_remembers_nothing():
+    """Remembering costs a sink alone (a copy of each message, the table): it checks as before."""
+    verdicts, gate, key = Verdicts(), messages.Gate(), Key.parse("pepper/frame")
+    verdicts.join()
+    payload = _frame(5)
+    assert verdicts.check(gate, key, payload)["seq"] == verdicts.check(gate, key, payload)["seq"] == 5
+    assert len(verdicts) == 0 and verdicts.checked == 0
+    verdicts.join()  # a second node: remembered
+    verdicts.check(gate, key, payload)
+    assert len(verdicts) == 1 and verdicts.checked == 1
+    verdicts.leave()  # alone again: forgotten
+    assert len(verdicts) == 0
 
 
 def test_a_refused_frame_is_refused_for_each_node_with_its_reason(checks):
     bad = _frame(1, values=[0.1, 1e300, 0.3])
-    reasons = []
-    for _node in ("a", "b", "c"):
+    reasons, nodes = [], [Selection(["*/joints/*"]) for _ in range(3)]
+    for selection in nodes:
         counted: dict[str, int] = {}
-        selection = Selection(["*/joints/*"])
         assert selection.take("pepper/frame", bad, lambda what, n, c=counted: c.update({what: c.get(what, 0) + n}),
                               lambda what, text: reasons.append(text)) is None
         assert counted == {"received": 1, "bad": 1}  # each node counts it
@@ -120,6 +132,8 @@ def test_a_node_that_changes_its_message_changes_no_other_nodes():
 
 def test_what_is_remembered_is_bounded():
     verdicts, gate, key = Verdicts(items=8, size=64 << 10), messages.Gate(), Key.parse("pepper/frame")
+    verdicts.join()
+    verdicts.join()
     for seq in range(100):
         assert verdicts.check(gate, key, _frame(seq))["seq"] == seq
         assert len(verdicts) <= 8
