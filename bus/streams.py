@@ -186,8 +186,8 @@ class Selection:
         section = messages.SECTIONS.get(source.section)
         taken_as = section.taken_as if section is not None else ""
         derived = source.section == "derived" and not source.name  # <robot>/derived: a derived frame
-        if taken_as == "frame" or derived:  # (the process's other nodes take the same bytes: checked once
-            # for them all, each given a message of its own; bus/verdicts.py)
+        if (taken_as == "frame" or derived) and VERDICTS.takers > 1:  # (the process's other nodes take the
+            # same bytes: checked once for them all, each given a message of its own; bus/verdicts.py)
             message = VERDICTS.check(self.gate, source, payload, nested=derived)
         else:
             message = self.gate.check(source, payload)  # (a key of no section is refused here)
