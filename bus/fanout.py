@@ -5,18 +5,10 @@ thread: ``Callback(f, indirect=True)``), so the seven subscriptions of one ``son
 to a robot's frame woke seven threads a frame, each converting the key and copying the
 payload. ``Fanout`` declares one Zenoh subscriber per key expression (as ``keys.expr``
 wrote it) and gives each sample to every subscription to it, in the order they joined,
-in one call: the key converted once, the payload copied once (and only if a
+on that one thread: the key converted once, the payload copied once (and only if a
 subscription's size limit lets it through; past its limit a subscription gets
 ``codec.Oversize``). What one subscription's ``take`` raises does not keep the sample
 from the others: it is raised again, to Zenoh, once they all had it.
-
-``Bus`` declares the Zenoh subscriber with a direct callback (``indirect=False``): the
-call runs on Zenoh's own thread (a sample from another session), or inside the ``put``
-of a node of the same session (the show in one process: the sim's thread runs it), not on
-a Python thread woken for each sample: in the show in one process that was a third of
-its context switches (docs/performance.md). So a subscription's ``take`` only ever does
-what is quick (it enqueues; a sink's ``direct`` take only with its lock free,
-``streams.if_free``) and never waits on a lock that a ``put`` may be made under.
 
 >>> class Subscriber:  # what Zenoh's ``declare_subscriber`` gives back (here: no session)
 ...     def undeclare(self): print("undeclared")

@@ -102,10 +102,7 @@ class Bus:
         self._lock = threading.Lock()
         # the session's subscriptions, one Zenoh subscriber per key expression (``bus/fanout.py``), shared
         # by every node's Bus like ``_shared`` (not in it: a view made by ``shared`` may subscribe)
-        # (called on Zenoh's thread, or in a same-session put, not on a Python thread of its own woken
-        # for each sample: the callbacks only enqueue or do what is quick, bus/fanout.py)
-        self._subscriptions = Fanout(lambda keyexpr, callback: session.declare_subscriber(
-            keyexpr, zenoh.handlers.Callback(callback, indirect=False)))
+        self._subscriptions = Fanout(lambda keyexpr, callback: session.declare_subscriber(keyexpr, callback))
         # what a callback of this node that raised is handed to (its adapter's ``fail``): Zenoh would
         # print it and go on, and the node would report itself well while hearing nothing
         self.on_error: Callable[[str, BaseException], None] | None = None
@@ -181,8 +178,8 @@ class Bus:
         ``max_payload`` replaces the gate's size limit.
 
         The subscriptions of one session to the same key expression share one Zenoh
-        subscriber, called on Zenoh's thread (``bus/fanout.py``; not those with ``history``):
-        what this returns undeclares this subscription alone, the last one the Zenoh subscriber."""
+        subscriber and its thread (``bus/fanout.py``; not those with ``history``): what this
+        returns undeclares this subscription alone, the last one the Zenoh subscriber."""
         keyexpr = keys.expr(keyexpr)
         queue = queue if queue is not None else SampleQueue(maxlen)
 
