@@ -154,6 +154,9 @@ class Incoming(NamedTuple):
         return self.samples if self.selected is not None else (self,)
 
 
+_new = tuple.__new__  # (an ``Incoming`` made from all its fields at once: ``_derived_frame``)
+
+
 class Selection:
     """What a sink's ``patterns`` select, and what it receives, checked by the
     message layer's gate: ``incoming``/``take`` decode, ``accepts(key)`` tells
@@ -210,9 +213,12 @@ class Selection:
         t, seq, values = message["t"], message["seq"], message["v"]
         selected = self.selected(source.key, message["names"], source.key + "/")
         chosen = values if selected.indices is None else [values[i] for i in selected.indices]
-        parts = tuple(Incoming(key, {"t": t, "seq": seq, "v": value}, None, t, seq,
-                               tuple(map(float, value)) if value.__class__ is list else (float(value),))
-                      for key, value in zip(selected.sources, chosen, strict=True))
+        # (a list made in one comprehension, each part made as a tuple: no generator to resume, no
+        # NamedTuple __new__ to call, 26 times a frame for each node that takes derived values)
+        parts = tuple([_new(Incoming, (key, {"t": t, "seq": seq, "v": value}, None, t, seq,
+                                       tuple(map(float, value)) if value.__class__ is list else (float(value),),
+                                       None, None))
+                       for key, value in zip(selected.sources, chosen, strict=True)])
         return Incoming(source, message, None, t, seq, (), None, parts)
 
     def selected(self, robot: str, names: list[str], prefix: str = "") -> Selected:
