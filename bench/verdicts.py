@@ -75,7 +75,7 @@ def instructions(ticks: int, tree: str) -> int:
     """Instructions of a whole run of ``ticks`` (all threads), on ``tree`` ("": this one)."""
     with tempfile.TemporaryDirectory() as folder:
         out = Path(folder) / "callgrind.out"
-        env = {**os.environ, **({"PYTHONPATH": tree} if tree else {})}
+        env = {**os.environ, "PYTHONHASHSEED": "0", **({"PYTHONPATH": tree} if tree else {})}
         subprocess.run(["valgrind", "--tool=callgrind", f"--callgrind-out-file={out}", sys.executable,
                         __file__, "--run", str(ticks)], env=env, check=True, capture_output=True)
         summary = re.search(r"^summary: (\d+)", out.read_text(), re.M) or re.search(r"^totals: (\d+)",
