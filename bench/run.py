@@ -35,6 +35,8 @@ SCRIPTS: dict[str, tuple[str, list[str], float]] = {
     # N subscriptions to one key in one process: a Zenoh subscriber each, or one shared (issue 35)
     "shared_subscriptions": ("shared_subscriptions", ["--rounds", "3", "--seconds", "5"], 400),
     "floor_instructions": ("floor_instructions", [], 900),  # the OSC sink's frame path in instructions (callgrind)
+    # the show's seven takers of a frame in one process: instructions a tick (callgrind; issue 35)
+    "verdicts": ("verdicts", [], 300),
     "sink_throughput": ("sink_throughput", [], 120),
     "sink_throughput_bundles": ("sink_throughput", ["--bundles", "--name", "sink_throughput_bundles",
                                                     "--rates", "40000", "100000", "150000", "200000"], 90),

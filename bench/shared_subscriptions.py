@@ -11,7 +11,11 @@ into its own queue drained by a worker thread of its own (as a node's): either
   sharing: N Zenoh subscribers, each with zenoh-python's channel and thread), as
   before sharing; or
 - ``shared``: each from ``Bus.for_node`` of one ``Bus`` (as ``sonibus run`` gives its
-  nodes): one Zenoh subscriber for the N.
+  nodes): one Zenoh subscriber for the N, its callback on a Python thread of
+  zenoh-python's own woken for each sample (``Callback(f, indirect=True)``, the default); or
+- ``direct`` (``--ways shared direct``): shared, its callback called on Zenoh's own thread
+  (``indirect=False``): no Python thread woken a sample, but Zenoh's thread attached to
+  Python at each call (tried for issue 35 and left: docs/performance.md).
 
 The same code both ways. The two receiving processes run side by side, fed the same
 frames by one publisher over the same window (a shared machine's load weighs on both
@@ -48,7 +52,7 @@ def frame(seq: int) -> bytes:
     return msgpack.packb({"t": time.time(), "seq": seq, "names": names, "values": [0.1 * n for n in range(17)]})
 
 
-def receiver(endpoint: str, count: int, shared: bool, ready: Any, done: Any, out: Any) -> None:
+def receiver(endpoint: str, count: int, way: str, ready: Any, done: Any, out: Any) -> None:
     """``count`` subscriptions to ``KEY``, each drained by a thread; reports frames taken and
     Zenoh subscribers declared when ``done``."""
     import threading
@@ -56,7 +60,13 @@ def receiver(endpoint: str, count: int, shared: bool, ready: Any, done: Any, out
     from sonibus.bus import Bus, BusConfig, open_session
     session = open_session(BusConfig(multicast=False, connect=(endpoint,)))
     first = Bus(session, node="bench")
-    buses = [first.for_node(f"n{n}") if shared else Bus(session, node=f"n{n}") for n in range(count)]
+    if way == "direct":  # (called on Zenoh's thread, not on zenoh-python's thread woken a sample)
+        import zenoh
+
+        from sonibus.bus.fanout import Fanout
+        first._subscriptions = Fanout(lambda keyexpr, callback: session.declare_subscriber(
+            keyexpr, zenoh.handlers.Callback(callback, indirect=False)))
+    buses = [Bus(session, node=f"n{n}") if way == "separate" else first.for_node(f"n{n}") for n in range(count)]
     taken = [0] * count
     subscriptions = []
 
@@ -82,7 +92,7 @@ def receiver(endpoint: str, count: int, shared: bool, ready: Any, done: Any, out
     out.put({"taken": taken, "declared": declared})
 
 
-def measure(count: int, rate: int, seconds: float) -> dict[str, dict[str, Any]]:
+def measure(count: int, rate: int, seconds: float, kinds: tuple[str, ...] = WAYS) -> dict[str, dict[str, Any]]:
     """Both ways side by side, fed the same frames over the same window (the machine's load
     the same for both): CPU % of one core of each receiving process, frames each of its
     subscriptions took (the fewest), Zenoh subscribers it declared."""
@@ -92,9 +102,9 @@ def measure(count: int, rate: int, seconds: float) -> dict[str, dict[str, Any]]:
     publisher = session.declare_publisher(KEY, congestion_control=zenoh.CongestionControl.BLOCK)
     done = CONTEXT.Event()
     ways = {}
-    for way in WAYS:
+    for way in kinds:
         ready, out = CONTEXT.Event(), CONTEXT.Queue()
-        process = CONTEXT.Process(target=receiver, args=(endpoint, count, way == "shared", ready, done, out),
+        process = CONTEXT.Process(target=receiver, args=(endpoint, count, way, ready, done, out),
                                   daemon=True)
         ways[way] = (process, ready, out)
         process.start()
@@ -103,7 +113,7 @@ def measure(count: int, rate: int, seconds: float) -> dict[str, dict[str, Any]]:
             if not ready.wait(60):
                 raise RuntimeError(f"the {way} receiving process did not start")
         deadline = time.monotonic() + 20
-        while len(session.info.peers_zid()) < len(WAYS) or not publisher.matching_status.matching:
+        while len(session.info.peers_zid()) < len(kinds) or not publisher.matching_status.matching:
             if time.monotonic() > deadline:
                 raise RuntimeError("the publisher never matched both receivers")
             time.sleep(0.02)
@@ -128,7 +138,7 @@ def measure(count: int, rate: int, seconds: float) -> dict[str, dict[str, Any]]:
         done.set()
         got = {way: out.get(timeout=20) for way, (_, _, out) in ways.items()}
         return {way: {"cpu_pct": cpu[way], "switches_per_s": waits[way], "sent": sent,
-                      "taken_min": min(got[way]["taken"]), "declared": got[way]["declared"]} for way in WAYS}
+                      "taken_min": min(got[way]["taken"]), "declared": got[way]["declared"]} for way in kinds}
     finally:
         done.set()
         for process, _, _ in ways.values():
@@ -145,21 +155,25 @@ def main() -> None:
     parser.add_argument("--seconds", type=float, default=5.0, help="measuring window of each case")
     parser.add_argument("--counts", type=int, nargs="+", default=list(COUNTS))
     parser.add_argument("--rates", type=int, nargs="+", default=list(RATES))
+    parser.add_argument("--ways", nargs=2, default=list(WAYS), choices=("separate", "shared", "direct"),
+                        help="the baseline and the way measured against it (default: separate shared)")
     parser.add_argument("--name", default="shared_subscriptions", help="results file name")
     args = parser.parse_args()
+    ways = tuple(args.ways)
+    base, way_ = ways
     load = [os.getloadavg()[0]]
     runs: dict[str, dict[str, list[dict[str, Any]]]] = {}
     for index in range(args.rounds):
         for rate in args.rates:
             for count in args.counts:
-                case = runs.setdefault(f"{count}x{rate}", {"separate": [], "shared": []})
-                got = measure(count, rate, args.seconds)
-                for way in WAYS:
+                case = runs.setdefault(f"{count}x{rate}", {way: [] for way in ways})
+                got = measure(count, rate, args.seconds, ways)
+                for way in ways:
                     case[way].append(got[way])
                 print(f"round {index + 1}, {count} subscription(s), {rate} frames/s: " + "; ".join(
                     f"{way} {got[way]['cpu_pct']:.2f} %, {got[way]['switches_per_s']:.0f} switches/s "
                     f"({got[way]['declared']} Zenoh subscriber(s), each "
-                    f"subscription took ≥ {got[way]['taken_min']} of {got[way]['sent']})" for way in WAYS), flush=True)
+                    f"subscription took ≥ {got[way]['taken_min']} of {got[way]['sent']})" for way in ways), flush=True)
         load.append(os.getloadavg()[0])
     machine = f"{os.cpu_count()} cores, load {min(load):.2f}–{max(load):.2f}"
     median = {case: {way: statistics.median(r["cpu_pct"] for r in got[way]) for way in got}
@@ -169,15 +183,15 @@ def main() -> None:
     summary = []
     for case, cpu in median.items():
         count, rate = case.split("x")
-        saved = 1.0 - cpu["shared"] / cpu["separate"]
+        saved = 1.0 - cpu[way_] / cpu[base]
         summary.append({"scenario": f"(issue 35) {count} subscription(s) to one key in one process, {rate} frames/s: "
-                                    "receiving process's CPU, one shared Zenoh subscriber",
-                        "sonibus": f"{cpu['shared']:.2f} %", "baseline": f"{cpu['separate']:.2f} % (a subscriber each)",
-                        "ratio": f"{cpu['shared'] / cpu['separate']:.2f}× ({100 * saved:.0f} % saved)",
+                                    f"receiving process's CPU, {way_} against {base}",
+                        "sonibus": f"{cpu[way_]:.2f} %", "baseline": f"{cpu[base]:.2f} % ({base})",
+                        "ratio": f"{cpu[way_] / cpu[base]:.2f}× ({100 * saved:.0f} % saved)",
                         "goal": "≥ 10 % saved" if int(count) > 1 else "", "met": (
                             "yes" if saved >= 0.10 else "no") if int(count) > 1 else ""})
-        print(f"{case}: separate {cpu['separate']:.2f} %, shared {cpu['shared']:.2f} % ({100 * saved:.0f} % saved); "
-              f"switches/s {waits[case]['separate']:.0f} → {waits[case]['shared']:.0f}")
+        print(f"{case}: {base} {cpu[base]:.2f} %, {way_} {cpu[way_]:.2f} % ({100 * saved:.0f} % saved); "
+              f"switches/s {waits[case][base]:.0f} → {waits[case][way_]:.0f}")
     write(args.name, {"machine": machine, "rounds": args.rounds, "seconds": args.seconds,
                                    "runs": runs, "median": median, "switches_per_s": waits, "summary": summary})
     print(machine)

@@ -36,6 +36,7 @@ from __future__ import annotations
 import itertools
 import logging
 import threading
+import weakref
 from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass
 from typing import Any, NamedTuple
@@ -48,6 +49,7 @@ from .errors import ConfigError
 from .node import Bus
 from .pacing import Spacing
 from .queue import SampleQueue
+from .verdicts import VERDICTS
 
 log = logging.getLogger(__name__)
 
@@ -152,6 +154,9 @@ class Incoming(NamedTuple):
         return self.samples if self.selected is not None else (self,)
 
 
+_new = tuple.__new__  # (an ``Incoming`` made from all its fields at once: ``_derived_frame``)
+
+
 class Selection:
     """What a sink's ``patterns`` select, and what it receives, checked by the
     message layer's gate: ``incoming``/``take`` decode, ``accepts(key)`` tells
@@ -167,6 +172,8 @@ class Selection:
 
     def __init__(self, patterns: Iterable[str], limits: messages.Limits | None = None) -> None:
         self.gate = messages.Gate(limits)
+        VERDICTS.join()  # (the frames this takes are checked once for the process: bus/verdicts.py)
+        weakref.finalize(self, VERDICTS.leave)
         self._selected = [zenoh.KeyExpr(keys.expr(p)) for p in patterns]
         # (keys, robots and joint names come from the network: every table is capped, count and bytes)
         self._accepted: Capped[str, bool] = Capped(MAX_KEYS, MAX_BYTES)
@@ -179,15 +186,21 @@ class Selection:
         """What came on ``key``, checked by the gate (a frame keeps the selected joints);
         ``messages.BadMessage`` saying what is wrong otherwise."""
         source = self._key(key)
-        message = self.gate.check(source, payload)  # (a key of no section is refused here)
-        taken_as = messages.SECTIONS[source.section].taken_as
+        section = messages.SECTIONS.get(source.section)
+        taken_as = section.taken_as if section is not None else ""
+        derived = source.section == "derived" and not source.name  # <robot>/derived: a derived frame
+        if (taken_as == "frame" or derived) and VERDICTS.takers > 1:  # (the process's other nodes take the
+            # same bytes: checked once for them all, each given a message of its own; bus/verdicts.py)
+            message = VERDICTS.check(self.gate, source, payload, nested=derived)
+        else:
+            message = self.gate.check(source, payload)  # (a key of no section is refused here)
         if taken_as == "frame":
             values = message["v"]
             selected = self.selected(source.robot, message["names"])
             if selected.indices is not None:
                 values = [values[i] for i in selected.indices]
             return Incoming(source, message, None, message["t"], message["seq"], tuple(map(float, values)), selected)
-        if taken_as == "sample" and not source.name:  # <robot>/derived: a derived frame
+        if derived:
             return self._derived_frame(source, message)
         if taken_as == "sample":
             value = message["v"]
@@ -200,9 +213,12 @@ class Selection:
         t, seq, values = message["t"], message["seq"], message["v"]
         selected = self.selected(source.key, message["names"], source.key + "/")
         chosen = values if selected.indices is None else [values[i] for i in selected.indices]
-        parts = tuple(Incoming(key, {"t": t, "seq": seq, "v": value}, None, t, seq,
-                               tuple(map(float, value)) if value.__class__ is list else (float(value),))
-                      for key, value in zip(selected.sources, chosen, strict=True))
+        # (a list made in one comprehension, each part made as a tuple: no generator to resume, no
+        # NamedTuple __new__ to call, 26 times a frame for each node that takes derived values)
+        parts = tuple([_new(Incoming, (key, {"t": t, "seq": seq, "v": value}, None, t, seq,
+                                       tuple(map(float, value)) if value.__class__ is list else (float(value),),
+                                       None, None))
+                       for key, value in zip(selected.sources, chosen, strict=True)])
         return Incoming(source, message, None, t, seq, (), None, parts)
 
     def selected(self, robot: str, names: list[str], prefix: str = "") -> Selected:

@@ -220,3 +220,16 @@ def test_what_waits_for_its_turn_is_bounded_by_the_queue(net):
     assert queue.dropped == len(keys) - queue.maxlen
     assert set(paced._held) == set(keys[-queue.maxlen:])
     paced.undeclare()
+
+
+def test_a_sample_on_a_robots_joints_key_alone_is_refused_not_taken_for_a_derived_frame():
+    """``pepper/joints`` (no joint named) reaches a sink of ``pepper/**`` (``**`` matches no chunk too):
+    it was taken for a derived frame, and the KeyError of its missing names ended the sink's worker."""
+    counted, warned = {}, []
+    selection = Selection(["pepper/**"])
+    taken = selection.take("pepper/joints", codec.encode({"t": time.time(), "seq": 1, "v": 0.5}),
+                           lambda what, n: counted.update({what: counted.get(what, 0) + n}),
+                           lambda what, text: warned.append(text))
+    assert taken is None and counted == {"received": 1, "bad": 1}
+    assert warned == ["message on 'pepper/joints' refused: pepper/joints names no joint: "
+                      "a joint's sample goes on <robot>/joints/<Joint>"]
