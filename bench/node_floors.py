@@ -191,22 +191,20 @@ def subscribed(endpoint: str, each: Any, ready: Any, done: Any) -> None:
     session.close()
 
 
-def measure(seconds: float, warmup_s: float = 3.0) -> dict[str, float]:
-    """CPU % of one core of each floor over ``seconds`` after ``warmup_s``, each fed its own
-    publisher of one robot × 17 joints at ``RATE_HZ``."""
+def measure(seconds: float, warmup_s: float = 3.0, nodes: tuple[str, ...] = NODES) -> dict[str, float]:
+    """CPU % of one core of each floor (of ``nodes``) over ``seconds`` after ``warmup_s``, each
+    fed its own publisher of one robot × 17 joints at ``RATE_HZ``."""
+    if not nodes:
+        return {}
     done = CONTEXT.Event()
-    endpoints = {name: f"tcp/127.0.0.1:{free_port()}" for name in NODES}
-    web_ports = {name: free_port() for name in ("foxglove", "oscquery")}  # (each with a client reading)
+    endpoints = {name: f"tcp/127.0.0.1:{free_port()}" for name in nodes}
+    web_ports = {name: free_port() for name in ("foxglove", "oscquery") if name in nodes}  # (each with a client)
     readies = {name: CONTEXT.Event() for name in (*endpoints, *(f"{name} client" for name in web_ports))}
     with tempfile.TemporaryDirectory() as folder:
-        floors = {
-            "foxglove": CONTEXT.Process(target=foxglove_floor, args=(endpoints["foxglove"], web_ports["foxglove"],
-                                                                     readies["foxglove"], done), daemon=True),
-            "recorder": CONTEXT.Process(target=recorder_floor, args=(endpoints["recorder"], folder,
-                                                                     readies["recorder"], done), daemon=True),
-            "oscquery": CONTEXT.Process(target=oscquery_floor, args=(endpoints["oscquery"], web_ports["oscquery"],
-                                                                     readies["oscquery"], done), daemon=True),
-        }
+        targets = {"foxglove": (foxglove_floor, web_ports.get("foxglove")), "recorder": (recorder_floor, folder),
+                   "oscquery": (oscquery_floor, web_ports.get("oscquery"))}
+        floors = {name: CONTEXT.Process(target=target, args=(endpoints[name], where, readies[name], done),
+                                        daemon=True) for name, (target, where) in targets.items() if name in nodes}
         others: list[Any] = []
         try:
             for process in floors.values():
