@@ -104,6 +104,19 @@ class _Client(WebClient):
             self.on_drop()
         self.waiting.set()
 
+    def put_frames(self, parts: list[bytes]) -> None:
+        """Whole frames of three parts each (``Hub._send``'s): written at once when nothing waits
+        before them and the socket takes them (one write, no wake-up of the sender), else each
+        into the backlog, as ``put``."""
+        transport = self.transport
+        if (not self.backlog and not self.protocol.writing_paused and transport is not None
+                and not transport.is_closing() and not self.ws.closed and sum(map(len, parts)) <= WRITE_BYTES):
+            self.on_write()  # (counted first, as send_all does)
+            transport.write(b"".join(parts))
+            return
+        for i in range(0, len(parts), 3):
+            self.put((parts[i], parts[i + 1], parts[i + 2]))
+
     async def send_all(self) -> None:
         backlog, transport = self.backlog, self.transport
         while not self.ws.closed:
@@ -253,10 +266,24 @@ class Hub:
             self._waiting = 0
 
     def _flush(self) -> None:
+        """What the outbox holds, in order; the messages of consecutive ``_send``s gathered per
+        client and handed to it at once (``_Client.put_frames``: one write when it can)."""
         with self._lock:
             outbox, self._outbox, self._waiting = self._outbox, [], 0
+        due: dict[_Client, list[bytes]] = {}  # client → its frames' parts, in order
         for function, args in outbox:
+            if function == self._send:
+                self._send(*args, due=due)
+                continue
+            self._hand(due)  # (what was gathered goes before an advertisement that follows it)
             function(*args)
+        self._hand(due)
+
+    @staticmethod
+    def _hand(due: dict[_Client, list[bytes]]) -> None:
+        for client, parts in due.items():
+            client.put_frames(parts)
+        due.clear()
 
     # -- on the server's loop ------------------------------------------------------------
 
@@ -307,11 +334,16 @@ class Hub:
                     client.since.pop(channel_id, None)
                 client.push(json.dumps(wire.unadvertise(told)))
 
-    def _send(self, sends: list[tuple[list[tuple[_Client, int]], bytes]], log_time_ns: int) -> None:
+    def _send(self, sends: list[tuple[list[tuple[_Client, int]], bytes]], log_time_ns: int, *,
+              due: dict[_Client, list[bytes]]) -> None:
+        """Each message's frame, for each of its subscribers, added to ``due`` (``_flush``'s)."""
         for subscribers, payload in sends:
             head, tail = wire.data_frame(log_time_ns, payload)  # (once for every client)
             for client, subscription in subscribers:
-                client.put((head, wire.subscription(subscription), tail))
+                parts = due.get(client)
+                if parts is None:
+                    parts = due[client] = []
+                parts += (head, wire.subscription(subscription), tail)
 
     def _receive(self, client: _Client, message: WSMessage) -> None:
         if message.type == WSMsgType.BINARY:

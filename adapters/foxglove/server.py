@@ -31,7 +31,7 @@ from importlib.metadata import version
 from typing import Any
 
 from sonibus.adapters.osc.gateway import parse_endpoint
-from sonibus.adapters.recorder.channels import MESSAGE_ENCODING, SCHEMA_ENCODING, channel_schema, to_json
+from sonibus.adapters.recorder.channels import MESSAGE_ENCODING, SCHEMA_ENCODING, channel_schema
 from sonibus.bus import codec, keys
 from sonibus.bus.adapter import Adapter
 from sonibus.bus.info import InfoRequests
@@ -90,7 +90,7 @@ class FoxgloveServer(Adapter):
         cfg: FoxgloveConfig = self.config
         host, port = parse_endpoint("listen", cfg.listen)
         self.web = WebServer(self, host, port, key="listen", limits=cfg.limits, browsers=True, origins=cfg.origins)
-        self.hub = Hub(self, self.web, cfg.name, to_json, {"sonibus": version("sonibus")})
+        self.hub = Hub(self, self.web, cfg.name, wire.to_json, {"sonibus": version("sonibus")})
         self._infos: dict[str, dict[str, Any]] = {}  # info and info/derived keys → their latest message
         self._queue = self.own(SampleQueue(cfg.queue))
         self._info_seen: set[str] = set()
@@ -198,15 +198,17 @@ class FoxgloveServer(Adapter):
             self._infos[key] = incoming.message
         elif robot not in self._info_seen:
             self._info.ask(robot)
-        self._log_all([*samples_of(incoming), *self._views.of(incoming)])
+        # (an event's channels, its own and <robot>/log, keep a history: Hub.log's)
+        self._log_all([*samples_of(incoming), *self._views.of(incoming)], incoming.source.section == "events")
 
     def _log(self, key: str, message: dict[str, Any]) -> None:
         """``message`` on the channel of ``key`` (advertised now if new), to the clients subscribed."""
-        self._log_all([(key, message)])
+        self._log_all([(key, message)], _events(key))
 
-    def _log_all(self, messages: list[tuple[str, dict[str, Any]]]) -> None:
-        """Each ``(key, message)`` on its channel, in one go (``Hub.log_all``)."""
-        problems = self.hub.log_all([(key, message, _events(key)) for key, message in messages], time.time_ns(),
+    def _log_all(self, messages: list[tuple[str, dict[str, Any]]], events: bool) -> None:
+        """Each ``(key, message)`` on its channel, in one go (``Hub.log_all``); ``events``: all of
+        them on channels of events (``_events``)."""
+        problems = self.hub.log_all([(key, message, events) for key, message in messages], time.time_ns(),
                                     _describe)
         for key, exc in problems:
             if exc is None:
