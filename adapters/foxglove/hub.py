@@ -43,9 +43,10 @@ from typing import TYPE_CHECKING, Any
 
 from aiohttp import WSMessage, WSMsgType, web
 
-from sonibus.bus.web import CLIENT_BACKLOG, CLIENT_BACKLOG_BYTES, WebClient, WebServer, close_clients
+from sonibus.bus.web import WebServer, close_clients
 
 from . import wire
+from .framed import FramedClient
 
 if TYPE_CHECKING:
     from sonibus.bus.adapter import Adapter
@@ -57,7 +58,6 @@ MAX_OUTBOX = 8192           # messages waiting for the server's loop; past it a 
 HEARTBEAT_S = 10.0          # a ping this often; a client that does not answer within half of it is dropped
 HISTORY = 256               # messages an event channel keeps for a subscription taken a moment after advertising
 HISTORY_BYTES = 16 << 20    # bytes of JSON all event channels keep together (past it: the latest only)
-WRITE_BYTES = 64 << 10      # bytes of a client's messages written in one go (then its socket's room is checked)
 
 
 @dataclass
@@ -70,75 +70,18 @@ class _Channel:
     history_bytes: int = 0
 
 
-class _Client(WebClient):
-    """A client and its subscriptions (subscription id → channel id). What it is due waits in
-    its backlog as WebSocket frames in parts (a message's parts are shared by every client:
-    only its 4-byte subscription id is the client's own), bounded as ``WebClient``'s; the
-    sender writes all that waits in one transport write (up to ``WRITE_BYTES``), not one
-    ``send`` per message, and waits for the client to take it when its socket is full."""
+class _Client(FramedClient):
+    """A client and its subscriptions (subscription id → channel id); what it is due waits as
+    frames in parts (``FramedClient``): a message's parts are shared by every client, only its
+    4-byte subscription id is the client's own."""
 
     def __init__(self, ws: web.WebSocketResponse, on_drop: Callable[[], None], request: web.Request,
                  on_write: Callable[[], None]) -> None:
-        super().__init__(ws, on_drop, request.transport)
-        self.on_write = on_write
-        self.protocol = request.protocol  # (its flow control: paused while the socket's buffer is full)
+        super().__init__(ws, on_drop, request, on_write)
         self.subscriptions: dict[int, int] = {}
         self.advertised: set[int] = set()  # channel ids told to it (an advertisement never goes twice)
         self.since: dict[int, int] = {}    # channel id → the number of its first message since it was told of it
                                            # (until its first subscription; on the loop)
-        self.backlog: deque[tuple[int, tuple[bytes, ...]]] = deque()  # type: ignore[assignment]  # (size, parts)
-
-    def push(self, message: str | bytes, kept: bool = False) -> None:
-        """A text (``str``) or binary message, framed; ``kept`` is not served here (the hub
-        replies with statuses, which may be dropped like the rest)."""
-        data = message.encode() if isinstance(message, str) else message
-        self.put((wire.frame_header(wire.TEXT if isinstance(message, str) else wire.BINARY, len(data)), data))
-
-    def put(self, parts: tuple[bytes, ...]) -> None:
-        """A WebSocket frame, as parts to be joined (parts shared with other clients are not copied)."""
-        size = sum(map(len, parts))
-        self.backlog.append((size, parts))
-        self.size += size
-        while len(self.backlog) > CLIENT_BACKLOG or (self.size > CLIENT_BACKLOG_BYTES and len(self.backlog) > 1):
-            self.size -= self.backlog.popleft()[0]
-            self.on_drop()
-        self.waiting.set()
-
-    def put_frames(self, parts: list[bytes]) -> None:
-        """Whole frames of three parts each (``Hub._send``'s): written at once when nothing waits
-        before them and the socket takes them (one write, no wake-up of the sender), else each
-        into the backlog, as ``put``."""
-        transport = self.transport
-        if (not self.backlog and not self.protocol.writing_paused and transport is not None
-                and not transport.is_closing() and not self.ws.closed and sum(map(len, parts)) <= WRITE_BYTES):
-            self.on_write()  # (counted first, as send_all does)
-            transport.write(b"".join(parts))
-            return
-        for i in range(0, len(parts), 3):
-            self.put((parts[i], parts[i + 1], parts[i + 2]))
-
-    async def send_all(self) -> None:
-        backlog, transport = self.backlog, self.transport
-        while not self.ws.closed:
-            await self.waiting.wait()
-            self.waiting.clear()
-            while backlog and not self.ws.closed:
-                size, parts = backlog.popleft()
-                batch = list(parts)
-                while backlog and size < WRITE_BYTES:
-                    more, parts = backlog.popleft()
-                    batch.extend(parts)
-                    size += more
-                self.size -= size
-                if transport is None or transport.is_closing():
-                    return  # the client went away; its handler ends the connection
-                self.on_write()  # (counted first: a client may read what is written before this line runs)
-                transport.write(b"".join(batch))  # (whole frames: aiohttp's own, a ping, go between them)
-                if self.protocol.writing_paused:
-                    try:
-                        await self.protocol._drain_helper()  # (as aiohttp's own writer waits)
-                    except ConnectionError:
-                        return
 
 
 class Hub:
@@ -282,7 +225,7 @@ class Hub:
     @staticmethod
     def _hand(due: dict[_Client, list[bytes]]) -> None:
         for client, parts in due.items():
-            client.put_frames(parts)
+            client.put_frames(parts, 3)
         due.clear()
 
     # -- on the server's loop ------------------------------------------------------------
