@@ -15,10 +15,12 @@ essential work with the same libraries and no sonibus, fed the same frames as
   No advertising, subscribing, latching, limits or info channels (once, not per frame);
 - **recorder**: a subscriber that decodes each frame, makes it JSON and adds it to an
   MCAP file (``mcap``'s ``Writer``, zstd chunks of 1 MiB, as the recorder's);
-- **oscquery**: a subscriber that keeps each frame's payload as the latest (what
-  answering a question needs) and sends each of its values as an OSC message (address
-  bytes made once, ``struct.pack``), one binary WebSocket message each (aiohttp), to the
-  one client connected: the show's OSCQuery client LISTENs to every joint.
+- **oscquery**: subscribers of the frames and of the derived frames (fed both, as the node
+  is in the show: its namespace serves derived values too) that keep each one's payload as
+  the latest of its key (what answering a question needs), and send each of a frame's values
+  as an OSC message (address bytes made once, ``struct.pack``), one binary WebSocket message
+  each (aiohttp), to the one client connected: the show's OSCQuery client LISTENs to every
+  joint, to no derived value.
 
 The nodes do more than their floors (the features node's derived frames and the robot's
 events come in too, Foxglove's views and per-joint channels go out, the recorder writes
@@ -47,7 +49,7 @@ from floor import CONTEXT, Case, cpu_ns, publish
 RATE_HZ = 50
 NODES = ("foxglove", "recorder", "oscquery")  # the nodes with a floor here
 HEADER = struct.Struct("<BIQ")  # Foxglove's message data: opcode 1, subscription id, log time (ns)
-FED_DERIVED = ("foxglove",)  # floors fed a derived frame beside each frame (floor.DERIVED), as their nodes are
+FED_DERIVED = ("foxglove", "oscquery")  # floors fed a derived frame beside each frame (floor.DERIVED), as nodes
 # Pepper's arm chains (robots.json's, from its URDF): joint (the frame's J5..J16), parent, origin, origin's
 # rotation (quaternion), axis (None: the hand, a point)
 _BENT = (0.0, -0.07845878036326605, 0.0, 0.9969173585528084)
@@ -228,8 +230,10 @@ def oscquery_floor(endpoint: str, port: int, ready: Any, done: Any) -> None:
         text = f"/{robot}/joints/{name}".encode() + b"\0"
         return text + b"\0" * (-len(text) % 4) + b",f\0\0"
 
-    async def send(clients: set[Any], key: str, payload: bytes) -> None:
+    async def send(clients: dict[Any, Any], key: str, payload: bytes) -> None:
         latest[key] = payload
+        if key.endswith("/derived"):  # (kept: no client listens to a derived value)
+            return
         robot, frame = key.partition("/")[0], msgpack.unpackb(payload)
         for name, value in zip(frame["names"], frame["v"], strict=True):
             prefix = addresses.get((robot, name)) or addresses.setdefault((robot, name), address(robot, name))
@@ -237,7 +241,7 @@ def oscquery_floor(endpoint: str, port: int, ready: Any, done: Any) -> None:
             for ws in list(clients):
                 await ws.send_bytes(data)
 
-    websocket_floor(endpoint, port, ready, done, send)
+    websocket_floor(endpoint, port, ready, done, send, ("*/frame", "*/derived"))
 
 
 def subscribed(endpoint: str, each: Any, ready: Any, done: Any) -> None:
