@@ -120,29 +120,35 @@ class Hub:
         ``history``: a channel of events, whose messages since a client was told of it reach
         its subscription (see the module's docstring). From any thread; what ``to_json``
         raises (not strict JSON) reaches the caller."""
-        for _, problem in self.log_all([(topic, message, history)], log_time_ns, lambda id_, _: describe(id_)):
+        for _, problem in self.log_all([(topic, message)], log_time_ns, lambda id_, _: describe(id_), history):
             if isinstance(problem, Exception):
                 raise problem
             return False
         return True
 
-    def log_all(self, items: list[tuple[str, Any, bool]], log_time_ns: int,
-                describe: Callable[[int, str], wire.Channel]) -> list[tuple[str, Exception | None]]:
-        """Each ``(topic, message, history)`` as ``log`` logs it, in order, all at ``log_time_ns``
-        (what one message from the bus gives: a frame's joints, its views), with one hold of
-        the lock and one batch for the server's loop (issue 35: what was paid per message,
-        once). What could not be logged, with why: ``(topic, None)`` for a channel that cannot
-        be made (``MAX_CHANNELS``), ``(topic, exception)`` for what ``to_json`` raised."""
+    def log_all(self, items: list[tuple[str, Any]], log_time_ns: int, describe: Callable[[int, str], wire.Channel],
+                history: bool = False) -> list[tuple[str, Exception | None]]:
+        """Each ``(topic, message)`` as ``log`` logs it (``history`` for all of them), in order,
+        all at ``log_time_ns`` (what one message from the bus gives: a frame's joints, its
+        views), with one hold of the lock and one batch for the server's loop (issue 35: what
+        was paid per message, once). What could not be logged, with why: ``(topic, None)``
+        for a channel that cannot be made (``MAX_CHANNELS``), ``(topic, exception)`` for what
+        ``to_json`` raised."""
         problems: list[tuple[str, Exception | None]] = []
-        kept: list[tuple[str, Any, bool, bytes | None]] = []
-        for topic, message, history in items:
-            try:  # (events: a few a second)
-                kept.append((topic, message, history, self.to_json(message) if history else None))
-            except (ValueError, TypeError) as exc:
-                problems.append((topic, exc))
+        encoded: list[bytes] = []  # (events: a few a second) their JSON first, for their history
+        if history:
+            kept = []
+            for topic, message in items:
+                try:
+                    encoded.append(self.to_json(message))
+                    kept.append((topic, message))
+                except (ValueError, TypeError) as exc:
+                    problems.append((topic, exc))
+            items = kept
         due: list[tuple[list[tuple[_Client, int]], str, Any, bytes | None]] = []
         with self._lock:
-            for topic, message, history, payload in kept:
+            for i, (topic, message) in enumerate(items):
+                payload = encoded[i] if history else None
                 channel = self._channels.get(topic)
                 if channel is None:
                     if len(self._channels) >= MAX_CHANNELS:

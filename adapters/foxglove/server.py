@@ -208,8 +208,7 @@ class FoxgloveServer(Adapter):
     def _log_all(self, messages: list[tuple[str, dict[str, Any]]], events: bool) -> None:
         """Each ``(key, message)`` on its channel, in one go (``Hub.log_all``); ``events``: all of
         them on channels of events (``_events``)."""
-        problems = self.hub.log_all([(key, message, events) for key, message in messages], time.time_ns(),
-                                    _describe)
+        problems = self.hub.log_all(messages, time.time_ns(), _describe, events)
         for key, exc in problems:
             if exc is None:
                 self.warn("channels", f"'{key}' not served: {MAX_CHANNELS} channels already")
