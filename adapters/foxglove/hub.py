@@ -33,10 +33,11 @@ took 14 % of the node's CPU).
 
 from __future__ import annotations
 
+import contextlib
 import json
 import time
 from collections import deque
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from threading import Lock
 from typing import TYPE_CHECKING, Any
@@ -102,6 +103,7 @@ class Hub:
         self._lock = Lock()  # channels, latest messages, subscribers: the adapter's thread and the loop
         self._outbox: list[tuple[Callable[..., None], tuple[Any, ...]]] = []  # for the loop, in order (under _lock)
         self._waiting = 0  # messages in the outbox's batches (under _lock)
+        self._batching = False  # the loop serves messages and flushes after them (batch): no call to it (under _lock)
         web_server.app.router.add_get("/{path:.*}", self._websocket)  # (a client may name any path)
         web_server.app.on_shutdown.append(lambda app: close_clients(list(self._clients)))
 
@@ -210,9 +212,22 @@ class Hub:
     def _later(self, function: Callable[..., None], *args: Any) -> None:
         """``function(*args)`` on the server's loop, after what is in the outbox (under ``_lock``)."""
         self._outbox.append((function, args))
-        if len(self._outbox) == 1 and not self.web.call(self._flush):
+        if len(self._outbox) == 1 and not self._batching and not self.web.call(self._flush):
             self._outbox.clear()  # (the server is not running: nobody to tell)
             self._waiting = 0
+
+    @contextlib.contextmanager
+    def batch(self) -> Iterator[None]:
+        """On the server's loop: what is logged in the block is flushed at its end, by this
+        call, not by a call to the loop (a write to its pipe, a wake-up of itself)."""
+        with self._lock:
+            self._batching = True
+        try:
+            yield
+        finally:
+            with self._lock:
+                self._batching = False
+            self._flush()
 
     def _flush(self) -> None:
         """What the outbox holds, in order; the messages of consecutive ``_send``s gathered per

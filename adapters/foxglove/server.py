@@ -38,7 +38,7 @@ from sonibus.bus.info import InfoRequests
 from sonibus.bus.options import bad
 from sonibus.bus.presence import watch_robots
 from sonibus.bus.queue import SampleQueue
-from sonibus.bus.streams import Streams, if_free, without_audio
+from sonibus.bus.streams import Streams, without_audio
 from sonibus.bus.web import Limits, WebServer
 
 from . import wire
@@ -49,6 +49,7 @@ log = logging.getLogger(__name__)
 
 MAX_ROBOTS = 64  # robots served (names made up on the bus must not grow what is kept per robot)
 MAX_GONE = 1024  # robots remembered as gone (names from the bus: a claim storm must not grow it for ever)
+MAX_ARRIVED = 64  # frames waiting for the server's loop; past it they go through the queue (the serve worker)
 
 
 @dataclass(frozen=True)
@@ -97,9 +98,12 @@ class FoxgloveServer(Adapter):
         self._robots: set[str] = set()  # robots served: their messages pass, and their state is kept
         self._info = InfoRequests(self.bus, self._take_info, lambda robot, text: self.warn("info", text))
         self._views = Views(self.bus, self._take_derived_info)
-        # Frames are taken where they arrive (a thread hand-off less, as the OSC sink's), the rest from the
-        # queue by the serve worker; one lock between them guards the node's state and the order of its messages.
+        # Frames are handed to the server's loop as they arrive and served there (issue 35: the loop wakes for
+        # them anyway, and a Zenoh thread that made their JSON fought it for the GIL), the rest from the queue by
+        # the serve worker; one lock between them guards the node's state and the order of its messages.
         self._state = threading.Lock()
+        self._arrived: deque[tuple[str, Any]] = deque()  # frames for the loop (at most MAX_ARRIVED)
+        self._arrival = threading.Lock()
         self._streams: Streams | None = None  # (a frame that arrives while Streams subscribes: queued)
         self._streams = Streams(self.bus, cfg.subscribe, self._queue, per_joint_keys=cfg.per_joint_keys,
                                 direct=self._direct)
@@ -143,9 +147,29 @@ class FoxgloveServer(Adapter):
                         self._log(key, message)
 
     def _direct(self, key: str, payload: Any) -> bool:
-        """A frame, on its subscription's callback thread (``Streams``' ``direct``); into the
-        queue instead (False) while the serve worker holds the state (``if_free``)."""
-        return self._streams is not None and if_free(self._state, lambda: self._serve_one(key, payload))
+        """A frame, on its subscription's callback thread (``Streams``' ``direct``): handed to the
+        server's loop (``_arrivals``), the loop woken only if none was waiting; into the queue
+        instead (False) when ``MAX_ARRIVED`` wait already or the server is not running."""
+        if self._streams is None:
+            return False
+        with self._arrival:
+            if len(self._arrived) >= MAX_ARRIVED:
+                return False
+            self._arrived.append((key, payload))
+            if len(self._arrived) > 1 or self.web.call(self._arrivals):
+                return True
+            self._arrived.pop()
+            return False
+
+    def _arrivals(self) -> None:
+        """The frames waiting, served on the server's loop; what they give the clients handed
+        to them at the end, in one go (``Hub.batch``)."""
+        with self._arrival:
+            arrived = list(self._arrived)
+            self._arrived.clear()
+        with self.hub.batch(), self._state:
+            for key, payload in arrived:
+                self._serve_one(key, payload)
 
     def _serve_one(self, key: str, payload: Any) -> None:  # (holding _state)
         self._changes()
