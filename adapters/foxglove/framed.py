@@ -11,18 +11,22 @@ What is due at once goes in one write when nothing waits before it and the socke
 (``put_frames``, no wake-up of the sender); otherwise the sender writes what waits up to
 ``WRITE_BYTES`` at a time and waits for the client to take it when its socket is full.
 
-(Its place is ``bus/web.py``, beside ``WebClient``, once the core takes it; here it is
-shared by the two adapters that stream.)
+``Handoff`` brings the frames those clients are sent to the server's loop, served there.
+
+(Their place is ``bus/web.py``, beside ``WebClient``, once the core takes them; here they
+are shared by the two adapters that stream.)
 """
 
 from __future__ import annotations
 
 from collections import deque
 from collections.abc import Callable
+from threading import Lock
+from typing import Any
 
 from aiohttp import web
 
-from sonibus.bus.web import CLIENT_BACKLOG, CLIENT_BACKLOG_BYTES, WebClient
+from sonibus.bus.web import CLIENT_BACKLOG, CLIENT_BACKLOG_BYTES, WebClient, WebServer
 
 from . import wire
 
@@ -92,3 +96,33 @@ class FramedClient(WebClient):
                         await self.protocol._drain_helper()  # (as aiohttp's own writer waits)
                     except ConnectionError:
                         return
+
+
+class Handoff:
+    """Frames handed from Zenoh's callback threads to a web server's loop, served there in
+    batches by ``serve(items)`` (issue 35): the loop wakes for what a client is sent anyway,
+    and a callback thread that did the work (decoding, JSON, OSC) fought the loop for the
+    GIL. ``put`` is a ``Streams`` ``direct``: it wakes the loop only when nothing waits, and
+    says False (the sample then goes to the node's own queue and worker) when ``most``
+    wait already or the server is not running: what waits here is bounded."""
+
+    def __init__(self, web: WebServer, serve: Callable[[list[tuple[str, Any]]], None], most: int = 64) -> None:
+        self.web, self.serve, self.most = web, serve, most
+        self._items: deque[tuple[str, Any]] = deque()
+        self._lock = Lock()
+
+    def put(self, key: str, payload: Any) -> bool:
+        with self._lock:
+            if len(self._items) >= self.most:
+                return False
+            self._items.append((key, payload))
+            if len(self._items) > 1 or self.web.call(self._run):
+                return True
+            self._items.pop()
+            return False
+
+    def _run(self) -> None:  # (on the loop)
+        with self._lock:
+            items = list(self._items)
+            self._items.clear()
+        self.serve(items)

@@ -42,6 +42,7 @@ from sonibus.bus.streams import Streams, without_audio
 from sonibus.bus.web import Limits, WebServer
 
 from . import wire
+from .framed import Handoff
 from .hub import MAX_CHANNELS, Hub
 from .views import DERIVED_INFO, LOG, Views, samples_of
 
@@ -49,7 +50,6 @@ log = logging.getLogger(__name__)
 
 MAX_ROBOTS = 64  # robots served (names made up on the bus must not grow what is kept per robot)
 MAX_GONE = 1024  # robots remembered as gone (names from the bus: a claim storm must not grow it for ever)
-MAX_ARRIVED = 64  # frames waiting for the server's loop; past it they go through the queue (the serve worker)
 
 
 @dataclass(frozen=True)
@@ -102,9 +102,8 @@ class FoxgloveServer(Adapter):
         # them anyway, and a Zenoh thread that made their JSON fought it for the GIL), the rest from the queue by
         # the serve worker; one lock between them guards the node's state and the order of its messages.
         self._state = threading.Lock()
-        self._arrived: deque[tuple[str, Any]] = deque()  # frames for the loop (at most MAX_ARRIVED)
-        self._arrival = threading.Lock()
         self._streams: Streams | None = None  # (a frame that arrives while Streams subscribes: queued)
+        self._handoff = Handoff(self.web, self._arrivals)
         self._streams = Streams(self.bus, cfg.subscribe, self._queue, per_joint_keys=cfg.per_joint_keys,
                                 direct=self._direct)
         self._comings: deque[tuple[str, bool]] = deque(maxlen=4096)  # robots come or gone (a Zenoh thread)
@@ -148,25 +147,12 @@ class FoxgloveServer(Adapter):
 
     def _direct(self, key: str, payload: Any) -> bool:
         """A frame, on its subscription's callback thread (``Streams``' ``direct``): handed to the
-        server's loop (``_arrivals``), the loop woken only if none was waiting; into the queue
-        instead (False) when ``MAX_ARRIVED`` wait already or the server is not running."""
-        if self._streams is None:
-            return False
-        with self._arrival:
-            if len(self._arrived) >= MAX_ARRIVED:
-                return False
-            self._arrived.append((key, payload))
-            if len(self._arrived) > 1 or self.web.call(self._arrivals):
-                return True
-            self._arrived.pop()
-            return False
+        server's loop (``Handoff``: ``_arrivals``), or into the queue (False)."""
+        return self._streams is not None and self._handoff.put(key, payload)
 
-    def _arrivals(self) -> None:
-        """The frames waiting, served on the server's loop; what they give the clients handed
-        to them at the end, in one go (``Hub.batch``)."""
-        with self._arrival:
-            arrived = list(self._arrived)
-            self._arrived.clear()
+    def _arrivals(self, arrived: list[tuple[str, Any]]) -> None:
+        """Frames served on the server's loop; what they give the clients handed to them at
+        the end, in one go (``Hub.batch``)."""
         with self.hub.batch(), self._state:
             for key, payload in arrived:
                 self._serve_one(key, payload)
