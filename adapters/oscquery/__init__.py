@@ -20,14 +20,13 @@ import threading
 import time
 from typing import Any
 
-from sonibus.adapters.foxglove.framed import Handoff
 from sonibus.adapters.osc import encode
 from sonibus.adapters.osc.profiles import event_args
 from sonibus.bus.adapter import Adapter
 from sonibus.bus.info import DERIVED_ALONE, InfoRequests, watch_nodes
 from sonibus.bus.presence import watch_robots
 from sonibus.bus.queue import SampleQueue
-from sonibus.bus.streams import Incoming, Streams
+from sonibus.bus.streams import Incoming, Streams, if_free
 from sonibus.bus.web import WebServer
 
 from . import mdns
@@ -75,12 +74,10 @@ class OscQuery(Adapter):
         self.address = f"OSCQuery on {self.url} (WebSocket on the same port)"
         log.info("%s: %s", self.name, self.address)
         self._queue = self.own(SampleQueue(cfg.queue))
-        # Frames are handed to the server's loop as they arrive and served there (issue 35: the loop wakes to
-        # write their values anyway; Handoff), the rest from the queue by the forward worker; one lock between
-        # them guards what they share (pacing, the namespace's values, what goes to the clients in order).
+        # Frames are taken where they arrive (a thread hand-off less, as the OSC sink's), the rest from the
+        # queue by the forward worker; one lock between them guards what they share (pacing, the namespace's
+        # values, what goes to the clients in order).
         self._state = threading.Lock()
-        self._handoff = Handoff(self.web, self._arrivals)
-        self._batch: list[tuple[str, bytes]] | None = None  # what frames served on the loop give, sent after them
         self._streams: Streams | None = None  # (a frame that arrives while Streams subscribes: queued)
         self._streams = Streams(self.bus, SUBSCRIBE, self._queue, direct=self._direct)
         self.spawn(self._forward, "forward")  # before anything else is declared: nothing waits in the queue
@@ -197,21 +194,9 @@ class OscQuery(Adapter):
                     self._take(*item)
 
     def _direct(self, key: str, payload: Any) -> bool:
-        """A frame, on its subscription's callback thread (``Streams``' ``direct``): handed to the
-        server's loop (``Handoff``: ``_arrivals``), or into the queue (False)."""
-        return self._streams is not None and self._handoff.put(key, payload)
-
-    def _arrivals(self, arrived: list[tuple[str, Any]]) -> None:
-        """Frames served on the server's loop, the values they give sent after them in one go."""
-        with self._state:
-            self._batch = batch = []
-            try:
-                for key, payload in arrived:
-                    self._take(key, payload)
-            finally:
-                self._batch = None
-        if batch:
-            self.server.send_osc_now(batch)
+        """A frame, on its subscription's callback thread (``Streams``' ``direct``); into the
+        queue instead (False) while the forward worker holds the state (``if_free``)."""
+        return self._streams is not None and if_free(self._state, lambda: self._take(key, payload))
 
     def _take(self, key: str, payload: Any) -> None:  # (holding _state)
         message = self._streams.take(key, payload, self.count, self.warn)  # checked by the gate, paced
@@ -242,10 +227,7 @@ class OscQuery(Adapter):
         if out:
             if message.event is None:
                 self.record_latency(time.time() - message.t)
-            if self._batch is not None:  # (on the loop: sent after the frames it serves)
-                self._batch += out
-            else:
-                self.server.send_osc(out)
+            self.server.send_osc(out)
 
     def _event(self, robot: str, kind: str, event: dict[str, Any], out: list[tuple[str, bytes]]) -> None:
         path = f"/{robot}/events/{kind}"

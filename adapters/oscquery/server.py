@@ -192,10 +192,6 @@ class QueryServer:
         self.adapter.count("bad")
         self.adapter.warn("ws", f"WebSocket: refused {what}")
 
-    def send_osc_now(self, messages: list[tuple[str, bytes]]) -> None:
-        """``send_osc``, on the server's loop."""
-        self._send_osc(messages)
-
     def _send_osc(self, messages: list[tuple[str, bytes]]) -> None:
         """Each client's messages framed and handed to it at once (one write when it can)."""
         sent = 0
