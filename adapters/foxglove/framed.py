@@ -28,6 +28,7 @@ from typing import Any
 
 from aiohttp import web
 
+from sonibus.bus.queue import item_size
 from sonibus.bus.web import CLIENT_BACKLOG, CLIENT_BACKLOG_BYTES, WebClient, WebServer
 
 from . import wire
@@ -105,26 +106,33 @@ class Handoff:
     batches by ``serve(items)`` (issue 35): the loop wakes for what a client is sent anyway,
     and a callback thread that did the work (decoding, JSON, OSC) fought the loop for the
     GIL. ``put`` is a ``Streams`` ``direct``: it wakes the loop only when nothing waits, and
-    says False (the sample then goes to the node's own queue and worker) when ``most``
-    wait already or the server is not running: what waits here is bounded."""
+    says False (the sample then goes to the node's own queue and worker, bounded and
+    counted there) when ``most`` samples or ``most_bytes`` wait already, or the server is
+    not running: what waits here is bounded."""
 
-    def __init__(self, web: WebServer, serve: Callable[[list[tuple[str, Any]]], None], most: int = 64) -> None:
-        self.web, self.serve, self.most = web, serve, most
+    def __init__(self, web: WebServer, serve: Callable[[list[tuple[str, Any]]], None], most: int = 64,
+                 most_bytes: int = 4 << 20) -> None:
+        self.web, self.serve, self.most, self.most_bytes = web, serve, most, most_bytes
         self._items: deque[tuple[str, Any]] = deque()
+        self._bytes = 0
         self._lock = Lock()
 
     def put(self, key: str, payload: Any) -> bool:
+        size = item_size((key, payload))
         with self._lock:
-            if len(self._items) >= self.most:
+            if len(self._items) >= self.most or (self._items and self._bytes + size > self.most_bytes):
                 return False
             self._items.append((key, payload))
+            self._bytes += size
             if len(self._items) > 1 or self.web.call(self._run):
                 return True
             self._items.pop()
+            self._bytes -= size
             return False
 
     def _run(self) -> None:  # (on the loop)
         with self._lock:
             items = list(self._items)
             self._items.clear()
+            self._bytes = 0
         self.serve(items)
