@@ -2,15 +2,25 @@
 essential work with the same libraries and no sonibus, fed the same frames as
 ``show.py``'s other floors (one robot × 17 joints at its rate, msgpack, zenoh-python).
 
-- **foxglove**: a subscriber that decodes each frame, makes it JSON and sends it, behind
-  Foxglove's 13-byte message header, as one binary WebSocket message (aiohttp, the
-  node's library) to the one client connected (a reader in a process of its own);
+- **foxglove**: what the show's Foxglove client receives from the node, made the same way
+  (``json``, compact, the channels' JSON byte for byte in shape) and sent as the node sends
+  it: subscribers of the frames and of the derived frames (fed both, as the node is in the
+  show); each frame gives 19 messages — each joint's sample ``{"t", "seq", "v"}`` on its own
+  channel (17), the frame whole, and its arms' 12 transforms as ``foxglove.FrameTransforms``
+  (quaternions of Pepper's arm chains, numbers written here) — and each derived frame 26, a
+  value each; every message is a binary WebSocket frame with Foxglove's 13-byte header
+  (opcode 1, subscription id, log time), and what one bus message gives goes to the one
+  client connected (a reader in a process of its own) in ONE transport write (the fewest the
+  protocol allows: a WebSocket message per Foxglove message), on an aiohttp server's loop.
+  No advertising, subscribing, latching, limits or info channels (once, not per frame);
 - **recorder**: a subscriber that decodes each frame, makes it JSON and adds it to an
   MCAP file (``mcap``'s ``Writer``, zstd chunks of 1 MiB, as the recorder's);
-- **oscquery**: a subscriber that keeps each frame's payload as the latest (what
-  answering a question needs) and sends each of its values as an OSC message (address
-  bytes made once, ``struct.pack``), one binary WebSocket message each (aiohttp), to the
-  one client connected: the show's OSCQuery client LISTENs to every joint;
+- **oscquery**: subscribers of the frames and of the derived frames (fed both, as the node
+  is in the show: its namespace serves derived values too) that keep each one's payload as
+  the latest of its key (what answering a question needs), and send each of a frame's values
+  as an OSC message (address bytes made once, ``struct.pack``), one binary WebSocket message
+  each (aiohttp), to the one client connected: the show's OSCQuery client LISTENs to every
+  joint, to no derived value;
 - **web**, **midi**, **features**: the web node's frames at the page's rate, the MIDI
   sink's control changes on JACK, the features node's derived frames (their docstrings
   below, each with what the node does beyond it).
@@ -42,30 +52,45 @@ from floor import CONTEXT, Case, cpu_ns, publish
 RATE_HZ = 50
 NODES = ("foxglove", "recorder", "oscquery", "web", "midi", "features")  # the nodes with a floor here
 HEADER = struct.Struct("<BIQ")  # Foxglove's message data: opcode 1, subscription id, log time (ns)
+FED_DERIVED = ("foxglove", "oscquery")  # floors fed a derived frame beside each frame (floor.DERIVED), as nodes
+# Pepper's arm chains (robots.json's, from its URDF): joint (the frame's J5..J16), parent, origin, origin's
+# rotation (quaternion), axis (None: the hand, a point)
+_BENT = (0.0, -0.07845878036326605, 0.0, 0.9969173585528084)
+_NONE = (0.0, 0.0, 0.0, 1.0)
+ARMS = [(f"{side}{joint}", f"{side}{parent}" if parent else "Torso", (x, y * (1 if side == "L" else -1), z), rpy, axis)
+        for side in "LR" for joint, parent, (x, y, z), rpy, axis in (
+            ("ShoulderPitch", "", (-0.057, 0.14974, 0.08682), _NONE, (0.0, 1.0, 0.0)),
+            ("ShoulderRoll", "ShoulderPitch", (0.0, 0.0, 0.0), _NONE, (0.0, 0.0, 1.0)),
+            ("ElbowYaw", "ShoulderRoll", (0.1812, 0.015, 0.00013), _BENT, (1.0, 0.0, 0.0)),
+            ("ElbowRoll", "ElbowYaw", (0.0, 0.0, 0.0), _NONE, (0.0, 0.0, 1.0)),
+            ("WristYaw", "ElbowRoll", (0.15, 0.0, 0.0), _NONE, (1.0, 0.0, 0.0)),
+            ("Hand", "WristYaw", (0.025, 0.0, 0.0), _NONE, None))]
 
 
 def websocket_floor(endpoint: str, port: int, ready: Any, done: Any,
-                    take: Callable[[set[Any], str, bytes], Awaitable[None]] | None,
+                    take: Callable[[dict[Any, Any], str, bytes], Awaitable[None]] | None,
+                    keys: tuple[str, ...] = ("*/frame",),
                     arrive: Callable[[Any], None] | None = None,
-                    pace: Callable[[set[Any]], Awaitable[None]] | None = None) -> None:
-    """Frames from a session listening on ``endpoint``, each handed to ``take(clients, key,
-    payload)`` on the loop of an aiohttp WebSocket server on ``port`` (its clients connected);
-    or to ``arrive(sample)`` where they arrive (Zenoh's callback thread), with ``pace(clients)``
+                    pace: Callable[[dict[Any, Any]], Awaitable[None]] | None = None) -> None:
+    """Samples of ``keys`` from a session listening on ``endpoint``, each handed to
+    ``take(clients, key, payload)`` on the loop of an aiohttp WebSocket server on ``port``
+    (``clients``: each connected client's WebSocketResponse → its transport); or to
+    ``arrive(sample)`` where they arrive (Zenoh's callback thread), with ``pace(clients)``
     running on the loop meanwhile."""
     import zenoh
     from aiohttp import web
 
     async def main() -> None:
         loop = asyncio.get_running_loop()
-        clients: set[web.WebSocketResponse] = set()
+        clients: dict[web.WebSocketResponse, Any] = {}
 
         async def websocket(request: web.Request) -> web.WebSocketResponse:
             ws = web.WebSocketResponse(compress=False)
             await ws.prepare(request)
-            clients.add(ws)
+            clients[ws] = request.transport
             async for _ in ws:
                 pass
-            clients.discard(ws)
+            clients.pop(ws, None)
             return ws
 
         app = web.Application()
@@ -74,15 +99,16 @@ def websocket_floor(endpoint: str, port: int, ready: Any, done: Any,
         await runner.setup()
         await web.TCPSite(runner, "127.0.0.1", port).start()
         session = zenoh.open(zenoh_config(listen=endpoint))
-        subscriber = session.declare_subscriber("*/frame", arrive or (
+        subscribers = [session.declare_subscriber(key, arrive or (
             lambda sample: asyncio.run_coroutine_threadsafe(take(clients, str(sample.key_expr),  # type: ignore[misc]
-                                                                 sample.payload.to_bytes()), loop)))
+                                                                 sample.payload.to_bytes()), loop))) for key in keys]
         paced = asyncio.create_task(pace(clients)) if pace is not None else None
         ready.set()
         await asyncio.to_thread(done.wait)
         if paced is not None:
             paced.cancel()
-        subscriber.undeclare()
+        for subscriber in subscribers:
+            subscriber.undeclare()
         session.close()
         await runner.cleanup()
 
@@ -90,16 +116,52 @@ def websocket_floor(endpoint: str, port: int, ready: Any, done: Any,
 
 
 def foxglove_floor(endpoint: str, port: int, ready: Any, done: Any) -> None:
-    """Each frame as JSON in one binary WebSocket message to the client connected on ``port``."""
+    """What the show's Foxglove client gets of each frame and derived frame (the module's
+    docstring), each bus message's Foxglove messages in one write to the client on ``port``."""
+    import math
+
     import msgpack
 
-    async def send(clients: set[Any], key: str, payload: bytes) -> None:
-        frame = msgpack.unpackb(payload)
-        data = HEADER.pack(1, 1, time.time_ns()) + json.dumps(frame).encode()
-        for ws in list(clients):
-            await ws.send_bytes(data)
+    encode = json.JSONEncoder(separators=(",", ":"), ensure_ascii=False, allow_nan=False).encode
+    ids: dict[str, int] = {}  # channel → subscription id (the client's subscription of it)
+    pack = HEADER.pack
 
-    websocket_floor(endpoint, port, ready, done, send)
+    def message(topic: str, data: dict[str, Any], log_ns: int) -> bytes:
+        body = encode(data).encode()
+        size = HEADER.size + len(body)
+        head = bytes((0x82, size)) if size < 126 else b"\x82\x7e" + size.to_bytes(2, "big") if size < 1 << 16 \
+            else b"\x82\x7f" + size.to_bytes(8, "big")
+        return head + pack(1, ids.get(topic) or ids.setdefault(topic, len(ids) + 1), log_ns) + body
+
+    def transforms(robot: str, frame: dict[str, Any]) -> dict[str, Any]:
+        sec = math.floor(frame["t"])
+        stamp = {"sec": sec, "nsec": round((frame["t"] - sec) * 1e9)}
+        out = []
+        for (joint, parent, (x, y, z), (ax, ay, az, aw), axis), angle in zip(ARMS, frame["v"][5:], strict=True):
+            if axis is not None:  # (the origin's rotation, then the joint's about its axis)
+                s, c = math.sin(angle / 2), math.cos(angle / 2)
+                bx, by, bz, bw = axis[0] * s, axis[1] * s, axis[2] * s, c
+                ax, ay, az, aw = (aw * bx + ax * bw + ay * bz - az * by, aw * by - ax * bz + ay * bw + az * bx,
+                                  aw * bz + ax * by - ay * bx + az * bw, aw * bw - ax * bx - ay * by - az * bz)
+            out.append({"timestamp": stamp, "parent_frame_id": f"{robot}/{parent}",
+                        "child_frame_id": f"{robot}/{joint}", "translation": {"x": x, "y": y, "z": z},
+                        "rotation": {"x": ax, "y": ay, "z": az, "w": aw}})
+        return {"transforms": out}
+
+    async def send(clients: dict[Any, Any], key: str, payload: bytes) -> None:
+        robot, _, section = key.partition("/")
+        frame, log_ns = msgpack.unpackb(payload), time.time_ns()
+        t, seq = frame["t"], frame["seq"]
+        folder = f"{robot}/joints/" if section == "frame" else f"{robot}/derived/"
+        out = [message(folder + name, {"t": t, "seq": seq, "v": v}, log_ns)
+               for name, v in zip(frame["names"], frame["v"], strict=True)]
+        if section == "frame":
+            out += [message(f"{robot}/frame", frame, log_ns), message(f"{robot}/tf", transforms(robot, frame), log_ns)]
+        data = b"".join(out)
+        for transport in list(clients.values()):
+            transport.write(data)
+
+    websocket_floor(endpoint, port, ready, done, send, ("*/frame", "*/derived"))
 
 
 def reader(port: int, ready: Any, done: Any) -> None:
@@ -179,8 +241,10 @@ def oscquery_floor(endpoint: str, port: int, ready: Any, done: Any) -> None:
         text = f"/{robot}/joints/{name}".encode() + b"\0"
         return text + b"\0" * (-len(text) % 4) + b",f\0\0"
 
-    async def send(clients: set[Any], key: str, payload: bytes) -> None:
+    async def send(clients: dict[Any, Any], key: str, payload: bytes) -> None:
         latest[key] = payload
+        if key.endswith("/derived"):  # (kept: no client listens to a derived value)
+            return
         robot, frame = key.partition("/")[0], msgpack.unpackb(payload)
         for name, value in zip(frame["names"], frame["v"], strict=True):
             prefix = addresses.get((robot, name)) or addresses.setdefault((robot, name), address(robot, name))
@@ -188,7 +252,7 @@ def oscquery_floor(endpoint: str, port: int, ready: Any, done: Any) -> None:
             for ws in list(clients):
                 await ws.send_bytes(data)
 
-    websocket_floor(endpoint, port, ready, done, send)
+    websocket_floor(endpoint, port, ready, done, send, ("*/frame", "*/derived"))
 
 
 def web_floor(endpoint: str, port: int, ready: Any, done: Any, update_hz: float = 25.0) -> None:
@@ -210,7 +274,7 @@ def web_floor(endpoint: str, port: int, ready: Any, done: Any, update_hz: float 
         with lock:
             latest[str(sample.key_expr).partition("/")[0]] = frame
 
-    async def push(clients: set[Any]) -> None:
+    async def push(clients: dict[Any, Any]) -> None:
         period, due = 1.0 / update_hz, time.monotonic()
         while True:
             due += period
@@ -224,7 +288,7 @@ def web_floor(endpoint: str, port: int, ready: Any, done: Any, update_hz: float 
                 for ws in list(clients):
                     await ws.send_str(text)
 
-    websocket_floor(endpoint, port, ready, done, None, keep, push)
+    websocket_floor(endpoint, port, ready, done, None, arrive=keep, pace=push)
 
 
 MIDI_RANGE = (-8.0, 8.0)  # the floor's joints' range, mapped onto 0..127: a few messages a joint a second
@@ -402,32 +466,30 @@ def subscribed(endpoint: str, each: Any, ready: Any, done: Any, key: str = "*/fr
     session.close()
 
 
-def measure(seconds: float, warmup_s: float = 3.0) -> dict[str, float]:
-    """CPU % of one core of each floor over ``seconds`` after ``warmup_s``, each fed its own
-    publisher of one robot × 17 joints at ``RATE_HZ``."""
+def measure(seconds: float, warmup_s: float = 3.0, nodes: tuple[str, ...] = NODES) -> dict[str, float]:
+    """CPU % of one core of each floor (of ``nodes``) over ``seconds`` after ``warmup_s``, each
+    fed its own publisher of one robot × 17 joints at ``RATE_HZ``."""
+    if not nodes:
+        return {}
     done = CONTEXT.Event()
-    endpoints = {name: f"tcp/127.0.0.1:{free_port()}" for name in NODES}
-    web_ports = {name: free_port() for name in ("foxglove", "oscquery", "web")}  # (each with a client reading)
+    endpoints = {name: f"tcp/127.0.0.1:{free_port()}" for name in nodes}
+    web_ports = {name: free_port() for name in ("foxglove", "oscquery", "web") if name in nodes}  # (each with a client)
     readies = {name: CONTEXT.Event() for name in (*endpoints, *(f"{name} client" for name in web_ports))}
     derived, derived_at = CONTEXT.Event(), f"tcp/127.0.0.1:{free_port()}"  # (the features floor's reader)
     with tempfile.TemporaryDirectory() as folder:
-        floors = {
-            "foxglove": CONTEXT.Process(target=foxglove_floor, args=(endpoints["foxglove"], web_ports["foxglove"],
-                                                                     readies["foxglove"], done), daemon=True),
-            "recorder": CONTEXT.Process(target=recorder_floor, args=(endpoints["recorder"], folder,
-                                                                     readies["recorder"], done), daemon=True),
-            "oscquery": CONTEXT.Process(target=oscquery_floor, args=(endpoints["oscquery"], web_ports["oscquery"],
-                                                                     readies["oscquery"], done), daemon=True),
-            "web": CONTEXT.Process(target=web_floor, args=(endpoints["web"], web_ports["web"], readies["web"], done),
-                                   daemon=True),
-            "midi": CONTEXT.Process(target=midi_floor, args=(endpoints["midi"], readies["midi"], done), daemon=True),
-            "features": CONTEXT.Process(target=features_floor, args=(endpoints["features"], derived_at,
-                                                                     readies["features"], done), daemon=True),
-        }
-        others: list[Any] = [CONTEXT.Process(target=derived_reader, args=(derived_at, derived, done), daemon=True)]
+        targets = {"foxglove": (foxglove_floor, (web_ports.get("foxglove"),)), "recorder": (recorder_floor, (folder,)),
+                   "oscquery": (oscquery_floor, (web_ports.get("oscquery"),)),
+                   "web": (web_floor, (web_ports.get("web"),)), "midi": (midi_floor, ()),
+                   "features": (features_floor, (derived_at,))}
+        floors = {name: CONTEXT.Process(target=target, args=(endpoints[name], *where, readies[name], done),
+                                        daemon=True) for name, (target, where) in targets.items() if name in nodes}
+        others: list[Any] = []
+        if "features" in nodes:
+            others.append(CONTEXT.Process(target=derived_reader, args=(derived_at, derived, done), daemon=True))
+        else:
+            derived.set()
         try:
-            others[0].start()
-            for process in floors.values():
+            for process in (*others, *floors.values()):
                 process.start()
             if not all(readies[name].wait(30) for name in floors):
                 raise RuntimeError("the node floors did not start")
@@ -438,11 +500,11 @@ def measure(seconds: float, warmup_s: float = 3.0) -> dict[str, float]:
             if not all(readies[f"{name} client"].wait(30) for name in web_ports) or not derived.wait(30):
                 raise RuntimeError("the node floors' clients did not connect")
             handles = []  # (kept until the end: a queue collected here is gone for the child too)
-            for endpoint in endpoints.values():
+            for name, endpoint in endpoints.items():
                 fed, out = CONTEXT.Event(), CONTEXT.Queue()
                 others.append(CONTEXT.Process(target=publish, args=(endpoint, Case(1, 17), seconds + warmup_s + 1,
-                                                                     fed, out), kwargs={"rate_hz": RATE_HZ},
-                                              daemon=True))
+                                                                     fed, out), daemon=True,
+                                              kwargs={"rate_hz": RATE_HZ, "derived": name in FED_DERIVED}))
                 others[-1].start()
                 handles.append((fed, out))
             if not all(fed.wait(30) for fed, _ in handles):

@@ -23,6 +23,15 @@ the features node's derived values too). CPU is each process's, from
 ``/proc/<pid>/task/*/schedstat`` over the window after a warm-up; medians of rounds.
 
     .venv/bin/python bench/show.py [--rounds 2] [--seconds 8] [--name show]
+    .venv/bin/python bench/show.py --nodes foxglove,oscquery  # those nodes and their floors only
+    .venv/bin/python bench/show.py --nodes foxglove,oscquery --against DIR  # and DIR's beside them
+
+``--nodes``: only the named nodes in a process each, with the sim and the features node that
+feed them (measured too), beside their floors; no one-process layout (quicker, for one node's
+before and after). With ``--against DIR`` too, the same nodes of the tree in DIR run beside
+them on the same bus, fed the same frames, each with clients of its own, measured over the
+same window: a change's before and after in the same conditions (a run's ratio to a floor
+measured apart moves by ±15 % on a shared machine).
 
 "Before" figures come from the same script run against an older tree:
 ``PYTHONPATH=<dir with sonibus/{bus,adapters,schemas} of that tree> .venv/bin/python
@@ -118,21 +127,24 @@ async def _read(ws: aiohttp.ClientWebSocketResponse, counts: dict[str, int], nam
 
 async def _clients(ports: dict[str, int], counts: dict[str, int], stop: asyncio.Event, ready: Any) -> None:
     """A page on the web node, an OSCQuery client LISTENing to every joint, a Foxglove client
-    subscribed to every channel; each reads all it is sent until ``stop``."""
+    subscribed to every channel (each of those whose node has a port in ``ports``); each reads
+    all it is sent until ``stop``."""
     async with aiohttp.ClientSession() as session:
         deadline = time.monotonic() + 30
         while True:
             try:
-                web = await session.ws_connect(f"ws://127.0.0.1:{ports['web']}/ws")
-                oscquery = await session.ws_connect(f"ws://127.0.0.1:{ports['oscquery']}/")
+                web = await session.ws_connect(f"ws://127.0.0.1:{ports['web']}/ws") if "web" in ports else None
+                oscquery = await session.ws_connect(f"ws://127.0.0.1:{ports['oscquery']}/") \
+                    if "oscquery" in ports else None
                 foxglove = await session.ws_connect(f"ws://127.0.0.1:{ports['foxglove']}",
-                                                    protocols=("foxglove.sdk.v1", "foxglove.websocket.v1"))
+                                                    protocols=("foxglove.sdk.v1", "foxglove.websocket.v1")) \
+                    if "foxglove" in ports else None
                 break
             except aiohttp.ClientError:
                 if time.monotonic() > deadline:
                     raise
                 await asyncio.sleep(0.2)
-        for joint in JOINTS:
+        for joint in JOINTS if oscquery is not None else ():
             await oscquery.send_str(json.dumps({"COMMAND": "LISTEN", "DATA": f"/pepper/joints/{joint}"}))
         subscribed: set[int] = set()
 
@@ -149,12 +161,14 @@ async def _clients(ports: dict[str, int], counts: dict[str, int], stop: asyncio.
                 elif message.type == aiohttp.WSMsgType.BINARY:
                     counts["foxglove"] = counts.get("foxglove", 0) + 1
 
-        tasks = [asyncio.create_task(_read(web, counts, "web")),
-                 asyncio.create_task(_read(oscquery, counts, "oscquery")), asyncio.create_task(foxglove_reader())]
+        tasks = [*([asyncio.create_task(_read(web, counts, "web"))] if web is not None else []),
+                 *([asyncio.create_task(_read(oscquery, counts, "oscquery"))] if oscquery is not None else []),
+                 *([asyncio.create_task(foxglove_reader())] if foxglove is not None else [])]
         ready.set()
         await stop.wait()
         for ws in (web, oscquery, foxglove):
-            await ws.close()
+            if ws is not None:
+                await ws.close()
         for task in tasks:
             task.cancel()
 
@@ -162,7 +176,7 @@ async def _clients(ports: dict[str, int], counts: dict[str, int], stop: asyncio.
 def clients(ports: dict[str, int], counts: dict[str, int], ready: Any, done: Any) -> None:
     """The clients and a UDP receiver for the OSC node, in this process (not measured)."""
     receiver = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-    receiver.bind(("127.0.0.1", ports["osc"]))
+    receiver.bind(("127.0.0.1", ports["osc"]))  # (always bound: the OSC node, if run, sends to it)
     receiver.settimeout(0.2)
 
     def drain() -> None:
@@ -217,19 +231,28 @@ def window(pids: dict[str, int], seconds: float) -> dict[str, float]:
 
 
 def measure_show(folder: Path, seconds: float, split: bool, tree: str = "",
-                 waits: dict[str, float] | None = None) -> dict[str, float]:
+                 waits: dict[str, float] | None = None, nodes: tuple[str, ...] = NODES,
+                 against: str = "") -> dict[str, float]:
     """The show in one process (``{"show": cpu}``) or in a process per node (cpu by node), clients
     attached; ``tree``: the one process on another tree (see ``sonibus``); ``waits``: filled with
-    each process's voluntary context switches a second over the same window."""
-    ports = {name: free_port(socket.SOCK_DGRAM if name in ("osc", "gateway") else socket.SOCK_STREAM)
-             for name in ("osc", "gateway", "web", "oscquery", "foxglove")}
+    each process's voluntary context switches a second over the same window; ``nodes``: those
+    only, a process each (``split``); ``against``: with ``split``, the tree in that folder's
+    nodes too (but the sim and features: ``"<node> @against"``), clients of their own."""
+    def show_ports() -> dict[str, int]:
+        return {name: free_port(socket.SOCK_DGRAM if name in ("osc", "gateway") else socket.SOCK_STREAM)
+                for name in ("osc", "gateway", "web", "oscquery", "foxglove")}
+    ports = show_ports()
     config = folder / "show.toml"
     config.write_text(SHOW.format(rate=RATE_HZ, folder=folder, **ports))
+    twins = [node for node in nodes if node not in ("sim", "features")] if split and against else []
+    twin_ports = show_ports()
+    (folder / "against.toml").write_text(SHOW.format(rate=RATE_HZ, folder=folder, **twin_ports))
     endpoint = f"tcp/127.0.0.1:{free_port()}"
     processes: dict[str, subprocess.Popen[bytes]] = {}
     manager = CONTEXT.Manager()
     counts, ready, done = manager.dict(), CONTEXT.Event(), CONTEXT.Event()
-    client = None
+    twin_counts, twin_ready = manager.dict(), CONTEXT.Event()
+    client = twin_client = None
     try:
         if split:  # (every node connects to a router, no node's process the others' meeting point; peers
             # still link to each other directly, learnt by gossip: the router's CPU is said apart, ~0.7 %)
@@ -237,22 +260,35 @@ def measure_show(folder: Path, seconds: float, split: bool, tree: str = "",
                 processes["router"] = subprocess.Popen([SONIBUS, "router", "--no-multicast", "--listen", endpoint],
                                                        stdout=out, stderr=subprocess.STDOUT, start_new_session=True)
             started(folder / "router.log", processes["router"], "sonibus router")
-            for node in NODES:
+            for node in nodes:
                 processes[node] = sonibus(config, folder / f"{node}.log", "--only", node, "--connect", endpoint)
-            for node in NODES:
+            for node in twins:
+                processes[f"{node} @against"] = sonibus(folder / "against.toml", folder / f"{node}-against.log",
+                                                        "--only", node, "--connect", endpoint, tree=against)
+            for node in nodes:
                 started(folder / f"{node}.log", processes[node])
+            for node in twins:
+                started(folder / f"{node}-against.log", processes[f"{node} @against"])
         else:
             processes["show"] = sonibus(config, folder / "show.log", "--listen", endpoint, tree=tree)
             started(folder / "show.log", processes["show"])
-        client = CONTEXT.Process(target=clients, args=(ports, counts, ready, done), daemon=True)
+        served = {name: port for name, port in ports.items() if name in nodes or name == "osc"}
+        client = CONTEXT.Process(target=clients, args=(served, counts, ready, done), daemon=True)
         client.start()
-        if not ready.wait(60):
+        if twins:
+            twin_served = {name: port for name, port in twin_ports.items() if name in twins or name == "osc"}
+            twin_client = CONTEXT.Process(target=clients, args=(twin_served, twin_counts, twin_ready, done),
+                                          daemon=True)
+            twin_client.start()
+        if not ready.wait(60) or (twins and not twin_ready.wait(60)):
             raise RuntimeError("the clients did not connect")
         deadline = time.monotonic() + 30  # (every client fed before the warm-up: a busy machine starts slowly)
-        while min(counts.get(name, 0) for name in ("osc", "web", "oscquery", "foxglove")) == 0:
+        while (min(counts.get(name, 0) for name in ("osc", "web", "oscquery", "foxglove") if name in nodes) == 0
+               or any(twin_counts.get(name, 0) == 0 for name in ("osc", "web", "oscquery", "foxglove")
+                      if name in twins)):
             if time.monotonic() > deadline or not client.is_alive():
-                logs = {name: (folder / f"{name}.log").read_text(errors="replace")[-600:] for name in processes}
-                raise RuntimeError(f"a client received nothing: {dict(counts)}; {logs}")
+                logs = {name: (folder / f"{name}.log").read_text(errors="replace")[-600:] for name in nodes}
+                raise RuntimeError(f"a client received nothing: {dict(counts)}, {dict(twin_counts)}; {logs}")
             time.sleep(0.2)
         time.sleep(WARMUP_S)
         before = {name: switches(p.pid) for name, p in processes.items()}
@@ -262,10 +298,11 @@ def measure_show(folder: Path, seconds: float, split: bool, tree: str = "",
         return cpu
     finally:
         done.set()
-        if client is not None:
-            client.join(10)
-            if client.is_alive():
-                client.kill()
+        for each in (client, twin_client):
+            if each is not None:
+                each.join(10)
+                if each.is_alive():
+                    each.kill()
         for process in processes.values():
             stop_process(process)
         manager.shutdown()
@@ -333,8 +370,15 @@ def main() -> None:
     parser.add_argument("--one-process", action="store_true",
                         help="only the show in one process (no floors, no process per node)")
     parser.add_argument("--against", metavar="DIR", default="",
-                        help="with --one-process: each round also the show on the tree in DIR (DIR/sonibus/{bus,...})")
+                        help="with --one-process: each round also the show on the tree in DIR (DIR/sonibus/{bus,...}); "
+                             "with --nodes: those nodes of that tree beside them, on the same bus")
+    parser.add_argument("--nodes", default="", help="comma-separated: only these nodes (with the sim and features "
+                        "that feed them), a process each, and their floors; no one-process layout")
     args = parser.parse_args()
+    chosen = tuple(node for node in args.nodes.split(",") if node)
+    if unknown := set(chosen) - set(NODES):
+        parser.error(f"--nodes {args.nodes}: no node {', '.join(sorted(unknown))} (the show's: {', '.join(NODES)})")
+    nodes = tuple(node for node in NODES if node in {"sim", "features", *chosen}) if chosen else NODES
     if args.one_process:
         one_process(args)
         return
@@ -345,9 +389,11 @@ def main() -> None:
         jack = start_jack(folder / "jackd.log")
         try:
             for index in range(args.rounds):
-                got = {"floors": {**measure_floors(args.seconds), **node_floors.measure(args.seconds, WARMUP_S)}}
-                for split in ((True, False) if index % 2 == 0 else (False, True)):
-                    got["split" if split else "one"] = measure_show(folder, args.seconds, split)
+                own = tuple(node for node in node_floors.NODES if node in nodes)
+                got = {"floors": {**measure_floors(args.seconds), **node_floors.measure(args.seconds, WARMUP_S, own)}}
+                for split in ((True,) if chosen else (True, False) if index % 2 == 0 else (False, True)):
+                    got["split" if split else "one"] = measure_show(folder, args.seconds, split, nodes=nodes,
+                                                                    against=args.against if chosen else "")
                 rounds.append(got)
                 load.append(os.getloadavg()[0])
                 print(f"round {index + 1}: " + "; ".join(f"{layout}: " + ", ".join(
@@ -362,16 +408,22 @@ def main() -> None:
     machine = f"{os.cpu_count()} cores, load {min(load):.2f}–{max(load):.2f}"
     tree = os.environ.get("PYTHONPATH", "") or "this tree"
     receive, floors = med["floors"]["subscriber"], med["floors"]
-    nodes = {node: cpu for node, cpu in med["split"].items() if node != "router"}
+    cpus = {node: cpu for node, cpu in med["split"].items() if node != "router"}
     summary = [{"scenario": f"(show) one process, every node, 1 robot at {RATE_HZ} Hz, clients attached: CPU",
                 "sonibus": f"{med['one']['show']:.1f} %",
-                "baseline": f"{sum(nodes.values()):.1f} % as a process per node (and their router "
-                            f"{med['split'].get('router', 0.0):.1f} %)", "ratio": ""}]
-    for node, cpu in nodes.items():
+                "baseline": f"{sum(cpus.values()):.1f} % as a process per node (and their router "
+                            f"{med['split'].get('router', 0.0):.1f} %)", "ratio": ""}] if "one" in med else []
+    for node, cpu in cpus.items():
+        if node.endswith(" @against"):  # (the same node of another tree, beside it: the row of this tree's says it)
+            continue
+        if f"{node} @against" in cpus:
+            summary.append({"scenario": f"(show) {node} node, own process, beside {args.against}'s on one bus: CPU",
+                            "sonibus": f"{cpu:.1f} %", "baseline": f"{cpus[node + ' @against']:.1f} %",
+                            "ratio": f"{cpu / cpus[node + ' @against']:.2f}×"})
         base = floors["publisher"] if node == "sim" else floors["osc sink + derived"] if node == "osc" else receive
         label = ("publisher" if node == "sim" else "minimal OSC sink of joints and derived values" if node == "osc"
                  else "empty subscriber")
-        if node in node_floors.NODES:  # (their own: bench/node_floors.py)
+        if node in floors and node in node_floors.NODES:  # (their own: bench/node_floors.py)
             base, label = floors[node], f"{node} floor"
         ratio = f"{cpu / base:.2f}×"
         if node == "osc":

@@ -33,19 +33,21 @@ took 14 % of the node's CPU).
 
 from __future__ import annotations
 
+import contextlib
 import json
 import time
 from collections import deque
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from threading import Lock
 from typing import TYPE_CHECKING, Any
 
 from aiohttp import WSMessage, WSMsgType, web
 
-from sonibus.bus.web import CLIENT_BACKLOG, CLIENT_BACKLOG_BYTES, WebClient, WebServer, close_clients
+from sonibus.bus.web import WebServer, close_clients
 
 from . import wire
+from .framed import FramedClient
 
 if TYPE_CHECKING:
     from sonibus.bus.adapter import Adapter
@@ -57,7 +59,6 @@ MAX_OUTBOX = 8192           # messages waiting for the server's loop; past it a 
 HEARTBEAT_S = 10.0          # a ping this often; a client that does not answer within half of it is dropped
 HISTORY = 256               # messages an event channel keeps for a subscription taken a moment after advertising
 HISTORY_BYTES = 16 << 20    # bytes of JSON all event channels keep together (past it: the latest only)
-WRITE_BYTES = 64 << 10      # bytes of a client's messages written in one go (then its socket's room is checked)
 
 
 @dataclass
@@ -70,62 +71,18 @@ class _Channel:
     history_bytes: int = 0
 
 
-class _Client(WebClient):
-    """A client and its subscriptions (subscription id → channel id). What it is due waits in
-    its backlog as WebSocket frames in parts (a message's parts are shared by every client:
-    only its 4-byte subscription id is the client's own), bounded as ``WebClient``'s; the
-    sender writes all that waits in one transport write (up to ``WRITE_BYTES``), not one
-    ``send`` per message, and waits for the client to take it when its socket is full."""
+class _Client(FramedClient):
+    """A client and its subscriptions (subscription id → channel id); what it is due waits as
+    frames in parts (``FramedClient``): a message's parts are shared by every client, only its
+    4-byte subscription id is the client's own."""
 
     def __init__(self, ws: web.WebSocketResponse, on_drop: Callable[[], None], request: web.Request,
                  on_write: Callable[[], None]) -> None:
-        super().__init__(ws, on_drop, request.transport)
-        self.on_write = on_write
-        self.protocol = request.protocol  # (its flow control: paused while the socket's buffer is full)
+        super().__init__(ws, on_drop, request, on_write)
         self.subscriptions: dict[int, int] = {}
         self.advertised: set[int] = set()  # channel ids told to it (an advertisement never goes twice)
         self.since: dict[int, int] = {}    # channel id → the number of its first message since it was told of it
                                            # (until its first subscription; on the loop)
-        self.backlog: deque[tuple[int, tuple[bytes, ...]]] = deque()  # type: ignore[assignment]  # (size, parts)
-
-    def push(self, message: str | bytes, kept: bool = False) -> None:
-        """A text (``str``) or binary message, framed; ``kept`` is not served here (the hub
-        replies with statuses, which may be dropped like the rest)."""
-        data = message.encode() if isinstance(message, str) else message
-        self.put((wire.frame_header(wire.TEXT if isinstance(message, str) else wire.BINARY, len(data)), data))
-
-    def put(self, parts: tuple[bytes, ...]) -> None:
-        """A WebSocket frame, as parts to be joined (parts shared with other clients are not copied)."""
-        size = sum(map(len, parts))
-        self.backlog.append((size, parts))
-        self.size += size
-        while len(self.backlog) > CLIENT_BACKLOG or (self.size > CLIENT_BACKLOG_BYTES and len(self.backlog) > 1):
-            self.size -= self.backlog.popleft()[0]
-            self.on_drop()
-        self.waiting.set()
-
-    async def send_all(self) -> None:
-        backlog, transport = self.backlog, self.transport
-        while not self.ws.closed:
-            await self.waiting.wait()
-            self.waiting.clear()
-            while backlog and not self.ws.closed:
-                size, parts = backlog.popleft()
-                batch = list(parts)
-                while backlog and size < WRITE_BYTES:
-                    more, parts = backlog.popleft()
-                    batch.extend(parts)
-                    size += more
-                self.size -= size
-                if transport is None or transport.is_closing():
-                    return  # the client went away; its handler ends the connection
-                self.on_write()  # (counted first: a client may read what is written before this line runs)
-                transport.write(b"".join(batch))  # (whole frames: aiohttp's own, a ping, go between them)
-                if self.protocol.writing_paused:
-                    try:
-                        await self.protocol._drain_helper()  # (as aiohttp's own writer waits)
-                    except ConnectionError:
-                        return
 
 
 class Hub:
@@ -146,6 +103,7 @@ class Hub:
         self._lock = Lock()  # channels, latest messages, subscribers: the adapter's thread and the loop
         self._outbox: list[tuple[Callable[..., None], tuple[Any, ...]]] = []  # for the loop, in order (under _lock)
         self._waiting = 0  # messages in the outbox's batches (under _lock)
+        self._batching = False  # the loop serves messages and flushes after them (batch): no call to it (under _lock)
         web_server.app.router.add_get("/{path:.*}", self._websocket)  # (a client may name any path)
         web_server.app.on_shutdown.append(lambda app: close_clients(list(self._clients)))
 
@@ -164,29 +122,35 @@ class Hub:
         ``history``: a channel of events, whose messages since a client was told of it reach
         its subscription (see the module's docstring). From any thread; what ``to_json``
         raises (not strict JSON) reaches the caller."""
-        for _, problem in self.log_all([(topic, message, history)], log_time_ns, lambda id_, _: describe(id_)):
+        for _, problem in self.log_all([(topic, message)], log_time_ns, lambda id_, _: describe(id_), history):
             if isinstance(problem, Exception):
                 raise problem
             return False
         return True
 
-    def log_all(self, items: list[tuple[str, Any, bool]], log_time_ns: int,
-                describe: Callable[[int, str], wire.Channel]) -> list[tuple[str, Exception | None]]:
-        """Each ``(topic, message, history)`` as ``log`` logs it, in order, all at ``log_time_ns``
-        (what one message from the bus gives: a frame's joints, its views), with one hold of
-        the lock and one batch for the server's loop (issue 35: what was paid per message,
-        once). What could not be logged, with why: ``(topic, None)`` for a channel that cannot
-        be made (``MAX_CHANNELS``), ``(topic, exception)`` for what ``to_json`` raised."""
+    def log_all(self, items: list[tuple[str, Any]], log_time_ns: int, describe: Callable[[int, str], wire.Channel],
+                history: bool = False) -> list[tuple[str, Exception | None]]:
+        """Each ``(topic, message)`` as ``log`` logs it (``history`` for all of them), in order,
+        all at ``log_time_ns`` (what one message from the bus gives: a frame's joints, its
+        views), with one hold of the lock and one batch for the server's loop (issue 35: what
+        was paid per message, once). What could not be logged, with why: ``(topic, None)``
+        for a channel that cannot be made (``MAX_CHANNELS``), ``(topic, exception)`` for what
+        ``to_json`` raised."""
         problems: list[tuple[str, Exception | None]] = []
-        kept: list[tuple[str, Any, bool, bytes | None]] = []
-        for topic, message, history in items:
-            try:  # (events: a few a second)
-                kept.append((topic, message, history, self.to_json(message) if history else None))
-            except (ValueError, TypeError) as exc:
-                problems.append((topic, exc))
+        encoded: list[bytes] = []  # (events: a few a second) their JSON first, for their history
+        if history:
+            kept = []
+            for topic, message in items:
+                try:
+                    encoded.append(self.to_json(message))
+                    kept.append((topic, message))
+                except (ValueError, TypeError) as exc:
+                    problems.append((topic, exc))
+            items = kept
         due: list[tuple[list[tuple[_Client, int]], str, Any, bytes | None]] = []
         with self._lock:
-            for topic, message, history, payload in kept:
+            for i, (topic, message) in enumerate(items):
+                payload = encoded[i] if history else None
                 channel = self._channels.get(topic)
                 if channel is None:
                     if len(self._channels) >= MAX_CHANNELS:
@@ -248,15 +212,42 @@ class Hub:
     def _later(self, function: Callable[..., None], *args: Any) -> None:
         """``function(*args)`` on the server's loop, after what is in the outbox (under ``_lock``)."""
         self._outbox.append((function, args))
-        if len(self._outbox) == 1 and not self.web.call(self._flush):
+        if len(self._outbox) == 1 and not self._batching and not self.web.call(self._flush):
             self._outbox.clear()  # (the server is not running: nobody to tell)
             self._waiting = 0
 
+    @contextlib.contextmanager
+    def batch(self) -> Iterator[None]:
+        """On the server's loop: what is logged in the block is flushed at its end, by this
+        call, not by a call to the loop (a write to its pipe, a wake-up of itself)."""
+        with self._lock:
+            self._batching = True
+        try:
+            yield
+        finally:
+            with self._lock:
+                self._batching = False
+            self._flush()
+
     def _flush(self) -> None:
+        """What the outbox holds, in order; the messages of consecutive ``_send``s gathered per
+        client and handed to it at once (``_Client.put_frames``: one write when it can)."""
         with self._lock:
             outbox, self._outbox, self._waiting = self._outbox, [], 0
+        due: dict[_Client, list[bytes]] = {}  # client → its frames' parts, in order
         for function, args in outbox:
+            if function == self._send:
+                self._send(*args, due=due)
+                continue
+            self._hand(due)  # (what was gathered goes before an advertisement that follows it)
             function(*args)
+        self._hand(due)
+
+    @staticmethod
+    def _hand(due: dict[_Client, list[bytes]]) -> None:
+        for client, parts in due.items():
+            client.put_frames(parts, 3)
+        due.clear()
 
     # -- on the server's loop ------------------------------------------------------------
 
@@ -307,11 +298,16 @@ class Hub:
                     client.since.pop(channel_id, None)
                 client.push(json.dumps(wire.unadvertise(told)))
 
-    def _send(self, sends: list[tuple[list[tuple[_Client, int]], bytes]], log_time_ns: int) -> None:
+    def _send(self, sends: list[tuple[list[tuple[_Client, int]], bytes]], log_time_ns: int, *,
+              due: dict[_Client, list[bytes]]) -> None:
+        """Each message's frame, for each of its subscribers, added to ``due`` (``_flush``'s)."""
         for subscribers, payload in sends:
             head, tail = wire.data_frame(log_time_ns, payload)  # (once for every client)
             for client, subscription in subscribers:
-                client.put((head, wire.subscription(subscription), tail))
+                parts = due.get(client)
+                if parts is None:
+                    parts = due[client] = []
+                parts += (head, wire.subscription(subscription), tail)
 
     def _receive(self, client: _Client, message: WSMessage) -> None:
         if message.type == WSMsgType.BINARY:

@@ -31,17 +31,18 @@ from importlib.metadata import version
 from typing import Any
 
 from sonibus.adapters.osc.gateway import parse_endpoint
-from sonibus.adapters.recorder.channels import MESSAGE_ENCODING, SCHEMA_ENCODING, channel_schema, to_json
+from sonibus.adapters.recorder.channels import MESSAGE_ENCODING, SCHEMA_ENCODING, channel_schema
 from sonibus.bus import codec, keys
 from sonibus.bus.adapter import Adapter
 from sonibus.bus.info import InfoRequests
 from sonibus.bus.options import bad
 from sonibus.bus.presence import watch_robots
 from sonibus.bus.queue import SampleQueue
-from sonibus.bus.streams import Streams, if_free, without_audio
+from sonibus.bus.streams import Streams, without_audio
 from sonibus.bus.web import Limits, WebServer
 
 from . import wire
+from .framed import Handoff
 from .hub import MAX_CHANNELS, Hub
 from .views import DERIVED_INFO, LOG, Views, samples_of
 
@@ -90,17 +91,19 @@ class FoxgloveServer(Adapter):
         cfg: FoxgloveConfig = self.config
         host, port = parse_endpoint("listen", cfg.listen)
         self.web = WebServer(self, host, port, key="listen", limits=cfg.limits, browsers=True, origins=cfg.origins)
-        self.hub = Hub(self, self.web, cfg.name, to_json, {"sonibus": version("sonibus")})
+        self.hub = Hub(self, self.web, cfg.name, wire.to_json, {"sonibus": version("sonibus")})
         self._infos: dict[str, dict[str, Any]] = {}  # info and info/derived keys → their latest message
         self._queue = self.own(SampleQueue(cfg.queue))
         self._info_seen: set[str] = set()
         self._robots: set[str] = set()  # robots served: their messages pass, and their state is kept
         self._info = InfoRequests(self.bus, self._take_info, lambda robot, text: self.warn("info", text))
         self._views = Views(self.bus, self._take_derived_info)
-        # Frames are taken where they arrive (a thread hand-off less, as the OSC sink's), the rest from the
-        # queue by the serve worker; one lock between them guards the node's state and the order of its messages.
+        # Frames are handed to the server's loop as they arrive and served there (issue 35: the loop wakes for
+        # them anyway, and a Zenoh thread that made their JSON fought it for the GIL), the rest from the queue by
+        # the serve worker; one lock between them guards the node's state and the order of its messages.
         self._state = threading.Lock()
         self._streams: Streams | None = None  # (a frame that arrives while Streams subscribes: queued)
+        self._handoff = Handoff(self.web, self._arrivals)
         self._streams = Streams(self.bus, cfg.subscribe, self._queue, per_joint_keys=cfg.per_joint_keys,
                                 direct=self._direct)
         self._comings: deque[tuple[str, bool]] = deque(maxlen=4096)  # robots come or gone (a Zenoh thread)
@@ -143,9 +146,16 @@ class FoxgloveServer(Adapter):
                         self._log(key, message)
 
     def _direct(self, key: str, payload: Any) -> bool:
-        """A frame, on its subscription's callback thread (``Streams``' ``direct``); into the
-        queue instead (False) while the serve worker holds the state (``if_free``)."""
-        return self._streams is not None and if_free(self._state, lambda: self._serve_one(key, payload))
+        """A frame, on its subscription's callback thread (``Streams``' ``direct``): handed to the
+        server's loop (``Handoff``: ``_arrivals``), or into the queue (False)."""
+        return self._streams is not None and self._handoff.put(key, payload)
+
+    def _arrivals(self, arrived: list[tuple[str, Any]]) -> None:
+        """Frames served on the server's loop; what they give the clients handed to them at
+        the end, in one go (``Hub.batch``)."""
+        with self.hub.batch(), self._state:
+            for key, payload in arrived:
+                self._serve_one(key, payload)
 
     def _serve_one(self, key: str, payload: Any) -> None:  # (holding _state)
         self._changes()
@@ -198,16 +208,17 @@ class FoxgloveServer(Adapter):
             self._infos[key] = incoming.message
         elif robot not in self._info_seen:
             self._info.ask(robot)
-        self._log_all([*samples_of(incoming), *self._views.of(incoming)])
+        # (an event's channels, its own and <robot>/log, keep a history: Hub.log's)
+        self._log_all([*samples_of(incoming), *self._views.of(incoming)], incoming.source.section == "events")
 
     def _log(self, key: str, message: dict[str, Any]) -> None:
         """``message`` on the channel of ``key`` (advertised now if new), to the clients subscribed."""
-        self._log_all([(key, message)])
+        self._log_all([(key, message)], _events(key))
 
-    def _log_all(self, messages: list[tuple[str, dict[str, Any]]]) -> None:
-        """Each ``(key, message)`` on its channel, in one go (``Hub.log_all``)."""
-        problems = self.hub.log_all([(key, message, _events(key)) for key, message in messages], time.time_ns(),
-                                    _describe)
+    def _log_all(self, messages: list[tuple[str, dict[str, Any]]], events: bool) -> None:
+        """Each ``(key, message)`` on its channel, in one go (``Hub.log_all``); ``events``: all of
+        them on channels of events (``_events``)."""
+        problems = self.hub.log_all(messages, time.time_ns(), _describe, events)
         for key, exc in problems:
             if exc is None:
                 self.warn("channels", f"'{key}' not served: {MAX_CHANNELS} channels already")

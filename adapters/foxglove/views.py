@@ -104,11 +104,20 @@ def samples_of(incoming: Incoming) -> list[tuple[str, dict[str, Any]]]:
 
 
 def joint_samples(frame: Incoming) -> list[tuple[str, dict[str, Any]]]:
-    """The samples of a frame's selected joints (``Incoming.samples``), each on its joint's key."""
-    robot = frame.source.robot
-    chosen = {sample.source.name for sample in frame.samples}
-    return [(keys.joint(robot, name), sample) for name, sample in messages.frame_samples(frame.message)
-            if name in chosen]
+    """The samples of a frame's selected joints (``Incoming.samples``), each on its joint's key
+    (``messages.frame_samples``'s: ``t``, ``seq``, ``v`` and the extra quantities), from its
+    ``Selected`` (no ``Incoming`` made per joint)."""
+    message, chosen = frame.message, frame.selected
+    if chosen is None:
+        return []
+    t, seq, values = message["t"], message["seq"], message["v"]
+    index = range(len(values)) if chosen.indices is None else chosen.indices
+    extra = [(q, v) for q, v in message.items() if q not in messages.FRAME_FIELDS]
+    if not extra:
+        return [(source.key, {"t": t, "seq": seq, "v": values[i]}) for source, i in zip(chosen.sources, index,
+                                                                                           strict=True)]
+    return [(source.key, {"t": t, "seq": seq, "v": values[i], **{q: v[i] for q, v in extra}})
+            for source, i in zip(chosen.sources, index, strict=True)]
 
 
 def selected(frame: Incoming) -> dict[str, Any]:

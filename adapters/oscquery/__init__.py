@@ -214,9 +214,11 @@ class OscQuery(Adapter):
             self.live.keep(message)
             if self.server.listened:  # (else nothing more to do for this frame)
                 listened = self.server.listened
-                for source, values in values_of(message):
-                    if (path := "/" + source.key) in listened:
-                        self._value(path, values, span_of(source), out)
+                chosen = [(path, list(values), span_of(source)) for source, values in values_of(message)
+                          if (path := "/" + source.key) in listened]
+                if chosen:
+                    for (path, _, _), served in zip(chosen, self.live.update_all(chosen), strict=True):
+                        self._served(path, served, out)
         else:
             source = message.source
             if source.section == "derived" and source.robot not in self._present and source.robot not in self._alone:
@@ -246,10 +248,18 @@ class OscQuery(Adapter):
         except ValueError as exc:
             self._unfit(exc)
             return
+        self._served(path, served, out)
+
+    def _served(self, path: str, served: list[Any] | ValueError | None, out: list[tuple[str, bytes]]) -> None:
+        """What ``Live.update`` gave for ``path``, as an OSC message in ``out`` if a client listens."""
+        if isinstance(served, ValueError):
+            self._unfit(served)
+            return
         if served is None or path not in self.server.listened:
             return
-        try:
-            out.append((path, encode.message(path, *served)))
+        try:  # (floats alone, a frame's values: one pack, the same bytes as message's)
+            out.append((path, encode.floats(path, served) if all(v.__class__ is float for v in served)
+                        else encode.message(path, *served)))
         except encode.EncodeError as exc:
             self._unfit(ValueError(f"{path}: OSC cannot carry it: {exc}"))
 

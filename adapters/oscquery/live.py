@@ -127,6 +127,18 @@ class Live:
         with self._lock:
             return self._update(path, values, span)
 
+    def update_all(self, items: Sequence[tuple[str, Sequence[Any], str]]) -> list[list[Any] | ValueError | None]:
+        """``update`` of each ``(path, values, span)`` with one hold of the lock (a frame's
+        listened values): what each serves now, None, or the ``ValueError`` it raised."""
+        out: list[list[Any] | ValueError | None] = []
+        with self._lock:
+            for path, values, span in items:
+                try:
+                    out.append(self._update(path, values, span))
+                except ValueError as exc:
+                    out.append(exc)
+        return out
+
     def keep(self, message: Incoming) -> None:
         """A frame of joints or of derived values (``Incoming.joints``: its samples), kept as it
         came, its values served when asked for (``node``); one of a robot not served is not kept."""

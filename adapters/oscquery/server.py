@@ -17,7 +17,6 @@ serves is held once (interned) whoever listens, so clients cost little and give 
 
 from __future__ import annotations
 
-import asyncio
 import contextlib
 import functools
 import json
@@ -28,7 +27,9 @@ from typing import TYPE_CHECKING, Any
 
 from aiohttp import WSMessage, WSMsgType, web
 
-from sonibus.bus.web import WebClient, WebServer, close_clients
+from sonibus.adapters.foxglove.framed import FramedClient
+from sonibus.adapters.foxglove.wire import BINARY, frame_header
+from sonibus.bus.web import WebServer, close_clients
 
 from .live import Live
 
@@ -107,8 +108,9 @@ class QueryServer:
         return 200, {attribute: node[attribute]}
 
     async def _websocket(self, request: web.Request) -> web.WebSocketResponse:
-        async with self.web.accept(request, max_msg_size=MAX_WS_MESSAGE, heartbeat=HEARTBEAT_S) as ws:
-            client = _Client(ws, request.transport, self.adapter)
+        async with self.web.accept(request, max_msg_size=MAX_WS_MESSAGE, heartbeat=HEARTBEAT_S,
+                                   compress=False) as ws:  # (frames written as they are: FramedClient)
+            client = _Client(ws, request, self.adapter)
             self._clients.add(client)
             self.adapter.count("ws_clients")
             try:
@@ -191,11 +193,19 @@ class QueryServer:
         self.adapter.warn("ws", f"WebSocket: refused {what}")
 
     def _send_osc(self, messages: list[tuple[str, bytes]]) -> None:
+        """Each client's messages framed and handed to it at once (one write when it can)."""
+        sent = 0
         for client in self._clients:
+            parts: list[bytes] = []
+            listens = client.listens
             for path, data in messages:
-                if path in client.listens:
-                    client.push(data)
-                    self.adapter.count("sent")
+                if path in listens:
+                    parts += (frame_header(BINARY, len(data)), data)
+            if parts:
+                client.put_frames(parts, 2)
+                sent += len(parts) // 2
+        if sent:
+            self.adapter.count("sent", sent)
 
     def _push_all(self, text: str) -> None:
         for client in self._clients:
@@ -205,10 +215,11 @@ class QueryServer:
         await close_clients(self._clients)
 
 
-class _Client(WebClient):
-    """A WebSocket client and the paths it listens to (``LISTEN``)."""
+class _Client(FramedClient):
+    """A WebSocket client and the paths it listens to (``LISTEN``); what it is due is written
+    as whole frames, several in one write (``FramedClient``)."""
 
-    def __init__(self, ws: web.WebSocketResponse, transport: asyncio.Transport | None, adapter: Adapter) -> None:
-        super().__init__(ws, lambda: adapter.count("ws_dropped"), transport)
+    def __init__(self, ws: web.WebSocketResponse, request: web.Request, adapter: Adapter) -> None:
+        super().__init__(ws, lambda: adapter.count("ws_dropped"), request)
         self.listens: set[str] = set()
         self.unserved: set[str] = set()  # those not served when LISTENed (at most MAX_UNSERVED)

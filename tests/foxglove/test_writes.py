@@ -14,7 +14,7 @@ import time
 
 import aiohttp
 
-from sonibus.adapters.foxglove import hub
+from sonibus.adapters.foxglove import framed
 from sonibus.adapters.foxglove.server import FoxgloveConfig, FoxgloveServer, _describe
 from sonibus.bus.web import CLIENT_BACKLOG_BYTES
 
@@ -101,7 +101,7 @@ def test_a_client_that_stops_reading_holds_a_bounded_amount_and_loses_its_oldest
 
         waiting, unsent = server.web.submit(held()).result(5)
         assert waiting <= CLIENT_BACKLOG_BYTES + 25_000, waiting
-        assert unsent <= 2 * hub.WRITE_BYTES + (64 << 10), f"{unsent} bytes in the transport's buffer"
+        assert unsent <= 2 * framed.WRITE_BYTES + (64 << 10), f"{unsent} bytes in the transport's buffer"
         assert server.state == "running"
     finally:
         sock.close()
