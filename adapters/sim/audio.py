@@ -34,7 +34,8 @@ from sonibus.bus.robot import RobotModel
 from .whine import Whine
 
 MIC_COUNTERS = ("mic_chunks",)
-IDLE_S = 0.2  # a silent speaker, an unheard mic, wake this often at most (20 ms ticks: ~1 % of a core for nothing)
+IDLE_S = 1.0  # a silent speaker, an unheard mic, wake this often at most (20 ms ticks: ~1 % of a core for nothing;
+             # 0.2 s: 0.3 % for the speaker alone, issue 35); sound, a listener or a stop wakes them at once
 SPEAKER_COUNTERS = ("speaker_frames", "speaker_underruns", "speaker_overruns", "speaker_gaps", "speaker_refused")
 
 
