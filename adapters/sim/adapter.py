@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import threading
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -15,38 +14,7 @@ from sonibus.bus.robot import load_model, models
 
 from . import audio
 from .engine import SimEngine
-
-NAP_S = 0.05  # the frame loop sleeps at most this long between looks at its stop (Ctrl-C, stop())
-
-
-class Nap:
-    """A stop event as ``Pacer.run`` waits on it, but waited on with ``time.sleep``
-    (slices of ``NAP_S`` at most, so a stop is seen within that): a wake-up from
-    ``time.sleep`` costs a thread ~60-70 µs here against ~100-110 µs from
-    ``Event.wait``'s lock with a timeout (docs/performance.md, "The sim against its
-    floor"), and the frame loop wakes ``rate_hz`` times a second.
-
-    >>> import threading
-    >>> stop = threading.Event()
-    >>> Nap(stop).wait(0.01), stop.set(), Nap(stop).wait(10.0)
-    (False, None, True)
-    """
-
-    def __init__(self, stop: threading.Event) -> None:
-        self.stop = stop
-
-    def is_set(self) -> bool:
-        return self.stop.is_set()
-
-    def wait(self, timeout: float) -> bool:
-        """Sleep ``timeout`` seconds, or until the stop is seen; whether it is set."""
-        end = time.monotonic() + timeout
-        while not self.stop.is_set():
-            left = end - time.monotonic()
-            if left <= 0:
-                break
-            time.sleep(min(left, NAP_S))
-        return self.stop.is_set()
+from .nap import Nap
 
 
 @dataclass(frozen=True)

@@ -272,3 +272,19 @@ def test_a_silent_speaker_waits_for_sound_instead_of_pulling_silence_every_tick(
     played = np.concatenate(list(sim.speaker.played))
     assert peak_hz(played, 48000) == pytest.approx(440.0, abs=4.0)
     assert sim.stats["speaker_frames"] % 960 == 0
+
+
+def test_what_the_speaker_keeps_is_its_last_seconds_however_long_its_blocks(net):
+    """``played`` keeps ``keep_s`` of sound by length: a silent speaker plays long blocks (up to
+    a second after a wait), and a count of 20 ms blocks (500 for 10 s) kept 500 s of those."""
+    from sonibus.adapters.sim.audio import SimSpeaker
+    sim = net.sim(speaker=False, body_sound=False)
+    speaker = SimSpeaker(sim, "pepper", 100.0, keep_s=0.5)  # (25 blocks of 20 ms)
+    sim.spawn(speaker.run, "kept")
+    try:
+        wait_for(lambda: sim.stats.get("speaker_frames", 0) >= 2 * 48000, what="two seconds of silence played")
+        blocks = list(speaker.played)
+        newer = sum(len(block) for block in blocks[1:])  # (the oldest block kept is the one keep_s reaches into)
+        assert newer < 24000, f"{newer / 48000:.2f} s kept after the oldest block, for keep_s 0.5"
+    finally:
+        speaker.close()  # (wakes it from its wait: the node's stop then ends it at once)
