@@ -34,10 +34,12 @@ import json
 from typing import Any
 
 from sonibus import schemas
-from sonibus.adapters.foxglove.views import FOXGLOVE, is_view
+from sonibus.adapters.foxglove.views import FOXGLOVE, TF, is_view
 from sonibus.bus import codec, messages
 from sonibus.bus.keys import Key
 from sonibus.schemas import foxglove
+
+from .transforms import transforms_json
 
 MESSAGE_ENCODING = "json"
 AUDIO_ENCODING = "msgpack"  # not one of MCAP's well-known encodings: Foxglove lists these channels but cannot show them
@@ -93,6 +95,8 @@ def to_data(key: str, message: Any) -> bytes:
     ``TypeError`` for what its encoding cannot carry."""
     if encoding_of(key) == AUDIO_ENCODING:
         return codec.encode(message)
+    if key.partition("/")[2] == TF:  # (the arms' transforms, made every frame: what did not move is kept)
+        return transforms_json(message, to_json)
     return to_json(message)
 
 
