@@ -13,8 +13,10 @@ essential work with the same libraries and no sonibus, fed the same frames as
   client connected (a reader in a process of its own) in ONE transport write (the fewest the
   protocol allows: a WebSocket message per Foxglove message), on an aiohttp server's loop.
   No advertising, subscribing, latching, limits or info channels (once, not per frame);
-- **recorder**: a subscriber that decodes each frame, makes it JSON and adds it to an
-  MCAP file (``mcap``'s ``Writer``, zstd chunks of 1 MiB, as the recorder's);
+- **recorder**: a subscriber that decodes each frame and each derived frame (its
+  publisher puts one of ``floor.DERIVED``'s shape beside each frame: the show's recorder
+  records the features node's too), makes it JSON and adds it to an MCAP file
+  (``mcap``'s ``Writer``, zstd chunks of 1 MiB, as the recorder's);
 - **oscquery**: subscribers of the frames and of the derived frames (fed both, as the node
   is in the show: its namespace serves derived values too) that keep each one's payload as
   the latest of its key (what answering a question needs), and send each of a frame's values
@@ -27,8 +29,8 @@ essential work with the same libraries and no sonibus, fed the same frames as
 
 The nodes do more than their floors (the features node's derived frames and the robot's
 events come in too, Foxglove's views and per-joint channels go out, the recorder writes
-each frame's transforms beside it, and each derived frame): the ratio says what that and
-sonibus's own work cost. (Before issue 35 the recorder wrote a frame's joints a message each.)
+each frame's transforms beside it): the ratio says what that and sonibus's own work
+cost. (Before issue 35 the recorder wrote a frame's joints a message each.)
 
     from node_floors import measure
     measure(8.0, warmup_s=3.0)  # {"foxglove": CPU %, "recorder": ..., "oscquery": ...}
@@ -52,7 +54,7 @@ from floor import CONTEXT, Case, cpu_ns, publish
 RATE_HZ = 50
 NODES = ("foxglove", "recorder", "oscquery", "web", "midi", "features")  # the nodes with a floor here
 HEADER = struct.Struct("<BIQ")  # Foxglove's message data: opcode 1, subscription id, log time (ns)
-FED_DERIVED = ("foxglove", "oscquery")  # floors fed a derived frame beside each frame (floor.DERIVED), as nodes
+FED_DERIVED = ("foxglove", "oscquery", "recorder")  # fed a derived frame beside each frame (floor.DERIVED)
 # Pepper's arm chains (robots.json's, from its URDF): joint (the frame's J5..J16), parent, origin, origin's
 # rotation (quaternion), axis (None: the hand, a point)
 _BENT = (0.0, -0.07845878036326605, 0.0, 0.9969173585528084)
@@ -193,8 +195,8 @@ def reader(port: int, ready: Any, done: Any) -> None:
 
 
 def recorder_floor(endpoint: str, folder: str, ready: Any, done: Any) -> None:
-    """Each frame as JSON, one MCAP message, into a file with zstd chunks (the writer on a thread
-    of its own, as the recorder's, fed by a queue)."""
+    """Each frame and each derived frame as JSON, one MCAP message each, into a file with zstd
+    chunks (the writer on a thread of its own, as the recorder's, fed by a queue)."""
     import queue
 
     import msgpack
@@ -224,7 +226,7 @@ def recorder_floor(endpoint: str, folder: str, ready: Any, done: Any) -> None:
     thread = threading.Thread(target=write)
     thread.start()
     subscribed(endpoint, lambda sample: waiting.put((str(sample.key_expr), sample.payload.to_bytes(), time.time_ns())),
-               ready, done)
+               ready, done, ("*/frame", "*/derived"))
     waiting.put(None)
     thread.join()
 
@@ -451,24 +453,26 @@ def features_floor(endpoint: str, reader: str, ready: Any, done: Any) -> None:
 def derived_reader(endpoint: str, ready: Any, done: Any) -> None:
     """The features floor's one subscriber of derived frames, listening on ``endpoint`` (not
     measured): the node's have several."""
-    subscribed(endpoint, lambda sample: None, ready, done, "*/derived")
+    subscribed(endpoint, lambda sample: None, ready, done, ("*/derived",))
 
 
-def subscribed(endpoint: str, each: Any, ready: Any, done: Any, key: str = "*/frame") -> None:
-    """``each(sample)`` for every frame (or sample on ``key``), on a session listening on
+def subscribed(endpoint: str, each: Any, ready: Any, done: Any, keys: tuple[str, ...] = ("*/frame",)) -> None:
+    """``each(sample)`` for every sample of ``keys`` (frames), on a session listening on
     ``endpoint``, until ``done``."""
     import zenoh
     session = zenoh.open(zenoh_config(listen=endpoint))
-    subscriber = session.declare_subscriber(key, each)
+    subscribers = [session.declare_subscriber(key, each) for key in keys]
     ready.set()
     done.wait()
-    subscriber.undeclare()
+    for subscriber in subscribers:
+        subscriber.undeclare()
     session.close()
 
 
 def measure(seconds: float, warmup_s: float = 3.0, nodes: tuple[str, ...] = NODES) -> dict[str, float]:
     """CPU % of one core of each floor (of ``nodes``) over ``seconds`` after ``warmup_s``, each
-    fed its own publisher of one robot × 17 joints at ``RATE_HZ``."""
+    fed its own publisher of one robot × 17 joints at ``RATE_HZ`` (with a derived frame beside
+    each for the floors of ``FED_DERIVED``)."""
     if not nodes:
         return {}
     done = CONTEXT.Event()

@@ -6,8 +6,9 @@ derived frames), each a ``sonibus run --only`` process of this tree; two recorde
 taking the same bus at the same time, each a process of its own: this tree's and, when
 ``--before DIR`` is given, the one of the tree in DIR (``DIR/sonibus/{bus,adapters,schemas}``,
 imported through ``PYTHONPATH``); both with the Foxglove views (the default). Beside them
-``node_floors.recorder_floor`` (a subscriber that decodes each frame and adds it as JSON to
-an MCAP file on a writer thread), fed by a publisher of its own at the same rate. CPU % of
+``node_floors.recorder_floor`` (a subscriber that decodes each frame and derived frame and
+adds it as JSON to an MCAP file on a writer thread), fed by a publisher of its own at the same
+rate, a derived frame beside each frame. CPU % of
 one core of each process over ``--seconds`` after a warm-up (``/proc/<pid>/stat``), and of
 its Python threads (the writer, mostly: Zenoh names its own threads); medians of rounds;
 then what each file holds (MCAP messages a frame).
@@ -110,7 +111,8 @@ def measure(seconds: float, before: str | None) -> dict[str, Any]:
             raise RuntimeError("the recorder floor did not start")
         fed, out_queue = CONTEXT.Event(), CONTEXT.Queue()
         feeder = CONTEXT.Process(target=publish, args=(floor_endpoint, Case(1, 17), seconds + WARMUP_S + 2, fed,
-                                                       out_queue), kwargs={"rate_hz": RATE_HZ}, daemon=True)
+                                                       out_queue), kwargs={"rate_hz": RATE_HZ, "derived": True},
+                                 daemon=True)
         feeder.start()
         if not fed.wait(30):
             raise RuntimeError("the floor's publisher did not find it")

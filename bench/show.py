@@ -12,11 +12,13 @@ private JACK server, dummy driver). Two layouts, each round:
   its CPU;
 - a process per node (``--only NODE``, each connected to a ``sonibus router``): each
   node's CPU, its own Zenoh session included (the router's said apart). The sim's
-  session sends each frame to every session that subscribes to it (seven nodes here);
-  its floor, a publisher, to one.
+  session sends each frame to every session that subscribes to it (seven nodes here),
+  and so does its floor, a publisher.
 
 Beside them, the floors: a zenoh-python publisher of the same frames at the same
-rate (the sim's), a subscriber of them with an empty callback (what any sink pays
+rate (the sim's), each frame taken by as many sessions as take the sim's in the show
+(``FRAME_TAKERS``: a publisher's send to each is its essential work, issue 35), a
+subscriber of them with an empty callback (what any sink pays
 to receive), and ``floor.py``'s minimal OSC sink, of the frames alone and of the
 frames with a derived frame beside each (the OSC node's work in the show: it sends
 the features node's derived values too). CPU is each process's, from
@@ -65,6 +67,7 @@ from sink_throughput import SONIBUS, stop_process
 
 RATE_HZ = 50
 WARMUP_S = 3.0
+FRAME_TAKERS = 7  # the show's nodes that take the robot's frames (all but the gateway): its publisher's fan-out
 NODES = ("sim", "osc", "gateway", "features", "recorder", "web", "oscquery", "foxglove", "midi")
 SHOW = """[bus]
 multicast = false
@@ -309,7 +312,8 @@ def measure_show(folder: Path, seconds: float, split: bool, tree: str = "",
 
 
 def measure_floors(seconds: float) -> dict[str, float]:
-    """The minimal harnesses: publisher (the sim's floor), an empty subscriber (a sink's floor),
+    """The minimal harnesses: publisher (the sim's floor, its frames taken by ``FRAME_TAKERS``
+    sessions), an empty subscriber (a sink's floor),
     floor.py's OSC sink, one robot × 17 joints at ``RATE_HZ``, and the same sink fed a derived
     frame beside each frame (``floor.DERIVED``, a features node's shape): the show's OSC node
     sends joints and derived values, a datagram each."""
@@ -324,31 +328,55 @@ def measure_floors(seconds: float) -> dict[str, float]:
         readies.append(CONTEXT.Event())
         sinks.append(CONTEXT.Process(target=floor_sink, args=(endpoint, receiver.getsockname()[1], case, readies[-1],
                                                               done), kwargs={"derived": derived}, daemon=True))
+    fed_all = CONTEXT.Event()  # (the publisher's other takers: sessions of their own, each fed before measuring)
+    takers = CONTEXT.Process(target=takers_of, args=(endpoints[0], FRAME_TAKERS - 1, fed_all, done), daemon=True)
     for process in (empty, *sinks):
         process.start()
     feeders = []
     try:
         if not all(event.wait(30) for event in readies):
             raise RuntimeError("the floor harnesses did not start")
+        takers.start()
         handles = []  # (kept until the end: a queue collected here is gone for the child too)
         for endpoint, derived in zip(endpoints, (False, False, True), strict=True):
             fed, out = CONTEXT.Event(), CONTEXT.Queue()
-            feeders.append(CONTEXT.Process(target=publish, args=(endpoint, case, seconds + WARMUP_S + 1, fed, out),
+            feeders.append(CONTEXT.Process(target=publish, args=(endpoint, case, seconds + WARMUP_S + 5, fed, out),
                                            kwargs={"rate_hz": RATE_HZ, "derived": derived}, daemon=True))
             feeders[-1].start()
             handles.append((fed, out))
-        if not all(fed.wait(30) for fed, _ in handles):
+        if not all(fed.wait(30) for fed, _ in handles) or not fed_all.wait(30):
             raise RuntimeError("the floor publishers did not find their subscribers")
         time.sleep(WARMUP_S)
         return window({"publisher": feeders[0].pid, "subscriber": empty.pid, "osc sink": sinks[0].pid,
                        "osc sink + derived": sinks[1].pid}, seconds)
     finally:
         done.set()
-        for process in (*feeders, empty, *sinks):
+        for process in (*feeders, empty, *sinks, takers):
+            if process.pid is None:  # (never started)
+                continue
             process.join(10)
             if process.is_alive():
                 process.kill()
         receiver.close()
+
+
+def takers_of(endpoint: str, count: int, fed: Any, done: Any) -> None:
+    """``count`` sessions (one process), each connected to ``endpoint`` and taking the frames
+    with an empty callback: the publisher's frames go to each (its session learns them by
+    gossip and links to each, as the sim's links to each node's); ``fed`` once each has one."""
+    import zenoh
+    sessions = [zenoh.open(zenoh_config(connect=endpoint)) for _ in range(count)]
+    got = [threading.Event() for _ in sessions]
+    subscribers = [session.declare_subscriber("*/frame", lambda sample, event=event: event.set())
+                   for session, event in zip(sessions, got, strict=True)]
+    for event in got:
+        if not event.wait(30):
+            return  # (said by the caller: fed is never set)
+    fed.set()
+    done.wait()
+    for subscriber, session in zip(subscribers, sessions, strict=True):
+        subscriber.undeclare()
+        session.close()
 
 
 def empty_subscriber(endpoint: str, ready: Any, done: Any) -> None:

@@ -34,10 +34,12 @@ import json
 from typing import Any
 
 from sonibus import schemas
-from sonibus.adapters.foxglove.views import FOXGLOVE, is_view
+from sonibus.adapters.foxglove.views import FOXGLOVE, TF, is_view
 from sonibus.bus import codec, messages
 from sonibus.bus.keys import Key
 from sonibus.schemas import foxglove
+
+from .transforms import transforms_json
 
 MESSAGE_ENCODING = "json"
 AUDIO_ENCODING = "msgpack"  # not one of MCAP's well-known encodings: Foxglove lists these channels but cannot show them
@@ -67,10 +69,15 @@ def schema_for(key: str) -> str | None:
         return None
 
 
+# made once: ``json.dumps`` with options builds an encoder per call, 40 % of the encoding of a
+# frame (15.5 µs against 8.9 µs for Pepper's; the recorder encodes ~150 messages a second a robot)
+_ENCODE = json.JSONEncoder(separators=(",", ":"), ensure_ascii=False, allow_nan=False).encode
+
+
 def to_json(message: Any) -> bytes:
     """A message as compact, strict JSON bytes (what an MCAP ``json`` channel holds):
     ``ValueError`` for NaN or infinity, ``TypeError`` for what JSON has no type for."""
-    return json.dumps(message, separators=(",", ":"), ensure_ascii=False, allow_nan=False).encode()
+    return _ENCODE(message).encode()
 
 
 def from_json(data: bytes) -> Any:
@@ -88,6 +95,8 @@ def to_data(key: str, message: Any) -> bytes:
     ``TypeError`` for what its encoding cannot carry."""
     if encoding_of(key) == AUDIO_ENCODING:
         return codec.encode(message)
+    if key.partition("/")[2] == TF:  # (the arms' transforms, made every frame: what did not move is kept)
+        return transforms_json(message, to_json)
     return to_json(message)
 
 

@@ -14,6 +14,7 @@ from sonibus.bus.robot import load_model, models
 
 from . import audio
 from .engine import SimEngine
+from .nap import Nap
 
 
 @dataclass(frozen=True)
@@ -99,15 +100,16 @@ class SimRobot(RobotAdapter):
     def _acquire(self) -> None:
         self.pacer = Pacer(self.rate_hz)
         last = time.monotonic()
+        names, advance = self.engine.body.names, self.engine.advance  # (the model's, made once: not per frame)
 
         def frame(seq: int) -> None:
             nonlocal last
             now, tick = time.time(), time.monotonic()  # wall clock for `t`, monotonic for motion
-            positions = self.engine.advance(now, tick - last)
+            positions = advance(now, tick - last)
             last = tick
-            self.publish_frame(now, seq, positions)
+            self.publish_frame(now, seq, positions, names)
 
-        self.pacer.run(frame, self.stopping)
+        self.pacer.run(frame, Nap(self.stopping))  # type: ignore[arg-type]  # (an Event to the pacer)
 
     @property
     def frames_skipped(self) -> int:

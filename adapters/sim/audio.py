@@ -31,10 +31,12 @@ from sonibus.bus.owner import RobotAdapter
 from sonibus.bus.pacing import Pacer
 from sonibus.bus.robot import RobotModel
 
+from .nap import Nap
 from .whine import Whine
 
 MIC_COUNTERS = ("mic_chunks",)
-IDLE_S = 0.2  # a silent speaker, an unheard mic, wake this often at most (20 ms ticks: ~1 % of a core for nothing)
+IDLE_S = 1.0  # a silent speaker, an unheard mic, wake this often at most (20 ms ticks: ~1 % of a core for nothing;
+             # 0.2 s: 0.3 % for the speaker alone, issue 35); sound, a listener or a stop wakes them at once
 SPEAKER_COUNTERS = ("speaker_frames", "speaker_underruns", "speaker_overruns", "speaker_gaps", "speaker_refused")
 
 
@@ -104,13 +106,14 @@ class SimMic:
             self._publisher.put(codec.encode(chunk.message()))
             self.node.count("mic_chunks")
 
-        self.pacer.run(tick, self.node.stopping)
+        self.pacer.run(tick, Nap(self.node.stopping))  # type: ignore[arg-type]  # (an Event to the pacer)
 
 
 class SimSpeaker:
     """Plays ``<robot>/audio/speaker`` through a jitter buffer in real time; run ``run()``.
 
-    ``played`` holds the last ``keep_s`` seconds or so it played (int16 blocks of 20 ms, longer after a stall)."""
+    ``played`` holds the last ``keep_s`` seconds or so it played (int16 blocks of 20 ms, longer after a
+    stall or a silence): kept by their length, not their count (500 blocks of a second's silence are 96 MB)."""
 
     def __init__(self, node: Adapter, robot: str, target_ms: float, fmt: Format = SPEAKER,
                  keep_s: float = 10.0) -> None:
@@ -120,7 +123,8 @@ class SimSpeaker:
         node.own(subscriber)
         node.own(self._queue)
         self._gate = messages.Gate(node.bus.limits)
-        self.played: deque[np.ndarray] = deque(maxlen=max(1, round(keep_s * 1000 / fmt.chunk_ms)))
+        self.played: deque[np.ndarray] = deque()
+        self._kept, self._keep = 0, max(fmt.frames, round(keep_s * fmt.rate))  # frames in played, at most
         for counter in SPEAKER_COUNTERS[1:]:  # the jitter buffer's own counts
             node.stats.follow(counter, functools.partial(self._buffer_stat, counter.removeprefix("speaker_")))
 
@@ -135,10 +139,17 @@ class SimSpeaker:
                 self._take(key, payload)
             frames = self.fmt.frames * (frame - last)  # a stalled card still plays what the skipped ticks would
             last = frame
-            self.played.append(self.buffer.pull(frames))
+            self._play(self.buffer.pull(frames))
             self.node.count("speaker_frames", frames)
 
-        Pacer(1000.0 / self.fmt.chunk_ms).run(tick, self.node.stopping)
+        Pacer(1000.0 / self.fmt.chunk_ms).run(tick, Nap(self.node.stopping))  # type: ignore[arg-type]
+
+    def _play(self, block: np.ndarray) -> None:
+        """Keep ``block`` in ``played``, and of the blocks before it what ``keep_s`` holds."""
+        self.played.append(block)
+        self._kept += len(block)
+        while self._kept - len(self.played[0]) >= self._keep:
+            self._kept -= len(self.played.popleft())
 
     def close(self) -> None:
         """Wake ``run`` from its wait on the queue (the node is stopping)."""

@@ -57,7 +57,13 @@ class SimEngine:
         self._idle_home = self.body.pose()
         self.halted = False  # a stop holds the body still (no idle motion, no autoplay) until the next move
         self._next_autoplay = time.monotonic() + autoplay_s
-        self._speeds: dict[str, float] = {}
+        # the last step's positions before it and its length: speeds are worked out when asked
+        # (by the microphones, while anyone listens), not every frame for nobody
+        self._before: list[float] = list(self.body.positions)
+        self._dt = 0.0
+        # the idle joints this model has: (name, amplitude, angular frequency), found once
+        self._idle_joints = [(joint, amplitude, 2 * math.pi / period) for joint, (amplitude, period)
+                             in IDLE_JOINTS.items() if model.has_joint(joint)]
 
     @staticmethod
     def behaviors() -> list[str]:
@@ -113,22 +119,24 @@ class SimEngine:
     def speeds(self) -> dict[str, float]:
         """Each moving joint's speed over the last step (rad/s, signed): what the body sound follows."""
         with self.lock:
-            return dict(self._speeds)
+            dt = self._dt
+            if dt <= 0:
+                return {}
+            return {name: (after - was) / dt for name, was, after
+                    in zip(self.body.names, self._before, self.body.positions, strict=True) if after != was}
 
     def _step(self, dt: float) -> None:
         if dt <= 0:
             return
-        before = list(self.body.positions)
+        self._before[:] = self.body.positions
+        self._dt = dt
         self.body.step(dt)
-        self._speeds = {name: (after - was) / dt for name, was, after
-                        in zip(self.body.names, before, self.body.positions, strict=True) if after != was}
 
     def _idle(self, now: float) -> None:
-        targets = {}
-        for joint, (amplitude, period) in IDLE_JOINTS.items():
-            if self.model.has_joint(joint) and (joint != "HeadYaw" or self.aware):
-                targets[joint] = self._idle_home[joint] + amplitude * math.sin(2 * math.pi * now / period)
-        self.body.set_targets(targets, 0.2)
+        home, aware, sin = self._idle_home, self.aware, math.sin
+        self.body.set_targets({joint: home[joint] + amplitude * sin(omega * now)
+                               for joint, amplitude, omega in self._idle_joints
+                               if aware or joint != "HeadYaw"}, 0.2)
 
     def _start_behavior(self, name: str, now: float) -> list[tuple[str, dict[str, Any]]]:
         events = self._interrupt()

@@ -52,13 +52,16 @@ class Body:
         """Advance ``dt`` seconds (nothing moves for ``dt <= 0``)."""
         if dt <= 0:
             return
+        positions, stiffness = self.positions, self.stiffness
         for i, target in enumerate(self.targets):
-            if self.stiffness[i] < STIFF:
-                self.targets[i] = self.positions[i]
+            if target == positions[i]:  # (at rest, most joints: nothing to move)
                 continue
-            error = target - self.positions[i]
+            if stiffness[i] < STIFF:
+                self.targets[i] = positions[i]
+                continue
+            error = target - positions[i]
             reach = self.velocity[i] * dt
-            self.positions[i] = target if abs(error) <= reach else self.positions[i] + (reach if error > 0 else -reach)
+            positions[i] = target if abs(error) <= reach else positions[i] + (reach if error > 0 else -reach)
 
     def pose(self) -> dict[str, float]:
         return dict(zip(self.names, self.positions, strict=True))

@@ -178,3 +178,27 @@ def test_a_put_on_info_derived_does_not_kill_a_recorder_without_views(net, tmp_p
     bus.put("toy/events/done", {"t": 1.7e9, "kind": "done"})
     wait_for(lambda: recorder.stats["written"] >= 1, what="the next event written")
     assert recorder.state == "running" and recorder.stats["bad"] >= 1
+
+
+def test_the_transforms_are_written_as_their_json_byte_for_byte_moving_or_still():
+    """The tf view's JSON keeps the text of a transform that did not move (issue 35: it was the
+    recorder's largest per-frame cost); what it writes is ``to_json``'s, to the bit: a joint
+    at 0.0 then -0.0 (equal numbers, two texts), still, moving, every joint at once."""
+    import math
+    import random
+
+    from sonibus.adapters.foxglove.convert import ArmFrames
+    from sonibus.adapters.recorder.channels import to_data, to_json
+    from sonibus.bus.robot import load_model
+    names, arms, rng = list(load_model("pepper").joint_names), ArmFrames.of("pepper"), random.Random(35)
+    frames = [[0.0] * len(names), [-0.0] * len(names), [-0.0] * len(names)]  # (still, then the sign of zero)
+    frames += [[math.sin(k / 7) if name.endswith("ShoulderPitch") else 0.3 for name in names] for k in range(20)]
+    frames += [[rng.choice((0.0, -0.0, rng.uniform(-2, 2))) for _ in names] for _ in range(60)]
+    for k, values in enumerate(frames):
+        message = arms.transforms("pepper", {"t": 1.7e9 + k / 50, "seq": k, "names": names, "v": values})
+        assert to_data("pepper/tf", message) == to_json(message), f"frame {k}"
+    odd = {"transforms": [{**message["transforms"][0], "translation": {"x": 1, "y": 0.0, "z": 0.0}}]}
+    assert to_data("pepper/tf", odd) == to_json(odd)  # (an int's text is not its float's)
+    with pytest.raises(ValueError):
+        to_data("pepper/tf", arms.transforms("pepper", {"t": 1.7e9, "seq": 0, "names": names,
+                                                       "v": [math.nan] * len(names)}))

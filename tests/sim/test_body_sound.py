@@ -257,16 +257,34 @@ def test_stopping_the_sim_ends_its_audio_threads(net):
 
 def test_a_silent_speaker_waits_for_sound_instead_of_pulling_silence_every_tick(net):
     """Nothing to play: the speaker still counts its silence in real time, but in a few long
-    blocks (it waits on its queue), not a 20 ms block per tick; sound sent then plays at once."""
+    blocks (it waits on its queue up to a second), not a 20 ms block per tick (50 a second) nor
+    one per 0.2 s wait (5 a second: its thread 0.3 % of a core, issue 35); sound sent then plays
+    at once."""
     sim = net.sim(speaker_latency_ms=60)
     client = net.bus("client")
     wait_for(lambda: sim.stats["speaker_frames"] > 0, what="the speaker to run")
     frames, blocks = sim.stats["speaker_frames"], len(sim.speaker.played)
     wait_for(lambda: sim.stats["speaker_frames"] >= frames + 48000, what="a second of silence played")
     ticks = len(sim.speaker.played) - blocks
-    assert ticks <= 20, f"{ticks} blocks for a second of silence (a block per 20 ms tick: 50)"
+    assert ticks <= 3, f"{ticks} blocks for a second of silence (a block per 20 ms tick: 50; per 0.2 s wait: 5)"
     play(client, sine_chunks(440.0, 48000, 2, 0.5))
     wait_for(lambda: sim.speaker.buffer.stats["underruns"] >= 1, what="the speaker to run dry after the sine")
     played = np.concatenate(list(sim.speaker.played))
     assert peak_hz(played, 48000) == pytest.approx(440.0, abs=4.0)
     assert sim.stats["speaker_frames"] % 960 == 0
+
+
+def test_what_the_speaker_keeps_is_its_last_seconds_however_long_its_blocks(net):
+    """``played`` keeps ``keep_s`` of sound by length: a silent speaker plays long blocks (up to
+    a second after a wait), and a count of 20 ms blocks (500 for 10 s) kept 500 s of those."""
+    from sonibus.adapters.sim.audio import SimSpeaker
+    sim = net.sim(speaker=False, body_sound=False)
+    speaker = SimSpeaker(sim, "pepper", 100.0, keep_s=0.5)  # (25 blocks of 20 ms)
+    sim.spawn(speaker.run, "kept")
+    try:
+        wait_for(lambda: sim.stats.get("speaker_frames", 0) >= 2 * 48000, what="two seconds of silence played")
+        blocks = list(speaker.played)
+        newer = sum(len(block) for block in blocks[1:])  # (the oldest block kept is the one keep_s reaches into)
+        assert newer < 24000, f"{newer / 48000:.2f} s kept after the oldest block, for keep_s 0.5"
+    finally:
+        speaker.close()  # (wakes it from its wait: the node's stop then ends it at once)
