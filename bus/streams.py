@@ -27,8 +27,8 @@ made once here for every sink). Per-key derived samples (a processor with
 Plan(frames=('*/frame',), keys=('*/events/*',), broad=(), derived=())
 >>> plan(["pepper/**"]).broad, plan(["pepper/joints/R*"], per_joint_keys=True).keys
 (('pepper/joints/**',), ('pepper/joints/R$*',))
->>> plan(["*/derived/**", "pepper/derived/qom/*"]).derived
-('*/derived',)
+>>> plan(["*/derived/**", "pepper/derived/qom/*"])  # (the derived frames on their own, not under */derived/**)
+Plan(frames=(), keys=('*/derived/*/**', 'pepper/derived/qom/*'), broad=(), derived=('*/derived',))
 """
 
 from __future__ import annotations
@@ -84,8 +84,11 @@ def plan(patterns: Iterable[str], per_joint_keys: bool = False) -> Plan:
     for pattern in dict.fromkeys(n for p in patterns for n in narrowed(keys.expr(p))):
         selected = zenoh.KeyExpr(pattern)
         key = keys.derived_frame(_robot(pattern))
-        if named_section(pattern) in ("", "derived") and selected.intersects(_DERIVED) and key not in derived:
-            derived.append(key)
+        if named_section(pattern) in ("", "derived") and selected.intersects(_DERIVED):
+            if key not in derived:
+                derived.append(key)
+            if pattern.endswith("/derived/**"):  # (``**`` is also no chunk: the derived frame would come twice,
+                pattern = pattern[:-2] + "*/**"  # once to be skipped; it comes from ``derived``'s subscription)
         if per_joint_keys or not selected.intersects(_JOINTS):
             direct.append(pattern)  # (subscribed without frame keys: pepper/** would take them twice)
             continue

@@ -16,17 +16,18 @@ from sonibus.bus.streams import Incoming, Plan, Selection, Streams, plan
 from .conftest import wait_for
 
 REST = ("derived", "events", "info", "cmd")  # the sections besides frames and joints a broad pattern takes
-REST_OF_PEPPER = tuple(f"pepper/{s}/**" for s in REST)
+# (derived keys under one chunk at least: ``pepper/derived`` itself, the derived frame, comes on its own)
+REST_OF_PEPPER = tuple(f"pepper/{s}/*/**" if s == "derived" else f"pepper/{s}/**" for s in REST)
 
 
 @pytest.mark.parametrize(("patterns", "per_joint_keys", "expected"), [
     (["*/joints/*"], False, Plan(frames=("*/frame",))),
     (["pepper/joints/R*", "nao/joints/*"], False, Plan(frames=("pepper/frame", "nao/frame"))),
     (["*/joints/*", "*/derived/**", "*/events/*"], False,
-     Plan(frames=("*/frame",), keys=("*/derived/**", "*/events/*"), derived=("*/derived",))),
+     Plan(frames=("*/frame",), keys=("*/derived/*/**", "*/events/*"), derived=("*/derived",))),
     # a pattern that does not name audio (or stats) is narrowed to the sections it may take: it does
     # not subscribe to the microphones (their owner publishes them only while someone listens)
-    (["**"], False, Plan(frames=("*/frame",), keys=("*/derived/**", "*/events/**", "*/info/**", "*/cmd/**"),
+    (["**"], False, Plan(frames=("*/frame",), keys=("*/derived/*/**", "*/events/**", "*/info/**", "*/cmd/**"),
                          broad=("*/joints/**",), derived=("*/derived",))),
     (["pepper/**"], False, Plan(frames=("pepper/frame",), keys=REST_OF_PEPPER, broad=("pepper/joints/**",),
                                 derived=("pepper/derived",))),
@@ -39,7 +40,7 @@ REST_OF_PEPPER = tuple(f"pepper/{s}/**" for s in REST)
                                               derived=("pepper/derived",))),
     # derived values: served from the derived frames of the robots named (and from their own keys)
     (["pepper/derived/qom/*", "nao/derived/**"], False,
-     Plan(keys=("pepper/derived/qom/*", "nao/derived/**"), derived=("pepper/derived", "nao/derived"))),
+     Plan(keys=("pepper/derived/qom/*", "nao/derived/*/**"), derived=("pepper/derived", "nao/derived"))),
     (["**/audio/mic"], False, Plan(keys=("**/audio/mic",))),  # audio named after a leading **: kept
     (["pepper/audio/mic", "pepper/*/mic"], False,
      Plan(keys=("pepper/audio/mic", *(f"pepper/{s}/mic" for s in REST)),
