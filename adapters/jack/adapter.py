@@ -50,6 +50,7 @@ class JackBridge(Adapter):
     def _start(self) -> None:
         cfg: JackConfig = self.config
         self._client: jack.Client | None = None
+        self._ending = jack_client.ProcessEnd()
         self._failure: Exception | None = None  # what JACK's threads met, for the watch worker to fail with
         self._client = jack_client.open_client(cfg.client_name, cfg.server)
         self.client_name = self._client.name  # (JACK may have added -01: the ports are named after it)
@@ -98,7 +99,7 @@ class JackBridge(Adapter):
     def _stop(self) -> None:
         client, self._client = getattr(self, "_client", None), None
         # the ports go with the client; the callbacks stop before the workers are joined
-        if client is not None and not jack_client.close_client(client, CLOSE_TIMEOUT_S):
+        if client is not None and not jack_client.close_client(client, CLOSE_TIMEOUT_S, self._ending):
             log.warning("%s: JACK server '%s' did not answer within %g s: client '%s' and its ports stay "
                         "until it does (is jackd stopped or hung?)", self.name,
                         jack_client.server_name(self.config.server), CLOSE_TIMEOUT_S, self.client_name)
@@ -114,6 +115,7 @@ class JackBridge(Adapter):
     # -- JACK's threads: copy, count, never the bus --------------------------------------
 
     def _process(self, frames: int) -> None:
+        self._ending.check()  # (first, out of the try: its CallbackExit is a stop, not a failure)
         try:
             if self._ring is not None:
                 self._ring.write([port.get_array() for port in self._inputs], time.time())

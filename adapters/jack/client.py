@@ -10,6 +10,7 @@ from __future__ import annotations
 import logging
 import os
 import threading
+import time
 
 import jack
 
@@ -91,10 +92,50 @@ def connect(client: jack.Client, ours: list[jack.OwnPort], theirs: tuple[str, ..
                               f"audio {'outputs' if port.is_input else 'inputs'} there: {names}") from None
 
 
-def close_client(client: jack.Client, timeout: float) -> bool:
+class ProcessEnd:
+    """The way a Python process callback's thread ends before its client is closed.
+
+    jack2 cancels a client's process thread when it deactivates it (``JackClient::Deactivate``:
+    ``fThread.Kill()``, a ``pthread_cancel``), assuming it waits in libjack by then. A thread
+    still running Python (a late cycle on a busy machine) is cancelled holding the GIL, and
+    every thread of the process waits for it for ever: a test's stop of the bridge hung a
+    whole suite that way. So the callback calls ``check()`` first thing; ``end()`` makes its
+    next cycle raise ``jack.CallbackExit``, which JACK answers by ending the thread itself, in
+    C, out of Python; ``end`` waits (bounded) for that thread to be gone before the client closes.
+    """
+
+    def __init__(self) -> None:
+        self.asked = False
+        self.tid: int | None = None  # the process thread's (its first cycle's)
+
+    def check(self) -> None:
+        """Raise ``jack.CallbackExit`` once ``end`` was asked (JACK's process thread, before any work)."""
+        if self.tid is None:
+            self.tid = threading.get_native_id()
+        if self.asked:
+            raise jack.CallbackExit
+
+    def end(self, timeout: float) -> bool:
+        """Ask the process thread to end and wait up to ``timeout`` s for it to be gone (True if it is,
+        or never ran a cycle; a hung server runs none: the close that follows is bounded too)."""
+        self.asked = True
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            tid = self.tid
+            if tid is not None and not os.path.exists(f"/proc/self/task/{tid}"):
+                return True
+            time.sleep(0.002)
+        return self.tid is None
+
+
+def close_client(client: jack.Client, timeout: float, ending: ProcessEnd | None = None) -> bool:
     """Deactivate and close ``client`` (its ports go with it); False if its server did
     not answer within ``timeout`` s (a stopped or hung jackd: libjack waits for it
-    without a bound, so the closing is left to a daemon thread that ends when it does)."""
+    without a bound, so the closing is left to a daemon thread that ends when it does);
+    ``ending``: the client's process callback's, whose thread ends first (``ProcessEnd``)."""
+    started = time.monotonic()
+    if ending is not None:
+        ending.end(timeout / 2)
     failed: list[BaseException] = []
 
     def close() -> None:
@@ -106,7 +147,7 @@ def close_client(client: jack.Client, timeout: float) -> bool:
 
     closing = threading.Thread(target=close, name=f"jack-close-{client.name}", daemon=True)
     closing.start()
-    closing.join(timeout)
+    closing.join(max(0.1, timeout - (time.monotonic() - started)))
     if failed:
         raise failed[0]
     return not closing.is_alive()

@@ -44,6 +44,7 @@ class JackMidiIn:
         self.changed = threading.Event()             # a port came, went, or was (dis)connected
         self.connected: frozenset[str] = frozenset()
         self.heard = 0                               # channel messages handed to ``receive``
+        self._ending = jack_client.ProcessEnd()
         self.client = jack_client.open_client(client_name, "", key="api")
         try:
             self.port = self.client.midi_inports.register(port)
@@ -68,6 +69,7 @@ class JackMidiIn:
     # -- JACK's threads ---------------------------------------------------------------
 
     def _process(self, frames: int) -> None:
+        self._ending.check()  # (first, out of the try: its CallbackExit is a close, not a failure)
         try:
             for _, data in self.port.incoming_midi_events():
                 message = bytes(data)  # (a view of JACK's buffer, valid in this period only)
@@ -126,6 +128,6 @@ class JackMidiIn:
     def close(self) -> None:
         """Close the client (its port goes with it); bounded if the server hangs. Safe twice."""
         client, self.client = getattr(self, "client", None), None
-        if client is not None and not jack_client.close_client(client, CLOSE_TIMEOUT_S):
+        if client is not None and not jack_client.close_client(client, CLOSE_TIMEOUT_S, self._ending):
             log.warning("JACK server '%s' did not answer within %g s: client '%s' stays until it does",
                         jack_client.server_name(""), CLOSE_TIMEOUT_S, client.name)

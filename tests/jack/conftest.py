@@ -10,6 +10,8 @@ import jack as jack_client
 import numpy as np
 import pytest
 
+from sonibus.adapters.jack.client import ProcessEnd
+
 from .. import jackd
 
 jack, jack_server = jackd.jack, jackd.jack_server  # the fixtures, shared with tests/midi
@@ -26,10 +28,12 @@ class Peer:
         self.ear = self.client.inports.register("ear")
         self.heard: list[np.ndarray] = []
         self.first_sound: float | None = None  # time.monotonic() of the first block heard louder than 0.1
+        self.ending = ProcessEnd()  # (its thread ends before the client closes: see ``ProcessEnd``)
         self.client.set_process_callback(self._process)
         self.client.activate()
 
     def _process(self, frames: int) -> None:
+        self.ending.check()
         n = np.arange(self.played, self.played + frames)
         self.sine.get_array()[:] = self.amplitude * np.sin(2 * np.pi * self.hz * n / self.rate)
         self.played += frames
@@ -45,6 +49,7 @@ class Peer:
         return sorted(p.name for p in self.client.get_ports(is_audio=True, **kind) if p.name.startswith(prefix))
 
     def close(self) -> None:
+        self.ending.end(2.0)
         self.client.deactivate()
         self.client.close()
 

@@ -132,6 +132,32 @@ def test_stop_leaves_no_ports_and_no_threads(net, peer):
              explain=lambda: f"{_os_threads()} threads, {threads_before} before")
 
 
+def test_stop_ends_the_process_thread_before_jack_deactivates_the_client(net, peer, monkeypatch):
+    """jack2 cancels a client's process thread when deactivating it: one cancelled while in Python
+    holds the GIL for ever (a suite's worker hung so); the thread must be gone by then."""
+    process, deactivate = JackBridge._process, jack.Client.deactivate
+    threads: list[int] = []
+    alive_at_deactivate: list[bool] = []
+
+    def traced(self, frames):
+        if not threads:
+            threads.append(threading.get_native_id())
+        return process(self, frames)
+
+    def traced_deactivate(self, *args, **kwargs):
+        alive_at_deactivate.extend(os.path.exists(f"/proc/self/task/{tid}") for tid in threads)
+        return deactivate(self, *args, **kwargs)
+
+    monkeypatch.setattr(JackBridge, "_process", traced)
+    monkeypatch.setattr(jack.Client, "deactivate", traced_deactivate)
+    node = JackBridge(JackConfig(robot="pepper", client_name="ending"), name="jack")
+    node.start(net.bus("jack"))
+    wait_for(lambda: threads, what="the bridge's process callback")
+    node.stop()
+    assert alive_at_deactivate == [False]
+    assert peer.ports("ending:") == []
+
+
 def test_a_port_to_connect_that_is_not_there_is_an_error_naming_the_key_and_the_ports(net, peer):
     with pytest.raises(ConfigError) as error:
         bridge(net, client_name="bridge", connect_inputs=("pd:output_1",))

@@ -24,7 +24,7 @@ from sonibus.adapters.web.slider import Coalescer
 from sonibus.bus import ConfigError, decode, keys
 from sonibus.bus.client import send_command
 from sonibus.bus.config import parse
-from sonibus.bus.errors import CommandError
+from sonibus.bus.errors import CommandError, RobotNotFound
 
 from ..conftest import SONIBUS, Process, free_port, queued_keys, run_cli, wait_for
 from .conftest import HELLO, KIOSK_TOKEN, RATE, TOKEN, WAVE, start_web
@@ -140,6 +140,15 @@ def test_slider_moves_are_coalesced_to_slider_hz_latest_wins_at_the_configured_s
     assert len(coalesced) == 50 - len(sent) == stage.node.stats["commands_coalesced"]
 
 
+def ran(bus, robot: str, behavior: str) -> bool:
+    """Whether ``robot`` ran ``behavior`` for ``bus`` (False: no owner known to its session yet)."""
+    try:
+        send_command(bus, robot, "behavior/run", {"name": behavior})
+    except RobotNotFound:
+        return False
+    return True
+
+
 def test_stop_reaches_every_robot_and_cancels_a_held_slider_move(net, websocket):
     net.sim("pepper", rate_hz=RATE)
     net.sim("nao", rate_hz=RATE)
@@ -147,8 +156,8 @@ def test_stop_reaches_every_robot_and_cancels_a_held_slider_move(net, websocket)
     seen = command_events(net, "*")
     cli = net.bus("cli")
     wait_for(lambda: {"pepper", "nao"} <= set(node.shown_robots()), 10, "both robots at the web node")
-    for robot in ("pepper", "nao"):
-        send_command(cli, robot, "behavior/run", {"name": WAVE})
+    for robot in ("pepper", "nao"):  # (the cli's session is new: it may not know an owner yet, which is no run)
+        wait_for(lambda robot=robot: ran(cli, robot, WAVE), 10, f"{robot} to run {WAVE} for the cli")
     page = websocket(node.url.replace("http", "ws") + "/ws")
     page.wait("hello")
     for i, angle in enumerate((0.1, 0.2)):
