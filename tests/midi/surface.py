@@ -1,8 +1,9 @@
 """A MIDI controller in a process of its own: JACK client ``surface`` with output port
 ``fader`` (JACK-Client). ``flood N`` writes up to N CC 7 messages (channel 1, unmapped in
-the tests) as fast as JACK's MIDI buffer takes them, ``note N`` one note on N then
-nothing. It prints ``ready`` when its port is there, starts once something connects to
-it (printing ``connected``), and waits to be killed.
+the tests) as fast as JACK's MIDI buffer takes them, ``note N`` a note on N, again each
+second (a note written in the cycle its connection is made may reach nobody: a CI run's
+node never heard the one note). It prints ``ready`` when its port is there, starts once
+something connects to it (printing ``connected``), and waits to be killed.
 
     python tests/midi/surface.py flood 500000
 """
@@ -43,6 +44,9 @@ def main(mode: str, number: int) -> None:
         time.sleep(0.01)
     left[0] = number if mode == "flood" else 1
     print("connected" if port.connections else "nobody connected", flush=True)
+    while mode == "note":
+        time.sleep(1.0)
+        left[0] = 1
     threading.Event().wait()
 
 
