@@ -39,6 +39,9 @@ SONIBUS = str(Path(sys.executable).with_name("sonibus"))
 # start, and this one.
 NO_MULTICAST = Path(__file__).resolve().parent / "nomulticast"
 os.environ.setdefault("SONIBUS_TEST_NETNS", os.readlink("/proc/self/ns/net"))
+# every Python child says where each of its threads is when it dies of a signal: a child that does
+# not end when asked is sent SIGABRT and its stacks are in the failure (``Process.stop``)
+os.environ.setdefault("PYTHONFAULTHANDLER", "1")
 os.environ["PYTHONPATH"] = os.pathsep.join(p for p in (str(NO_MULTICAST), os.environ.get("PYTHONPATH")) if p)
 _guard = importlib.util.spec_from_file_location("sonibus_no_multicast", NO_MULTICAST / "sitecustomize.py")
 assert _guard is not None and _guard.loader is not None
@@ -175,9 +178,21 @@ class Process:
         try:
             out, err = self.popen.communicate(timeout=timeout)
         except subprocess.TimeoutExpired:
-            self.kill()
-            pytest.fail(f"{self.popen.args} did not end within {timeout} s of signal {sig}")
+            pytest.fail(f"{self.popen.args} did not end within {timeout} s of signal {sig}; "
+                        f"where it was:\n{self.stacks()}")
         return self.popen.returncode, out, err
+
+    def stacks(self) -> str:
+        """End the process with SIGABRT (faulthandler, on in every child: every thread's stack
+        on its stderr) and give back the end of what it printed, then kill what is left."""
+        try:
+            os.kill(self.popen.pid, signal.SIGABRT)
+            out, err = self.popen.communicate(timeout=5)
+        except (OSError, subprocess.TimeoutExpired, ValueError):
+            out = err = ""
+        finally:
+            self.kill()
+        return ((err or "") + (out or "") + "\n".join(self.lines[-100:]))[-6000:]
 
     def kill(self) -> None:
         """SIGKILL its process group; then read what is left, for a bounded time: a grandchild that
