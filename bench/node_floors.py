@@ -55,6 +55,8 @@ RATE_HZ = 50
 NODES = ("foxglove", "recorder", "oscquery", "web", "midi", "features")  # the nodes with a floor here
 HEADER = struct.Struct("<BIQ")  # Foxglove's message data: opcode 1, subscription id, log time (ns)
 FED_DERIVED = ("foxglove", "oscquery", "recorder")  # fed a derived frame beside each frame (floor.DERIVED)
+DERIVED_TAKERS = 5  # the show's sinks of derived frames (OSC, recorder, web, OSCQuery, Foxglove): the features
+# node's put goes to each, its essential work as the sim's to its frames' takers (show.FRAME_TAKERS)
 # Pepper's arm chains (robots.json's, from its URDF): joint (the frame's J5..J16), parent, origin, origin's
 # rotation (quaternion), axis (None: the hand, a point)
 _BENT = (0.0, -0.07845878036326605, 0.0, 0.9969173585528084)
@@ -377,12 +379,12 @@ def features_floor(endpoint: str, reader: str, ready: Any, done: Any) -> None:
     speeds (a velocity filter of the 6 coordinates), the quantity of motion of each chain and of the
     body, motion onsets and offsets of each chain (hysteresis) — each clamped into a range, and put
     as one derived frame (``{t, seq, names, v}``, msgpack) on ``<robot>/derived``, to the
-    ``derived_reader`` listening on ``reader``.
+    ``derived_reader``s, the first listening on ``reader``.
 
     The node beyond it: each frame checked by the gate and counted, a robot's info worked out
     into its tables and served on ``<robot>/info/derived``, missing and refused joints counted
     and warned of, stale frames skipped, each frame's latency noted; its derived frames go to
-    every sink that takes them (five sessions in the show), the floor's to one."""
+    every sink that takes them; so do the floor's (``DERIVED_TAKERS`` sessions)."""
     import math
 
     import msgpack
@@ -450,10 +452,24 @@ def features_floor(endpoint: str, reader: str, ready: Any, done: Any) -> None:
     session.close()
 
 
-def derived_reader(endpoint: str, ready: Any, done: Any) -> None:
-    """The features floor's one subscriber of derived frames, listening on ``endpoint`` (not
-    measured): the node's have several."""
-    subscribed(endpoint, lambda sample: None, ready, done, ("*/derived",))
+def derived_reader(endpoint: str, ready: Any, fed: Any, done: Any) -> None:
+    """The features floor's ``DERIVED_TAKERS`` subscribers of derived frames (not measured), one
+    process: the first listens on ``endpoint``, the others connect to it (the floor's session
+    learns them by gossip and links to each, as the node's links to each sink's); ``ready`` once
+    they subscribe, ``fed`` once each has had a derived frame."""
+    import zenoh
+    sessions = [zenoh.open(zenoh_config(listen=endpoint))]
+    sessions += [zenoh.open(zenoh_config(connect=endpoint)) for _ in range(DERIVED_TAKERS - 1)]
+    got = [threading.Event() for _ in sessions]
+    subscribers = [session.declare_subscriber("*/derived", lambda sample, event=event: event.set())
+                   for session, event in zip(sessions, got, strict=True)]
+    ready.set()
+    if all(event.wait(60) for event in got):  # (else said by the caller: fed is never set)
+        fed.set()
+    done.wait()
+    for subscriber, session in zip(subscribers, sessions, strict=True):
+        subscriber.undeclare()
+        session.close()
 
 
 def subscribed(endpoint: str, each: Any, ready: Any, done: Any, keys: tuple[str, ...] = ("*/frame",)) -> None:
@@ -479,7 +495,8 @@ def measure(seconds: float, warmup_s: float = 3.0, nodes: tuple[str, ...] = NODE
     endpoints = {name: f"tcp/127.0.0.1:{free_port()}" for name in nodes}
     web_ports = {name: free_port() for name in ("foxglove", "oscquery", "web") if name in nodes}  # (each with a client)
     readies = {name: CONTEXT.Event() for name in (*endpoints, *(f"{name} client" for name in web_ports))}
-    derived, derived_at = CONTEXT.Event(), f"tcp/127.0.0.1:{free_port()}"  # (the features floor's reader)
+    derived, derived_at = CONTEXT.Event(), f"tcp/127.0.0.1:{free_port()}"  # (the features floor's readers)
+    derived_fed = CONTEXT.Event()
     with tempfile.TemporaryDirectory() as folder:
         targets = {"foxglove": (foxglove_floor, (web_ports.get("foxglove"),)), "recorder": (recorder_floor, (folder,)),
                    "oscquery": (oscquery_floor, (web_ports.get("oscquery"),)),
@@ -489,9 +506,11 @@ def measure(seconds: float, warmup_s: float = 3.0, nodes: tuple[str, ...] = NODE
                                         daemon=True) for name, (target, where) in targets.items() if name in nodes}
         others: list[Any] = []
         if "features" in nodes:
-            others.append(CONTEXT.Process(target=derived_reader, args=(derived_at, derived, done), daemon=True))
+            others.append(CONTEXT.Process(target=derived_reader, args=(derived_at, derived, derived_fed, done),
+                                          daemon=True))
         else:
             derived.set()
+            derived_fed.set()
         try:
             for process in (*others, *floors.values()):
                 process.start()
@@ -511,7 +530,7 @@ def measure(seconds: float, warmup_s: float = 3.0, nodes: tuple[str, ...] = NODE
                                               kwargs={"rate_hz": RATE_HZ, "derived": name in FED_DERIVED}))
                 others[-1].start()
                 handles.append((fed, out))
-            if not all(fed.wait(30) for fed, _ in handles):
+            if not all(fed.wait(30) for fed, _ in handles) or not derived_fed.wait(30):
                 raise RuntimeError("the node floors' publishers did not find their subscribers")
             time.sleep(warmup_s)
             before, started = {name: cpu_ns(p.pid) for name, p in floors.items()}, time.monotonic()
