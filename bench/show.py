@@ -286,7 +286,8 @@ def measure_show(folder: Path, seconds: float, split: bool, tree: str = "",
         if not ready.wait(60) or (twins and not twin_ready.wait(60)):
             raise RuntimeError("the clients did not connect")
         deadline = time.monotonic() + 30  # (every client fed before the warm-up: a busy machine starts slowly)
-        while (min(counts.get(name, 0) for name in ("osc", "web", "oscquery", "foxglove") if name in nodes) == 0
+        while (min((counts.get(name, 0) for name in ("osc", "web", "oscquery", "foxglove") if name in nodes),
+                   default=1) == 0
                or any(twin_counts.get(name, 0) == 0 for name in ("osc", "web", "oscquery", "foxglove")
                       if name in twins)):
             if time.monotonic() > deadline or not client.is_alive():
