@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import threading
 from dataclasses import dataclass
+from types import SimpleNamespace
 from typing import Any
 
 import msgpack
@@ -161,30 +162,16 @@ def test_one_streams_subscribes_the_broadest_first_so_one_serves_both(net):
 def test_the_keys_a_broader_subscriber_remembers_are_capped():
     """Keys come from the network: the table of which subscriptions each key goes to stops growing
     (past it, a key's subscriptions are worked out each time), and each still gets its own keys."""
-    class Payload(bytes):
-        def to_bytes(self) -> bytes:
-            return bytes(self)
-
-    @dataclass
-    class Sample:
-        key_expr: str
-        payload: Payload
-
     callbacks: list = []
-
-    class Subscriber:
-        def undeclare(self) -> None:
-            pass
-
-    fanout = Fanout(lambda keyexpr, callback: callbacks.append(callback) or Subscriber())
+    fanout = Fanout(lambda keyexpr, callback: callbacks.append(callback) or SimpleNamespace(undeclare=lambda: None))
     every: list[str] = []
     pepper: list[str] = []
     fanout.join("*/frame", lambda key, payload, sample: every.append(key), lambda key, size: True)
     narrower = fanout.join("pepper/frame", lambda key, payload, sample: pepper.append(key), lambda key, size: True)
     [dispatch] = callbacks
     for n in range(3 * MAX_ROUTES):
-        dispatch(Sample(f"robot{n}/frame", Payload(b"")))
-        dispatch(Sample("pepper/frame", Payload(b"")))
+        dispatch(SimpleNamespace(key_expr=f"robot{n}/frame", payload=zenoh.ZBytes(b"")))
+        dispatch(SimpleNamespace(key_expr="pepper/frame", payload=zenoh.ZBytes(b"")))
     assert len(every) == 6 * MAX_ROUTES and pepper == ["pepper/frame"] * 3 * MAX_ROUTES
     assert len(fanout._shared["*/frame"].members.routes) == MAX_ROUTES
     narrower.undeclare()
