@@ -99,10 +99,10 @@ class _Members:
 class _Shared:
     """A key expression's Zenoh subscriber and the subscriptions it serves."""
 
-    __slots__ = ("keyexpr", "members", "subscriber")
+    __slots__ = ("expr", "keyexpr", "members", "subscriber")
 
     def __init__(self, keyexpr: str) -> None:
-        self.keyexpr = keyexpr
+        self.keyexpr, self.expr = keyexpr, zenoh.KeyExpr(keyexpr)
         self.subscriber: Any = None
         self.members = _Members(keyexpr, ())
 
@@ -182,13 +182,8 @@ class Fanout:
         shared = self._shared.get(keyexpr)
         if shared is not None:
             return shared
-        wanted = None
-        for via, shared in self._shared.items():
-            if wanted is None:
-                wanted = zenoh.KeyExpr(keyexpr)
-            if zenoh.KeyExpr(via).includes(wanted):
-                return shared
-        return None
+        wanted = zenoh.KeyExpr(keyexpr)
+        return next((shared for shared in self._shared.values() if shared.expr.includes(wanted)), None)
 
     def _broadest_planned(self, keyexpr: str) -> str:
         """The planned key expression to declare for ``keyexpr``: one that includes it and that no

@@ -109,8 +109,10 @@ def plan(patterns: Iterable[str], per_joint_keys: bool = False) -> Plan:
 
 def planned(config: Any) -> tuple[str, ...]:
     """The key expressions a node whose configuration has ``subscribe`` (patterns; and
-    ``per_joint_keys``) subscribes to through ``Streams``, for ``Bus.plan`` (the runner's, before
-    any node starts): () for a configuration without, or with patterns its node will refuse."""
+    ``per_joint_keys``) subscribes to through ``Streams`` (the OSC, MIDI, Foxglove and recorder
+    nodes), for ``Bus.plan`` (the runner's, before any node starts): () for a configuration
+    without, or with patterns its node will refuse. (A node whose ``subscribe`` meant anything
+    else would only make others share a broader Zenoh subscriber: nothing any node takes changes.)"""
     patterns = getattr(config, "subscribe", None)
     if not isinstance(patterns, tuple | list) or not all(isinstance(p, str) for p in patterns):
         return ()
