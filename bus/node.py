@@ -202,11 +202,11 @@ class Bus:
         return self._subscriptions.join(keyexpr, callback, fits), queue
 
     def plan(self, keyexprs: Iterable[str]) -> None:
-        """Say the key expressions this session's nodes will subscribe to (``keys.expr``'s; the
-        runner, from each node's ``subscribe``, before any starts): a node's subscription that a
-        broader one of them includes is then served by that one's Zenoh subscriber, whichever
-        node subscribes first (``bus/fanout.py``)."""
-        self._subscriptions.plan(keyexprs)
+        """Say the key expressions this session's nodes will subscribe to (the runner, from each
+        node's ``subscribe``, before any starts; ``ConfigError`` for a bad one): a node's
+        subscription that a broader one of them includes is then served by that one's Zenoh
+        subscriber, whichever node subscribes first (``bus/fanout.py``)."""
+        self._subscriptions.plan(keys.expr(keyexpr) for keyexpr in keyexprs)  # (as ``subscribe`` writes them)
 
     def on_sample(self, keyexpr: str, take: Callable[[str, bytes | codec.Oversize], None], what: str) -> Any:
         """Call ``take(key, payload)`` on Zenoh's thread for each sample of ``keyexpr``, with no
