@@ -34,6 +34,10 @@ SCRIPTS: dict[str, tuple[str, list[str], float]] = {
     "show": ("show", ["--rounds", "2", "--seconds", "8"], 300),  # a full show, node by node (issue 27)
     # N subscriptions to one key in one process: a Zenoh subscriber each, or one shared (issue 35)
     "shared_subscriptions": ("shared_subscriptions", ["--rounds", "3", "--seconds", "5"], 400),
+    # a robot's subscriptions (pepper/frame) beside every robot's (*/frame): two Zenoh subscribers, or one
+    "shared_subscriptions_broader": ("shared_subscriptions", ["--rounds", "3", "--seconds", "5", "--ways", "apart",
+                                                              "broader", "--counts", "2", "8", "--rates", "50",
+                                                              "--name", "shared_subscriptions_broader"], 200),
     "floor_instructions": ("floor_instructions", [], 900),  # the OSC sink's frame path in instructions (callgrind)
     # the show's seven takers of a frame in one process: instructions a tick (callgrind; issue 35)
     "verdicts": ("verdicts", [], 300),

@@ -15,7 +15,12 @@ into its own queue drained by a worker thread of its own (as a node's): either
   zenoh-python's own woken for each sample (``Callback(f, indirect=True)``, the default); or
 - ``direct`` (``--ways shared direct``): shared, its callback called on Zenoh's own thread
   (``indirect=False``): no Python thread woken a sample, but Zenoh's thread attached to
-  Python at each call (tried for issue 35 and left: docs/performance.md).
+  Python at each call (tried for issue 35 and left: docs/performance.md); or
+- ``apart`` and ``broader`` (``--ways apart broader``): shared, the first half of the N
+  subscriptions to ``pepper/frame`` (a robot's nodes: the OSC sink, features), the rest to
+  ``*/frame`` (the recorder, Foxglove...), in that order: ``apart`` as a process without a
+  plan (two Zenoh subscribers: the broader one came after), ``broader`` with ``*/frame``
+  planned first, as ``sonibus run`` does (one: the robot's served by the broader one's).
 
 The same code both ways. The two receiving processes run side by side, fed the same
 frames by one publisher over the same window (a shared machine's load weighs on both
@@ -39,6 +44,7 @@ from common import free_port, write, zenoh_config
 from floor import CONTEXT, cpu_ns, switches
 
 KEY = "pepper/frame"
+EVERY = "*/frame"
 WARMUP_S = 1.5
 COUNTS = (1, 4, 8)
 RATES = (50, 100)
@@ -67,6 +73,9 @@ def receiver(endpoint: str, count: int, way: str, ready: Any, done: Any, out: An
         first._subscriptions = Fanout(lambda keyexpr, callback: session.declare_subscriber(
             keyexpr, zenoh.handlers.Callback(callback, indirect=False)))
     buses = [Bus(session, node=f"n{n}") if way == "separate" else first.for_node(f"n{n}") for n in range(count)]
+    if way == "broader":
+        first.plan([EVERY])
+    split = way in ("apart", "broader")  # (the first half a robot's subscriptions, the rest every robot's)
     taken = [0] * count
     subscriptions = []
 
@@ -77,7 +86,7 @@ def receiver(endpoint: str, count: int, way: str, ready: Any, done: Any, out: An
 
     threads = []
     for index, bus in enumerate(buses):
-        subscription, queue = bus.subscribe(KEY)
+        subscription, queue = bus.subscribe(EVERY if split and index >= count // 2 else KEY)
         subscriptions.append(subscription)
         threads.append(threading.Thread(target=drain, args=(index, queue), daemon=True))
         threads[-1].start()
@@ -155,7 +164,8 @@ def main() -> None:
     parser.add_argument("--seconds", type=float, default=5.0, help="measuring window of each case")
     parser.add_argument("--counts", type=int, nargs="+", default=list(COUNTS))
     parser.add_argument("--rates", type=int, nargs="+", default=list(RATES))
-    parser.add_argument("--ways", nargs=2, default=list(WAYS), choices=("separate", "shared", "direct"),
+    parser.add_argument("--ways", nargs=2, default=list(WAYS),
+                        choices=("separate", "shared", "direct", "apart", "broader"),
                         help="the baseline and the way measured against it (default: separate shared)")
     parser.add_argument("--name", default="shared_subscriptions", help="results file name")
     args = parser.parse_args()

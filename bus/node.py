@@ -15,7 +15,7 @@ import queue
 import socket
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from typing import Any, NamedTuple, TypeVar
 
@@ -178,8 +178,10 @@ class Bus:
         ``max_payload`` replaces the gate's size limit.
 
         The subscriptions of one session to the same key expression share one Zenoh
-        subscriber and its thread (``bus/fanout.py``; not those with ``history``): what this
-        returns undeclares this subscription alone, the last one the Zenoh subscriber."""
+        subscriber and its thread (``bus/fanout.py``; not those with ``history``), and so do
+        those a broader one includes that the session subscribes to or planned (``plan``),
+        each given only its own keys: what this returns undeclares this subscription alone,
+        the last one a Zenoh subscriber serves that subscriber."""
         keyexpr = keys.expr(keyexpr)
         queue = queue if queue is not None else SampleQueue(maxlen)
 
@@ -198,6 +200,13 @@ class Bus:
                                                     f"subscriber to {keyexpr}"),
                 history=zenoh.ext.HistoryConfig(detect_late_publishers=True)), queue
         return self._subscriptions.join(keyexpr, callback, fits), queue
+
+    def plan(self, keyexprs: Iterable[str]) -> None:
+        """Say the key expressions this session's nodes will subscribe to (the runner, from each
+        node's ``subscribe``, before any starts; ``ConfigError`` for a bad one): a node's
+        subscription that a broader one of them includes is then served by that one's Zenoh
+        subscriber, whichever node subscribes first (``bus/fanout.py``)."""
+        self._subscriptions.plan(keys.expr(keyexpr) for keyexpr in keyexprs)  # (as ``subscribe`` writes them)
 
     def on_sample(self, keyexpr: str, take: Callable[[str, bytes | codec.Oversize], None], what: str) -> Any:
         """Call ``take(key, payload)`` on Zenoh's thread for each sample of ``keyexpr``, with no

@@ -22,6 +22,7 @@ from .notify import Notifier
 from .owner import RobotAdapter
 from .restarts import Restart
 from .session import BusConfig, open_session
+from .streams import planned
 from .watchdog import Watchdog
 
 log = logging.getLogger(__name__)
@@ -84,6 +85,9 @@ def run(adapters: list[Adapter], bus_config: BusConfig, stop: threading.Event,
         owner = any(isinstance(adapter, RobotAdapter) for adapter in adapters)
         control = closing.enter_context(contextlib.closing(open_control(bus_config, session))) if owner else None
         bus = Bus(session, host=host, limits=Limits(max_future_s=bus_config.max_future_s), control=control)
+        # what the nodes will subscribe to, before any does: a robot's frames reach one Zenoh subscriber
+        # of the process, whichever node of one robot or of every robot starts first (bus/fanout.py)
+        bus.plan(k for adapter in adapters for k in planned(adapter.config))
         started: list[Adapter] = []
         why = "stopped"
         try:

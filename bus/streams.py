@@ -74,6 +74,13 @@ class Plan:
     broad: tuple[str, ...] = ()
     derived: tuple[str, ...] = ()
 
+    @property
+    def keyexprs(self) -> tuple[str, ...]:
+        """Every key expression it subscribes to, the broadest first (those of every robot, then
+        of one): the order ``Streams`` subscribes in, so that one of its own subscriptions a
+        broader one includes is served by that one's Zenoh subscriber (``bus/fanout.py``)."""
+        return tuple(sorted((*self.frames, *self.derived, *self.keys, *self.broad), key=_narrowness))
+
 
 def plan(patterns: Iterable[str], per_joint_keys: bool = False) -> Plan:
     """How to subscribe to ``patterns`` (user patterns; see ``keys.expr``)."""
@@ -98,6 +105,26 @@ def plan(patterns: Iterable[str], per_joint_keys: bool = False) -> Plan:
         if not _JOINTS.includes(selected):  # it selects more than joints
             broad.append(pattern)
     return Plan(_one_each(frames, keys.frame()), tuple(direct), tuple(broad), _one_each(derived, keys.derived_frame()))
+
+
+def planned(config: Any) -> tuple[str, ...]:
+    """The key expressions a node whose configuration has ``subscribe`` (patterns; and
+    ``per_joint_keys``) subscribes to through ``Streams`` (the OSC, MIDI, Foxglove and recorder
+    nodes), for ``Bus.plan`` (the runner's, before any node starts): () for a configuration
+    without, or with patterns its node will refuse. (A node whose ``subscribe`` meant anything
+    else would only make others share a broader Zenoh subscriber: nothing any node takes changes.)"""
+    patterns = getattr(config, "subscribe", None)
+    if not isinstance(patterns, tuple | list) or not all(isinstance(p, str) for p in patterns):
+        return ()
+    try:
+        return plan(patterns, bool(getattr(config, "per_joint_keys", False))).keyexprs
+    except (ConfigError, ValueError):  # (said by the node itself when it starts)
+        return ()
+
+
+def _narrowness(keyexpr: str) -> int:
+    """0 for a key expression of every robot (``*/frame``), 1 for one robot's."""
+    return 0 if "*" in keyexpr.split("/")[0] else 1
 
 
 def _robot(pattern: str) -> str:
@@ -316,14 +343,14 @@ class Streams(Selection):
             log.info("%s: %s served from whole frames on %s (per_joint_keys = true for publishers of "
                      "joint keys only)", bus.node, ", ".join(patterns), ", ".join(self.plan.frames))
         into = _Direct(queue, direct) if direct is not None else queue
-        self.subscribers = [bus.subscribe(k, queue=into, stamped=stamped)[0] for k in self.plan.frames]
-        # (derived frames too: one a tick beside the robot's, as quick to take; through the queue, the
+        # (derived frames as the robot's: one a tick beside it, as quick to take; through the queue, the
         # worker's wake-up cost an OSC sink more than the frame's work: docs/performance.md)
-        self.subscribers += [bus.subscribe(k, queue=into, stamped=stamped)[0] for k in self.plan.derived]
-        self.subscribers += [bus.subscribe(k, queue=queue, stamped=stamped, skip=_skip(k, _frame_keys(k)))[0]
-                             for k in self.plan.keys]
-        self.subscribers += [bus.subscribe(k, queue=queue, stamped=stamped, skip=_skip(k, _from_frames(k)))[0]
-                             for k in self.plan.broad]
+        subscriptions = [(k, {"queue": into}) for k in (*self.plan.frames, *self.plan.derived)]
+        subscriptions += [(k, {"queue": queue, "skip": _skip(k, _frame_keys(k))}) for k in self.plan.keys]
+        subscriptions += [(k, {"queue": queue, "skip": _skip(k, _from_frames(k))}) for k in self.plan.broad]
+        # (the broadest first: one of them that includes another serves it too, bus/fanout.py)
+        subscriptions.sort(key=lambda subscription: _narrowness(subscription[0]))
+        self.subscribers = [bus.subscribe(k, stamped=stamped, **options)[0] for k, options in subscriptions]
 
     def take(self, key: str, payload: bytes | Held, count: Callable[[str, int], None],
              warn: Callable[[str, str], None]) -> Incoming | None:
