@@ -61,7 +61,6 @@ log = logging.getLogger(__name__)
 START_TIMEOUT_S = 5.0   # binding the port takes milliseconds; this only guards a wedged loop
 CLOSE_WAIT_S = 0.5      # how long a WebSocket client has to answer the server's close
 SHUTDOWN_S = 0.5        # how long running handlers have to finish before they are cancelled
-STOP_POLL_S = 0.05      # ``adapter.stopping`` is a threading.Event: the loop looks at it this often
 CLIENT_BACKLOG = 256    # messages waiting for a slow client; past this its oldest are dropped
 CLIENT_BACKLOG_BYTES = 8 << 20  # and bytes: 256 large messages must not hold a gigabyte for one client
 LISTEN_BACKLOG = 128    # connections the kernel holds before accept (aiohttp's default)
@@ -124,6 +123,7 @@ class WebServer:
         self._ready = threading.Event()
         self._start_error: BaseException | None = None
         self._crash: BaseException | None = None
+        self._ended: asyncio.Event | None = None  # (on the loop) the server ends once it is set
         adapter.stats.follow("dropped", lambda: self.dropped)  # the node's stats count them too
         # what the limits refused (below), shown at zero
         adapter.stats.declare(("connections_refused", "clients_refused", "accept_failed", "refused", "timed_out",
@@ -277,10 +277,13 @@ class WebServer:
         self.port = listener.sockets[0].getsockname()[1]
         self._cap = self._connection_cap()
         self._loop = loop
+        ended = self._ended = asyncio.Event()  # set by the node's stop (when_stopping) or a crash: no poll
+        if self._crash is not None:
+            ended.set()
+        self.adapter.when_stopping(lambda: self.call(ended.set))
         self._ready.set()
         try:
-            while self._crash is None and not self.adapter.stopping.is_set():
-                await asyncio.sleep(STOP_POLL_S)
+            await ended.wait()
         finally:
             self._loop = None
             listener.close()
@@ -369,6 +372,8 @@ class WebServer:
             return
         if self._crash is None:  # the worker raises it: fail() logs it with its traceback
             self._crash = exc
+            if self._ended is not None:
+                self._ended.set()
 
     @web.middleware
     async def _errors(self, request: web.Request, handler: Handler) -> web.StreamResponse:

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import functools
 import json
+import threading
 import time
 from typing import TYPE_CHECKING
 
@@ -40,9 +41,22 @@ class MapsPanel:
     def __init__(self, adapter: Adapter, pages: Pages) -> None:
         self.adapter, self.pages = adapter, pages
         self._structure = ""  # the last ``maps`` message sent
+        self._wanted = threading.Event()  # an operator's page came, or the node stops
+        pages.on_operator.append(self._wanted.set)
 
     def run(self) -> None:
-        while not self.adapter.stopping.wait(MAPS_EVERY_S):
+        """Look every ``MAPS_EVERY_S`` while an operator's page is open; with none, wait for one
+        (not a wake-up a look for nobody)."""
+        stopping = self.adapter.stopping
+        self.adapter.when_stopping(self._wanted.set)
+        while not stopping.is_set():
+            if not self.pages.operators:
+                self._wanted.clear()
+                if not self.pages.operators:  # (one that came between: set after the clear, or seen here)
+                    self._wanted.wait()
+                continue
+            if stopping.wait(MAPS_EVERY_S):
+                return
             if self.pages.operators:
                 self.look()
 
