@@ -23,7 +23,7 @@ from pathlib import Path
 
 from common import free_port, write
 from floor import switches
-from show import started, window
+from show import sonibus, started, window
 from sink_throughput import SONIBUS, stop_process
 
 NODES = ("web", "osc", "oscquery", "recorder", "features", "gateway")
@@ -97,7 +97,6 @@ def measure(folder: Path, nodes: tuple[str, ...], against: str, seconds: float) 
 
 
 def _run(path: Path, log: Path, node: str, endpoint: str, tree: str) -> subprocess.Popen[bytes]:
-    from show import sonibus
     return sonibus(path, log, "--only", node, "--connect", endpoint, tree=tree)
 
 
@@ -131,8 +130,8 @@ def main() -> None:
                           "ratio": round(ratio, 3), "against": args.against})
         print(row)
         summary.append(entry)
-    write(args.name, {"seconds": args.seconds, "rounds": args.rounds, "load": open("/proc/loadavg").read().split()[:3],
-                      "cpu": cpu, "switches_per_s": waits, "summary": summary})
+    load = Path("/proc/loadavg").read_text().split()[:3]
+    write(args.name, {"seconds": args.seconds, "rounds": args.rounds, "load": load, "cpu": cpu, "switches_per_s": waits, "summary": summary})
 
 
 if __name__ == "__main__":
