@@ -131,7 +131,8 @@ def main() -> None:
         print(row)
         summary.append(entry)
     load = Path("/proc/loadavg").read_text().split()[:3]
-    write(args.name, {"seconds": args.seconds, "rounds": args.rounds, "load": load, "cpu": cpu, "switches_per_s": waits, "summary": summary})
+    write(args.name, {"seconds": args.seconds, "rounds": args.rounds, "load": load, "cpu": cpu,
+                      "switches_per_s": waits, "summary": summary})
 
 
 if __name__ == "__main__":
