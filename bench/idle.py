@@ -23,48 +23,16 @@ from pathlib import Path
 
 from common import free_port, write
 from floor import switches
-from show import sonibus, started, window
+from show import RATE_HZ, SHOW, sonibus, started, window
 from sink_throughput import SONIBUS, stop_process
 
-NODES = ("web", "osc", "oscquery", "recorder", "features", "gateway")
-CONFIG = """[bus]
-multicast = false
-
-[nodes.osc]
-adapter = "osc"
-subscribe = ["pepper/joints/*", "pepper/derived/**", "pepper/events/*"]
-targets = ["127.0.0.1:{osc}"]
-
-[nodes.gateway]
-adapter = "osc-gateway"
-listen = "127.0.0.1:{gateway}"
-
-[nodes.features]
-adapter = "features"
-robots = "pepper"
-
-[nodes.recorder]
-adapter = "recorder"
-path = "{folder}/idle-{{time}}.mcap"
-status_every_s = 0
-
-[nodes.web]
-adapter = "web"
-listen = "127.0.0.1:{web}"
-
-[nodes.oscquery]
-adapter = "oscquery"
-listen = "127.0.0.1:{oscquery}"
-gateway = "127.0.0.1:{gateway}"
-mdns = false
-"""
-
-
+NODES = ("web", "osc", "oscquery", "recorder", "features", "gateway", "foxglove")  # (show.py's; not midi: JACK)
 def config(folder: Path, name: str) -> Path:
+    """show.py's show, ports of its own (each node is run alone: ``--only``; no sim is)."""
     ports = {name: free_port(socket.SOCK_DGRAM if name in ("osc", "gateway") else socket.SOCK_STREAM)
-             for name in ("osc", "gateway", "web", "oscquery")}
+             for name in ("osc", "gateway", "web", "oscquery", "foxglove")}
     path = folder / f"{name}.toml"
-    path.write_text(CONFIG.format(folder=folder, **ports))
+    path.write_text(SHOW.format(rate=RATE_HZ, folder=folder, **ports))
     return path
 
 
