@@ -84,6 +84,8 @@ class MapsPanel:
         if structure != self._structure:
             self._structure = structure
             self.pages.maps(structure)
+        if not nodes:  # (no map node: nothing live to show, 5 messages a second to each page for nothing)
+            return
         self.pages.to_operators(_dumps({"type": "map_values", "t": time.time(), "nodes": {
             n.get("node"): {m.get("name"): {k: m.get(k) for k in LIVE} for m in n.get("maps", ())} for n in nodes},
             "halted": {n.get("node"): _halted(n.get("halted")) for n in nodes}}))

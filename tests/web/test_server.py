@@ -119,6 +119,17 @@ def test_a_web_node_with_no_page_open_sleeps_and_a_page_that_comes_gets_frames_a
     assert page.texts().index(hello) < page.texts().index(frame)  # (the greeting first, as before)
 
 
+def test_with_no_map_node_an_open_page_gets_no_live_map_values(net, websocket):
+    """The maps panel looks 5 times a second while a page is open; with no map node on the bus
+    its ``map_values`` would say nothing (they were sent all the same: 5 messages a second)."""
+    node = start_web(net)
+    page = websocket(node.url.replace("http", "ws") + "/ws")
+    page.wait("hello")
+    wait_for(lambda: page.of("maps"), 10, "the panel's first look (its maps: none)")
+    wait_for(lambda: len(page.of("stats")) >= 2, 10, "a second or two of the panel's looks")
+    assert page.of("map_values") == [], [m.get("type") for m in page.texts()]
+
+
 def test_a_command_goes_through_the_owners_validation_and_its_reply_comes_back(stage, websocket):
     page = websocket(stage.ws_url())
     page.wait("hello")
