@@ -88,14 +88,16 @@ def main() -> None:
                                                             if args.against else ""))
     for node in (*nodes, "router"):
         row = f"{node:<10} {cpu[node]:7.2f} {waits[node]:11.0f}"
-        entry = {"scenario": f"(idle) {node} node alone, no robot, no client: CPU %", "value": round(cpu[node], 3),
+        entry = {"scenario": f"(idle) {node} node alone, no robot, no client: CPU, wake-ups",
+                 "sonibus": f"{cpu[node]:.2f} % of a core, {waits[node]:.0f} switches/s", "cpu": round(cpu[node], 3),
                  "switches_per_s": round(waits[node], 1)}
         other = f"{node} @against"
         if other in cpu:
             ratio = cpu[node] / cpu[other] if cpu[other] else float("nan")
             row += f" {cpu[other]:14.2f} {waits[other]:11.0f} {ratio:6.2f}"
-            entry.update({"baseline": round(cpu[other], 3), "baseline_switches_per_s": round(waits[other], 1),
-                          "ratio": round(ratio, 3), "against": args.against})
+            entry.update({"baseline": f"{cpu[other]:.2f} %, {waits[other]:.0f} switches/s ({args.against})",
+                          "ratio": f"{ratio:.2f}×", "baseline_cpu": round(cpu[other], 3),
+                          "baseline_switches_per_s": round(waits[other], 1)})
         print(row)
         summary.append(entry)
     load = Path("/proc/loadavg").read_text().split()[:3]
