@@ -88,7 +88,8 @@ def main() -> None:
                                                             if args.against else ""))
     for node in (*nodes, "router"):
         row = f"{node:<10} {cpu[node]:7.2f} {waits[node]:11.0f}"
-        entry = {"scenario": f"(idle) {node} node alone, no robot, no client: CPU, wake-ups",
+        what = "their router" if node == "router" else f"{node} node alone, no robot, no client"
+        entry = {"scenario": f"(idle) {what}: CPU, wake-ups",
                  "sonibus": f"{cpu[node]:.2f} % of a core, {waits[node]:.0f} switches/s", "cpu": round(cpu[node], 3),
                  "switches_per_s": round(waits[node], 1)}
         other = f"{node} @against"
