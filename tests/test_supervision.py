@@ -172,7 +172,7 @@ def test_the_run_sleeps_between_its_checks_and_a_failing_node_still_ends_it_at_o
     try:
         wait_for(lambda: supervisor.with_key("READY"), 20, "READY=1")
         counted = wakes([running.thread], 2.0)
-        assert counted[running.thread.name] <= 6, counted  # (2 checks; a GIL wait counts too. Before: 20+)
+        assert counted[running.thread.name] <= 8, counted  # (2 checks: 1-4 seen, a GIL wait counts too; before 20-27)
         worker.queue.put("fail")
         wait_for(lambda: not running.thread.is_alive(), 10, "the run to end")
     finally:

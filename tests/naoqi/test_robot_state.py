@@ -213,7 +213,7 @@ def test_the_not_answering_watch_wakes_once_a_timeout_not_ten_times_a_second(net
     r.events.wait("connection", state="connected")
     [watch] = named(f"{r.adapter.name}:answers")
     counted = wakes([watch], 2.0)
-    assert counted[watch.name] <= 6, counted  # (about 2; a GIL wait counts too. Before: 20)
+    assert counted[watch.name] <= 8, counted  # (2-4 measured, a GIL wait counts too; before: 20-24)
     r.fake.freeze()
     frozen = r.events.wait("connection", timeout=5.0, state="not_answering")
     assert "no frame" in frozen["error"]
