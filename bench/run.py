@@ -32,6 +32,7 @@ SCRIPTS: dict[str, tuple[str, list[str], float]] = {
     "osc_latency_one_process": ("osc_latency", ["--robots", "2", "--seconds", "8", "--one-process",
                                                 "--name", "osc_latency_one_process"], 60),
     "show": ("show", ["--rounds", "2", "--seconds", "8"], 300),  # a full show, node by node (issue 27)
+    "idle": ("idle", ["--seconds", "20"], 120),  # each node of the show alone, idle: CPU and wake-ups (issue 35)
     # N subscriptions to one key in one process: a Zenoh subscriber each, or one shared (issue 35)
     "shared_subscriptions": ("shared_subscriptions", ["--rounds", "3", "--seconds", "5"], 400),
     # a robot's subscriptions (pepper/frame) beside every robot's (*/frame): two Zenoh subscribers, or one

@@ -88,6 +88,8 @@ class Adapter:
         self._entities: list[Any] = []
         self._queues: list[SampleQueue] = []  # whose consumers must keep taking (see health)
         self._stats_beat = 0.0            # when the stats worker last went round (monotonic)
+        self._on_stopping: list[Callable[[], None]] = []  # told once ``stopping`` is set (when_stopping)
+        self._on_failed: list[Callable[[], None]] = []    # told once the node failed (when_failed)
 
     @property
     def bus(self) -> Bus:
@@ -125,6 +127,8 @@ class Adapter:
         self.stopping.set()
         log.info("%s: stopping; %s", self.name, ", ".join(f"{k} {v}" for k, v in self.stats.items()))
         try:
+            for wake in list(self._on_stopping):
+                wake()
             self._stop()
         finally:
             for thread in self._threads:
@@ -233,6 +237,24 @@ class Adapter:
         counters = ", ".join(f"{k} {v}" for k, v in self.stats.items() if v)  # (outside the lock: reads sources)
         log.warning("%s: %s%s", self.name, message, f" ({counters})" if counters else "")
 
+    def when_stopping(self, wake: Callable[[], None]) -> None:
+        """Call ``wake()`` (on the stopping thread: it must not block) once ``stopping`` is set, at
+        once if it is already: a worker that waits on something else than ``stopping`` (an event
+        loop, a queue) is woken by it instead of looking at ``stopping`` every few milliseconds."""
+        with self._lock:
+            self._on_stopping.append(wake)
+        if self.stopping.is_set():
+            wake()
+
+    def when_failed(self, wake: Callable[[], None]) -> None:
+        """Call ``wake()`` (on the failing thread: it must not block) once the node has failed, at
+        once if it has: ``sonibus run`` waits for that, or a stop, without looking every 0.1 s."""
+        with self._lock:
+            self._on_failed.append(wake)
+            failed = bool(self.failure)
+        if failed:
+            wake()
+
     def spawn(self, target: Callable[[], None], name: str, restart: bool = False) -> threading.Thread:
         """Run ``target`` on a thread joined by ``stop()``; it must return once ``stopping``
         is set. If it raises, the node fails (see ``fail``) — or, with ``restart``, it
@@ -254,6 +276,7 @@ class Adapter:
             if self.failure:
                 return
             self.failure = reason
+            told = list(self._on_failed)
         self.state = "failed"
         self.count("errors")
         expected = isinstance(exc, SonibusError)  # a failure the code foresaw (a full disk): its line says it all
@@ -267,6 +290,8 @@ class Adapter:
                 self._bus.put(keys.NODE_EVENTS, event)
             except Exception as exc:  # the session may be closing: the log line and the state remain
                 log.debug("%s: node event not sent: %s", self.name, exc)
+        for wake in told:
+            wake()
 
     def own(self, entity: Any) -> Any:
         """Undeclare/close ``entity`` (publisher, subscriber, token, queue...) on stop; a

@@ -168,6 +168,16 @@ class Connection:
         if self.answer_s is not None and self.state == "connected" and silent >= self.answer_s:
             self.set("not_answering", f"no frame from the robot for {silent:.1f} s; the link is up")
 
+    def due_in(self, now: float) -> float:
+        """Seconds until ``check`` may find the robot silent (``now``: monotonic): ``answer_s``
+        after its last frame while connected; else ``answer_s`` (the soonest a robot that
+        connects now can fall silent, its connection counting as an answer)."""
+        if self.answer_s is None:
+            return 1.0
+        if self.state != "connected":
+            return self.answer_s
+        return max(0.005, self._answered + self.answer_s - now)  # (at least a little: no spin on a rounding)
+
     def info(self, standing_by: bool = False) -> dict[str, Any]:
         """What the robot's info says of it (``standing_by``: another owner keeps it)."""
         now = time.monotonic()

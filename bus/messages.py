@@ -35,6 +35,7 @@ from .. import schemas
 from .capped import Capped, size_of
 from .codec import DecodeError, decode
 from .keys import AUDIO_STREAMS, Key
+from .schemacheck import fits
 
 __all__ = ["FRAME_FIELDS", "SECTIONS", "BadMessage", "Gate", "Limits", "Section", "derived_frame", "derived_samples",
            "frame", "frame_samples", "schema_of", "valid_part"]
@@ -266,7 +267,8 @@ class Gate:
     def info(self, key: Key, message: dict[str, Any]) -> None:
         json_like(message, "info")
         name = "derived_info" if key.name == "derived" else "robot_info"
-        _schema_check(schemas.validator(name), name.replace("_", " "), message)
+        if not fits(name)(message):  # (the compiled check first: jsonschema only to say why it does not fit)
+            _schema_check(schemas.validator(name), name.replace("_", " "), message)
         for joint in message.get("joints", ()):
             if not joint["min"] <= joint["max"]:
                 raise BadMessage(f"joint {joint['name']}: min {joint['min']} is above max {joint['max']}")
@@ -283,7 +285,8 @@ class Gate:
             if isinstance(found, dict) and len(found) > most:
                 raise BadMessage(f"{table}: {len(found)} entries, at most {most}")
         json_like(message, "stats")
-        _schema_check(schemas.validator("node_stats"), "node stats", message)
+        if not fits("node_stats")(message):  # (the compiled check first: jsonschema only to say why it does not fit)
+            _schema_check(schemas.validator("node_stats"), "node stats", message)
 
     # -- shared -----------------------------------------------------------------------
 

@@ -94,7 +94,9 @@ class RobotAdapter(Adapter):
             self.spawn(self._watch_answers, "answers")
 
     def _watch_answers(self) -> None:
-        while not self.stopping.wait(0.1):
+        """``not_answering`` once the robot gave no frame for ``answer_s``: woken when that may
+        first be true (``Connection.due_in``), not ten times a second."""
+        while not self.stopping.wait(self.connection.due_in(time.monotonic())):
             self.connection.check(time.monotonic())
 
     def _claim(self) -> None:

@@ -94,6 +94,7 @@ def run(adapters: list[Adapter], bus_config: BusConfig, stop: threading.Event,
             for adapter in adapters:
                 watchdog.status(f"starting node '{adapter.name}' ({adapter.kind})")
                 adapter.restarts = restart.count
+                adapter.when_failed(stop.set)
                 try:
                     adapter.start(bus)
                 except ConfigError as exc:
@@ -106,11 +107,17 @@ def run(adapters: list[Adapter], bus_config: BusConfig, stop: threading.Event,
                 on_started(bus)
             watchdog.ready(f"running {', '.join(a.name for a in started)} on {bus.host}"
                            + (f" (restart {restart.count})" if restart.count else ""))
-            while not stop.wait(0.1):
+            # woken by a stop, by a node that fails (it sets ``stop``: every node stops, NodeFailed says
+            # why), or when the watchdog or the trimmer may be due: not ten times a second for nothing
+            every_s = min(watchdog.every_s, trimmer.every_s)
+            while True:
+                stopped = stop.wait(every_s)
                 failed = [a for a in started if a.failure]
                 if failed:
                     why = "; ".join(f"node '{a.name}': {a.failure}" for a in failed)
                     raise NodeFailed(why)
+                if stopped:
+                    break
                 watchdog.check()
                 trimmer.check()
         except BaseException as exc:

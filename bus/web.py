@@ -41,29 +41,27 @@ import os
 import resource
 import socket
 import threading
-from collections import deque
-from collections.abc import AsyncIterator, Awaitable, Callable, Coroutine, Iterable
+from collections.abc import AsyncIterator, Awaitable, Callable, Coroutine
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
-from aiohttp import WSCloseCode, web, web_fileresponse
+from aiohttp import web, web_fileresponse
 from aiohttp.http_exceptions import HttpProcessingError
-from aiohttp.web_protocol import RequestHandler
 
 from .browser import OWN, check_browser
 from .options import bad
+from .webclient import CLIENT_BACKLOG, CLIENT_BACKLOG_BYTES, CLOSE_WAIT_S, WebClient, close_clients
+from .webconnection import Refused, TimedHandler
 
 if TYPE_CHECKING:
     from .adapter import Adapter
 
+__all__ = ["CLIENT_BACKLOG", "CLIENT_BACKLOG_BYTES", "Limits", "WebClient", "WebServer", "close_clients"]
+
 log = logging.getLogger(__name__)
 
 START_TIMEOUT_S = 5.0   # binding the port takes milliseconds; this only guards a wedged loop
-CLOSE_WAIT_S = 0.5      # how long a WebSocket client has to answer the server's close
 SHUTDOWN_S = 0.5        # how long running handlers have to finish before they are cancelled
-STOP_POLL_S = 0.05      # ``adapter.stopping`` is a threading.Event: the loop looks at it this often
-CLIENT_BACKLOG = 256    # messages waiting for a slow client; past this its oldest are dropped
-CLIENT_BACKLOG_BYTES = 8 << 20  # and bytes: 256 large messages must not hold a gigabyte for one client
 LISTEN_BACKLOG = 128    # connections the kernel holds before accept (aiohttp's default)
 MAX_HEADERS = 64        # header lines of one request (aiohttp's default 128); each at most 8190 bytes
 # accept() errors that say the process or the machine is out of something: asyncio retries a second later
@@ -124,6 +122,7 @@ class WebServer:
         self._ready = threading.Event()
         self._start_error: BaseException | None = None
         self._crash: BaseException | None = None
+        self._ended: asyncio.Event | None = None  # (on the loop) the server ends once it is set
         adapter.stats.follow("dropped", lambda: self.dropped)  # the node's stats count them too
         # what the limits refused (below), shown at zero
         adapter.stats.declare(("connections_refused", "clients_refused", "accept_failed", "refused", "timed_out",
@@ -277,10 +276,13 @@ class WebServer:
         self.port = listener.sockets[0].getsockname()[1]
         self._cap = self._connection_cap()
         self._loop = loop
+        ended = self._ended = asyncio.Event()  # set by the node's stop (when_stopping) or a crash: no poll
+        if self._crash is not None:
+            ended.set()
+        self.adapter.when_stopping(lambda: self.call(ended.set))
         self._ready.set()
         try:
-            while self._crash is None and not self.adapter.stopping.is_set():
-                await asyncio.sleep(STOP_POLL_S)
+            await ended.wait()
         finally:
             self._loop = None
             listener.close()
@@ -292,14 +294,14 @@ class WebServer:
         one that answers 503 and closes (counted ``connections_refused``)."""
         if self._open < self._cap:
             self._open += 1
-            return _Handler(self._handlers, self._timed_out, self._stalled, self.limits.timeout_s,
+            return TimedHandler(self._handlers, self._timed_out, self._stalled, self.limits.timeout_s,
                             loop=self._handlers._loop, **self._handlers._kwargs)
         self.adapter.count("connections_refused")
         self.adapter.warn("connections", f"web server on {self.url}: {self._cap} connections open, the most it "
                                          "takes ([limits] connections): new ones get 503 and are closed "
                                          f"(a connection without a whole request is closed after "
                                          f"{self.limits.timeout_s:g} s)")
-        return _Refused()
+        return Refused()
 
     def _dropped(self) -> None:
         self.dropped += 1
@@ -369,6 +371,8 @@ class WebServer:
             return
         if self._crash is None:  # the worker raises it: fail() logs it with its traceback
             self._crash = exc
+            if self._ended is not None:
+                self._ended.set()
 
     @web.middleware
     async def _errors(self, request: web.Request, handler: Handler) -> web.StreamResponse:
@@ -395,122 +399,3 @@ class WebServer:
                                          f"{request.remote}: {reason}")
             raise web.HTTPForbidden(text=f"403 forbidden: {reason}\n")
         return await handler(request)
-
-
-class _Handler(RequestHandler):
-    """aiohttp's connection handler (what ``web_server.Server()`` makes), telling ``on_timeout``
-    when its keep-alive timeout (here the header timeout too) closes it, with how many requests
-    it had taken; and cutting the connection when what it writes makes no progress for
-    ``stall_s`` (a client that never reads: aiohttp would wait to write for ever), told to
-    ``on_stall``."""
-
-    __slots__ = ("_stall", "on_stall", "on_timeout", "stall_s")
-
-    def __init__(self, manager: Any, on_timeout: Callable[[int], None], on_stall: Callable[[], None],
-                 stall_s: float, **kwargs: Any) -> None:
-        super().__init__(manager, **kwargs)
-        self.on_timeout, self.on_stall, self.stall_s = on_timeout, on_stall, stall_s
-        self._stall: asyncio.TimerHandle | None = None
-
-    def pause_writing(self) -> None:  # (the transport's buffer is full: the client reads nothing)
-        super().pause_writing()
-        if self._stall is None:
-            self._stall = self._loop.call_later(self.stall_s, self._stalled)
-
-    def resume_writing(self) -> None:
-        super().resume_writing()
-        if self._stall is not None:
-            self._stall.cancel()
-            self._stall = None
-
-    def _stalled(self) -> None:
-        self._stall = None
-        if self.transport is not None:
-            self.on_stall()
-            self.transport.abort()  # (close() would wait for the buffer to be read: never)
-
-    def connection_lost(self, exc: BaseException | None) -> None:
-        if self._stall is not None:
-            self._stall.cancel()
-            self._stall = None
-        super().connection_lost(exc)
-
-    def _process_keepalive(self) -> None:  # (aiohttp's timer: it closes the connection if it is idle)
-        was_open = not self._force_close
-        super()._process_keepalive()
-        if was_open and self._force_close:
-            self.on_timeout(self._request_count)
-
-
-class _Refused(asyncio.Protocol):
-    """A connection past the cap: told so, then closed."""
-
-    def connection_made(self, transport: asyncio.BaseTransport) -> None:
-        text = b"503: too many connections to this server at once; try again\n"
-        assert isinstance(transport, asyncio.WriteTransport)
-        transport.write(b"HTTP/1.1 503 Service Unavailable\r\nConnection: close\r\nContent-Type: text/plain\r\n"
-                        b"Content-Length: %d\r\n\r\n%s" % (len(text), text))
-        transport.close()  # (after the write is flushed; what the client sends is ignored)
-
-
-class WebClient:
-    """One WebSocket client: text and binary messages wait in a bounded backlog, sent in
-    order by one task (``send_all``); a client ``CLIENT_BACKLOG`` messages (or
-    ``CLIENT_BACKLOG_BYTES``) behind loses the oldest, each one told to ``on_drop``.
-    Messages pushed ``kept`` (a reply to what the client asked) are never dropped and go
-    out before the backlog: whoever pushes them bounds their number (the web pages' server
-    stops reading a client whose replies pile up)."""
-
-    def __init__(self, ws: web.WebSocketResponse, on_drop: Callable[[], None],
-                 transport: asyncio.BaseTransport | None = None) -> None:
-        self.ws = ws
-        self.on_drop = on_drop
-        self.transport = transport  # cut by close_clients if the client never takes the close
-        self.backlog: deque[str | bytes] = deque()
-        self.size = 0  # bytes (characters) waiting in the backlog
-        self.kept: deque[str | bytes] = deque()
-        self.waiting = asyncio.Event()
-
-    def push(self, message: str | bytes, kept: bool = False) -> None:
-        if kept:
-            self.kept.append(message)
-            self.waiting.set()
-            return
-        self.backlog.append(message)
-        self.size += len(message)
-        while len(self.backlog) > CLIENT_BACKLOG or (self.size > CLIENT_BACKLOG_BYTES and len(self.backlog) > 1):
-            self.size -= len(self.backlog.popleft())
-            self.on_drop()
-        self.waiting.set()
-
-    async def send_all(self) -> None:
-        while not self.ws.closed:
-            await self.waiting.wait()
-            self.waiting.clear()
-            while (self.kept or self.backlog) and not self.ws.closed:
-                if self.kept:
-                    message = self.kept.popleft()
-                else:
-                    message = self.backlog.popleft()
-                    self.size -= len(message)
-                try:
-                    if isinstance(message, bytes):
-                        await self.ws.send_bytes(message)
-                    else:
-                        await self.ws.send_str(message)
-                except ConnectionError:  # the client went away; its handler ends the connection
-                    return
-
-
-async def close_clients(clients: Iterable[WebClient]) -> None:
-    """Close every client's WebSocket ("going away"), waiting a bounded time for them; the
-    connection of one that does not read (its send blocked, the close never taken) is cut,
-    or the node's stop would wait on it."""
-    clients = list(clients)
-    closing = [asyncio.create_task(c.ws.close(code=WSCloseCode.GOING_AWAY, message=b"node stopping"))
-               for c in clients]
-    if closing:
-        await asyncio.wait(closing, timeout=2 * CLOSE_WAIT_S)
-    for client in clients:
-        if client.transport is not None and not client.transport.is_closing():
-            client.transport.abort()

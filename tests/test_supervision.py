@@ -20,6 +20,7 @@ from sonibus.bus.watchdog import Watchdog
 
 from .conftest import SONIBUS, free_port, wait_for
 from .supervisor import Supervisor
+from .wakes import wakes
 
 
 def test_sonibus_run_says_ready_pings_the_watchdog_and_says_stopping(supervisor, spawn, tmp_path):
@@ -161,3 +162,19 @@ def test_a_supervisor_that_went_away_is_logged_once_and_nothing_raises(tmp_path,
     assert not notifier.send(READY=1) and not notifier.send(WATCHDOG=1)
     assert [r.getMessage() for r in caplog.records] == [
         f"cannot notify the supervisor at NOTIFY_SOCKET={tmp_path / 'gone'}: [Errno 2] No such file or directory"]
+
+
+def test_the_run_sleeps_between_its_checks_and_a_failing_node_still_ends_it_at_once(supervisor):
+    """``run``'s thread wakes for the watchdog's and the trimmer's checks (once a second), a stop,
+    or a node that fails (which sets ``stop``), not ten times a second to look (issue 35)."""
+    worker = Worker(name="worker")
+    running = Running(supervisor, [worker], watchdog_s=30)  # (its checks every 10 s; the trimmer's every 1 s)
+    try:
+        wait_for(lambda: supervisor.with_key("READY"), 20, "READY=1")
+        counted = wakes([running.thread], 2.0)
+        assert counted[running.thread.name] <= 8, counted  # (2 checks: 1-4 seen, a GIL wait counts too; before 20-27)
+        worker.queue.put("fail")
+        wait_for(lambda: not running.thread.is_alive(), 10, "the run to end")
+    finally:
+        running.end()
+    assert isinstance(running.error, NodeFailed)

@@ -24,6 +24,7 @@ from sonibus.bus import Adapter, ConfigError, decode, keys
 from sonibus.bus.web import WebServer
 
 from .conftest import SONIBUS, free_port, wait_for
+from .wakes import wakes
 
 ROOT = Path(__file__).resolve().parent.parent
 STOP_WITHIN_S = 3.0   # the node's contract (docs/adapters.md)
@@ -369,3 +370,16 @@ def test_an_ipv6_server_gives_a_url_a_client_can_use(net):
         async with aiohttp.ClientSession(server.web.url) as http, http.get("/value") as response:
             return response.status
     assert asyncio.run(scenario()) == 200  # answered, over IPv6
+
+
+def test_an_idle_web_server_sleeps_until_its_node_stops(net):
+    """With no client, the server's loop thread does not wake to look at ``stopping`` (it was
+    20 times a second in every web server of a show: an idle process's share); the node's stop
+    still ends it at once."""
+    server = value_server(net)
+    [thread] = web_threads("web")
+    counted = wakes([thread], 1.0)
+    assert counted["web:web"] <= 5, counted  # (before: 20 or more, STOP_POLL_S = 0.05)
+    started = time.monotonic()
+    server.stop()
+    assert not thread.is_alive() and time.monotonic() - started < STOP_WITHIN_S

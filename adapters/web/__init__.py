@@ -98,6 +98,7 @@ class WebPages(Adapter):
         self._taking = threading.Lock()  # Streams' tables and pacing: the feed worker's, or a frame's where it arrives
         self._streams: Streams | None = None
         self._streams = Streams(self.bus, patterns, self._queue, direct=self._direct)
+        self.when_stopping(self._queue.close)  # (its worker waits on it, not on stopping)
         self.spawn(self._feed, "feed")
         self.own(self._streams)
         # nodes' stats wait in a queue of their own, short: a node says one a second, and a flood of
@@ -106,6 +107,7 @@ class WebPages(Adapter):
         self._stats_queue = self.own(SampleQueue(STATS_QUEUE))
         self._gate = Gate(self.bus.limits)
         self.own(self.bus.subscribe(keys.NODE_STATS, queue=self._stats_queue, skip=self._unlisted)[0])
+        self.when_stopping(self._stats_queue.close)
         self.spawn(self._take_stats, "stats")
         owners(self.bus)  # (the view of robots' owners a command names, kept from now: the first one too)
         self.own(watch_robots(self.bus, self._robot_changed, self.capped))
@@ -214,7 +216,7 @@ class WebPages(Adapter):
         streams = self._streams
         assert streams is not None
         while not self.stopping.is_set():
-            item = self._queue.get(timeout=0.2)
+            item = self._queue.get()  # (woken by an item, or by the queue closed on stop: no poll)
             if item is None:
                 continue
             with self._taking:
@@ -304,7 +306,7 @@ class WebPages(Adapter):
 
     def _take_stats(self) -> None:
         while not self.stopping.is_set():
-            for key, payload in self._stats_queue.drain(timeout=0.2):
+            for key, payload in self._stats_queue.drain():  # (as _feed's: closed on stop)
                 self.count("received")
                 if self._unlisted(key):
                     continue
@@ -320,13 +322,17 @@ class WebPages(Adapter):
     def _push(self) -> None:
         """On the server's loop: each robot's newest frame to the operators' pages ``update_hz``
         times a second, and the nodes' stats every ``STATS_EVERY_S``, against deadlines fixed now
-        (skip, never burst: a tick late by more than a period skips those it missed, as ``Pacer``)."""
+        (skip, never burst: a tick late by more than a period skips those it missed, as ``Pacer``).
+        With no operator's page, the loop sleeps to the next stats: an operator that comes wakes it
+        (``Pages.on_operator``), its first frames a tick later."""
         loop = asyncio.get_running_loop()
         period, start, next_stats = 1.0 / self.config.update_hz, loop.time(), time.monotonic()
         frame = 0
+        pending: asyncio.TimerHandle | None = None
 
         def tick() -> None:
-            nonlocal frame, next_stats
+            nonlocal frame, next_stats, pending
+            pending = None
             if self.stopping.is_set():
                 return
             with self._lock:
@@ -341,7 +347,18 @@ class WebPages(Adapter):
             late = loop.time() - (start + frame * period)
             if late > period:
                 frame += int(late / period)
-            loop.call_at(start + frame * period, tick)
+            if self.pages.operators:
+                pending = loop.call_at(start + frame * period, tick)
+            else:  # (nobody to show frames to: the next stats only; their frames wait, the newest kept)
+                pending = loop.call_later(max(0.0, next_stats - time.monotonic()), tick)
+
+        def operator_came() -> None:  # (the first page since none: the tick was asleep till the next stats)
+            nonlocal pending
+            if len(self.pages.operators) == 1 and pending is not None:
+                pending.cancel()
+                pending = loop.call_soon(tick)  # (after the page's greeting, sent in the same turn of the loop)
+
+        self.pages.on_operator.append(operator_came)
         tick()
 
     def _node_stats(self) -> list[dict[str, Any]]:

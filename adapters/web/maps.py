@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import functools
 import json
+import threading
 import time
 from typing import TYPE_CHECKING
 
@@ -27,6 +28,7 @@ if TYPE_CHECKING:
     from .server import Client, Pages
 
 MAPS_EVERY_S = 0.2     # how often the maps' live values are asked while a page is open
+NO_MAPS_EVERY_S = 1.0  # and how often while the last look found no map node (a new one shows within it)
 ASK_TIMEOUT_S = 1.0    # how long a look waits for the map nodes' answers
 MAX_MAP_NODES = 16     # map nodes shown (names from the bus)
 MAX_MAPS_BYTES = 4 << 20  # a look's maps, as JSON: past this the nodes past it are left out (said, counted)
@@ -40,9 +42,23 @@ class MapsPanel:
     def __init__(self, adapter: Adapter, pages: Pages) -> None:
         self.adapter, self.pages = adapter, pages
         self._structure = ""  # the last ``maps`` message sent
+        self._found = False   # whether the last look found a map node
+        self._wanted = threading.Event()  # an operator's page came, or the node stops
+        pages.on_operator.append(self._wanted.set)
 
     def run(self) -> None:
-        while not self.adapter.stopping.wait(MAPS_EVERY_S):
+        """Look every ``MAPS_EVERY_S`` while an operator's page is open (``NO_MAPS_EVERY_S`` while
+        there is no map node to show); with no page, wait for one (not a wake-up a look for nobody)."""
+        stopping = self.adapter.stopping
+        self.adapter.when_stopping(self._wanted.set)
+        while not stopping.is_set():
+            if not self.pages.operators:
+                self._wanted.clear()
+                if not self.pages.operators:  # (one that came between: set after the clear, or seen here)
+                    self._wanted.wait()
+                continue
+            if stopping.wait(MAPS_EVERY_S if self._found else NO_MAPS_EVERY_S):
+                return
             if self.pages.operators:
                 self.look()
 
@@ -70,6 +86,9 @@ class MapsPanel:
         if structure != self._structure:
             self._structure = structure
             self.pages.maps(structure)
+        self._found = bool(nodes)
+        if not nodes:  # (no map node: nothing live to show, 5 messages a second to each page for nothing)
+            return
         self.pages.to_operators(_dumps({"type": "map_values", "t": time.time(), "nodes": {
             n.get("node"): {m.get("name"): {k: m.get(k) for k in LIVE} for m in n.get("maps", ())} for n in nodes},
             "halted": {n.get("node"): _halted(n.get("halted")) for n in nodes}}))

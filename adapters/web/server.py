@@ -14,6 +14,7 @@ import asyncio
 import functools
 import json
 import re
+from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -86,6 +87,7 @@ class Pages:
         self._robots: str | None = None   # the latest robots message, for a page that connects
         self._stats: str | None = None
         self._maps: str | None = None     # the latest maps message (the mappings panel: maps.py)
+        self.on_operator: list[Callable[[], None]] = []  # each told (on the loop) when an operator's page comes
         app = web_server.app
         app.router.add_get("/", functools.partial(self._page, "operator"))
         app.router.add_get("/kiosk", functools.partial(self._page, "kiosk"))
@@ -146,6 +148,9 @@ class Pages:
             client = Client(ws, role, self.adapter, request.transport)
             group = self.operators if role == "operator" else self.kiosks
             group.add(client)
+            if role == "operator":
+                for told in self.on_operator:
+                    told()
             self.adapter.count("clients")
             self._greet(client)
             try:

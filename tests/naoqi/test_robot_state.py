@@ -30,6 +30,7 @@ from sonibus.bus.monitor import Monitor
 from ..conftest import free_port, run_cli, wait_for
 from ..jackd import MidiInput, jack  # noqa: F401 (the fixture)
 from ..osc.pd import Patch, osc_input, oscdump_lines, printed, start_oscdump, start_pd
+from ..wakes import named, wakes
 from ..web.browser import Browser
 from ..web.conftest import websocket  # noqa: F401 (the fixture)
 from .conftest import attach
@@ -203,3 +204,16 @@ def test_a_sink_hears_each_state_of_a_robot_once(net, fakes, spawn):
     states = [line.rsplit(" ", 1)[1] for line in oscdump_lines(dump) if "/pepper/events/connection" in line]
     assert states[-1] == '"connected"' and states.count('"connected"') == 1, states  # ("connecting" before, or not:
     assert set(states) <= {'"connecting"', '"connected"'}, states                   # the sink may hear it or not)
+
+
+def test_the_not_answering_watch_wakes_once_a_timeout_not_ten_times_a_second(net, rig):
+    """While frames flow, the owner's watch of a silent robot sleeps ``answer_timeout_s`` after the
+    last frame it saw (it woke every 0.1 s); a robot that freezes is still not answering in time."""
+    r = rig(answer_timeout_s=1.0, connect_timeout_s=8.0)
+    r.events.wait("connection", state="connected")
+    [watch] = named(f"{r.adapter.name}:answers")
+    counted = wakes([watch], 2.0)
+    assert counted[watch.name] <= 8, counted  # (2-4 measured, a GIL wait counts too; before: 20-24)
+    r.fake.freeze()
+    frozen = r.events.wait("connection", timeout=5.0, state="not_answering")
+    assert "no frame" in frozen["error"]

@@ -27,6 +27,7 @@ from sonibus.bus.config import parse
 from sonibus.bus.errors import CommandError, RobotNotFound
 
 from ..conftest import SONIBUS, Process, free_port, queued_keys, run_cli, wait_for
+from ..wakes import named, wakes
 from .conftest import HELLO, KIOSK_TOKEN, RATE, TOKEN, WAVE, start_web
 
 STOP_WITHIN_S = 3.0  # the node's contract (docs/adapters.md)
@@ -96,6 +97,46 @@ def test_frames_are_kept_where_they_arrive_not_through_the_queue(net, websocket)
     seen = len(page.of("frame"))
     wait_for(lambda: len(page.of("frame")) >= seen + 10, 10, "ten frames more at the page")
     assert queued.count("pepper/frame") <= 1, queued  # (one may meet the feed worker taking an event)
+
+
+def test_a_web_node_with_no_page_open_sleeps_and_a_page_that_comes_gets_frames_at_once(net, websocket):
+    """With no page, the node's threads do not wake for nobody (its server's loop 45 times a
+    second before: the stop poll and the frames' tick; the maps panel, the feed and the stats
+    workers 5 each); the frames of a robot still wait, the newest kept, for a page that comes."""
+    net.sim("pepper", rate_hz=RATE)
+    node = start_web(net, name="idleweb")
+    wait_for(lambda: "pepper" in node.shown_robots(), 10, "pepper's info at the web node")
+    counted = wakes(named("idleweb:"), 2.0)
+    # left: the node's stats (1/s), its worker taking the sim's and its own (2-4/s), the tick for the
+    # pages' stats (1/s), the robots' info asked (1-3/s): 10/s measured; pepper's frames come on Zenoh's threads
+    # (a count, but a thread that waits for the GIL counts a switch too: room for a loaded machine)
+    assert sum(counted.values()) <= 2.0 * 20, counted  # (before: 67/s)
+    assert counted["idleweb:web"] <= 2.0 * 5, counted  # (the robots' info and the pages' stats; before: 44/s)
+    assert counted["idleweb:maps"] == 0 and counted["idleweb:feed"] <= 2, counted
+    page = websocket(node.url.replace("http", "ws") + "/ws")
+    hello = page.wait("hello")
+    frame = page.wait("frame", robot="pepper", timeout=5.0)
+    assert page.texts().index(hello) < page.texts().index(frame)  # (the greeting first, as before)
+
+
+def test_with_no_map_node_an_open_page_gets_no_live_map_values_and_is_looked_for_less(net, websocket):
+    """The maps panel looks 5 times a second while a page is open; with no map node on the bus
+    its ``map_values`` would say nothing (they were sent all the same: 5 messages a second), and
+    it looks once a second (a map node that comes shows within it)."""
+    asked = []
+    listener = net.bus("listener")  # (hears the panel's looks, answers none: no map node to show)
+    entity = listener.serve(keys.maps("listener", "list"), lambda query: asked.append(time.monotonic()))
+    try:
+        node = start_web(net, name="nomaps")
+        page = websocket(node.url.replace("http", "ws") + "/ws")
+        page.wait("hello")
+        wait_for(lambda: asked, 10, "the panel's first look")
+        looks = len(asked)
+        time.sleep(1.5)  # (the window counted: not a wait for something to happen)
+        assert len(asked) - looks <= 3, asked  # (1 or 2 in 1.5 s; 7 before)
+    finally:
+        entity.undeclare()
+    assert page.of("map_values") == [], [m.get("type") for m in page.texts()]
 
 
 def test_a_command_goes_through_the_owners_validation_and_its_reply_comes_back(stage, websocket):

@@ -1,0 +1,33 @@
+"""How often threads of this process wake: their voluntary context switches (each a wait that
+ended: a poll's timeout, a message, a timer), read from ``/proc/self/task/<tid>/status``. A
+count, not a time: what an idle worker costs in wake-ups, whatever the machine's load."""
+
+from __future__ import annotations
+
+import threading
+import time
+
+
+def switches(thread: threading.Thread) -> int:
+    """``thread``'s voluntary context switches so far (0 once it has ended)."""
+    try:
+        with open(f"/proc/self/task/{thread.native_id}/status") as f:
+            return sum(int(line.split()[1]) for line in f if line.startswith("voluntary_ctxt_switches"))
+    except (FileNotFoundError, ProcessLookupError):
+        return 0
+
+
+def wakes(threads: list[threading.Thread], seconds: float) -> dict[str, int]:
+    """Each of ``threads``' wake-ups over ``seconds`` (by name; several of one name added)."""
+    assert threads, "no thread to count"
+    before = [switches(t) for t in threads]
+    time.sleep(seconds)  # (the window counted: not a wait for something to happen)
+    counted: dict[str, int] = {}
+    for thread, was in zip(threads, before, strict=True):
+        counted[thread.name] = counted.get(thread.name, 0) + switches(thread) - was
+    return counted
+
+
+def named(prefix: str) -> list[threading.Thread]:
+    """The live threads whose name starts with ``prefix`` (a node's: ``"<node>:"``)."""
+    return [t for t in threading.enumerate() if t.name.startswith(prefix)]
