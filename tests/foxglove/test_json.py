@@ -36,7 +36,7 @@ reordered = st.permutations(["t", "seq", "v"]).flatmap(
 others = st.dictionaries(st.text(max_size=5), values, max_size=4)
 
 
-@settings(max_examples=250, deadline=None)
+@settings(max_examples=150, deadline=None)
 @given(st.lists(st.one_of(samples, reordered, others), min_size=1, max_size=6))
 def test_every_message_is_json_s_bytes_or_its_error(messages):
     for message in messages:
@@ -44,7 +44,7 @@ def test_every_message_is_json_s_bytes_or_its_error(messages):
         assert outcome(channels.to_json, message) == outcome(reference, message), message
 
 
-@settings(max_examples=200, deadline=None)
+@settings(max_examples=100, deadline=None)
 @given(st.floats(allow_nan=False, allow_infinity=False), st.integers(min_value=0, max_value=2**40),
        st.lists(st.floats(), min_size=1, max_size=30))
 def test_a_frame_s_samples_sharing_t_and_seq_are_json_s(t, seq, vs):
