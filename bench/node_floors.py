@@ -16,7 +16,8 @@ essential work with the same libraries and no sonibus, fed the same frames as
 - **recorder**: a subscriber that decodes each frame and each derived frame (its
   publisher puts one of ``floor.DERIVED``'s shape beside each frame: the show's recorder
   records the features node's too), makes it JSON and adds it to an MCAP file
-  (``mcap``'s ``Writer``, zstd chunks of 1 MiB, as the recorder's);
+  (``mcap``'s ``Writer``, zstd chunks of 1 MiB, as the recorder's), and each frame's arm
+  transforms beside it, as the recorder writes them by default (``foxglove = true``);
 - **oscquery**: subscribers of the frames and of the derived frames (fed both, as the node
   is in the show: its namespace serves derived values too) that keep each one's payload as
   the latest of its key (what answering a question needs), and send each of a frame's values
@@ -27,10 +28,10 @@ essential work with the same libraries and no sonibus, fed the same frames as
   sink's control changes on JACK, the features node's derived frames (their docstrings
   below, each with what the node does beyond it).
 
-The nodes do more than their floors (the features node's derived frames and the robot's
-events come in too, Foxglove's views and per-joint channels go out, the recorder writes
-each frame's transforms beside it): the ratio says what that and sonibus's own work
-cost. (Before issue 35 the recorder wrote a frame's joints a message each.)
+The nodes do more than their floors (the robot's events and info come in too, channels
+are advertised and subscribed, limits kept): the ratio says what that and sonibus's own
+work cost. (Before issue 35 the recorder wrote a frame's joints a message each; until
+29 Nov its floor wrote no transforms, which the node writes beside each frame.)
 
     from node_floors import measure
     measure(8.0, warmup_s=3.0)  # {"foxglove": CPU %, "recorder": ..., "oscquery": ...}
@@ -40,6 +41,7 @@ from __future__ import annotations
 
 import asyncio
 import json
+import math
 import os
 import struct
 import tempfile
@@ -69,6 +71,24 @@ ARMS = [(f"{side}{joint}", f"{side}{parent}" if parent else "Torso", (x, y * (1 
             ("ElbowRoll", "ElbowYaw", (0.0, 0.0, 0.0), _NONE, (0.0, 0.0, 1.0)),
             ("WristYaw", "ElbowRoll", (0.15, 0.0, 0.0), _NONE, (1.0, 0.0, 0.0)),
             ("Hand", "WristYaw", (0.025, 0.0, 0.0), _NONE, None))]
+
+
+def arm_transforms(robot: str, frame: dict[str, Any]) -> dict[str, Any]:
+    """A frame's arms as ``foxglove.FrameTransforms`` (what the Foxglove node sends and the
+    recorder writes beside each frame: Pepper's 12 arm transforms, computed here)."""
+    sec = math.floor(frame["t"])
+    stamp = {"sec": sec, "nsec": round((frame["t"] - sec) * 1e9)}
+    out = []
+    for (joint, parent, (x, y, z), (ax, ay, az, aw), axis), angle in zip(ARMS, frame["v"][5:], strict=True):
+        if axis is not None:  # (the origin's rotation, then the joint's about its axis)
+            s, c = math.sin(angle / 2), math.cos(angle / 2)
+            bx, by, bz, bw = axis[0] * s, axis[1] * s, axis[2] * s, c
+            ax, ay, az, aw = (aw * bx + ax * bw + ay * bz - az * by, aw * by - ax * bz + ay * bw + az * bx,
+                              aw * bz + ax * by - ay * bx + az * bw, aw * bw - ax * bx - ay * by - az * bz)
+        out.append({"timestamp": stamp, "parent_frame_id": f"{robot}/{parent}",
+                    "child_frame_id": f"{robot}/{joint}", "translation": {"x": x, "y": y, "z": z},
+                    "rotation": {"x": ax, "y": ay, "z": az, "w": aw}})
+    return {"transforms": out}
 
 
 def websocket_floor(endpoint: str, port: int, ready: Any, done: Any,
@@ -122,8 +142,6 @@ def websocket_floor(endpoint: str, port: int, ready: Any, done: Any,
 def foxglove_floor(endpoint: str, port: int, ready: Any, done: Any) -> None:
     """What the show's Foxglove client gets of each frame and derived frame (the module's
     docstring), each bus message's Foxglove messages in one write to the client on ``port``."""
-    import math
-
     import msgpack
 
     encode = json.JSONEncoder(separators=(",", ":"), ensure_ascii=False, allow_nan=False).encode
@@ -137,21 +155,6 @@ def foxglove_floor(endpoint: str, port: int, ready: Any, done: Any) -> None:
             else b"\x82\x7f" + size.to_bytes(8, "big")
         return head + pack(1, ids.get(topic) or ids.setdefault(topic, len(ids) + 1), log_ns) + body
 
-    def transforms(robot: str, frame: dict[str, Any]) -> dict[str, Any]:
-        sec = math.floor(frame["t"])
-        stamp = {"sec": sec, "nsec": round((frame["t"] - sec) * 1e9)}
-        out = []
-        for (joint, parent, (x, y, z), (ax, ay, az, aw), axis), angle in zip(ARMS, frame["v"][5:], strict=True):
-            if axis is not None:  # (the origin's rotation, then the joint's about its axis)
-                s, c = math.sin(angle / 2), math.cos(angle / 2)
-                bx, by, bz, bw = axis[0] * s, axis[1] * s, axis[2] * s, c
-                ax, ay, az, aw = (aw * bx + ax * bw + ay * bz - az * by, aw * by - ax * bz + ay * bw + az * bx,
-                                  aw * bz + ax * by - ay * bx + az * bw, aw * bw - ax * bx - ay * by - az * bz)
-            out.append({"timestamp": stamp, "parent_frame_id": f"{robot}/{parent}",
-                        "child_frame_id": f"{robot}/{joint}", "translation": {"x": x, "y": y, "z": z},
-                        "rotation": {"x": ax, "y": ay, "z": az, "w": aw}})
-        return {"transforms": out}
-
     async def send(clients: dict[Any, Any], key: str, payload: bytes) -> None:
         robot, _, section = key.partition("/")
         frame, log_ns = msgpack.unpackb(payload), time.time_ns()
@@ -160,7 +163,8 @@ def foxglove_floor(endpoint: str, port: int, ready: Any, done: Any) -> None:
         out = [message(folder + name, {"t": t, "seq": seq, "v": v}, log_ns)
                for name, v in zip(frame["names"], frame["v"], strict=True)]
         if section == "frame":
-            out += [message(f"{robot}/frame", frame, log_ns), message(f"{robot}/tf", transforms(robot, frame), log_ns)]
+            out += [message(f"{robot}/frame", frame, log_ns),
+                    message(f"{robot}/tf", arm_transforms(robot, frame), log_ns)]
         data = b"".join(out)
         for transport in list(clients.values()):
             transport.write(data)
@@ -197,14 +201,17 @@ def reader(port: int, ready: Any, done: Any) -> None:
 
 
 def recorder_floor(endpoint: str, folder: str, ready: Any, done: Any) -> None:
-    """Each frame and each derived frame as JSON, one MCAP message each, into a file with zstd
-    chunks (the writer on a thread of its own, as the recorder's, fed by a queue)."""
+    """Each frame and each derived frame as JSON, one MCAP message each, and each frame's arm
+    transforms (``arm_transforms``: the recorder writes them beside each frame for Foxglove's
+    3D panel, ``foxglove = true`` by default), into a file with zstd chunks (the writer on a
+    thread of its own, as the recorder's, fed by a queue)."""
     import queue
 
     import msgpack
     from mcap.writer import CompressionType, Writer
 
     waiting: queue.SimpleQueue[tuple[str, bytes, int] | None] = queue.SimpleQueue()
+    encode = json.JSONEncoder(separators=(",", ":"), ensure_ascii=False, allow_nan=False).encode  # (the node's)
 
     def write() -> None:
         with open(os.path.join(folder, "floor.mcap"), "wb") as out:
@@ -217,12 +224,15 @@ def recorder_floor(endpoint: str, folder: str, ready: Any, done: Any) -> None:
                 if item is None:
                     break
                 key, payload, log_ns = item
-                if key not in channels:
-                    channels[key] = writer.register_channel(key, "json", 0)
                 frame = msgpack.unpackb(payload)
-                writer.add_message(channels[key], log_time=log_ns, data=json.dumps(frame).encode(),
-                                   publish_time=int(frame["t"] * 1e9), sequence=sequence)
-                sequence += 1
+                robot, _, section = key.partition("/")
+                for topic, message in ((key, frame), *([(f"{robot}/tf", arm_transforms(robot, frame))]
+                                                       if section == "frame" else [])):
+                    if topic not in channels:
+                        channels[topic] = writer.register_channel(topic, "json", 0)
+                    writer.add_message(channels[topic], log_time=log_ns, data=encode(message).encode(),
+                                       publish_time=int(frame["t"] * 1e9), sequence=sequence)
+                    sequence += 1
             writer.finish()
 
     thread = threading.Thread(target=write)

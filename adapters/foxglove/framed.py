@@ -21,6 +21,7 @@ is shared by the two adapters that stream.)
 
 from __future__ import annotations
 
+import asyncio
 from collections import deque
 from collections.abc import Callable
 from threading import Lock
@@ -108,14 +109,21 @@ class Handoff:
     GIL. ``put`` is a ``Streams`` ``direct``: it wakes the loop only when nothing waits, and
     says False (the sample then goes to the node's own queue and worker, bounded and
     counted there) when ``most`` samples or ``most_bytes`` wait already, or the server is
-    not running: what waits here is bounded."""
+    not running: what waits here is bounded.
+
+    ``gather_s`` (0: none): once the loop has served a batch it comes round again by itself
+    after ``gather_s`` and serves what came meanwhile, without being asked (no wake-up from
+    the callback thread, and a robot's frame and the derived frame made of it go to a client
+    in one write: half the loop's wake-ups and writes with one robot at 50 Hz), until it
+    comes round to nothing; a sample then waits ``gather_s`` at most."""
 
     def __init__(self, web: WebServer, serve: Callable[[list[tuple[str, Any]]], None], most: int = 64,
-                 most_bytes: int = 4 << 20) -> None:
-        self.web, self.serve, self.most, self.most_bytes = web, serve, most, most_bytes
+                 most_bytes: int = 4 << 20, gather_s: float = 0.0) -> None:
+        self.web, self.serve, self.most, self.most_bytes, self.gather_s = web, serve, most, most_bytes, gather_s
         self._items: deque[tuple[str, Any]] = deque()
         self._bytes = 0
         self._lock = Lock()
+        self._armed = False  # the loop comes round by itself (gather_s): nobody needs to ask it (under _lock)
 
     def put(self, key: str, payload: Any) -> bool:
         size = item_size((key, payload))
@@ -124,7 +132,7 @@ class Handoff:
                 return False
             self._items.append((key, payload))
             self._bytes += size
-            if len(self._items) > 1 or self.web.call(self._run):
+            if len(self._items) > 1 or self._armed or self.web.call(self._run):
                 return True
             self._items.pop()
             self._bytes -= size
@@ -135,4 +143,8 @@ class Handoff:
             items = list(self._items)
             self._items.clear()
             self._bytes = 0
-        self.serve(items)
+            again = self._armed = bool(items) and self.gather_s > 0
+        if again:  # (by itself while samples come; a round that finds none ends it)
+            asyncio.get_running_loop().call_later(self.gather_s, self._run)
+        if items:
+            self.serve(items)

@@ -246,7 +246,7 @@ class Hub:
     @staticmethod
     def _hand(due: dict[_Client, list[bytes]]) -> None:
         for client, parts in due.items():
-            client.put_frames(parts, 3)
+            client.put_frames(parts, 4)
         due.clear()
 
     # -- on the server's loop ------------------------------------------------------------
@@ -300,14 +300,16 @@ class Hub:
 
     def _send(self, sends: list[tuple[list[tuple[_Client, int]], bytes]], log_time_ns: int, *,
               due: dict[_Client, list[bytes]]) -> None:
-        """Each message's frame, for each of its subscribers, added to ``due`` (``_flush``'s)."""
+        """Each message's frame, for each of its subscribers, added to ``due`` (``_flush``'s) in
+        parts shared by every client (``wire.data_head``), none copied until the client's write."""
+        stamp, head_of, subscription_of = wire.stamp(log_time_ns), wire.data_head, wire.subscription
         for subscribers, payload in sends:
-            head, tail = wire.data_frame(log_time_ns, payload)  # (once for every client)
+            head = head_of(len(payload))
             for client, subscription in subscribers:
                 parts = due.get(client)
                 if parts is None:
                     parts = due[client] = []
-                parts += (head, wire.subscription(subscription), tail)
+                parts += (head, subscription_of(subscription), stamp, payload)
 
     def _receive(self, client: _Client, message: WSMessage) -> None:
         if message.type == WSMsgType.BINARY:

@@ -50,6 +50,8 @@ log = logging.getLogger(__name__)
 
 MAX_ROBOTS = 64  # robots served (names made up on the bus must not grow what is kept per robot)
 MAX_GONE = 1024  # robots remembered as gone (names from the bus: a claim storm must not grow it for ever)
+GATHER_S = 0.02  # frames gathered on the server's loop this long at most (Handoff: a frame and its derived frame
+                 # in one wake-up and one write to a client; a viewer draws at 60 Hz at most)
 
 
 @dataclass(frozen=True)
@@ -103,7 +105,7 @@ class FoxgloveServer(Adapter):
         # the serve worker; one lock between them guards the node's state and the order of its messages.
         self._state = threading.Lock()
         self._streams: Streams | None = None  # (a frame that arrives while Streams subscribes: queued)
-        self._handoff = Handoff(self.web, self._arrivals)
+        self._handoff = Handoff(self.web, self._arrivals, gather_s=GATHER_S)
         self._streams = Streams(self.bus, cfg.subscribe, self._queue, per_joint_keys=cfg.per_joint_keys,
                                 direct=self._direct)
         self._comings: deque[tuple[str, bool]] = deque(maxlen=4096)  # robots come or gone (a Zenoh thread)

@@ -29,6 +29,7 @@ from __future__ import annotations
 import json
 import struct
 from dataclasses import dataclass
+from json.encoder import c_make_encoder, encode_basestring
 from typing import Any
 
 TEXT, BINARY = 0x1, 0x2  # WebSocket opcodes (RFC 6455 5.2)
@@ -39,8 +40,15 @@ MAX_ID = 2**32 - 1   # ids are uint32
 _HEADER = struct.Struct("<BIQ")
 _SUBSCRIPTION = struct.Struct("<I")
 _TIME = struct.Struct("<Q")
-_JSON = json.JSONEncoder(separators=(",", ":"), ensure_ascii=False, allow_nan=False).encode  # (made once:
-# json.dumps with options makes an encoder at every call, ~1 µs of 45 messages a frame)
+_ENCODER = json.JSONEncoder(separators=(",", ":"), ensure_ascii=False, allow_nan=False)
+# ``_ENCODER``'s C encoder itself, made once (``JSONEncoder.encode`` makes one at every call: 1.6 µs of a
+# sample's 5.2); no check of circular references (``markers`` None: a message decoded from the bus
+# cannot hold itself; one made to would raise RecursionError), else the same bytes and errors
+_C_JSON = c_make_encoder(None, _ENCODER.default, encode_basestring, None, ":", ",", False, False, False) \
+    if c_make_encoder is not None else None
+_SAMPLE = ("t", "seq", "v")
+_float = float.__repr__  # (what json writes for a float: its repr; for an int, its int's)
+_prefix: tuple[Any, Any, str] = (None, None, "")  # (t, seq, '{"t":...,"seq":...,"v":') of the last sample
 
 
 class Refused(ValueError):
@@ -91,8 +99,33 @@ def to_json(message: Any) -> bytes:
 
     >>> to_json({"t": 1.5, "seq": 7, "v": 0.25, "name": "é"})
     b'{"t":1.5,"seq":7,"v":0.25,"name":"\\xc3\\xa9"}'
+
+    A sample ``{"t": float, "seq": int, "v": float}`` (a joint's, a derived value's: 43 of the
+    45 messages of a frame in the show) is written without the encoder (issue 35): its ``t``
+    and ``seq`` once for the samples of a frame (they share them), its ``v`` as json writes
+    it (``float.__repr__``); any other message, or a sample of another type or not finite,
+    goes through the encoder. The bytes are the same (``tests/foxglove/test_json.py``).
     """
-    return _JSON(message).encode()
+    global _prefix
+    if message.__class__ is dict and len(message) == 3:
+        t, seq, v = message.get("t"), message.get("seq"), message.get("v")
+        if t.__class__ is float and seq.__class__ is int and v.__class__ is float and v - v == 0.0:
+            prefix = _prefix  # (one read: another thread may set it meanwhile)
+            if prefix[0] is not t or prefix[1] is not seq:  # (held there, so not another object at its address)
+                if t - t != 0.0 or tuple(message) != _SAMPLE:
+                    return encode(message)
+                prefix = _prefix = (t, seq, f'{{"t":{_float(t)},"seq":{int.__repr__(seq)},"v":')
+            elif tuple(message) != _SAMPLE:
+                return encode(message)
+            return f"{prefix[2]}{_float(v)}}}".encode()
+    return encode(message)
+
+
+def encode(message: Any) -> bytes:
+    """``message`` as compact, strict JSON by the encoder (``json``'s, in C when there is one)."""
+    if _C_JSON is None:
+        return _ENCODER.encode(message).encode()
+    return "".join(_C_JSON(message, 0)).encode()
 
 
 def frame_header(opcode: int, length: int) -> bytes:
@@ -106,16 +139,31 @@ def frame_header(opcode: int, length: int) -> bytes:
     return bytes((0x80 | opcode, 127)) + length.to_bytes(8, "big")
 
 
-def data_frame(log_time_ns: int, payload: bytes) -> tuple[bytes, bytes]:
-    """A message's WebSocket frame but for its subscription id, made once for every client:
-    ``(head, tail)``; a client's frame is ``head + subscription(id) + tail``."""
-    return (frame_header(BINARY, _HEADER.size + len(payload)) + bytes((MESSAGE_DATA,)),
-            _TIME.pack(log_time_ns) + payload)
+_SHORT_HEADS = [frame_header(BINARY, _HEADER.size + n) + bytes((MESSAGE_DATA,)) for n in range(126 - _HEADER.size)]
+
+
+def data_head(length: int) -> bytes:
+    """The start of a message's WebSocket frame, up to its subscription id, for a payload of
+    ``length`` bytes; a client's frame is ``data_head + subscription(id) + stamp(log time) +
+    payload`` (parts made once for every client and every message of a time: ``hub.py``).
+
+    >>> parts = (data_head(7), subscription(7), stamp(1_500_000_000), b'{"v":1}')
+    >>> b"".join(parts) == frame_header(BINARY, 20) + message_data(7, 1_500_000_000, b'{"v":1}')
+    True
+    """
+    if length < 126 - _HEADER.size:
+        return _SHORT_HEADS[length]
+    return frame_header(BINARY, _HEADER.size + length) + bytes((MESSAGE_DATA,))
 
 
 def subscription(id_: int) -> bytes:
-    """A subscription id as a message carries it (between ``data_frame``'s head and tail)."""
+    """A subscription id as a message carries it (after ``data_head``)."""
     return _SUBSCRIPTION.pack(id_)
+
+
+def stamp(log_time_ns: int) -> bytes:
+    """A log time as a message carries it (after its subscription id)."""
+    return _TIME.pack(log_time_ns)
 
 
 def parse(text: str) -> tuple[str, list[Any]]:

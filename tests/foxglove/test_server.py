@@ -298,7 +298,7 @@ def test_messages_wait_for_a_stuck_server_loop_up_to_a_bound_then_are_dropped_co
                                                                                                    monkeypatch):
     """What goes to the clients reaches the server's loop in batches (the hub's outbox): a
     loop held up (here: a callback that sleeps 1.5 s) lets at most ``MAX_OUTBOX`` messages
-    wait; the rest are dropped and counted, never held without bound, and once the loop
+    wait a round of the loop; the rest are dropped and counted, never held without bound, and once the loop
     runs again the client gets the new frames."""
     monkeypatch.setattr(hub, "MAX_OUTBOX", 10)
 
@@ -314,7 +314,9 @@ def test_messages_wait_for_a_stuck_server_loop_up_to_a_bound_then_are_dropped_co
             after = time.time()
             found = await client.until(lambda got: sum(json.loads(p)["t"] > after for _, _, p in got) >= 10)
             old = len(found) - sum(json.loads(p)["t"] > after for _, _, p in found)
-            assert old <= 10 + 5, f"{old} messages from before the stall: the outbox held more than its bound"
+            # (two rounds of the loop after the stall hand a client what waited: the outbox the serve worker
+            # filled, and the frames the Handoff held, logged in one batch: each within MAX_OUTBOX)
+            assert old <= 2 * 10 + 5, f"{old} messages from before the stall: the outbox held more than its bound"
 
     run(scenario())
     assert served.state == "running"
