@@ -22,7 +22,7 @@ call a frame, after a warm-up of as many:
   pacing learns, so it never holds one back (under valgrind the main thread can wait
   a second for its turn: a stall to the pacing), and ``max_age_ms = 0`` (they are old).
 
-    .venv/bin/python bench/floor_instructions.py [--joints 17 128] [--frames 2000]
+    .venv/bin/python bench/floor_instructions.py [--joints 17 128] [--frames 500]
 
 Writes bench/results/floor_instructions.json and prints a table.
 """
@@ -168,7 +168,8 @@ def instructions(joints: int, n: int, bundle: bool) -> dict[str, float]:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--joints", type=int, nargs="+", default=[17, 128])
-    parser.add_argument("--frames", type=int, default=2000, help="frames counted per contender")
+    parser.add_argument("--frames", type=int, default=500,
+                        help="frames counted per contender (deterministic counts: more only takes longer)")
     parser.add_argument("--name", default="floor_instructions", help="results file name")
     parser.add_argument("--segments", type=int, nargs=2, help=argparse.SUPPRESS)  # (the run under callgrind)
     parser.add_argument("--bundle", action="store_true", help=argparse.SUPPRESS)
