@@ -11,13 +11,18 @@ call a frame, after a warm-up of as many:
 - ``decode``: ``msgpack.unpackb`` alone;
 - ``gate``: ``Gate.check`` (decode and check, as every sink does);
 - ``floor``: ``floor.py``'s sink callback (unpack, the precomputed datagrams, sent);
+- the sink's stages, each on its own (issue 35: where the sonibus frame's instructions go):
+  ``select`` a ``Selection`` of its patterns (the gate, then the joints it selects, as an
+  ``Incoming``), ``pace`` a ``Spacing``'s turn, ``send`` its target's plan (rendered and
+  sent: ``OscSink._planned``), ``latency`` one latency noted for the stats; what ``sonibus``
+  spends beyond them is its own dispatch (``Streams.take``, counts, the frame assembler);
 - ``sonibus``: an ``osc`` node (``extra = ["t", "seq"]``, ``bundle`` as asked) started
   on a real Zenoh session, given each frame as its frame subscription's callback does
   (``Streams``' ``direct``, its state lock had); its frames' ``t`` are 2 s apart, more than any period the
   pacing learns, so it never holds one back (under valgrind the main thread can wait
   a second for its turn: a stall to the pacing), and ``max_age_ms = 0`` (they are old).
 
-    .venv/bin/python bench/floor_instructions.py [--joints 17 128] [--frames 2000]
+    .venv/bin/python bench/floor_instructions.py [--joints 17 128] [--frames 500]
 
 Writes bench/results/floor_instructions.json and prints a table.
 """
@@ -40,7 +45,7 @@ from typing import Any
 from common import write
 from floor import Datagrams
 
-CONTENDERS = ("decode", "gate", "floor", "sonibus")
+CONTENDERS = ("decode", "gate", "select", "pace", "send", "latency", "floor", "sonibus")
 SPACING_S = 2.0  # between the frames' t: over pacing.MAX_PERIOD_S, so nothing is paced however slowly valgrind runs
 
 
@@ -55,8 +60,9 @@ def frames(joints: int, n: int) -> list[bytes]:
                            "v": [math.sin(i + 0.1 * j) for j in range(joints)]}) for i in range(n)]
 
 
-def contenders(joints: int, bundle: bool, port: int) -> tuple[dict[str, Callable[[bytes], Any]], Callable[[], Any]]:
-    """Each contender as a call on one payload, and what stops the sonibus one."""
+def contenders(joints: int, bundle: bool, port: int, payloads: list[bytes]) -> tuple[
+        dict[str, Callable[[bytes], Any]], Callable[[], Any]]:
+    """Each contender as a call on one of ``payloads``, and what stops the sonibus one."""
     import msgpack
 
     from sonibus.adapters.osc.config import OscSinkConfig
@@ -64,7 +70,11 @@ def contenders(joints: int, bundle: bool, port: int) -> tuple[dict[str, Callable
     from sonibus.bus.keys import Key
     from sonibus.bus.messages import Gate
     from sonibus.bus.node import Bus
+    from sonibus.bus.pacing import Spacing
     from sonibus.bus.session import BusConfig, open_session
+    from sonibus.bus.stats import Latencies
+    from sonibus.bus.streams import Selection
+    from sonibus.bus.verdicts import VERDICTS
 
     key, destination = "robot0/frame", ("127.0.0.1", port)
     sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
@@ -99,8 +109,18 @@ def contenders(joints: int, bundle: bool, port: int) -> tuple[dict[str, Callable
         session.close()
         return counted
 
-    return {"decode": msgpack.unpackb, "gate": lambda payload: gate.check(parsed, payload), "floor": floor,
-            "sonibus": take}, close
+    # the stages, on objects of their own (the sink's pacing must see each frame once: its own turn)
+    selection = Selection(sink.config.subscribe)
+    VERDICTS.leave()  # (the sink alone takes frames in its process, as in floor.py: nothing remembered)
+    spacing, latencies, (link,) = Spacing(), Latencies(), sink._links
+    taken = {payload: selection.incoming(key, payload) for payload in payloads}  # (before the counts)
+    now = time.monotonic()
+    return {"decode": msgpack.unpackb, "gate": lambda payload: gate.check(parsed, payload),
+            "select": lambda payload: selection.incoming(key, payload),
+            "pace": lambda payload: spacing.turn(key, taken[payload].t, taken[payload].seq),
+            "send": lambda payload: sink._planned(link, taken[payload], now),
+            "latency": lambda payload: latencies.add(0.001),
+            "floor": floor, "sonibus": take}, close
 
 
 def segments(joints: int, n: int, bundle: bool) -> None:
@@ -108,8 +128,8 @@ def segments(joints: int, n: int, bundle: bool) -> None:
     before each and at the end, the collector off (its passes depend on the heap)."""
     receiver = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     receiver.bind(("127.0.0.1", 0))  # (never read: what overflows it is dropped by the kernel)
-    calls, close = contenders(joints, bundle, receiver.getsockname()[1])
     payloads = frames(joints, 2 * n)
+    calls, close = contenders(joints, bundle, receiver.getsockname()[1], payloads)
     warm, counted = payloads[:n], payloads[n:]
     for call in calls.values():
         for payload in warm:
@@ -148,7 +168,8 @@ def instructions(joints: int, n: int, bundle: bool) -> dict[str, float]:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--joints", type=int, nargs="+", default=[17, 128])
-    parser.add_argument("--frames", type=int, default=2000, help="frames counted per contender")
+    parser.add_argument("--frames", type=int, default=500,
+                        help="frames counted per contender (deterministic counts: more only takes longer)")
     parser.add_argument("--name", default="floor_instructions", help="results file name")
     parser.add_argument("--segments", type=int, nargs=2, help=argparse.SUPPRESS)  # (the run under callgrind)
     parser.add_argument("--bundle", action="store_true", help=argparse.SUPPRESS)
@@ -160,6 +181,8 @@ def main() -> None:
     for joints in args.joints:
         for bundle in (False, True):
             counts = instructions(joints, args.frames, bundle)
+            # what the sink spends beyond its stages: Streams.take, its counts, the frame assembler, _take
+            counts["dispatch"] = counts["sonibus"] - sum(counts[s] for s in ("select", "pace", "send", "latency"))
             rows.append({"joints": joints, "bundle": bundle, "per_frame": counts,
                          "sonibus_to_floor": counts["sonibus"] / counts["floor"],
                          "gate_to_decode": counts["gate"] / counts["decode"]})

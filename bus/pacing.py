@@ -133,7 +133,13 @@ class Spacing:
                 return GO
             paced, gap, stalled = state.learnt >= LEARNING, 0.0, False
             if arrived:
-                self._learn(state, t, seq)
+                # the period, from the frames' own clock (a skipped seq counts); inline: a call a frame less
+                if seq > state.seen_seq and t > state.seen_t:
+                    sample = (t - state.seen_t) / (seq - state.seen_seq)
+                    if sample <= MAX_PERIOD_S:
+                        state.period = sample if not state.period else state.period + (sample - state.period) / 8
+                        state.learnt += 1
+                    state.seen_t, state.seen_seq = t, seq
                 gap, state.arrived = now - state.arrived, now
                 stalled = paced and gap >= max(STALL_PERIODS * state.period, STALL_S)
                 state.recovering = state.recovering or stalled
@@ -148,13 +154,3 @@ class Spacing:
                     state.recovering = False  # (its frames arrive at their pace again)
             state.sent_at, state.sent_t = now, t
             return GO
-
-    @staticmethod
-    def _learn(state: _Stream, t: float, seq: int) -> None:
-        """The period, from the frames' own clock (a skipped seq counts)."""
-        if seq > state.seen_seq and t > state.seen_t:
-            sample = (t - state.seen_t) / (seq - state.seen_seq)
-            if sample <= MAX_PERIOD_S:
-                state.period = sample if not state.period else state.period + (sample - state.period) / 8
-                state.learnt += 1
-            state.seen_t, state.seen_seq = t, seq

@@ -215,7 +215,7 @@ class Selection:
     def incoming(self, key: str, payload: bytes) -> Incoming:
         """What came on ``key``, checked by the gate (a frame keeps the selected joints);
         ``messages.BadMessage`` saying what is wrong otherwise."""
-        source = self._key(key)
+        source = self._parsed.get(key) or self._key(key)  # (the usual: a key parsed before, no call)
         section = messages.SECTIONS.get(source.section)
         taken_as = section.taken_as if section is not None else ""
         derived = source.section == "derived" and not source.name  # <robot>/derived: a derived frame
@@ -229,7 +229,9 @@ class Selection:
             selected = self.selected(source.robot, message["names"])
             if selected.indices is not None:
                 values = [values[i] for i in selected.indices]
-            return Incoming(source, message, None, message["t"], message["seq"], tuple(map(float, values)), selected)
+            # (made as a tuple: no NamedTuple __new__ to call, every frame of every node; issue 35)
+            return _new(Incoming, (source, message, None, message["t"], message["seq"], tuple(map(float, values)),
+                                   selected, None))
         if derived:
             return self._derived_frame(source, message)
         if taken_as == "sample":

@@ -71,12 +71,17 @@ class FrameBytes:
     once: ``render(t, seq, values, interval)`` gives the plain messages (one per joint),
     the bundle, or PepperOSC's loop, byte for byte as the profile does it one joint at
     a time. Raises what ``struct`` raises for a value OSC cannot carry (the caller then
-    takes the general path, which leaves out just that message)."""
+    takes the general path, which leaves out just that message).
 
-    __slots__ = ("_extra", "_last", "_latency_s", "_pack", "_prefixes", "_shape")
+    A bundle is packed in one ``struct`` call: its fixed bytes (the head, each element's
+    size, address and type tags) and its values are the arguments of one format worked
+    out here, the values put in place by slice (no Python code per joint: issue 35)."""
+
+    __slots__ = ("_args", "_extra", "_fill", "_last", "_latency_s", "_pack", "_prefixes", "_shape", "_stride",
+                 "_whole")
 
     def __init__(self, prefixes: tuple[bytes, ...], pack: Callable[..., bytes], extra: tuple[str, ...],
-                 shape: str, latency_s: float = 0.0, last: bytes = b"") -> None:
+                 shape: str, latency_s: float = 0.0, last: bytes = b"", tags: str = "") -> None:
         self._prefixes = prefixes  # per joint: its address and type tags (with its size first, in a bundle)
         self._pack = pack          # the arguments of one message
         # what follows the value, picked out of (t, seq as int32) in the order of extra ("t", "seq")
@@ -86,8 +91,24 @@ class FrameBytes:
         self._shape = shape        # "messages", "bundle" or "pepperosc"
         self._latency_s = latency_s
         self._last = last          # PepperOSC: the prefix of its /latency message
+        self._stride = 2 + len(extra)  # a bundle's arguments per joint: its fixed bytes, its value, its extra
+        self._fill = tuple((4 + i, e == "t") for i, e in enumerate(extra))  # where each extra goes (True: t)
+        self._args: list[Any] = []
+        self._whole: Callable[..., bytes] | None = None
+        if shape == "bundle":  # ("#bundle\0", its timetag, then per joint its fixed bytes and arguments)
+            self._whole = struct.Struct(">8sQ" + "".join(f"{len(p)}s{tags}" for p in prefixes)).pack
+            self._args = [b"#bundle\0", 0, *(x for p in prefixes for x in (p, 0.0, *(0 for _ in extra)))]
 
     def render(self, t: float, seq: int, values: Sequence[float], interval: float = 0.0) -> list[bytes]:
+        if self._whole is not None:  # a bundle, in one call (the same bytes as ``encode.bundle`` of the messages)
+            args, stride, n = self._args, self._stride, len(self._prefixes)
+            seconds = t + self._latency_s + encode.NTP_OFFSET  # (encode.timetag's sum, to the last bit)
+            whole = int(seconds)  # (OverflowError, ValueError if not finite: refused, as by timetag)
+            args[1] = (whole << 32) | int((seconds - whole) * 2**32)
+            args[3::stride] = values  # (ValueError if there are not n of them: an extended slice keeps its size)
+            for i, pick in self._fill:
+                args[i::stride] = [t if pick else seq & SEQ_MASK] * n
+            return [self._whole(*args)]
         pack, pairs = self._pack, zip(self._prefixes, values, strict=True)
         tail = self._extra((t, seq & SEQ_MASK)) if self._extra else ()
         if len(tail) == 2:  # (t and seq: named, as a call with *tail costs a third of the frame)
@@ -97,8 +118,6 @@ class FrameBytes:
             out = [prefix + pack(v, *tail) for prefix, v in pairs]
         else:
             out = [prefix + pack(v) for prefix, v in pairs]
-        if self._shape == "bundle":
-            return [encode.bundle_head(encode.timetag(t + self._latency_s)) + b"".join(out)]
         if self._shape == "pepperosc":
             out.append(self._last + pack(interval))
         return out
@@ -134,7 +153,8 @@ class SonibusProfile:
             return FrameBytes(prefixes, packer.pack, self.target.extra, "messages")
         sized = tuple(struct.pack(">i", len(prefix) + packer.size) + prefix for prefix in prefixes)
         # (the same sum as ``frame``'s, so the same timetag to the last bit)
-        return FrameBytes(sized, packer.pack, self.target.extra, "bundle", self.target.latency_ms / 1000.0)
+        return FrameBytes(sized, packer.pack, self.target.extra, "bundle", self.target.latency_ms / 1000.0,
+                          tags=tags)
 
     def sample(self, source: Key, values: Sequence[float], t: float, seq: int) -> bytes:
         if not self.target.extra:

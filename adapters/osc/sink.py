@@ -36,6 +36,7 @@ MAX_PLANS = 1024          # frame plans kept per target (joint lists come from t
 MAX_PLAN_BYTES = 4 << 20  # and their bytes (a plan holds a datagram's head per joint: 128 long names fill 64 KB)
 LISTENING_AFTER_S = 2.0   # a target whose host has not refused a datagram for this long: something listens there
 _REFUSED = (struct.error, OverflowError, ValueError)  # what packing a value OSC cannot carry raises
+_NEVER = -math.inf
 
 
 class _Plan(NamedTuple):
@@ -54,6 +55,7 @@ class _Link:
         self.profile = PROFILES[target.profile](target)
         self.min_interval = 1.0 / target.max_rate_hz if target.max_rate_hz else 0.0
         self.filtering = target.on_change or target.deadband > 0
+        self.framed = target.framed  # (a property of the target's: read once a frame, kept here)
         self.last_values: dict[str, Sequence[float]] = {}
         self.last_sent: dict[str, float] = {}     # slot (key, or robot for frames) → monotonic time
         self.held: dict[str, Any] = {}            # slot → the newest thing waiting for its turn
@@ -110,6 +112,8 @@ class OscSink(Adapter):
         self._assembler = FrameAssembler()
         self.stats.follow("late", lambda: self._assembler.late)
         self._tally = self.stats.tally(("received", "sent"))  # (counted under self._state: no lock of their own)
+        self._max_age = cfg.max_age_ms / 1000.0
+        self._count, self._warn = self._counted, self.warn  # (bound once: passed on with every frame)
         for link in self._links:
             self.own(link.socket)
         self._queue = self.own(SampleQueue(cfg.queue))
@@ -186,11 +190,11 @@ class OscSink(Adapter):
             self.count(kind, n)
 
     def _take(self, key: str, payload: Any, now: float) -> None:
-        message = self._streams.take(key, payload, self._counted, self.warn)
+        message = self._streams.take(key, payload, self._count, self._warn)
         if message is None:
             return
         source = message.source
-        if source.section in ("frame", "joints") and now - self._heard.get(source.robot, -math.inf) >= HEARD_EVERY_S:
+        if source.section in ("frame", "joints") and now - self._heard.get(source.robot, _NEVER) >= HEARD_EVERY_S:
             if len(self._heard) >= 4096:  # (robot names come from the network)
                 self._heard.clear()
             self._heard[source.robot] = now
@@ -199,12 +203,11 @@ class OscSink(Adapter):
             if self._presence.passes(source.robot, message.event):  # (a repeated connection state: not)
                 self._event(source, message.event)
             return
-        max_age = self.config.max_age_ms / 1000.0
-        age = time.time() - message.t
-        if max_age and age > max_age:
+        t = message.t
+        if self._max_age and time.time() - t > self._max_age:
             self.count("stale")
             self.warn("stale", f"samples older than max_age_ms = {self.config.max_age_ms:g} dropped ('{key}' was "
-                               f"{age * 1000:.0f} ms old: {lateness.why_late(self.bus, message.source.robot)})")
+                               f"{(time.time() - t) * 1000:.0f} ms old: {lateness.why_late(self.bus, source.robot)})")
             return
         if message.parts is not None:  # a derived frame: its values, as the samples of their keys
             if message.parts:
@@ -213,7 +216,8 @@ class OscSink(Adapter):
             self._samples((message,), now)
         elif message.values:
             self._frame(message, now)
-        self.record_latency(time.time() - message.t)  # once a message, however many targets
+        # once a message, however many targets (Adapter.record_latency's, without its call)
+        self._stats_report.latencies.add(time.time() - t)
 
     def _samples(self, samples: Sequence[Incoming], now: float) -> None:
         """The general path: samples (joint keys, derived values), one target and one value at a time."""
@@ -233,10 +237,10 @@ class OscSink(Adapter):
         has one; the general path (``_samples``) for the others."""
         selected = message.selected
         assert selected is not None
-        slow = [link for link in self._sample_links if not self._planned(link, message, now)]
-        for link in slow:
-            for sample in message.samples:
-                self._sample_to(link, sample.source, sample.values, sample.t, sample.seq, now)
+        for link in self._sample_links:
+            if not self._planned(link, message, now):
+                for sample in message.samples:
+                    self._sample_to(link, sample.source, sample.values, sample.t, sample.seq, now)
         if not self._frame_links:
             return
         robot = message.source.robot
@@ -269,17 +273,23 @@ class OscSink(Adapter):
         if found.spans is not None:
             fraction = scale.fraction
             values = [v if span is None else fraction(v, span) for v, span in zip(values, found.spans, strict=True)]
-        robot, t = message.source.robot, message.t
-        framed = link.target.framed
-        previous = link.last_frame_t.get(robot) if framed else None
+        t = message.t
+        if not link.framed:
+            try:
+                datagrams = found.datagrams.render(t, message.seq, values)
+            except _REFUSED:  # (the general path leaves out just what OSC cannot carry, and says so)
+                return False
+            self._emit(link, datagrams)
+            return True
+        robot = message.source.robot
+        previous = link.last_frame_t.get(robot)
         try:
             datagrams = found.datagrams.render(t, message.seq, values,
                                                t - previous if previous is not None and t > previous else 0.0)
-        except _REFUSED:  # (the general path leaves out just what OSC cannot carry, and says so)
+        except _REFUSED:
             return False
-        if framed:
-            link.last_sent[robot] = now
-            link.last_frame_t[robot] = t
+        link.last_sent[robot] = now
+        link.last_frame_t[robot] = t
         self._emit(link, datagrams)
         return True
 

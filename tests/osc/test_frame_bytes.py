@@ -72,6 +72,28 @@ def test_a_frame_s_precomputed_bytes_are_the_general_path_s(target, names, data,
         assert compiled.render(t, seq, values, interval) == expected
 
 
+def test_one_plan_renders_frame_after_frame_as_the_general_path_whatever_came_before():
+    """A bundle's plan keeps its arguments between frames (issue 35: packed in one call, its
+    values put in place by slice): each frame is still the general path's bytes, after a
+    frame of other values, of values OSC cannot carry (refused), of too few values."""
+    names = ["HeadYaw", "HeadPitch", "LHand"]
+    sources = [Key.parse(f"pepper/joints/{name}") for name in names]
+    for extra in ((), ("t", "seq"), ("seq", "t", "seq")):
+        target = Target(to="127.0.0.1:9", bundle=True, extra=extra, latency_ms=25.0)
+        compiled = PROFILES["sonibus"](target).compile(sources)
+        assert compiled is not None
+        frames = [(1.7e9 + 0.01 * n, n, [0.1 * n, -0.5, 2.0 + n]) for n in range(6)]
+        frames.insert(2, (1.7e9, 99, [0.0, 1e39, 0.0]))  # beyond float32: refused
+        frames.insert(4, (1.7e9, 98, [0.0, 1.0]))        # a value short: refused
+        for t, seq, values in frames:
+            expected = general(target, sources, values, t, seq, 0.0) if len(values) == len(names) else None
+            if expected is None:
+                with pytest.raises(REFUSED):
+                    compiled.render(t, seq, values)
+            else:
+                assert compiled.render(t, seq, values) == expected, (extra, seq)
+
+
 # -- the sink, both ways -------------------------------------------------------------------------
 
 NAMES_OF_TOY = ["A", "B", "C", "D", "Unranged"]
