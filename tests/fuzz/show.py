@@ -160,16 +160,21 @@ def _osc_message(address: str) -> bytes:
 
 
 _MIDI_CHILD = r"""
-import json, sys, time, rtmidi
+import json, sys, threading, time, rtmidi
 midi = rtmidi.MidiIn(rtmidi.API_UNIX_JACK, "fuzz-reader")
 names = midi.get_ports()
 wanted = [i for i, name in enumerate(names) if sys.argv[1] in name]
 if not wanted:
     print(json.dumps(names), flush=True)
     raise SystemExit(0)
-midi.set_callback(lambda event, _: print(time.monotonic(), event[0][0], flush=True))
+lock = threading.Lock()  # (a line whole: rtmidi's thread prints as soon as the port is open, beside "ready")
+def say(line):
+    with lock:
+        sys.stdout.write(line + "\n")
+        sys.stdout.flush()
+midi.set_callback(lambda event, _: say(f"{time.monotonic()} {event[0][0]}"))
 midi.open_port(wanted[0], "in")
-print("ready", flush=True)
+say("ready")
 sys.stdin.read()  # (until the show closes it)
 midi.close_port()
 midi.delete()
