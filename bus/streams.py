@@ -417,9 +417,10 @@ class Streams(Selection):
         self.subscribers = [bus.subscribe(k, stamped=stamped, **options)[0] for k, options in subscriptions]
 
     def take(self, key: str, payload: bytes | Held, count: Callable[[str, int], None],
-             warn: Callable[[str, str], None]) -> Incoming | None:
+             warn: Callable[[str, str], None], now: float | None = None) -> Incoming | None:
         """``Selection.take``, then the pacing: None for a message held for its turn
-        (the queue gives it back then, as a ``Held``) or skipped (counted)."""
+        (the queue gives it back then, as a ``Held``) or skipped (counted). ``now``: the
+        caller's ``time.monotonic()``, if it has one (the pacing reads the clock otherwise)."""
         if payload.__class__ is Held:
             with self._held_lock:
                 newest = self._held.get(key) is payload
@@ -432,8 +433,8 @@ class Streams(Selection):
             message = super().take(key, payload, count, warn)  # type: ignore[arg-type]
             if message is None or self.spacing is None or message.event is not None:
                 return message
-        turn = self.spacing.turn(key, message.t, message.seq,  # type: ignore[union-attr]
-                                 arrived=payload.__class__ is not Held)
+        turn = self.spacing.turn(key, message.t, message.seq, now,  # type: ignore[union-attr]
+                                 payload.__class__ is not Held)
         if turn.go:
             return message
         if not turn.until:

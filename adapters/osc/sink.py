@@ -190,7 +190,7 @@ class OscSink(Adapter):
             self.count(kind, n)
 
     def _take(self, key: str, payload: Any, now: float) -> None:
-        message = self._streams.take(key, payload, self._count, self._warn)
+        message = self._streams.take(key, payload, self._count, self._warn, now)
         if message is None:
             return
         source = message.source
