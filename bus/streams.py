@@ -308,7 +308,8 @@ class Selection:
         if chosen is None or chosen[0] is not names:
             chosen = self._chosen(source.key, names or tuple(message["names"]), source.key + "/")
         t, seq = message["t"], message["seq"]
-        return Incoming(source, message, None, t, seq, (), None, Parts(chosen[1].sources, chosen[2](message["v"]), t, seq))
+        parts = Parts(chosen[1].sources, chosen[2](message["v"]), t, seq)
+        return Incoming(source, message, None, t, seq, (), None, parts)
 
     def selected(self, robot: str, names: list[str] | tuple[str, ...], prefix: str = "") -> Selected:
         """The joints of ``robot``'s frames with ``names`` (checked by the gate) that the patterns select

@@ -279,6 +279,7 @@ def test_a_robots_next_frames_find_their_selection_by_the_gates_names_without_co
     monkeypatch.setattr(Selection, "_chosen", lambda *args: worked_out.append(args[1]) or chosen(*args))
     taken = [selection.incoming("pepper/frame", payload) for payload in frames[1:]]
     assert worked_out == []
-    assert all(m.selected is first.selected for m in taken) and [m.values for m in taken] == [(0.1 * s,) for s in range(1, 5)]
+    assert all(m.selected is first.selected for m in taken)
+    assert [m.values for m in taken] == [(0.1 * s,) for s in range(1, 5)]
     other = selection.incoming("pepper/frame", codec.encode(messages.frame(t, 9, ["LHand", "HeadPitch"], [0.5, 0.7])))
     assert worked_out == ["pepper"] and other.values == (0.7,) and other.selected is not first.selected

@@ -19,7 +19,7 @@ from sonibus.bus.frames import Frame, FrameAssembler
 from sonibus.bus.info import InfoRequests
 from sonibus.bus.keys import Key
 from sonibus.bus.queue import SampleQueue
-from sonibus.bus.streams import Incoming, Selected, Streams, if_free
+from sonibus.bus.streams import Incoming, Selected, Streams
 
 from . import scale
 from .config import OscSinkConfig, Target, parse_target
@@ -158,7 +158,14 @@ class OscSink(Adapter):
         """A frame, on its subscription's callback thread (``Streams``' ``direct``); into the
         queue instead (False) before it subscribed everywhere or while the forward worker
         holds the state (``if_free``)."""
-        return self._streams is not None and if_free(self._state, lambda: self._take(key, payload, time.monotonic()))
+        # (``if_free`` without its call and lambda a frame: the dispatch is every frame's, issue 35)
+        if self._streams is None or not self._state.acquire(blocking=False):
+            return False
+        try:
+            self._take(key, payload, time.monotonic())
+        finally:
+            self._state.release()
+        return True
 
     def _wait(self) -> float:
         soonest = [0.2]
