@@ -283,3 +283,17 @@ def test_a_robots_next_frames_find_their_selection_by_the_gates_names_without_co
     assert [m.values for m in taken] == [(0.1 * s,) for s in range(1, 5)]
     other = selection.incoming("pepper/frame", codec.encode(messages.frame(t, 9, ["LHand", "HeadPitch"], [0.5, 0.7])))
     assert worked_out == ["pepper"] and other.values == (0.7,) and other.selected is not first.selected
+
+
+def test_a_derived_frames_parts_are_made_only_when_a_sink_looks_at_them():
+    """``Incoming.parts`` knows its length at once (what ``take`` counts); its samples are made
+    the first time they are read, once, the same as each value's key would carry."""
+    selection = Selection(["pepper/derived/qom/*"])
+    t = time.time() - 1
+    payload = codec.encode(messages.derived_frame(t, 3, ["qom/all", "hand/R", "qom/arm"], [0.2, [0.1, 0.3], 0.4]))
+    message = selection.incoming("pepper/derived", payload)
+    assert len(message.parts) == 2 and message.parts and message.parts._made is None  # (none made yet)
+    assert [(p.source.key, p.message, p.values) for p in message.parts] == [
+        ("pepper/derived/qom/all", {"t": t, "seq": 3, "v": 0.2}, (0.2,)),
+        ("pepper/derived/qom/arm", {"t": t, "seq": 3, "v": 0.4}, (0.4,))]
+    assert message.parts[1] is message.parts._made[1]  # (made once)
