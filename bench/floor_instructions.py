@@ -115,9 +115,9 @@ def contenders(joints: int, bundle: bool, port: int, payloads: list[bytes]) -> t
     spacing, latencies, (link,) = Spacing(), Latencies(), sink._links
     taken = {payload: selection.incoming(key, payload) for payload in payloads}  # (before the counts)
     now = time.monotonic()
-    return {"decode": msgpack.unpackb, "gate": lambda payload: gate.check(parsed, payload),
+    return {"decode": msgpack.unpackb, "gate": lambda payload: gate.verdict(parsed, payload),
             "select": lambda payload: selection.incoming(key, payload),
-            "pace": lambda payload: spacing.turn(key, taken[payload].t, taken[payload].seq),
+            "pace": lambda payload: spacing.turn(key, taken[payload].t, taken[payload].seq, now),
             "send": lambda payload: sink._planned(link, taken[payload], now),
             "latency": lambda payload: latencies.add(0.001),
             "floor": floor, "sonibus": take}, close

@@ -70,8 +70,11 @@ class FrameAssembler:
         ``robot``'s is open and its frames hold just these keys (no derived values join
         them). It is then taken as closed without being built (a sample of its ``seq``
         that comes later is late), and the caller sends it as it is."""
-        if robot in self._open or self._expected.get(robot) != keys:
+        expected = self._expected.get(robot)
+        if robot in self._open or (expected is not keys and expected != keys):
             return False
+        if expected is not keys:  # (equal: kept as the caller's, whose next frame's are the same object)
+            self._expected[robot] = keys
         self._closed[robot] = (seq, t)
         return True
 

@@ -96,9 +96,16 @@ class Gate:
         self.limits = limits or DEFAULT_LIMITS
         self._known_names: Capped[tuple[str, ...], bool] = Capped(self.MAX_KNOWN, self.MAX_KNOWN_BYTES)
         # robot → the (checked) names of its last frame
-        self._last_names: Capped[str, list[str]] = Capped(self.MAX_KNOWN, self.MAX_KNOWN_BYTES)
+        self._last_names: Capped[str, tuple[str, ...]] = Capped(self.MAX_KNOWN, self.MAX_KNOWN_BYTES)
 
     def check(self, key: Key, payload: bytes) -> dict[str, Any]:
+        return self.verdict(key, payload)[0]
+
+    def verdict(self, key: Key, payload: bytes) -> tuple[dict[str, Any], tuple[str, ...] | None]:
+        """``check``, and what the check found beside the message: a frame's (or derived frame's)
+        ``names`` as one immutable tuple, the same object for every frame of ``key``'s robot with
+        the same names (what ``Selection`` keys its selection by, comparing no name again; its
+        ``v`` is then known to be floats or ints within bounds), None for other messages."""
         section = SECTIONS.get(key.section)
         if section is None:
             raise BadMessage(f"'{key.section}' is not a section of the key space ({', '.join(SECTIONS)})")
@@ -117,12 +124,11 @@ class Gate:
             except DecodeError as exc:
                 raise BadMessage(_cut(str(exc))) from None
         try:
-            section.check(self, key, message)
+            return message, section.check(self, key, message)
         except BadMessage:
             raise
         except (KeyError, TypeError, ValueError) as exc:  # a field missing or of the wrong type
             raise BadMessage(_reason(exc)) from None
-        return message
 
     # -- sections ---------------------------------------------------------------------
 
@@ -137,7 +143,7 @@ class Gate:
             raise BadMessage(f"{len(names)} {what}, at most {most}")
         return names, values
 
-    def frame(self, key: Key, message: dict[str, Any]) -> None:
+    def frame(self, key: Key, message: dict[str, Any]) -> tuple[str, ...]:
         # (the usual frame's t, seq, names and v in one test, no call: what _columns checks, in its order,
         # each failure then said by _columns; the gate's per-frame cost is every node's, issue 35)
         t, seq = message["t"], message["seq"]
@@ -146,14 +152,16 @@ class Gate:
                 and seq.__class__ is int and 0 <= seq <= MAX_SEQ
                 and names.__class__ is list and values.__class__ is list and len(names) == len(values) <= MAX_JOINTS):
             names, values = self._columns(message, MAX_JOINTS, "joints in one frame")
-        if names != self._last_names.get(key.robot):  # (a robot's names are the same every frame: one comparison)
+        signature = tuple(names)  # (immutable: whoever takes the message may change its list)
+        last = self._last_names.get(key.robot)
+        if signature != last:  # (a robot's names are the same every frame: one comparison, the only one)
             self._known(names)
-            # (a copy: whoever takes the message may change its list; robot and joint names come from the network)
-            self._last_names.put(key.robot, list(names), size_of(names) + len(key.robot))
+            # (robot and joint names come from the network: capped)
+            last = self._last_names.put(key.robot, signature, size_of(names) + len(key.robot))
         if list(map(type, values)).count(float) != len(values) or not hypot(*values) <= MAX_VALUE:  # (plain_floats)
             numbers(values, "v")
         if len(message) == len(FRAME_FIELDS):  # (all four were read above: no quantity per joint beside v)
-            return
+            return last
         for quantity, extra in message.items():
             if quantity in FRAME_FIELDS:
                 continue
@@ -162,6 +170,7 @@ class Gate:
             if extra.__class__ is not list or len(extra) != len(names):
                 raise BadMessage(f"{quantity} is not a list of {len(names)} numbers")
             numbers(extra, quantity)
+        return last
 
     def _known(self, names: list[Any]) -> None:
         """``names`` checked (plain, unique), or one of the lists checked before."""
@@ -186,33 +195,35 @@ class Gate:
         if "v" not in message:
             raise BadMessage("no 'v'")
 
-    def derived(self, key: Key, message: dict[str, Any]) -> None:
+    def derived(self, key: Key, message: dict[str, Any]) -> tuple[str, ...] | None:
         """A derived frame (``<robot>/derived``) or a derived sample (``<robot>/derived/<feature>/<name>``)."""
         if key.name:
             self.derived_sample(key, message)
-        else:
-            self.derived_frame(key, message)
+            return None
+        return self.derived_frame(key, message)
 
-    def derived_frame(self, key: Key, message: dict[str, Any]) -> None:
+    def derived_frame(self, key: Key, message: dict[str, Any]) -> tuple[str, ...]:
         names, values = self._columns(message, MAX_DERIVED_VALUES, "values in one derived frame")
         if len(message) != len(FRAME_FIELDS):
             extra = next(field for field in message if field not in FRAME_FIELDS)
             raise BadMessage(f"field {_short(extra)} is not one of a derived frame's ({', '.join(FRAME_FIELDS)})")
-        if names != self._last_names.get(key.key):  # (a robot's names are the same every frame: one comparison)
+        signature = tuple(names)
+        last = self._last_names.get(key.key)
+        if signature != last:  # (a robot's names are the same every frame: one comparison, the only one)
             for name in names:
                 if name.__class__ is not str or not _DERIVED_NAME(name):
                     raise BadMessage(f"derived name {_short(name)} is not <feature>/<name> of plain key chunks")
             if len(set(names)) != len(names):
                 raise BadMessage("derived names are not unique")
-            self._last_names.put(key.key, list(names), size_of(names) + len(key.key))
+            last = self._last_names.put(key.key, signature, size_of(names) + len(key.key))
         if plain_floats(values):
-            return
+            return last
         # (the usual: numbers and a few vectors of floats, let through in one go; a value at a time cost
         # 26 calls, 15 µs a frame, every node that takes derived values)
         vectors = [value for value in values if value.__class__ is list]
         if all(0 < len(vector) <= MAX_DERIVED_SIZE for vector in vectors) and plain_floats(
                 [value for value in values if value.__class__ is not list] + list(chain.from_iterable(vectors))):
-            return
+            return last
         for i, value in enumerate(values):  # (which one is wrong, and how)
             if value.__class__ is list:
                 if not 0 < len(value) <= MAX_DERIVED_SIZE:
@@ -220,6 +231,7 @@ class Gate:
                 numbers(value, f"v[{i}]")
             else:
                 numbers((value,), f"v[{i}]")
+        return last
 
     def derived_sample(self, key: Key, message: dict[str, Any]) -> None:
         value = message.get("v")
@@ -323,7 +335,7 @@ class Section:
 
     name: str
     schema: str | None                                   # None: no one schema (a command's is its verb's)
-    check: Callable[[Gate, Key, dict[str, Any]], None]
+    check: Callable[[Gate, Key, dict[str, Any]], tuple[str, ...] | None]  # (a frame's names: Gate.verdict)
     taken_as: str = "message"                            # "frame", "sample" (t, seq, values) or "message"
     by_name: bool = False                                # True: a sink takes it only where a pattern names it
 

@@ -22,6 +22,7 @@ import random
 import resource
 import threading
 import time
+from collections import deque
 from collections.abc import Callable, Iterable, Iterator, Mapping
 from dataclasses import dataclass, field
 from typing import Any
@@ -99,8 +100,14 @@ class Latencies:
     """A uniform sample (at most ``size``) of the latencies seen since the last ``take``.
 
     Reservoir sampling by Li's algorithm L: once the sample is full, how many latencies
-    to pass over before the next one kept is drawn at once, so most ``add`` calls draw
-    no random number (a sink adds one a frame).
+    to pass over before the next one kept is drawn at once, so most latencies draw no
+    random number (a sink adds one a frame).
+
+    ``add`` takes no lock: it appends to a deque (atomic under the GIL, from any thread)
+    and every ``FOLD`` latencies they are folded into the sample under the lock, popped
+    one by one (each popped by one folder only, as many as were there when it began);
+    ``take`` folds what is left first. Every latency is counted once, in the interval of
+    the ``take`` that folds it: exactly as if each ``add`` took the lock.
 
     >>> latencies = Latencies(size=4)
     >>> for ms in range(1000):
@@ -110,23 +117,39 @@ class Latencies:
     (1000, 0)
     """
 
+    FOLD = 64  # latencies added between two folds (at most this many wait, besides what threads add meanwhile)
+
     def __init__(self, size: int = RESERVOIR) -> None:
         self._size = size
         self._lock = threading.Lock()
+        self._fresh: deque[float] = deque()  # added, not yet folded into the sample
         self._kept: list[float] = []
         self._seen = 0
         self._next = 0      # the count at which the next latency is kept (once the sample is full)
         self._weight = 1.0  # algorithm L's W
 
     def add(self, seconds: float) -> None:
+        fresh = self._fresh
+        fresh.append(seconds)
+        if len(fresh) >= self.FOLD:
+            self._fold()
+
+    def _fold(self) -> None:
         with self._lock:
+            self._fold_locked()
+
+    def _fold_locked(self) -> None:
+        """The latencies added so far, into the sample (each seen latency kept with the same chance)."""
+        popleft, kept, size = self._fresh.popleft, self._kept, self._size
+        for _ in range(len(self._fresh)):  # (only folders pop, under the lock: these many are there)
+            seconds = popleft()
             self._seen += 1
-            if len(self._kept) < self._size:
-                self._kept.append(seconds)
-                if len(self._kept) == self._size:
+            if len(kept) < size:
+                kept.append(seconds)
+                if len(kept) == size:
                     self._skip()
-            elif self._seen == self._next:  # each latency seen is kept with the same chance
-                self._kept[random.randrange(self._size)] = seconds
+            elif self._seen == self._next:
+                kept[random.randrange(size)] = seconds
                 self._skip()
 
     def _skip(self) -> None:
@@ -137,6 +160,7 @@ class Latencies:
     def take(self) -> dict[str, float] | None:
         """p50 and p99 in ms of the sample, and how many were seen; None if none; starts over."""
         with self._lock:
+            self._fold_locked()
             kept, seen = sorted(self._kept), self._seen
             self._kept, self._seen, self._next, self._weight = [], 0, 0, 1.0
         if not kept:

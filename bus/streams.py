@@ -35,9 +35,10 @@ from __future__ import annotations
 
 import itertools
 import logging
+import operator
 import threading
 import weakref
-from collections.abc import Callable, Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass
 from typing import Any, NamedTuple
 
@@ -164,7 +165,7 @@ class Incoming(NamedTuple):
     seq: int = 0
     values: tuple[float, ...] = ()
     selected: Selected | None = None
-    parts: tuple[Incoming, ...] | None = None  # a derived frame's selected values, as their keys' samples
+    parts: Parts | None = None  # a derived frame's selected values, as their keys' samples (made when looked at)
 
     @property
     def samples(self) -> tuple[Incoming, ...]:
@@ -177,14 +178,71 @@ class Incoming(NamedTuple):
                      for source, value in zip(self.selected.sources, self.values, strict=True))
 
     @property
-    def joints(self) -> tuple[Incoming, ...]:
+    def joints(self) -> Sequence[Incoming]:
         """The samples it carries: a frame's, a derived frame's (``parts``), or itself."""
         if self.parts is not None:
             return self.parts
         return self.samples if self.selected is not None else (self,)
 
 
-_new = tuple.__new__  # (an ``Incoming`` made from all its fields at once: ``_derived_frame``)
+_new = tuple.__new__  # (an ``Incoming`` made from all its fields at once: ``incoming``)
+_Chosen = tuple[tuple[str, ...], Selected, Callable[[list[Any]], tuple[Any, ...]]]  # names, selection, picker
+
+
+def _picker(indices: tuple[int, ...] | None) -> Callable[[list[Any]], tuple[Any, ...]]:
+    """What takes the values at ``indices`` (None: all) out of a frame's ``v``, as a tuple, in C."""
+    if indices is None:
+        return tuple
+    if len(indices) == 1:
+        return lambda values, i=indices[0]: (values[i],)
+    if not indices:
+        return lambda values: ()
+    return operator.itemgetter(*indices)
+
+
+class Parts(Sequence[Incoming]):
+    """A derived frame's selected values as the samples of their own keys (``Incoming.parts``),
+    made the first time a sink looks at them: a node that takes derived frames whole (the
+    recorder) never pays for them. Its length is known without them."""
+
+    __slots__ = ("_made", "_sources", "_values", "seq", "t")
+
+    def __init__(self, sources: tuple[keys.Key, ...], values: tuple[Any, ...], t: float, seq: int) -> None:
+        self._sources, self._values, self.t, self.seq = sources, values, t, seq
+        self._made: tuple[Incoming, ...] | None = None
+
+    def _parts(self) -> tuple[Incoming, ...]:
+        made = self._made
+        if made is None:  # (two threads may both make them: equal tuples, either kept)
+            t, seq = self.t, self.seq
+            # (a list made in one comprehension, each part made as a tuple: no generator to resume, no
+            # NamedTuple __new__ to call, 26 times a frame for each node that takes derived values)
+            made = self._made = tuple([_new(Incoming, (
+                key, {"t": t, "seq": seq, "v": value}, None, t, seq,
+                tuple(map(float, value)) if value.__class__ is list else (float(value),), None, None))
+                for key, value in zip(self._sources, self._values, strict=True)])
+        return made
+
+    def __len__(self) -> int:
+        return len(self._sources)
+
+    def __bool__(self) -> bool:
+        return bool(self._sources)
+
+    def __iter__(self) -> Iterator[Incoming]:
+        return iter(self._parts())
+
+    def __getitem__(self, index: Any) -> Any:
+        return self._parts()[index]
+
+    def __eq__(self, other: object) -> bool:
+        return self._parts() == (other._parts() if isinstance(other, Parts) else other)
+
+    def __hash__(self) -> int:
+        return hash(self._parts())
+
+    def __repr__(self) -> str:
+        return repr(self._parts())
 
 
 class Selection:
@@ -209,8 +267,7 @@ class Selection:
         self._accepted: Capped[str, bool] = Capped(MAX_KEYS, MAX_BYTES)
         self._parsed: Capped[str, keys.Key] = Capped(MAX_KEYS, MAX_BYTES)
         self._frames: Capped[tuple[str, tuple[str, ...]], Selected] = Capped(MAX_FRAMES, MAX_BYTES)
-        self._last: Capped[str, tuple[list[str], Selected]] = Capped(MAX_FRAMES, MAX_BYTES)  # robot → its last
-        # names (a copy), their selection
+        self._last: Capped[str, _Chosen] = Capped(MAX_FRAMES, MAX_BYTES)  # robot → its last names' snapshot
 
     def incoming(self, key: str, payload: bytes) -> Incoming:
         """What came on ``key``, checked by the gate (a frame keeps the selected joints);
@@ -221,48 +278,55 @@ class Selection:
         derived = source.section == "derived" and not source.name  # <robot>/derived: a derived frame
         if (taken_as == "frame" or derived) and VERDICTS.takers > 1:  # (the process's other nodes take the
             # same bytes: checked once for them all, each given a message of its own; bus/verdicts.py)
-            message = VERDICTS.check(self.gate, source, payload, nested=derived)
+            message, names = VERDICTS.verdict(self.gate, source, payload, nested=derived)
         else:
-            message = self.gate.check(source, payload)  # (a key of no section is refused here)
+            message, names = self.gate.verdict(source, payload)  # (a key of no section is refused here)
         if taken_as == "frame":
-            values = message["v"]
-            selected = self.selected(source.robot, message["names"])
-            if selected.indices is not None:
-                values = [values[i] for i in selected.indices]
+            # (the gate compared the names with the robot's last frame's and gave the same tuple if they
+            # were: the selection for them is found by identity, no name compared again; one snapshot
+            # read once, so two threads taking frames of one robot never mix two selections)
+            chosen = self._last.get(source.robot)
+            if chosen is None or chosen[0] is not names:
+                chosen = self._chosen(source.robot, names or tuple(message["names"]))
+            values = chosen[2](message["v"])
+            if names is None:  # (not all floats: ints, which the gate let through)
+                values = tuple(map(float, values))
             # (made as a tuple: no NamedTuple __new__ to call, every frame of every node; issue 35)
-            return _new(Incoming, (source, message, None, message["t"], message["seq"], tuple(map(float, values)),
-                                   selected, None))
+            return _new(Incoming, (source, message, None, message["t"], message["seq"], values, chosen[1], None))
         if derived:
-            return self._derived_frame(source, message)
+            return self._derived_frame(source, message, names)
         if taken_as == "sample":
             value = message["v"]
             values = tuple(map(float, value)) if isinstance(value, list) else (float(value),)
             return Incoming(source, message, None, message["t"], message["seq"], values)
         return Incoming(source, message, message)
 
-    def _derived_frame(self, source: keys.Key, message: dict[str, Any]) -> Incoming:
-        """A derived frame, with the values the patterns select as the samples of their own keys."""
-        t, seq, values = message["t"], message["seq"], message["v"]
-        selected = self.selected(source.key, message["names"], source.key + "/")
-        chosen = values if selected.indices is None else [values[i] for i in selected.indices]
-        # (a list made in one comprehension, each part made as a tuple: no generator to resume, no
-        # NamedTuple __new__ to call, 26 times a frame for each node that takes derived values)
-        parts = tuple([_new(Incoming, (key, {"t": t, "seq": seq, "v": value}, None, t, seq,
-                                       tuple(map(float, value)) if value.__class__ is list else (float(value),),
-                                       None, None))
-                       for key, value in zip(selected.sources, chosen, strict=True)])
+    def _derived_frame(self, source: keys.Key, message: dict[str, Any], names: tuple[str, ...] | None) -> Incoming:
+        """A derived frame, with the values the patterns select as the samples of their own keys
+        (made when a sink first looks at them: ``Parts``)."""
+        chosen = self._last.get(source.key)
+        if chosen is None or chosen[0] is not names:
+            chosen = self._chosen(source.key, names or tuple(message["names"]), source.key + "/")
+        t, seq = message["t"], message["seq"]
+        parts = Parts(chosen[1].sources, chosen[2](message["v"]), t, seq)
         return Incoming(source, message, None, t, seq, (), None, parts)
 
-    def selected(self, robot: str, names: list[str], prefix: str = "") -> Selected:
+    def selected(self, robot: str, names: list[str] | tuple[str, ...], prefix: str = "") -> Selected:
         """The joints of ``robot``'s frames with ``names`` (checked by the gate) that the patterns select
         (``prefix``: their keys' beside the names, ``<robot>/joints/`` unless given; a derived frame's
         are ``<robot>/derived/``, and ``robot`` is then its key)."""
-        last = self._last.get(robot)
-        if last is not None and last[0] == names:  # (a robot's names are the same every frame: one comparison)
-            return last[1]
-        signature = (robot, tuple(names))
-        found = self._frames.get(signature)
+        return self._chosen(robot, names if names.__class__ is tuple else tuple(names), prefix)[1]
+
+    def _chosen(self, robot: str, names: tuple[str, ...], prefix: str = "") -> _Chosen:
+        """``robot``'s snapshot for frames with ``names``: the names, their ``Selected`` and what picks
+        the selected values out of a frame's ``v``, kept as the robot's last (``incoming`` finds it
+        by the identity of the gate's names)."""
         size = size_of(names) + len(robot)
+        last = self._last.get(robot)
+        if last is not None and last[0] == names:  # (the same names, another tuple: kept with this one)
+            return self._last.put(robot, (names, last[1], last[2]), size)
+        signature = (robot, names)
+        found = self._frames.get(signature)
         if found is None:
             prefix = prefix or f"{robot}/joints/"
             indices = tuple(i for i, name in enumerate(names) if self.accepts(prefix + name))
@@ -270,8 +334,7 @@ class Selection:
             found = self._frames.put(signature, Selected(sources, None if len(indices) == len(names) else indices,
                                                          frozenset(source.key for source in sources)),
                                      size + PER_NAME * len(indices))  # (its keys, mostly _parsed's)
-        self._last.put(robot, (list(names), found), size)
-        return found
+        return self._last.put(robot, (names, found, _picker(found.indices)), size)
 
     def take(self, key: str, payload: bytes, count: Callable[[str, int], None],
              warn: Callable[[str, str], None]) -> Incoming | None:
@@ -355,9 +418,10 @@ class Streams(Selection):
         self.subscribers = [bus.subscribe(k, stamped=stamped, **options)[0] for k, options in subscriptions]
 
     def take(self, key: str, payload: bytes | Held, count: Callable[[str, int], None],
-             warn: Callable[[str, str], None]) -> Incoming | None:
+             warn: Callable[[str, str], None], now: float | None = None) -> Incoming | None:
         """``Selection.take``, then the pacing: None for a message held for its turn
-        (the queue gives it back then, as a ``Held``) or skipped (counted)."""
+        (the queue gives it back then, as a ``Held``) or skipped (counted). ``now``: the
+        caller's ``time.monotonic()``, if it has one (the pacing reads the clock otherwise)."""
         if payload.__class__ is Held:
             with self._held_lock:
                 newest = self._held.get(key) is payload
@@ -370,8 +434,8 @@ class Streams(Selection):
             message = super().take(key, payload, count, warn)  # type: ignore[arg-type]
             if message is None or self.spacing is None or message.event is not None:
                 return message
-        turn = self.spacing.turn(key, message.t, message.seq,  # type: ignore[union-attr]
-                                 arrived=payload.__class__ is not Held)
+        turn = self.spacing.turn(key, message.t, message.seq, now,  # type: ignore[union-attr]
+                                 payload.__class__ is not Held)
         if turn.go:
             return message
         if not turn.until:

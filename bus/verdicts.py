@@ -54,7 +54,7 @@ class Verdicts:
     def __init__(self, items: int = MAX_VERDICTS, size: int = MAX_BYTES) -> None:
         # (key, payload) → (the limits, the message or the reason refused): nodes with other limits
         # than the last one's check again (and are remembered in its place)
-        self._table: Capped[tuple[str, bytes], tuple[Limits, dict[str, Any] | str]] = Capped(items, size)
+        self._table: Capped[tuple[str, bytes], tuple[Limits, tuple[dict[str, Any], Any] | str]] = Capped(items, size)
         self._lock = threading.Lock()  # (gets are dict lookups; puts count bytes and may clear)
         self.checked = 0  # payloads the gate was asked about (the others were remembered)
         self.takers = 0  # what takes frames in this process (``join``, ``leave``): remembered only if two or more
@@ -74,14 +74,20 @@ class Verdicts:
         """``gate.check(key, payload)``, or what it said of the same bytes on ``key`` with the
         same limits before: a message of the caller's own, or ``BadMessage``. ``nested``: the
         message's ``v`` may hold lists (a derived frame's), copied too."""
+        return self.verdict(gate, key, payload, nested)[0]
+
+    def verdict(self, gate: Gate, key: Key, payload: bytes,
+                nested: bool = False) -> tuple[dict[str, Any], tuple[str, ...] | None]:
+        """``check``, with what the gate found beside the message (``Gate.verdict``: a frame's
+        names, an immutable tuple shared by every caller)."""
         limits = gate.limits
         if self.takers < 2 or payload.__class__ is not bytes:  # (alone: nobody to share with; an oversize
-            return gate.check(key, payload)  # marker: refused by the gate at once)
+            return gate.verdict(key, payload)  # marker: refused by the gate at once)
         entry = (key.key, payload)
         found = self._table.get(entry)
         if found is None or (found[0] is not limits and found[0] != limits):  # (one bus's nodes: the same object)
             try:
-                verdict: dict[str, Any] | str = gate.check(key, payload)
+                verdict: tuple[dict[str, Any], tuple[str, ...] | None] | str = gate.verdict(key, payload)
             except BadMessage as exc:
                 verdict = str(exc)
             found = (limits, verdict)
@@ -91,7 +97,7 @@ class Verdicts:
         verdict = found[1]
         if verdict.__class__ is str:
             raise BadMessage(verdict)
-        return own(verdict, nested)  # type: ignore[arg-type]
+        return own(verdict[0], nested), verdict[1]  # type: ignore[index]
 
     def __len__(self) -> int:
         return len(self._table)

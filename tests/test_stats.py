@@ -295,3 +295,38 @@ def test_naoqi_robot_counts_warns_and_publishes_its_stats(net, caplog):
 ])
 def test_summary_is_one_line(stats, line):
     assert health.summary(stats) == line
+
+
+def test_latencies_added_from_two_threads_while_a_third_takes_are_each_counted_once():
+    """``add`` takes no lock (a deque, folded every ``FOLD``): however the threads interleave,
+    the intervals' ``samples`` add up to every latency added, and no sample holds more than
+    its size nor a latency that was not added."""
+    switch = sys.getswitchinterval()
+    sys.setswitchinterval(1e-6)  # (threads switch as often as they can: the races, if any, happen)
+    latencies, per_thread, taken = Latencies(size=16), 50_000, []
+    stop = threading.Event()
+
+    def adder(offset: float) -> None:
+        for i in range(per_thread):
+            latencies.add(offset + i * 1e-9)
+
+    def taker() -> None:
+        while not stop.is_set():
+            taken.append(latencies.take())
+
+    try:
+        threads = [threading.Thread(target=adder, args=(offset,)) for offset in (1.0, 2.0)]
+        watcher = threading.Thread(target=taker)
+        for thread in (*threads, watcher):
+            thread.start()
+        for thread in threads:
+            thread.join()
+        stop.set()
+        watcher.join()
+    finally:
+        sys.setswitchinterval(switch)
+    taken.append(latencies.take())
+    counted = [t for t in taken if t is not None]
+    assert sum(t["samples"] for t in counted) == 2 * per_thread
+    assert len(counted) > 1  # (the taker did take while they added)
+    assert all(1000.0 <= t["p50"] <= 2000.0 + per_thread * 1e-6 for t in counted)

@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import sys
 import threading
 import time
 
@@ -234,3 +235,65 @@ def test_a_sample_on_a_robots_joints_key_alone_is_refused_not_taken_for_a_derive
     assert taken is None and counted == {"received": 1, "bad": 1}
     assert warned == ["message on 'pepper/joints' refused: pepper/joints names no joint: "
                       "a joint's sample goes on <robot>/joints/<Joint>"]
+
+
+def test_two_threads_taking_one_robots_frames_with_two_joint_lists_each_get_their_own_joints():
+    """One ``Selection`` (a sink takes frames on the callback thread and on its worker) given one
+    robot's frames whose joint list changes every frame: each frame's values are those of its own
+    names, never picked by the other list's selection (what is kept per names is one snapshot,
+    read once a frame)."""
+    selection = Selection(["pepper/joints/HeadYaw"])
+    t = time.time() - 1
+    payloads = [codec.encode(messages.frame(t, 0, ["HeadYaw", "LHand"], [1.0, 2.0])),
+                codec.encode(messages.frame(t, 1, ["LHand", "HeadYaw", "RHand"], [2.0, 1.0, 3.0]))]
+    wrong: list[tuple[str, ...]] = []
+
+    def take(first: int) -> None:
+        for i in range(4000):
+            message = selection.incoming("pepper/frame", payloads[(first + i) % 2])
+            if message.values != (1.0,) or [s.key for s in message.selected.sources] != ["pepper/joints/HeadYaw"]:
+                wrong.append(message.values)
+
+    switch = sys.getswitchinterval()
+    sys.setswitchinterval(1e-6)  # (the threads switch as often as they can)
+    try:
+        threads = [threading.Thread(target=take, args=(first,)) for first in (0, 1)]
+        for thread in threads:
+            thread.start()
+        for thread in threads:
+            thread.join()
+    finally:
+        sys.setswitchinterval(switch)
+    assert wrong == []
+
+
+def test_a_robots_next_frames_find_their_selection_by_the_gates_names_without_comparing(monkeypatch):
+    """The gate compares a frame's names with the robot's last frame's and gives the same tuple when
+    they are; the selection is then found by that tuple's identity: no name compared again."""
+    selection = Selection(["pepper/joints/Head*"])
+    t = time.time() - 1
+    frames = [codec.encode(messages.frame(t + seq, seq, ["HeadYaw", "LHand"], [0.1 * seq, 0.5])) for seq in range(5)]
+    first = selection.incoming("pepper/frame", frames[0])
+    worked_out = []
+    chosen = Selection._chosen
+    monkeypatch.setattr(Selection, "_chosen", lambda *args: worked_out.append(args[1]) or chosen(*args))
+    taken = [selection.incoming("pepper/frame", payload) for payload in frames[1:]]
+    assert worked_out == []
+    assert all(m.selected is first.selected for m in taken)
+    assert [m.values for m in taken] == [(0.1 * s,) for s in range(1, 5)]
+    other = selection.incoming("pepper/frame", codec.encode(messages.frame(t, 9, ["LHand", "HeadPitch"], [0.5, 0.7])))
+    assert worked_out == ["pepper"] and other.values == (0.7,) and other.selected is not first.selected
+
+
+def test_a_derived_frames_parts_are_made_only_when_a_sink_looks_at_them():
+    """``Incoming.parts`` knows its length at once (what ``take`` counts); its samples are made
+    the first time they are read, once, the same as each value's key would carry."""
+    selection = Selection(["pepper/derived/qom/*"])
+    t = time.time() - 1
+    payload = codec.encode(messages.derived_frame(t, 3, ["qom/all", "hand/R", "qom/arm"], [0.2, [0.1, 0.3], 0.4]))
+    message = selection.incoming("pepper/derived", payload)
+    assert len(message.parts) == 2 and message.parts and message.parts._made is None  # (none made yet)
+    assert [(p.source.key, p.message, p.values) for p in message.parts] == [
+        ("pepper/derived/qom/all", {"t": t, "seq": 3, "v": 0.2}, (0.2,)),
+        ("pepper/derived/qom/arm", {"t": t, "seq": 3, "v": 0.4}, (0.4,))]
+    assert message.parts[1] is message.parts._made[1]  # (made once)

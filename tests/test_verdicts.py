@@ -28,15 +28,15 @@ def _frame(seq: int, t: float | None = None, values: list[float] | None = None) 
 
 @pytest.fixture
 def checks(monkeypatch):
-    """The gate's checks of this test, counted (the real ``Gate.check`` does each)."""
+    """The gate's checks of this test, counted (the real ``Gate.verdict``, what ``Gate.check`` calls, does each)."""
     counted = []
-    check = messages.Gate.check
+    check = messages.Gate.verdict
 
     def counting(gate, key, payload):
         counted.append(key.key)
         return check(gate, key, payload)
 
-    monkeypatch.setattr(messages.Gate, "check", counting)
+    monkeypatch.setattr(messages.Gate, "verdict", counting)
     return counted
 
 

@@ -19,7 +19,7 @@ from sonibus.bus.frames import Frame, FrameAssembler
 from sonibus.bus.info import InfoRequests
 from sonibus.bus.keys import Key
 from sonibus.bus.queue import SampleQueue
-from sonibus.bus.streams import Incoming, Selected, Streams, if_free
+from sonibus.bus.streams import Incoming, Selected, Streams
 
 from . import scale
 from .config import OscSinkConfig, Target, parse_target
@@ -158,7 +158,14 @@ class OscSink(Adapter):
         """A frame, on its subscription's callback thread (``Streams``' ``direct``); into the
         queue instead (False) before it subscribed everywhere or while the forward worker
         holds the state (``if_free``)."""
-        return self._streams is not None and if_free(self._state, lambda: self._take(key, payload, time.monotonic()))
+        # (``if_free`` without its call and lambda a frame: the dispatch is every frame's, issue 35)
+        if self._streams is None or not self._state.acquire(blocking=False):
+            return False
+        try:
+            self._take(key, payload, time.monotonic())
+        finally:
+            self._state.release()
+        return True
 
     def _wait(self) -> float:
         soonest = [0.2]
@@ -190,7 +197,7 @@ class OscSink(Adapter):
             self.count(kind, n)
 
     def _take(self, key: str, payload: Any, now: float) -> None:
-        message = self._streams.take(key, payload, self._count, self._warn)
+        message = self._streams.take(key, payload, self._count, self._warn, now)
         if message is None:
             return
         source = message.source
