@@ -57,11 +57,13 @@ class MidiController(Adapter):
             from .jack_in import JackMidiIn  # (JACK-Client and libjack only for JACK)
             self._jack = self.own(JackMidiIn(self.name, cfg.port, cfg.connect,
                                              lambda message: self._queue.put(("midi", message))))
+            self.when_stopping(self._jack.changed.set)  # (its watch waits for a change, or this)
             self.spawn(self._watch, "jack")
         else:
             self.own(ports.Closer(ports.open_input(cfg.api, cfg.port, cfg.connect, self._receive, client=self.name)))
         for robot in {m.robot for m in cfg.mappings("cc")}:
             self._info.ask(robot)
+        self.when_stopping(self._queue.close)  # (its worker waits on it, not on stopping)
         self.spawn(self._work, "commands")
         self.address = f"MIDI in on {f'{cfg.connect!r}' if cfg.connect else f'virtual port {cfg.port!r}'}"
         log.info("%s: %s", self.name, self.address)
@@ -72,7 +74,7 @@ class MidiController(Adapter):
     def _watch(self) -> None:
         """Says who connects to the JACK port and who leaves; the JACK server gone fails the node."""
         while not self.stopping.is_set():
-            self._jack.changed.wait(0.5)
+            self._jack.changed.wait()
             came, left = self._jack.changes()
             for port in sorted(came):
                 log.info("%s: controller '%s' connected to %s", self.name, port, self._jack.name)
@@ -96,12 +98,16 @@ class MidiController(Adapter):
                     self._midi(payload)
             self._flush(time.monotonic())
 
-    def _wait(self) -> float:
+    def _wait(self) -> float | None:
+        """Until a held fader's robot may be sent to (``rate_hz``), or its info asked again
+        (``INFO_RETRY_S``: a robot whose limits are not known yet is not sent to); with none
+        held, until a message comes or the stop closes the queue (None)."""
         if not self._held:
-            return 0.2
-        robots = {robot for robot, _ in self._held}
-        soonest = min(self._last_sent.get(r, -math.inf) for r in robots) + self._interval
-        return max(0.0, min(0.2, soonest - time.monotonic()))
+            return None
+        now = time.monotonic()
+        soonest = min(self._last_sent.get(robot, -math.inf) + self._interval if robot in self._limits
+                      else now + INFO_RETRY_S for robot, _ in self._held)
+        return max(0.0, soonest - now)
 
     def _midi(self, message: list[int]) -> None:
         self.count("received")
