@@ -29,6 +29,7 @@ from .config import CcMapping, MidiControllerConfig
 log = logging.getLogger(__name__)
 
 INFO_RETRY_S = 2.0
+SETTLE_S = 0.5  # a JACK port's change looked at again this long after it was told
 INFO = "\0info"
 
 
@@ -73,9 +74,13 @@ class MidiController(Adapter):
 
     def _watch(self) -> None:
         """Says who connects to the JACK port and who leaves; the JACK server gone fails the node."""
+        again: float | None = None
         while not self.stopping.is_set():
-            self._jack.changed.wait()
+            # (JACK tells of a change before its connections show it: after one, a look again
+            # SETTLE_S later; with nothing changing, asleep until JACK or the stop wakes it)
+            told = self._jack.changed.wait(again)
             came, left = self._jack.changes()
+            again = SETTLE_S if told or came or left else None
             for port in sorted(came):
                 log.info("%s: controller '%s' connected to %s", self.name, port, self._jack.name)
             for port in sorted(left):
