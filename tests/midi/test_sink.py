@@ -262,6 +262,7 @@ def test_an_idle_sinks_workers_sleep_until_there_is_work(net, reader):
     midi = reader("daw:sonibus")
     net.sim("pepper", rate_hz=50)
     wait_for(lambda: len(midi.messages) >= 10, what="pepper's frames at the MIDI port")
+    wait_for(lambda: not daw._presence.unsaid, what="pepper's state told (presence's rounds until then)")
     counted = wakes(named("daw:"), 3.0)
     # (a count: a thread that waits for the GIL counts a switch too; before: forward 15, silence 6)
     assert counted["daw:forward"] <= 3 and counted["daw:silence"] <= 3, counted

@@ -111,6 +111,7 @@ def test_an_idle_sinks_workers_sleep_until_there_is_work(net):
                                  name="idlesink"))
         net.sim("pepper", rate_hz=50)
         wait_for(lambda: len(receiver.data()) >= 10, what="pepper's frames at the target")
+        wait_for(lambda: not sink._presence.unsaid, what="pepper's state told (presence's rounds until then)")
         counted = wakes(named("idlesink:"), 3.0)
         # (a count: a thread that waits for the GIL counts a switch too; before: forward 15, silence 6)
         assert counted["idlesink:forward"] <= 3 and counted["idlesink:silence"] <= 3, counted
