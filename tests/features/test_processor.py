@@ -18,7 +18,7 @@ from sonibus.bus import ConfigError, decode, encode, keys, load_model, messages,
 from sonibus.bus.info import InfoRequests
 
 from ..conftest import queued_keys, wait_for
-from ..wakes import named, wakes
+from ..wakes import left_after_stop, named, wakes
 from .conftest import T0, model_info
 
 HEY = "animations/Stand/Gestures/Hey_1"
@@ -346,6 +346,4 @@ def test_an_idle_worker_sleeps_while_frames_are_worked_out_where_they_arrive(net
     wait_for(lambda: node.stats["frames"] >= 10, what="pepper's frames worked out")
     counted = wakes(named("idlefeat:"), 2.0)
     assert counted["idlefeat:features"] <= 2, counted  # (a count: the GIL's waits count too; before: 10)
-    workers = named("idlefeat:")
-    node.stop()
-    assert not [t.name for t in workers if t.is_alive()]  # (woken by the stop: not left to its join's 2 s)
+    assert not left_after_stop(node, "idlefeat:")  # (woken by the stop: not left to its join's 2 s)

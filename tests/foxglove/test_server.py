@@ -28,7 +28,7 @@ from sonibus.bus.errors import ConfigError
 from sonibus.schemas import foxglove
 
 from ..conftest import wait_for
-from ..wakes import named, wakes
+from ..wakes import left_after_stop, named, wakes
 from .test_convert import origins
 
 PROTOCOLS = ("foxglove.sdk.v1", "foxglove.websocket.v1")
@@ -333,6 +333,4 @@ def test_an_idle_serve_worker_sleeps_until_a_message_a_robot_or_the_infos_turn(n
     counted = wakes(named("idlefox:serve"), 2.0)
     # (the infos sent again at most once, 5 s apart; a count: the GIL's waits count too; before: 10)
     assert counted["idlefox:serve"] <= 5, counted
-    workers = named("idlefox:")
-    server.stop()
-    assert not [t.name for t in workers if t.is_alive()]  # (woken by the stop: not left to its join's 2 s)
+    assert not left_after_stop(server, "idlefox:")  # (woken by the stop: not left to its join's 2 s)

@@ -12,7 +12,7 @@ from sonibus.adapters.show import Show, ShowConfig
 from sonibus.bus import ConfigError, decode, load_model
 
 from ..conftest import wait_for
-from ..wakes import named, wakes
+from ..wakes import left_after_stop, named, wakes
 
 HEY = "animations/Stand/Gestures/Hey_1"
 
@@ -155,9 +155,7 @@ def test_an_idle_controller_sleeps_until_a_message_or_a_port_change(net, writer)
     counted = wakes(named("surface-in:"), 3.0)
     # (a count: a thread that waits for the GIL counts a switch too; before: commands 15, jack 6)
     assert counted["surface-in:commands"] <= 3 and counted["surface-in:jack"] <= 3, counted
-    workers = named("surface-in:")
-    node.stop()
-    assert not [t.name for t in workers if t.is_alive()]  # (each woken by the stop: not left to its join's 2 s)
+    assert not left_after_stop(node, "surface-in:")  # (each woken by the stop: not left to its join's 2 s)
 
 
 def test_a_fader_of_a_robot_without_info_waits_for_it_without_spinning(net, writer):

@@ -17,7 +17,7 @@ from sonibus.adapters.sim.behaviors import LIBRARY
 from sonibus.bus import ConfigError, encode, keys
 
 from ..conftest import queued_keys, wait_for
-from ..wakes import named, wakes
+from ..wakes import left_after_stop, named, wakes
 
 
 def sink(net, **options):
@@ -266,6 +266,4 @@ def test_an_idle_sinks_workers_sleep_until_there_is_work(net, reader):
     counted = wakes(named("daw:"), 3.0)
     # (a count: a thread that waits for the GIL counts a switch too; before: forward 15, silence 6)
     assert counted["daw:forward"] <= 3 and counted["daw:silence"] <= 3, counted
-    workers = named("daw:")
-    daw.stop()
-    assert not [t.name for t in workers if t.is_alive()]  # (each woken by the stop: not left to its join's 2 s)
+    assert not left_after_stop(daw, "daw:")  # (each woken by the stop: not left to its join's 2 s)

@@ -25,7 +25,7 @@ from sonibus.bus.commands import ok_reply
 from sonibus.bus.options import from_mapping
 
 from ..conftest import free_port, require_tool, wait_for
-from ..wakes import named, wakes
+from ..wakes import left_after_stop, named, wakes
 
 DOCS = Path(__file__).resolve().parents[2] / "docs"
 
@@ -386,6 +386,4 @@ def test_an_idle_gateway_sleeps_until_a_datagram_or_a_reply_and_stops_at_once(ne
     assert counted["gate:udp"] <= 1 and counted["gate:reply"] <= 1, counted
     address, (ok, _) = client.ask("/pepper/cmd/say", "again")  # (asleep, it still answers)
     assert (address, ok) == ("/pepper/reply/say", 1)
-    workers = named("gate:")
-    gate.stop()
-    assert not [t.name for t in workers if t.is_alive()]  # (each woken by the stop: not left to its join's 2 s)
+    assert not left_after_stop(gate, "gate:")  # (each woken by the stop: not left to its join's 2 s)

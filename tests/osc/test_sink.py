@@ -12,7 +12,7 @@ from sonibus.adapters.osc import OscSink, OscSinkConfig
 from sonibus.bus import ConfigError, encode
 
 from ..conftest import free_port, require_tool, wait_for
-from ..wakes import named, wakes
+from ..wakes import left_after_stop, named, wakes
 from .pd import Datagrams
 
 
@@ -115,9 +115,7 @@ def test_an_idle_sinks_workers_sleep_until_there_is_work(net):
         counted = wakes(named("idlesink:"), 3.0)
         # (a count: a thread that waits for the GIL counts a switch too; before: forward 15, silence 6)
         assert counted["idlesink:forward"] <= 3 and counted["idlesink:silence"] <= 3, counted
-        workers = named("idlesink:")
-        sink.stop()
-        assert not [t.name for t in workers if t.is_alive()]  # (each woken by the stop: not left to its join's 2 s)
+        assert not left_after_stop(sink, "idlesink:")  # (each woken by the stop: not left to its join's 2 s)
     finally:
         receiver.close()
 
