@@ -40,6 +40,7 @@ HISTORY_EVERY_S = 0.1   # at most this often: a sparkline of three seconds
 EVENTS = 200            # events kept
 LOSSES = ("dropped", "stale", "bad", "errors")  # counters whose moving is a warning
 QUEUE = 8192
+_WAKE = ("", b"")  # put into the queue to wake the worker for a token that came (``_waking``); never taken
 MAX_SHOWN = 1024        # robots, and nodes, kept: names made up on the fly must not grow it for ever
 MAX_WHY = 300          # characters kept of why a node is paused
 
@@ -100,8 +101,8 @@ class Monitor:
         for pattern in (keys.frame(), keys.event("*", "*")):
             self._entities.append(self.bus.subscribe(pattern, queue=self._queue)[0])
         self._entities.append(self.bus.subscribe(keys.NODE_STATS, queue=self._queue, skip=self._skip_stats)[0])
-        self._entities.append(self.bus.watch_tokens(f"{keys.NODES}/*/*", self._node_token))
-        self._entities.append(self.bus.watch_tokens(keys.robot_token(), self._robot_token))
+        self._entities.append(self.bus.watch_tokens(f"{keys.NODES}/*/*", self._waking(self._node_token)))
+        self._entities.append(self.bus.watch_tokens(keys.robot_token(), self._waking(self._robot_token)))
         self._worker = threading.Thread(target=self._work, name="monitor", daemon=True)
         self._worker.start()
         return self
@@ -233,9 +234,28 @@ class Monitor:
             self.failure = f"the monitor stopped: {type(exc).__name__}: {exc}"
             raise
 
+    def _waking(self, noted: Callable[[str, bool], None]) -> Callable[[str, bool], None]:
+        """``noted``, then the worker woken (``_WAKE``) when a token came: a node to ask what it
+        is, a robot to ask for its info (``_ask``)."""
+        def note(key: str, alive: bool) -> None:
+            noted(key, alive)
+            if alive:
+                self._queue.put(_WAKE)
+        return note
+
+    def _wait(self) -> float | None:
+        """Until a robot without info is asked again (``InfoRequests`` paces it); otherwise
+        until a message or a token comes, or ``close`` closes the queue (None)."""
+        with self._lock:
+            waiting = any(r.claims and r.info is None for r in self._robots.values())
+        return self._info.retry_s if waiting else None
+
     def _take_all(self) -> None:
         while not self._stopping.is_set():
-            for key, payload in self._queue.drain(timeout=0.25):
+            for item in self._queue.drain(timeout=self._wait()):
+                if item is _WAKE:
+                    continue
+                key, payload = item
                 self.counters.add("received")
                 try:
                     self._take(key, payload)

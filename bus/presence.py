@@ -26,6 +26,7 @@ log = logging.getLogger(__name__)
 
 SILENCE_S = 3.0  # a robot on the bus whose frames do not arrive for this long is worth a warning
 MAX_REMEMBERED = 1024  # connection states remembered of robots not on the bus (names from events can be made up)
+ROUND_S = 0.5  # how often ``watch`` looks while a robot's state is still to be asked (its owner starting)
 PROBES_PER_ROUND = 8  # robots whose owner is asked for its state, per half second (claims can be made up)
 
 
@@ -69,6 +70,7 @@ class Presence:
         self.said: dict[str, tuple[str, float | None]] = {}  # robot → (state, owner's t) of the last connection event
         self.checked: dict[str, float] = {}  # silent robot → when its state was last asked (monotonic)
         self._lock = threading.Lock()
+        self._woken = threading.Event()      # a robot came (its state to ask), or the sink stops (``wake``)
         self._entities = [watch_robots(bus, self._changed, capped)]
 
     def _changed(self, robot: str, alive: bool) -> None:
@@ -77,6 +79,7 @@ class Presence:
                 self.on_bus[robot] = time.monotonic()
                 if self._wants_events(robot):
                     self.unsaid.add(robot)  # (its state comes from its info: ``watch``)
+                self._woken.set()  # (``watch`` asks its state, or starts its silence's count)
                 return
             # a robot the sink was never told of (no state said, no data heard: a made-up claim)
             # leaves without a word: a thousand of them were a thousand events ahead of real frames
@@ -140,7 +143,11 @@ class Presence:
         if not self.frames and not self._wants_events("*"):
             return
         probed: dict[str, float] = {}  # robot → when its owner was last asked (the longest unasked go first)
-        while not stopping.wait(0.5):
+        while True:
+            self._woken.wait(self._next_round())
+            self._woken.clear()
+            if stopping.is_set():
+                return
             now = time.monotonic()
             with self._lock:
                 unsaid = list(self.unsaid)
@@ -161,6 +168,26 @@ class Presence:
                         continue
                     self.warned[robot] = connection["state"]
                 log.warning(silence_hint(self.bus.node, robot, connection))
+
+    def wake(self) -> None:
+        """Wake ``watch`` (on the sink's stop: ``Adapter.when_stopping``; it then looks at ``stopping``)."""
+        self._woken.set()
+
+    def _next_round(self) -> float | None:
+        """How long ``watch`` sleeps: a round (``ROUND_S``) while a robot's state is still to be
+        asked, or a silent robot's owner does not answer yet; otherwise until the soonest robot
+        may fall silent (``SILENCE_S`` after its last data), or a warned one is asked again;
+        None with no robot to watch (a robot that comes wakes it)."""
+        now = time.monotonic()
+        with self._lock:
+            if self.unsaid:
+                return ROUND_S
+            due = [max(since, self.heard.get(robot, since)) + SILENCE_S for robot, since in self.on_bus.items()]
+        silent = set(self.silent(now))
+        if any(robot not in self.warned for robot in silent):
+            return ROUND_S
+        due = [d for d in due if d > now] + [self.checked.get(r, now) + SILENCE_S for r in silent]
+        return max(0.0, min(due) - now) if due else None
 
     def _say_state(self, robot: str) -> None:
         connection = self._connection(robot)

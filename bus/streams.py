@@ -455,9 +455,10 @@ class Streams(Selection):
     def each(self, stopping: threading.Event, count: Callable[[str, int], None],
              warn: Callable[[str, str], None]) -> Iterator[Incoming]:
         """The checked messages of the queue (see ``take``) until ``stopping`` is set:
-        the loop of a node's worker."""
+        the loop of a node's worker. It waits for a message (or a held one's turn), not for
+        time: the node closes the queue at its stop (``Adapter.when_stopping(queue.close)``)."""
         while not stopping.is_set():
-            item = self.queue.get(timeout=0.2)
+            item = self.queue.get()
             message = self.take(item[0], item[1], count, warn) if item else None
             if message is not None:
                 yield message

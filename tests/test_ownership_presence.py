@@ -11,6 +11,7 @@ import time
 import pytest
 
 from sonibus.adapters.osc import OscSink, OscSinkConfig
+from sonibus.adapters.osc import sink as osc_sink
 from sonibus.bus import codec, keys, presence
 from sonibus.bus.ownership import Claim
 
@@ -23,6 +24,9 @@ SILENCE = "is on the bus but none of its data arrived"
 @pytest.fixture
 def quick(monkeypatch):
     monkeypatch.setattr(presence, "SILENCE_S", 0.5)
+    # (the sink tells presence of a robot's data at most every HEARD_EVERY_S, 0.5 s: a silence as short must
+    # be longer than that, or a streaming robot is silent at the instant presence wakes for it, SILENCE_S on)
+    monkeypatch.setattr(osc_sink, "HEARD_EVERY_S", 0.1)
 
 
 @pytest.fixture

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import threading
 import time
+from typing import Any
 
 
 def switches(thread: threading.Thread) -> int:
@@ -31,3 +32,11 @@ def wakes(threads: list[threading.Thread], seconds: float) -> dict[str, int]:
 def named(prefix: str) -> list[threading.Thread]:
     """The live threads whose name starts with ``prefix`` (a node's: ``"<node>:"``)."""
     return [t for t in threading.enumerate() if t.name.startswith(prefix)]
+
+
+def left_after_stop(node: Any, prefix: str) -> list[str]:
+    """The names of ``prefix``'s threads still alive once ``node.stop()`` has returned: none
+    when the stop woke each of them (a worker left to its join's timeout is still alive)."""
+    workers = named(prefix)
+    node.stop()
+    return [t.name for t in workers if t.is_alive()]

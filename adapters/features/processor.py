@@ -65,6 +65,7 @@ class Features(Adapter):
         self._streams: Streams | None = None  # (a frame may arrive while Streams subscribes: queued, see _direct)
         self._streams = self.own(Streams(self.bus, [keys.joints(r) for r in cfg.robots], self._queue,
                                          per_joint_keys=cfg.per_joint_keys, direct=self._direct))
+        self.when_stopping(self._queue.close)  # (its worker waits on it, not on stopping)
         self.spawn(self._run, "features")
 
     # -- the loop ---------------------------------------------------------------------
@@ -72,7 +73,9 @@ class Features(Adapter):
     def _run(self) -> None:
         while not self.stopping.is_set():
             expiry = self._assembler.next_expiry()
-            item = self._queue.get(timeout=0.2 if expiry is None else max(0.0, min(0.2, expiry - time.monotonic())))
+            # (a joint key's frame waits in the assembler until its expiry; nothing else is timed: a frame
+            # is taken where it arrives, the rest comes by the queue, which the stop closes)
+            item = self._queue.get(timeout=None if expiry is None else max(0.0, expiry - time.monotonic()))
             with self._state:
                 if item is not None:
                     self._take(*item)

@@ -50,6 +50,7 @@ log = logging.getLogger(__name__)
 
 MAX_ROBOTS = 64  # robots served (names made up on the bus must not grow what is kept per robot)
 MAX_GONE = 1024  # robots remembered as gone (names from the bus: a claim storm must not grow it for ever)
+_COMING = ("", b"")  # put into the queue to wake the serve worker for a robot come or gone; never taken
 GATHER_S = 0.02  # frames gathered on the server's loop this long at most (Handoff: a frame and its derived frame
                  # in one wake-up and one write to a client; a viewer draws at 60 Hz at most)
 
@@ -110,12 +111,13 @@ class FoxgloveServer(Adapter):
                                 direct=self._direct)
         self._comings: deque[tuple[str, bool]] = deque(maxlen=4096)  # robots come or gone (a Zenoh thread)
         self._gone: dict[str, None] = {}  # robots gone and not back: what of them is still in flight is dropped
-        self.own(watch_robots(self.bus, lambda robot, alive: self._comings.append((robot, alive)), self.capped))
+        self.own(watch_robots(self.bus, self._coming, self.capped))
         self.web.start()
         self.port = self.web.port
         self.address = (f"Foxglove → Open connection → ws://"
                         f"{'localhost' if host in ('127.0.0.1', '0.0.0.0') else host}:{self.port}")
         log.info("%s: %s", self.name, self.address)
+        self.when_stopping(self._queue.close)  # (its worker waits on it, not on stopping)
         self.spawn(self._serve, "serve")
 
     def _stop(self) -> None:
@@ -133,15 +135,22 @@ class FoxgloveServer(Adapter):
     def _take_derived_info(self, key: str, payload: bytes) -> None:  # on a Zenoh thread
         self._queue.put((key, payload))
 
+    def _coming(self, robot: str, alive: bool) -> None:  # on a Zenoh thread
+        """A robot came or went: noted, and the serve worker woken for it (``_COMING``)."""
+        self._comings.append((robot, alive))
+        self._queue.put(_COMING)
+
     def _serve(self) -> None:
+        """The queue's messages and the robots come or gone, as they come; the infos sent again
+        every ``info_every_s`` (the only time it wakes by itself); until the stop closes the queue."""
         again = time.monotonic() + self.config.info_every_s
         while not self.stopping.is_set():
-            items = self._queue.drain(timeout=0.2)
+            items = self._queue.drain(timeout=max(0.0, again - time.monotonic()))
             with self._state:
                 self._changes()
-                for key, payload in items:
-                    if key.partition("/")[0] not in self._gone:
-                        self._take(key, payload)
+                for item in items:
+                    if item is not _COMING and item[0].partition("/")[0] not in self._gone:
+                        self._take(*item)
                 if time.monotonic() >= again:
                     again = time.monotonic() + self.config.info_every_s
                     for key, message in list(self._infos.items()):

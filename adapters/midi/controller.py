@@ -29,6 +29,7 @@ from .config import CcMapping, MidiControllerConfig
 log = logging.getLogger(__name__)
 
 INFO_RETRY_S = 2.0
+SETTLE_S = 0.5  # a JACK port's change looked at again this long after it was told
 INFO = "\0info"
 
 
@@ -57,11 +58,13 @@ class MidiController(Adapter):
             from .jack_in import JackMidiIn  # (JACK-Client and libjack only for JACK)
             self._jack = self.own(JackMidiIn(self.name, cfg.port, cfg.connect,
                                              lambda message: self._queue.put(("midi", message))))
+            self.when_stopping(self._jack.changed.set)  # (its watch waits for a change, or this)
             self.spawn(self._watch, "jack")
         else:
             self.own(ports.Closer(ports.open_input(cfg.api, cfg.port, cfg.connect, self._receive, client=self.name)))
         for robot in {m.robot for m in cfg.mappings("cc")}:
             self._info.ask(robot)
+        self.when_stopping(self._queue.close)  # (its worker waits on it, not on stopping)
         self.spawn(self._work, "commands")
         self.address = f"MIDI in on {f'{cfg.connect!r}' if cfg.connect else f'virtual port {cfg.port!r}'}"
         log.info("%s: %s", self.name, self.address)
@@ -71,9 +74,13 @@ class MidiController(Adapter):
 
     def _watch(self) -> None:
         """Says who connects to the JACK port and who leaves; the JACK server gone fails the node."""
+        again: float | None = None
         while not self.stopping.is_set():
-            self._jack.changed.wait(0.5)
+            # (JACK tells of a change before its connections show it: after one, a look again
+            # SETTLE_S later; with nothing changing, asleep until JACK or the stop wakes it)
+            told = self._jack.changed.wait(again)
             came, left = self._jack.changes()
+            again = SETTLE_S if told or came or left else None
             for port in sorted(came):
                 log.info("%s: controller '%s' connected to %s", self.name, port, self._jack.name)
             for port in sorted(left):
@@ -96,12 +103,16 @@ class MidiController(Adapter):
                     self._midi(payload)
             self._flush(time.monotonic())
 
-    def _wait(self) -> float:
+    def _wait(self) -> float | None:
+        """Until a held fader's robot may be sent to (``rate_hz``), or its info asked again
+        (``INFO_RETRY_S``: a robot whose limits are not known yet is not sent to); with none
+        held, until a message comes or the stop closes the queue (None)."""
         if not self._held:
-            return 0.2
-        robots = {robot for robot, _ in self._held}
-        soonest = min(self._last_sent.get(r, -math.inf) for r in robots) + self._interval
-        return max(0.0, min(0.2, soonest - time.monotonic()))
+            return None
+        now = time.monotonic()
+        soonest = min(self._last_sent.get(robot, -math.inf) + self._interval if robot in self._limits
+                      else now + INFO_RETRY_S for robot, _ in self._held)
+        return max(0.0, soonest - now)
 
     def _midi(self, message: list[int]) -> None:
         self.count("received")

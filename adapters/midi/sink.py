@@ -94,6 +94,8 @@ class MidiSink(Adapter):
         self._streams: Streams | None = None  # (a frame may arrive while Streams subscribes: queued, see _direct)
         self._streams = self.own(Streams(self.bus, cfg.subscribe, self._queue, per_joint_keys=cfg.per_joint_keys,
                                          direct=None if cfg.max_rate_hz else self._direct))
+        self.when_stopping(self._queue.close)      # (its worker waits on it, not on stopping)
+        self.when_stopping(self._presence.wake)
         self.spawn(lambda: self._presence.watch(self.stopping), "silence")
         self.spawn(self._forward, "forward")
         self.address = f"MIDI out on {f'{cfg.connect!r}' if cfg.connect else f'virtual port {cfg.port!r}'}"
@@ -125,11 +127,14 @@ class MidiSink(Adapter):
         state (``if_free``)."""
         return self._streams is not None and if_free(self._state, lambda: self._take(key, payload, time.monotonic()))
 
-    def _wait(self) -> float:
+    def _wait(self) -> float | None:
+        """Until a held controller's turn (``max_rate_hz``); with none held, until a message comes
+        or the stop closes the queue (None). Only the worker holds controllers: with
+        ``max_rate_hz`` every frame comes through the queue."""
         if not self._held:
-            return 0.2
+            return None
         soonest = min(self._controllers[k].last_sent for k in self._held) + self._interval  # type: ignore[union-attr]
-        return max(0.0, min(0.2, soonest - time.monotonic()))
+        return max(0.0, soonest - time.monotonic())
 
     def _tick(self, now: float) -> None:
         for key in list(self._held):

@@ -14,6 +14,7 @@ never stalls the receive loop, and commands reach a robot in the order they came
 
 from __future__ import annotations
 
+import contextlib
 import errno
 import ipaddress
 import json
@@ -38,7 +39,7 @@ log = logging.getLogger(__name__)
 
 COUNTERS = ("received", "commands", "replies_ok", "replies_error", "malformed", "unknown_address",
             "refused_source", "bad_args", "busy", "replies_lost", "internal", "kernel_dropped")
-POLL_S = 0.2          # socket timeouts: how soon stop() is noticed
+POLL_S = 0.2          # the TCP listener's timeout: how soon stop() is noticed
 DROPS_EVERY_S = 1.0   # how often the kernel's drops on the UDP socket are read (as the stats are sent)
 UDP_BUFFER = 1 << 20  # bytes of receive buffer asked for
 
@@ -109,6 +110,8 @@ class OscGateway(Adapter):
             self._tcp = self.own(self._bind(socket.SOCK_STREAM, "tcp", cfg.tcp))
             self.tcp_address = self._tcp.getsockname()
             self.spawn(self._serve_tcp, "tcp")
+        self.when_stopping(self._wake_udp)
+        self.when_stopping(self._replies.close)  # (its worker waits on it, not on stopping)
         self.spawn(self._receive_udp, "udp")
         self.spawn(self._send_replies, "reply")
         self.address = f"OSC commands on udp {cfg.listen}{f' and tcp {cfg.tcp}' if cfg.tcp else ''}"
@@ -143,22 +146,40 @@ class OscGateway(Adapter):
     # -- receiving ------------------------------------------------------------------
 
     def _receive_udp(self) -> None:
+        """Datagrams as they come; the kernel's drops looked at every ``DROPS_EVERY_S`` while they
+        come and once after the last (a flood's end): with none coming, it sleeps until one does,
+        or the stop wakes it (``_wake_udp``)."""
         checked = time.monotonic()
+        self._udp.settimeout(None)
+        waiting = None  # the socket's timeout: DROPS_EVERY_S from a datagram to the look after the last
         while not self.stopping.is_set():
             if time.monotonic() - checked >= DROPS_EVERY_S:
                 checked = time.monotonic()
                 self._count_kernel_drops()
             try:
                 data, source = self._udp.recvfrom(65535)
-            except TimeoutError:
+            except TimeoutError:  # none for DROPS_EVERY_S: the drops looked at, then asleep until one comes
+                checked = time.monotonic()
+                self._count_kernel_drops()
+                self._udp.settimeout(waiting := None)
                 continue
             except OSError as exc:
                 self.warn("internal", f"UDP receive failed: {exc}")
                 continue
+            if source is None:  # (the stop's shutdown)
+                continue
+            if waiting is None:
+                self._udp.settimeout(waiting := DROPS_EVERY_S)
             if self._allowed(source[0]):
                 self._guarded(data, Peer(source))
             else:
                 self.count("received")
+
+    def _wake_udp(self) -> None:
+        """Wake the UDP worker's receive at the stop: the socket shut for reading (an unbound
+        UDP socket says ENOTCONN, and wakes its reader all the same)."""
+        with contextlib.suppress(OSError):
+            self._udp.shutdown(socket.SHUT_RD)
 
     def _count_kernel_drops(self) -> None:
         """What the kernel dropped since the last look (the receive buffer was full): counted
@@ -286,7 +307,7 @@ class OscGateway(Adapter):
 
     def _send_replies(self) -> None:
         while not self.stopping.is_set():
-            item = self._replies.get(timeout=POLL_S)
+            item = self._replies.get()
             if item is None:
                 continue
             peer, address, args = item

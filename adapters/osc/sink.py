@@ -37,6 +37,8 @@ MAX_PLAN_BYTES = 4 << 20  # and their bytes (a plan holds a datagram's head per 
 LISTENING_AFTER_S = 2.0   # a target whose host has not refused a datagram for this long: something listens there
 _REFUSED = (struct.error, OverflowError, ValueError)  # what packing a value OSC cannot carry raises
 _NEVER = -math.inf
+_FOREVER = math.inf
+_WAKE = ("", b"")  # put into the queue to wake the forward worker (``_take_direct``); never taken
 
 
 class _Plan(NamedTuple):
@@ -123,12 +125,17 @@ class OscSink(Adapter):
         # Frames are taken where they arrive (a thread hand-off less: docs/performance.md), the rest
         # from the queue by the forward worker; one lock between them guards the sink's state.
         self._state = threading.Lock()
+        # (what a frame taken where it arrived can leave held for the worker: a target's turn, a bundle's parts)
+        self._may_hold = bool(self._frame_links) or any(link.min_interval for link in self._links)
+        self._until = _FOREVER  # when the forward worker wakes by itself (set by it, under _state)
         self._streams: Streams | None = None  # (a frame may arrive while Streams subscribes: queued, see _direct)
         self._streams = Streams(self.bus, cfg.subscribe, self._queue, per_joint_keys=cfg.per_joint_keys,
                                 direct=self._direct)
+        self.when_stopping(self._queue.close)  # (its worker waits on it, not on stopping)
         self.spawn(self._forward, "forward")
         self.own(self._streams)
         self.own(self._presence)
+        self.when_stopping(self._presence.wake)
         self.spawn(lambda: self._presence.watch(self.stopping), "silence")
 
     @property
@@ -146,12 +153,18 @@ class OscSink(Adapter):
     # -- the loop ---------------------------------------------------------------------
 
     def _forward(self) -> None:
+        """The queue's messages, and what is held (a frame's parts, a target's turn) when it is due:
+        the worker sleeps until then, or until a message comes or the stop closes the queue."""
         while not self.stopping.is_set():
-            items = self._queue.drain(timeout=self._wait())
+            with self._state:
+                wait = self._wait()
+                self._until = _FOREVER if wait is None else time.monotonic() + wait
+            items = self._queue.drain(timeout=wait)
             with self._state:
                 now = time.monotonic()  # (once the lock is had: a frame taken where it arrived may have held it)
                 for item in items:
-                    self._take(*item, now)
+                    if item is not _WAKE:
+                        self._take(*item, now)
                 self._tick(now)
 
     def _direct(self, key: str, payload: Any) -> bool:
@@ -162,21 +175,29 @@ class OscSink(Adapter):
         if self._streams is None or not self._state.acquire(blocking=False):
             return False
         try:
-            self._take(key, payload, time.monotonic())
+            self._take_direct(key, payload)
         finally:
             self._state.release()
         return True
 
-    def _wait(self) -> float:
-        soonest = [0.2]
+    def _take_direct(self, key: str, payload: Any) -> None:
+        """``_take`` where the frame arrived (under ``_state``); what it held (a target's turn, a
+        frame's parts) due before the worker would wake wakes it (``_WAKE``)."""
+        self._take(key, payload, time.monotonic())
+        if self._may_hold and (wait := self._wait()) is not None and time.monotonic() + wait < self._until:
+            self._until = _NEVER  # (woken once)
+            self._queue.put(_WAKE)
+
+    def _wait(self) -> float | None:
+        """Until the soonest held thing is due; None with nothing held."""
+        soonest = []
         expiry = self._assembler.next_expiry()
         if expiry is not None:
-            soonest.append(expiry - time.monotonic())
+            soonest.append(expiry)
         for link in self._links:
             if link.held:
-                soonest.append(min(link.last_sent.get(s, 0.0) for s in link.held) + link.min_interval
-                               - time.monotonic())
-        return max(0.0, min(soonest))
+                soonest.append(min(link.last_sent.get(s, 0.0) for s in link.held) + link.min_interval)
+        return max(0.0, min(soonest) - time.monotonic()) if soonest else None
 
     def _tick(self, now: float) -> None:
         for frame in self._assembler.expire(now):

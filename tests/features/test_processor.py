@@ -18,6 +18,7 @@ from sonibus.bus import ConfigError, decode, encode, keys, load_model, messages,
 from sonibus.bus.info import InfoRequests
 
 from ..conftest import queued_keys, wait_for
+from ..wakes import left_after_stop, named, wakes
 from .conftest import T0, model_info
 
 HEY = "animations/Stand/Gestures/Hey_1"
@@ -334,3 +335,15 @@ def test_frames_are_worked_out_where_they_arrive_not_through_the_queue(net, owne
     wait_for(lambda: any(m["seq"] == last + 10 for _, m in list(derived)), what="the tenth frame's features")
     subscriber.undeclare()
     assert queued.count("pepper/frame") <= 1, queued  # (one may meet the worker holding the state)
+
+
+def test_an_idle_worker_sleeps_while_frames_are_worked_out_where_they_arrive(net):
+    """With a robot streaming, its frames worked out where they arrive, the worker has nothing to
+    do: it sleeps until a message comes (before: a 0.2 s timeout, 5 wake-ups a second; issue 35);
+    stopped, it ends at once."""
+    node = net.start(Features(FeaturesConfig(robots="pepper"), name="idlefeat"))
+    net.sim("pepper", rate_hz=50)
+    wait_for(lambda: node.stats["frames"] >= 10, what="pepper's frames worked out")
+    counted = wakes(named("idlefeat:"), 2.0)
+    assert counted["idlefeat:features"] <= 2, counted  # (a count: the GIL's waits count too; before: 10)
+    assert not left_after_stop(node, "idlefeat:")  # (woken by the stop: not left to its join's 2 s)

@@ -28,6 +28,7 @@ from sonibus.bus.errors import ConfigError
 from sonibus.schemas import foxglove
 
 from ..conftest import wait_for
+from ..wakes import left_after_stop, named, wakes
 from .test_convert import origins
 
 PROTOCOLS = ("foxglove.sdk.v1", "foxglove.websocket.v1")
@@ -320,3 +321,16 @@ def test_messages_wait_for_a_stuck_server_loop_up_to_a_bound_then_are_dropped_co
 
     run(scenario())
     assert served.state == "running"
+
+
+def test_an_idle_serve_worker_sleeps_until_a_message_a_robot_or_the_infos_turn(net):
+    """Frames go to the server's loop where they arrive; the serve worker sleeps until a message
+    comes by its queue, a robot comes or goes, or the infos are due again (``info_every_s``;
+    before: a 0.2 s timeout, 5 wake-ups a second; issue 35). Stopped, it ends at once."""
+    server = net.start(FoxgloveServer(FoxgloveConfig(listen="127.0.0.1:0"), name="idlefox"))
+    net.sim("pepper", rate_hz=50)
+    wait_for(lambda: server.stats["received"] >= 10 and "pepper" in server._robots, what="pepper at the node")
+    counted = wakes(named("idlefox:serve"), 2.0)
+    # (the infos sent again at most once, 5 s apart; a count: the GIL's waits count too; before: 10)
+    assert counted["idlefox:serve"] <= 5, counted
+    assert not left_after_stop(server, "idlefox:")  # (woken by the stop: not left to its join's 2 s)

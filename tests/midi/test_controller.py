@@ -12,6 +12,7 @@ from sonibus.adapters.show import Show, ShowConfig
 from sonibus.bus import ConfigError, decode, load_model
 
 from ..conftest import wait_for
+from ..wakes import left_after_stop, named, wakes
 
 HEY = "animations/Stand/Gestures/Hey_1"
 
@@ -144,3 +145,28 @@ def test_an_unknown_joint_of_an_unknown_model_is_reported_when_info_arrives(net,
     surface = controller(net, cc=({"cc": 1, "robot": "robo", "joint": "Tail"},))
     wait_for(lambda: surface.stats["errors"] >= 1, what="the unknown joint reported")
     assert "key 'cc': robo has no joint 'Tail'" in caplog.text
+
+
+def test_an_idle_controller_sleeps_until_a_message_or_a_port_change(net, writer):
+    """With no fader moved, the commands worker and the JACK watch have nothing to do: they sleep
+    (before: 0.2 s and 0.5 s timeouts, 5 and 2 wake-ups a second; issue 35). Stopped, they end at once."""
+    node = controller(net, cc=({"cc": 7, "channel": 2, "robot": "pepper", "joint": "HeadYaw"},))
+    wait_for(lambda: node._jack.connected, what="the controller's port connected")
+    counted = wakes(named("surface-in:"), 3.0)
+    # (a count: a thread that waits for the GIL counts a switch too; before: commands 15, jack 6)
+    assert counted["surface-in:commands"] <= 3 and counted["surface-in:jack"] <= 3, counted
+    assert not left_after_stop(node, "surface-in:")  # (each woken by the stop: not left to its join's 2 s)
+
+
+def test_a_fader_of_a_robot_without_info_waits_for_it_without_spinning(net, writer):
+    """A fader moved for a robot whose limits are not known yet (no owner answers its info) is held
+    until they are: the worker asks again every INFO_RETRY_S, and sleeps between (before: it woke
+    with a timeout of 0, over and over, counting ``waiting_info`` each time)."""
+    node = controller(net, cc=({"cc": 7, "channel": 2, "robot": "ghost", "joint": "HeadYaw"},))
+    wait_for(lambda: node._jack.connected, what="the controller's port connected")
+    writer.send_message([0xB1, 7, 64])
+    wait_for(lambda: node.stats["waiting_info"], what="the fader held for ghost's info")
+    counted = wakes(named("surface-in:commands"), 2.0)
+    assert counted["surface-in:commands"] <= 4, counted  # (one ask in 2 s, and room for the GIL)
+    assert node.stats["waiting_info"] <= 4, dict(node.stats)
+    node.stop()  # (before JACK's server, the fixtures' teardown: not a client it must drop)

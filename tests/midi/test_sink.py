@@ -17,6 +17,7 @@ from sonibus.adapters.sim.behaviors import LIBRARY
 from sonibus.bus import ConfigError, encode, keys
 
 from ..conftest import queued_keys, wait_for
+from ..wakes import left_after_stop, named, wakes
 
 
 def sink(net, **options):
@@ -251,3 +252,18 @@ def test_frames_are_played_where_they_arrive_not_through_the_queue(net, fake, re
     wait_for(lambda: midi.cc(1, 20)[-1:] == [127], what="A at its maximum, ten frames on")
     assert len(midi.cc(1, 20)) >= 11
     assert queued.count("bot/frame") <= 1, queued  # (one may meet the worker holding the state)
+
+
+def test_an_idle_sinks_workers_sleep_until_there_is_work(net, reader):
+    """With a robot streaming, its frames played where they arrive, the forward worker has nothing
+    to do, and presence's watch nothing until the robot may fall silent: they sleep (before: 0.2 s
+    and 0.5 s timeouts, 5 and 2 wake-ups a second; issue 35). Stopped, they end at once."""
+    daw = sink(net)
+    midi = reader("daw:sonibus")
+    net.sim("pepper", rate_hz=50)
+    wait_for(lambda: len(midi.messages) >= 10, what="pepper's frames at the MIDI port")
+    wait_for(lambda: not daw._presence.unsaid, what="pepper's state told (presence's rounds until then)")
+    counted = wakes(named("daw:"), 3.0)
+    # (a count: a thread that waits for the GIL counts a switch too; before: forward 15, silence 6)
+    assert counted["daw:forward"] <= 3 and counted["daw:silence"] <= 3, counted
+    assert not left_after_stop(daw, "daw:")  # (each woken by the stop: not left to its join's 2 s)

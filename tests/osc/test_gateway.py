@@ -25,6 +25,7 @@ from sonibus.bus.commands import ok_reply
 from sonibus.bus.options import from_mapping
 
 from ..conftest import free_port, require_tool, wait_for
+from ..wakes import left_after_stop, named, wakes
 
 DOCS = Path(__file__).resolve().parents[2] / "docs"
 
@@ -371,3 +372,18 @@ def test_the_doc_and_the_routes_cover_every_verb():
         assert {s.name for s in route.slots} <= set(schema.get("properties", {})), route.path
         given_by_address = {"names"} if route is routes.PER_JOINT else set()
         assert {s.name for s in route.slots} | given_by_address >= set(schema.get("required", ())), route.path
+
+
+def test_an_idle_gateway_sleeps_until_a_datagram_or_a_reply_and_stops_at_once(net, gate, client):
+    """The UDP worker sleeps until a datagram comes (the kernel's drops looked at once after the
+    last), the reply worker until a reply is due (before: 0.2 s timeouts, 5 wake-ups a second
+    each; issue 35); stopped, both end at once."""
+    address, (ok, _) = client.ask("/pepper/cmd/say", "hello")
+    assert (address, ok) == ("/pepper/reply/say", 1)
+    time.sleep(1.2)  # (past DROPS_EVERY_S: the look after the last datagram done, not counted below)
+    counted = wakes(named("gate:"), 2.0)
+    # (a count: a thread that waits for the GIL counts a switch too; before: udp 10, reply 10)
+    assert counted["gate:udp"] <= 1 and counted["gate:reply"] <= 1, counted
+    address, (ok, _) = client.ask("/pepper/cmd/say", "again")  # (asleep, it still answers)
+    assert (address, ok) == ("/pepper/reply/say", 1)
+    assert not left_after_stop(gate, "gate:")  # (each woken by the stop: not left to its join's 2 s)

@@ -3,13 +3,17 @@
 from __future__ import annotations
 
 import socket
+import time
 
 import pytest
+from pythonosc.osc_message import OscMessage
 
 from sonibus.adapters.osc import OscSink, OscSinkConfig
 from sonibus.bus import ConfigError, encode
 
 from ..conftest import free_port, require_tool, wait_for
+from ..wakes import left_after_stop, named, wakes
+from .pd import Datagrams
 
 
 def test_sink_serves_every_target_with_its_template(net, spawn):
@@ -92,3 +96,45 @@ def test_a_target_nobody_listens_at_is_said_and_gets_the_frames_once_it_listens(
     assert seqs[1:] == list(range(seqs[0] + 1, seqs[0] + 40)), f"a gap once the receiver listens: {seqs}"
     wait_for(lambda: f"something listens at udp 127.0.0.1:{port} now" in caplog.text, what="said once it listens")
     assert sink.stats["send_errors"] == 0
+
+
+# -- waits: for work, not for time (issue 35) --------------------------------------------
+
+
+def test_an_idle_sinks_workers_sleep_until_there_is_work(net):
+    """With a robot streaming, its frames taken where they arrive, the forward worker has nothing
+    to do, and presence's watch nothing until the robot may fall silent: they sleep (before: 0.2 s
+    and 0.5 s timeouts, 5 and 2 wake-ups a second). Stopped, they end at once."""
+    receiver = Datagrams()
+    try:
+        sink = net.start(OscSink(OscSinkConfig(subscribe="pepper/joints/*", targets=(receiver.target,)),
+                                 name="idlesink"))
+        net.sim("pepper", rate_hz=50)
+        wait_for(lambda: len(receiver.data()) >= 10, what="pepper's frames at the target")
+        wait_for(lambda: not sink._presence.unsaid, what="pepper's state told (presence's rounds until then)")
+        counted = wakes(named("idlesink:"), 3.0)
+        # (a count: a thread that waits for the GIL counts a switch too; before: forward 15, silence 6)
+        assert counted["idlesink:forward"] <= 3 and counted["idlesink:silence"] <= 3, counted
+        assert not left_after_stop(sink, "idlesink:")  # (each woken by the stop: not left to its join's 2 s)
+    finally:
+        receiver.close()
+
+
+def test_a_frame_held_for_its_targets_turn_goes_out_with_no_frame_after_it(net):
+    """A frame taken where it arrived and held for its target's turn (``max_rate_hz``) wakes the
+    forward worker, which sleeps otherwise: it goes out at its turn though no frame follows it."""
+    receiver = Datagrams()
+    robot = net.bus("fake-bot")
+    try:
+        net.start(OscSink(OscSinkConfig(subscribe="bot/joints/*", targets=(receiver.target,), max_rate_hz=2),
+                          name="held"))
+
+        def frame(value: float) -> None:
+            robot.put("bot/frame", {"t": time.time(), "seq": int(value * 10), "names": ["A"], "v": [value]})
+
+        wait_for(lambda: (frame(0.1), receiver.data())[1], what="the first frame at the target")
+        frame(0.5)  # within the target's 0.5 s: held for its turn, and nothing after it
+        wait_for(lambda: any(OscMessage(d).params == [0.5] for d in receiver.data()), 3,
+                 "the held frame at its turn")
+    finally:
+        receiver.close()

@@ -15,6 +15,7 @@ from sonibus.bus import Adapter, CommandError, encode, keys, load_model, message
 from sonibus.bus.monitor import Monitor, Snapshot
 
 from ..conftest import wait_for
+from ..wakes import named, wakes
 
 
 def robot(snapshot: Snapshot, name: str):
@@ -228,3 +229,15 @@ def test_a_node_description_of_the_wrong_types_shows_what_is_usable(net):
         assert (shown.adapter, shown.uptime_s, shown.error) == ("?", None, "")
     token.undeclare()
     served.undeclare()
+
+
+def test_with_nothing_on_the_bus_its_worker_sleeps_and_a_node_that_comes_is_asked(net):
+    """The worker sleeps until a message or a token comes (before: a 0.25 s timeout, 4 wake-ups a
+    second; issue 35); a node's token wakes it to ask what the node is."""
+    with Monitor(net.bus("top")) as monitor:
+        [worker] = named("monitor")
+        counted = wakes([worker], 2.0)
+        assert counted["monitor"] <= 1, counted  # (a count: the GIL's waits count too; before: 8)
+        net.sim("pepper", rate_hz=50)
+        wait_for(lambda: (n := node(monitor.snapshot(), "sim-pepper")) and n.adapter == "sim", 5,
+                 "the sim node, asked what it is")
