@@ -70,7 +70,8 @@ def out_of_range(messages: list[tuple[bool, str, list]], ranges: dict[str, tuple
 
 def declared(bus) -> dict[str, tuple[np.ndarray, np.ndarray]]:
     """Each derived key's range as the features node serves it (a hand's: its box)."""
-    reply = bus.query(keys.derived_info("pepper"))[0]
+    # (a session just opened may ask before it has learnt the features node's queryable: asked again)
+    reply = wait_for(lambda: bus.query(keys.derived_info("pepper")), timeout=10, what="the derived info")[0]
     return {e["key"]: (e["box"]["min"], e["box"]["max"]) if "box" in e else (e["min"], e["max"])
             for e in reply["derived"] if "min" in e}
 
