@@ -20,9 +20,9 @@ from .messages import Limits
 from .node import Bus
 from .notify import Notifier
 from .owner import RobotAdapter
+from .plan import planned
 from .restarts import Restart
 from .session import BusConfig, open_session
-from .streams import planned
 from .watchdog import Watchdog
 
 log = logging.getLogger(__name__)

@@ -11,8 +11,9 @@ import pytest
 
 from sonibus import schemas
 from sonibus.bus import codec, messages, streams
+from sonibus.bus.plan import Plan, plan
 from sonibus.bus.queue import SampleQueue
-from sonibus.bus.streams import Incoming, Plan, Selection, Streams, plan
+from sonibus.bus.streams import Incoming, Selection, Streams
 
 from .conftest import wait_for
 

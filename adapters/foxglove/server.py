@@ -36,9 +36,10 @@ from sonibus.bus import codec, keys
 from sonibus.bus.adapter import Adapter
 from sonibus.bus.info import InfoRequests
 from sonibus.bus.options import bad
+from sonibus.bus.plan import without_audio
 from sonibus.bus.presence import watch_robots
 from sonibus.bus.queue import SampleQueue
-from sonibus.bus.streams import Streams, without_audio
+from sonibus.bus.streams import Streams
 from sonibus.bus.web import Limits, WebServer
 
 from . import wire

@@ -14,8 +14,8 @@ from typing import Any, Literal, TypeVar
 from sonibus.bus import keys
 from sonibus.bus.errors import ConfigError
 from sonibus.bus.options import bad, from_mapping
+from sonibus.bus.plan import without_audio
 from sonibus.bus.robot import load_model
-from sonibus.bus.streams import without_audio
 
 from .mapping import BEHAVIOR_NOTES, SPEECH_NOTE
 

@@ -17,7 +17,7 @@ from typing import Any, Literal
 from sonibus.bus import keys
 from sonibus.bus.errors import ConfigError
 from sonibus.bus.options import bad, from_mapping
-from sonibus.bus.streams import without_audio
+from sonibus.bus.plan import without_audio
 
 JOINT_FIELDS = ("robot", "section", "joint", "name", "key")
 DERIVED_FIELDS = ("robot", "section", "feature", "name", "key")

@@ -72,8 +72,9 @@ from sonibus.bus.errors import ConfigError
 from sonibus.bus.info import InfoRequests
 from sonibus.bus.options import bad
 from sonibus.bus.ownership import claims
+from sonibus.bus.plan import named_section
 from sonibus.bus.queue import SampleQueue
-from sonibus.bus.streams import Streams, named_section
+from sonibus.bus.streams import Streams
 
 from .disk import MB, DiskGuard
 from .rotation import TIME, Rotation, Series

@@ -10,7 +10,7 @@ from typing import Any
 
 import zenoh
 
-from .. import codec, connection, health, keys, messages, ownership, registry, streams
+from .. import codec, connection, health, keys, messages, ownership, plan, registry
 from ..client import robot_info
 from ..errors import ConfigError
 from ..node import Bus
@@ -132,7 +132,7 @@ def _echo(args: argparse.Namespace, env: Environment) -> Exit:
         env.hint(f"{missing}; echo waits for it")
     with joined(cfg) as bus:
         # derived values come in derived frames (<robot>/derived): shown as each value's own key, as before
-        frames = streams.plan([args.keyexpr]).derived
+        frames = plan.plan([args.keyexpr]).derived
         subscriber, queue = bus.subscribe(args.keyexpr, 65536, skip=keys.is_derived_frame if frames else None)
         others = [bus.subscribe(k, queue=queue)[0] for k in frames]
         wanted = zenoh.KeyExpr(keys.expr(args.keyexpr))
