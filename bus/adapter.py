@@ -128,7 +128,11 @@ class Adapter:
         log.info("%s: stopping; %s", self.name, ", ".join(f"{k} {v}" for k, v in self.stats.items()))
         try:
             for wake in list(self._on_stopping):
-                wake()
+                try:
+                    wake()
+                except Exception:  # (one wake that fails must not keep the node's own stop from running)
+                    self.count("errors")
+                    log.exception("%s: waking a worker at the stop failed", self.name)
             self._stop()
         finally:
             for thread in self._threads:

@@ -40,7 +40,6 @@ HISTORY_EVERY_S = 0.1   # at most this often: a sparkline of three seconds
 EVENTS = 200            # events kept
 LOSSES = ("dropped", "stale", "bad", "errors")  # counters whose moving is a warning
 QUEUE = 8192
-_WAKE = ("", b"")  # put into the queue to wake the worker for a token that came (``_waking``); never taken
 MAX_SHOWN = 1024        # robots, and nodes, kept: names made up on the fly must not grow it for ever
 MAX_WHY = 300          # characters kept of why a node is paused
 
@@ -235,12 +234,12 @@ class Monitor:
             raise
 
     def _waking(self, noted: Callable[[str, bool], None]) -> Callable[[str, bool], None]:
-        """``noted``, then the worker woken (``_WAKE``) when a token came: a node to ask what it
+        """``noted``, then the worker woken (``SampleQueue.wake``) when a token came: a node to ask what it
         is, a robot to ask for its info (``_ask``)."""
         def note(key: str, alive: bool) -> None:
             noted(key, alive)
             if alive:
-                self._queue.put(_WAKE)
+                self._queue.wake()
         return note
 
     def _wait(self) -> float | None:
@@ -252,10 +251,7 @@ class Monitor:
 
     def _take_all(self) -> None:
         while not self._stopping.is_set():
-            for item in self._queue.drain(timeout=self._wait()):
-                if item is _WAKE:
-                    continue
-                key, payload = item
+            for key, payload in self._queue.drain(timeout=self._wait()):
                 self.counters.add("received")
                 try:
                     self._take(key, payload)

@@ -139,7 +139,9 @@ class Presence:
     def watch(self, stopping: threading.Event) -> None:
         """Until ``stopping`` is set: tell the sink each robot's connection state as its owner
         says it (its info) once it is on the bus, and warn of each robot that is silent
-        (``silence_hint``: once, and again if its state changes while it stays silent)."""
+        (``silence_hint``: once, and again if its state changes while it stays silent). With no
+        robot to watch it sleeps with no timeout: its sink calls ``wake`` once ``stopping`` is
+        set (``Adapter.when_stopping(presence.wake)``), or its stop waits for it."""
         if not self.frames and not self._wants_events("*"):
             return
         probed: dict[str, float] = {}  # robot → when its owner was last asked (the longest unasked go first)

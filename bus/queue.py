@@ -51,6 +51,7 @@ class SampleQueue:
         self._held: dict[str, tuple[float, Any]] = {}  # slot → (due, item), at most maxlen
         self._ready = threading.Condition()
         self._closed = False
+        self._woken = False  # ``wake`` called: the waiting consumer (or the next one) returns at once
         self.dropped = 0
         self._filled = self._taken = time.monotonic()  # when it last went from empty to not; last get/drain
 
@@ -87,10 +88,11 @@ class SampleQueue:
 
     def get(self, timeout: float | None = None) -> Any | None:
         """The oldest item (one held and due first), or None when closed, after
-        ``timeout`` seconds, or when woken to look at a newly held item."""
+        ``timeout`` seconds, or when woken to look at a newly held item (or by ``wake``)."""
         with self._ready:
-            if not self._items and not self._closed:
+            if not self._items and not self._closed and not self._woken:
                 self._ready.wait(self._until(timeout))
+            self._woken = False
             self._taken = time.monotonic()
             if self._held:
                 due = self._due(1)
@@ -107,8 +109,9 @@ class SampleQueue:
         ``timeout`` for one: a consumer that takes a frame's samples in one go wakes once,
         not per sample."""
         with self._ready:
-            if not self._items and not self._closed:
+            if not self._items and not self._closed and not self._woken:
                 self._ready.wait(self._until(timeout))
+            self._woken = False
             self._taken = time.monotonic()
             items = self._due() if self._held else []
             items += self._items
@@ -128,6 +131,15 @@ class SampleQueue:
         now = time.monotonic()
         due = sorted((d, slot) for slot, (d, _) in self._held.items() if d <= now)[:most]
         return [self._held.pop(slot)[1] for _, slot in due]
+
+    def wake(self) -> None:
+        """Make the consumer waiting in ``get`` or ``drain`` (or the next one to wait) return now
+        with what there is, maybe nothing: something it looks at beside the items changed (a
+        token came, a held frame fell due sooner). No item is put: a flood of wake-ups (a
+        stranger's tokens) pushes no message out of a full queue."""
+        with self._ready:
+            self._woken = True
+            self._ready.notify_all()
 
     def close(self) -> None:
         with self._ready:

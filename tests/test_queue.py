@@ -54,3 +54,25 @@ def test_what_a_queue_counts_is_what_it_holds(steps, maxlen, budget):
         assert len(held) <= maxlen and (queue.bytes <= budget or len(held) == 1)  # (one too big is kept alone)
         dropped = queue.dropped
     assert put == taken + len(queue) + dropped
+
+
+def test_a_wake_returns_a_waiting_consumer_at_once_and_a_flood_of_them_pushes_no_item_out():
+    import threading
+    import time
+
+    queue = SampleQueue(maxlen=4)
+    for i in range(4):
+        queue.put(("pepper/frame", bytes([i])))
+    for _ in range(10_000):  # (a stranger's tokens, each waking the worker)
+        queue.wake()
+    assert queue.dropped == 0 and [p for _, p in queue.drain()] == [bytes([i]) for i in range(4)]
+    got: list = []
+    waiter = threading.Thread(target=lambda: got.append(queue.drain(timeout=30)))
+    waiter.start()
+    time.sleep(0.05)  # (the waiter most likely waits by now; if not, the wake still holds for it)
+    started = time.monotonic()
+    queue.wake()
+    waiter.join(5)
+    assert not waiter.is_alive() and got == [[]] and time.monotonic() - started < 5
+    queue.put(("pepper/frame", b"x"))
+    assert queue.drain(timeout=0) == [("pepper/frame", b"x")]

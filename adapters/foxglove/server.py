@@ -51,7 +51,6 @@ log = logging.getLogger(__name__)
 
 MAX_ROBOTS = 64  # robots served (names made up on the bus must not grow what is kept per robot)
 MAX_GONE = 1024  # robots remembered as gone (names from the bus: a claim storm must not grow it for ever)
-_COMING = ("", b"")  # put into the queue to wake the serve worker for a robot come or gone; never taken
 GATHER_S = 0.02  # frames gathered on the server's loop this long at most (Handoff: a frame and its derived frame
                  # in one wake-up and one write to a client; a viewer draws at 60 Hz at most)
 
@@ -137,9 +136,9 @@ class FoxgloveServer(Adapter):
         self._queue.put((key, payload))
 
     def _coming(self, robot: str, alive: bool) -> None:  # on a Zenoh thread
-        """A robot came or went: noted, and the serve worker woken for it (``_COMING``)."""
+        """A robot came or went: noted, and the serve worker woken for it (``SampleQueue.wake``)."""
         self._comings.append((robot, alive))
-        self._queue.put(_COMING)
+        self._queue.wake()
 
     def _serve(self) -> None:
         """The queue's messages and the robots come or gone, as they come; the infos sent again
@@ -150,7 +149,7 @@ class FoxgloveServer(Adapter):
             with self._state:
                 self._changes()
                 for item in items:
-                    if item is not _COMING and item[0].partition("/")[0] not in self._gone:
+                    if item[0].partition("/")[0] not in self._gone:
                         self._take(*item)
                 if time.monotonic() >= again:
                     again = time.monotonic() + self.config.info_every_s

@@ -38,7 +38,6 @@ LISTENING_AFTER_S = 2.0   # a target whose host has not refused a datagram for t
 _REFUSED = (struct.error, OverflowError, ValueError)  # what packing a value OSC cannot carry raises
 _NEVER = -math.inf
 _FOREVER = math.inf
-_WAKE = ("", b"")  # put into the queue to wake the forward worker (``_take_direct``); never taken
 
 
 class _Plan(NamedTuple):
@@ -163,8 +162,7 @@ class OscSink(Adapter):
             with self._state:
                 now = time.monotonic()  # (once the lock is had: a frame taken where it arrived may have held it)
                 for item in items:
-                    if item is not _WAKE:
-                        self._take(*item, now)
+                    self._take(*item, now)
                 self._tick(now)
 
     def _direct(self, key: str, payload: Any) -> bool:
@@ -182,11 +180,11 @@ class OscSink(Adapter):
 
     def _take_direct(self, key: str, payload: Any) -> None:
         """``_take`` where the frame arrived (under ``_state``); what it held (a target's turn, a
-        frame's parts) due before the worker would wake wakes it (``_WAKE``)."""
+        frame's parts) due before the worker would wake wakes it (``SampleQueue.wake``)."""
         self._take(key, payload, time.monotonic())
         if self._may_hold and (wait := self._wait()) is not None and time.monotonic() + wait < self._until:
             self._until = _NEVER  # (woken once)
-            self._queue.put(_WAKE)
+            self._queue.wake()
 
     def _wait(self) -> float | None:
         """Until the soonest held thing is due; None with nothing held."""
