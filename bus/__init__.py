@@ -15,6 +15,7 @@ owners) and are registered in the ``sonibus.adapters`` entry-point group.
 """
 
 from .adapter import Adapter
+from .busconfig import BusConfig
 from .client import robot_info, send_command
 from .codec import decode, encode
 from .config import Installation, NodeSpec
@@ -24,7 +25,7 @@ from .node import Bus
 from .owner import RobotAdapter
 from .queue import SampleQueue
 from .robot import JointSpec, RobotModel, load_model
-from .session import BusConfig, open_session
+from .session import open_session
 from .verbs import RobotVerbs
 
 __all__ = [

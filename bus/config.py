@@ -14,11 +14,11 @@ from pathlib import Path
 from typing import Any
 
 from .adapter import Adapter
+from .busconfig import BusConfig
 from .errors import ConfigError, controls, visible
 from .keys import check_name
 from .logfile import LogConfig
 from .options import from_mapping, located
-from .session import BusConfig
 
 TOP_LEVEL = ("bus", "nodes", "log", "demo")  # [demo]: what the flags of `sonibus demo` set (bus/cli/demo.py)
 

@@ -18,7 +18,8 @@ session over the link it dialled, where ``<robot>/cmd/stop`` is served by a call
 called on Zenoh's own thread (no channel, no Python thread in between).
 
 >>> from contextlib import closing
->>> from sonibus.bus.session import BusConfig, open_session
+>>> from sonibus.bus.busconfig import BusConfig
+>>> from sonibus.bus.session import open_session
 >>> cfg = BusConfig(multicast=False, listen=("tcp/127.0.0.1:0",))
 >>> with closing(open_session(cfg)) as data, closing(open_control(cfg, data)) as control:
 ...     str(control.zid()) != str(data.zid())
@@ -31,7 +32,8 @@ from dataclasses import replace
 
 import zenoh
 
-from .session import CONTROLS, BusConfig, from_here, listening, open_session
+from .busconfig import BusConfig
+from .session import CONTROLS, from_here, listening, open_session
 
 URGENT = {"priority": zenoh.Priority.REAL_TIME, "express": True}
 """Zenoh options of a stop: ahead of every data message in Zenoh's queues."""

@@ -12,6 +12,7 @@ from pathlib import Path
 
 from . import keys, registry
 from .adapter import Adapter
+from .busconfig import BusConfig
 from .config import Installation
 from .control import open_control
 from .errors import AdapterError, ConfigError, NodeFailed
@@ -22,7 +23,7 @@ from .notify import Notifier
 from .owner import RobotAdapter
 from .plan import planned
 from .restarts import Restart
-from .session import BusConfig, open_session
+from .session import open_session
 from .watchdog import Watchdog
 
 log = logging.getLogger(__name__)

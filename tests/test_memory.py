@@ -8,8 +8,8 @@ import ctypes
 import threading
 
 from sonibus.bus import Adapter, runner
+from sonibus.bus.busconfig import BusConfig
 from sonibus.bus.memory import GROWN, Trimmer, resident
-from sonibus.bus.session import BusConfig
 
 from .conftest import free_port, wait_for
 

@@ -12,10 +12,10 @@ import pytest
 
 import sonibus.bus.adapter as adapter_module
 from sonibus.bus import Adapter, runner
+from sonibus.bus.busconfig import BusConfig
 from sonibus.bus.errors import NodeFailed
 from sonibus.bus.notify import Notifier
 from sonibus.bus.queue import SampleQueue
-from sonibus.bus.session import BusConfig
 from sonibus.bus.watchdog import Watchdog
 
 from .conftest import SONIBUS, free_port, wait_for

@@ -8,8 +8,8 @@ from dataclasses import dataclass, field
 from typing import Any, Literal
 
 from sonibus.bus import keys
+from sonibus.bus.busconfig import PROTOCOLS
 from sonibus.bus.options import bad
-from sonibus.bus.session import PROTOCOLS
 
 MIDDLEWARES = ("zenoh", "dds")
 

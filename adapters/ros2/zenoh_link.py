@@ -18,9 +18,10 @@ from dataclasses import dataclass
 from typing import Any
 
 from sonibus.bus import codec
+from sonibus.bus.busconfig import BusConfig
 from sonibus.bus.node import Bus, Qos
 from sonibus.bus.queue import SampleQueue
-from sonibus.bus.session import BusConfig, open_session
+from sonibus.bus.session import open_session
 
 from . import cdr, rmw
 from .config import Ros2Config

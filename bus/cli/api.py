@@ -25,10 +25,11 @@ from dataclasses import dataclass, field, replace
 from typing import Any, TextIO
 
 from .. import config
+from ..busconfig import MODES, BusConfig, check_endpoint, check_option
 from ..control import open_control
 from ..errors import ConfigError
 from ..node import Bus
-from ..session import MODES, BusConfig, check_endpoint, check_option, default_listen, from_here, open_session
+from ..session import default_listen, from_here, open_session
 
 COMMAND_GROUP = "sonibus.commands"
 DEMO_BUS = "tcp/127.0.0.1:7448"  # where `sonibus demo` listens (adapters/demo.toml): this machine only

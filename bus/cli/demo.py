@@ -22,9 +22,9 @@ from importlib import resources
 from typing import Any
 
 from .. import config, runner
+from ..busconfig import BusConfig
 from ..errors import ConfigError, OwnershipError
 from ..node import Bus
-from ..session import BusConfig
 from .api import DEMO_LISTEN, Command, Environment, Exit, add_bus_arguments, bus_config, on_loopback
 from .run import stop_lines
 

@@ -8,10 +8,10 @@ import socket
 from collections.abc import Iterator, Sequence
 
 from .. import keys
+from ..busconfig import BusConfig
 from ..errors import RobotNotFound
 from ..node import Bus
 from ..ownership import claims
-from ..session import BusConfig
 from .api import DEMO_BUS, joined
 
 PROBE_S = 0.5  # a connect to loopback is answered in a millisecond, or refused in less

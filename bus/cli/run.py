@@ -14,11 +14,12 @@ from dataclasses import replace
 
 from .. import config, runner
 from ..adapter import Adapter
+from ..busconfig import BusConfig
 from ..logfile import LogFile
 from ..node import Bus
 from ..notify import Notifier
 from ..restarts import STOPPED, RunState
-from ..session import BusConfig, from_here, listening, open_session
+from ..session import from_here, listening, open_session
 from ..stats import BASE
 from ..watchdog import Watchdog
 from .api import Command, Environment, Exit, add_bus_arguments, bus_config

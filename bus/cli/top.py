@@ -28,11 +28,11 @@ from textual.screen import ModalScreen
 from textual.widgets import DataTable, Footer, Static
 
 from .. import connection
+from ..busconfig import BusConfig
 from ..claimwatch import owners
 from ..client import Outcome, stop_all
 from ..errors import CommandError, ConfigError, SonibusError
 from ..monitor import Monitor
-from ..session import BusConfig
 from ..text import printable
 from ..views import EventView, JointView, NodeView, RobotView, Snapshot
 from .api import Command, Environment, Exit, bus_config, joined

@@ -11,11 +11,11 @@ from typing import Any
 import zenoh
 
 from .. import codec, connection, health, keys, messages, ownership, plan, registry
+from ..busconfig import BusConfig
 from ..client import robot_info
 from ..errors import ConfigError
 from ..node import Bus
 from ..presence import SILENCE_S
-from ..session import BusConfig
 from .api import Command, Environment, Exit, bus_config, joined
 from .hints import no_demo, reach_hint, reach_hint_now
 
