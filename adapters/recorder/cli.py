@@ -22,8 +22,9 @@ from sonibus.bus.session import links
 
 from .export import export_csv
 from .plot import plot
-from .reading import Recording, RecordingError, StillRecording, head, recover
+from .reading import Recording, RecordingError, StillRecording, head
 from .recorder import EVERYTHING, MICROPHONES, Recorder, RecorderConfig, describe
+from .repair import recover
 from .replay import Replay, ReplayConfig
 from .wav import audio_keys, export_wav
 

@@ -55,7 +55,7 @@ from .bounded import (
     records,
 )
 from .channels import AUDIO_ENCODING, MESSAGE_ENCODING, from_data, is_view
-from .writer import METADATA_RECORDING, METADATA_STATS, BadRecord, RecordingWriter
+from .writer import METADATA_RECORDING, METADATA_STATS
 
 MAGIC = b"\x89MCAP0\r\n"
 METADATA = (METADATA_RECORDING, METADATA_STATS)  # the metadata records read (a file may hold any number)
@@ -123,7 +123,7 @@ class Recording:
         except ChunkError as exc:  # (what the index says: recover, which reads every chunk, cannot help)
             raise RecordingError(f"{path} cannot be read: {exc}") from None
         except DAMAGE as exc:
-            raise RecordingError(f"{path} is damaged ({_why(exc)}); {_RECOVER.format(path=path)}") from None
+            raise RecordingError(f"{path} is damaged ({why(exc)}); {_RECOVER.format(path=path)}") from None
         try:
             if summary is not None:
                 self._indexes = sorted(summary.chunk_indexes, key=lambda index: index.chunk_start_offset)
@@ -139,7 +139,7 @@ class Recording:
             raise RecordingError(f"{path} cannot be read: {exc}" + (
                 f"; 'sonibus recover {path}' keeps its other chunks" if many else "")) from None
         except DAMAGE as exc:
-            raise RecordingError(f"{path} is damaged ({_why(exc)}); {_RECOVER.format(path=path)}") from None
+            raise RecordingError(f"{path} is damaged ({why(exc)}); {_RECOVER.format(path=path)}") from None
         if summary is None or summary.statistics is None:
             raise RecordingError(f"{path} has no summary; {_RECOVER.format(path=path)}")
         if len(summary.channels) > MAX_CHANNELS:
@@ -156,7 +156,7 @@ class Recording:
         self._message_count = stats.message_count
         # channels of a data key or a view: a message on any other is skipped (keys are what readers take apart)
         self._channels: dict[int, Channel] = {cid: c for cid, c in summary.channels.items()
-                                              if is_view(c.topic) or _data_key(c.topic)}
+                                              if is_view(c.topic) or data_key(c.topic)}
         self._counts = {c.topic: stats.channel_message_counts.get(cid, 0) for cid, c in self._channels.items()}
         # frames (one message a frame) read as the samples of their keys: derived frames (<robot>/derived), and
         # a robot's frames (<robot>/frame) when the file holds no joint key of it (else they are Foxglove's view of
@@ -172,7 +172,7 @@ class Recording:
                     if isinstance(record, Metadata):
                         self.metadata[record.name] = dict(record.metadata)
         except DAMAGE as exc:
-            raise RecordingError(f"{path} is damaged ({_why(exc)}); {_RECOVER.format(path=path)}") from None
+            raise RecordingError(f"{path} is damaged ({why(exc)}); {_RECOVER.format(path=path)}") from None
 
     @property
     def counts(self) -> dict[str, int]:
@@ -303,7 +303,7 @@ class Recording:
         except ChunkError as exc:
             self.checks.skip("chunks", str(exc), at)
         except DAMAGE as exc:  # (a record torn inside a chunk: those before it were read)
-            self.checks.skip("chunks", f"the chunk at byte {at}: {_why(exc)}", at)
+            self.checks.skip("chunks", f"the chunk at byte {at}: {why(exc)}", at)
 
     def _unindexed(self, wanted: set[int], start: int, end: int | None) -> Iterator[Message]:
         bad: list[ChunkError] = []
@@ -318,7 +318,7 @@ class Recording:
                         if found is not None:
                             yield found
             except DAMAGE as exc:
-                raise RecordingError(f"{self.path} is damaged ({_why(exc)}); {_RECOVER.format(path=self.path)}") \
+                raise RecordingError(f"{self.path} is damaged ({why(exc)}); {_RECOVER.format(path=self.path)}") \
                     from None
 
     def infos(self) -> dict[str, dict[str, Any]]:
@@ -383,7 +383,7 @@ class Checks:
                 key = self._keys.get(channel.topic) or self._keys.setdefault(channel.topic, Key.parse(channel.topic))
                 SECTIONS[key.section].check(self._gate, key, data)
         except (BadMessage, KeyError, TypeError, ValueError, RecursionError, OverflowError) as exc:
-            self.skip("messages", f"{channel.topic[:80]}: {_why(exc)}", where)
+            self.skip("messages", f"{channel.topic[:80]}: {why(exc)}", where)
             return None
         return Message(channel.topic, message.log_time, message.publish_time, data)
 
@@ -458,7 +458,7 @@ def _frames(counts: dict[str, int]) -> dict[str, str]:
                      if keys.is_frame(k) and k.partition("/")[0] not in per_joint}
 
 
-def _data_key(topic: str) -> bool:
+def data_key(topic: str) -> bool:
     """A topic that is a bus key (one Zenoh takes: replay puts it back on the bus) of one of the key
     space's sections."""
     try:
@@ -468,53 +468,8 @@ def _data_key(topic: str) -> bool:
         return False
 
 
-def _why(exc: BaseException) -> str:
+def why(exc: BaseException) -> str:
     if isinstance(exc, BadMessage | ChunkError):
         return " ".join(str(exc).split())[:160]
     text = " ".join(str(exc).split())
     return f"{type(exc).__name__}: {text[:100]}" if text else type(exc).__name__
-
-
-def recover(path: str, out: str) -> tuple[int, str]:
-    """Copy every message of the damaged recording ``path`` that can be read into a
-    new, complete recording ``out``; returns how many, and what was skipped ("" if
-    nothing was: a message the recorder would not write, a chunk that cannot be read)."""
-    try:
-        with open(path, "rb") as f:
-            head = f.read(len(MAGIC))
-    except OSError as exc:
-        raise RecordingError(f"cannot read {path}: {exc.strerror}") from None
-    if not MAGIC.startswith(head):
-        raise RecordingError(f"{path} is not an MCAP file (it starts with {head[:8]!r})")
-    channels: dict[int, Channel] = {}
-    kept, checks = 0, Checks(path)
-    bad: list[ChunkError] = []
-    with open(path, "rb") as f, RecordingWriter(out) as writer:
-        try:
-            for record in records(f, bad):
-                if isinstance(record, Channel):
-                    if len(channels) < MAX_CHANNELS and len(record.topic) <= MAX_TOPIC and \
-                            record.message_encoding in (MESSAGE_ENCODING, AUDIO_ENCODING) and \
-                            (is_view(record.topic) or _data_key(record.topic)):
-                        channels[record.id] = record
-                elif isinstance(record, McapMessage) and record.channel_id in channels:
-                    found = checks.message(channels[record.channel_id], record)
-                    if found is None:
-                        continue
-                    try:
-                        writer.write(found.key, found.log_ns, found.data)
-                    except BadRecord as exc:  # (from an older recorder): the rest is kept
-                        checks.skip("messages", f"{found.key}: {exc}")
-                        continue
-                    kept += 1
-                elif isinstance(record, Metadata) and record.name == METADATA_RECORDING:
-                    writer.add_metadata(record.name, dict(record.metadata))
-        except DAMAGE:
-            pass  # the damaged end: everything before it is kept
-    for exc in bad:
-        checks.skip("chunks", str(exc))
-    if kept == 0:
-        os.unlink(out)
-        more = f": {checks.problems().partition(': ')[2]}" if checks.problems() else ""
-        raise RecordingError(f"{path} holds no complete chunk: nothing to recover{more}")
-    return kept, checks.problems()
