@@ -88,6 +88,7 @@ class MidiSink(Adapter):
         self.own(ports.Closer(self._out))
         self._queue = self.own(SampleQueue(cfg.queue))
         self._tally = self.stats.tally(("received", "sent"))  # (counted under self._state: no lock of their own)
+        self._counted = self.stats.counting(self._tally)
         self._info = InfoRequests(self.bus, lambda robot, info: self._queue.put((INFO, (robot, info))),
                                   lambda robot, text: self.warn("info", text), INFO_RETRY_S,
                                   derived_alone=True)
@@ -182,13 +183,6 @@ class MidiSink(Adapter):
             for sample in message.joints:
                 self._sample(sample.source, sample.values[0], now)
         self.record_latency(time.time() - message.t)
-
-    def _counted(self, kind: str, n: int = 1) -> None:
-        """``count``, under ``_state``: what every frame counts goes to the tally."""
-        if kind == "received":
-            self._tally[kind] += n
-        else:
-            self.count(kind, n)
 
     def _sample(self, source: Key, value: float, now: float) -> None:
         if source.section not in ("joints", "derived"):
