@@ -100,7 +100,7 @@ class WebPages(Adapter):
         # a thread hand-off a frame less; events, and a frame that finds the state busy, come by the queue)
         self._taking = threading.Lock()  # Streams' tables and pacing: the feed worker's, or a frame's where it arrives
         self._counted = self.stats.counting(self.stats.tally(("received",)))  # (under _taking: no lock of its own)
-        self._coalesced = self.stats.tally(("frames_coalesced",))  # (under _lock)
+        self._pushes = self.stats.tally(("frames_coalesced", "frames_pushed"))  # (under _lock)
         self._streams: Streams | None = None
         self._streams = Streams(self.bus, patterns, self._queue, direct=self._direct)
         self.when_stopping(self._queue.close)  # (its worker waits on it, not on stopping)
@@ -248,7 +248,7 @@ class WebPages(Adapter):
         if robot not in self._robots:  # (a page shows the frames of the robots it was told of)
             return
         if robot in self._latest:
-            self._coalesced["frames_coalesced"] += 1
+            self._pushes["frames_coalesced"] += 1
         self._latest[robot] = message.message  # (made JSON when pushed: most are replaced first)
 
     def _take(self, message: Incoming) -> None:
@@ -352,9 +352,9 @@ class WebPages(Adapter):
                 return                                               # wait, the newest kept)
             with self._lock:
                 latest, self._latest = self._latest, {}
+                self._pushes["frames_pushed"] += len(latest)
             if latest:
                 self.pages.push_frames([_frame(robot, frame) for robot, frame in latest.items()])
-                self.count("frames_pushed", len(latest))
             frame += 1
             late = loop.time() - (start + frame * period)
             if late > period:
