@@ -98,11 +98,12 @@ class WebPages(Adapter):
         patterns = [f"{robot}/joints/*" for robot in cfg.robots] + ["*/events/*"]
         # (frames are taken where they arrive, the newest of each robot kept for the pages' next tick:
         # a thread hand-off a frame less; events, and a frame that finds the state busy, come by the queue)
-        self._taking = threading.Lock()  # Streams' tables and pacing: the feed worker's, or a frame's where it arrives
+        self._taking = threading.Lock()  # Streams' tables: the feed worker's, or a frame's where it arrives
         self._counted = self.stats.counting(self.stats.tally(("received",)))  # (under _taking: no lock of its own)
         self._pushes = self.stats.tally(("frames_coalesced", "frames_pushed"))  # (under _lock)
         self._streams: Streams | None = None
-        self._streams = Streams(self.bus, patterns, self._queue, direct=self._direct)
+        # (not paced: the newest of a robot's frames is pushed at update_hz, never a burst; docs/design.md)
+        self._streams = Streams(self.bus, patterns, self._queue, pace=False, direct=self._direct)
         self.when_stopping(self._queue.close)  # (its worker waits on it, not on stopping)
         self.spawn(self._feed, "feed")
         self.own(self._streams)

@@ -1,33 +1,37 @@
-"""Instructions per frame (issue 35): the MIDI sink's frame path beside ``node_floors.py``'s
-``midi_floor``, counted by ``valgrind --tool=callgrind`` (deterministic, whatever the load;
-user space only: the kernel's part of JACK's ring buffer is not in them).
+"""Instructions per frame (issue 35): the MIDI sink's and the web node's frame paths beside
+``node_floors.py``'s ``midi_floor`` and ``web_floor``, counted by ``valgrind --tool=callgrind``
+(deterministic, whatever the load; user space only: the kernel's part is not in them).
 
-One process under callgrind, a private JACK server (dummy driver) beside it, not counted;
-the process dumps its counts whenever ``os.getppid`` is entered, called between contenders,
-and only the main thread's counts are kept (JACK's process thread, the sink's workers and
-Zenoh's threads are not). Each contender takes the same msgpack frames (``{t, seq, names,
-v}`` of ``pepper/frame``, 17 joints), one call a frame, after a warm-up of as many:
+One process under callgrind (for MIDI, a private JACK server beside it, not counted); it
+dumps its counts whenever ``os.getppid`` is entered, called between contenders, and only
+the main thread's counts are kept (JACK's process thread, the nodes' workers and Zenoh's
+threads are not). Each contender takes the same msgpack frames (``{t, seq, names, v}`` of
+``pepper/frame``, 17 joints), one call a frame, after a warm-up of as many:
 
 - ``decode``: ``msgpack.unpackb`` alone;
-- ``floor``: ``midi_floor``'s callback (unpack, each joint scaled into 0..127, a control
-  change sent through python-rtmidi for each number that changed);
-- ``sonibus``: a ``midi`` node (``auto_map``, the robot's info given: its joints' ranges)
-  started on a real Zenoh session, given each frame as its frame subscription's callback
-  does (``Streams``' ``direct``, its state lock had). The frames' ``t`` are 2 s apart, so
-  the pacing never holds one back however slowly valgrind runs.
+- ``floor``: the floor's callback: MIDI, ``midi_floor``'s (unpack, each joint scaled into
+  0..127, a control change sent through python-rtmidi for each number that changed); web,
+  ``web_floor``'s (unpack, kept as the robot's newest under a lock);
+- ``sonibus``: the node (MIDI: ``auto_map``, the robot's info given, its joints' ranges;
+  web: the robot shown) started on a real Zenoh session, given each frame as its frame
+  subscription's callback does (``Streams``' ``direct``). The frames' ``t`` are 2 s apart,
+  so the MIDI sink's pacing never holds one back however slowly valgrind runs.
 
-Two kinds of frames: ``still`` (values that move by less than a MIDI step: nothing sent, as
-an idle robot's frames mostly are) and ``moving`` (every joint's number changes: 17 control
-changes a frame, each contender).
+MIDI takes two kinds of frames: ``still`` (values that move by less than a MIDI step:
+nothing sent, as an idle robot's frames mostly are) and ``moving`` (every joint's number
+changes: 17 control changes a frame, each contender); web, ``still`` ones (what it does
+with a frame does not depend on its values). The web node's push (25 a second, on its
+server's loop) is not counted: it is the floor's work (a frame made JSON and sent).
 
-    .venv/bin/python bench/midi_instructions.py [--frames 500]
+    .venv/bin/python bench/node_instructions.py [--nodes midi web] [--frames 500]
 
-Writes bench/results/midi_instructions.json and prints a table.
+Writes bench/results/node_instructions.json and prints a table.
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import gc
 import math
 import os
@@ -35,6 +39,7 @@ import re
 import subprocess
 import sys
 import tempfile
+import threading
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -43,7 +48,7 @@ from typing import Any
 from common import write
 
 CONTENDERS = ("decode", "floor", "sonibus")
-KINDS = ("still", "moving")
+KINDS = {"midi": ("still", "moving"), "web": ("still",)}
 JOINTS = 17
 SPACING_S = 2.0  # between the frames' t: over pacing.MAX_PERIOD_S, so nothing is paced however slowly valgrind runs
 RANGE = (-8.0, 8.0)  # the joints' range, the floor's (MIDI_RANGE) and the sink's (the robot's info)
@@ -65,8 +70,44 @@ def frames(kind: str, n: int) -> list[bytes]:
             for i, v in enumerate(values)]
 
 
-def contenders() -> tuple[dict[str, Callable[[bytes], Any]], Callable[[], dict[str, int]]]:
-    """Each contender as a call on one payload, and what stops them (the sink's counters back)."""
+def web_contenders() -> tuple[dict[str, Callable[[bytes], Any]], Callable[[], dict[str, int]]]:
+    """Each contender of the web node as a call on one payload, and what stops them (the node's
+    counters back)."""
+    import msgpack
+
+    from sonibus.adapters.web import WebConfig, WebPages
+    from sonibus.bus.node import Bus
+    from sonibus.bus.session import BusConfig, open_session
+
+    latest: dict[str, dict[str, Any]] = {}
+    lock = threading.Lock()
+
+    def floor(payload: bytes) -> None:  # (node_floors.web_floor's keep, its sample's key given)
+        frame = msgpack.unpackb(payload)
+        with lock:
+            latest[KEY.partition("/")[0]] = frame
+
+    session = open_session(BusConfig(multicast=False, listen=("tcp/127.0.0.1:0",)))
+    node = WebPages(WebConfig(listen="127.0.0.1:0"), name="web")
+    node.start(Bus(session, node="bench"))
+    node._robots["pepper"] = {}  # (shown: its frames are kept)
+
+    def take(payload: bytes) -> None:
+        if not node._direct(KEY, payload):
+            raise SystemExit("the web node's feed worker held its state: a frame went to its queue")
+
+    def close() -> dict[str, int]:
+        counted = dict(node.stats)
+        node.stop()
+        session.close()
+        return counted
+
+    return {"decode": msgpack.unpackb, "floor": floor, "sonibus": take}, close
+
+
+def midi_contenders() -> tuple[dict[str, Callable[[bytes], Any]], Callable[[], dict[str, int]]]:
+    """Each contender of the MIDI sink as a call on one payload, and what stops them (the
+    sink's counters back)."""
     import msgpack
     import rtmidi
 
@@ -111,11 +152,11 @@ def contenders() -> tuple[dict[str, Callable[[bytes], Any]], Callable[[], dict[s
     return {"decode": msgpack.unpackb, "floor": floor, "sonibus": take}, close
 
 
-def segments(n: int) -> None:
+def segments(node: str, n: int) -> None:
     """Under callgrind: for each kind of frames, each contender on ``n`` frames after ``n`` others,
     ``os.getppid`` before each and at the end, the collector off (its passes depend on the heap)."""
-    calls, close = contenders()
-    for kind in KINDS:
+    calls, close = (midi_contenders if node == "midi" else web_contenders)()
+    for kind in KINDS[node]:
         payloads = frames(kind, 2 * n)
         warm, counted = payloads[:n], payloads[n:]
         for call in calls.values():
@@ -130,23 +171,37 @@ def segments(n: int) -> None:
         os.getppid()
         gc.enable()
     stats = close()
-    print(f"sink counters: {stats}", file=sys.stderr)
-    if stats.get("received") != len(KINDS) * 2 * n * JOINTS or stats.get("skipped") or stats.get("bad"):
-        raise SystemExit(f"the sink did not take every frame as it should: {stats}")
+    print(f"{node} counters: {stats}", file=sys.stderr)
+    taken = len(KINDS[node]) * 2 * n * JOINTS  # (the web node counts the nodes' stats it hears too: its own)
+    if not 0 <= stats.get("received", 0) - taken < (100 if node == "web" else 1) or stats.get("skipped") \
+            or stats.get("bad"):
+        raise SystemExit(f"the {node} node did not take every frame as it should: {stats}")
 
 
-def instructions(n: int) -> dict[str, dict[str, float]]:
-    """Instructions per frame of each contender and kind, counted in one process under callgrind."""
+@contextlib.contextmanager
+def jack(node: str, folder: Path) -> Any:
+    """A private JACK server for the MIDI contenders while the block runs."""
+    if node != "midi":
+        yield
+        return
     from midi_rate import start_jack, stop_jack
+    server = start_jack(folder / "jackd.log")
+    try:
+        yield
+    finally:
+        stop_jack(server)
+
+
+def instructions(node: str, n: int) -> dict[str, dict[str, float]]:
+    """Instructions per frame of each contender and kind of ``node``, counted in one process under
+    callgrind."""
     with tempfile.TemporaryDirectory() as tmp:
-        jack = start_jack(Path(tmp) / "jackd.log")
-        try:
+        with jack(node, Path(tmp)):
             out = Path(tmp) / "callgrind.out"
             run = subprocess.run(["valgrind", "--tool=callgrind", f"--callgrind-out-file={out}",
                                   "--dump-before=os_getppid", "--separate-threads=yes", sys.executable, __file__,
-                                  "--segments", str(n)], capture_output=True, text=True, cwd=Path(__file__).parent)
-        finally:
-            stop_jack(jack)
+                                  "--segments", node, str(n)], capture_output=True, text=True,
+                                 cwd=Path(__file__).parent)
         if run.returncode:
             raise SystemExit(f"callgrind run failed:\n{run.stderr[-3000:]}")
         main = [path for path in Path(tmp).glob("callgrind.out.*-01")]  # (the main thread's dumps)
@@ -156,25 +211,28 @@ def instructions(n: int) -> dict[str, dict[str, float]]:
     # the next kind's first getppid (its warm-up in the dump after it, dropped)
     per = len(CONTENDERS) + 1
     return {kind: {name: total / n for name, total in zip(CONTENDERS, totals[1 + k * per:], strict=False)}
-            for k, kind in enumerate(KINDS)}
+            for k, kind in enumerate(KINDS[node])}
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--frames", type=int, default=500,
                         help="frames counted per contender (deterministic counts: more only takes longer)")
-    parser.add_argument("--name", default="midi_instructions", help="results file name")
-    parser.add_argument("--segments", type=int, help=argparse.SUPPRESS)  # (the run under callgrind)
+    parser.add_argument("--nodes", nargs="+", choices=tuple(KINDS), default=list(KINDS))
+    parser.add_argument("--name", default="node_instructions", help="results file name")
+    parser.add_argument("--segments", nargs=2, help=argparse.SUPPRESS)  # (the run under callgrind: node, frames)
     args = parser.parse_args()
     if args.segments:
-        segments(args.segments)
+        segments(args.segments[0], int(args.segments[1]))
         return
     rows = []
-    for kind, counts in instructions(args.frames).items():
-        rows.append({"kind": kind, "per_frame": counts, "sonibus_to_floor": counts["sonibus"] / counts["floor"]})
-        print(f"{kind:>6}: " + ", ".join(f"{name} {count / 1000:,.1f}k" for name, count in counts.items())
-              + f"; sonibus {rows[-1]['sonibus_to_floor']:.2f}× floor", flush=True)
-    summary = [{"scenario": f"(MIDI) instructions per frame, {JOINTS} joints, {r['kind']}",
+    for node in args.nodes:
+        for kind, counts in instructions(node, args.frames).items():
+            rows.append({"node": node, "kind": kind, "per_frame": counts,
+                         "sonibus_to_floor": counts["sonibus"] / counts["floor"]})
+            print(f"{node:>4} {kind:>6}: " + ", ".join(f"{name} {count / 1000:,.1f}k" for name, count in counts.items())
+                  + f"; sonibus {rows[-1]['sonibus_to_floor']:.2f}× floor", flush=True)
+    summary = [{"scenario": f"({r['node']}) instructions per frame, {JOINTS} joints, {r['kind']}",
                 "sonibus": f"{r['per_frame']['sonibus'] / 1000:,.0f}k",
                 "baseline": f"floor {r['per_frame']['floor'] / 1000:,.0f}k "
                             f"(msgpack {r['per_frame']['decode'] / 1000:,.0f}k)",
