@@ -32,11 +32,8 @@ from __future__ import annotations
 
 import argparse
 import contextlib
-import gc
 import math
 import os
-import re
-import subprocess
 import sys
 import tempfile
 import threading
@@ -45,7 +42,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from common import write
+from common import callgrind_totals, counted_calls, write
 
 CONTENDERS = ("decode", "floor", "sonibus")
 KINDS = {"midi": ("still", "moving"), "web": ("still",)}
@@ -158,18 +155,7 @@ def segments(node: str, n: int) -> None:
     calls, close = (midi_contenders if node == "midi" else web_contenders)()
     for kind in KINDS[node]:
         payloads = frames(kind, 2 * n)
-        warm, counted = payloads[:n], payloads[n:]
-        for call in calls.values():
-            for payload in warm:
-                call(payload)
-        gc.collect()
-        gc.disable()
-        for call in calls.values():
-            os.getppid()
-            for payload in counted:
-                call(payload)
-        os.getppid()
-        gc.enable()
+        counted_calls(list(calls.values()), payloads[:n], payloads[n:])
     stats = close()
     print(f"{node} counters: {stats}", file=sys.stderr)
     taken = len(KINDS[node]) * 2 * n * JOINTS  # (the web node counts the nodes' stats it hears too: its own)
@@ -195,18 +181,8 @@ def jack(node: str, folder: Path) -> Any:
 def instructions(node: str, n: int) -> dict[str, dict[str, float]]:
     """Instructions per frame of each contender and kind of ``node``, counted in one process under
     callgrind."""
-    with tempfile.TemporaryDirectory() as tmp:
-        with jack(node, Path(tmp)):
-            out = Path(tmp) / "callgrind.out"
-            run = subprocess.run(["valgrind", "--tool=callgrind", f"--callgrind-out-file={out}",
-                                  "--dump-before=os_getppid", "--separate-threads=yes", sys.executable, __file__,
-                                  "--segments", node, str(n)], capture_output=True, text=True,
-                                 cwd=Path(__file__).parent)
-        if run.returncode:
-            raise SystemExit(f"callgrind run failed:\n{run.stderr[-3000:]}")
-        main = [path for path in Path(tmp).glob("callgrind.out.*-01")]  # (the main thread's dumps)
-        main.sort(key=lambda path: int(path.name.rsplit(".", 1)[1].split("-")[0]))
-        totals = [int(re.search(r"^(?:summary|totals): (\d+)", path.read_text(), re.M).group(1)) for path in main]
+    with tempfile.TemporaryDirectory() as tmp, jack(node, Path(tmp)):
+        totals = callgrind_totals([__file__, "--segments", node, str(n)], Path(__file__).parent)
     # dump 1 is the setup and the first warm-up; then, per kind, one per contender, the last one ended by
     # the next kind's first getppid (its warm-up in the dump after it, dropped)
     per = len(CONTENDERS) + 1
