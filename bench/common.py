@@ -68,3 +68,44 @@ def compare(result: dict[str, Any], base: dict[str, Any], bus: dict[str, Any], c
     for name, row in (("no bus", base), ("sonibus", bus)):
         print(f"{name:<9} " + " ".join(f"{row[c]:>9.0f}" for c in columns))
     print(f"ratio p50 {result['ratio_p50']:.2f}, p99 {result['ratio_p99']:.2f}")
+
+
+def callgrind_totals(argv: list[str], cwd: Path) -> list[int]:
+    """Run ``argv`` (a Python script) under ``valgrind --tool=callgrind``, its counts dumped whenever
+    ``os.getppid`` is entered: the main thread's instructions of each dump, in order (the first:
+    from the start to the first ``os.getppid``). ``SystemExit`` with valgrind's end if it failed."""
+    import re
+    import subprocess
+    import sys
+    import tempfile
+    with tempfile.TemporaryDirectory() as tmp:
+        out = Path(tmp) / "callgrind.out"
+        run = subprocess.run(["valgrind", "--tool=callgrind", f"--callgrind-out-file={out}",
+                              "--dump-before=os_getppid", "--separate-threads=yes", sys.executable, *argv],
+                             capture_output=True, text=True, cwd=cwd)
+        if run.returncode:
+            raise SystemExit(f"callgrind run failed:\n{run.stderr[-3000:]}")
+        main = [path for path in Path(tmp).glob("callgrind.out.*-01")]  # (the main thread's dumps)
+        main.sort(key=lambda path: int(path.name.rsplit(".", 1)[1].split("-")[0]))
+        return [int(re.search(r"^(?:summary|totals): (\d+)", path.read_text(), re.M).group(1)) for path in main]
+
+
+def counted_calls(calls: list[Any], warm: list[Any], counted: list[Any]) -> None:
+    """Under ``callgrind_totals``: each of ``calls`` on every item of ``warm``, then, the collector
+    off (its passes depend on the heap), each on every item of ``counted``, ``os.getppid`` before
+    each and after the last (a dump each: ``len(calls)`` of them, and one more at the end)."""
+    import gc
+    import os
+    for call in calls:
+        for item in warm:
+            call(item)
+    gc.collect()
+    gc.disable()
+    try:
+        for call in calls:
+            os.getppid()
+            for item in counted:
+                call(item)
+        os.getppid()
+    finally:
+        gc.enable()

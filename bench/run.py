@@ -40,6 +40,8 @@ SCRIPTS: dict[str, tuple[str, list[str], float]] = {
                                                               "broader", "--counts", "2", "8", "--rates", "50",
                                                               "--name", "shared_subscriptions_broader"], 200),
     "floor_instructions": ("floor_instructions", [], 900),  # the OSC sink's frame path in instructions (callgrind)
+    # the MIDI sink's and the web node's frame paths beside their floors', in instructions (callgrind; issue 35)
+    "node_instructions": ("node_instructions", [], 300),
     # the show's seven takers of a frame in one process: instructions a tick (callgrind; issue 35)
     "verdicts": ("verdicts", [], 300),
     "sink_throughput": ("sink_throughput", [], 120),

@@ -66,6 +66,24 @@ class Counters(Mapping[str, int]):
             self.follow(name, lambda name=name: kept[name])
         return kept
 
+    def counting(self, tally: dict[str, int]) -> Callable[[str, int], None]:
+        """A ``count(name, n)`` that adds to ``tally`` (``tally``'s) the names it keeps, under
+        its owner's lock, and to these counters the others: what a sink gives ``Streams.take``
+        on its frames' path, where ``received`` is counted every frame.
+
+        >>> counters = Counters(("bad",))
+        >>> count = counters.counting(counters.tally(("received",)))
+        >>> count("received", 17); count("bad", 1)
+        >>> counters["received"], counters["bad"]
+        (17, 1)
+        """
+        def count(name: str, n: int = 1) -> None:
+            if name in tally:
+                tally[name] += n
+            else:
+                self.add(name, n)
+        return count
+
     def follow(self, name: str, source: Callable[[], int]) -> None:
         """Add ``source()`` (a count kept elsewhere, e.g. a queue's drops) to ``name`` when read."""
         with self._lock:

@@ -14,6 +14,7 @@
 
 from __future__ import annotations
 
+import math
 import zlib
 
 FIRST_CC = 20          # default controllers: joint i of the robot's table on CC 20 + i
@@ -29,6 +30,20 @@ def scale(value: float, low: float, high: float, top: int) -> int:
         return 0
     fraction = min(1.0, max(0.0, (value - low) / (high - low)))
     return round(fraction * top)
+
+
+def span(low: float, high: float) -> float:
+    """What ``scale`` divides by, for a caller that inlines it on a hot path:
+    ``round(min(1.0, max(0.0, (value - low) / span(low, high))) * top)`` is
+    ``scale(value, low, high, top)`` for every finite ``value`` (an empty range's
+    span is infinite: every value gives 0, as ``scale`` does).
+
+    >>> values = [-3.0, -2.0, -0.7, 0.0, 0.123456789, 1.999, 2.0, 7.5]
+    >>> all(round(min(1.0, max(0.0, (v - lo) / span(lo, hi))) * 127) == scale(v, lo, hi, 127)
+    ...     for v in values for lo, hi in ((-2.0, 2.0), (0.5, 0.5), (1.0, -1.0), (-0.3, 1.7)))
+    True
+    """
+    return high - low if high > low else math.inf
 
 
 def unscale(number: int, top: int, low: float, high: float) -> float:

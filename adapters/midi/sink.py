@@ -15,7 +15,7 @@ from sonibus.bus.adapter import Adapter
 from sonibus.bus.info import InfoRequests
 from sonibus.bus.keys import Key
 from sonibus.bus.queue import SampleQueue
-from sonibus.bus.streams import Streams, if_free
+from sonibus.bus.streams import Selected, Streams, if_free
 
 from . import mapping, ports
 from .config import MidiSinkConfig
@@ -64,6 +64,10 @@ class _Robot:
     notes: dict[int, str] = field(default_factory=dict)  # behavior note → the first behavior heard on it
 
 
+# a frame's played joints (``MidiSink._played``): index among the selected, controller, low, span, top
+Played = tuple[tuple[int, _Controller, float, float, int], ...]
+
+
 class MidiSink(Adapter):
     """Robots as MIDI: joints on controllers, behaviors and speech as notes (for a DAW or a synth)."""
 
@@ -79,10 +83,12 @@ class MidiSink(Adapter):
         self._sounding: set[tuple[int, int]] = set()
         self._interval = 1.0 / cfg.max_rate_hz if cfg.max_rate_hz else 0.0
         self._heard: dict[str, float] = {}  # robot → when its data was last told to presence
+        self._frames: dict[str, tuple[Selected, Played]] = {}  # robot → _played's last
         self._out = ports.open_output(cfg.api, cfg.port, cfg.connect, client=self.name)
         self.own(ports.Closer(self._out))
         self._queue = self.own(SampleQueue(cfg.queue))
         self._tally = self.stats.tally(("received", "sent"))  # (counted under self._state: no lock of their own)
+        self._counted = self.stats.counting(self._tally)
         self._info = InfoRequests(self.bus, lambda robot, info: self._queue.put((INFO, (robot, info))),
                                   lambda robot, text: self.warn("info", text), INFO_RETRY_S,
                                   derived_alone=True)
@@ -167,19 +173,16 @@ class MidiSink(Adapter):
                 self._event(source, message.event)
             return
         if message.selected is not None:  # a frame: its selected joints, without a sample made of each
-            for joint, value in zip(message.selected.sources, message.values, strict=True):
-                self._sample(joint, value, now)
+            played = None if self._interval else self._played(source.robot, message.selected)
+            if played is not None:
+                self._frame(played, message.values, now)
+            else:
+                for joint, value in zip(message.selected.sources, message.values, strict=True):
+                    self._sample(joint, value, now)
         else:
             for sample in message.joints:
                 self._sample(sample.source, sample.values[0], now)
         self.record_latency(time.time() - message.t)
-
-    def _counted(self, kind: str, n: int = 1) -> None:
-        """``count``, under ``_state``: what every frame counts goes to the tally."""
-        if kind == "received":
-            self._tally[kind] += n
-        else:
-            self.count(kind, n)
 
     def _sample(self, source: Key, value: float, now: float) -> None:
         if source.section not in ("joints", "derived"):
@@ -199,6 +202,33 @@ class MidiSink(Adapter):
             self.count("held")
         elif number != controller.last:
             self._emit(controller, number, now)
+
+    def _played(self, robot: str, selected: Selected) -> Played | None:
+        """The controllers of the joints ``selected`` of ``robot``'s frames, each with the joint's
+        index among them and its scaling (``mapping.span``), worked out once per selection
+        (``Selected`` is kept by ``Streams``: found by identity) and kept as the robot's last;
+        None while its info has not come."""
+        last = self._frames.get(robot)
+        if last is not None and last[0] is selected:
+            return last[1]
+        shown = self._robots.get(robot)
+        if shown is None or not shown.known:
+            return None
+        controllers = [self._controller(joint, shown) for joint in selected.sources]
+        played = tuple((i, c, c.low, mapping.span(c.low, c.high), c.top) for i, c in enumerate(controllers)
+                       if c is not None)
+        if all(joint.key in self._controllers for joint in selected.sources):  # (past MAX_CONTROLLERS: per frame)
+            self._frames[robot] = (selected, played)  # (robots are capped: MAX_ROBOTS)
+        return played
+
+    def _frame(self, played: Played, values: tuple[float, ...], now: float) -> None:
+        """A frame's values on their controllers (``_played``), each sent if its number changed:
+        ``_sample``'s work without ``max_rate_hz`` (nothing held), with ``mapping.scale`` inlined
+        (three calls a joint less: it was most of a frame's own work; issue 35)."""
+        for i, controller, low, span, top in played:
+            number = round(min(1.0, max(0.0, (values[i] - low) / span)) * top)  # (mapping.span says why: scale)
+            if number != controller.last:
+                self._emit(controller, number, now)
 
     def _emit(self, controller: _Controller, number: int, now: float) -> None:
         controller.last, controller.last_sent = number, now

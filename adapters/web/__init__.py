@@ -55,13 +55,12 @@ MAX_WHY = 240        # characters of why a robot's controller is not matched, as
 INFO_EVERY_S = 2.0   # how often each robot's info is asked again (behaviors installed, a new owner)
 GONE_AFTER_S = 3.0   # a node whose stats have not come for this long is shown gone
 FORGET_AFTER_S = 60.0  # ... and left out after this
-STATS_EVERY_S = 1.0    # how often the pages get the nodes' stats
+STATS_EVERY_S = 1.0    # how often the nodes' stats are checked and the pages get them
 # Names from the bus the node keeps (made-up ones must not grow it, nor what every page gets each second):
 MAX_SHOWN = 32         # robots shown on the operator's page
 MAX_NODES = 128        # nodes whose stats are shown
 MAX_FIGURES = 32        # counters, and rates, shown of one node (the page shows 6 of them)
 MAX_BEHAVIORS = 1000   # behaviors (and postures) of one robot shown
-STATS_QUEUE = 256      # nodes' stats waiting (each up to 64 KiB); past this the oldest are dropped
 
 
 class WebPages(Adapter):
@@ -78,6 +77,10 @@ class WebPages(Adapter):
         self._robots: dict[str, dict[str, Any]] = {}  # the shown robots, as the robots message says them
         self._latest: dict[str, dict[str, Any]] = {}  # robot → its newest frame, not yet pushed
         self._nodes: dict[tuple[str, str], tuple[float, dict[str, Any]]] = {}  # latest stats, when heard
+        # each node's newest stats not checked yet: when they came, key, payload, and whether the node is
+        # not listed (it takes a place: MAX_NODES counts these, _fresh of them, and the listed)
+        self._waiting: dict[tuple[str, str], tuple[float, str, Any, bool]] = {}
+        self._fresh = 0
         self._shown = [zenoh.KeyExpr(keys.expr(r)) for r in cfg.robots]
         self.web = WebServer(self, cfg.host, cfg.port, key="listen", limits=cfg.limits, browsers=True,
                              names=auth.names(cfg.token))
@@ -95,19 +98,20 @@ class WebPages(Adapter):
         patterns = [f"{robot}/joints/*" for robot in cfg.robots] + ["*/events/*"]
         # (frames are taken where they arrive, the newest of each robot kept for the pages' next tick:
         # a thread hand-off a frame less; events, and a frame that finds the state busy, come by the queue)
-        self._taking = threading.Lock()  # Streams' tables and pacing: the feed worker's, or a frame's where it arrives
+        self._taking = threading.Lock()  # Streams' tables: the feed worker's, or a frame's where it arrives
+        self._counted = self.stats.counting(self.stats.tally(("received",)))  # (under _taking: no lock of its own)
+        self._pushes = self.stats.tally(("frames_coalesced", "frames_pushed"))  # (under _lock)
         self._streams: Streams | None = None
-        self._streams = Streams(self.bus, patterns, self._queue, direct=self._direct)
+        # (not paced: the newest of a robot's frames is pushed at update_hz, never a burst; docs/design.md)
+        self._streams = Streams(self.bus, patterns, self._queue, pace=False, direct=self._direct)
         self.when_stopping(self._queue.close)  # (its worker waits on it, not on stopping)
         self.spawn(self._feed, "feed")
         self.own(self._streams)
-        # nodes' stats wait in a queue of their own, short: a node says one a second, and a flood of
-        # made-up nodes' (each up to 64 KiB) must not fill the frames' queue, nor the memory
-        # (and a node not listed when the list is full is left out before its message is even checked)
-        self._stats_queue = self.own(SampleQueue(STATS_QUEUE))
+        # each node's newest stats wait where they arrive, one a node (a flood of made-up nodes' stats,
+        # each up to 64 KiB, holds at most MAX_NODES of them), for the stats worker's check once a second
+        # (a wake-up a second, not one a node: issue 35)
         self._gate = Gate(self.bus.limits)
-        self.own(self.bus.subscribe(keys.NODE_STATS, queue=self._stats_queue, skip=self._unlisted)[0])
-        self.when_stopping(self._stats_queue.close)
+        self.own(self.bus.on_sample(keys.NODE_STATS, self._stats_came, "the nodes' stats"))
         self.spawn(self._take_stats, "stats")
         owners(self.bus)  # (the view of robots' owners a command names, kept from now: the first one too)
         self.own(watch_robots(self.bus, self._robot_changed, self.capped))
@@ -220,7 +224,7 @@ class WebPages(Adapter):
             if item is None:
                 continue
             with self._taking:
-                message = streams.take(item[0], item[1], self.count, self.warn)
+                message = streams.take(item[0], item[1], self._counted, self.warn)
             if message is not None:
                 self._take(message)
 
@@ -233,7 +237,7 @@ class WebPages(Adapter):
             return False
 
         def keep() -> None:
-            message = streams.take(key, payload, self.count, self.warn)
+            message = streams.take(key, payload, self._counted, self.warn)
             if message is not None:
                 with self._lock:
                     self._keep(message)
@@ -245,7 +249,7 @@ class WebPages(Adapter):
         if robot not in self._robots:  # (a page shows the frames of the robots it was told of)
             return
         if robot in self._latest:
-            self.count("frames_coalesced")
+            self._pushes["frames_coalesced"] += 1
         self._latest[robot] = message.message  # (made JSON when pushed: most are replaced first)
 
     def _take(self, message: Incoming) -> None:
@@ -291,71 +295,76 @@ class WebPages(Adapter):
             robots = dict(self._robots)
         self.pages.robots(robots)
 
-    def _unlisted(self, key: str) -> bool:
-        """Whether ``key``'s stats are left out (on a Zenoh thread, before they are queued, and
-        again when taken), before their message is even checked (a schema check takes ms):
-        a node that said its stats less than ``STATS_EVERY_S / 2`` ago (a node says them once a
-        second), or one not listed while the list is full (``MAX_NODES``: said, counted ``capped``)."""
-        node = tuple(key.split("/")[2:4])
+    def _stats_came(self, key: str, payload: Any) -> None:
+        """A node's stats, on a Zenoh thread: kept as its newest, for the stats worker to check
+        (``_take_stats``); left out before they are even checked (a schema check takes ms) when
+        its last came less than ``STATS_EVERY_S / 2`` ago (a node says them once a second), or when
+        it is not listed while the list is full (``MAX_NODES``: said, counted ``capped``)."""
+        node, now = tuple(key.split("/")[2:4]), time.monotonic()
         with self._lock:
-            heard = self._nodes.get(node)
-            full = heard is None and len(self._nodes) >= MAX_NODES
+            waiting = self._waiting.get(node)
+            heard = waiting or self._nodes.get(node)
+            full = heard is None and len(self._nodes) + self._fresh >= MAX_NODES
+            kept = not full and (heard is None or now - heard[0] >= STATS_EVERY_S / 2)
+            if kept:
+                fresh = waiting[3] if waiting is not None else node not in self._nodes
+                if fresh and waiting is None:
+                    self._fresh += 1
+                self._waiting[node] = (now, key, payload, fresh)
         if full:
             self.capped(f"the stats on '{printable(key[:140])}' not shown: already {MAX_NODES} nodes listed")
-        return full or (heard is not None and time.monotonic() - heard[0] < STATS_EVERY_S / 2)
+        elif kept:
+            self.count("received")
 
     def _take_stats(self) -> None:
-        while not self.stopping.is_set():
-            for key, payload in self._stats_queue.drain():  # (as _feed's: closed on stop)
-                self.count("received")
-                if self._unlisted(key):
-                    continue
+        """Every ``STATS_EVERY_S``: the stats that came since, checked by the gate (a bad one
+        counted and warned about), listed, and the list to the pages."""
+        while not self.stopping.wait(STATS_EVERY_S):
+            with self._lock:
+                waiting, self._waiting = self._waiting, {}
+            for node, (heard, key, payload, fresh) in waiting.items():
                 try:
-                    stats = self._gate.check(keys.Key.parse(key), payload)
+                    stats = _shown_stats(self._gate.check(keys.Key.parse(key), payload))
                 except ValueError as exc:  # messages.BadMessage
+                    stats = None
                     self.count("bad")
                     self.warn("bad", f"message on '{printable(key[:140])}' refused: {exc}")
-                    continue
-                with self._lock:  # (listed by this worker alone: the check above still holds)
-                    self._nodes[tuple(key.split("/")[2:4])] = (time.monotonic(), _shown_stats(stats))
+                with self._lock:
+                    self._fresh -= fresh  # (its place: listed now, or given back)
+                    if stats is not None:
+                        self._nodes[node] = (heard, stats)
+            self.pages.stats(self._node_stats())
 
     def _push(self) -> None:
         """On the server's loop: each robot's newest frame to the operators' pages ``update_hz``
-        times a second, and the nodes' stats every ``STATS_EVERY_S``, against deadlines fixed now
-        (skip, never burst: a tick late by more than a period skips those it missed, as ``Pacer``).
-        With no operator's page, the loop sleeps to the next stats: an operator that comes wakes it
-        (``Pages.on_operator``), its first frames a tick later."""
+        times a second, against deadlines fixed now (skip, never burst: a tick late by more than
+        a period skips those it missed, as ``Pacer``). With no operator's page, the ticks stop: an
+        operator that comes starts them again (``Pages.on_operator``), its first frames at once
+        (the nodes' stats go from their own worker, ``_take_stats``)."""
         loop = asyncio.get_running_loop()
-        period, start, next_stats = 1.0 / self.config.update_hz, loop.time(), time.monotonic()
+        period, start = 1.0 / self.config.update_hz, loop.time()
         frame = 0
-        pending: asyncio.TimerHandle | None = None
+        pending: asyncio.Handle | None = None
 
         def tick() -> None:
-            nonlocal frame, next_stats, pending
+            nonlocal frame, pending
             pending = None
-            if self.stopping.is_set():
-                return
+            if self.stopping.is_set() or not self.pages.operators:  # (nobody to show frames to: they
+                return                                               # wait, the newest kept)
             with self._lock:
                 latest, self._latest = self._latest, {}
-            if latest and self.pages.operators:
+                self._pushes["frames_pushed"] += len(latest)
+            if latest:
                 self.pages.push_frames([_frame(robot, frame) for robot, frame in latest.items()])
-                self.count("frames_pushed", len(latest))
-            if time.monotonic() >= next_stats:
-                next_stats += STATS_EVERY_S
-                self.pages.stats(self._node_stats())
             frame += 1
             late = loop.time() - (start + frame * period)
             if late > period:
                 frame += int(late / period)
-            if self.pages.operators:
-                pending = loop.call_at(start + frame * period, tick)
-            else:  # (nobody to show frames to: the next stats only; their frames wait, the newest kept)
-                pending = loop.call_later(max(0.0, next_stats - time.monotonic()), tick)
+            pending = loop.call_at(start + frame * period, tick)
 
-        def operator_came() -> None:  # (the first page since none: the tick was asleep till the next stats)
+        def operator_came() -> None:  # (the first page since none: the ticks had stopped)
             nonlocal pending
-            if len(self.pages.operators) == 1 and pending is not None:
-                pending.cancel()
+            if pending is None:
                 pending = loop.call_soon(tick)  # (after the page's greeting, sent in the same turn of the loop)
 
         self.pages.on_operator.append(operator_came)

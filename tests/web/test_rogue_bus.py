@@ -83,3 +83,24 @@ def test_made_up_nodes_stats_do_not_grow_what_every_page_gets(stage, websocket, 
     assert list(made_up["counters"])[:6] == ["received", "sent", "dropped", "stale", "bad", "errors"]
     page.send({"type": "stop", "id": 1})
     assert page.wait("reply", id=1, robot="pepper")["ok"] is True
+
+
+def test_a_bad_stats_message_is_refused_with_its_reason_and_a_good_one_listed(stage, websocket, caplog):
+    """Nodes' stats are checked once a second, each node's newest (issue 35: a wake-up a second,
+    not one a node): one that is not a valid ``node_stats`` message is still refused, counted
+    ``bad`` and warned about with the reason, its node not listed; a valid one is listed."""
+    page = websocket(stage.ws_url())
+    page.wait("hello")
+    rogue = stage.net.bus("rogue")
+    bad = {**node_stats("rogue-host", "liar"), "interval_s": "soon"}
+    good = node_stats("rogue-host", "honest")
+    bad_before = stage.node.stats["bad"]
+    rogue.put(keys.node_stats("rogue-host", "liar"), bad)
+    rogue.put(keys.node_stats("rogue-host", "honest"), good)
+    wait_for(lambda: stage.node.stats["bad"] == bad_before + 1, 5, "the bad stats refused",
+             lambda: repr(dict(stage.node.stats)))
+    assert any("sonibus/stats/rogue-host/liar' refused: not a valid node stats: interval_s" in r.getMessage()
+               for r in caplog.records), [r.getMessage() for r in caplog.records]
+    listed = wait_for(lambda: [m for m in page.of("stats") if "honest" in {n["node"] for n in m["nodes"]}], 5,
+                      "the good stats at the page")[0]
+    assert "liar" not in {n["node"] for n in listed["nodes"]}
