@@ -140,7 +140,7 @@ def instructions(n: int) -> dict[str, float]:
             run = subprocess.run(["valgrind", "--tool=callgrind", f"--callgrind-out-file={out}",
                                   "--dump-before=os_getppid", "--separate-threads=yes", sys.executable, __file__,
                                   "--segments", endpoint, str(n)],
-                                 capture_output=True, text=True, cwd=Path(__file__).parent)
+                                 capture_output=True, text=True, cwd=Path(__file__).parent, timeout=900)
             if run.returncode:
                 raise SystemExit(f"callgrind run failed:\n{run.stderr[-3000:]}")
             main = list(Path(tmp).glob("callgrind.out.*-01"))  # (the main thread's dumps)
@@ -153,7 +153,6 @@ def instructions(n: int) -> dict[str, float]:
         if takers.is_alive():
             takers.kill()
         anchor.close()
-    print("dumps:", totals, file=sys.stderr)
     # dump 1 is the setup and warm-up; then one per contender, each ended by the next getppid
     return {name: total / n for name, total in zip(CONTENDERS, totals[1:], strict=False)}
 

@@ -46,7 +46,7 @@ def test_the_sims_frames_on_the_wire_are_the_bytes_of_the_map_they_carry(net):
     (idle motion, every frame by the fast path) publishes what it published with msgpack."""
     net.sim(rate_hz=50, idle=True, body_sound=False, speaker=False)
     client = net.bus("client")
-    subscriber, queue = client.subscribe("pepper/frame", maxlen=1000)
+    _subscriber, queue = client.subscribe("pepper/frame", maxlen=1000)  # (kept: undeclared when dropped)
     payloads: list[bytes] = []
 
     def got() -> bool:
