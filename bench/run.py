@@ -54,6 +54,7 @@ SCRIPTS: dict[str, tuple[str, list[str], float]] = {
     # the recorder node beside its floor, one robot at 50 Hz with features (issue 35)
     "recorder_node": ("recorder_node", ["--rounds", "2", "--seconds", "8"], 180),
     "sim_node": ("sim_node", ["--rounds", "4", "--seconds", "8"], 240),  # the sim beside its floor (issue 35)
+    "sim_instructions": ("sim_instructions", [], 300),  # the sim's frame beside the floor's in instructions (callgrind)
     # Foxglove's and the recorder's own Python per bus message, a fixed workload replayed (issue 35)
     "foxglove_replay": ("foxglove_replay", ["--rounds", "3"], 300),
     "stop_latency": ("stop_latency", [], 90),

@@ -133,7 +133,24 @@ class RobotAdapter(Adapter):
         """One frame: ``positions`` in the order of ``names`` (default: the model's joints);
         ``extra`` adds quantities (``cmd``, ``cur``, ``temp``) in the same order.
         Published whole on ``<robot>/frame``, then per joint (while anyone listens there)."""
-        message = messages.frame(t, seq, names or self.model.joint_names, positions, extra)
+        names = names or self.model.joint_names
+        # the usual frame (a simulator's, a robot's joints alone), its values checked in one go:
+        # nothing to leave out (``valid_part``), and no map to make of it (``publish_values``)
+        usual = extra is None and len(positions) == len(names) and messages.plain_floats(positions)
+        message = None if usual else self._valid_frame(t, seq, positions, names, extra)
+        now = time.monotonic()
+        self.connection.answered(now)
+        if (self.ownership.publish_values(t, seq, names, positions) if message is None
+                else self.ownership.publish_frame(message)):  # (nothing while another owner keeps the robot)
+            self.connection.published(now)
+            self.stats.add("sent")
+            self._stats_report.latencies.add(time.time() - t)  # acquisition to publish (``record_latency``)
+
+    def _valid_frame(self, t: float, seq: int, positions: Sequence[float], names: Sequence[str],
+                     extra: dict[str, Sequence[float]] | None) -> dict[str, Any]:
+        """The frame of ``positions`` (and ``extra``) without the joints the gate would refuse,
+        those left out counted and warned about; ``ValueError`` for columns of other lengths."""
+        message = messages.frame(t, seq, names, positions, extra)
         if len(message["names"]) != len(message["v"]) or any(len(v) != len(message["names"])
                                                              for v in (extra or {}).values()):
             raise ValueError(f"{len(message['names'])} joint names but {len(positions)} positions (or extras)")
@@ -142,12 +159,7 @@ class RobotAdapter(Adapter):
             self.count("joints_left_out", len(left_out))
             self.warn("values", f"{self.robot}: {', '.join(left_out)} left out of frame {seq}: "
                                 f"not a finite value within ±{messages.MAX_VALUE:g}")
-        now = time.monotonic()
-        self.connection.answered(now)
-        if self.ownership.publish_frame(message):  # nothing while another owner keeps the robot
-            self.connection.published(now)
-            self.count("sent")
-            self.record_latency(time.time() - t)  # acquisition to publish
+        return message
 
     def publish_event(self, kind: str, **fields: Any) -> None:
         if not self.ownership.speaks:  # standing by for another owner: it speaks for the robot

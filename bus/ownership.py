@@ -34,7 +34,7 @@ import logging
 import re
 import threading
 import time
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -303,6 +303,16 @@ class Ownership:
         if self._publishers is None:
             self.declare_publishers()
         self._publishers.put(message)
+        return True
+
+    def publish_values(self, t: float, seq: int, names: Sequence[str], values: Sequence[float]) -> bool:
+        """``publish_frame`` of the frame of ``values`` (each a ``float`` within range, no other
+        quantity: ``FramePublishers.put_values``), with no map made of it."""
+        if not self.active:
+            return False
+        if self._publishers is None:
+            self.declare_publishers()
+        self._publishers.put_values(t, seq, names, values)
         return True
 
     def declare_publishers(self, joints: Iterable[str] = ()) -> None:

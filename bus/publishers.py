@@ -5,7 +5,7 @@ anyone subscribes there, since per-joint keys cost an encode and a put per joint
 
 from __future__ import annotations
 
-from collections.abc import Iterable
+from collections.abc import Iterable, Sequence
 from typing import Any
 
 import zenoh
@@ -23,6 +23,7 @@ class FramePublishers:
         self._frame = bus.stream_publisher(keys.frame(robot))
         self._joints: dict[str, zenoh.Publisher] = {}
         self.per_joint = False  # whether anyone subscribes to the robot's joint keys now
+        self._encoder = codec.FrameEncoder(())  # (made again for the names of the first frame, then kept)
         self._watch = bus.watch_subscribers(keys.joints(robot), self._wanted)
         for joint in joints:
             self._joint(joint)
@@ -35,6 +36,18 @@ class FramePublishers:
         self._frame.put(codec.encode(frame))
         if self.per_joint:
             for name, sample in messages.frame_samples(frame):
+                self._joint(name).put(codec.encode(sample))
+
+    def put_values(self, t: float, seq: int, names: Sequence[str], values: Sequence[float]) -> None:
+        """Publish the frame of ``values`` (one per name, each a ``float`` within range:
+        ``messages.plain_floats``; no other quantity), the same bytes as ``put`` of it, with
+        its names packed once for all frames (``codec.FrameEncoder``)."""
+        encoder = self._encoder
+        if names is not encoder.names and tuple(names) != encoder.names:  # (a robot's joints: the same each frame)
+            encoder = self._encoder = codec.FrameEncoder(names)
+        self._frame.put(encoder.encode(t, seq, values))
+        if self.per_joint:
+            for name, sample in messages.frame_samples(messages.frame(t, seq, names, values)):
                 self._joint(name).put(codec.encode(sample))
 
     def _joint(self, name: str) -> zenoh.Publisher:

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -99,6 +99,11 @@ class SimRobot(RobotAdapter):
 
     def _acquire(self) -> None:
         self.pacer = Pacer(self.rate_hz)
+        self.pacer.run(self.ticker(), Nap(self.stopping))  # type: ignore[arg-type]  # (an Event to the pacer)
+
+    def ticker(self) -> Callable[[int], None]:
+        """The frame loop's tick: the engine moved on to now and its frame published
+        (``bench/sim_instructions.py`` counts it)."""
         last = time.monotonic()
         names, advance = self.engine.body.names, self.engine.advance  # (the model's, made once: not per frame)
 
@@ -109,7 +114,7 @@ class SimRobot(RobotAdapter):
             last = tick
             self.publish_frame(now, seq, positions, names)
 
-        self.pacer.run(frame, Nap(self.stopping))  # type: ignore[arg-type]  # (an Event to the pacer)
+        return frame
 
     @property
     def frames_skipped(self) -> int:

@@ -139,7 +139,11 @@ class SimSpeaker:
                 self._take(key, payload)
             frames = self.fmt.frames * (frame - last)  # a stalled card still plays what the skipped ticks would
             last = frame
-            self._play(self.buffer.pull(frames))
+            # silence that nothing changes (nothing queued or playing, no fade left; only this thread
+            # pushes): zeros, not pulled — a second of it pulled made and scaled 1 MB of floats
+            # after each wait (issue 35)
+            silent = self.buffer.silent
+            self._play(np.zeros((frames, self.fmt.channels), np.int16) if silent else self.buffer.pull(frames))
             self.node.count("speaker_frames", frames)
 
         Pacer(1000.0 / self.fmt.chunk_ms).run(tick, Nap(self.node.stopping))  # type: ignore[arg-type]

@@ -113,7 +113,8 @@ class SimEngine:
             if not self._speaking_until and self._speech:
                 self._speaking_until = now + self._speech[0].duration
                 events.append(("speech", {"text": self._speech[0].text, "state": "started"}))
-            self._emit(events)
+            if events:
+                self._emit(events)
             return list(self.body.positions)
 
     def speeds(self) -> dict[str, float]:

@@ -22,6 +22,11 @@ class Body:
         self.names = model.joint_names
         self._index = {n: i for i, n in enumerate(self.names)}
         self._specs = model.joints
+        # each joint's limits and top speed by index: ``set_targets`` clamps with them in line
+        # (a ``JointSpec.clamp`` call per joint was most of the idle motion's frame, issue 35)
+        self._low = [s.min for s in self._specs]
+        self._high = [s.max for s in self._specs]
+        self._top = [s.max_velocity for s in self._specs]
         pose = pose or {}
         self.positions = [s.clamp(pose.get(s.name, min(max(0.0, s.min), s.max))) for s in self._specs]
         self.targets = list(self.positions)
@@ -30,11 +35,14 @@ class Body:
 
     def set_targets(self, targets: Mapping[str, float], fraction: float) -> None:
         """Move ``targets`` (name → position) at ``fraction`` of each joint's max velocity."""
+        speed = min(1.0, max(0.0, fraction))
+        index, low, high, top, aims, velocity = (self._index, self._low, self._high, self._top,
+                                                 self.targets, self.velocity)
         for name, value in targets.items():
-            i = self._index[name]
-            spec = self._specs[i]
-            self.targets[i] = spec.clamp(value)
-            self.velocity[i] = spec.max_velocity * min(1.0, max(0.0, fraction))
+            i = index[name]
+            value = value if value > low[i] else low[i]  # JointSpec.clamp's min(max, max(min, value)),
+            aims[i] = value if value < high[i] else high[i]  # without two calls per joint
+            velocity[i] = top[i] * speed
 
     def set_stiffness(self, names: Iterable[str], value: float) -> None:
         for name in names:
@@ -52,15 +60,15 @@ class Body:
         """Advance ``dt`` seconds (nothing moves for ``dt <= 0``)."""
         if dt <= 0:
             return
-        positions, stiffness = self.positions, self.stiffness
-        for i, target in enumerate(self.targets):
+        positions, stiffness, targets, velocity = self.positions, self.stiffness, self.targets, self.velocity
+        for i, target in enumerate(targets):
             if target == positions[i]:  # (at rest, most joints: nothing to move)
                 continue
             if stiffness[i] < STIFF:
-                self.targets[i] = positions[i]
+                targets[i] = positions[i]
                 continue
             error = target - positions[i]
-            reach = self.velocity[i] * dt
+            reach = velocity[i] * dt
             positions[i] = target if abs(error) <= reach else positions[i] + (reach if error > 0 else -reach)
 
     def pose(self) -> dict[str, float]:

@@ -28,16 +28,19 @@ class Nap:
 
     def __init__(self, stop: threading.Event) -> None:
         self.stop = stop
-
-    def is_set(self) -> bool:
-        return self.stop.is_set()
+        self.is_set = stop.is_set  # (the pacer asks it every tick: the event's own, no call in between)
 
     def wait(self, timeout: float) -> bool:
         """Sleep ``timeout`` seconds, or until the stop is seen; whether it is set."""
+        is_set = self.stop.is_set
+        if timeout <= NAP_S:  # (a frame loop's wait: one sleep)
+            if timeout > 0 and not is_set():
+                time.sleep(timeout)
+            return is_set()
         end = time.monotonic() + timeout
-        while not self.stop.is_set():
+        while not is_set():
             left = end - time.monotonic()
             if left <= 0:
                 break
             time.sleep(min(left, NAP_S))
-        return self.stop.is_set()
+        return is_set()
