@@ -19,12 +19,12 @@ from sonibus.bus.frames import Frame, FrameAssembler
 from sonibus.bus.info import InfoRequests
 from sonibus.bus.keys import Key
 from sonibus.bus.queue import SampleQueue
-from sonibus.bus.streams import Incoming, Selected, Streams
+from sonibus.bus.streams import Incoming, Parts, Selected, Streams
 
 from . import scale
 from .config import OscSinkConfig, Target, parse_target
 from .encode import EncodeError
-from .profiles import PROFILES, FrameBytes, Rendered
+from .profiles import PROFILES, DerivedBytes, FrameBytes, Rendered, shape_of
 
 log = logging.getLogger(__name__)
 
@@ -36,6 +36,7 @@ MAX_PLANS = 1024          # frame plans kept per target (joint lists come from t
 MAX_PLAN_BYTES = 4 << 20  # and their bytes (a plan holds a datagram's head per joint: 128 long names fill 64 KB)
 LISTENING_AFTER_S = 2.0   # a target whose host has not refused a datagram for this long: something listens there
 _REFUSED = (struct.error, OverflowError, ValueError)  # what packing a value OSC cannot carry raises
+_NOT_PLANNED = (*_REFUSED, TypeError)  # and a derived value of another shape than its plan's (a number for a list)
 _NEVER = -math.inf
 _FOREVER = math.inf
 
@@ -76,6 +77,11 @@ class _Link:
         self.direct = not self.min_interval and not self.filtering
         # id(Selected) → it (kept, so its id is not reused) and its plan (None: the general path)
         self.plans: Capped[int, tuple[Selected, _Plan | None]] = Capped(MAX_PLANS, MAX_PLAN_BYTES)
+        # derived frames too, raw values only (a normalized one may wait for its range: the general path);
+        # id(Parts.sources) → them and their plan, for the last shape of their values
+        self.derived_direct = self.direct and not target.framed and target.values == "raw"
+        self.derived_plans: Capped[int, tuple[tuple[Key, ...], DerivedBytes | None]] = Capped(MAX_PLANS,
+                                                                                                MAX_PLAN_BYTES)
 
     def changed(self, key: str, values: Sequence[float]) -> bool:
         """Whether ``values`` pass the on-change/deadband filter (and remember them if so)."""
@@ -237,7 +243,7 @@ class OscSink(Adapter):
             return
         if message.parts is not None:  # a derived frame: its values, as the samples of their keys
             if message.parts:
-                self._samples(message.parts, now)
+                self._derived(message.parts, now)
         elif message.selected is None:
             self._samples((message,), now)
         elif message.values:
@@ -245,9 +251,10 @@ class OscSink(Adapter):
         # once a message, however many targets (Adapter.record_latency's, without its call)
         self._stats_report.latencies.add(time.time() - t)
 
-    def _samples(self, samples: Sequence[Incoming], now: float) -> None:
-        """The general path: samples (joint keys, derived values), one target and one value at a time."""
-        for link in self._sample_links:
+    def _samples(self, samples: Sequence[Incoming], now: float, framed_only: bool = False) -> None:
+        """The general path: samples (joint keys, derived values), one target and one value at a time
+        (``framed_only``: to the targets of whole frames only)."""
+        for link in () if framed_only else self._sample_links:
             for sample in samples:
                 self._sample_to(link, sample.source, sample.values, sample.t, sample.seq, now)
         if self._frame_links:
@@ -257,6 +264,48 @@ class OscSink(Adapter):
                                             {s.source.key: (s.source, s.values) for s in samples})
             for frame in frames:
                 self._send_frame(frame, now)
+
+    def _derived(self, parts: Parts, now: float) -> None:
+        """A derived frame's values: each target of plain messages from its plan for them, where
+        it has one; the general path (``_samples``, a value at a time) for the others."""
+        for link in self._sample_links:
+            if not self._planned_derived(link, parts):
+                for sample in parts:
+                    self._sample_to(link, sample.source, sample.values, sample.t, sample.seq, now)
+        if self._frame_links:
+            self._samples(parts, now, framed_only=True)
+
+    def _planned_derived(self, link: _Link, parts: Parts) -> bool:
+        """Send a derived frame's values (``parts``) to ``link`` from its plan (``DerivedBytes``,
+        a message each: what ``_sample_to`` sends of each value, through ``sample``); False when
+        it takes the general path: a rate cap, a filter, normalized values, a value OSC cannot carry."""
+        if not link.derived_direct:
+            return False
+        sources, values = parts.sources, parts.values
+        entry = link.derived_plans.get(id(sources))
+        if entry is None or entry[0] is not sources:
+            entry = link.derived_plans.put(id(sources), (sources, link.profile.compile_derived(sources, shape_of(
+                values))), size_of(s.key for s in sources))  # (its addresses: about its keys)
+        found = entry[1]
+        if found is None:
+            return False
+        try:
+            datagrams = found.render(parts.t, parts.seq, values)
+        except _NOT_PLANNED:
+            shape = shape_of(values)
+            if shape == found.shape:  # (a value OSC cannot carry: the general path leaves out just that one)
+                return False
+            # (its values' sizes changed: planned again for them, as the first frame's were)
+            entry = link.derived_plans.put(id(sources), (sources, link.profile.compile_derived(sources, shape)),
+                                           size_of(s.key for s in sources))
+            if entry[1] is None:
+                return False
+            try:
+                datagrams = entry[1].render(parts.t, parts.seq, values)
+            except _NOT_PLANNED:
+                return False
+        self._emit(link, datagrams)
+        return True
 
     def _frame(self, message: Incoming, now: float) -> None:
         """A robot's frame: each target's datagrams from its plan for these joints, where it
@@ -476,6 +525,7 @@ class OscSink(Adapter):
             self._described[robot] = {str(d.get("name")) for d in info.get("derived", []) if isinstance(d, dict)}
             for link in self._links:  # (worked out again with these ranges)
                 link.plans.clear()
+                link.derived_plans.clear()
 
 
 def _resolve(target: str) -> tuple[str, int]:

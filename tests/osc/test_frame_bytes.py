@@ -15,7 +15,7 @@ from sonibus import schemas
 from sonibus.adapters.osc import OscSink, OscSinkConfig
 from sonibus.adapters.osc.config import Target
 from sonibus.adapters.osc.encode import NTP_OFFSET, EncodeError
-from sonibus.adapters.osc.profiles import PROFILES
+from sonibus.adapters.osc.profiles import PROFILES, shape_of
 from sonibus.bus import encode
 from sonibus.bus.keys import Key
 from sonibus.bus.messages import MAX_VALUE, frame
@@ -232,3 +232,45 @@ def test_a_frame_that_arrives_while_the_sink_subscribes_is_queued_not_a_failure(
                              name="early"))
     wait_for(lambda: any(a == "/toy/joints/A" for a, _ in messages(receiver)), what="the early frame at the target")
     assert sink.stats["errors"] == 0 and not sink.failure and sink.state == "running"
+
+
+# -- derived frames (issue 35) ------------------------------------------------------------------
+
+DERIVED_NAMES = st.lists(st.from_regex(r"[a-z]{1,6}/[A-Za-z0-9_]{1,8}", fullmatch=True), min_size=1, max_size=12,
+                         unique=True)
+DERIVED_TEMPLATES = ["/{robot}/derived/{feature}/{name}", "/{key}", "/d/{name}/{section}", "/ü/{feature}"]
+NUMBER = st.one_of(VALUE, st.integers(-10, 10))  # (ints pass the gate in a derived frame)
+DERIVED_VALUE = st.one_of(NUMBER, st.lists(NUMBER, min_size=1, max_size=4))
+
+
+def general_derived(target: Target, sources: list[Key], values: list, t: float, seq: int) -> list[bytes] | None:
+    """What the general path sends of a derived frame's values, one at a time through ``sample``
+    (None: it leaves one out, as unencodable)."""
+    profile = PROFILES["sonibus"](target)
+    try:
+        return [profile.sample(s, tuple(map(float, v)) if isinstance(v, list) else (float(v),), t, seq)
+                for s, v in zip(sources, values, strict=True)]
+    except EncodeError:
+        return None
+
+
+@given(DERIVED_NAMES, st.data(), st.floats(0, 2**32 - NTP_OFFSET - 1),
+       st.integers(0, 2**63 - 1), st.sampled_from(DERIVED_TEMPLATES),
+       st.lists(st.sampled_from(["t", "seq"]), max_size=3))
+@settings(max_examples=300)
+def test_a_derived_frame_s_precomputed_bytes_are_the_general_path_s(names, data, t, seq, template, extra):
+    """``DerivedBytes``: a message per value, byte for byte what ``sample`` sends of each, for
+    the shape it was planned for; a value of another shape (a number for a list, a list of other
+    size) or one OSC cannot carry raises, and the sink then takes the general path."""
+    target = Target(to="127.0.0.1:9", derived_address=template, extra=tuple(extra))
+    sources = [Key.parse(f"pepper/derived/{name}") for name in names]
+    planned = data.draw(st.lists(DERIVED_VALUE, min_size=len(names), max_size=len(names)))
+    compiled = PROFILES["sonibus"](target).compile_derived(sources, shape_of(planned))
+    assert compiled is not None and compiled.shape == shape_of(planned)
+    for values in (planned, data.draw(st.lists(DERIVED_VALUE, min_size=len(names), max_size=len(names)))):
+        expected = general_derived(target, sources, values, t, seq)
+        if expected is None or shape_of(values) != compiled.shape:
+            with pytest.raises((*REFUSED, TypeError)):
+                compiled.render(t, seq, values)
+        else:
+            assert compiled.render(t, seq, values) == expected
