@@ -35,6 +35,7 @@ HEARD_EVERY_S = 0.5       # how often a robot's data is told to presence (its si
 MAX_PLANS = 1024          # frame plans kept per target (joint lists come from the network)
 MAX_PLAN_BYTES = 4 << 20  # and their bytes (a plan holds a datagram's head per joint: 128 long names fill 64 KB)
 LISTENING_AFTER_S = 2.0   # a target whose host has not refused a datagram for this long: something listens there
+DIRECT_WAIT_S = 0.002     # a frame waits this long at most on Zenoh's thread for another one taken there
 _REFUSED = (struct.error, OverflowError, ValueError)  # what packing a value OSC cannot carry raises
 _NOT_PLANNED = (*_REFUSED, TypeError)  # and a derived value of another shape than its plan's (a number for a list)
 _NEVER = -math.inf
@@ -133,6 +134,7 @@ class OscSink(Adapter):
         # (what a frame taken where it arrived can leave held for the worker: a target's turn, a bundle's parts)
         self._may_hold = bool(self._frame_links) or any(link.min_interval for link in self._links)
         self._until = _FOREVER  # when the forward worker wakes by itself (set by it, under _state)
+        self._working = False  # the forward worker holds _state, taking a batch
         self._streams: Streams | None = None  # (a frame may arrive while Streams subscribes: queued, see _direct)
         self._streams = Streams(self.bus, cfg.subscribe, self._queue, per_joint_keys=cfg.per_joint_keys,
                                 direct=self._direct)
@@ -166,17 +168,27 @@ class OscSink(Adapter):
                 self._until = _FOREVER if wait is None else time.monotonic() + wait
             items = self._queue.drain(timeout=wait)
             with self._state:
-                now = time.monotonic()  # (once the lock is had: a frame taken where it arrived may have held it)
-                for item in items:
-                    self._take(*item, now)
-                self._tick(now)
+                self._working = True
+                try:
+                    now = time.monotonic()  # (once the lock is had: a frame taken where it arrived may have held it)
+                    for item in items:
+                        self._take(*item, now)
+                    self._tick(now)
+                finally:
+                    self._working = False
 
     def _direct(self, key: str, payload: Any) -> bool:
         """A frame, on its subscription's callback thread (``Streams``' ``direct``); into the
         queue instead (False) before it subscribed everywhere or while the forward worker
-        holds the state (``if_free``)."""
+        takes a batch (``if_free``: a batch may take seconds, Zenoh's threads must not wait)."""
         # (``if_free`` without its call and lambda a frame: the dispatch is every frame's, issue 35)
-        if self._streams is None or not self._state.acquire(blocking=False):
+        # (held but not by the worker: by the other subscription's callback taking its frame, a derived
+        # frame and its robot's arriving together, a matter of µs: waited for, where the queue cost the
+        # worker's wake-up for a third of the show's derived frames, issue 35; not long even if the worker
+        # took the lock in between)
+        state = self._state
+        if self._streams is None or not (state.acquire(blocking=False)
+                                         or (not self._working and state.acquire(timeout=DIRECT_WAIT_S))):
             return False
         try:
             self._take_direct(key, payload)

@@ -5,6 +5,7 @@ through ``sample`` and ``frame``, sends — for every profile and option."""
 from __future__ import annotations
 
 import struct
+import threading
 import time
 
 import pytest
@@ -207,7 +208,36 @@ def test_a_frame_never_waits_on_zenohs_thread_for_the_forward_worker(net, receiv
             time.sleep(0.01)
         return len(sink._queue) > 0
     with sink._state:  # (as the forward worker does while it takes a batch)
-        wait_for(queued, what="a frame in the queue while the worker is busy")
+        sink._working = True
+        try:
+            wait_for(queued, what="a frame in the queue while the worker is busy")
+        finally:
+            sink._working = False
+    wait_for(lambda: any(a == "/toy/joints/A" for a, _ in messages(receiver)), what="the frame at the target")
+
+
+def test_a_frame_waits_for_another_taken_where_it_arrived_not_for_the_queue(net, receivers, monkeypatch):
+    """Issue 35: a derived frame and its robot's frame arrive together on two of Zenoh's
+    threads; the one that finds the state held by the other's (quick) take waits for it and is
+    taken there too, not handed to the queue (a wake-up of the worker each time)."""
+    from sonibus.adapters.osc import sink as osc_sink
+    monkeypatch.setattr(osc_sink, "DIRECT_WAIT_S", 30.0)  # (whatever the machine's load)
+    receiver = receivers()
+    sink = net.start(OscSink(OscSinkConfig(targets=(receiver.target,), subscribe="toy/joints/*", max_age_ms=0),
+                             name="two"))
+    held, release = threading.Event(), threading.Event()
+
+    def other_take() -> None:  # (as another subscription's callback holds the state while it takes its frame)
+        with sink._state:
+            held.set()
+            release.wait(0.05)
+    other = threading.Thread(target=other_take)
+    other.start()
+    held.wait(10)
+    taken = sink._direct("toy/frame", encode(frame(time.time(), 1, ["A"], [0.25])))
+    release.set()
+    other.join(10)
+    assert taken and not len(sink._queue)
     wait_for(lambda: any(a == "/toy/joints/A" for a, _ in messages(receiver)), what="the frame at the target")
 
 
