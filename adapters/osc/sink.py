@@ -9,11 +9,11 @@ import struct
 import threading
 import time
 from collections.abc import Callable, Sequence
-from typing import Any, NamedTuple
+from typing import Any
 
 from sonibus.bus import lateness, presence
 from sonibus.bus.adapter import Adapter
-from sonibus.bus.capped import Capped, size_of
+from sonibus.bus.capped import size_of
 from sonibus.bus.errors import ConfigError
 from sonibus.bus.frames import Frame, FrameAssembler
 from sonibus.bus.info import InfoRequests
@@ -22,9 +22,10 @@ from sonibus.bus.queue import SampleQueue
 from sonibus.bus.streams import Incoming, Parts, Selected, Streams
 
 from . import scale
-from .config import OscSinkConfig, Target, parse_target
+from .config import OscSinkConfig, parse_target
 from .encode import EncodeError
-from .profiles import PROFILES, DerivedBytes, FrameBytes, Rendered, shape_of
+from .link import Link, Plan
+from .profiles import Rendered, shape_of
 
 log = logging.getLogger(__name__)
 
@@ -32,71 +33,12 @@ INFO_RETRY_S = 2.0
 MAX_ROBOTS = 1024  # robots whose info (ranges) is kept: names made up on the bus must not grow it
 UNDESCRIBED_WAIT_S = 3.0  # a derived value no info describes is held back this long at most, then sent raw
 HEARD_EVERY_S = 0.5       # how often a robot's data is told to presence (its silence is warned of after 3 s)
-MAX_PLANS = 1024          # frame plans kept per target (joint lists come from the network)
-MAX_PLAN_BYTES = 4 << 20  # and their bytes (a plan holds a datagram's head per joint: 128 long names fill 64 KB)
 LISTENING_AFTER_S = 2.0   # a target whose host has not refused a datagram for this long: something listens there
 DIRECT_WAIT_S = 0.002     # a frame waits this long at most on Zenoh's thread for another one taken there
 _REFUSED = (struct.error, OverflowError, ValueError)  # what packing a value OSC cannot carry raises
 _NOT_PLANNED = (*_REFUSED, TypeError)  # and a derived value of another shape than its plan's (a number for a list)
 _NEVER = -math.inf
 _FOREVER = math.inf
-
-
-class _Plan(NamedTuple):
-    """How one target sends frames of one joint list: their datagrams worked out once,
-    and each joint's range (``values = "normalized"``)."""
-
-    datagrams: FrameBytes
-    spans: tuple[tuple[float, float] | None, ...] | None
-
-
-class _Link:
-    """One target: where it is, its profile, and what it was last sent."""
-
-    def __init__(self, target: Target, destination: tuple[str, int]) -> None:
-        self.target = target
-        self.profile = PROFILES[target.profile](target)
-        self.min_interval = 1.0 / target.max_rate_hz if target.max_rate_hz else 0.0
-        self.filtering = target.on_change or target.deadband > 0
-        self.framed = target.framed  # (a property of the target's: read once a frame, kept here)
-        self.last_values: dict[str, Sequence[float]] = {}
-        self.last_sent: dict[str, float] = {}     # slot (key, or robot for frames) → monotonic time
-        self.held: dict[str, Any] = {}            # slot → the newest thing waiting for its turn
-        self.last_frame_t: dict[str, float] = {}  # robot → t of the last frame sent
-        self.sent = 0                             # datagrams sent to it
-        # A socket of its own, connected: the kernel keeps the route and the address (cheaper
-        # per datagram than sendto: docs/performance.md), and a "port unreachable" from the
-        # target's host (nobody listens there) comes back on a later send, where it is counted.
-        self.socket = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-        try:
-            self.socket.connect(destination)
-            self.send: Callable[[bytes], int] = self.socket.send
-        except OSError:  # (no route yet, say: sendto says so a datagram at a time, and works once there is one)
-            self.send = lambda datagram: self.socket.sendto(datagram, destination)
-        self.refused_at = 0.0  # when its host last said nothing listens (monotonic; 0: not since it was heard)
-        # Frames go out from their precomputed bytes unless a rate cap or a filter needs each value.
-        self.direct = not self.min_interval and not self.filtering
-        # id(Selected) → it (kept, so its id is not reused) and its plan (None: the general path)
-        self.plans: Capped[int, tuple[Selected, _Plan | None]] = Capped(MAX_PLANS, MAX_PLAN_BYTES)
-        # derived frames too, raw values only (a normalized one may wait for its range: the general path);
-        # id(Parts.sources) → them and their plan, for the last shape of their values
-        self.derived_direct = self.direct and not target.framed and target.values == "raw"
-        self.derived_plans: Capped[int, tuple[tuple[Key, ...], DerivedBytes | None]] = Capped(MAX_PLANS,
-                                                                                                MAX_PLAN_BYTES)
-
-    def changed(self, key: str, values: Sequence[float]) -> bool:
-        """Whether ``values`` pass the on-change/deadband filter (and remember them if so)."""
-        if self.filtering:
-            last = self.last_values.get(key)
-            if last is not None and len(last) == len(values) and all(
-                    abs(a - b) <= self.target.deadband for a, b in zip(values, last, strict=True)):
-                return False
-        self.last_values[key] = values
-        return True
-
-    def turn(self, slot: str, now: float) -> bool:
-        """Whether ``slot`` may send now under the rate cap."""
-        return now - self.last_sent.get(slot, -math.inf) >= self.min_interval
 
 
 class OscSink(Adapter):
@@ -113,7 +55,7 @@ class OscSink(Adapter):
         self._heard: dict[str, float] = {}  # robot → when its data was last told to presence
         self._info = InfoRequests(self.bus, self._take_info, lambda robot, text: self.warn("info", text),
                                   INFO_RETRY_S, derived_alone=True)
-        self._links = [_Link(t, _resolve(t.to)) for t in cfg.resolved_targets()]
+        self._links = [Link(t, _resolve(t.to)) for t in cfg.resolved_targets()]
         self.address = "OSC to " + ", ".join(f"udp {t.to} ({t.profile})" for t in cfg.resolved_targets())
         self._sample_links = [link for link in self._links if not link.target.framed]
         self._frame_links = [link for link in self._links if link.target.framed]
@@ -287,7 +229,7 @@ class OscSink(Adapter):
         if self._frame_links:
             self._samples(parts, now, framed_only=True)
 
-    def _planned_derived(self, link: _Link, parts: Parts) -> bool:
+    def _planned_derived(self, link: Link, parts: Parts) -> bool:
         """Send a derived frame's values (``parts``) to ``link`` from its plan (``DerivedBytes``,
         a message each: what ``_sample_to`` sends of each value, through ``sample``); False when
         it takes the general path: a rate cap, a filter, normalized values, a value OSC cannot carry."""
@@ -343,7 +285,7 @@ class OscSink(Adapter):
                     selected.sources, message.values, strict=True)})
                 self._frame_link(link, frame, now)
 
-    def _planned(self, link: _Link, message: Incoming, now: float) -> bool:
+    def _planned(self, link: Link, message: Incoming, now: float) -> bool:
         """Send ``message`` (a frame) to ``link`` from its plan; False when it takes the general
         path instead: a rate cap or a filter, ranges not known yet, a value OSC cannot carry."""
         if not link.direct:
@@ -380,7 +322,7 @@ class OscSink(Adapter):
         self._emit(link, datagrams)
         return True
 
-    def _plan(self, link: _Link, selected: Selected, robot: str) -> _Plan | None:
+    def _plan(self, link: Link, selected: Selected, robot: str) -> Plan | None:
         """``link``'s plan for frames of ``selected`` joints (None: the general path, which
         waits for the robot's ranges, or says what OSC cannot carry)."""
         spans = None
@@ -390,11 +332,11 @@ class OscSink(Adapter):
                 return None
             spans = tuple(ranges.get(source.name) for source in selected.sources)
         datagrams = link.profile.compile(selected.sources)
-        return None if datagrams is None else _Plan(datagrams, spans)
+        return None if datagrams is None else Plan(datagrams, spans)
 
     # -- per target ------------------------------------------------------------------
 
-    def _sample_to(self, link: _Link, source: Key, values: Sequence[float], t: float, seq: int,
+    def _sample_to(self, link: Link, source: Key, values: Sequence[float], t: float, seq: int,
                    now: float) -> None:
         key = source.key
         if link.min_interval and not link.turn(key, now):
@@ -411,13 +353,13 @@ class OscSink(Adapter):
         for link in self._frame_links:
             self._frame_link(link, frame, now)
 
-    def _frame_link(self, link: _Link, frame: Frame, now: float) -> None:
+    def _frame_link(self, link: Link, frame: Frame, now: float) -> None:
         if link.turn(frame.robot, now):
             self._frame_to(link, frame, now)
         else:
             link.held[frame.robot] = frame
 
-    def _frame_to(self, link: _Link, frame: Frame, now: float) -> None:
+    def _frame_to(self, link: Link, frame: Frame, now: float) -> None:
         samples = []
         for source, values in frame.values.values():
             scaled = self._scaled(link, source, values)
@@ -437,7 +379,7 @@ class OscSink(Adapter):
             if link.target.events:
                 self._send(link, link.profile.event, source.robot, kind, message)
 
-    def _send(self, link: _Link, render: Callable[..., bytes | Rendered | None], *args: Any) -> None:
+    def _send(self, link: Link, render: Callable[..., bytes | Rendered | None], *args: Any) -> None:
         """Encode with ``render(*args)`` and send; what OSC cannot carry is left out
         (just that message: the rest of a frame or bundle goes), counted and warned about."""
         try:
@@ -451,7 +393,7 @@ class OscSink(Adapter):
                 self._unencodable(link, dropped)
         self._emit(link, [rendered] if isinstance(rendered, bytes) else rendered or ())
 
-    def _emit(self, link: _Link, datagrams: Sequence[bytes]) -> None:
+    def _emit(self, link: Link, datagrams: Sequence[bytes]) -> None:
         """Send ``datagrams`` to ``link``'s target, counted once."""
         send, sent = link.send, 0
         for datagram in datagrams:
@@ -474,7 +416,7 @@ class OscSink(Adapter):
                 link.refused_at = 0.0
                 log.info("%s: something listens at udp %s now", self.name, link.target.to)
 
-    def _refused(self, link: _Link) -> None:
+    def _refused(self, link: Link) -> None:
         """Nothing listens at ``link``'s target: counted, and said once until something does."""
         self.count("unreachable")
         if not link.refused_at:
@@ -483,18 +425,18 @@ class OscSink(Adapter):
                         self.name, link.target.to)
         link.refused_at = time.monotonic()
 
-    def _send_failed(self, link: _Link, exc: OSError) -> None:
+    def _send_failed(self, link: Link, exc: OSError) -> None:
         self.count("send_errors")
         self.warn("send", f"cannot send to {link.target.to}: {exc.strerror or exc}")
 
-    def _unencodable(self, link: _Link, dropped: list[EncodeError]) -> None:
+    def _unencodable(self, link: Link, dropped: list[EncodeError]) -> None:
         self.count("unencodable", len(dropped))
         self.warn("encode", f"left out of what goes to {link.target.to}, OSC cannot carry it: {dropped[0]}"
                   + (f" (and {len(dropped) - 1} more)" if len(dropped) > 1 else ""))
 
     # -- normalization ----------------------------------------------------------------
 
-    def _scaled(self, link: _Link, source: Key, values: Sequence[float]) -> Sequence[float] | None:
+    def _scaled(self, link: Link, source: Key, values: Sequence[float]) -> Sequence[float] | None:
         if link.target.values == "raw":
             return values
         ranges = self._ranges.get(source.robot)
