@@ -24,9 +24,7 @@ import re
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from itertools import chain
 from math import hypot
-from operator import itemgetter
 from typing import Any
 
 import jsonschema
@@ -36,6 +34,7 @@ from .. import schemas
 from .capped import Capped, size_of
 from .codec import DecodeError, decode
 from .keys import AUDIO_STREAMS, Key
+from .layouts import Layouts
 from .schemacheck import fits
 
 __all__ = ["FRAME_FIELDS", "SECTIONS", "BadMessage", "Gate", "Limits", "Section", "derived_frame", "derived_samples",
@@ -98,10 +97,8 @@ class Gate:
         self._known_names: Capped[tuple[str, ...], bool] = Capped(self.MAX_KNOWN, self.MAX_KNOWN_BYTES)
         # robot → the (checked) names of its last frame
         self._last_names: Capped[str, tuple[str, ...]] = Capped(self.MAX_KNOWN, self.MAX_KNOWN_BYTES)
-        # derived frame's key → its last frame's types, what picks its floats and its vectors, their sizes
-        self._layouts: Capped[str, tuple[list[type], Callable[[list[Any]], tuple[Any, ...]],
-                                         Callable[[list[Any]], tuple[Any, ...]], list[int]]] = Capped(
-            self.MAX_KNOWN, self.MAX_KNOWN_BYTES)
+        # derived frame's key → where its vectors are (its last frame's types), their sizes
+        self._layouts = Layouts(MAX_DERIVED_SIZE, MAX_VALUE, self.MAX_KNOWN, self.MAX_KNOWN_BYTES)
 
     def check(self, key: Key, payload: bytes) -> dict[str, Any]:
         return self.verdict(key, payload)[0]
@@ -229,7 +226,7 @@ class Gate:
             if len(set(names)) != len(names):
                 raise BadMessage("derived names are not unique")
             last = self._last_names.put(key.key, signature, size_of(names) + len(key.key))
-        if self._plain_derived(key.key, values):
+        if self._layouts.plain(key.key, values):  # (the usual, in C: bus/layouts.py)
             return last
         for i, value in enumerate(values):  # (which one is wrong, and how)
             if value.__class__ is list:
@@ -239,34 +236,6 @@ class Gate:
             else:
                 numbers((value,), f"v[{i}]")
         return last
-
-    def _plain_derived(self, key: str, values: list[Any]) -> bool:
-        """Whether a derived frame's ``values`` are floats and vectors of 1..``MAX_DERIVED_SIZE``
-        floats, their length as one vector within ``MAX_VALUE``: the usual derived frame, let through
-        in C. False says nothing (``derived_frame`` then looks at each value). Where the vectors are
-        is learnt from the key's last frame (its types, value by value): a values' pass in Python
-        once, not a frame (the vectors and the floats picked apart in comprehensions, then checked
-        again: ~25k instructions a frame, every node that takes derived values; issue 35)."""
-        kinds = list(map(type, values))
-        layout = self._layouts.get(key)
-        if layout is None or layout[0] != kinds:
-            floats = kinds.count(float)
-            if floats == len(kinds):
-                return hypot(*values) <= MAX_VALUE
-            if floats + kinds.count(list) != len(kinds):
-                return False
-            at = [i for i, kind in enumerate(kinds) if kind is list]
-            layout = self._layouts.put(key, (kinds, _getter([i for i, kind in enumerate(kinds) if kind is float]),
-                                             _getter(at), []), 16 * len(kinds) + len(key))
-        _, scalars, vectors_of, learnt = layout
-        vectors = vectors_of(values)
-        sizes = list(map(len, vectors))
-        if sizes != learnt:  # (the vectors' sizes: learnt again, within bounds)
-            if not (min(sizes) > 0 and max(sizes) <= MAX_DERIVED_SIZE):
-                return False
-            self._layouts.put(key, (*layout[:3], sizes), 16 * len(kinds) + len(key))
-        flat = list(chain.from_iterable(vectors))
-        return list(map(type, flat)).count(float) == len(flat) and hypot(hypot(*scalars(values)), *flat) <= MAX_VALUE
 
     def derived_sample(self, key: Key, message: dict[str, Any]) -> None:
         value = message.get("v")
@@ -413,13 +382,6 @@ def numbers(values: Sequence[Any], field: str) -> None:
             raise BadMessage(f"{field}[{i}] = {_short(v)} is not a number")
         if not -MAX_VALUE <= v <= MAX_VALUE:  # (NaN fails too)
             raise BadMessage(f"{field}[{i}] = {v!r} is outside ±{MAX_VALUE:g}")
-
-
-def _getter(indices: list[int]) -> Callable[[list[Any]], tuple[Any, ...]]:
-    """What takes the items at ``indices`` out of a list, as a tuple, in C."""
-    if len(indices) == 1:
-        return lambda values, i=indices[0]: (values[i],)
-    return itemgetter(*indices) if indices else lambda values: ()
 
 
 def plain_floats(values: Sequence[Any]) -> bool:
