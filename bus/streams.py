@@ -224,7 +224,7 @@ class Selection:
             chosen = self._chosen(source.key, names or tuple(message["names"]), source.key + "/")
         t, seq = message["t"], message["seq"]
         parts = Parts(chosen[1].sources, chosen[2](message["v"]), t, seq)
-        return Incoming(source, message, None, t, seq, (), None, parts)
+        return _new(Incoming, (source, message, None, t, seq, (), None, parts))  # (as a frame's: no __new__ call)
 
     def selected(self, robot: str, names: list[str] | tuple[str, ...], prefix: str = "") -> Selected:
         """The joints of ``robot``'s frames with ``names`` (checked by the gate) that the patterns select
