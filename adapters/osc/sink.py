@@ -120,10 +120,13 @@ class OscSink(Adapter):
                     self._working = False
 
     def _direct(self, key: str, payload: Any) -> bool:
-        """A frame, on its subscription's callback thread (``Streams``' ``direct``); into the
-        queue instead (False) before it subscribed everywhere or while the forward worker
-        takes a batch (``if_free``: a batch may take seconds, Zenoh's threads must not wait)."""
-        # (``if_free`` without its call and lambda a frame: the dispatch is every frame's, issue 35)
+        """A frame, on its subscription's callback thread (``Streams``' ``direct``), taken there
+        (``_take``, under ``_state``); into the queue instead (False) before it subscribed
+        everywhere or while the forward worker takes a batch (``if_free``: a batch may take
+        seconds, Zenoh's threads must not wait). What it held (a target's turn, a frame's parts)
+        due before the worker would wake wakes it (``SampleQueue.wake``)."""
+        # (``if_free`` without its call and lambda a frame, nor a call of its own for the take: the
+        # dispatch is every frame's, issue 35)
         # (held but not by the worker: by the other subscription's callback taking its frame, a derived
         # frame and its robot's arriving together, a matter of µs: waited for, where the queue cost the
         # worker's wake-up for a third of the show's derived frames, issue 35; not long even if the worker
@@ -133,18 +136,13 @@ class OscSink(Adapter):
                                          or (not self._working and state.acquire(timeout=DIRECT_WAIT_S))):
             return False
         try:
-            self._take_direct(key, payload)
+            self._take(key, payload, time.monotonic())
+            if self._may_hold and (wait := self._wait()) is not None and time.monotonic() + wait < self._until:
+                self._until = _NEVER  # (woken once)
+                self._queue.wake()
         finally:
-            self._state.release()
+            state.release()
         return True
-
-    def _take_direct(self, key: str, payload: Any) -> None:
-        """``_take`` where the frame arrived (under ``_state``); what it held (a target's turn, a
-        frame's parts) due before the worker would wake wakes it (``SampleQueue.wake``)."""
-        self._take(key, payload, time.monotonic())
-        if self._may_hold and (wait := self._wait()) is not None and time.monotonic() + wait < self._until:
-            self._until = _NEVER  # (woken once)
-            self._queue.wake()
 
     def _wait(self) -> float | None:
         """Until the soonest held thing is due; None with nothing held."""
