@@ -22,7 +22,14 @@ call a frame, after a warm-up of as many:
   pacing learns, so it never holds one back (under valgrind the main thread can wait
   a second for its turn: a stall to the pacing), and ``max_age_ms = 0`` (they are old).
 
-    .venv/bin/python bench/floor_instructions.py [--joints 17 128] [--frames 500]
+The derived frame (issue 35: in the show the OSC node takes one beside each robot frame,
+26 values each sent as a message, half its work): the same contenders on ``robot0/derived``
+frames of ``floor.DERIVED``'s shape (17 scalars, two 3-vectors, 7 scalars), plain messages;
+the floor is ``floor_sink(derived=True)``'s callback for them (``Datagrams.derived``), the
+sink's ``select`` makes the frame's parts (``Incoming.parts``), its ``send`` is what
+``OscSink._take`` does with them once selected (``_derived``: every target's datagrams).
+
+    .venv/bin/python bench/floor_instructions.py [--joints 17 128] [--frames 500] [--derived | --no-derived]
 
 Writes bench/results/floor_instructions.json and prints a table.
 """
@@ -43,7 +50,7 @@ from pathlib import Path
 from typing import Any
 
 from common import write
-from floor import Datagrams
+from floor import DERIVED, Datagrams
 
 CONTENDERS = ("decode", "gate", "select", "pace", "send", "latency", "floor", "sonibus")
 SPACING_S = 2.0  # between the frames' t: over pacing.MAX_PERIOD_S, so nothing is paced however slowly valgrind runs
@@ -60,9 +67,27 @@ def frames(joints: int, n: int) -> list[bytes]:
                            "v": [math.sin(i + 0.1 * j) for j in range(joints)]}) for i in range(n)]
 
 
-def contenders(joints: int, bundle: bool, port: int, payloads: list[bytes]) -> tuple[
+def derived_frames(n: int) -> list[bytes]:
+    """``n`` derived frames of ``floor.DERIVED``'s shape, as ``floor.publish`` puts them, their
+    ``t`` as ``frames``'."""
+    import math
+
+    import msgpack
+    names = [name for name, _ in DERIVED]
+    t0 = time.time() - n * SPACING_S - 10
+    out = []
+    for i in range(n):
+        values = [math.sin(i + 0.1 * j) for j in range(len(DERIVED))]
+        out.append(msgpack.packb({"t": t0 + i * SPACING_S, "seq": i, "names": names,
+                                  "v": [[v, v, v] if size == 3 else v for (_, size), v in zip(DERIVED, values,
+                                                                                              strict=True)]}))
+    return out
+
+
+def contenders(joints: int, bundle: bool, port: int, payloads: list[bytes], derived: bool = False) -> tuple[
         dict[str, Callable[[bytes], Any]], Callable[[], Any]]:
-    """Each contender as a call on one of ``payloads``, and what stops the sonibus one."""
+    """Each contender as a call on one of ``payloads`` (robot frames, or derived frames), and
+    what stops the sonibus one."""
     import msgpack
 
     from sonibus.adapters.osc.config import OscSinkConfig
@@ -76,12 +101,16 @@ def contenders(joints: int, bundle: bool, port: int, payloads: list[bytes]) -> t
     from sonibus.bus.streams import Selection
     from sonibus.bus.verdicts import VERDICTS
 
-    key, destination = "robot0/frame", ("127.0.0.1", port)
+    key, destination = "robot0/derived" if derived else "robot0/frame", ("127.0.0.1", port)
     sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     datagrams = Datagrams(1, joints)
 
     def floor(payload: bytes) -> None:
         frame = msgpack.unpackb(payload)
+        if derived:  # (floor_sink's each_derived: a datagram a value)
+            for datagram in datagrams.derived("robot0", frame["t"], frame["seq"], frame["v"]):
+                sock.sendto(datagram, destination)
+            return
         if bundle:
             sock.sendto(datagrams.bundle(key, frame["t"], frame["seq"], frame["v"]), destination)
             return
@@ -89,8 +118,9 @@ def contenders(joints: int, bundle: bool, port: int, payloads: list[bytes]) -> t
             sock.sendto(datagram, destination)
 
     session = open_session(BusConfig(multicast=False, listen=("tcp/127.0.0.1:0",)))
-    sink = OscSink(OscSinkConfig(subscribe=("*/joints/*",), targets=(f"127.0.0.1:{port}",), extra=("t", "seq"),
-                                 bundle=bundle, max_age_ms=0), name="sound")
+    sink = OscSink(OscSinkConfig(subscribe=("*/derived/**",) if derived else ("*/joints/*",),
+                                 targets=(f"127.0.0.1:{port}",), extra=("t", "seq"), bundle=bundle, max_age_ms=0),
+                   name="sound")
     sink.start(Bus(session, node="bench"))
     gate, parsed = Gate(), Key.parse(key)
     # The sink's state lock, held here for the whole run: each frame is taken as ``_direct``
@@ -115,21 +145,35 @@ def contenders(joints: int, bundle: bool, port: int, payloads: list[bytes]) -> t
     spacing, latencies, (link,) = Spacing(), Latencies(), sink._links
     taken = {payload: selection.incoming(key, payload) for payload in payloads}  # (before the counts)
     now = time.monotonic()
+    if derived:
+        # (what ``_take`` does with a selected derived frame's parts: ``_derived`` where there is one; in a
+        # tree from before it, ``_samples`` of them, made one by one by ``select``: the same bench counts both)
+        derived_path = getattr(sink, "_derived", None)
+        if derived_path is None:
+            derived_path = sink._samples
+            for message in taken.values():
+                tuple(message.parts)  # (made before the counts: ``send`` takes them as the sink would)
+            select: Callable[[bytes], Any] = lambda payload: tuple(selection.incoming(key, payload).parts)  # noqa: E731
+        else:
+            select = lambda payload: selection.incoming(key, payload)  # noqa: E731
+        send: Callable[[bytes], Any] = lambda payload: derived_path(taken[payload].parts, now)  # noqa: E731
+    else:
+        select = lambda payload: selection.incoming(key, payload)  # noqa: E731
+        send = lambda payload: sink._planned(link, taken[payload], now)  # noqa: E731
     return {"decode": msgpack.unpackb, "gate": lambda payload: gate.verdict(parsed, payload),
-            "select": lambda payload: selection.incoming(key, payload),
-            "pace": lambda payload: spacing.turn(key, taken[payload].t, taken[payload].seq, now),
-            "send": lambda payload: sink._planned(link, taken[payload], now),
+            "select": select, "pace": lambda payload: spacing.turn(key, taken[payload].t, taken[payload].seq, now),
+            "send": send,
             "latency": lambda payload: latencies.add(0.001),
             "floor": floor, "sonibus": take}, close
 
 
-def segments(joints: int, n: int, bundle: bool) -> None:
+def segments(joints: int, n: int, bundle: bool, derived: bool = False) -> None:
     """Under callgrind: each contender on ``n`` frames after ``n`` others, ``os.getppid``
     before each and at the end, the collector off (its passes depend on the heap)."""
     receiver = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     receiver.bind(("127.0.0.1", 0))  # (never read: what overflows it is dropped by the kernel)
-    payloads = frames(joints, 2 * n)
-    calls, close = contenders(joints, bundle, receiver.getsockname()[1], payloads)
+    payloads = derived_frames(2 * n) if derived else frames(joints, 2 * n)
+    calls, close = contenders(joints, bundle, receiver.getsockname()[1], payloads, derived)
     warm, counted = payloads[:n], payloads[n:]
     for call in calls.values():
         for payload in warm:
@@ -144,17 +188,19 @@ def segments(joints: int, n: int, bundle: bool) -> None:
     gc.enable()
     stats = close()
     print(f"sink counters: {stats}", file=sys.stderr)
-    if stats.get("received") != 2 * n * joints or stats.get("skipped") or stats.get("bad"):
+    if stats.get("received") != 2 * n * (len(DERIVED) if derived else joints) or stats.get("skipped") \
+            or stats.get("bad"):
         raise SystemExit(f"the sink did not take every frame as it should: {stats}")
 
 
-def instructions(joints: int, n: int, bundle: bool) -> dict[str, float]:
+def instructions(joints: int, n: int, bundle: bool, derived: bool = False) -> dict[str, float]:
     """Instructions per frame of each contender, counted in one process under callgrind."""
     with tempfile.TemporaryDirectory() as tmp:
         out = Path(tmp) / "callgrind.out"
         run = subprocess.run(["valgrind", "--tool=callgrind", f"--callgrind-out-file={out}",
                               "--dump-before=os_getppid", "--separate-threads=yes", sys.executable, __file__,
-                              "--segments", str(joints), str(n), *(["--bundle"] if bundle else [])],
+                              "--segments", str(joints), str(n), *(["--bundle"] if bundle else []),
+                              *(["--derived-frames"] if derived else [])],
                              capture_output=True, text=True, cwd=Path(__file__).parent)
         if run.returncode:
             raise SystemExit(f"callgrind run failed:\n{run.stderr[-3000:]}")
@@ -167,34 +213,39 @@ def instructions(joints: int, n: int, bundle: bool) -> dict[str, float]:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--joints", type=int, nargs="+", default=[17, 128])
+    parser.add_argument("--joints", type=int, nargs="*", default=[17, 128],
+                        help="robot frames of so many joints (none: the derived frame alone)")
     parser.add_argument("--frames", type=int, default=500,
                         help="frames counted per contender (deterministic counts: more only takes longer)")
     parser.add_argument("--name", default="floor_instructions", help="results file name")
     parser.add_argument("--segments", type=int, nargs=2, help=argparse.SUPPRESS)  # (the run under callgrind)
     parser.add_argument("--bundle", action="store_true", help=argparse.SUPPRESS)
+    parser.add_argument("--derived-frames", action="store_true", help=argparse.SUPPRESS)
+    parser.add_argument("--derived", action=argparse.BooleanOptionalAction, default=True,
+                        help="the derived frame's path too (a row of its own, plain messages)")
     args = parser.parse_args()
     if args.segments:
-        segments(*args.segments, args.bundle)
+        segments(*args.segments, args.bundle, args.derived_frames)
         return
     rows = []
-    for joints in args.joints:
-        for bundle in (False, True):
-            counts = instructions(joints, args.frames, bundle)
-            # what the sink spends beyond its stages: Streams.take, its counts, the frame assembler, _take
-            counts["dispatch"] = counts["sonibus"] - sum(counts[s] for s in ("select", "pace", "send", "latency"))
-            rows.append({"joints": joints, "bundle": bundle, "per_frame": counts,
-                         "sonibus_to_floor": counts["sonibus"] / counts["floor"],
-                         "gate_to_decode": counts["gate"] / counts["decode"]})
-            print(f"{joints:>4} joints {'bundle' if bundle else 'plain ':>6}: " + ", ".join(
-                f"{name} {count / 1000:,.1f}k" for name, count in counts.items())
-                + f"; sonibus {rows[-1]['sonibus_to_floor']:.2f}× floor, gate {rows[-1]['gate_to_decode']:.2f}× decode",
-                flush=True)
+    cases = [(joints, bundle, False) for joints in args.joints for bundle in (False, True)]
+    for joints, bundle, derived in cases + ([(len(DERIVED), False, True)] if args.derived else []):
+        counts = instructions(joints, args.frames, bundle, derived)
+        # what the sink spends beyond its stages: Streams.take, its counts, the frame assembler, _take
+        counts["dispatch"] = counts["sonibus"] - sum(counts[s] for s in ("select", "pace", "send", "latency"))
+        rows.append({"joints": joints, "bundle": bundle, "derived": derived, "per_frame": counts,
+                     "sonibus_to_floor": counts["sonibus"] / counts["floor"],
+                     "gate_to_decode": counts["gate"] / counts["decode"]})
+        what = f"{joints:>4} derived values" if derived else f"{joints:>4} joints {'bundle' if bundle else 'plain ':>6}"
+        print(f"{what}: " + ", ".join(f"{name} {count / 1000:,.1f}k" for name, count in counts.items())
+              + f"; sonibus {rows[-1]['sonibus_to_floor']:.2f}× floor, gate {rows[-1]['gate_to_decode']:.2f}× decode",
+              flush=True)
     summary = []
     for r in rows:
         k = {name: f"{count / 1000:,.0f}k" for name, count in r["per_frame"].items()}
-        summary.append({"scenario": f"(floor) instructions per frame, {r['joints']} joints, "
-                                    + ("one bundle" if r["bundle"] else "plain messages"),
+        summary.append({"scenario": f"(floor) instructions per derived frame, {r['joints']} values, plain messages"
+                        if r["derived"] else f"(floor) instructions per frame, {r['joints']} joints, "
+                                             + ("one bundle" if r["bundle"] else "plain messages"),
                         "sonibus": f"{k['sonibus']} (Gate.check {k['gate']})",
                         "baseline": f"floor {k['floor']} (msgpack {k['decode']})",
                         "ratio": f"{r['sonibus_to_floor']:.2f}×", "goal": "", "met": ""})

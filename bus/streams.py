@@ -115,12 +115,15 @@ def _picker(indices: tuple[int, ...] | None) -> Callable[[list[Any]], tuple[Any,
 class Parts(Sequence[Incoming]):
     """A derived frame's selected values as the samples of their own keys (``Incoming.parts``),
     made the first time a sink looks at them: a node that takes derived frames whole (the
-    recorder) never pays for them. Its length is known without them."""
+    recorder) never pays for them. Its length is known without them; ``sources`` (their keys,
+    the same tuple for every frame of the robot with the same names: a sink may key what it
+    works out for them by its identity) and ``values`` (as the frame carries them: a number,
+    or a list of numbers, each) are there without them too (the OSC sink sends from them)."""
 
-    __slots__ = ("_made", "_sources", "_values", "seq", "t")
+    __slots__ = ("_made", "seq", "sources", "t", "values")
 
     def __init__(self, sources: tuple[keys.Key, ...], values: tuple[Any, ...], t: float, seq: int) -> None:
-        self._sources, self._values, self.t, self.seq = sources, values, t, seq
+        self.sources, self.values, self.t, self.seq = sources, values, t, seq
         self._made: tuple[Incoming, ...] | None = None
 
     def _parts(self) -> tuple[Incoming, ...]:
@@ -132,14 +135,14 @@ class Parts(Sequence[Incoming]):
             made = self._made = tuple([_new(Incoming, (
                 key, {"t": t, "seq": seq, "v": value}, None, t, seq,
                 tuple(map(float, value)) if value.__class__ is list else (float(value),), None, None))
-                for key, value in zip(self._sources, self._values, strict=True)])
+                for key, value in zip(self.sources, self.values, strict=True)])
         return made
 
     def __len__(self) -> int:
-        return len(self._sources)
+        return len(self.sources)
 
     def __bool__(self) -> bool:
-        return bool(self._sources)
+        return bool(self.sources)
 
     def __iter__(self) -> Iterator[Incoming]:
         return iter(self._parts())
@@ -221,7 +224,7 @@ class Selection:
             chosen = self._chosen(source.key, names or tuple(message["names"]), source.key + "/")
         t, seq = message["t"], message["seq"]
         parts = Parts(chosen[1].sources, chosen[2](message["v"]), t, seq)
-        return Incoming(source, message, None, t, seq, (), None, parts)
+        return _new(Incoming, (source, message, None, t, seq, (), None, parts))  # (as a frame's: no __new__ call)
 
     def selected(self, robot: str, names: list[str] | tuple[str, ...], prefix: str = "") -> Selected:
         """The joints of ``robot``'s frames with ``names`` (checked by the gate) that the patterns select

@@ -307,3 +307,29 @@ def test_a_robots_joint_names_and_chains_are_plain_unique_chunks():
     assert "name" in refused(info_key, {**good, "joints": [{**joint, "name": "a/b"}]})
     assert "joint names are not unique" in refused(info_key, {**good, "joints": [joint, joint]})
     assert "max_velocity" in refused(info_key, {**good, "joints": [{**joint, "max_velocity": 1e308}]})
+
+
+LAYOUT_VALUES = st.one_of(st.floats(-2e6, 2e6), st.just(float("nan")), st.integers(-3, 3), st.booleans(),
+                          st.lists(st.one_of(st.floats(-2e6, 2e6), st.integers(-3, 3), st.booleans()), max_size=4),
+                          st.lists(st.floats(-1.0, 1.0), min_size=60, max_size=70))
+
+
+@given(st.lists(st.lists(LAYOUT_VALUES, min_size=4, max_size=4), min_size=2, max_size=8))
+@settings(max_examples=300, deadline=None)
+def test_one_gate_takes_a_key_s_derived_frames_one_after_another_as_the_schema_says(values):
+    """Issue 35: the gate learns where a key's vectors are from its last derived frame (their
+    values checked in C); frames whose floats, ints, vectors and their sizes move from one to
+    the next are each accepted exactly when the schema accepts them, refused with their reason."""
+    gate, key, names = Gate(), Key.parse("pepper/derived"), ["qom/Body", "hand/R", "hand/L", "velocity/A"]
+    for seq, v in enumerate(values):
+        frame = messages.derived_frame(time.time() - 1.0, seq, names, v)
+        try:
+            gate.check(key, pack(frame))
+            accepted = True
+        except BadMessage as exc:
+            accepted = False
+            assert str(exc).startswith("v["), exc  # (the value's index and what is wrong with it)
+        nan = any(x != x for value in v for x in (value if isinstance(value, list) else [value]))
+        # (NaN: within the schema's bounds as JSON Schema compares, refused by the gate as no number)
+        assert accepted == (schemas.validator("derived_frame").is_valid(frame) and not nan), (
+            seq, frame, next(schemas.validator("derived_frame").iter_errors(frame), None))

@@ -10,6 +10,8 @@ For a robot's frames, which bring the same joints again and again, a profile
 also works out their datagrams once (``compile``): the same bytes as ``sample``
 of each joint or ``frame``, from precomputed addresses and one ``struct.pack``
 per message (``tests/osc/test_frame_bytes.py`` compares them for every option).
+A derived frame's values, which come the same way, are worked out once too
+(``compile_derived``: ``sample`` of each value, for a target of plain messages).
 """
 
 from __future__ import annotations
@@ -123,6 +125,41 @@ class FrameBytes:
         return out
 
 
+class DerivedBytes:
+    """One target's plain messages for derived frames with one list of values and one
+    ``shape`` (how many numbers each value holds: 1 for a number), worked out once:
+    ``render(t, seq, values)`` gives a message per value, byte for byte what ``sample``
+    makes of each (``tests/osc/test_frame_bytes.py``). A value of another shape, or one
+    OSC cannot carry, raises what ``struct`` raises (``struct.error``, ``OverflowError``):
+    the caller then takes the general path (the count of numbers fixes the type tags, so
+    a value that packs is a value of the plan's shape)."""
+
+    __slots__ = ("_extra", "_packs", "_prefixes", "shape")
+
+    def __init__(self, prefixes: tuple[bytes, ...], packs: tuple[Callable[..., bytes], ...],
+                 shape: tuple[int, ...], extra: tuple[str, ...]) -> None:
+        self._prefixes, self._packs, self.shape = prefixes, packs, shape
+        picks = [0 if e == "t" else 1 for e in extra]  # (what follows the numbers: t, seq as int32, as extra says)
+        self._extra = itemgetter(*picks) if len(picks) > 1 else (lambda both, i=picks[0]: (both[i],)) \
+            if picks else None
+
+    def render(self, t: float, seq: int, values: Sequence[Any]) -> list[bytes]:
+        # (a number, or a list of numbers spread as the pack's arguments: the floor's listcomp, issue 35)
+        items = zip(self._prefixes, self._packs, values, strict=True)
+        if self._extra is None:
+            return [prefix + (pack(*v) if v.__class__ is list else pack(v)) for prefix, pack, v in items]
+        tail = self._extra((t, seq & SEQ_MASK))
+        if len(tail) == 2:  # (t and seq, named: a call with *tail costs more)
+            a, b = tail
+            return [prefix + (pack(*v, a, b) if v.__class__ is list else pack(v, a, b)) for prefix, pack, v in items]
+        return [prefix + (pack(*v, *tail) if v.__class__ is list else pack(v, *tail)) for prefix, pack, v in items]
+
+
+def shape_of(values: Sequence[Any]) -> tuple[int, ...]:
+    """How many numbers each of a derived frame's values holds (1 for a number)."""
+    return tuple([len(v) if v.__class__ is list else 1 for v in values])
+
+
 class SonibusProfile:
     """Addresses from the target's templates; one value (or a few) per message."""
 
@@ -155,6 +192,21 @@ class SonibusProfile:
         # (the same sum as ``frame``'s, so the same timetag to the last bit)
         return FrameBytes(sized, packer.pack, self.target.extra, "bundle", self.target.latency_ms / 1000.0,
                           tags=tags)
+
+    def compile_derived(self, sources: Sequence[Key], shape: tuple[int, ...]) -> DerivedBytes | None:
+        """The messages of derived frames of these values (``sources``, each holding as many
+        numbers as ``shape`` says), worked out once (None: an address OSC cannot carry, a value
+        of no number; the general path says which)."""
+        extra = "".join("d" if e == "t" else "i" for e in self.target.extra)
+        if not all(shape):
+            return None
+        try:
+            prefixes = tuple(encode.prefix(self.address(source), "f" * n + extra)
+                             for source, n in zip(sources, shape, strict=True))
+        except ValueError:
+            return None
+        packers = {n: encode.packer("f" * n + extra).pack for n in set(shape)}  # (one per size: 1, 3)
+        return DerivedBytes(prefixes, tuple(packers[n] for n in shape), shape, self.target.extra)
 
     def sample(self, source: Key, values: Sequence[float], t: float, seq: int) -> bytes:
         if not self.target.extra:

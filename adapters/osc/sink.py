@@ -9,22 +9,23 @@ import struct
 import threading
 import time
 from collections.abc import Callable, Sequence
-from typing import Any, NamedTuple
+from typing import Any
 
 from sonibus.bus import lateness, presence
 from sonibus.bus.adapter import Adapter
-from sonibus.bus.capped import Capped, size_of
+from sonibus.bus.capped import size_of
 from sonibus.bus.errors import ConfigError
 from sonibus.bus.frames import Frame, FrameAssembler
 from sonibus.bus.info import InfoRequests
 from sonibus.bus.keys import Key
 from sonibus.bus.queue import SampleQueue
-from sonibus.bus.streams import Incoming, Selected, Streams
+from sonibus.bus.streams import Incoming, Parts, Selected, Streams
 
 from . import scale
-from .config import OscSinkConfig, Target, parse_target
+from .config import OscSinkConfig, parse_target
 from .encode import EncodeError
-from .profiles import PROFILES, FrameBytes, Rendered
+from .link import Link, Plan
+from .profiles import Rendered, shape_of
 
 log = logging.getLogger(__name__)
 
@@ -32,64 +33,12 @@ INFO_RETRY_S = 2.0
 MAX_ROBOTS = 1024  # robots whose info (ranges) is kept: names made up on the bus must not grow it
 UNDESCRIBED_WAIT_S = 3.0  # a derived value no info describes is held back this long at most, then sent raw
 HEARD_EVERY_S = 0.5       # how often a robot's data is told to presence (its silence is warned of after 3 s)
-MAX_PLANS = 1024          # frame plans kept per target (joint lists come from the network)
-MAX_PLAN_BYTES = 4 << 20  # and their bytes (a plan holds a datagram's head per joint: 128 long names fill 64 KB)
 LISTENING_AFTER_S = 2.0   # a target whose host has not refused a datagram for this long: something listens there
+DIRECT_WAIT_S = 0.002     # a frame waits this long at most on Zenoh's thread for another one taken there
 _REFUSED = (struct.error, OverflowError, ValueError)  # what packing a value OSC cannot carry raises
+_NOT_PLANNED = (*_REFUSED, TypeError)  # and a derived value of another shape than its plan's (a number for a list)
 _NEVER = -math.inf
 _FOREVER = math.inf
-
-
-class _Plan(NamedTuple):
-    """How one target sends frames of one joint list: their datagrams worked out once,
-    and each joint's range (``values = "normalized"``)."""
-
-    datagrams: FrameBytes
-    spans: tuple[tuple[float, float] | None, ...] | None
-
-
-class _Link:
-    """One target: where it is, its profile, and what it was last sent."""
-
-    def __init__(self, target: Target, destination: tuple[str, int]) -> None:
-        self.target = target
-        self.profile = PROFILES[target.profile](target)
-        self.min_interval = 1.0 / target.max_rate_hz if target.max_rate_hz else 0.0
-        self.filtering = target.on_change or target.deadband > 0
-        self.framed = target.framed  # (a property of the target's: read once a frame, kept here)
-        self.last_values: dict[str, Sequence[float]] = {}
-        self.last_sent: dict[str, float] = {}     # slot (key, or robot for frames) → monotonic time
-        self.held: dict[str, Any] = {}            # slot → the newest thing waiting for its turn
-        self.last_frame_t: dict[str, float] = {}  # robot → t of the last frame sent
-        self.sent = 0                             # datagrams sent to it
-        # A socket of its own, connected: the kernel keeps the route and the address (cheaper
-        # per datagram than sendto: docs/performance.md), and a "port unreachable" from the
-        # target's host (nobody listens there) comes back on a later send, where it is counted.
-        self.socket = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-        try:
-            self.socket.connect(destination)
-            self.send: Callable[[bytes], int] = self.socket.send
-        except OSError:  # (no route yet, say: sendto says so a datagram at a time, and works once there is one)
-            self.send = lambda datagram: self.socket.sendto(datagram, destination)
-        self.refused_at = 0.0  # when its host last said nothing listens (monotonic; 0: not since it was heard)
-        # Frames go out from their precomputed bytes unless a rate cap or a filter needs each value.
-        self.direct = not self.min_interval and not self.filtering
-        # id(Selected) → it (kept, so its id is not reused) and its plan (None: the general path)
-        self.plans: Capped[int, tuple[Selected, _Plan | None]] = Capped(MAX_PLANS, MAX_PLAN_BYTES)
-
-    def changed(self, key: str, values: Sequence[float]) -> bool:
-        """Whether ``values`` pass the on-change/deadband filter (and remember them if so)."""
-        if self.filtering:
-            last = self.last_values.get(key)
-            if last is not None and len(last) == len(values) and all(
-                    abs(a - b) <= self.target.deadband for a, b in zip(values, last, strict=True)):
-                return False
-        self.last_values[key] = values
-        return True
-
-    def turn(self, slot: str, now: float) -> bool:
-        """Whether ``slot`` may send now under the rate cap."""
-        return now - self.last_sent.get(slot, -math.inf) >= self.min_interval
 
 
 class OscSink(Adapter):
@@ -106,7 +55,7 @@ class OscSink(Adapter):
         self._heard: dict[str, float] = {}  # robot → when its data was last told to presence
         self._info = InfoRequests(self.bus, self._take_info, lambda robot, text: self.warn("info", text),
                                   INFO_RETRY_S, derived_alone=True)
-        self._links = [_Link(t, _resolve(t.to)) for t in cfg.resolved_targets()]
+        self._links = [Link(t, _resolve(t.to)) for t in cfg.resolved_targets()]
         self.address = "OSC to " + ", ".join(f"udp {t.to} ({t.profile})" for t in cfg.resolved_targets())
         self._sample_links = [link for link in self._links if not link.target.framed]
         self._frame_links = [link for link in self._links if link.target.framed]
@@ -127,6 +76,7 @@ class OscSink(Adapter):
         # (what a frame taken where it arrived can leave held for the worker: a target's turn, a bundle's parts)
         self._may_hold = bool(self._frame_links) or any(link.min_interval for link in self._links)
         self._until = _FOREVER  # when the forward worker wakes by itself (set by it, under _state)
+        self._working = False  # the forward worker holds _state, taking a batch
         self._streams: Streams | None = None  # (a frame may arrive while Streams subscribes: queued, see _direct)
         self._streams = Streams(self.bus, cfg.subscribe, self._queue, per_joint_keys=cfg.per_joint_keys,
                                 direct=self._direct)
@@ -160,31 +110,39 @@ class OscSink(Adapter):
                 self._until = _FOREVER if wait is None else time.monotonic() + wait
             items = self._queue.drain(timeout=wait)
             with self._state:
-                now = time.monotonic()  # (once the lock is had: a frame taken where it arrived may have held it)
-                for item in items:
-                    self._take(*item, now)
-                self._tick(now)
+                self._working = True
+                try:
+                    now = time.monotonic()  # (once the lock is had: a frame taken where it arrived may have held it)
+                    for item in items:
+                        self._take(*item, now)
+                    self._tick(now)
+                finally:
+                    self._working = False
 
     def _direct(self, key: str, payload: Any) -> bool:
-        """A frame, on its subscription's callback thread (``Streams``' ``direct``); into the
-        queue instead (False) before it subscribed everywhere or while the forward worker
-        holds the state (``if_free``)."""
-        # (``if_free`` without its call and lambda a frame: the dispatch is every frame's, issue 35)
-        if self._streams is None or not self._state.acquire(blocking=False):
+        """A frame, on its subscription's callback thread (``Streams``' ``direct``), taken there
+        (``_take``, under ``_state``); into the queue instead (False) before it subscribed
+        everywhere or while the forward worker takes a batch (``if_free``: a batch may take
+        seconds, Zenoh's threads must not wait). What it held (a target's turn, a frame's parts)
+        due before the worker would wake wakes it (``SampleQueue.wake``)."""
+        # (``if_free`` without its call and lambda a frame, nor a call of its own for the take: the
+        # dispatch is every frame's, issue 35)
+        # (held but not by the worker: by the other subscription's callback taking its frame, a derived
+        # frame and its robot's arriving together, a matter of µs: waited for, where the queue cost the
+        # worker's wake-up for a third of the show's derived frames, issue 35; not long even if the worker
+        # took the lock in between)
+        state = self._state
+        if self._streams is None or not (state.acquire(blocking=False)
+                                         or (not self._working and state.acquire(timeout=DIRECT_WAIT_S))):
             return False
         try:
-            self._take_direct(key, payload)
+            self._take(key, payload, time.monotonic())
+            if self._may_hold and (wait := self._wait()) is not None and time.monotonic() + wait < self._until:
+                self._until = _NEVER  # (woken once)
+                self._queue.wake()
         finally:
-            self._state.release()
+            state.release()
         return True
-
-    def _take_direct(self, key: str, payload: Any) -> None:
-        """``_take`` where the frame arrived (under ``_state``); what it held (a target's turn, a
-        frame's parts) due before the worker would wake wakes it (``SampleQueue.wake``)."""
-        self._take(key, payload, time.monotonic())
-        if self._may_hold and (wait := self._wait()) is not None and time.monotonic() + wait < self._until:
-            self._until = _NEVER  # (woken once)
-            self._queue.wake()
 
     def _wait(self) -> float | None:
         """Until the soonest held thing is due; None with nothing held."""
@@ -237,7 +195,7 @@ class OscSink(Adapter):
             return
         if message.parts is not None:  # a derived frame: its values, as the samples of their keys
             if message.parts:
-                self._samples(message.parts, now)
+                self._derived(message.parts, now)
         elif message.selected is None:
             self._samples((message,), now)
         elif message.values:
@@ -245,9 +203,10 @@ class OscSink(Adapter):
         # once a message, however many targets (Adapter.record_latency's, without its call)
         self._stats_report.latencies.add(time.time() - t)
 
-    def _samples(self, samples: Sequence[Incoming], now: float) -> None:
-        """The general path: samples (joint keys, derived values), one target and one value at a time."""
-        for link in self._sample_links:
+    def _samples(self, samples: Sequence[Incoming], now: float, framed_only: bool = False) -> None:
+        """The general path: samples (joint keys, derived values), one target and one value at a time
+        (``framed_only``: to the targets of whole frames only)."""
+        for link in () if framed_only else self._sample_links:
             for sample in samples:
                 self._sample_to(link, sample.source, sample.values, sample.t, sample.seq, now)
         if self._frame_links:
@@ -257,6 +216,48 @@ class OscSink(Adapter):
                                             {s.source.key: (s.source, s.values) for s in samples})
             for frame in frames:
                 self._send_frame(frame, now)
+
+    def _derived(self, parts: Parts, now: float) -> None:
+        """A derived frame's values: each target of plain messages from its plan for them, where
+        it has one; the general path (``_samples``, a value at a time) for the others."""
+        for link in self._sample_links:
+            if not self._planned_derived(link, parts):
+                for sample in parts:
+                    self._sample_to(link, sample.source, sample.values, sample.t, sample.seq, now)
+        if self._frame_links:
+            self._samples(parts, now, framed_only=True)
+
+    def _planned_derived(self, link: Link, parts: Parts) -> bool:
+        """Send a derived frame's values (``parts``) to ``link`` from its plan (``DerivedBytes``,
+        a message each: what ``_sample_to`` sends of each value, through ``sample``); False when
+        it takes the general path: a rate cap, a filter, normalized values, a value OSC cannot carry."""
+        if not link.derived_direct:
+            return False
+        sources, values = parts.sources, parts.values
+        entry = link.derived_plans.get(id(sources))
+        if entry is None or entry[0] is not sources:
+            entry = link.derived_plans.put(id(sources), (sources, link.profile.compile_derived(sources, shape_of(
+                values))), size_of(s.key for s in sources))  # (its addresses: about its keys)
+        found = entry[1]
+        if found is None:
+            return False
+        try:
+            datagrams = found.render(parts.t, parts.seq, values)
+        except _NOT_PLANNED:
+            shape = shape_of(values)
+            if shape == found.shape:  # (a value OSC cannot carry: the general path leaves out just that one)
+                return False
+            # (its values' sizes changed: planned again for them, as the first frame's were)
+            entry = link.derived_plans.put(id(sources), (sources, link.profile.compile_derived(sources, shape)),
+                                           size_of(s.key for s in sources))
+            if entry[1] is None:
+                return False
+            try:
+                datagrams = entry[1].render(parts.t, parts.seq, values)
+            except _NOT_PLANNED:
+                return False
+        self._emit(link, datagrams)
+        return True
 
     def _frame(self, message: Incoming, now: float) -> None:
         """A robot's frame: each target's datagrams from its plan for these joints, where it
@@ -282,7 +283,7 @@ class OscSink(Adapter):
                     selected.sources, message.values, strict=True)})
                 self._frame_link(link, frame, now)
 
-    def _planned(self, link: _Link, message: Incoming, now: float) -> bool:
+    def _planned(self, link: Link, message: Incoming, now: float) -> bool:
         """Send ``message`` (a frame) to ``link`` from its plan; False when it takes the general
         path instead: a rate cap or a filter, ranges not known yet, a value OSC cannot carry."""
         if not link.direct:
@@ -319,7 +320,7 @@ class OscSink(Adapter):
         self._emit(link, datagrams)
         return True
 
-    def _plan(self, link: _Link, selected: Selected, robot: str) -> _Plan | None:
+    def _plan(self, link: Link, selected: Selected, robot: str) -> Plan | None:
         """``link``'s plan for frames of ``selected`` joints (None: the general path, which
         waits for the robot's ranges, or says what OSC cannot carry)."""
         spans = None
@@ -329,11 +330,11 @@ class OscSink(Adapter):
                 return None
             spans = tuple(ranges.get(source.name) for source in selected.sources)
         datagrams = link.profile.compile(selected.sources)
-        return None if datagrams is None else _Plan(datagrams, spans)
+        return None if datagrams is None else Plan(datagrams, spans)
 
     # -- per target ------------------------------------------------------------------
 
-    def _sample_to(self, link: _Link, source: Key, values: Sequence[float], t: float, seq: int,
+    def _sample_to(self, link: Link, source: Key, values: Sequence[float], t: float, seq: int,
                    now: float) -> None:
         key = source.key
         if link.min_interval and not link.turn(key, now):
@@ -350,13 +351,13 @@ class OscSink(Adapter):
         for link in self._frame_links:
             self._frame_link(link, frame, now)
 
-    def _frame_link(self, link: _Link, frame: Frame, now: float) -> None:
+    def _frame_link(self, link: Link, frame: Frame, now: float) -> None:
         if link.turn(frame.robot, now):
             self._frame_to(link, frame, now)
         else:
             link.held[frame.robot] = frame
 
-    def _frame_to(self, link: _Link, frame: Frame, now: float) -> None:
+    def _frame_to(self, link: Link, frame: Frame, now: float) -> None:
         samples = []
         for source, values in frame.values.values():
             scaled = self._scaled(link, source, values)
@@ -376,7 +377,7 @@ class OscSink(Adapter):
             if link.target.events:
                 self._send(link, link.profile.event, source.robot, kind, message)
 
-    def _send(self, link: _Link, render: Callable[..., bytes | Rendered | None], *args: Any) -> None:
+    def _send(self, link: Link, render: Callable[..., bytes | Rendered | None], *args: Any) -> None:
         """Encode with ``render(*args)`` and send; what OSC cannot carry is left out
         (just that message: the rest of a frame or bundle goes), counted and warned about."""
         try:
@@ -390,7 +391,7 @@ class OscSink(Adapter):
                 self._unencodable(link, dropped)
         self._emit(link, [rendered] if isinstance(rendered, bytes) else rendered or ())
 
-    def _emit(self, link: _Link, datagrams: Sequence[bytes]) -> None:
+    def _emit(self, link: Link, datagrams: Sequence[bytes]) -> None:
         """Send ``datagrams`` to ``link``'s target, counted once."""
         send, sent = link.send, 0
         for datagram in datagrams:
@@ -413,7 +414,7 @@ class OscSink(Adapter):
                 link.refused_at = 0.0
                 log.info("%s: something listens at udp %s now", self.name, link.target.to)
 
-    def _refused(self, link: _Link) -> None:
+    def _refused(self, link: Link) -> None:
         """Nothing listens at ``link``'s target: counted, and said once until something does."""
         self.count("unreachable")
         if not link.refused_at:
@@ -422,18 +423,18 @@ class OscSink(Adapter):
                         self.name, link.target.to)
         link.refused_at = time.monotonic()
 
-    def _send_failed(self, link: _Link, exc: OSError) -> None:
+    def _send_failed(self, link: Link, exc: OSError) -> None:
         self.count("send_errors")
         self.warn("send", f"cannot send to {link.target.to}: {exc.strerror or exc}")
 
-    def _unencodable(self, link: _Link, dropped: list[EncodeError]) -> None:
+    def _unencodable(self, link: Link, dropped: list[EncodeError]) -> None:
         self.count("unencodable", len(dropped))
         self.warn("encode", f"left out of what goes to {link.target.to}, OSC cannot carry it: {dropped[0]}"
                   + (f" (and {len(dropped) - 1} more)" if len(dropped) > 1 else ""))
 
     # -- normalization ----------------------------------------------------------------
 
-    def _scaled(self, link: _Link, source: Key, values: Sequence[float]) -> Sequence[float] | None:
+    def _scaled(self, link: Link, source: Key, values: Sequence[float]) -> Sequence[float] | None:
         if link.target.values == "raw":
             return values
         ranges = self._ranges.get(source.robot)
@@ -476,6 +477,7 @@ class OscSink(Adapter):
             self._described[robot] = {str(d.get("name")) for d in info.get("derived", []) if isinstance(d, dict)}
             for link in self._links:  # (worked out again with these ranges)
                 link.plans.clear()
+                link.derived_plans.clear()
 
 
 def _resolve(target: str) -> tuple[str, int]:

@@ -99,3 +99,37 @@ def test_a_derived_frame_is_taken_where_it_arrives_not_through_the_queue(net, re
         tick()
     wait_for(lambda: len(receiver.data()) >= sent + 10, what="ten derived frames at the target")
     assert queued.count("toy/derived") <= 1, queued  # (one may meet the worker holding the state)
+
+
+@pytest.mark.parametrize("extra", [(), ("t", "seq")], ids=["plain", "t and seq"])
+def test_derived_frames_whose_values_change_shape_go_out_as_the_general_path_sends_them(net, receivers, extra):
+    """Issue 35: a target of plain messages sends a derived frame from datagrams worked out once
+    for its values' shape (``profiles.DerivedBytes``); a frame whose values change shape (a
+    vector shrinks, a number comes where a vector was) or holds ints goes out byte for byte as
+    the general path sends it, value by value. (A value OSC cannot carry, beyond float32, the
+    gate refuses first: past ±1e6.)"""
+    planned, general_path = receivers(), receivers()
+    config = {"subscribe": "toy/derived/**", "max_age_ms": 0, "extra": extra}
+    fast = net.start(OscSink(OscSinkConfig(targets=(planned.target,), **config), name="planned"))
+    slow = net.start(OscSink(OscSinkConfig(targets=(general_path.target,), **config), name="general"))
+    slow._planned_derived = lambda link, parts: False  # (every value through sample, one at a time)
+    took: list[bool] = []
+    plan = fast._planned_derived
+    fast._planned_derived = lambda link, parts: took.append(plan(link, parts)) or took[-1]
+    names, base = ["qom/Body", "hand/R", "velocity/A"], time.time()
+    values = [[0.5, [0.1, 0.2, 0.3], -1.0], [0.6, [0.1, 0.2, 0.3], -1.1],  # planned for (1, 3, 1)
+              [0.7, [0.1, 0.2], -1.2], [0.8, [0.1, 0.2], -1.3],           # the vector shorter: planned again
+              [[0.9], 2, 3],                                              # a vector of one, ints
+              [1.1, [0.4, 0.5, 0.6], -1.4]]
+    for seq, v in enumerate(values):
+        payload = encode(derived_frame(base + 1e-4 * seq, seq, names, v))
+        was = [sink.stats["received"] for sink in (fast, slow)]
+        for sink in (fast, slow):
+            sink._queue.put(("toy/derived", payload))
+        wait_for(lambda was=was: fast.stats["received"] > was[0] and slow.stats["received"] > was[1],
+                 what=f"derived frame {seq} taken by both sinks")
+    wait_for(lambda: len(planned.data()) == len(general_path.data()) == 3 * len(values),
+             what="every value at both targets")
+    assert planned.data() == general_path.data()
+    assert fast.stats["sent"] == slow.stats["sent"] and fast.stats["unencodable"] == slow.stats["unencodable"] == 0
+    assert took == [True] * len(values)  # (a plan for every shape: planned again when it changed)

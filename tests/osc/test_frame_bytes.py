@@ -5,6 +5,7 @@ through ``sample`` and ``frame``, sends — for every profile and option."""
 from __future__ import annotations
 
 import struct
+import threading
 import time
 
 import pytest
@@ -15,7 +16,7 @@ from sonibus import schemas
 from sonibus.adapters.osc import OscSink, OscSinkConfig
 from sonibus.adapters.osc.config import Target
 from sonibus.adapters.osc.encode import NTP_OFFSET, EncodeError
-from sonibus.adapters.osc.profiles import PROFILES
+from sonibus.adapters.osc.profiles import PROFILES, shape_of
 from sonibus.bus import encode
 from sonibus.bus.keys import Key
 from sonibus.bus.messages import MAX_VALUE, frame
@@ -172,22 +173,22 @@ def test_the_sink_sends_the_same_bytes_through_its_plans_as_through_the_general_
 def test_made_up_joint_lists_do_not_grow_the_plans(net, receivers):
     """Joint lists come from the network: a target keeps at most ``MAX_PLANS`` plans, however
     many robots and lists are made up, and still sends each frame (through a new plan)."""
-    from sonibus.adapters.osc import sink as osc_sink
+    from sonibus.adapters.osc import link as osc_link
     receiver = receivers()
     sink = net.start(OscSink(OscSinkConfig(targets=(receiver.target,), subscribe="*/joints/*", max_age_ms=0),
                              name="plans"))
     (link,) = sink._links
-    for n in range(osc_sink.MAX_PLANS + 100):
+    for n in range(osc_link.MAX_PLANS + 100):
         payload = encode(frame(time.time(), n, ["A", f"Made{n}"], [0.25, 0.5]))
         sink._direct(f"robot{n % 7}/frame", payload)  # (as its subscription's callback does)
-        assert len(link.plans) <= osc_sink.MAX_PLANS
+        assert len(link.plans) <= osc_link.MAX_PLANS
     assert len(link.plans) > 50, "the plans were never used"
 
     def last_sent() -> bool:  # (again until one arrives: UDP may drop one of a thousand sent at once)
         sink._direct("robot0/frame", encode(frame(time.time(), 10 ** 6, ["A", "Last"], [0.25, 0.5])))
         return any(a == "/robot0/joints/Last" for a, _ in messages(receiver))
     wait_for(last_sent, what="a frame at the target after them")
-    assert len(link.plans) <= osc_sink.MAX_PLANS
+    assert len(link.plans) <= osc_link.MAX_PLANS
 
 
 def test_a_frame_never_waits_on_zenohs_thread_for_the_forward_worker(net, receivers):
@@ -207,7 +208,36 @@ def test_a_frame_never_waits_on_zenohs_thread_for_the_forward_worker(net, receiv
             time.sleep(0.01)
         return len(sink._queue) > 0
     with sink._state:  # (as the forward worker does while it takes a batch)
-        wait_for(queued, what="a frame in the queue while the worker is busy")
+        sink._working = True
+        try:
+            wait_for(queued, what="a frame in the queue while the worker is busy")
+        finally:
+            sink._working = False
+    wait_for(lambda: any(a == "/toy/joints/A" for a, _ in messages(receiver)), what="the frame at the target")
+
+
+def test_a_frame_waits_for_another_taken_where_it_arrived_not_for_the_queue(net, receivers, monkeypatch):
+    """Issue 35: a derived frame and its robot's frame arrive together on two of Zenoh's
+    threads; the one that finds the state held by the other's (quick) take waits for it and is
+    taken there too, not handed to the queue (a wake-up of the worker each time)."""
+    from sonibus.adapters.osc import sink as osc_sink
+    monkeypatch.setattr(osc_sink, "DIRECT_WAIT_S", 30.0)  # (whatever the machine's load)
+    receiver = receivers()
+    sink = net.start(OscSink(OscSinkConfig(targets=(receiver.target,), subscribe="toy/joints/*", max_age_ms=0),
+                             name="two"))
+    held, release = threading.Event(), threading.Event()
+
+    def other_take() -> None:  # (as another subscription's callback holds the state while it takes its frame)
+        with sink._state:
+            held.set()
+            release.wait(0.05)
+    other = threading.Thread(target=other_take)
+    other.start()
+    held.wait(10)
+    taken = sink._direct("toy/frame", encode(frame(time.time(), 1, ["A"], [0.25])))
+    release.set()
+    other.join(10)
+    assert taken and not len(sink._queue)
     wait_for(lambda: any(a == "/toy/joints/A" for a, _ in messages(receiver)), what="the frame at the target")
 
 
@@ -232,3 +262,45 @@ def test_a_frame_that_arrives_while_the_sink_subscribes_is_queued_not_a_failure(
                              name="early"))
     wait_for(lambda: any(a == "/toy/joints/A" for a, _ in messages(receiver)), what="the early frame at the target")
     assert sink.stats["errors"] == 0 and not sink.failure and sink.state == "running"
+
+
+# -- derived frames (issue 35) ------------------------------------------------------------------
+
+DERIVED_NAMES = st.lists(st.from_regex(r"[a-z]{1,6}/[A-Za-z0-9_]{1,8}", fullmatch=True), min_size=1, max_size=12,
+                         unique=True)
+DERIVED_TEMPLATES = ["/{robot}/derived/{feature}/{name}", "/{key}", "/d/{name}/{section}", "/ü/{feature}"]
+NUMBER = st.one_of(VALUE, st.integers(-10, 10))  # (ints pass the gate in a derived frame)
+DERIVED_VALUE = st.one_of(NUMBER, st.lists(NUMBER, min_size=1, max_size=4))
+
+
+def general_derived(target: Target, sources: list[Key], values: list, t: float, seq: int) -> list[bytes] | None:
+    """What the general path sends of a derived frame's values, one at a time through ``sample``
+    (None: it leaves one out, as unencodable)."""
+    profile = PROFILES["sonibus"](target)
+    try:
+        return [profile.sample(s, tuple(map(float, v)) if isinstance(v, list) else (float(v),), t, seq)
+                for s, v in zip(sources, values, strict=True)]
+    except EncodeError:
+        return None
+
+
+@given(DERIVED_NAMES, st.data(), st.floats(0, 2**32 - NTP_OFFSET - 1),
+       st.integers(0, 2**63 - 1), st.sampled_from(DERIVED_TEMPLATES),
+       st.lists(st.sampled_from(["t", "seq"]), max_size=3))
+@settings(max_examples=300)
+def test_a_derived_frame_s_precomputed_bytes_are_the_general_path_s(names, data, t, seq, template, extra):
+    """``DerivedBytes``: a message per value, byte for byte what ``sample`` sends of each, for
+    the shape it was planned for; a value of another shape (a number for a list, a list of other
+    size) or one OSC cannot carry raises, and the sink then takes the general path."""
+    target = Target(to="127.0.0.1:9", derived_address=template, extra=tuple(extra))
+    sources = [Key.parse(f"pepper/derived/{name}") for name in names]
+    planned = data.draw(st.lists(DERIVED_VALUE, min_size=len(names), max_size=len(names)))
+    compiled = PROFILES["sonibus"](target).compile_derived(sources, shape_of(planned))
+    assert compiled is not None and compiled.shape == shape_of(planned)
+    for values in (planned, data.draw(st.lists(DERIVED_VALUE, min_size=len(names), max_size=len(names)))):
+        expected = general_derived(target, sources, values, t, seq)
+        if expected is None or shape_of(values) != compiled.shape:
+            with pytest.raises((*REFUSED, TypeError)):
+                compiled.render(t, seq, values)
+        else:
+            assert compiled.render(t, seq, values) == expected
