@@ -86,8 +86,8 @@ def test_frames_are_pushed_at_most_update_hz_per_robot(net, websocket, figure):
 
 
 def test_frames_are_kept_where_they_arrive_not_through_the_queue(net, websocket):
-    """A robot's frames are checked and kept as its newest on the subscription's callback
-    thread, and pushed at update_hz from the server's loop: no thread hand-off a frame (the
+    """A robot's frames are kept as its newest on the subscription's callback thread, and
+    checked and pushed at update_hz from the server's loop: no thread hand-off a frame (the
     feed worker's wake-up cost the show's web node more than the frame's work; issue 35)."""
     net.sim("pepper", rate_hz=RATE)
     node = start_web(net)
