@@ -87,6 +87,7 @@ class WebPages(Adapter):
         self.web = WebServer(self, cfg.host, cfg.port, key="listen", limits=cfg.limits, browsers=True,
                              names=auth.names(cfg.token))
         self.pages = Pages(self, self.web, cfg, self._images())
+        self._maps = MapsPanel(self, self.pages, self._map_node_listed)  # (before the stats worker tells it)
         self._info = InfoRequests(self.bus, self._take_info, lambda robot, text: self.warn("info", text),
                                   INFO_EVERY_S)
         self.web.start()
@@ -119,7 +120,7 @@ class WebPages(Adapter):
         self.own(watch_robots(self.bus, self._robot_changed, self.capped))
         self.web.call(self._push)  # (on the server's loop: no thread of its own, no hand-off to the loop a tick)
         self.spawn(lambda: self._info.keep_asking(self.stopping, self._on_bus), "info")
-        self.spawn(MapsPanel(self, self.pages).run, "maps")
+        self.spawn(self._maps.run, "maps")
 
     def _images(self) -> dict[str, str]:
         """The kiosk buttons' images by button id, each path from the installation file's folder."""
@@ -338,6 +339,14 @@ class WebPages(Adapter):
                     if stats is not None:
                         self._nodes[node] = (heard, stats)
             self.pages.stats(self._node_stats())
+            self._maps.nodes_listed()
+
+    def _map_node_listed(self) -> bool:
+        """Whether a map node (adapter ``map``, its stats heard within ``GONE_AFTER_S``) is listed."""
+        now = time.monotonic()
+        with self._lock:
+            return any(stats.get("adapter") == "map" and now - heard <= GONE_AFTER_S
+                       for heard, stats in self._nodes.values())
 
     def _push(self) -> None:
         """On the server's loop: each robot's newest frame to the operators' pages ``update_hz``
