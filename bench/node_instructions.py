@@ -20,8 +20,11 @@ threads are not). Each contender takes the same msgpack frames (``{t, seq, names
 MIDI takes two kinds of frames: ``still`` (values that move by less than a MIDI step:
 nothing sent, as an idle robot's frames mostly are) and ``moving`` (every joint's number
 changes: 17 control changes a frame, each contender); web, ``still`` ones (what it does
-with a frame does not depend on its values). The web node's push (25 a second, on its
-server's loop) is not counted: it is the floor's work (a frame made JSON and sent).
+with a frame does not depend on its values). The web node keeps a frame as it came and
+checks the robot's newest when it pushes it (25 a second, on its server's loop, the show's
+robots publishing 50): its contender is ``_direct`` each frame and the push's check
+(``_checked``) every ``PUSH_EVERY``-th, as the tick takes them; the rest of the push (a
+frame made JSON and sent) is not counted: it is the floor's work.
 
     .venv/bin/python bench/node_instructions.py [--nodes midi web] [--frames 500]
 
@@ -50,6 +53,7 @@ JOINTS = 17
 SPACING_S = 2.0  # between the frames' t: over pacing.MAX_PERIOD_S, so nothing is paced however slowly valgrind runs
 RANGE = (-8.0, 8.0)  # the joints' range, the floor's (MIDI_RANGE) and the sink's (the robot's info)
 KEY = "pepper/frame"
+PUSH_EVERY = 2  # frames a web push: the show's robots publish 50 a second, the web node pushes 25
 
 
 def frames(kind: str, n: int) -> list[bytes]:
@@ -89,9 +93,17 @@ def web_contenders() -> tuple[dict[str, Callable[[bytes], Any]], Callable[[], di
     node.start(Bus(session, node="bench"))
     node._robots["pepper"] = {}  # (shown: its frames are kept)
 
+    pushes = [0]
+
     def take(payload: bytes) -> None:
         if not node._direct(KEY, payload):
-            raise SystemExit("the web node's feed worker held its state: a frame went to its queue")
+            raise SystemExit("the web node gave a frame to its queue")
+        pushes[0] += 1
+        if pushes[0] % PUSH_EVERY == 0:  # (the tick's part: the newest taken, checked)
+            with node._lock:
+                latest, node._latest = node._latest, {}
+            if len(node._checked(latest)) != 1:
+                raise SystemExit("the web node's push did not check the robot's newest frame")
 
     def close() -> dict[str, int]:
         counted = dict(node.stats)
@@ -159,6 +171,8 @@ def segments(node: str, n: int) -> None:
     stats = close()
     print(f"{node} counters: {stats}", file=sys.stderr)
     taken = len(KINDS[node]) * 2 * n * JOINTS  # (the web node counts the nodes' stats it hears too: its own)
+    if node == "web":  # (only the frames it pushes: the others were replaced first)
+        taken //= PUSH_EVERY
     if not 0 <= stats.get("received", 0) - taken < (100 if node == "web" else 1) or stats.get("skipped") \
             or stats.get("bad"):
         raise SystemExit(f"the {node} node did not take every frame as it should: {stats}")

@@ -37,7 +37,7 @@ from sonibus.bus.messages import Gate
 from sonibus.bus.monitor import LOSSES
 from sonibus.bus.presence import watch_robots
 from sonibus.bus.queue import SampleQueue
-from sonibus.bus.streams import Incoming, Streams, if_free
+from sonibus.bus.streams import Incoming, Streams
 from sonibus.bus.text import printable
 from sonibus.bus.web import WebServer
 
@@ -75,7 +75,9 @@ class WebPages(Adapter):
         self._lock = threading.Lock()
         self._present: set[str] = set()           # robots on the bus (all of them: a stop reaches each)
         self._robots: dict[str, dict[str, Any]] = {}  # the shown robots, as the robots message says them
-        self._latest: dict[str, dict[str, Any]] = {}  # robot → its newest frame, not yet pushed
+        # robot → its newest frame as it came (key, payload), not yet pushed: checked by the gate when
+        # pushed (25 a second), not as it comes (50): most are replaced first (docs/design.md)
+        self._latest: dict[str, tuple[str, Any]] = {}
         self._nodes: dict[tuple[str, str], tuple[float, dict[str, Any]]] = {}  # latest stats, when heard
         # each node's newest stats not checked yet: when they came, key, payload, and whether the node is
         # not listed (it takes a place: MAX_NODES counts these, _fresh of them, and the listed)
@@ -85,6 +87,7 @@ class WebPages(Adapter):
         self.web = WebServer(self, cfg.host, cfg.port, key="listen", limits=cfg.limits, browsers=True,
                              names=auth.names(cfg.token))
         self.pages = Pages(self, self.web, cfg, self._images())
+        self._maps = MapsPanel(self, self.pages, self._map_node_listed)  # (before the stats worker tells it)
         self._info = InfoRequests(self.bus, self._take_info, lambda robot, text: self.warn("info", text),
                                   INFO_EVERY_S)
         self.web.start()
@@ -96,9 +99,9 @@ class WebPages(Adapter):
         log.info("%s: %s", self.name, self.address)
         self._queue = self.own(SampleQueue(cfg.queue))
         patterns = [f"{robot}/joints/*" for robot in cfg.robots] + ["*/events/*"]
-        # (frames are taken where they arrive, the newest of each robot kept for the pages' next tick:
-        # a thread hand-off a frame less; events, and a frame that finds the state busy, come by the queue)
-        self._taking = threading.Lock()  # Streams' tables: the feed worker's, or a frame's where it arrives
+        # (frames are kept where they arrive, the newest of each robot for the pages' next tick, which
+        # checks it: a thread hand-off a frame less; events come by the queue)
+        self._taking = threading.Lock()  # Streams' tables: the feed worker's, or the push tick's
         self._counted = self.stats.counting(self.stats.tally(("received",)))  # (under _taking: no lock of its own)
         self._pushes = self.stats.tally(("frames_coalesced", "frames_pushed"))  # (under _lock)
         self._streams: Streams | None = None
@@ -117,7 +120,7 @@ class WebPages(Adapter):
         self.own(watch_robots(self.bus, self._robot_changed, self.capped))
         self.web.call(self._push)  # (on the server's loop: no thread of its own, no hand-off to the loop a tick)
         self.spawn(lambda: self._info.keep_asking(self.stopping, self._on_bus), "info")
-        self.spawn(MapsPanel(self, self.pages).run, "maps")
+        self.spawn(self._maps.run, "maps")
 
     def _images(self) -> dict[str, str]:
         """The kiosk buttons' images by button id, each path from the installation file's folder."""
@@ -229,35 +232,37 @@ class WebPages(Adapter):
                 self._take(message)
 
     def _direct(self, key: str, payload: Any) -> bool:
-        """A robot's frame, on its subscription's callback thread (``Streams``' ``direct``):
-        checked and kept as the robot's newest (``_keep``); into the queue instead (False)
-        before ``Streams`` is made or while the feed worker takes a message (``if_free``)."""
+        """A robot's frame, on its subscription's callback thread (``Streams``' ``direct``): kept
+        as it came as the robot's newest, if the page shows the robot, for the pages' next tick,
+        which checks it (``_checked``); one a shown robot (``MAX_SHOWN``), a replaced one counted
+        ``frames_coalesced``. Never into the queue (True): nothing here waits on the feed worker."""
+        robot = key.partition("/")[0]  # (as keys.Key.parse: a robot is the key's first chunk)
+        with self._lock:
+            if robot in self._robots:  # (a page shows the frames of the robots it was told of)
+                if robot in self._latest:
+                    self._pushes["frames_coalesced"] += 1
+                self._latest[robot] = (key, payload)
+        return True
+
+    def _checked(self, latest: dict[str, tuple[str, Any]]) -> list[tuple[str, dict[str, Any]]]:
+        """Each robot and its frame, decoded, of those ``latest`` keeps that the gate lets through (as
+        ``Streams.take``: counted ``received``; a bad one refused, counted ``bad`` and warned
+        about), on the server's loop: a check is ~20 µs, and ``_taking`` is held by the feed
+        worker only while it takes an event."""
         streams = self._streams
         if streams is None:
-            return False
-
-        def keep() -> None:
-            message = streams.take(key, payload, self._counted, self.warn)
-            if message is not None:
-                with self._lock:
-                    self._keep(message)
-        return if_free(self._taking, keep)
-
-    def _keep(self, message: Incoming) -> None:
-        """A frame as the newest of its robot, for the pages' next tick (``self._lock`` held)."""
-        robot = message.source.robot
-        if robot not in self._robots:  # (a page shows the frames of the robots it was told of)
-            return
-        if robot in self._latest:
-            self._pushes["frames_coalesced"] += 1
-        self._latest[robot] = message.message  # (made JSON when pushed: most are replaced first)
+            return []
+        frames = []
+        with self._taking:
+            for robot, (key, payload) in latest.items():
+                message = streams.take(key, payload, self._counted, self.warn)
+                if message is not None:
+                    frames.append((robot, message.message))
+        return frames
 
     def _take(self, message: Incoming) -> None:
         source = message.source
-        if source.section == "frame":
-            with self._lock:
-                self._keep(message)
-        elif message.event is not None:
+        if message.event is not None:  # (frames never come by the queue: _direct keeps every one)
             robot, kind = source.robot, source.name
             if kind == "connection":
                 self._connection(robot, message.event)
@@ -334,6 +339,14 @@ class WebPages(Adapter):
                     if stats is not None:
                         self._nodes[node] = (heard, stats)
             self.pages.stats(self._node_stats())
+            self._maps.nodes_listed()
+
+    def _map_node_listed(self) -> bool:
+        """Whether a map node (adapter ``map``, its stats heard within ``GONE_AFTER_S``) is listed."""
+        now = time.monotonic()
+        with self._lock:
+            return any(stats.get("adapter") == "map" and now - heard <= GONE_AFTER_S
+                       for heard, stats in self._nodes.values())
 
     def _push(self) -> None:
         """On the server's loop: each robot's newest frame to the operators' pages ``update_hz``
@@ -353,9 +366,11 @@ class WebPages(Adapter):
                 return                                               # wait, the newest kept)
             with self._lock:
                 latest, self._latest = self._latest, {}
-                self._pushes["frames_pushed"] += len(latest)
-            if latest:
-                self.pages.push_frames([_frame(robot, frame) for robot, frame in latest.items()])
+            checked = self._checked(latest) if latest else None
+            if checked:
+                with self._lock:
+                    self._pushes["frames_pushed"] += len(checked)
+                self.pages.push_frames([_frame(robot, frame) for robot, frame in checked])
             frame += 1
             late = loop.time() - (start + frame * period)
             if late > period:

@@ -1,6 +1,14 @@
 """The operator page's mappings panel, on the server's side: every map node's maps, asked
-(``*/maps/list``) ``MAPS_EVERY_S`` while an operator's page is open, and the page's edits
-carried to the node that runs the map (``<node>/maps/<verb>``), its answer the page's reply.
+(``*/maps/list``) ``MAPS_EVERY_S`` while an operator's page is open and a map node is
+listed, and the page's edits carried to the node that runs the map (``<node>/maps/<verb>``),
+its answer the page's reply.
+
+Whether a map node is on the bus is read from the nodes' stats the web node lists anyway
+(their ``adapter``, ``map``; once a second): with none the panel asks nothing and wakes
+for nothing, where it asked every ``NO_MAPS_EVERY_S`` (a Zenoh query a second with a page
+open: ~0.1 % of a core; issue 35). Zenoh's matching status of a querier does not serve
+here: it matches the queryables whose key holds the querier's, and ``*/maps/list`` is
+held by none (a map node serves ``<node>/maps/**``).
 
 Two messages go to the pages: ``maps`` (each node's maps: tables, curves; sent when they
 change, and to a page that connects) and ``map_values`` (each map's live input, output,
@@ -13,6 +21,7 @@ import functools
 import json
 import threading
 import time
+from collections.abc import Callable
 from typing import TYPE_CHECKING
 
 from sonibus.bus import client as bus_client
@@ -28,7 +37,7 @@ if TYPE_CHECKING:
     from .server import Client, Pages
 
 MAPS_EVERY_S = 0.2     # how often the maps' live values are asked while a page is open
-NO_MAPS_EVERY_S = 1.0  # and how often while the last look found no map node (a new one shows within it)
+NO_MAPS_EVERY_S = 1.0  # and how often while a map node is listed but the last look found none
 ASK_TIMEOUT_S = 1.0    # how long a look waits for the map nodes' answers
 MAX_MAP_NODES = 16     # map nodes shown (names from the bus)
 MAX_MAPS_BYTES = 4 << 20  # a look's maps, as JSON: past this the nodes past it are left out (said, counted)
@@ -39,22 +48,32 @@ _dumps = functools.partial(json.dumps, allow_nan=False)
 class MapsPanel:
     """Looks at the map nodes for ``pages`` (``run`` on a worker of ``adapter``)."""
 
-    def __init__(self, adapter: Adapter, pages: Pages) -> None:
-        self.adapter, self.pages = adapter, pages
+    def __init__(self, adapter: Adapter, pages: Pages, listed: Callable[[], bool]) -> None:
+        """``listed``: whether a map node is among the nodes listed now (their stats)."""
+        self.adapter, self.pages, self._listed = adapter, pages, listed
         self._structure = ""  # the last ``maps`` message sent
         self._found = False   # whether the last look found a map node
-        self._wanted = threading.Event()  # an operator's page came, or the node stops
+        self._wanted = threading.Event()  # an operator's page came, a map node listed, or the node stops
         pages.on_operator.append(self._wanted.set)
 
+    def nodes_listed(self) -> None:
+        """The nodes' list was made anew (their stats, once a second): a look if a map node is in it."""
+        if not self._found and self._listed():
+            self._wanted.set()
+
     def run(self) -> None:
-        """Look every ``MAPS_EVERY_S`` while an operator's page is open (``NO_MAPS_EVERY_S`` while
-        there is no map node to show); with no page, wait for one (not a wake-up a look for nobody)."""
+        """Look every ``MAPS_EVERY_S`` while an operator's page is open and a map node is listed
+        (``NO_MAPS_EVERY_S`` while the last look found none to show; one look more when the
+        last goes, to clear the panel); else wait for both (not a wake-up a look for nobody)."""
         stopping = self.adapter.stopping
         self.adapter.when_stopping(self._wanted.set)
+
+        def wanted() -> bool:
+            return bool(self.pages.operators) and (self._found or self._listed())
         while not stopping.is_set():
-            if not self.pages.operators:
+            if not wanted():
                 self._wanted.clear()
-                if not self.pages.operators:  # (one that came between: set after the clear, or seen here)
+                if not wanted():  # (what came between: set after the clear, or seen here)
                     self._wanted.wait()
                 continue
             if stopping.wait(MAPS_EVERY_S if self._found else NO_MAPS_EVERY_S):
