@@ -20,7 +20,18 @@ call a frame, after a warm-up of as many:
   on a real Zenoh session, given each frame as its frame subscription's callback does
   (``Streams``' ``direct``, its state lock had); its frames' ``t`` are 2 s apart, more than any period the
   pacing learns, so it never holds one back (under valgrind the main thread can wait
-  a second for its turn: a stall to the pacing), and ``max_age_ms = 0`` (they are old).
+  a second for its turn: a stall to the pacing), and ``max_age_ms = 0`` (they are old);
+- ``callback``: the same node given each frame as Zenoh's callback gives it (its shared
+  subscriber's ``_Shared.dispatch`` on a sample of ``robot1``: a pacing of its own), through
+  every layer before the node's take (the fanout, the guard, ``Bus.subscribe``'s callable,
+  the node's ``_direct`` and its lock, the state lock released and had again around each);
+  ``callback`` − ``sonibus`` is not only those layers: ``_direct`` does the node's own work
+  too (what it holds, woken for), which moves from run to run;
+- the layers alone (issue 35), on a ``Streams`` of its own session (a ``Fanout`` of its own)
+  whose ``direct`` is a plain function that takes the frame: ``stubbed``, its shared
+  subscriber's ``dispatch`` on the sample, beside ``plain``, that function given the sample
+  as a floor's Zenoh callback would (its key as a string, its payload as bytes); the row
+  ``layers`` is ``stubbed`` − ``plain``: what the layers cost a sample.
 
 The derived frame (issue 35: in the show the OSC node takes one beside each robot frame,
 26 values each sent as a message, half its work): the same contenders on ``robot0/derived``
@@ -52,7 +63,8 @@ from typing import Any
 from common import write
 from floor import DERIVED, Datagrams
 
-CONTENDERS = ("decode", "gate", "select", "pace", "send", "latency", "floor", "sonibus")
+CONTENDERS = ("decode", "gate", "select", "pace", "send", "latency", "floor", "sonibus", "callback", "plain",
+              "stubbed")
 SPACING_S = 2.0  # between the frames' t: over pacing.MAX_PERIOD_S, so nothing is paced however slowly valgrind runs
 
 
@@ -89,6 +101,7 @@ def contenders(joints: int, bundle: bool, port: int, payloads: list[bytes], deri
     """Each contender as a call on one of ``payloads`` (robot frames, or derived frames), and
     what stops the sonibus one."""
     import msgpack
+    import zenoh
 
     from sonibus.adapters.osc.config import OscSinkConfig
     from sonibus.adapters.osc.sink import OscSink
@@ -121,7 +134,8 @@ def contenders(joints: int, bundle: bool, port: int, payloads: list[bytes], deri
     sink = OscSink(OscSinkConfig(subscribe=("*/derived/**",) if derived else ("*/joints/*",),
                                  targets=(f"127.0.0.1:{port}",), extra=("t", "seq"), bundle=bundle, max_age_ms=0),
                    name="sound")
-    sink.start(Bus(session, node="bench"))
+    bus = Bus(session, node="bench")
+    sink.start(bus)
     gate, parsed = Gate(), Key.parse(key)
     # The sink's state lock, held here for the whole run: each frame is taken as ``_direct``
     # takes it once it has the lock. (``_direct`` itself gives a frame to the queue while the
@@ -132,7 +146,48 @@ def contenders(joints: int, bundle: bool, port: int, payloads: list[bytes], deri
     def take(payload: bytes) -> None:
         sink._take(key, payload, time.monotonic())
 
+    class Sample:  # what Zenoh's callback is given: its key expression and its payload, as Zenoh's bytes
+        __slots__ = ("attachment", "key_expr", "payload")
+
+        def __init__(self, key_expr: str, payload: bytes) -> None:
+            self.key_expr, self.payload, self.attachment = zenoh.KeyExpr(key_expr), zenoh.ZBytes(payload), None
+
+    other = "robot1/derived" if derived else "robot1/frame"
+    samples = {payload: Sample(other, payload) for payload in payloads}
+    dispatch = bus._subscriptions._shared["*/derived" if derived else "*/frame"].dispatch
+    state = sink._state
+
+    def callback(payload: bytes) -> None:
+        state.release()  # (``_direct`` takes the lock itself)
+        try:
+            dispatch(samples[payload])
+        finally:
+            state.acquire()
+
+    # the layers alone: a Streams of a Bus of its own (its own Fanout) taking each frame in a plain function
+    from sonibus.bus.queue import SampleQueue
+    from sonibus.bus.streams import Streams
+    kept: list[Any] = []
+
+    def stub(key: str, payload: Any) -> bool:
+        kept.append(payload)
+        kept.clear()
+        return True
+
+    stub_bus = Bus(session, node="stub")
+    stub_streams = Streams(stub_bus, sink.config.subscribe, SampleQueue(16), direct=stub)
+    VERDICTS.leave()  # (its own gate is never asked: nothing remembered for it)
+    stub_dispatch = stub_bus._subscriptions._shared["*/derived" if derived else "*/frame"].dispatch
+
+    def plain(payload: bytes) -> None:
+        sample = samples[payload]
+        stub(str(sample.key_expr), sample.payload.to_bytes())
+
+    def stubbed(payload: bytes) -> None:
+        stub_dispatch(samples[payload])
+
     def close() -> dict[str, int]:
+        stub_streams.undeclare()
         sink._state.release()
         counted = dict(sink.stats)
         sink.stop()
@@ -164,7 +219,8 @@ def contenders(joints: int, bundle: bool, port: int, payloads: list[bytes], deri
             "select": select, "pace": lambda payload: spacing.turn(key, taken[payload].t, taken[payload].seq, now),
             "send": send,
             "latency": lambda payload: latencies.add(0.001),
-            "floor": floor, "sonibus": take}, close
+            "floor": floor, "sonibus": take, "callback": callback,
+            "plain": plain, "stubbed": stubbed}, close
 
 
 def segments(joints: int, n: int, bundle: bool, derived: bool = False) -> None:
@@ -188,7 +244,7 @@ def segments(joints: int, n: int, bundle: bool, derived: bool = False) -> None:
     gc.enable()
     stats = close()
     print(f"sink counters: {stats}", file=sys.stderr)
-    if stats.get("received") != 2 * n * (len(DERIVED) if derived else joints) or stats.get("skipped") \
+    if stats.get("received") != 4 * n * (len(DERIVED) if derived else joints) or stats.get("skipped") \
             or stats.get("bad"):
         raise SystemExit(f"the sink did not take every frame as it should: {stats}")
 
@@ -233,6 +289,7 @@ def main() -> None:
         counts = instructions(joints, args.frames, bundle, derived)
         # what the sink spends beyond its stages: Streams.take, its counts, the frame assembler, _take
         counts["dispatch"] = counts["sonibus"] - sum(counts[s] for s in ("select", "pace", "send", "latency"))
+        counts["layers"] = counts["stubbed"] - counts["plain"]  # from Zenoh's callback to the node's direct
         rows.append({"joints": joints, "bundle": bundle, "derived": derived, "per_frame": counts,
                      "sonibus_to_floor": counts["sonibus"] / counts["floor"],
                      "gate_to_decode": counts["gate"] / counts["decode"]})

@@ -50,6 +50,8 @@ from .codec import Oversize
 # (the attachment of another protocol's traffic)
 Take = Callable[[str, "bytes | Oversize", Any], Any]
 Fits = Callable[[str, int], bool]  # whether a payload of this size on this key is kept whole
+Direct = Callable[[str, "bytes | Oversize"], Any]  # a take that may decline a sample (falsy): ``join``'s ``take``
+Fails = Callable[[Exception], None]  # what a take's exception is handed to (``Bus``: its node's ``on_error``)
 MAX_ROUTES = 1024  # keys whose subscriptions a Zenoh subscriber remembers (keys come from the network)
 
 
@@ -58,11 +60,12 @@ class Subscription:
     ``keyexpr`` or one that includes it); ``undeclare`` ends it (the last one a Zenoh
     subscriber serves undeclares it)."""
 
-    __slots__ = ("_fanout", "fits", "keyexpr", "live", "take", "via")
+    __slots__ = ("_fanout", "direct", "fails", "fits", "keyexpr", "live", "take", "via", "whole")
 
-    def __init__(self, fanout: Fanout, keyexpr: str, take: Take, fits: Fits) -> None:
+    def __init__(self, fanout: Fanout, keyexpr: str, take: Take, fits: Fits, whole: int = -1,
+                 fails: Fails | None = None, direct: Direct | None = None) -> None:
         self.keyexpr, self.take, self.fits, self.live, self._fanout = keyexpr, take, fits, True, fanout
-        self.via = keyexpr
+        self.via, self.whole, self.fails, self.direct = keyexpr, whole, fails, direct
 
     def undeclare(self) -> None:
         self._fanout._leave(self)
@@ -120,16 +123,28 @@ class _Shared:
         for subscription in subscriptions:
             if not subscription.live:  # (undeclared while this sample went round)
                 continue
-            if subscription.fits(key, size):
+            # (``whole``: a size kept whole without a call, every frame of every node; issue 35)
+            if size <= subscription.whole or subscription.fits(key, size):
                 if data is None:
                     data = payload.to_bytes()
                 kept: bytes | Oversize = data
             else:
                 kept = Oversize(size)
             try:
-                subscription.take(key, kept, sample)
+                # (``direct`` called here, not by a ``take`` that forwards: a Python call less a frame; issue 35)
+                direct = subscription.direct
+                if direct is None or not direct(key, kept):
+                    subscription.take(key, kept, sample)
             except Exception as exc:  # the others still get it; then Zenoh hears of it, as before sharing
-                failed = failed or exc
+                # (the guard here, not a wrapper around each take: a Python call less a sample; issue 35)
+                fails = subscription.fails
+                if fails is None:
+                    failed = failed or exc
+                    continue
+                try:
+                    fails(exc)
+                except Exception as again:
+                    failed = failed or again
         if failed is not None:
             raise failed
 
@@ -156,10 +171,14 @@ class Fanout:
         with self._lock:
             self._planned = {**planned, **self._planned}
 
-    def join(self, keyexpr: str, take: Take, fits: Fits) -> Subscription:
+    def join(self, keyexpr: str, take: Take, fits: Fits, whole: int = -1, fails: Fails | None = None,
+             direct: Direct | None = None) -> Subscription:
         """A subscription to ``keyexpr`` (a ``keys.expr``): ``take(key, payload, sample)`` for each
-        sample of it on a Zenoh subscriber's thread, the payload whole where ``fits(key, size)``."""
-        subscription = Subscription(self, keyexpr, take, fits)
+        sample of it on a Zenoh subscriber's thread, the payload whole where it is at most ``whole``
+        bytes or ``fits(key, size)``; with ``direct``, ``direct(key, payload)`` first, and ``take`` only
+        for what it declines (returns falsy). What they raise is handed to ``fails`` (if given: what
+        that raises, or the exception itself without it, is raised to Zenoh once the others had it)."""
+        subscription = Subscription(self, keyexpr, take, fits, whole, fails, direct)
         with self._lock:
             shared = self._serving(keyexpr)
             if shared is None:

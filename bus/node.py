@@ -164,7 +164,7 @@ class Bus:
     def subscribe(self, keyexpr: str, maxlen: int = 1024, queue: SampleQueue | None = None,
                   stamped: bool = False, skip: Callable[[str], bool] | None = None,
                   attachment: bool = False, history: bool = False, max_payload: int | None = None,
-                  ) -> tuple[Any, SampleQueue]:
+                  direct: Callable[[str, Any], bool] | None = None) -> tuple[Any, SampleQueue]:
         """Samples of ``keyexpr`` as ``(key, payload bytes)`` in a bounded queue
         (``(key, payload, time.monotonic_ns())`` of arrival if ``stamped``). A payload
         over the gate's size limit is queued as ``codec.Oversize`` (its size only).
@@ -175,7 +175,8 @@ class Bus:
         traffic (ROS 2 over rmw_zenoh): ``attachment`` queues each sample's attachment
         (bytes, or None) after its payload, ``history`` asks publishers with a cache for
         what they hold, late joiners too (zenoh-ext's advanced subscriber), and
-        ``max_payload`` replaces the gate's size limit.
+        ``max_payload`` replaces the gate's size limit. ``direct(key, payload)`` is called first,
+        on the subscriber's thread, and what it returns True for is not queued (``Streams``' direct).
 
         The subscriptions of one session to the same key expression share one Zenoh
         subscriber and its thread (``bus/fanout.py``; not those with ``history``), and so do
@@ -192,14 +193,26 @@ class Bus:
                     item += (sample.attachment.to_bytes() if sample.attachment is not None else None,)
                 queue.put((*item, time.monotonic_ns()) if stamped else item)
 
-        callback = self.guarded(enqueue, f"subscriber to {keyexpr}")
+        # (``direct`` given to the fanout, which calls it, and ``enqueue`` for what it declines, itself:
+        # no Python call between Zenoh's callback and the sink's but the fanout's; issue 35)
+        if direct is not None and skip is not None:
+            taken, skipped = direct, skip
+
+            def direct(key: str, payload: bytes | codec.Oversize) -> Any:
+                return not skipped(key) and taken(key, payload)  # (declined: ``enqueue`` leaves it out too)
+        what = f"subscriber to {keyexpr}"
         fits = self._fits(max_payload)
         if history:  # (an advanced subscriber of its own: what it asks publishers for is its alone)
+            def advanced(sample: zenoh.Sample) -> None:
+                key, payload, sample = self._taken(sample, fits)
+                if direct is None or not direct(key, payload):
+                    enqueue(key, payload, sample)
             return zenoh.ext.declare_advanced_subscriber(
-                self.session, keyexpr, self.guarded(lambda sample: enqueue(*self._taken(sample, fits)),
-                                                    f"subscriber to {keyexpr}"),
+                self.session, keyexpr, self.guarded(advanced, what),
                 history=zenoh.ext.HistoryConfig(detect_late_publishers=True)), queue
-        return self._subscriptions.join(keyexpr, callback, fits), queue
+        # (guarded by the fanout, in its own frame: ``_fails``)
+        return self._subscriptions.join(keyexpr, enqueue, fits, self._whole(max_payload), self._fails(what),
+                                        direct), queue
 
     def plan(self, keyexprs: Iterable[str]) -> None:
         """Say the key expressions this session's nodes will subscribe to (the runner, from each
@@ -212,8 +225,20 @@ class Bus:
         """Call ``take(key, payload)`` on Zenoh's thread for each sample of ``keyexpr``, with no
         queue between (for what must act at once: a stop seen on a robot's events); ``take``
         must only store or signal. A payload over the gate's limit comes as ``codec.Oversize``."""
-        return self._subscriptions.join(
-            keys.expr(keyexpr), self.guarded(lambda key, payload, sample: take(key, payload), what), self._fits(None))
+        return self._subscriptions.join(keys.expr(keyexpr), lambda key, payload, sample: take(key, payload),
+                                        self._fits(None), self._whole(None), self._fails(what))
+
+    def _fails(self, what: str) -> Callable[[Exception], None]:
+        """What the fanout hands a subscription's exception to: ``on_error`` (read then), as ``guarded``."""
+        def fail(exc: Exception) -> None:
+            if self.on_error is None:
+                raise exc
+            self.on_error(what, exc)
+        return fail
+
+    def _whole(self, limit: int | None) -> int:
+        """The size up to which ``_fits(limit)`` keeps any payload whole (the fanout asks it beyond)."""
+        return limit if limit is not None else self.limits.max_payload
 
     def _fits(self, limit: int | None) -> Callable[[str, int], bool]:
         """Whether a payload of a size on a key is kept whole: at most ``limit`` bytes, or

@@ -322,10 +322,9 @@ class Streams(Selection):
         if self.plan.frames:  # said once: what a user asked for is not the key subscribed to
             log.info("%s: %s served from whole frames on %s (per_joint_keys = true for publishers of "
                      "joint keys only)", bus.node, ", ".join(patterns), ", ".join(self.plan.frames))
-        into = _Direct(queue, direct) if direct is not None else queue
         # (derived frames as the robot's: one a tick beside it, as quick to take; through the queue, the
         # worker's wake-up cost an OSC sink more than the frame's work: docs/performance.md)
-        subscriptions = [(k, {"queue": into}) for k in (*self.plan.frames, *self.plan.derived)]
+        subscriptions = [(k, {"queue": queue, "direct": direct}) for k in (*self.plan.frames, *self.plan.derived)]
         subscriptions += [(k, {"queue": queue, "skip": skipping(k, frame_keys_of(k))}) for k in self.plan.keys]
         subscriptions += [(k, {"queue": queue, "skip": skipping(k, from_frames_of(k))}) for k in self.plan.broad]
         # (the broadest first: one of them that includes another serves it too, bus/fanout.py)
@@ -382,20 +381,6 @@ class Streams(Selection):
         for subscriber in self.subscribers:
             subscriber.undeclare()
         self.subscribers.clear()
-
-
-class _Direct(SampleQueue):
-    """What a sink's frame subscriptions put into when it takes frames where they arrive:
-    ``take(key, payload)`` on the subscription's callback thread; what it gives back
-    (False) goes into the sink's ``queue``."""
-
-    def __init__(self, queue: SampleQueue, take: Callable[[str, Any], bool]) -> None:
-        super().__init__(1)  # (holds nothing itself)
-        self.queue, self.take = queue, take
-
-    def put(self, item: Any) -> None:
-        if not self.take(item[0], item[1]):
-            self.queue.put(item)
 
 
 def if_free(lock: threading.Lock, take: Callable[[], None]) -> bool:

@@ -13,6 +13,8 @@ from sonibus_testplugin import JsonLinesConfig, JsonLinesSink
 
 from sonibus.bus import Adapter, decode, keys
 from sonibus.bus.cli import Environment, main
+from sonibus.bus.queue import SampleQueue
+from sonibus.bus.streams import Streams
 
 from .conftest import SONIBUS, wait_for
 
@@ -147,3 +149,41 @@ def test_a_callback_that_raises_fails_its_node_instead_of_zenoh_printing_it(net)
     script.put(msgpack.packb({"t": 1.0, "kind": "x"}))
     wait_for(lambda: fussy.state == "failed", what="the node to fail")
     assert fussy.failure == "subscriber to pepper/events/* failed: KeyError: 'pepper/events/surprise'", fussy.failure
+
+
+class Direct(Adapter):
+    """A node taking frames where they arrive (``Streams``' ``direct``, called by the fanout itself):
+    it declines odd frames (into its queue) and raises on a frame it did not expect (a bug of its own)."""
+
+    @dataclass(frozen=True)
+    class Config:
+        pass
+
+    def _start(self) -> None:
+        self.taken: list[tuple[str, bytes]] = []
+
+        def direct(key: str, payload: bytes) -> bool:
+            if key.startswith("surprise/"):
+                raise KeyError(key)
+            if decode(payload)["seq"] % 2:
+                return False
+            self.taken.append((key, payload))
+            return True
+
+        self.queue = SampleQueue(16)
+        self.own(Streams(self.bus, ["*/joints/*"], self.queue, direct=direct))
+
+
+def test_a_direct_take_that_raises_fails_its_node_and_what_it_declines_is_queued(net):
+    direct = net.start(Direct(name="direct"))
+    script = net.bus("script").session
+    frames = script.declare_publisher("pepper/frame")
+    wait_for(lambda: frames.matching_status.matching, what="the node's subscription")
+    for seq in (0, 1):
+        frames.put(msgpack.packb({"t": 1.0, "seq": seq, "names": ["HeadYaw"], "v": [0.1]}))
+    wait_for(lambda: direct.taken and len(direct.queue), what="a frame taken and one queued")
+    assert [decode(payload)["seq"] for _, payload in direct.taken] == [0]
+    assert decode(direct.queue.get()[1])["seq"] == 1 and direct.state == "running"
+    script.put("surprise/frame", msgpack.packb({"t": 1.0, "seq": 2, "names": ["HeadYaw"], "v": [0.1]}))
+    wait_for(lambda: direct.state == "failed", what="the node to fail")
+    assert direct.failure == "subscriber to */frame failed: KeyError: 'surprise/frame'", direct.failure
