@@ -202,7 +202,10 @@ def table() -> str:
         for row in ROWS.get(name, rows_generic)(r):
             lines.append("| " + " | ".join(row) + " |")
     when = time.strftime("%Y-%m-%d %H:%M", time.localtime())
-    return "\n".join([f"Last `make bench`: {when}; {'; '.join(sorted(m for m in machines if m))}.", "", *lines])
+    # (each row is its script's last results, whenever it ran: ``--only`` and a script run alone rewrite theirs)
+    return "\n".join([f"Table written {when} from each script's last results in `bench/results/` (a script run "
+                      f"alone, or `--only`, rewrites its own rows; `make bench` all of them); "
+                      f"{'; '.join(sorted(m for m in machines if m))}.", "", *lines])
 
 
 def update_doc() -> None:
