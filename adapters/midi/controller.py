@@ -30,6 +30,7 @@ log = logging.getLogger(__name__)
 
 INFO_RETRY_S = 2.0
 SETTLE_S = 0.5  # a JACK port's change looked at again this long after it was told
+SETTLE_WINDOW_S = 5.0  # a change told but not shown yet is looked for every SETTLE_S this long at most
 INFO = "\0info"
 
 
@@ -75,12 +76,20 @@ class MidiController(Adapter):
     def _watch(self) -> None:
         """Says who connects to the JACK port and who leaves; the JACK server gone fails the node."""
         again: float | None = None
+        pending_until = 0.0  # (monotonic) a change told and not shown yet is looked for until then
         while not self.stopping.is_set():
             # (JACK tells of a change before its connections show it: after one, a look again
-            # SETTLE_S later; with nothing changing, asleep until JACK or the stop wakes it)
+            # SETTLE_S later, and every SETTLE_S while what was told has not shown, SETTLE_WINDOW_S
+            # at most: one look missed a killed controller's leaving on a loaded machine, and
+            # nothing told again; with nothing changing, asleep until JACK or the stop wakes it)
             told = self._jack.changed.wait(again)
             came, left = self._jack.changes()
-            again = SETTLE_S if told or came or left else None
+            now = time.monotonic()
+            if came or left:
+                pending_until = 0.0
+            elif told:
+                pending_until = now + SETTLE_WINDOW_S
+            again = SETTLE_S if told or came or left or now < pending_until else None
             for port in sorted(came):
                 log.info("%s: controller '%s' connected to %s", self.name, port, self._jack.name)
             for port in sorted(left):
