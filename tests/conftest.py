@@ -135,10 +135,11 @@ class Network:
         return self.start(SimRobot(SimConfig(robot=robot, **options), name=f"sim-{robot}"), bus)
 
     def close(self) -> None:
-        for adapter in reversed(self._adapters):
-            adapter.stop()
-        for session in reversed(self._sessions):
-            session.close()
+        """Stop the nodes started here and close the sessions, newest first; safe twice."""
+        while self._adapters:
+            self._adapters.pop().stop()
+        while self._sessions:
+            self._sessions.pop().close()
 
 
 @pytest.fixture

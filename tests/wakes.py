@@ -40,3 +40,28 @@ def left_after_stop(node: Any, prefix: str) -> list[str]:
     workers = named(prefix)
     node.stop()
     return [t.name for t in workers if t.is_alive()]
+
+
+def calls(waits: dict[str, tuple[Any, str]], seconds: float) -> dict[str, int]:
+    """How often each ``owner.<method>`` of ``waits`` (by name) is called over ``seconds``: a
+    worker's waits counted where it waits (its queue's ``get``, its event's ``wait``), each a
+    wake-up and a new wait. Where a worker's wait is known this is the count to take: ``wakes``
+    also counts each time its thread waited for the GIL, and on a loaded machine (CI, 2 cores)
+    those made an idle worker's 2 or 3 wake-ups 10 or 12."""
+    counts = dict.fromkeys(waits, 0)
+    originals = {name: getattr(owner, method) for name, (owner, method) in waits.items()}
+
+    def counting(name: str) -> Any:
+        def counted(*args: Any, **kwargs: Any) -> Any:
+            counts[name] += 1
+            return originals[name](*args, **kwargs)
+        return counted
+
+    for name, (owner, method) in waits.items():
+        setattr(owner, method, counting(name))
+    try:
+        time.sleep(seconds)  # (the window counted: not a wait for something to happen)
+    finally:
+        for name, (owner, method) in waits.items():
+            setattr(owner, method, originals[name])
+    return counts

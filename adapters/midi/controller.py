@@ -76,20 +76,25 @@ class MidiController(Adapter):
     def _watch(self) -> None:
         """Says who connects to the JACK port and who leaves; the JACK server gone fails the node."""
         again: float | None = None
-        pending_until = 0.0  # (monotonic) a change told and not shown yet is looked for until then
+        window_end = 0.0  # (monotonic) a connection told and not shown yet is looked for until then
         while not self.stopping.is_set():
-            # (JACK tells of a change before its connections show it: after one, a look again
-            # SETTLE_S later, and every SETTLE_S while what was told has not shown, SETTLE_WINDOW_S
-            # at most: one look missed a killed controller's leaving on a loaded machine, and
-            # nothing told again; with nothing changing, asleep until JACK or the stop wakes it)
+            # (JACK tells of a change before its list of connections shows it: after one, a look
+            # again SETTLE_S later, and every SETTLE_S while a connection or disconnection of our
+            # port that JACK told has not shown, SETTLE_WINDOW_S at most: one look missed a killed
+            # controller's leaving on a loaded machine, and nothing told again; with nothing
+            # changing, asleep until JACK or the stop wakes it)
             told = self._jack.changed.wait(again)
             came, left = self._jack.changes()
             now = time.monotonic()
-            if came or left:
-                pending_until = 0.0
-            elif told:
-                pending_until = now + SETTLE_WINDOW_S
-            again = SETTLE_S if told or came or left or now < pending_until else None
+            if not self._jack.unshown:
+                window_end = 0.0
+            elif not window_end:
+                window_end = now + SETTLE_WINDOW_S
+            elif now >= window_end:
+                log.warning("%s: JACK told of a change to %s's connections with %s that never showed in %g s",
+                            self.name, self._jack.name, self._jack.forget_told(), SETTLE_WINDOW_S)
+                window_end = 0.0
+            again = SETTLE_S if told or came or left or window_end else None
             for port in sorted(came):
                 log.info("%s: controller '%s' connected to %s", self.name, port, self._jack.name)
             for port in sorted(left):

@@ -43,14 +43,19 @@ class JackMidiIn:
         self.failure: BaseException | None = None   # set by JACK's threads, raised by ``watch``
         self.changed = threading.Event()             # a port came, went, or was (dis)connected
         self.connected: frozenset[str] = frozenset()
+        # what JACK told of our port's connections and its list did not show yet: the other port's
+        # name ("" if it was gone before its name could be read) -> connected; ``unshown`` says if any
+        self._told: dict[str, bool] = {}
+        self._told_lock = threading.Lock()
         self.heard = 0                               # channel messages handed to ``receive``
         self._ending = jack_client.ProcessEnd()
         self.client = jack_client.open_client(client_name, "", key="api")
         try:
             self.port = self.client.midi_inports.register(port)
+            self._ours = str(self.port.name)
             self.client.set_process_callback(self._process)
             self.client.set_shutdown_callback(self._gone)
-            self.client.set_port_connect_callback(lambda a, b, on: self.changed.set(), only_available=False)
+            self.client.set_port_connect_callback(self._connect_told, only_available=False)
             self.client.set_port_registration_callback(lambda p, on: self.changed.set(), only_available=False)
             self.client.activate()
             if connect and not self.link():
@@ -80,6 +85,13 @@ class JackMidiIn:
             self.failure = exc
             self.changed.set()
             raise jack.CallbackExit from None
+
+    def _connect_told(self, a: jack.Port | None, b: jack.Port | None, on: bool) -> None:
+        names = (a.name if a is not None else "", b.name if b is not None else "")
+        if self._ours in names:
+            with self._told_lock:
+                self._told[names[1] if names[0] == self._ours else names[0]] = on
+        self.changed.set()
 
     def _gone(self, status: jack.Status, reason: str) -> None:
         self.failure = jack_client.ServerGone(f"JACK server '{jack_client.server_name('')}' went away "
@@ -123,7 +135,22 @@ class JackMidiIn:
             return set(), set()
         came, left = set(now - self.connected), set(self.connected - now)
         self.connected = now
+        with self._told_lock:  # (what shows now was told: "" is any port that left)
+            for peer, on in list(self._told.items()):
+                if (peer in now) == on if peer else left or not now:
+                    del self._told[peer]
         return came, left
+
+    @property
+    def unshown(self) -> bool:
+        """Whether JACK told of a connection or disconnection of our port that its list does not show yet."""
+        return bool(self._told)
+
+    def forget_told(self) -> list[str]:
+        """Stop waiting for what was told and never showed; the ports it named."""
+        with self._told_lock:
+            peers, self._told = sorted(self._told), {}
+        return peers
 
     def close(self) -> None:
         """Close the client (its port goes with it); bounded if the server hangs. Safe twice."""

@@ -29,7 +29,7 @@ class Reader(jackd.MidiInput):
 
 
 @pytest.fixture
-def reader(jack) -> Iterator[Any]:
+def reader(jack, net) -> Iterator[Any]:
     made: list[Reader] = []
 
     def connect(port: str) -> Reader:
@@ -37,16 +37,22 @@ def reader(jack) -> Iterator[Any]:
         return made[-1]
 
     yield connect
+    net.close()  # (the nodes first: see ``writer``)
     for r in made:
         r.close()
 
 
+# python-rtmidi's JACK calls hold the GIL while libjack waits for the server, and the server waits
+# for a cycle of every client, midi-in's among them, whose process callback (Python) needs the GIL:
+# a port of the test's own closed while a node of the test's process runs stalled JACK for its 5 s
+# timeouts, and then the server did not end (CI). So the test's nodes stop before its ports close.
 @pytest.fixture
-def writer(jack) -> Iterator[Any]:
+def writer(jack, net) -> Iterator[Any]:
     """A JACK MIDI output (virtual port 'fader' of client 'surface') for the controller to connect to."""
     out = rtmidi.MidiOut(rtmidi.API_UNIX_JACK, "surface")
     out.open_virtual_port("fader")
     yield out
+    net.close()  # (the nodes first: see above)
     out.close_port()
     out.delete()
 

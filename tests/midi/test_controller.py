@@ -12,7 +12,7 @@ from sonibus.adapters.show import Show, ShowConfig
 from sonibus.bus import ConfigError, decode, load_model
 
 from ..conftest import wait_for
-from ..wakes import left_after_stop, named, wakes
+from ..wakes import calls, left_after_stop
 
 HEY = "animations/Stand/Gestures/Hey_1"
 
@@ -152,9 +152,8 @@ def test_an_idle_controller_sleeps_until_a_message_or_a_port_change(net, writer)
     (before: 0.2 s and 0.5 s timeouts, 5 and 2 wake-ups a second; issue 35). Stopped, they end at once."""
     node = controller(net, cc=({"cc": 7, "channel": 2, "robot": "pepper", "joint": "HeadYaw"},))
     wait_for(lambda: node._jack.connected, what="the controller's port connected")
-    counted = wakes(named("surface-in:"), 3.0)
-    # (a count: a thread that waits for the GIL counts a switch too; before: commands 15, jack 6)
-    assert counted["surface-in:commands"] <= 3 and counted["surface-in:jack"] <= 3, counted
+    counted = calls({"commands": (node._queue, "get"), "watch": (node._jack.changed, "wait")}, 3.0)
+    assert counted["commands"] <= 1 and counted["watch"] <= 2, counted
     assert not left_after_stop(node, "surface-in:")  # (each woken by the stop: not left to its join's 2 s)
 
 
@@ -166,7 +165,8 @@ def test_a_fader_of_a_robot_without_info_waits_for_it_without_spinning(net, writ
     wait_for(lambda: node._jack.connected, what="the controller's port connected")
     writer.send_message([0xB1, 7, 64])
     wait_for(lambda: node.stats["waiting_info"], what="the fader held for ghost's info")
-    counted = wakes(named("surface-in:commands"), 2.0)
-    assert counted["surface-in:commands"] <= 4, counted  # (one ask in 2 s, and room for the GIL)
+    counted = calls({"commands": (node._queue, "get")}, 2.0)
+    # (one ask in 2 s: the wait until it, and one after; before: waits of 0, over and over)
+    assert counted["commands"] <= 3, counted
     assert node.stats["waiting_info"] <= 4, dict(node.stats)
     node.stop()  # (before JACK's server, the fixtures' teardown: not a client it must drop)
