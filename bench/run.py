@@ -50,6 +50,8 @@ SCRIPTS: dict[str, tuple[str, list[str], float]] = {
     "naoqi_rate": ("naoqi_rate", [], 90),
     "midi_rate": ("midi_rate", [], 90),
     "midi_in_latency": ("midi_in_latency", [], 60),  # midi-in's JACK input: JACK-Client beside rtmidi (issue 33)
+    # rtmidi's JACK output opened and closed beside a Python JACK client in one process: its stall
+    "jack_rtmidi_stall": ("jack_rtmidi_stall", [], 60),
     "recorder_rate": ("recorder_rate", [], 90),
     # the recorder node beside its floor, one robot at 50 Hz with features (issue 35)
     "recorder_node": ("recorder_node", ["--rounds", "2", "--seconds", "8"], 180),
