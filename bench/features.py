@@ -47,7 +47,7 @@ from sonibus.adapters.features.config import DEFAULT
 from sonibus.adapters.features.processor import derived_frame, whole
 from sonibus.adapters.features.table import describe
 from sonibus.adapters.sim import SimConfig, SimRobot
-from sonibus.bus import Bus, BusConfig, codec, keys, load_model, messages, open_session, robot_info, send_command
+from sonibus.bus import Bus, BusConfig, codec, framing, keys, load_model, open_session, robot_info, send_command
 from sonibus.bus.streams import Selection
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # the tests package, for the reference step
@@ -102,7 +102,7 @@ def frames(n: int) -> list[bytes]:
     for k in range(n):
         t = t0 + k / RATE_HZ
         values = middle + 0.3 * half * np.sin(2 * np.pi * 0.5 * (t - t0) + phase)
-        out.append(codec.encode(messages.frame(t, k, MODEL.joint_names, values.tolist())))
+        out.append(codec.encode(framing.frame(t, k, MODEL.joint_names, values.tolist())))
     return out
 
 

@@ -20,7 +20,7 @@ import msgpack
 import numpy as np
 from common import write
 
-from sonibus.bus import keys, load_model, messages
+from sonibus.bus import framing, keys, load_model, messages
 from sonibus.bus.codec import encode
 from sonibus.bus.keys import Key
 from sonibus.bus.streams import Selection
@@ -35,7 +35,7 @@ def payloads(n: int) -> dict[str, tuple[Key, list[bytes]]]:
     values = rng.uniform(-1.0, 1.0, (n, len(MODEL.joint_names)))
     return {
         "frame": (Key.parse(keys.frame("pepper")),
-                  [encode(messages.frame(t0 + k / 100, k, MODEL.joint_names, values[k].tolist())) for k in range(n)]),
+                  [encode(framing.frame(t0 + k / 100, k, MODEL.joint_names, values[k].tolist())) for k in range(n)]),
         "joint sample": (Key.parse(keys.joint("pepper", "HeadYaw")),
                          [encode({"t": t0 + k / 100, "seq": k, "v": float(values[k, 0])}) for k in range(n)]),
         "event": (Key.parse(keys.event("pepper", "behavior")),

@@ -36,7 +36,7 @@ from pythonosc.osc_message import OscMessage
 from sonibus import schemas
 from sonibus.adapters.map import MapConfig, MapNode
 from sonibus.adapters.osc import OscSink, OscSinkConfig
-from sonibus.bus import Bus, BusConfig, codec, keys, load_model, messages, open_session
+from sonibus.bus import Bus, BusConfig, codec, framing, keys, load_model, open_session
 
 RATE_HZ = 100.0
 MAPS = 50
@@ -86,7 +86,7 @@ class Robot:
             t = time.time()
             values = [m + 0.5 * h * math.sin(2 * math.pi * 0.5 * (t - start) + k)
                       for k, (m, h) in enumerate(zip(self.middle, self.half, strict=True))]
-            self.publisher.put(codec.encode(messages.frame(t, self.sent, self.names, values)))
+            self.publisher.put(codec.encode(framing.frame(t, self.sent, self.names, values)))
             self.sent += 1
             self.stop.wait(max(0.0, start + self.sent / RATE_HZ - time.monotonic()))
 

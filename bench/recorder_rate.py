@@ -3,7 +3,7 @@
 
 sonibus path, per step of the ramp: publisher process(es) put frames as a
 robot owner does (``RobotAdapter.publish_frame``; ``sink_throughput.publish``):
-each frame of 17 joints whole on ``botN/frame`` (``messages.frame``,
+each frame of 17 joints whole on ``botN/frame`` (``framing.frame``,
 ``Bus.stream_publisher``), then its samples on ``botN/joints/JK``; the
 recorder is its own process (``sonibus run`` with ``adapter = "recorder"``,
 ``subscribe = ["*/joints/*"]``, so it takes the frames and writes each one

@@ -33,7 +33,7 @@ from common import write
 from rosbags.typesys import Stores, get_typestore
 
 from sonibus.adapters.ros2 import cdr
-from sonibus.bus import codec, messages
+from sonibus.bus import codec, framing
 
 STORE = get_typestore(Stores.ROS2_JAZZY)
 JOINT_STATE, TRAJECTORY = "sensor_msgs/msg/JointState", "trajectory_msgs/msg/JointTrajectory"
@@ -44,7 +44,7 @@ def contenders(joints: int) -> dict[str, tuple[Callable[[], object], str]]:
     names = [f"joint_{i}" for i in range(joints)]
     values = [0.1 * i for i in range(joints)]
     payload = cdr.joint_state(cdr.Stamp(1_763_900_000, 5), names, values, values, values)
-    frame = codec.encode(messages.frame(1_763_900_000.0, 1, names, values))
+    frame = codec.encode(framing.frame(1_763_900_000.0, 1, names, values))
     T = STORE.types
     point = [cdr.Point(values, 1.5, [0.0] * joints)]
 

@@ -51,7 +51,7 @@ def contenders(endpoint: str) -> tuple[dict[str, Callable[[int], Any]], Callable
     import zenoh
 
     from sonibus.adapters.sim.adapter import SimConfig, SimRobot
-    from sonibus.bus import codec, messages
+    from sonibus.bus import codec, framing
     from sonibus.bus.node import Bus
     from sonibus.bus.session import BusConfig, open_session
 
@@ -84,7 +84,7 @@ def contenders(endpoint: str) -> tuple[dict[str, Callable[[int], Any]], Callable
 
     engine, body_names, tick = robot.engine, robot.engine.body.names, robot.ticker()
     positions = list(robot.body.positions)
-    message = messages.frame(time.time(), 0, body_names, positions)
+    message = framing.frame(time.time(), 0, body_names, positions)
     payload = codec.encode(message)
 
     def advance(seq: int) -> None:

@@ -125,7 +125,7 @@ def publish(endpoint: str, robots: list[int], frames_per_s: float, seconds: floa
     ranges has them before the measured frames."""
     gc.disable()
     from sonibus import schemas
-    from sonibus.bus import Bus, BusConfig, codec, messages, open_session
+    from sonibus.bus import Bus, BusConfig, codec, framing, open_session
 
     session = open_session(BusConfig(multicast=False, connect=(endpoint,)))
     try:
@@ -157,7 +157,7 @@ def publish(endpoint: str, robots: list[int], frames_per_s: float, seconds: floa
         def put_frame(frame: int, t: float) -> int:
             for row, whole in zip(streams, frames_out, strict=True):
                 values = [value_of(frame, j) for j in range(JOINTS)]
-                whole.put(encode(messages.frame(t, frame, names, values)))
+                whole.put(encode(framing.frame(t, frame, names, values)))
                 for publisher, v in zip(row, values, strict=True):
                     publisher.put(encode({"t": t, "seq": frame, "v": v}))
             return JOINTS * len(streams)

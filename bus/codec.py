@@ -31,7 +31,7 @@ _UINTS = ((1 << 8, struct.Struct(">BB"), 0xCC), (1 << 16, struct.Struct(">BH"), 
 
 
 class FrameEncoder:
-    """A robot's frames (``{t, seq, names, v}``, ``messages.frame``) encoded to the very bytes
+    """A robot's frames (``{t, seq, names, v}``, ``framing.frame``) encoded to the very bytes
     ``encode`` makes of them, the names packed once: a robot's joints are the same every frame,
     and their names were half the packing of a 17-joint frame (issue 35).
 

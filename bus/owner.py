@@ -31,7 +31,7 @@ from typing import Any, ClassVar
 import zenoh
 
 from .. import schemas
-from . import codec, commands, keys, messages
+from . import codec, commands, framing, keys, messages
 from .adapter import Adapter
 from .connection import UNREACHED, Connection
 from .control import URGENT_REPLY
@@ -150,11 +150,11 @@ class RobotAdapter(Adapter):
                      extra: dict[str, Sequence[float]] | None) -> dict[str, Any]:
         """The frame of ``positions`` (and ``extra``) without the joints the gate would refuse,
         those left out counted and warned about; ``ValueError`` for columns of other lengths."""
-        message = messages.frame(t, seq, names, positions, extra)
+        message = framing.frame(t, seq, names, positions, extra)
         if len(message["names"]) != len(message["v"]) or any(len(v) != len(message["names"])
                                                              for v in (extra or {}).values()):
             raise ValueError(f"{len(message['names'])} joint names but {len(positions)} positions (or extras)")
-        message, left_out = messages.valid_part(message)
+        message, left_out = framing.valid_part(message)
         if left_out:  # a glitching sensor: the other joints go on
             self.count("joints_left_out", len(left_out))
             self.warn("values", f"{self.robot}: {', '.join(left_out)} left out of frame {seq}: "

@@ -10,7 +10,7 @@ from typing import Any
 
 import zenoh
 
-from . import codec, keys, messages
+from . import codec, framing, keys
 from .node import Bus, Entities
 
 
@@ -32,10 +32,10 @@ class FramePublishers:
         self.per_joint = matching
 
     def put(self, frame: dict[str, Any]) -> None:
-        """Publish ``frame`` (checked by the caller: ``messages.frame``, ``valid_part``)."""
+        """Publish ``frame`` (checked by the caller: ``framing.frame``, ``valid_part``)."""
         self._frame.put(codec.encode(frame))
         if self.per_joint:
-            for name, sample in messages.frame_samples(frame):
+            for name, sample in framing.frame_samples(frame):
                 self._joint(name).put(codec.encode(sample))
 
     def put_values(self, t: float, seq: int, names: Sequence[str], values: Sequence[float]) -> None:
@@ -47,7 +47,7 @@ class FramePublishers:
             encoder = self._encoder = codec.FrameEncoder(names)
         self._frame.put(encoder.encode(t, seq, values))
         if self.per_joint:
-            for name, sample in messages.frame_samples(messages.frame(t, seq, names, values)):
+            for name, sample in framing.frame_samples(framing.frame(t, seq, names, values)):
                 self._joint(name).put(codec.encode(sample))
 
     def _joint(self, name: str) -> zenoh.Publisher:

@@ -166,9 +166,10 @@ class Selection:
     whether a joint of a frame is one the patterns select (what a robot's frames
     with one joint list give is worked out once: ``selected``).
 
+    >>> from sonibus.bus import framing
     >>> from sonibus.bus.codec import encode
     >>> selection = Selection(["pepper/joints/Head*"])
-    >>> frame = messages.frame(1.5, 7, ["HeadYaw", "LHand"], [0.1, 0.9])
+    >>> frame = framing.frame(1.5, 7, ["HeadYaw", "LHand"], [0.1, 0.9])
     >>> [s.source.name for s in selection.incoming("pepper/frame", encode(frame)).samples]
     ['HeadYaw']
     """

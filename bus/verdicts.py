@@ -19,7 +19,8 @@ process of one sink gains nothing by remembering, and would pay for it.
 
 >>> from sonibus.bus.codec import encode
 >>> from sonibus.bus.keys import Key
->>> from sonibus.bus.messages import Gate, frame
+>>> from sonibus.bus.messages import Gate
+>>> from sonibus.bus.framing import frame
 >>> verdicts, gate = Verdicts(), Gate()
 >>> verdicts.join(); verdicts.join()  # (two nodes: what ``Selection`` does)
 >>> payload = encode(frame(1.5, 7, ["HeadYaw"], [0.1]))

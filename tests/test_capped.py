@@ -12,7 +12,7 @@ from contextlib import contextmanager
 
 from sonibus.adapters.osc.config import Target
 from sonibus.adapters.osc.profiles import SonibusProfile
-from sonibus.bus import messages
+from sonibus.bus import framing
 from sonibus.bus.capped import Capped
 from sonibus.bus.codec import encode
 from sonibus.bus.keys import Key
@@ -34,7 +34,7 @@ def held() -> Iterator[Callable[[], int]]:
 
 def made_up_frame(robot: int, joints: int, length: int) -> bytes:
     names = [f"r{robot}j{j}".ljust(length, "x") for j in range(joints)]
-    return encode(messages.frame(1.5, 7, names, [0.1] * joints))
+    return encode(framing.frame(1.5, 7, names, [0.1] * joints))
 
 
 def test_a_selection_keeps_few_bytes_of_made_up_joint_lists():
@@ -47,7 +47,7 @@ def test_a_selection_keeps_few_bytes_of_made_up_joint_lists():
 
 
 def test_a_selection_keeps_few_bytes_of_long_made_up_names():
-    payloads = [encode(messages.frame(1.5, 7, [f"N{i}".ljust(60_000, "x")], [0.1])) for i in range(400)]
+    payloads = [encode(framing.frame(1.5, 7, [f"N{i}".ljust(60_000, "x")], [0.1])) for i in range(400)]
     with held() as now:
         selection = Selection(["*/joints/*"])
         for payload in payloads:

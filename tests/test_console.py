@@ -9,7 +9,7 @@ import time
 import pytest
 
 from sonibus.adapters.console import ConsoleConfig, ConsoleView
-from sonibus.bus import keys, messages
+from sonibus.bus import framing, keys
 
 from .conftest import wait_for
 
@@ -29,7 +29,7 @@ def test_the_view_shows_frames_or_with_per_joint_keys_the_joint_keys(net, per_jo
         nonlocal seq
         seq += 1
         script.put(keys.joint("bot", "HeadPitch"), {"t": time.time(), "seq": seq, "v": 0.25})
-        script.put(keys.frame("bot"), messages.frame(time.time(), seq, ["HeadYaw"], [0.5]))
+        script.put(keys.frame("bot"), framing.frame(time.time(), seq, ["HeadYaw"], [0.5]))
         return [line for line in view.out.getvalue().splitlines() if heard in line]
 
     lines = wait_for(shown, what=f"a line with {heard}")

@@ -12,7 +12,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from sonibus import schemas
-from sonibus.bus import messages
+from sonibus.bus import framing, messages
 from sonibus.bus.keys import Key
 from sonibus.bus.messages import BadMessage, Gate, Limits
 
@@ -33,7 +33,7 @@ def refused(key: Key, message: object, gate: Gate | None = None) -> str:
 
 
 def now_frame(**changes: object) -> dict:
-    return {**messages.frame(time.time(), 1, ["HeadYaw", "HeadPitch"], [0.1, -0.2]), **changes}
+    return {**framing.frame(time.time(), 1, ["HeadYaw", "HeadPitch"], [0.1, -0.2]), **changes}
 
 
 def test_a_good_message_of_each_section_passes_unchanged():
@@ -189,7 +189,7 @@ def test_the_gate_accepts_a_derived_frame_exactly_when_the_schema_does(frame):
 
 
 def test_a_derived_frame_whose_names_and_values_differ_in_length_is_refused():
-    frame = messages.derived_frame(time.time(), 1, ["qom/Body", "hand/R"], [0.5])
+    frame = framing.derived_frame(time.time(), 1, ["qom/Body", "hand/R"], [0.5])
     assert "names and v are not two lists of the same length" in refused(Key.parse("pepper/derived"), frame)
 
 
@@ -274,14 +274,14 @@ def test_the_schemas_hold_the_bounds_the_gate_uses():
 
 
 def test_an_owner_leaves_out_the_joints_a_glitching_sensor_reports_and_keeps_the_rest():
-    glitch = messages.frame(time.time(), 4, ["HeadYaw", "HeadPitch", "LHand"], [0.1, float("nan"), 0.5],
+    glitch = framing.frame(time.time(), 4, ["HeadYaw", "HeadPitch", "LHand"], [0.1, float("nan"), 0.5],
                             {"temp": [40.0, 41.0, float("inf")]})
-    kept, left_out = messages.valid_part(glitch)
+    kept, left_out = framing.valid_part(glitch)
     assert left_out == ["HeadPitch", "LHand"]
     assert kept == {"t": glitch["t"], "seq": 4, "names": ["HeadYaw"], "v": [0.1], "temp": [40.0]}
     assert Gate().check(FRAME, pack(kept)) == kept
     good = now_frame()
-    assert messages.valid_part(good) == (good, [])
+    assert framing.valid_part(good) == (good, [])
 
 
 def test_an_event_of_a_kind_the_schema_knows_must_fit_it_and_its_key():
@@ -322,7 +322,7 @@ def test_one_gate_takes_a_key_s_derived_frames_one_after_another_as_the_schema_s
     the next are each accepted exactly when the schema accepts them, refused with their reason."""
     gate, key, names = Gate(), Key.parse("pepper/derived"), ["qom/Body", "hand/R", "hand/L", "velocity/A"]
     for seq, v in enumerate(values):
-        frame = messages.derived_frame(time.time() - 1.0, seq, names, v)
+        frame = framing.derived_frame(time.time() - 1.0, seq, names, v)
         try:
             gate.check(key, pack(frame))
             accepted = True

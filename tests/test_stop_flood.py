@@ -19,7 +19,7 @@ from sonibus.adapters.web import WebPages
 from sonibus.adapters.web.config import WebConfig
 from sonibus.bus import codec, keys, send_command
 from sonibus.bus.client import owner_of
-from sonibus.bus.messages import frame
+from sonibus.bus.framing import frame
 
 from .conftest import wait_for
 

@@ -10,7 +10,7 @@ import time
 import pytest
 
 from sonibus import schemas
-from sonibus.bus import codec, messages, streams
+from sonibus.bus import codec, framing, streams
 from sonibus.bus.plan import Plan, plan
 from sonibus.bus.queue import SampleQueue
 from sonibus.bus.streams import Incoming, Selection, Streams
@@ -116,7 +116,7 @@ def test_derived_frames_come_once_as_the_samples_of_the_keys_the_patterns_select
     seq = iter(range(10**6))
 
     def put() -> bool:
-        frame = messages.derived_frame(time.time(), next(seq), ["qom/Body", "hand/R", "velocity/HeadYaw"],
+        frame = framing.derived_frame(time.time(), next(seq), ["qom/Body", "hand/R", "velocity/HeadYaw"],
                                        [0.5, [0.1, 0.2, 0.3], 1.5])
         robot.put("pepper/derived", frame)
         robot.put("pepper/derived/qom/Head", {"t": time.time(), "seq": 7, "v": 0.25})
@@ -245,8 +245,8 @@ def test_two_threads_taking_one_robots_frames_with_two_joint_lists_each_get_thei
     read once a frame)."""
     selection = Selection(["pepper/joints/HeadYaw"])
     t = time.time() - 1
-    payloads = [codec.encode(messages.frame(t, 0, ["HeadYaw", "LHand"], [1.0, 2.0])),
-                codec.encode(messages.frame(t, 1, ["LHand", "HeadYaw", "RHand"], [2.0, 1.0, 3.0]))]
+    payloads = [codec.encode(framing.frame(t, 0, ["HeadYaw", "LHand"], [1.0, 2.0])),
+                codec.encode(framing.frame(t, 1, ["LHand", "HeadYaw", "RHand"], [2.0, 1.0, 3.0]))]
     wrong: list[tuple[str, ...]] = []
 
     def take(first: int) -> None:
@@ -273,7 +273,7 @@ def test_a_robots_next_frames_find_their_selection_by_the_gates_names_without_co
     they are; the selection is then found by that tuple's identity: no name compared again."""
     selection = Selection(["pepper/joints/Head*"])
     t = time.time() - 1
-    frames = [codec.encode(messages.frame(t + seq, seq, ["HeadYaw", "LHand"], [0.1 * seq, 0.5])) for seq in range(5)]
+    frames = [codec.encode(framing.frame(t + seq, seq, ["HeadYaw", "LHand"], [0.1 * seq, 0.5])) for seq in range(5)]
     first = selection.incoming("pepper/frame", frames[0])
     worked_out = []
     chosen = Selection._chosen
@@ -282,7 +282,7 @@ def test_a_robots_next_frames_find_their_selection_by_the_gates_names_without_co
     assert worked_out == []
     assert all(m.selected is first.selected for m in taken)
     assert [m.values for m in taken] == [(0.1 * s,) for s in range(1, 5)]
-    other = selection.incoming("pepper/frame", codec.encode(messages.frame(t, 9, ["LHand", "HeadPitch"], [0.5, 0.7])))
+    other = selection.incoming("pepper/frame", codec.encode(framing.frame(t, 9, ["LHand", "HeadPitch"], [0.5, 0.7])))
     assert worked_out == ["pepper"] and other.values == (0.7,) and other.selected is not first.selected
 
 
@@ -291,7 +291,7 @@ def test_a_derived_frames_parts_are_made_only_when_a_sink_looks_at_them():
     the first time they are read, once, the same as each value's key would carry."""
     selection = Selection(["pepper/derived/qom/*"])
     t = time.time() - 1
-    payload = codec.encode(messages.derived_frame(t, 3, ["qom/all", "hand/R", "qom/arm"], [0.2, [0.1, 0.3], 0.4]))
+    payload = codec.encode(framing.derived_frame(t, 3, ["qom/all", "hand/R", "qom/arm"], [0.2, [0.1, 0.3], 0.4]))
     message = selection.incoming("pepper/derived", payload)
     assert len(message.parts) == 2 and message.parts and message.parts._made is None  # (none made yet)
     assert [(p.source.key, p.message, p.values) for p in message.parts] == [

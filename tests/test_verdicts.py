@@ -10,7 +10,7 @@ import time
 import pytest
 import zenoh
 
-from sonibus.bus import codec, messages
+from sonibus.bus import codec, framing, messages
 from sonibus.bus.keys import Key
 from sonibus.bus.messages import BadMessage, Limits
 from sonibus.bus.queue import SampleQueue
@@ -23,7 +23,7 @@ NAMES = ["HeadYaw", "HeadPitch", "LHand"]
 
 
 def _frame(seq: int, t: float | None = None, values: list[float] | None = None) -> bytes:
-    return codec.encode(messages.frame(time.time() - 1 if t is None else t, seq, NAMES, values or [0.1, 0.2, 0.3]))
+    return codec.encode(framing.frame(time.time() - 1 if t is None else t, seq, NAMES, values or [0.1, 0.2, 0.3]))
 
 
 @pytest.fixture
@@ -112,7 +112,7 @@ def test_a_refused_frame_is_refused_for_each_node_with_its_reason(checks):
 
 def test_a_node_that_changes_its_message_changes_no_other_nodes():
     frame = _frame(3, values=[0.5, 0.6, 0.7])
-    derived = codec.encode(messages.derived_frame(time.time() - 1, 3, ["qom/all", "hand/R"], [0.2, [0.1, 0.0, 0.3]]))
+    derived = codec.encode(framing.derived_frame(time.time() - 1, 3, ["qom/all", "hand/R"], [0.2, [0.1, 0.0, 0.3]]))
     patterns = ["*/joints/*", "*/derived/**"]
     first = Selection(patterns)
     mine = first.incoming("pepper/frame", frame).message
@@ -137,7 +137,7 @@ def test_what_is_remembered_is_bounded():
     for seq in range(100):
         assert verdicts.check(gate, key, _frame(seq))["seq"] == seq
         assert len(verdicts) <= 8
-    huge = codec.encode(messages.frame(time.time() - 1, 0, [f"J{i}" for i in range(128)], [0.0] * 128,
+    huge = codec.encode(framing.frame(time.time() - 1, 0, [f"J{i}" for i in range(128)], [0.0] * 128,
                                        {f"q{i}": [0.0] * 128 for i in range(12)}))
     assert 12 << 10 < len(huge) < 64 << 10
     verdicts.check(gate, key, huge)  # (counted 4 bytes a byte: over the table's 64 KiB, not kept)

@@ -22,7 +22,7 @@ from typing import Any
 
 import zenoh
 
-from sonibus.bus import codec, keys, lateness, messages
+from sonibus.bus import codec, framing, keys, lateness
 from sonibus.bus.adapter import Adapter
 from sonibus.bus.frames import Frame, FrameAssembler
 from sonibus.bus.info import InfoRequests
@@ -207,4 +207,4 @@ def whole(message: Incoming) -> Frame:
 
 def derived_frame(out: Output) -> bytes:
     """The message on ``<robot>/derived`` carrying every derived value of a frame, encoded."""
-    return codec.encode(messages.derived_frame(out.t, out.seq, out.names, out.values))
+    return codec.encode(framing.derived_frame(out.t, out.seq, out.names, out.values))

@@ -16,7 +16,7 @@ import time
 from collections.abc import Callable
 from typing import Any
 
-from sonibus.bus import keys, messages
+from sonibus.bus import framing, keys, messages
 from sonibus.bus.node import Bus, Reply
 from sonibus.bus.streams import Incoming
 
@@ -105,7 +105,7 @@ def samples_of(incoming: Incoming) -> list[tuple[str, dict[str, Any]]]:
 
 def joint_samples(frame: Incoming) -> list[tuple[str, dict[str, Any]]]:
     """The samples of a frame's selected joints (``Incoming.samples``), each on its joint's key
-    (``messages.frame_samples``'s: ``t``, ``seq``, ``v`` and the extra quantities), from its
+    (``framing.frame_samples``'s: ``t``, ``seq``, ``v`` and the extra quantities), from its
     ``Selected`` (no ``Incoming`` made per joint)."""
     message, chosen = frame.message, frame.selected
     if chosen is None:
@@ -128,5 +128,5 @@ def selected(frame: Incoming) -> dict[str, Any]:
         return message
     index = frame.selected.indices
     extra = {q: message[q] for q in message if q not in messages.FRAME_FIELDS}
-    return messages.frame(message["t"], message["seq"], [message["names"][i] for i in index],
+    return framing.frame(message["t"], message["seq"], [message["names"][i] for i in index],
                           [message["v"][i] for i in index], {q: [v[i] for i in index] for q, v in extra.items()})

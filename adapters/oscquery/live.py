@@ -20,8 +20,8 @@ True
 ('sis', ['RArm', 7, 'onset'])
 >>> live.set_robot("pepper", info)  # (the info asked again: what was learned stays)
 >>> from sonibus.bus.streams import Selection
->>> from sonibus.bus import codec, messages
->>> payload = codec.encode(messages.frame(2.0, 8, ["HeadYaw"], [0.25]))
+>>> from sonibus.bus import codec, framing
+>>> payload = codec.encode(framing.frame(2.0, 8, ["HeadYaw"], [0.25]))
 >>> frame = Selection(["pepper/joints/*"]).incoming("pepper/frame", payload)
 >>> live.keep(frame), live.node("/pepper/joints/HeadYaw")["VALUE"]
 (None, [0.25])

@@ -35,8 +35,9 @@ from mcap.stream_reader import StreamReader
 
 from sonibus.bus import keys
 from sonibus.bus.errors import SonibusError
+from sonibus.bus.framing import derived_samples, frame_samples
 from sonibus.bus.keys import Key
-from sonibus.bus.messages import SECTIONS, BadMessage, Gate, Limits, derived_samples, frame_samples
+from sonibus.bus.messages import SECTIONS, BadMessage, Gate, Limits
 
 from . import lock
 from .bounded import (

@@ -41,7 +41,7 @@ from typing import Any, TypeVar
 
 import zenoh
 
-from sonibus.bus import codec, commands, keys, messages
+from sonibus.bus import codec, commands, framing, keys, messages
 from sonibus.bus.adapter import Adapter
 from sonibus.bus.errors import CommandError
 from sonibus.bus.keys import Key
@@ -286,7 +286,7 @@ class Replay(Adapter):
             return
         t = self._moved(first.data["t"], t_origin)
         owner = self._owners[self.names[first.key.partition("/")[0]]]
-        if owner.publish_frame(messages.frame(t, seq, names, values, extra)):  # per joint too, while wanted
+        if owner.publish_frame(framing.frame(t, seq, names, values, extra)):  # per joint too, while wanted
             self.count("frames")
             self.count("sent", len(names))
 
@@ -410,7 +410,7 @@ def _moments(messages: Iterable[Message]) -> Iterator[tuple[bool, list[Message]]
 
 def _join(samples: Sequence[dict[str, Any]]) -> tuple[list[float], dict[str, list[float]]]:
     """The positions and extras (those every sample has, as numbers) of one frame's
-    joint samples, for ``messages.frame``."""
+    joint samples, for ``framing.frame``."""
     shared = [q for q in samples[0]
               if q not in messages.FRAME_FIELDS and all(messages.number(s.get(q)) for s in samples)]
     return [s["v"] for s in samples], {quantity: [s[quantity] for s in samples] for quantity in shared}

@@ -10,7 +10,7 @@ from typing import Any
 
 import zenoh
 
-from .. import codec, connection, health, keys, messages, ownership, plan, registry
+from .. import codec, connection, framing, health, keys, ownership, plan, registry
 from ..busconfig import BusConfig
 from ..client import robot_info
 from ..errors import ConfigError
@@ -181,7 +181,7 @@ def _lines(key: str, payload: bytes, derived: zenoh.KeyExpr | None) -> list[str]
         return [f"{key} {json.dumps(message, separators=(', ', ': '), default=_unprintable)}"]
     try:
         return [f"{key}/{name} {json.dumps(sample, separators=(', ', ': '), default=_unprintable)}"
-                for name, sample in messages.derived_samples(message)
+                for name, sample in framing.derived_samples(message)
                 if derived.intersects(zenoh.KeyExpr(f"{key}/{name}"))]
     except (KeyError, TypeError, ValueError, zenoh.ZError):  # (not a derived frame, or a bad name: as it is)
         return [f"{key} {json.dumps(message, separators=(', ', ': '), default=_unprintable)}"]

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from sonibus import schemas
-from sonibus.bus import codec, keys, load_model, messages
+from sonibus.bus import codec, framing, keys, load_model
 
 T0 = 1_700_000_000.0  # frames carry UNIX times
 
@@ -42,7 +42,7 @@ class FakeOwner:
         the frame only."""
         self.seq = self.seq + 1 if seq is None else seq
         if whole:
-            self.put(keys.frame(self.robot), messages.frame(t, self.seq, list(positions), list(positions.values())))
+            self.put(keys.frame(self.robot), framing.frame(t, self.seq, list(positions), list(positions.values())))
         for joint, value in positions.items() if joints else ():
             self.put(keys.joint(self.robot, joint), {"t": t, "seq": self.seq, "v": value})
         return self.seq

@@ -14,7 +14,7 @@ import zenoh
 
 from sonibus import schemas
 from sonibus.adapters.features import Features, FeaturesConfig
-from sonibus.bus import ConfigError, decode, encode, keys, load_model, messages, robot_info, send_command
+from sonibus.bus import ConfigError, decode, encode, framing, keys, load_model, robot_info, send_command
 from sonibus.bus.info import InfoRequests
 
 from ..conftest import queued_keys, wait_for
@@ -51,7 +51,7 @@ def collect(bus, pattern: str) -> tuple[object, list[tuple[str, dict]]]:
         key, message = str(sample.key_expr), decode(sample.payload.to_bytes())
         with lock:
             if keys.is_derived_frame(key):
-                got.extend((f"{key}/{name}", part) for name, part in messages.derived_samples(message)
+                got.extend((f"{key}/{name}", part) for name, part in framing.derived_samples(message)
                            if wanted.intersects(zenoh.KeyExpr(f"{key}/{name}")))
             else:
                 got.append((key, message))

@@ -10,7 +10,7 @@ from typing import Any
 import pytest
 import rtmidi
 
-from sonibus.bus import codec, keys, messages
+from sonibus.bus import codec, framing, keys
 
 from .. import jackd
 
@@ -78,7 +78,7 @@ class FakeRobot:
         self.seq += 1
         t = time.time()
         if whole:
-            self.bus.put(keys.frame(self.robot), messages.frame(t, self.seq, list(values), list(values.values())))
+            self.bus.put(keys.frame(self.robot), framing.frame(t, self.seq, list(values), list(values.values())))
         for name, value in values.items() if joints else ():
             self.bus.put(keys.joint(self.robot, name), {"t": t, "seq": self.seq, "v": value})
 

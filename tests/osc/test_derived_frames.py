@@ -12,7 +12,7 @@ import pytest
 
 from sonibus.adapters.osc import OscSink, OscSinkConfig
 from sonibus.bus import encode, keys
-from sonibus.bus.messages import derived_frame, derived_samples, frame
+from sonibus.bus.framing import derived_frame, derived_samples, frame
 
 from ..conftest import wait_for
 from .test_frame_bytes import CONFIGS, toy_info

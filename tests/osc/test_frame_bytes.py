@@ -18,8 +18,9 @@ from sonibus.adapters.osc.config import Target
 from sonibus.adapters.osc.encode import NTP_OFFSET, EncodeError
 from sonibus.adapters.osc.profiles import PROFILES, shape_of
 from sonibus.bus import encode
+from sonibus.bus.framing import frame
 from sonibus.bus.keys import Key
-from sonibus.bus.messages import MAX_VALUE, frame
+from sonibus.bus.messages import MAX_VALUE
 
 from ..conftest import wait_for
 from .test_sink_delivery import messages

@@ -11,7 +11,7 @@ from pythonosc.osc_packet import OscPacket
 
 from sonibus.adapters.osc import OscSink, OscSinkConfig
 from sonibus.bus import encode, load_model
-from sonibus.bus.messages import frame
+from sonibus.bus.framing import frame
 
 from ..conftest import wait_for
 from .test_sink_delivery import commander

@@ -11,7 +11,7 @@ import time
 import pytest
 
 from sonibus.adapters.osc import OscSink, OscSinkConfig
-from sonibus.bus import Bus, encode, messages
+from sonibus.bus import Bus, encode, framing
 from sonibus.bus.claimwatch import owners
 
 from ..conftest import wait_for
@@ -35,7 +35,7 @@ def test_a_stale_warning_names_the_likely_cause_for_where_the_robot_runs(net, re
     wait_for(lambda: received(raw, "/pepper/joints/HeadYaw"), what="pepper's frames through the sink")
     script = net.bus("script")
     publisher = script.stream_publisher("pepper/frame")
-    old = encode(messages.frame(time.time() - 0.5, 1, ["HeadYaw"], [0.1]))  # half a second old
+    old = encode(framing.frame(time.time() - 0.5, 1, ["HeadYaw"], [0.1]))  # half a second old
     [warning] = wait_for(lambda: publisher.put(old) or stale_warnings(caplog), what="an old frame dropped, warned of")
     assert warning.partition("ms old: ")[2].startswith(cause.format(here=sink.bus.host)), warning
     assert "'pepper/frame'" in warning

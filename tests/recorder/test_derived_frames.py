@@ -15,7 +15,7 @@ from sonibus.adapters.features import Features, FeaturesConfig
 from sonibus.adapters.recorder.reading import Recording
 from sonibus.adapters.recorder.replay import Replay, ReplayConfig
 from sonibus.adapters.recorder.writer import RecordingWriter
-from sonibus.bus import decode, messages
+from sonibus.bus import decode, framing
 
 from ..conftest import wait_for
 from .conftest import record_sim, settle
@@ -39,11 +39,11 @@ def write(path: str, framed: bool) -> str:
             t = t_of(seq)
             names, values = zip(*[(n, v) for n, v in zip(NAMES, derived_values(seq), strict=True)
                                   if not (seq == 2 and n == "hand/R")], strict=True)
-            frame = messages.derived_frame(t, seq, names, values)
+            frame = framing.derived_frame(t, seq, names, values)
             if framed:
                 out.write("pepper/derived", ns(t), frame)
             else:
-                for name, sample in messages.derived_samples(frame):
+                for name, sample in framing.derived_samples(frame):
                     out.write(f"pepper/derived/{name}", ns(t), sample)
     return path
 
@@ -80,7 +80,7 @@ def test_the_recorder_writes_one_message_per_derived_frame_and_reads_back_their_
     settle(lambda: len(seen))
     features.stop()
     subscriber.undeclare()
-    on_bus = [(f"{key}/{name}", sample) for key, frame in seen for name, sample in messages.derived_samples(frame)]
+    on_bus = [(f"{key}/{name}", sample) for key, frame in seen for name, sample in framing.derived_samples(frame)]
     assert {key for key, _ in seen} == {"pepper/derived"}
     with Recording(str(path)) as recording:
         assert recording._counts["pepper/derived"] == len(seen)  # one MCAP message a frame, as it came

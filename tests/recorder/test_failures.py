@@ -22,7 +22,7 @@ import msgpack
 import pytest
 
 from sonibus.adapters.recorder import Recording, recover
-from sonibus.bus import messages
+from sonibus.bus import framing
 
 from ..conftest import SONIBUS, run_cli, wait_for
 from .conftest import tmpfs
@@ -100,7 +100,7 @@ def test_a_full_disk_ends_the_recorder_loudly_and_leaves_a_recoverable_file(net,
         seq = 0
         while not stop.wait(0.001):
             values = [random.uniform(-1, 1) for _ in names]
-            publisher.put(msgpack.packb(messages.frame(time.time(), seq, names, values)))
+            publisher.put(msgpack.packb(framing.frame(time.time(), seq, names, values)))
             seq += 1
 
     flooder = threading.Thread(target=flood, daemon=True)

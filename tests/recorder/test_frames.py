@@ -21,8 +21,8 @@ from sonibus.adapters.recorder.recorder import Recorder, RecorderConfig
 from sonibus.adapters.recorder.replay import Replay, ReplayConfig
 from sonibus.adapters.sim import SimRobot
 from sonibus.bus import SampleQueue, config, decode, encode, runner
-from sonibus.bus.messages import frame as frame_message
-from sonibus.bus.messages import frame_samples
+from sonibus.bus.framing import frame as frame_message
+from sonibus.bus.framing import frame_samples
 
 from ..conftest import SONIBUS, Network, wait_for
 from ..osc.pd import Datagrams

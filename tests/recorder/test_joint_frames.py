@@ -22,7 +22,7 @@ from sonibus.adapters.recorder.export import export_csv
 from sonibus.adapters.recorder.reading import Recording
 from sonibus.adapters.recorder.replay import Replay, ReplayConfig
 from sonibus.adapters.recorder.writer import RecordingWriter
-from sonibus.bus import decode, load_model, messages
+from sonibus.bus import decode, framing, load_model
 from sonibus.bus.cli import Environment, main
 
 from ..conftest import wait_for
@@ -122,13 +122,13 @@ def test_an_old_and_a_new_file_of_the_same_input_replay_the_same_frames_and_join
         assert all(frame in left for frame in got) and len(got) + replay.stats["late"] // 17 == len(recorded), name
         assert replay.stats["frames"] == len(got) and replay.problems == ""
         joints = {(key.rpartition("/")[2], m["seq"]): m for key, m in seen if "/joints/" in key}
-        assert joints == {(joint, f["seq"]): sample for f in frames for joint, sample in messages.frame_samples(f)}
+        assert joints == {(joint, f["seq"]): sample for f in frames for joint, sample in framing.frame_samples(f)}
 
 
 def test_a_bad_frame_in_a_file_is_skipped_with_one_line_and_the_rest_exports_and_replays(net, tmp_path):
     path = tmp_path / "crafted.mcap"
     names = [j.name for j in load_model("pepper").joints]
-    good = {seq: messages.frame(t_of(seq), seq, names, [value(seq, j) for j in range(len(names))])
+    good = {seq: framing.frame(t_of(seq), seq, names, [value(seq, j) for j in range(len(names))])
             for seq in range(6)}
     crafted = {2: {**good[2], "v": good[2]["v"][:-1]},                 # a value short
                4: {**good[4], "names": [*names[:-1], names[0]]}}       # a joint twice

@@ -24,7 +24,7 @@ from sonibus.adapters.recorder.reading import Recording
 from sonibus.adapters.recorder.recorder import Recorder, RecorderConfig
 from sonibus.bus import ConfigError
 from sonibus.bus.codec import encode
-from sonibus.bus.messages import frame, frame_samples
+from sonibus.bus.framing import frame, frame_samples
 
 from ..conftest import SONIBUS, run_cli, wait_for
 from .conftest import HEY, record_sim

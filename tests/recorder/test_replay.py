@@ -15,7 +15,7 @@ import pytest
 
 from sonibus.adapters.recorder import Recording
 from sonibus.adapters.recorder.replay import Replay, ReplayConfig
-from sonibus.bus import CommandError, OwnershipError, decode, encode, health, messages, robot_info, send_command
+from sonibus.bus import CommandError, OwnershipError, decode, encode, framing, health, robot_info, send_command
 
 from ..conftest import SONIBUS, free_port, run_cli, wait_for
 from ..osc.pd import Datagrams, oscdump_lines, start_oscdump
@@ -42,7 +42,7 @@ def start_sink(net, spawn, tmp_path, port, clock):
     probe = net.bus("probe")
     dump = start_oscdump(spawn, port)
     publisher = probe.stream_publisher("pepper/frame")  # the sink takes frames, as a robot owner puts them
-    wait_for(lambda: publisher.put(encode(messages.frame(time.time(), 0, ["Probe"], [0.0]))) or probed(dump),
+    wait_for(lambda: publisher.put(encode(framing.frame(time.time(), 0, ["Probe"], [0.0]))) or probed(dump),
              timeout=20, what="the sink to forward")
     publisher.undeclare()
     return dump

@@ -16,7 +16,7 @@ import zenoh
 from sonibus.adapters.recorder import Recording
 from sonibus.adapters.recorder.recorder import Recorder, RecorderConfig
 from sonibus.adapters.recorder.replay import Replay, ReplayConfig
-from sonibus.bus import messages, robot_info
+from sonibus.bus import framing, robot_info
 
 from ..conftest import run_cli, wait_for
 from .conftest import settle
@@ -44,12 +44,12 @@ def test_rotation_by_size_loses_and_repeats_no_message(net, tmp_path):
     frames = 0
     deadline = time.monotonic() + 30
     while len(recorder.files) < 4 and time.monotonic() < deadline:  # frames no compression shrinks much
-        publisher.put(msgpack.packb(messages.frame(time.time(), frames, JOINTS,
+        publisher.put(msgpack.packb(framing.frame(time.time(), frames, JOINTS,
                                                    [random.uniform(-1, 1) for _ in JOINTS])))
         frames += 1
         time.sleep(0.002)
     for _ in range(5):  # (the 4th file may have just opened, between two frames: it gets some, not 20 KB)
-        publisher.put(msgpack.packb(messages.frame(time.time(), frames, JOINTS, [0.0] * len(JOINTS))))
+        publisher.put(msgpack.packb(framing.frame(time.time(), frames, JOINTS, [0.0] * len(JOINTS))))
         frames += 1
     wait_for(lambda: recorder.stats["written"] == frames * len(JOINTS), what="every frame written",
              explain=lambda: f"{recorder.stats['written']} of {frames * len(JOINTS)}")

@@ -12,7 +12,7 @@ import pytest
 
 from sonibus.adapters.show import Show, ShowConfig
 from sonibus.adapters.show.clock import start
-from sonibus.bus import decode, keys, messages, send_command
+from sonibus.bus import decode, framing, keys, send_command
 from sonibus.bus.cli.top import ALARM, WARNING
 
 from ..conftest import SONIBUS
@@ -203,7 +203,7 @@ def test_a_robot_name_like_markup_is_shown_as_written(net):
 
     async def scenario(app, pilot):
         def put() -> None:
-            script.put(keys.frame("[b]bot"), messages.frame(time.time(), 1, ["HeadYaw"], [0.5]))
+            script.put(keys.frame("[b]bot"), framing.frame(time.time(), 1, ["HeadYaw"], [0.5]))
 
         await until(pilot, lambda: row(app, "robots", "[b]bot") or put(), what="the robot listed")
         await until(pilot, lambda: app.joints.border_title != "joints", what="its joints' title")
@@ -224,7 +224,7 @@ def test_control_characters_from_the_bus_are_shown_not_sent_to_the_terminal(net)
         def put() -> None:
             script.put(keys.event("pepper", "speech"), {"t": time.time(), "kind": "speech", "text": text,
                                                         "state": "started"})
-            script.put(keys.frame(bad_robot), messages.frame(time.time(), 1, ["HeadYaw"], [0.5]))
+            script.put(keys.frame(bad_robot), framing.frame(time.time(), 1, ["HeadYaw"], [0.5]))
 
         await until(pilot, lambda: ("started" in shown(app, "event-lines") and row(app, "robots", bad_robot))
                     or put(), what="the event and the robot shown")

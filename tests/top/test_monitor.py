@@ -11,7 +11,7 @@ from dataclasses import dataclass
 import pytest
 
 from sonibus.adapters.sim import SimConfig, SimRobot
-from sonibus.bus import Adapter, CommandError, encode, keys, load_model, messages, send_command
+from sonibus.bus import Adapter, CommandError, encode, framing, keys, load_model, send_command
 from sonibus.bus.monitor import Monitor, Snapshot
 
 from ..conftest import wait_for
@@ -45,7 +45,7 @@ def test_frames_missing_by_seq_are_counted_as_gaps_and_a_restart_is_none(net):
     script = net.bus("script")
     with Monitor(net.bus("top")) as monitor:
         def put(seq: int) -> None:
-            script.put(keys.frame("bot"), messages.frame(time.time(), seq, ["HeadYaw"], [0.1 * seq]))
+            script.put(keys.frame("bot"), framing.frame(time.time(), seq, ["HeadYaw"], [0.1 * seq]))
 
         put(1)  # (the subscription may not reach the script yet: until the first frame is seen)
         wait_for(lambda: robot(monitor.snapshot(), "bot") or put(1), what="the first frame of bot")
@@ -191,7 +191,7 @@ def test_robots_beyond_the_most_it_keeps_are_counted_not_kept(net):
     script = net.bus("script")
     with Monitor(net.bus("top"), most=2) as monitor:
         def put(name: str) -> None:
-            script.put(keys.frame(name), messages.frame(time.time(), 1, ["HeadYaw"], [0.5]))
+            script.put(keys.frame(name), framing.frame(time.time(), 1, ["HeadYaw"], [0.5]))
 
         wait_for(lambda: robot(monitor.snapshot(), "a") or put("a"), what="the first robot")
         for name in ("b", "c", "d"):
