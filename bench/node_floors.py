@@ -40,6 +40,7 @@ work cost. (Before issue 35 the recorder wrote a frame's joints a message each; 
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import json
 import math
 import os
@@ -47,7 +48,7 @@ import struct
 import tempfile
 import threading
 import time
-from collections.abc import Awaitable, Callable
+from collections.abc import Awaitable, Callable, Iterator
 from typing import Any
 
 from common import free_port, zenoh_config
@@ -499,8 +500,21 @@ def measure(seconds: float, warmup_s: float = 3.0, nodes: tuple[str, ...] = NODE
     """CPU % of one core of each floor (of ``nodes``) over ``seconds`` after ``warmup_s``, each
     fed its own publisher of one robot × 17 joints at ``RATE_HZ`` (with a derived frame beside
     each for the floors of ``FED_DERIVED``)."""
+    with running(nodes, seconds + warmup_s + 1) as pids:
+        time.sleep(warmup_s)
+        before, started = {name: cpu_ns(pid) for name, pid in pids.items()}, time.monotonic()
+        time.sleep(seconds)
+        wall = time.monotonic() - started
+        return {name: 100.0 * (cpu_ns(pid) - before[name]) / 1e9 / wall for name, pid in pids.items()}
+
+
+@contextlib.contextmanager
+def running(nodes: tuple[str, ...] = NODES, seconds: float = 600.0) -> Iterator[dict[str, int]]:
+    """The floors of ``nodes`` running, each fed (``measure``'s), for ``seconds`` at most: their
+    process ids by node, once every floor is fed (not warmed up); stopped on leaving."""
     if not nodes:
-        return {}
+        yield {}
+        return
     done = CONTEXT.Event()
     endpoints = {name: f"tcp/127.0.0.1:{free_port()}" for name in nodes}
     web_ports = {name: free_port() for name in ("foxglove", "oscquery", "web") if name in nodes}  # (each with a client)
@@ -515,6 +529,7 @@ def measure(seconds: float, warmup_s: float = 3.0, nodes: tuple[str, ...] = NODE
         floors = {name: CONTEXT.Process(target=target, args=(endpoints[name], *where, readies[name], done),
                                         daemon=True) for name, (target, where) in targets.items() if name in nodes}
         others: list[Any] = []
+        feeders: list[Any] = []
         if "features" in nodes:
             others.append(CONTEXT.Process(target=derived_reader, args=(derived_at, derived, derived_fed, done),
                                           daemon=True))
@@ -535,21 +550,21 @@ def measure(seconds: float, warmup_s: float = 3.0, nodes: tuple[str, ...] = NODE
             handles = []  # (kept until the end: a queue collected here is gone for the child too)
             for name, endpoint in endpoints.items():
                 fed, out = CONTEXT.Event(), CONTEXT.Queue()
-                others.append(CONTEXT.Process(target=publish, args=(endpoint, Case(1, 17), seconds + warmup_s + 1,
-                                                                     fed, out), daemon=True,
-                                              kwargs={"rate_hz": RATE_HZ, "derived": name in FED_DERIVED}))
-                others[-1].start()
+                feeders.append(CONTEXT.Process(target=publish, args=(endpoint, Case(1, 17), seconds, fed, out),
+                                               daemon=True,
+                                               kwargs={"rate_hz": RATE_HZ, "derived": name in FED_DERIVED}))
+                feeders[-1].start()
                 handles.append((fed, out))
             if not all(fed.wait(30) for fed, _ in handles) or not derived_fed.wait(30):
                 raise RuntimeError("the node floors' publishers did not find their subscribers")
-            time.sleep(warmup_s)
-            before, started = {name: cpu_ns(p.pid) for name, p in floors.items()}, time.monotonic()
-            time.sleep(seconds)
-            wall = time.monotonic() - started
-            return {name: 100.0 * (cpu_ns(p.pid) - before[name]) / 1e9 / wall for name, p in floors.items()}
+            yield {name: p.pid for name, p in floors.items()}
         finally:
             done.set()
+            for process in feeders:  # (they would publish until their time is up)
+                process.kill()
             for process in (*others, *floors.values()):
+                if process.pid is None:  # (never started)
+                    continue
                 process.join(10)
                 if process.is_alive():
                     process.kill()

@@ -15,7 +15,9 @@ private JACK server, dummy driver). Two layouts, each round:
   session sends each frame to every session that subscribes to it (seven nodes here),
   and so does its floor, a publisher.
 
-Beside them, the floors: a zenoh-python publisher of the same frames at the same
+Beside the nodes, at the same time (measured over the same window: one after the other,
+a node's ratio to its floor moved by ±30 % from run to run on a VM whose speed drifts over
+minutes), the floors: a zenoh-python publisher of the same frames at the same
 rate (the sim's), each frame taken by as many sessions as take the sim's in the show
 (``FRAME_TAKERS``: a publisher's send to each is its essential work, issue 35), a
 subscriber of them with an empty callback (what any sink pays
@@ -25,6 +27,7 @@ the features node's derived values too). CPU is each process's, from
 ``/proc/<pid>/task/*/schedstat`` over the window after a warm-up; medians of rounds.
 
     .venv/bin/python bench/show.py [--rounds 2] [--seconds 8] [--name show]
+    .venv/bin/python bench/show.py --lease-ms 10000 --name show_lease10s  # its nodes' Zenoh lease 10 s
     .venv/bin/python bench/show.py --nodes foxglove,oscquery  # those nodes and their floors only
     .venv/bin/python bench/show.py --nodes foxglove,oscquery --against DIR  # and DIR's beside them
 
@@ -46,6 +49,7 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import contextlib
 import json
 import os
 import signal
@@ -55,6 +59,7 @@ import subprocess
 import tempfile
 import threading
 import time
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -70,9 +75,10 @@ WARMUP_S = 3.0
 SHOW_GOAL_PCT = 20.0  # issue 35: the whole show in one `sonibus run`, % of a core
 NODE_GOAL = 1.5  # issue 35: each node in its own process, × its floor
 FRAME_TAKERS = 7  # the show's nodes that take the robot's frames (all but the gateway): its publisher's fan-out
+BUS_OPTIONS = ""  # more [bus] lines of the show, e.g. "\nlease_ms = 10000" (--lease-ms)
 NODES = ("sim", "osc", "gateway", "features", "recorder", "web", "oscquery", "foxglove", "midi")
 SHOW = """[bus]
-multicast = false
+multicast = false{bus_options}
 
 [nodes.sim]
 adapter = "sim"
@@ -238,20 +244,36 @@ def window(pids: dict[str, int], seconds: float) -> dict[str, float]:
 def measure_show(folder: Path, seconds: float, split: bool, tree: str = "",
                  waits: dict[str, float] | None = None, nodes: tuple[str, ...] = NODES,
                  against: str = "") -> dict[str, float]:
-    """The show in one process (``{"show": cpu}``) or in a process per node (cpu by node), clients
-    attached; ``tree``: the one process on another tree (see ``sonibus``); ``waits``: filled with
-    each process's voluntary context switches a second over the same window; ``nodes``: those
-    only, a process each (``split``); ``against``: with ``split``, the tree in that folder's
-    nodes too (but the sim and features: ``"<node> @against"``), clients of their own."""
+    """CPU % of ``show_running``'s processes over ``seconds`` after ``WARMUP_S``: ``{"show": cpu}``
+    in one process, cpu by node in a process each; ``waits``: filled with each process's
+    voluntary context switches a second over the same window."""
+    with show_running(folder, split, tree, nodes, against) as pids:
+        time.sleep(WARMUP_S)
+        before = {name: switches(pid) for name, pid in pids.items()}
+        cpu = window(pids, seconds)
+        if waits is not None:
+            waits.update({name: (switches(pid) - before[name]) / seconds for name, pid in pids.items()})
+        return cpu
+
+
+@contextlib.contextmanager
+def show_running(folder: Path, split: bool, tree: str = "", nodes: tuple[str, ...] = NODES,
+                 against: str = "") -> Iterator[dict[str, int]]:
+    """The show in one process (``"show"``) or in a process per node, clients attached, each fed;
+    their process ids by name (not warmed up); stopped on leaving. ``tree``: the one process on
+    another tree (see ``sonibus``); ``nodes``: those only, a process each (``split``); ``against``:
+    with ``split``, the tree in that folder's nodes too (but the sim and features: ``"<node>
+    @against"``), clients of their own."""
     def show_ports() -> dict[str, int]:
         return {name: free_port(socket.SOCK_DGRAM if name in ("osc", "gateway") else socket.SOCK_STREAM)
                 for name in ("osc", "gateway", "web", "oscquery", "foxglove")}
     ports = show_ports()
     config = folder / "show.toml"
-    config.write_text(SHOW.format(rate=RATE_HZ, folder=folder, **ports))
+    config.write_text(SHOW.format(rate=RATE_HZ, folder=folder, bus_options=BUS_OPTIONS, **ports))
     twins = [node for node in nodes if node not in ("sim", "features")] if split and against else []
     twin_ports = show_ports()
-    (folder / "against.toml").write_text(SHOW.format(rate=RATE_HZ, folder=folder, **twin_ports))
+    (folder / "against.toml").write_text(SHOW.format(rate=RATE_HZ, folder=folder, bus_options=BUS_OPTIONS,
+                                                      **twin_ports))
     endpoint = f"tcp/127.0.0.1:{free_port()}"
     processes: dict[str, subprocess.Popen[bytes]] = {}
     manager = CONTEXT.Manager()
@@ -296,12 +318,7 @@ def measure_show(folder: Path, seconds: float, split: bool, tree: str = "",
                 logs = {name: (folder / f"{name}.log").read_text(errors="replace")[-600:] for name in nodes}
                 raise RuntimeError(f"a client received nothing: {dict(counts)}, {dict(twin_counts)}; {logs}")
             time.sleep(0.2)
-        time.sleep(WARMUP_S)
-        before = {name: switches(p.pid) for name, p in processes.items()}
-        cpu = window({name: p.pid for name, p in processes.items()}, seconds)
-        if waits is not None:
-            waits.update({name: (switches(p.pid) - before[name]) / seconds for name, p in processes.items()})
-        return cpu
+        yield {name: p.pid for name, p in processes.items()}
     finally:
         done.set()
         for each in (client, twin_client):
@@ -314,12 +331,32 @@ def measure_show(folder: Path, seconds: float, split: bool, tree: str = "",
         manager.shutdown()
 
 
-def measure_floors(seconds: float) -> dict[str, float]:
+def measure_beside_floors(folder: Path, seconds: float, nodes: tuple[str, ...],
+                          against: str = "") -> dict[str, dict[str, float]]:
+    """The show in a process per node (``"split"``, ``show_running``'s) and every floor of its
+    nodes (``"floors"``: ``floors_running``'s and ``node_floors``'), all running at once, CPU %
+    over one window: a node and its floor measured in the same seconds, on the same machine
+    (measured one after the other, a node's ratio to its floor moved by ±30 % from run to run
+    on this VM, whose speed drifts over minutes)."""
+    with contextlib.ExitStack() as running:
+        floors = {**running.enter_context(floors_running()),
+                  **running.enter_context(node_floors.running(tuple(n for n in node_floors.NODES if n in nodes)))}
+        show = running.enter_context(show_running(folder, True, nodes=nodes, against=against))
+        time.sleep(WARMUP_S)
+        cpu = window({**{f"floors/{name}": pid for name, pid in floors.items()},
+                      **{f"split/{name}": pid for name, pid in show.items()}}, seconds)
+    return {layout: {name.partition("/")[2]: value for name, value in cpu.items() if name.startswith(layout + "/")}
+            for layout in ("floors", "split")}
+
+
+@contextlib.contextmanager
+def floors_running(seconds: float = 600.0) -> Iterator[dict[str, int]]:
     """The minimal harnesses: publisher (the sim's floor, its frames taken by ``FRAME_TAKERS``
     sessions), an empty subscriber (a sink's floor),
     floor.py's OSC sink, one robot × 17 joints at ``RATE_HZ``, and the same sink fed a derived
     frame beside each frame (``floor.DERIVED``, a features node's shape): the show's OSC node
-    sends joints and derived values, a datagram each."""
+    sends joints and derived values, a datagram each. Fed for ``seconds`` at most; their
+    process ids by name, once each is fed (not warmed up); stopped on leaving."""
     case = Case(1, 17)
     endpoints = [f"tcp/127.0.0.1:{free_port()}" for _ in range(3)]
     receiver = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
@@ -343,17 +380,18 @@ def measure_floors(seconds: float) -> dict[str, float]:
         handles = []  # (kept until the end: a queue collected here is gone for the child too)
         for endpoint, derived in zip(endpoints, (False, False, True), strict=True):
             fed, out = CONTEXT.Event(), CONTEXT.Queue()
-            feeders.append(CONTEXT.Process(target=publish, args=(endpoint, case, seconds + WARMUP_S + 5, fed, out),
+            feeders.append(CONTEXT.Process(target=publish, args=(endpoint, case, seconds, fed, out),
                                            kwargs={"rate_hz": RATE_HZ, "derived": derived}, daemon=True))
             feeders[-1].start()
             handles.append((fed, out))
         if not all(fed.wait(30) for fed, _ in handles) or not fed_all.wait(30):
             raise RuntimeError("the floor publishers did not find their subscribers")
-        time.sleep(WARMUP_S)
-        return window({"publisher": feeders[0].pid, "subscriber": empty.pid, "osc sink": sinks[0].pid,
-                       "osc sink + derived": sinks[1].pid}, seconds)
+        yield {"publisher": feeders[0].pid, "subscriber": empty.pid, "osc sink": sinks[0].pid,
+               "osc sink + derived": sinks[1].pid}
     finally:
         done.set()
+        for process in feeders:  # (they would publish until their time is up)
+            process.kill()
         for process in (*feeders, empty, *sinks, takers):
             if process.pid is None:  # (never started)
                 continue
@@ -405,7 +443,12 @@ def main() -> None:
                              "with --nodes: those nodes of that tree beside them, on the same bus")
     parser.add_argument("--nodes", default="", help="comma-separated: only these nodes (with the sim and features "
                         "that feed them), a process each, and their floors; no one-process layout")
+    parser.add_argument("--lease-ms", type=int, default=0,
+                        help="the show's Zenoh lease (its nodes' [bus] lease_ms; 0: sonibus's default)")
     args = parser.parse_args()
+    if args.lease_ms:
+        global BUS_OPTIONS
+        BUS_OPTIONS = f"\nlease_ms = {args.lease_ms}"
     chosen = tuple(node for node in args.nodes.split(",") if node)
     if unknown := set(chosen) - set(NODES):
         parser.error(f"--nodes {args.nodes}: no node {', '.join(sorted(unknown))} (the show's: {', '.join(NODES)})")
@@ -420,11 +463,12 @@ def main() -> None:
         jack = start_jack(folder / "jackd.log")
         try:
             for index in range(args.rounds):
-                own = tuple(node for node in node_floors.NODES if node in nodes)
-                got = {"floors": {**measure_floors(args.seconds), **node_floors.measure(args.seconds, WARMUP_S, own)}}
+                got: dict[str, dict[str, float]] = {}
                 for split in ((True,) if chosen else (True, False) if index % 2 == 0 else (False, True)):
-                    got["split" if split else "one"] = measure_show(folder, args.seconds, split, nodes=nodes,
-                                                                    against=args.against if chosen else "")
+                    if split:
+                        got.update(measure_beside_floors(folder, args.seconds, nodes, args.against if chosen else ""))
+                    else:
+                        got["one"] = measure_show(folder, args.seconds, False)
                 rounds.append(got)
                 load.append(os.getloadavg()[0])
                 print(f"round {index + 1}: " + "; ".join(f"{layout}: " + ", ".join(
@@ -466,7 +510,7 @@ def main() -> None:
                         "baseline": f"{base:.1f} % ({label})", "ratio": ratio,
                         "goal": f"≤ {NODE_GOAL:g}× its floor", "met": "yes" if cpu <= NODE_GOAL * base else "no"})
     write(args.name, {"machine": machine, "tree": tree, "rate_hz": RATE_HZ, "seconds": args.seconds,
-                      "rounds": rounds, "median": med, "summary": summary})
+                      "lease_ms": args.lease_ms or None, "rounds": rounds, "median": med, "summary": summary})
     for layout, values in med.items():
         print(f"{layout:>7}: " + ", ".join(f"{node} {cpu:.2f} %" for node, cpu in values.items()))
     print(machine, tree)
