@@ -11,6 +11,7 @@ damaged chunk the records before the damage; each message checked as ``Recording
 >>> _ = open(os.path.join(folder, "cut.mcap"), "wb").write(whole[:-40])  # its end torn off
 >>> recover(os.path.join(folder, "cut.mcap"), os.path.join(folder, "kept.mcap"))
 (1, '')
+>>> import shutil; shutil.rmtree(folder)
 """
 
 from __future__ import annotations
