@@ -4,6 +4,7 @@ latency statistics, results."""
 from __future__ import annotations
 
 import json
+import os
 import random
 import socket
 import struct
@@ -32,12 +33,24 @@ def free_port(kind: int = socket.SOCK_STREAM) -> int:
         return s.getsockname()[1]
 
 
+def lease_ms() -> int:
+    """The Zenoh lease of the benchmarks' own sessions: sonibus's (``[bus] lease_ms``), or
+    ``BENCH_LEASE_MS`` (``show.py --lease-ms``: its nodes' and floors' alike). A floor at
+    Zenoh's default (10 s) sent a keep-alive on each idle link every 2.5 s where sonibus's
+    sessions send one every 375 ms: work a node must do (a lost robot noticed within 2 s) that
+    its floor did not."""
+    from sonibus.bus.busconfig import BusConfig
+    return int(os.environ.get("BENCH_LEASE_MS") or BusConfig.lease_ms)
+
+
 def zenoh_config(extra: dict[str, Any] | None = None, **endpoints: str) -> Any:
-    """A zenoh-python config without sonibus: multicast scouting off, ``listen=`` / ``connect=``
-    an endpoint each, and ``extra`` options (key → value, as JSON5)."""
+    """A zenoh-python config without sonibus: multicast scouting off, sonibus's lease
+    (``lease_ms``), ``listen=`` / ``connect=`` an endpoint each, and ``extra`` options
+    (key → value, as JSON5)."""
     import zenoh
     config = zenoh.Config()
     config.insert_json5("scouting/multicast/enabled", "false")
+    config.insert_json5("transport/link/tx/lease", str(lease_ms()))
     for side, endpoint in endpoints.items():
         config.insert_json5(f"{side}/endpoints", json.dumps([endpoint]))
     for key, value in (extra or {}).items():

@@ -13,15 +13,19 @@ Every path gets the same input and is measured the same way:
 - **sonibus**: ``sonibus run`` with one ``osc`` node (``extra = ["t", "seq"]``,
   the same datagrams; ``bundle = true`` for bundles);
 - **no bus**: one process sends the same datagrams straight, paced the same way;
-- a separate receiver process notes each datagram's arrival (the kernel's
-  receive stamp, ``SO_TIMESTAMPNS``) − its ``t``.
+- receiver processes (one for sonibus's datagrams, one for the others') note each
+  datagram's arrival (the kernel's receive stamp, ``SO_TIMESTAMPNS``) − its ``t``.
 
 CPU is the sink process's own, summed over its threads from
 ``/proc/<pid>/task/*/schedstat`` over the measuring window (after a warm-up).
-Paths are interleaved, round after round; the figures are medians over rounds
-and every sonibus figure is stated as a ratio to the floor (and to no bus) of
-the same run. The sinks run from start to end; a publisher process per window
-feeds the one measured (no two sessions are linked, so the others idle).
+The floor and sonibus run in the same window, each fed by a publisher process of its
+own (this VM's speed drifts over minutes: measured one after the other, a sink's ratio
+to its floor moved by ±0.15 from run to run); no bus in a window of its own, before
+or after them, alternating; the figures are medians over rounds and every sonibus
+figure is stated as a ratio to the floor (and to no bus) of the same run. The sinks
+run from start to end; a publisher process per path and window feeds each one
+measured (no two sessions are linked, so the others idle). Every session has
+sonibus's lease (``common.lease_ms``).
 
     .venv/bin/python bench/floor.py [--rounds 3] [--seconds 4] [--only 2x17 2x17b]
 
@@ -53,6 +57,7 @@ CONTEXT = mp.get_context("spawn")  # never fork a process that has opened a Zeno
 SONIBUS = str(Path(sys.executable).with_name("sonibus"))
 RATE_HZ = 100.0
 WARMUP_S = 1.0
+SLACK_S = 2.0  # paths measured at once: how much later than the first the last may find its sink
 NTP_OFFSET = 2208988800
 CONNECTED = "floor (connected)"
 SO_TIMESTAMPNS = getattr(socket, "SO_TIMESTAMPNS", 35)  # Linux: the kernel's receive time, in ns
@@ -303,21 +308,39 @@ def switches(pid: int) -> int:
 # -- the run --------------------------------------------------------------------------------
 
 
+class Receiver:
+    """A ``receive`` process on a port of its own, told when to start and stop noting."""
+
+    def __init__(self) -> None:
+        self.port = free_port(socket.SOCK_DGRAM)
+        ready, self.control, self.results = CONTEXT.Event(), CONTEXT.Queue(), CONTEXT.Queue()
+        self.process = CONTEXT.Process(target=receive, args=(self.port, ready, self.control, self.results),
+                                       daemon=True)
+        self.process.start()
+        if not ready.wait(20):
+            raise RuntimeError("the receiver did not start")
+
+    def close(self) -> None:
+        self.control.put("quit")
+        self.process.join(10)
+        if self.process.is_alive():
+            self.process.kill()
+
+
 class Bench:
-    """The receiver and the sinks, up from start to end; ``measure`` runs one window."""
+    """The receivers and the sinks, up from start to end; ``measure`` runs one window of a
+    path, ``measure_at_once`` one window of several (sonibus's datagrams go to a receiver of
+    their own, the others' to another)."""
 
     def __init__(self, folder: Path) -> None:
         self.folder = folder
-        self.port = free_port(socket.SOCK_DGRAM)
-        ready, self.control, self.results = CONTEXT.Event(), CONTEXT.Queue(), CONTEXT.Queue()
-        self.receiver = CONTEXT.Process(target=receive, args=(self.port, ready, self.control, self.results),
-                                        daemon=True)
-        self.receiver.start()
-        if not ready.wait(20):
-            raise RuntimeError("the receiver did not start")
+        self.receivers = {"sonibus": Receiver(), "others": Receiver()}
         self.sinks: dict[tuple[str, str], tuple[Any, str]] = {}  # (path, case) → (process, endpoint)
         self.done = CONTEXT.Event()
         self.logs: dict[str, Path] = {}
+
+    def receiver(self, path: str) -> Receiver:
+        return self.receivers["sonibus" if path == "sonibus" else "others"]
 
     def sink(self, path: str, case: Case) -> tuple[int, str]:
         """The pid and endpoint of ``path``'s sink for ``case`` (started on first use)."""
@@ -326,7 +349,8 @@ class Bench:
             endpoint = f"tcp/127.0.0.1:{free_port()}"
             if path.startswith("floor"):
                 ready = CONTEXT.Event()
-                process = CONTEXT.Process(target=floor_sink, args=(endpoint, self.port, case, ready, self.done,
+                process = CONTEXT.Process(target=floor_sink, args=(endpoint, self.receiver(path).port, case, ready,
+                                                                   self.done,
                                                                    path == CONNECTED),
                                           daemon=True)
                 process.start()
@@ -341,7 +365,7 @@ class Bench:
     def _sonibus(self, endpoint: str, case: Case) -> subprocess.Popen[bytes]:
         config = self.folder / f"sink-{case.name}.toml"
         config.write_text(f'[bus]\nmulticast = false\n\n[nodes.sound]\nadapter = "osc"\nsubscribe = "*/joints/*"\n'
-                          f'targets = ["127.0.0.1:{self.port}"]\nextra = ["t", "seq"]\n'
+                          f'targets = ["127.0.0.1:{self.receivers["sonibus"].port}"]\nextra = ["t", "seq"]\n'
                           f'bundle = {str(case.bundle).lower()}\n')
         log = self.logs[case.name] = self.folder / f"sink-{case.name}.log"
         with open(log, "w") as stderr:
@@ -356,38 +380,62 @@ class Bench:
 
     def measure(self, path: str, case: Case, seconds: float) -> dict[str, Any]:
         """One window of ``path`` for ``case``: latencies, messages and the sink's CPU."""
-        ready, out = CONTEXT.Event(), CONTEXT.Queue()
-        pid = 0
-        if path == "no bus":
-            feeder = CONTEXT.Process(target=no_bus, args=(self.port, case, seconds + WARMUP_S, ready, out),
-                                     daemon=True)
-        else:
-            pid, endpoint = self.sink(path, case)
-            feeder = CONTEXT.Process(target=publish, args=(endpoint, case, seconds + WARMUP_S, ready, out),
-                                     daemon=True)
-        feeder.start()
+        return self.measure_at_once((path,), case, seconds)[path]
+
+    def measure_at_once(self, paths: tuple[str, ...], case: Case, seconds: float) -> dict[str, dict[str, Any]]:
+        """One window of every path of ``paths`` (each fed by a publisher process of its own, its
+        datagrams to a receiver of its own) for ``case``: by path, latencies, messages and the
+        sink's CPU. Measured in the same seconds, a sink and its floor see the same machine (this
+        VM's speed drifts over minutes: measured one after the other, a ratio moved by ±0.15)."""
+        if len({self.receiver(path).port for path in paths}) != len(paths):
+            raise ValueError(f"{paths}: two paths would share a receiver")
+        feeders, pids, endpoints = {}, {}, {}
+        for path in paths:  # (every sink up before any is fed: a sonibus starting takes a second or two)
+            if path != "no bus":
+                pids[path], endpoints[path] = self.sink(path, case)
+        # (each feeds from when it found its sink: with ``slack`` more, none stops before the window ends)
+        slack = SLACK_S if len(paths) > 1 else 0.0
+        for path in paths:
+            ready, out = CONTEXT.Event(), CONTEXT.Queue()
+            if path == "no bus":
+                feeder = CONTEXT.Process(target=no_bus, args=(self.receiver(path).port, case,
+                                                              seconds + WARMUP_S + slack, ready, out), daemon=True)
+            else:
+                feeder = CONTEXT.Process(target=publish, args=(endpoints[path], case, seconds + WARMUP_S + slack,
+                                                               ready, out), daemon=True)
+            feeders[path] = (feeder, ready, out)
+            feeder.start()
+        received = {}
         try:
-            if not ready.wait(30):
-                raise RuntimeError(f"{path}: the publishers did not find the sink")
+            if not all(ready.wait(30) for _, ready, _ in feeders.values()):
+                raise RuntimeError(f"{paths}: the publishers did not find the sinks")
             time.sleep(WARMUP_S)
-            self.control.put("start")
-            cpu0, wall0 = (cpu_ns(pid) if pid else 0), time.monotonic()
+            for path in paths:
+                self.receiver(path).control.put("start")
+            cpu0, wall0 = {path: cpu_ns(pid) for path, pid in pids.items()}, time.monotonic()
             time.sleep(seconds)
-            cpu, wall = (cpu_ns(pid) if pid else 0) - cpu0, time.monotonic() - wall0
-            self.control.put("stop")
-            received = self.results.get(timeout=30)
-            out.get(timeout=30)
+            cpu, wall = {path: cpu_ns(pid) - cpu0[path] for path, pid in pids.items()}, time.monotonic() - wall0
+            for path in paths:
+                self.receiver(path).control.put("stop")
+            for path in paths:
+                received[path] = self.receiver(path).results.get(timeout=30)
+                feeders[path][2].get(timeout=30)
         finally:
-            feeder.join(10)
-            if feeder.is_alive():
-                feeder.kill()
+            for feeder, _, _ in feeders.values():
+                feeder.join(10)
+                if feeder.is_alive():
+                    feeder.kill()
         nan = {"p50_us": math.nan, "p99_us": math.nan}
-        stats = latency_stats(received["latencies"]) if received["latencies"] else nan
-        woken = latency_stats(received["woken"]) if received["woken"] else nan
         expected = case.robots * case.joints * RATE_HZ * seconds  # messages (a bundle holds a frame's)
-        return {"p50_us": stats["p50_us"], "p99_us": stats["p99_us"], "woken_p50_us": woken["p50_us"],
-                "messages": received["messages"], "delivered": received["messages"] / expected,
-                "cpu_pct": 100.0 * cpu / 1e9 / wall if pid else None}
+        measured = {}
+        for path in paths:
+            got = received[path]
+            stats = latency_stats(got["latencies"]) if got["latencies"] else nan
+            woken = latency_stats(got["woken"]) if got["woken"] else nan
+            measured[path] = {"p50_us": stats["p50_us"], "p99_us": stats["p99_us"], "woken_p50_us": woken["p50_us"],
+                              "messages": got["messages"], "delivered": got["messages"] / expected,
+                              "cpu_pct": 100.0 * cpu[path] / 1e9 / wall if path in cpu else None}
+        return measured
 
     def close(self) -> dict[str, dict[str, int]]:
         """Stop everything; each sonibus sink's counters (from its last log line)."""
@@ -401,8 +449,8 @@ class Bench:
             else:
                 stop_process(process)
                 counters[name] = sink_stats(self.logs[name].read_text())
-        self.control.put("quit")
-        self.receiver.join(10)
+        for receiver in self.receivers.values():
+            receiver.close()
         return counters
 
 
@@ -474,10 +522,14 @@ def main() -> None:
         try:
             for index in range(args.rounds):
                 for case in cases:
-                    order = ["no bus", "floor", *([CONNECTED] if args.connected_floor else []), "sonibus"]
-                    order = order if index % 2 == 0 else order[::-1]
-                    rounds[case.name].append({path: bench.measure(path, case, args.seconds) for path in order})
-                    got = rounds[case.name][-1]
+                    # (the floor and sonibus in one window; no bus, their latency's reference, in one of its own)
+                    windows = [("no bus",), *([(CONNECTED,)] if args.connected_floor else []), ("floor", "sonibus")]
+                    windows = windows if index % 2 == 0 else windows[::-1]
+                    got = {}
+                    for paths in windows:
+                        got.update(bench.measure_at_once(paths, case, args.seconds))
+                    order = [path for paths in windows for path in paths]
+                    rounds[case.name].append(got)
                     print(f"round {index + 1} {case.name:>6}: " + ", ".join(
                         f"{p} {got[p]['p50_us']:.0f}/{got[p]['p99_us']:.0f} µs"
                         + (f" {got[p]['cpu_pct']:.2f} %" if got[p]["cpu_pct"] is not None else "")

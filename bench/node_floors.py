@@ -53,6 +53,7 @@ from typing import Any
 
 from common import free_port, zenoh_config
 from floor import CONTEXT, Case, cpu_ns, publish
+from links import Links
 
 RATE_HZ = 50
 NODES = ("foxglove", "recorder", "oscquery", "web", "midi", "features")  # the nodes with a floor here
@@ -509,15 +510,20 @@ def measure(seconds: float, warmup_s: float = 3.0, nodes: tuple[str, ...] = NODE
 
 
 @contextlib.contextmanager
-def running(nodes: tuple[str, ...] = NODES, seconds: float = 600.0) -> Iterator[dict[str, int]]:
+def running(nodes: tuple[str, ...] = NODES, seconds: float = 600.0, links: Links | None = None,
+            served: set[int] | None = None) -> Iterator[dict[str, int]]:
     """The floors of ``nodes`` running, each fed (``measure``'s), for ``seconds`` at most: their
-    process ids by node, once every floor is fed (not warmed up); stopped on leaving."""
+    process ids by node, once every floor is fed (not warmed up); stopped on leaving. With
+    ``links`` (``bench/links.py``), each floor's process can be given idle links; ``served``:
+    filled with the ports its WebSocket clients connect to."""
     if not nodes:
         yield {}
         return
     done = CONTEXT.Event()
     endpoints = {name: f"tcp/127.0.0.1:{free_port()}" for name in nodes}
     web_ports = {name: free_port() for name in ("foxglove", "oscquery", "web") if name in nodes}  # (each with a client)
+    if served is not None:
+        served.update(web_ports.values())
     readies = {name: CONTEXT.Event() for name in (*endpoints, *(f"{name} client" for name in web_ports))}
     derived, derived_at = CONTEXT.Event(), f"tcp/127.0.0.1:{free_port()}"  # (the features floor's readers)
     derived_fed = CONTEXT.Event()
@@ -526,8 +532,11 @@ def running(nodes: tuple[str, ...] = NODES, seconds: float = 600.0) -> Iterator[
                    "oscquery": (oscquery_floor, (web_ports.get("oscquery"),)),
                    "web": (web_floor, (web_ports.get("web"),)), "midi": (midi_floor, ()),
                    "features": (features_floor, (derived_at,))}
-        floors = {name: CONTEXT.Process(target=target, args=(endpoints[name], *where, readies[name], done),
-                                        daemon=True) for name, (target, where) in targets.items() if name in nodes}
+        def started(name: str, target: Callable[..., None], args: tuple[Any, ...]) -> Any:
+            run = links.wrapped(name, target, args) if links else {"target": target, "args": args}
+            return CONTEXT.Process(**run, daemon=True)
+        floors = {name: started(name, target, (endpoints[name], *where, readies[name], done))
+                  for name, (target, where) in targets.items() if name in nodes}
         others: list[Any] = []
         feeders: list[Any] = []
         if "features" in nodes:

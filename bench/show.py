@@ -67,6 +67,7 @@ import aiohttp
 import node_floors
 from common import free_port, write, zenoh_config
 from floor import CONTEXT, Case, cpu_ns, floor_sink, publish, switches
+from links import Links
 from midi_rate import start_jack
 from sink_throughput import SONIBUS, stop_process
 
@@ -76,6 +77,9 @@ SHOW_GOAL_PCT = 20.0  # issue 35: the whole show in one `sonibus run`, % of a co
 NODE_GOAL = 1.5  # issue 35: each node in its own process, × its floor
 FRAME_TAKERS = 7  # the show's nodes that take the robot's frames (all but the gateway): its publisher's fan-out
 BUS_OPTIONS = ""  # more [bus] lines of the show, e.g. "\nlease_ms = 10000" (--lease-ms)
+LINKED = True  # each floor with as many Zenoh links as its node (bench/links.py); --private-floors: False
+FLOOR_OF = {"publisher": "sim", "subscriber": "gateway", "osc sink": "osc", "osc sink + derived": "osc",
+            **{name: name for name in node_floors.NODES}}  # the node whose links a floor is given
 NODES = ("sim", "osc", "gateway", "features", "recorder", "web", "oscquery", "foxglove", "midi")
 SHOW = """[bus]
 multicast = false{bus_options}
@@ -258,12 +262,12 @@ def measure_show(folder: Path, seconds: float, split: bool, tree: str = "",
 
 @contextlib.contextmanager
 def show_running(folder: Path, split: bool, tree: str = "", nodes: tuple[str, ...] = NODES,
-                 against: str = "") -> Iterator[dict[str, int]]:
+                 against: str = "", served: set[int] | None = None) -> Iterator[dict[str, int]]:
     """The show in one process (``"show"``) or in a process per node, clients attached, each fed;
     their process ids by name (not warmed up); stopped on leaving. ``tree``: the one process on
     another tree (see ``sonibus``); ``nodes``: those only, a process each (``split``); ``against``:
     with ``split``, the tree in that folder's nodes too (but the sim and features: ``"<node>
-    @against"``), clients of their own."""
+    @against"``), clients of their own; ``served``: filled with the TCP ports its clients connect to."""
     def show_ports() -> dict[str, int]:
         return {name: free_port(socket.SOCK_DGRAM if name in ("osc", "gateway") else socket.SOCK_STREAM)
                 for name in ("osc", "gateway", "web", "oscquery", "foxglove")}
@@ -272,6 +276,8 @@ def show_running(folder: Path, split: bool, tree: str = "", nodes: tuple[str, ..
     config.write_text(SHOW.format(rate=RATE_HZ, folder=folder, bus_options=BUS_OPTIONS, **ports))
     twins = [node for node in nodes if node not in ("sim", "features")] if split and against else []
     twin_ports = show_ports()
+    if served is not None:
+        served.update(port for name, port in (*ports.items(), *twin_ports.items()) if name not in ("osc", "gateway"))
     (folder / "against.toml").write_text(SHOW.format(rate=RATE_HZ, folder=folder, bus_options=BUS_OPTIONS,
                                                       **twin_ports))
     endpoint = f"tcp/127.0.0.1:{free_port()}"
@@ -331,17 +337,30 @@ def show_running(folder: Path, split: bool, tree: str = "", nodes: tuple[str, ..
         manager.shutdown()
 
 
-def measure_beside_floors(folder: Path, seconds: float, nodes: tuple[str, ...],
-                          against: str = "") -> dict[str, dict[str, float]]:
+def measure_beside_floors(folder: Path, seconds: float, nodes: tuple[str, ...], against: str = "",
+                          counted: dict[str, Any] | None = None) -> dict[str, dict[str, float]]:
     """The show in a process per node (``"split"``, ``show_running``'s) and every floor of its
     nodes (``"floors"``: ``floors_running``'s and ``node_floors``'), all running at once, CPU %
     over one window: a node and its floor measured in the same seconds, on the same machine
     (measured one after the other, a node's ratio to its floor moved by ±30 % from run to run
-    on this VM, whose speed drifts over minutes)."""
+    on this VM, whose speed drifts over minutes).
+
+    With ``LINKED`` (the default), each floor's process has as many Zenoh links as its node's
+    (``FLOOR_OF``; ``bench/links.py``), the sessions of both at the same lease: ``counted``
+    gets each floor's and its node's link ends."""
+    if counted is None:
+        counted = {}
     with contextlib.ExitStack() as running:
-        floors = {**running.enter_context(floors_running()),
-                  **running.enter_context(node_floors.running(tuple(n for n in node_floors.NODES if n in nodes)))}
-        show = running.enter_context(show_running(folder, True, nodes=nodes, against=against))
+        links = Links() if LINKED else None
+        if links is not None:
+            running.callback(links.close)
+        served: set[int] = set()
+        floors = {**running.enter_context(floors_running(links=links)),
+                  **running.enter_context(node_floors.running(tuple(n for n in node_floors.NODES if n in nodes),
+                                                              links=links, served=served))}
+        show = running.enter_context(show_running(folder, True, nodes=nodes, against=against, served=served))
+        if links is not None:
+            counted.update(links.match(floors, show, FLOOR_OF, frozenset(served)))
         time.sleep(WARMUP_S)
         cpu = window({**{f"floors/{name}": pid for name, pid in floors.items()},
                       **{f"split/{name}": pid for name, pid in show.items()}}, seconds)
@@ -350,24 +369,28 @@ def measure_beside_floors(folder: Path, seconds: float, nodes: tuple[str, ...],
 
 
 @contextlib.contextmanager
-def floors_running(seconds: float = 600.0) -> Iterator[dict[str, int]]:
+def floors_running(seconds: float = 600.0, links: Links | None = None) -> Iterator[dict[str, int]]:
     """The minimal harnesses: publisher (the sim's floor, its frames taken by ``FRAME_TAKERS``
     sessions), an empty subscriber (a sink's floor),
     floor.py's OSC sink, one robot × 17 joints at ``RATE_HZ``, and the same sink fed a derived
     frame beside each frame (``floor.DERIVED``, a features node's shape): the show's OSC node
     sends joints and derived values, a datagram each. Fed for ``seconds`` at most; their
-    process ids by name, once each is fed (not warmed up); stopped on leaving."""
+    process ids by name, once each is fed (not warmed up); stopped on leaving. With ``links``
+    (``bench/links.py``), each one's process can be given idle links."""
+    def floor_process(name: str, target: Any, args: tuple[Any, ...], **kwargs: Any) -> Any:
+        run = links.wrapped(name, target, args) if links else {"target": target, "args": args}
+        return CONTEXT.Process(**run, kwargs=kwargs, daemon=True)
     case = Case(1, 17)
     endpoints = [f"tcp/127.0.0.1:{free_port()}" for _ in range(3)]
     receiver = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     receiver.bind(("127.0.0.1", 0))
     ready, done = CONTEXT.Event(), CONTEXT.Event()
-    empty = CONTEXT.Process(target=empty_subscriber, args=(endpoints[0], ready, done), daemon=True)
+    empty = floor_process("subscriber", empty_subscriber, (endpoints[0], ready, done))
     sinks, readies = [], [ready]
     for endpoint, derived in zip(endpoints[1:], (False, True), strict=True):
         readies.append(CONTEXT.Event())
-        sinks.append(CONTEXT.Process(target=floor_sink, args=(endpoint, receiver.getsockname()[1], case, readies[-1],
-                                                              done), kwargs={"derived": derived}, daemon=True))
+        sinks.append(floor_process("osc sink + derived" if derived else "osc sink", floor_sink,
+                             (endpoint, receiver.getsockname()[1], case, readies[-1], done), derived=derived))
     fed_all = CONTEXT.Event()  # (the publisher's other takers: sessions of their own, each fed before measuring)
     takers = CONTEXT.Process(target=takers_of, args=(endpoints[0], FRAME_TAKERS - 1, fed_all, done), daemon=True)
     for process in (empty, *sinks):
@@ -380,8 +403,12 @@ def floors_running(seconds: float = 600.0) -> Iterator[dict[str, int]]:
         handles = []  # (kept until the end: a queue collected here is gone for the child too)
         for endpoint, derived in zip(endpoints, (False, False, True), strict=True):
             fed, out = CONTEXT.Event(), CONTEXT.Queue()
-            feeders.append(CONTEXT.Process(target=publish, args=(endpoint, case, seconds, fed, out),
-                                           kwargs={"rate_hz": RATE_HZ, "derived": derived}, daemon=True))
+            if feeders:  # (the others feed a floor)
+                feeders.append(CONTEXT.Process(target=publish, args=(endpoint, case, seconds, fed, out),
+                                               kwargs={"rate_hz": RATE_HZ, "derived": derived}, daemon=True))
+            else:  # (the first is the sim's floor)
+                feeders.append(floor_process("publisher", publish, (endpoint, case, seconds, fed, out),
+                                             rate_hz=RATE_HZ, derived=derived))
             feeders[-1].start()
             handles.append((fed, out))
         if not all(fed.wait(30) for fed, _ in handles) or not fed_all.wait(30):
@@ -445,10 +472,14 @@ def main() -> None:
                         "that feed them), a process each, and their floors; no one-process layout")
     parser.add_argument("--lease-ms", type=int, default=0,
                         help="the show's Zenoh lease (its nodes' [bus] lease_ms; 0: sonibus's default)")
+    parser.add_argument("--private-floors", action="store_true",
+                        help="the floors on private pairs of sessions, without their nodes' links (as before 30 Nov)")
     args = parser.parse_args()
+    global BUS_OPTIONS, LINKED
+    LINKED = not args.private_floors
     if args.lease_ms:
-        global BUS_OPTIONS
         BUS_OPTIONS = f"\nlease_ms = {args.lease_ms}"
+        os.environ["BENCH_LEASE_MS"] = str(args.lease_ms)  # (the floors' too: bench/common.lease_ms)
     chosen = tuple(node for node in args.nodes.split(",") if node)
     if unknown := set(chosen) - set(NODES):
         parser.error(f"--nodes {args.nodes}: no node {', '.join(sorted(unknown))} (the show's: {', '.join(NODES)})")
@@ -458,18 +489,22 @@ def main() -> None:
         return
     load = [os.getloadavg()[0]]
     rounds: list[dict[str, dict[str, float]]] = []
+    links: list[dict[str, Any]] = []
     with tempfile.TemporaryDirectory() as name:
         folder = Path(name)
         jack = start_jack(folder / "jackd.log")
         try:
             for index in range(args.rounds):
                 got: dict[str, dict[str, float]] = {}
+                counted: dict[str, Any] = {}  # (each floor's link ends and its node's, LINKED)
                 for split in ((True,) if chosen else (True, False) if index % 2 == 0 else (False, True)):
                     if split:
-                        got.update(measure_beside_floors(folder, args.seconds, nodes, args.against if chosen else ""))
+                        got.update(measure_beside_floors(folder, args.seconds, nodes, args.against if chosen else "",
+                                                         counted))
                     else:
                         got["one"] = measure_show(folder, args.seconds, False)
                 rounds.append(got)
+                links.append(counted)
                 load.append(os.getloadavg()[0])
                 print(f"round {index + 1}: " + "; ".join(f"{layout}: " + ", ".join(
                     f"{node} {cpu:.1f} %" for node, cpu in values.items()) for layout, values in got.items()),
@@ -482,7 +517,7 @@ def main() -> None:
            for layout in rounds[0]}
     machine = f"{os.cpu_count()} cores, load {min(load):.2f}–{max(load):.2f}"
     tree = os.environ.get("PYTHONPATH", "") or "this tree"
-    receive, floors = med["floors"]["subscriber"], med["floors"]
+    floors = med["floors"]
     cpus = {node: cpu for node, cpu in med["split"].items() if node != "router"}
     summary = [{"scenario": f"(show) one process, every node, 1 robot at {RATE_HZ} Hz, clients attached: CPU",
                 "sonibus": f"{med['one']['show']:.1f} %",
@@ -497,11 +532,13 @@ def main() -> None:
             summary.append({"scenario": f"(show) {node} node, own process, beside {args.against}'s on one bus: CPU",
                             "sonibus": f"{cpu:.1f} %", "baseline": f"{cpus[node + ' @against']:.1f} %",
                             "ratio": f"{cpu / cpus[node + ' @against']:.2f}×"})
-        base = floors["publisher"] if node == "sim" else floors["osc sink + derived"] if node == "osc" else receive
+        floor = ("publisher" if node == "sim" else "osc sink + derived" if node == "osc"
+                 else node if node in floors and node in node_floors.NODES else "subscriber")
+        base = floors[floor]
         label = ("publisher" if node == "sim" else "minimal OSC sink of joints and derived values" if node == "osc"
-                 else "empty subscriber")
-        if node in floors and node in node_floors.NODES:  # (their own: bench/node_floors.py)
-            base, label = floors[node], f"{node} floor"
+                 else f"{node} floor" if floor == node else "empty subscriber")  # (their own: bench/node_floors.py)
+        if LINKED and floor in links[-1]:
+            label += f", {links[-1][floor]['node']} Zenoh links as the node's"
         ratio = f"{cpu / base:.2f}×"
         if node == "osc":
             label += f"; of joints only {floors['osc sink']:.1f} %"
@@ -510,7 +547,8 @@ def main() -> None:
                         "baseline": f"{base:.1f} % ({label})", "ratio": ratio,
                         "goal": f"≤ {NODE_GOAL:g}× its floor", "met": "yes" if cpu <= NODE_GOAL * base else "no"})
     write(args.name, {"machine": machine, "tree": tree, "rate_hz": RATE_HZ, "seconds": args.seconds,
-                      "lease_ms": args.lease_ms or None, "rounds": rounds, "median": med, "summary": summary})
+                      "lease_ms": args.lease_ms or None,
+                      "floors_linked": LINKED, "links": links, "rounds": rounds, "median": med, "summary": summary})
     for layout, values in med.items():
         print(f"{layout:>7}: " + ", ".join(f"{node} {cpu:.2f} %" for node, cpu in values.items()))
     print(machine, tree)
