@@ -23,11 +23,15 @@ rate (the sim's), each frame taken by as many sessions as take the sim's in the 
 subscriber of them with an empty callback (what any sink pays
 to receive), and ``floor.py``'s minimal OSC sink, of the frames alone and of the
 frames with a derived frame beside each (the OSC node's work in the show: it sends
-the features node's derived values too). CPU is each process's, from
+the features node's derived values too). Each floor's process is given as many Zenoh
+links as its node's holds, at the same lease (``bench/links.py``: a show's process links
+with every other one and keeps each link alive, the bus's cost of membership that a floor
+on a private pair of sessions did not pay; ``--private-floors``: as before). CPU is each process's, from
 ``/proc/<pid>/task/*/schedstat`` over the window after a warm-up; medians of rounds.
 
     .venv/bin/python bench/show.py [--rounds 2] [--seconds 8] [--name show]
-    .venv/bin/python bench/show.py --lease-ms 10000 --name show_lease10s  # its nodes' Zenoh lease 10 s
+    .venv/bin/python bench/show.py --lease-ms 10000 --name show_lease10s  # its nodes' (and floors') lease 10 s
+    .venv/bin/python bench/show.py --private-floors --name show_private_floors  # floors without the nodes' links
     .venv/bin/python bench/show.py --nodes foxglove,oscquery  # those nodes and their floors only
     .venv/bin/python bench/show.py --nodes foxglove,oscquery --against DIR  # and DIR's beside them
 
