@@ -23,7 +23,7 @@ from pathlib import Path
 
 from common import free_port, write
 from floor import switches
-from show import RATE_HZ, SHOW, sonibus, started, window
+from show import BUS_OPTIONS, RATE_HZ, SHOW, sonibus, started, window
 from sink_throughput import SONIBUS, stop_process
 
 NODES = ("web", "osc", "oscquery", "recorder", "features", "gateway", "foxglove")  # (show.py's; not midi: JACK)
@@ -32,7 +32,7 @@ def config(folder: Path, name: str) -> Path:
     ports = {name: free_port(socket.SOCK_DGRAM if name in ("osc", "gateway") else socket.SOCK_STREAM)
              for name in ("osc", "gateway", "web", "oscquery", "foxglove")}
     path = folder / f"{name}.toml"
-    path.write_text(SHOW.format(rate=RATE_HZ, folder=folder, **ports))
+    path.write_text(SHOW.format(rate=RATE_HZ, folder=folder, bus_options=BUS_OPTIONS, **ports))
     return path
 
 

@@ -33,7 +33,7 @@ from typing import Any
 import node_floors
 from common import free_port, write
 from floor import CONTEXT, Case, publish
-from show import SHOW, WARMUP_S, started, window
+from show import BUS_OPTIONS, SHOW, WARMUP_S, started, window
 from sink_throughput import SONIBUS, stop_process, thread_cpu
 
 RATE_HZ = 50
@@ -86,7 +86,8 @@ def measure(seconds: float, before: str | None) -> dict[str, Any]:
     folder = Path(tempfile.mkdtemp(prefix="recorder-node-"))
     config = folder / "show.toml"
     ports = {name: free_port() for name in ("osc", "gateway", "web", "oscquery", "foxglove")}  # (not run here)
-    config.write_text(SHOW.format(rate=RATE_HZ, folder=folder, **ports) + BEFORE.format(folder=folder))
+    config.write_text(SHOW.format(rate=RATE_HZ, folder=folder, bus_options=BUS_OPTIONS, **ports)
+                      + BEFORE.format(folder=folder))
     endpoint = f"tcp/127.0.0.1:{free_port()}"
     processes: dict[str, subprocess.Popen[bytes]] = {}
     done, ready = CONTEXT.Event(), CONTEXT.Event()

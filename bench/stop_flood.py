@@ -76,7 +76,7 @@ JOINTS = [f"J{i}" for i in range(20)]
 def flood(publishers: dict[str, Any], kind: str, count: int, rate: float) -> None:
     """``count`` valid messages of ``kind`` at ``rate``/s, paced in bursts of 50."""
     from sonibus.bus import codec
-    from sonibus.bus.messages import frame
+    from sonibus.bus.framing import frame
 
     publisher, started = publishers[kind], time.perf_counter()
     for seq in range(count):

@@ -98,12 +98,13 @@ def bus_round_trips(endpoint: str, trials: int) -> list[float]:
     try:
         bus = Bus(session, node="bench-web-baseline")
         _, events = bus.subscribe("pepper/events/behavior", maxlen=10_000)
+        replies: list[object] = []
 
         def one(i: int, timeout: float) -> float | None:
             name = BEHAVIORS[i % 2]
             answered = threading.Event()
             started = time.perf_counter()
-            ask(bus, "pepper", "behavior/run", {"name": name}, lambda _: answered.set())
+            ask(bus, "pepper", "behavior/run", {"name": name}, lambda reply: (replies.append(reply), answered.set()))
             deadline = started + timeout
             while (item := events.get(timeout=max(deadline - time.perf_counter(), 0))) is not None:
                 event = codec.decode(item[1])
@@ -114,16 +115,18 @@ def bus_round_trips(endpoint: str, trials: int) -> list[float]:
             return None
 
         # Warm up until 3 come back: a new session's subscription takes a moment to reach the robot.
-        back = 0
-        for i in range(20):
-            back += one(i, 1.0) is not None
-            if back == 3:
-                break
-        else:
-            raise RuntimeError("the robot's behavior events do not reach the benchmark's session")
-        times = [one(i, 5.0) for i in range(trials)]
-        if None in times:
-            raise RuntimeError("a behavior event did not come within 5 s")
+        back, warm = 0, 0
+        while back < 3:
+            if warm == 20:
+                raise RuntimeError("the robot's behavior events do not reach the benchmark's session")
+            back += one(warm, 1.0) is not None
+            warm += 1
+        times = []
+        for i in range(trials):  # (the alternation goes on from the warm-up's: the robot refuses to run again
+            times.append(one(warm + i, 5.0))  # the behavior that is running, "already running")
+            if times[-1] is None:
+                raise RuntimeError(f"trial {i}: the behavior's started event did not come within 5 s (its reply: "
+                                   f"{replies[-1] if replies else 'none'})")
         return times
     finally:
         session.close()
