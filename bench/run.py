@@ -163,7 +163,7 @@ def rows_features(r: dict[str, Any]) -> list[Row]:
                        f"{counted['decode_only'] / 1000:,.0f}k", f"{counted['features'] / counted['before']:.2f}×",
                        "", ""))
     if "on_bus_before" in r:
-        before.append(("features node on the bus, worker CPU, against before issue 35's per-frame work",
+        before.append(("features node on the bus, CPU taking frames, against before issue 35's per-frame work",
                        f"{r['on_bus']['cpu_percent']:.1f} % of a core",
                        f"{r['on_bus_before']['cpu_percent']:.1f} % (before)", f"{r['on_bus_after_to_before']:.2f}×",
                        "", ""))
@@ -174,7 +174,7 @@ def rows_features(r: dict[str, Any]) -> list[Row]:
                            f"{_us(f['p50_us'])} / {_us(f['p99_us'])} (features without)",
                            f"{r['expressive']['p50_us'] / f['p50_us']:.1f}× / "
                            f"{r['expressive']['p99_us'] / f['p99_us']:.1f}×", "", "")] if "expressive" in r else []) + (
-        [("features node on the bus, worker CPU: default / + expressive",
+        [("features node on the bus, CPU taking frames: default / + expressive",
           f"{r['on_bus']['cpu_percent']:.1f} % / {r['on_bus_expressive']['cpu_percent']:.1f} % of a core",
           "default features", f"{r['on_bus_expressive_ratio']:.1f}×", "", "")] if "on_bus_expressive" in r else [])
 
