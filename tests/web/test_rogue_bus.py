@@ -105,8 +105,10 @@ def test_a_bad_stats_message_is_refused_with_its_reason_and_a_good_one_listed(st
         return stage.node.stats["bad"] > bad_before
 
     wait_for(say, 10, "the bad stats refused", lambda: repr(dict(stage.node.stats)))
-    assert any("sonibus/stats/rogue-host/liar' refused: not a valid node stats: interval_s" in r.getMessage()
-               for r in caplog.records), [r.getMessage() for r in caplog.records]
+    # (counted, then warned about, on the node's thread: the warning may come just after the count)
+    wait_for(lambda: any("sonibus/stats/rogue-host/liar' refused: not a valid node stats: interval_s"
+                         in r.getMessage() for r in caplog.records), 5, "the refusal's warning",
+             lambda: repr([r.getMessage() for r in caplog.records]))
     listed = wait_for(lambda: [m for m in page.of("stats") if "honest" in {n["node"] for n in m["nodes"]}], 5,
                       "the good stats at the page")[0]
     assert "liar" not in {n["node"] for n in listed["nodes"]}
