@@ -328,9 +328,9 @@ class Receiver:
 
 
 class Bench:
-    """The receivers and the sinks, up from start to end; ``measure`` runs one window of a
-    path, ``measure_at_once`` one window of several (sonibus's datagrams go to a receiver of
-    their own, the others' to another)."""
+    """The receivers and the sinks, up from start to end; ``measure_at_once`` runs one window
+    of one path or several (sonibus's datagrams go to a receiver of their own, the others' to
+    another)."""
 
     def __init__(self, folder: Path) -> None:
         self.folder = folder
@@ -377,10 +377,6 @@ class Bench:
                 raise RuntimeError(f"sonibus did not start: {log.read_text()[-2000:]}")
             time.sleep(0.1)
         return process
-
-    def measure(self, path: str, case: Case, seconds: float) -> dict[str, Any]:
-        """One window of ``path`` for ``case``: latencies, messages and the sink's CPU."""
-        return self.measure_at_once((path,), case, seconds)[path]
 
     def measure_at_once(self, paths: tuple[str, ...], case: Case, seconds: float) -> dict[str, dict[str, Any]]:
         """One window of every path of ``paths`` (each fed by a publisher process of its own, its

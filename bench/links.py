@@ -1,8 +1,9 @@
 """A floor with as many Zenoh links as its node (issue 35): links counted and matched.
 
 A process of a show split into a process per node links with every other one (a Zenoh
-peer learns the others by gossip and dials them: each node here has ten links, the sim
-twenty with its control session's) and keeps each alive: at sonibus's lease (1.5 s, a lost
+peer learns the others by gossip and dials them, and two peers that dialled each other keep
+both links: each node here holds 15-18 link ends, the sim 25-27 with its control session's)
+and keeps each alive: at sonibus's lease (1.5 s, a lost
 robot noticed within 2 s) a keep-alive every 375 ms on each link that carries nothing else,
 and the other end's read. That is the bus's cost of being a member, paid by any program on
 it, minimal or not; a floor harness on a private pair of sessions (one or seven links) did
@@ -96,6 +97,13 @@ class Links:
         """``CONTEXT.Process``'s target and args for floor ``name``'s ``target(*args)``."""
         self.requests[name] = CONTEXT.Queue()
         return {"target": with_links, "args": (self.requests[name], self.hub, target, *args)}
+
+    @staticmethod
+    def process(links: Links | None, name: str, target: Callable[..., None], args: tuple[Any, ...],
+                **kwargs: Any) -> Any:
+        """Floor ``name``'s process (not started), through ``links`` when given (``wrapped``)."""
+        run = links.wrapped(name, target, args) if links else {"target": target, "args": args}
+        return CONTEXT.Process(**run, kwargs=kwargs, daemon=True)
 
     def match(self, floors: dict[str, int], nodes: dict[str, int], of: dict[str, str],
               served: frozenset[int] = frozenset(), timeout_s: float = 30.0) -> dict[str, dict[str, int]]:

@@ -532,10 +532,7 @@ def running(nodes: tuple[str, ...] = NODES, seconds: float = 600.0, links: Links
                    "oscquery": (oscquery_floor, (web_ports.get("oscquery"),)),
                    "web": (web_floor, (web_ports.get("web"),)), "midi": (midi_floor, ()),
                    "features": (features_floor, (derived_at,))}
-        def started(name: str, target: Callable[..., None], args: tuple[Any, ...]) -> Any:
-            run = links.wrapped(name, target, args) if links else {"target": target, "args": args}
-            return CONTEXT.Process(**run, daemon=True)
-        floors = {name: started(name, target, (endpoints[name], *where, readies[name], done))
+        floors = {name: Links.process(links, name, target, (endpoints[name], *where, readies[name], done))
                   for name, (target, where) in targets.items() if name in nodes}
         others: list[Any] = []
         feeders: list[Any] = []

@@ -381,20 +381,17 @@ def floors_running(seconds: float = 600.0, links: Links | None = None) -> Iterat
     sends joints and derived values, a datagram each. Fed for ``seconds`` at most; their
     process ids by name, once each is fed (not warmed up); stopped on leaving. With ``links``
     (``bench/links.py``), each one's process can be given idle links."""
-    def floor_process(name: str, target: Any, args: tuple[Any, ...], **kwargs: Any) -> Any:
-        run = links.wrapped(name, target, args) if links else {"target": target, "args": args}
-        return CONTEXT.Process(**run, kwargs=kwargs, daemon=True)
     case = Case(1, 17)
     endpoints = [f"tcp/127.0.0.1:{free_port()}" for _ in range(3)]
     receiver = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     receiver.bind(("127.0.0.1", 0))
     ready, done = CONTEXT.Event(), CONTEXT.Event()
-    empty = floor_process("subscriber", empty_subscriber, (endpoints[0], ready, done))
+    empty = Links.process(links, "subscriber", empty_subscriber, (endpoints[0], ready, done))
     sinks, readies = [], [ready]
     for endpoint, derived in zip(endpoints[1:], (False, True), strict=True):
         readies.append(CONTEXT.Event())
-        sinks.append(floor_process("osc sink + derived" if derived else "osc sink", floor_sink,
-                             (endpoint, receiver.getsockname()[1], case, readies[-1], done), derived=derived))
+        sinks.append(Links.process(links, "osc sink + derived" if derived else "osc sink", floor_sink,
+                                   (endpoint, receiver.getsockname()[1], case, readies[-1], done), derived=derived))
     fed_all = CONTEXT.Event()  # (the publisher's other takers: sessions of their own, each fed before measuring)
     takers = CONTEXT.Process(target=takers_of, args=(endpoints[0], FRAME_TAKERS - 1, fed_all, done), daemon=True)
     for process in (empty, *sinks):
@@ -411,7 +408,7 @@ def floors_running(seconds: float = 600.0, links: Links | None = None) -> Iterat
                 feeders.append(CONTEXT.Process(target=publish, args=(endpoint, case, seconds, fed, out),
                                                kwargs={"rate_hz": RATE_HZ, "derived": derived}, daemon=True))
             else:  # (the first is the sim's floor)
-                feeders.append(floor_process("publisher", publish, (endpoint, case, seconds, fed, out),
+                feeders.append(Links.process(links, "publisher", publish, (endpoint, case, seconds, fed, out),
                                              rate_hz=RATE_HZ, derived=derived))
             feeders[-1].start()
             handles.append((fed, out))

@@ -137,7 +137,7 @@ class JackMidiIn:
         self.connected = now
         with self._told_lock:  # (what shows now was told: "" is any port that left)
             for peer, on in list(self._told.items()):
-                if (peer in now) == on if peer else left or not now:
+                if ((peer in now) == on) if peer else (left or not now):
                     del self._told[peer]
         return came, left
 
