@@ -35,7 +35,7 @@ class FrameAssembler:
     def __init__(self, max_wait_s: float = 0.05) -> None:
         self.max_wait_s = max_wait_s
         self.late = 0
-        self._open: dict[str, Frame] = {}
+        self.open: dict[str, Frame] = {}  # robot → its frame still open (read it, never change it)
         self._expected: dict[str, frozenset[str]] = {}
         self._closed: dict[str, tuple[int, float]] = {}  # robot → (seq, t) of the frame closed last
 
@@ -47,7 +47,7 @@ class FrameAssembler:
         """Add several samples of one frame at once (a frame that came whole, to be
         joined by the derived values of its ``seq``); returns the frames completed."""
         done: list[Frame] = []
-        frame = self._open.get(robot)
+        frame = self.open.get(robot)
         if frame is not None and seq != frame.seq:
             if seq < frame.seq and t < frame.t:  # a straggler from an earlier frame
                 self.late += 1
@@ -58,7 +58,7 @@ class FrameAssembler:
             self.late += 1
             return done
         if frame is None:
-            frame = self._open[robot] = Frame(robot, seq, t)
+            frame = self.open[robot] = Frame(robot, seq, t)
         frame.values.update(items)
         expected = self._expected.get(robot)
         if expected and expected <= frame.values.keys():
@@ -71,7 +71,7 @@ class FrameAssembler:
         them). It is then taken as closed without being built (a sample of its ``seq``
         that comes later is late), and the caller sends it as it is."""
         expected = self._expected.get(robot)
-        if robot in self._open or (expected is not keys and expected != keys):
+        if robot in self.open or (expected is not keys and expected != keys):
             return False
         if expected is not keys:  # (equal: kept as the caller's, whose next frame's are the same object)
             self._expected[robot] = keys
@@ -81,16 +81,16 @@ class FrameAssembler:
     def expire(self, now: float | None = None) -> list[Frame]:
         """Frames open for longer than ``max_wait_s`` (their stream paused or lost keys)."""
         now = time.monotonic() if now is None else now
-        stale = [r for r, f in self._open.items() if now - f.opened >= self.max_wait_s]
+        stale = [r for r, f in self.open.items() if now - f.opened >= self.max_wait_s]
         return [self._close(r) for r in stale]
 
     def next_expiry(self) -> float | None:
-        return min((f.opened + self.max_wait_s for f in self._open.values()), default=None)
+        return min((f.opened + self.max_wait_s for f in self.open.values()), default=None)
 
     def _close(self, robot: str) -> Frame:
         """Close a frame; the keys a frame holds only grow, so one lost sample
         does not make the next frame close early."""
-        frame = self._open.pop(robot)
+        frame = self.open.pop(robot)
         self._expected[robot] = self._expected.get(robot, frozenset()) | frame.values.keys()
         self._closed[robot] = (frame.seq, frame.t)
         return frame

@@ -59,6 +59,7 @@ class OscSink(Adapter):
         self.address = "OSC to " + ", ".join(f"udp {t.to} ({t.profile})" for t in cfg.resolved_targets())
         self._sample_links = [link for link in self._links if not link.target.framed]
         self._frame_links = [link for link in self._links if link.target.framed]
+        self._held = [link.held for link in self._links]  # (each target's, read as a whole a frame)
         self._assembler = FrameAssembler()
         self.stats.follow("late", lambda: self._assembler.late)
         self._tally = self.stats.tally(("received", "sent"))  # (counted under self._state: no lock of their own)
@@ -137,7 +138,9 @@ class OscSink(Adapter):
             return False
         try:
             self._take(key, payload, time.monotonic())
-            if self._may_hold and (wait := self._wait()) is not None and time.monotonic() + wait < self._until:
+            # (``_wait`` only when something is held: a frame sent whole holds nothing, issue 35)
+            if self._may_hold and (self._assembler.open or any(self._held)) and (wait := self._wait()) is not None \
+                    and time.monotonic() + wait < self._until:
                 self._until = _NEVER  # (woken once)
                 self._queue.wake()
         finally:
