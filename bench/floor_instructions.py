@@ -14,7 +14,7 @@ call a frame, after a warm-up of as many:
 - the sink's stages, each on its own (issue 35: where the sonibus frame's instructions go):
   ``select`` a ``Selection`` of its patterns (the gate, then the joints it selects, as an
   ``Incoming``), ``pace`` a ``Spacing``'s turn, ``send`` its target's plan (rendered and
-  sent: ``OscSink._planned``), ``latency`` one latency noted for the stats; what ``sonibus``
+  sent: ``OscSink._frame``), ``latency`` one latency noted for the stats; what ``sonibus``
   spends beyond them is its own dispatch (``Streams.take``, counts, the frame assembler);
 - ``sonibus``: an ``osc`` node (``extra = ["t", "seq"]``, ``bundle`` as asked) started
   on a real Zenoh session, given each frame as its frame subscription's callback does
@@ -197,7 +197,7 @@ def contenders(joints: int, bundle: bool, port: int, payloads: list[bytes], deri
     # the stages, on objects of their own (the sink's pacing must see each frame once: its own turn)
     selection = Selection(sink.config.subscribe)
     VERDICTS.leave()  # (the sink alone takes frames in its process, as in floor.py: nothing remembered)
-    spacing, latencies, (link,) = Spacing(), Latencies(), sink._links
+    spacing, latencies = Spacing(), Latencies()
     taken = {payload: selection.incoming(key, payload) for payload in payloads}  # (before the counts)
     now = time.monotonic()
     if derived:
@@ -214,7 +214,7 @@ def contenders(joints: int, bundle: bool, port: int, payloads: list[bytes], deri
         send: Callable[[bytes], Any] = lambda payload: derived_path(taken[payload].parts, now)  # noqa: E731
     else:
         select = lambda payload: selection.incoming(key, payload)  # noqa: E731
-        send = lambda payload: sink._planned(link, taken[payload], now)  # noqa: E731
+        send = lambda payload: sink._frame(taken[payload], now)  # noqa: E731
     return {"decode": msgpack.unpackb, "gate": lambda payload: gate.verdict(parsed, payload),
             "select": select, "pace": lambda payload: spacing.turn(key, taken[payload].t, taken[payload].seq, now),
             "send": send,

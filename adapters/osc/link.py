@@ -10,14 +10,13 @@ from typing import Any, NamedTuple
 
 from sonibus.bus.capped import Capped
 from sonibus.bus.keys import Key
-from sonibus.bus.streams import Selected
 
 from .config import Target
 from .profiles import PROFILES, DerivedBytes, FrameBytes
 
 __all__ = ["MAX_PLANS", "MAX_PLAN_BYTES", "Link", "Plan"]
 
-MAX_PLANS = 1024          # frame plans kept per target (joint lists come from the network)
+MAX_PLANS = 1024          # plans kept per target (joint lists come from the network)
 MAX_PLAN_BYTES = 4 << 20  # and their bytes (a plan holds a datagram's head per joint: 128 long names fill 64 KB)
 
 
@@ -55,9 +54,7 @@ class Link:
         self.refused_at = 0.0  # when its host last said nothing listens (monotonic; 0: not since it was heard)
         # Frames go out from their precomputed bytes unless a rate cap or a filter needs each value.
         self.direct = not self.min_interval and not self.filtering
-        # id(Selected) → it (kept, so its id is not reused) and its plan (None: the general path)
-        self.plans: Capped[int, tuple[Selected, Plan | None]] = Capped(MAX_PLANS, MAX_PLAN_BYTES)
-        # derived frames too, raw values only (a normalized one may wait for its range: the general path);
+        # derived frames' plans, raw values only (a normalized one may wait for its range: the general path);
         # id(Parts.sources) → them and their plan, for the last shape of their values
         self.derived_direct = self.direct and not target.framed and target.values == "raw"
         self.derived_plans: Capped[int, tuple[tuple[Key, ...], DerivedBytes | None]] = Capped(MAX_PLANS,

@@ -13,7 +13,7 @@ from typing import Any
 
 from sonibus.bus import lateness, presence
 from sonibus.bus.adapter import Adapter
-from sonibus.bus.capped import size_of
+from sonibus.bus.capped import Capped, size_of
 from sonibus.bus.errors import ConfigError
 from sonibus.bus.frames import Frame, FrameAssembler
 from sonibus.bus.info import InfoRequests
@@ -24,7 +24,7 @@ from sonibus.bus.streams import Incoming, Parts, Selected, Streams
 from . import scale
 from .config import OscSinkConfig, parse_target
 from .encode import EncodeError
-from .link import Link, Plan
+from .link import MAX_PLAN_BYTES, MAX_PLANS, Link, Plan
 from .profiles import Rendered, shape_of
 
 log = logging.getLogger(__name__)
@@ -60,6 +60,9 @@ class OscSink(Adapter):
         self._sample_links = [link for link in self._links if not link.target.framed]
         self._frame_links = [link for link in self._links if link.target.framed]
         self._held = [link.held for link in self._links]  # (each target's, read as a whole a frame)
+        # id(Selected) → it (kept, so its id is not reused) and each target with its plan for its frames
+        self._lanes: Capped[int, tuple[Selected, tuple[tuple[Link, Plan | None], ...]]] = Capped(
+            MAX_PLANS, MAX_PLAN_BYTES * len(self._links))  # (the bytes of a plan a target, as each target kept them)
         self._assembler = FrameAssembler()
         self.stats.follow("late", lambda: self._assembler.late)
         self._tally = self.stats.tally(("received", "sent"))  # (counted under self._state: no lock of their own)
@@ -263,59 +266,75 @@ class OscSink(Adapter):
         return True
 
     def _frame(self, message: Incoming, now: float) -> None:
-        """A robot's frame: each target's datagrams from its plan for these joints, where it
-        has one; the general path (``_samples``) for the others."""
+        """A robot's frame: each target's datagrams from its plan for these joints (its lane's),
+        where it has one; the general path (``_unplanned``) for the others. A frame that is not
+        whole by itself (derived values of its seq join it) goes to the targets of whole frames
+        once complete (``_assemble``)."""
+        selected = message.selected
+        lane = self._lanes.get(id(selected))
+        if lane is None or lane[0] is not selected:
+            lane = self._lane(selected, message.source.robot)
+        whole = None  # (asked once, at the first target of whole frames)
+        for link, plan in lane[1]:
+            if link.framed:
+                if whole is None:
+                    whole = self._assembler.whole(message.source.robot, message.seq, message.t, selected.keys)
+                    if not whole:
+                        self._assemble(message, now)
+                if not whole:
+                    continue
+            if plan is None or not self._planned(link, plan, message, now):
+                self._unplanned(link, message, now)
+
+    def _lane(self, selected: Selected, robot: str) -> tuple[Selected, tuple[tuple[Link, Plan | None], ...]]:
+        """The frames of ``selected`` joints' lane: every target with its plan for them (None: the
+        general path), worked out once for a joint list (kept by the identity of ``selected``, which
+        the lane holds so it is not reused; worked out again once ranges come). One lookup a frame,
+        not one a target (issue 35)."""
+        plans = tuple((link, self._plan(link, selected, robot) if link.direct else None) for link in self._links)
+        return self._lanes.put(id(selected), (selected, plans),  # (its addresses: about its keys, a target each)
+                               len(plans) * size_of(s.key for s in selected.sources))
+
+    def _assemble(self, message: Incoming, now: float) -> None:
+        """A frame joined by the derived values of its seq: to every target of whole frames once complete."""
         selected = message.selected
         assert selected is not None
-        for link in self._sample_links:
-            if not self._planned(link, message, now):
-                for sample in message.samples:
-                    self._sample_to(link, sample.source, sample.values, sample.t, sample.seq, now)
-        if not self._frame_links:
-            return
-        robot = message.source.robot
-        if not self._assembler.whole(robot, message.seq, message.t, selected.keys):
-            items = {s.key: (s, (v,)) for s, v in zip(selected.sources, message.values, strict=True)}
-            for frame in self._assembler.extend(robot, message.seq, message.t, items):
-                self._send_frame(frame, now)
-            return
-        frame = None
-        for link in self._frame_links:
-            if not self._planned(link, message, now):
-                frame = frame or Frame(robot, message.seq, message.t, {s.key: (s, (v,)) for s, v in zip(
-                    selected.sources, message.values, strict=True)})
-                self._frame_link(link, frame, now)
+        items = {s.key: (s, (v,)) for s, v in zip(selected.sources, message.values, strict=True)}
+        for frame in self._assembler.extend(message.source.robot, message.seq, message.t, items):
+            self._send_frame(frame, now)
 
-    def _planned(self, link: Link, message: Incoming, now: float) -> bool:
-        """Send ``message`` (a frame) to ``link`` from its plan; False when it takes the general
-        path instead: a rate cap or a filter, ranges not known yet, a value OSC cannot carry."""
-        if not link.direct:
-            return False
+    def _unplanned(self, link: Link, message: Incoming, now: float) -> None:
+        """A frame to ``link`` by the general path: a joint at a time (``_sample_to``), or as a
+        ``Frame`` (``_frame_link``, its turn and its filter) to a target of whole frames."""
+        if not link.framed:
+            for sample in message.samples:
+                self._sample_to(link, sample.source, sample.values, sample.t, sample.seq, now)
+            return
         selected = message.selected
-        entry = link.plans.get(id(selected))
-        if entry is None or entry[0] is not selected:
-            entry = link.plans.put(id(selected), (selected, self._plan(link, selected, message.source.robot)),
-                                   size_of(s.key for s in selected.sources))  # (its addresses: about its keys)
-        found = entry[1]
-        if found is None:
-            return False
+        assert selected is not None
+        self._frame_link(link, Frame(message.source.robot, message.seq, message.t, {
+            s.key: (s, (v,)) for s, v in zip(selected.sources, message.values, strict=True)}), now)
+
+    def _planned(self, link: Link, plan: Plan, message: Incoming, now: float) -> bool:
+        """Send ``message`` (a frame) to ``link`` from its ``plan``; False when a value OSC cannot
+        carry sends it by the general path instead (which leaves out just that one, and says so)."""
         values: Sequence[float] = message.values
-        if found.spans is not None:
+        if plan.spans is not None:
             fraction = scale.fraction
-            values = [v if span is None else fraction(v, span) for v, span in zip(values, found.spans, strict=True)]
+            values = [v if span is None else fraction(v, span) for v, span in zip(values, plan.spans, strict=True)]
         t = message.t
         if not link.framed:
             try:
-                datagrams = found.datagrams.render(t, message.seq, values)
-            except _REFUSED:  # (the general path leaves out just what OSC cannot carry, and says so)
+                datagrams = plan.datagrams.render(t, message.seq, values)
+            except _REFUSED:
                 return False
             self._emit(link, datagrams)
             return True
         robot = message.source.robot
         previous = link.last_frame_t.get(robot)
         try:
-            datagrams = found.datagrams.render(t, message.seq, values,
-                                               t - previous if previous is not None and t > previous else 0.0)
+            datagrams = plan.datagrams.render(t, message.seq, values,
+                                              t - previous if previous is not None and t > previous else 0.0)
         except _REFUSED:
             return False
         link.last_sent[robot] = now
@@ -478,8 +497,8 @@ class OscSink(Adapter):
                 return
             self._ranges[robot] = ranges
             self._described[robot] = {str(d.get("name")) for d in info.get("derived", []) if isinstance(d, dict)}
-            for link in self._links:  # (worked out again with these ranges)
-                link.plans.clear()
+            self._lanes.clear()  # (worked out again with these ranges)
+            for link in self._links:
                 link.derived_plans.clear()
 
 

@@ -131,10 +131,10 @@ def test_the_sink_sends_the_same_bytes_through_its_plans_as_through_the_general_
     config = {"subscribe": "toy/joints/*", "max_age_ms": 0, **options}
     fast = net.start(OscSink(OscSinkConfig(targets=(planned.target,), **config), name="planned"))
     slow = net.start(OscSink(OscSinkConfig(targets=(general_path.target,), **config), name="general"))
-    slow._planned = lambda link, message, now: False  # (every frame through sample/frame, one joint at a time)
+    slow._planned = lambda *args: False  # (every frame through sample/frame, one joint at a time)
     took: list[bool] = []
     plan = fast._planned
-    fast._planned = lambda link, message, now: took.append(plan(link, message, now)) or took[-1]
+    fast._planned = lambda *args: took.append(plan(*args)) or took[-1]
     base = time.time()
 
     def put(seq: int) -> None:
@@ -172,24 +172,24 @@ def test_the_sink_sends_the_same_bytes_through_its_plans_as_through_the_general_
 
 
 def test_made_up_joint_lists_do_not_grow_the_plans(net, receivers):
-    """Joint lists come from the network: a target keeps at most ``MAX_PLANS`` plans, however
-    many robots and lists are made up, and still sends each frame (through a new plan)."""
+    """Joint lists come from the network: a sink keeps at most ``MAX_PLANS`` lanes (a plan for
+    each target), however many robots and lists are made up, and still sends each frame (through
+    a new plan)."""
     from sonibus.adapters.osc import link as osc_link
     receiver = receivers()
     sink = net.start(OscSink(OscSinkConfig(targets=(receiver.target,), subscribe="*/joints/*", max_age_ms=0),
                              name="plans"))
-    (link,) = sink._links
     for n in range(osc_link.MAX_PLANS + 100):
         payload = encode(frame(time.time(), n, ["A", f"Made{n}"], [0.25, 0.5]))
         sink._direct(f"robot{n % 7}/frame", payload)  # (as its subscription's callback does)
-        assert len(link.plans) <= osc_link.MAX_PLANS
-    assert len(link.plans) > 50, "the plans were never used"
+        assert len(sink._lanes) <= osc_link.MAX_PLANS
+    assert len(sink._lanes) > 50, "the plans were never used"
 
     def last_sent() -> bool:  # (again until one arrives: UDP may drop one of a thousand sent at once)
         sink._direct("robot0/frame", encode(frame(time.time(), 10 ** 6, ["A", "Last"], [0.25, 0.5])))
         return any(a == "/robot0/joints/Last" for a, _ in messages(receiver))
     wait_for(last_sent, what="a frame at the target after them")
-    assert len(link.plans) <= osc_link.MAX_PLANS
+    assert len(sink._lanes) <= osc_link.MAX_PLANS
 
 
 def test_a_frame_never_waits_on_zenohs_thread_for_the_forward_worker(net, receivers):
