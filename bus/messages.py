@@ -34,7 +34,7 @@ from msgpack import unpackb
 
 from .. import schemas
 from .capped import Capped, size_of
-from .codec import DecodeError, decode
+from .codec import DecodeError, FrameDecoder, decode
 from .keys import AUDIO_STREAMS, Key
 from .layouts import Layouts
 from .schemacheck import fits
@@ -98,6 +98,8 @@ class Gate:
         self._known_names: Capped[tuple[str, ...], bool] = Capped(self.MAX_KNOWN, self.MAX_KNOWN_BYTES)
         # robot → the (checked) names of its last frame
         self._last_names: Capped[str, tuple[str, ...]] = Capped(self.MAX_KNOWN, self.MAX_KNOWN_BYTES)
+        # robot → the reader of frames of its last names, as ``FrameEncoder`` writes them (``known_frame``)
+        self._decoders: Capped[str, FrameDecoder] = Capped(self.MAX_KNOWN, 2 * self.MAX_KNOWN_BYTES)
         # derived frame's key → where its vectors are (its last frame's types), their sizes
         self._layouts = Layouts(MAX_DERIVED_SIZE, MAX_VALUE, self.MAX_KNOWN, self.MAX_KNOWN_BYTES)
 
@@ -132,6 +134,26 @@ class Gate:
             raise
         except (KeyError, TypeError, ValueError) as exc:  # a field missing or of the wrong type
             raise BadMessage(_reason(exc)) from None
+
+    def known_frame(self, key: Key, payload: bytes) -> tuple[float, int, tuple[float, ...], tuple[str, ...]] | None:
+        """A robot's frame (``key``: ``<robot>/frame``) with the names of its last one, in the bytes
+        msgpack makes of a frame of floats (``codec.FrameDecoder``), checked as ``frame`` checks
+        it: its ``t``, ``seq``, values and the names' tuple (the one ``verdict`` gives for them).
+        None for anything else, and for such a frame out of bounds: ``verdict`` says what it is.
+        What every node pays a frame, without a string or a float made for each joint (issue 35)."""
+        last = self._last_names.get(key.robot)
+        if last is None or len(payload) > self.limits.max_payload:
+            return None
+        decoder = self._decoders.get(key.robot)
+        if decoder is None or decoder.names is not last:
+            decoder = self._decoders.put(key.robot, FrameDecoder(last), 2 * size_of(last) + len(key.robot))
+        read = decoder.decode(payload)
+        if read is None:
+            return None
+        t, seq, values = read  # (their types are the bytes': a float, an int, floats)
+        if 0.0 <= t <= time.time() + self.limits.max_future_s and seq <= MAX_SEQ and hypot(*values) <= MAX_VALUE:
+            return t, seq, values, last
+        return None
 
     # -- sections ---------------------------------------------------------------------
 
