@@ -26,12 +26,11 @@ from .config import OscSinkConfig, parse_target
 from .encode import EncodeError
 from .link import MAX_PLAN_BYTES, MAX_PLANS, Link, Plan
 from .profiles import Rendered, shape_of
+from .ranges import MAX_ROBOTS, RobotRanges
 
 log = logging.getLogger(__name__)
 
 INFO_RETRY_S = 2.0
-MAX_ROBOTS = 1024  # robots whose info (ranges) is kept: names made up on the bus must not grow it
-UNDESCRIBED_WAIT_S = 3.0  # a derived value no info describes is held back this long at most, then sent raw
 HEARD_EVERY_S = 0.5       # how often a robot's data is told to presence (its silence is warned of after 3 s)
 LISTENING_AFTER_S = 2.0   # a target whose host has not refused a datagram for this long: something listens there
 DIRECT_WAIT_S = 0.002     # a frame waits this long at most on Zenoh's thread for another one taken there
@@ -49,9 +48,7 @@ class OscSink(Adapter):
 
     def _start(self) -> None:
         cfg: OscSinkConfig = self.config
-        self._ranges: dict[str, dict[str, tuple[float, float]]] = {}
-        self._described: dict[str, set[str]] = {}  # robot → derived values its info describes (ranged or not)
-        self._first_seen: dict[tuple[str, str], float] = {}  # (robot, derived value) → when it first came
+        self._ranges = RobotRanges()
         self._heard: dict[str, float] = {}  # robot → when its data was last told to presence
         self._info = InfoRequests(self.bus, self._take_info, lambda robot, text: self.warn("info", text),
                                   INFO_RETRY_S, derived_alone=True)
@@ -347,7 +344,7 @@ class OscSink(Adapter):
         waits for the robot's ranges, or says what OSC cannot carry)."""
         spans = None
         if link.target.values != "raw":
-            ranges = self._ranges.get(robot)
+            ranges = self._ranges.spans.get(robot)
             if ranges is None:
                 return None
             spans = tuple(ranges.get(source.name) for source in selected.sources)
@@ -459,44 +456,23 @@ class OscSink(Adapter):
     def _scaled(self, link: Link, source: Key, values: Sequence[float]) -> Sequence[float] | None:
         if link.target.values == "raw":
             return values
-        ranges = self._ranges.get(source.robot)
-        if ranges is None:
+        scaled = self._ranges.scaled(source, values)
+        if scaled is None:  # (its robot's info, or a word of it on this derived value, to come)
             self.count("waiting_info")
             self._info.ask(source.robot)
-            return None
-        name = source.name if source.section == "joints" else f"{source.feature}/{source.name}"
-        span = ranges.get(name)
-        if span is None and source.section == "derived" and self._undescribed(source.robot, name):
-            self.count("waiting_info")
-            self._info.ask(source.robot)
-            return None
-        return values if span is None else scale.normalized(values, span)
-
-    def _undescribed(self, robot: str, name: str) -> bool:
-        """Whether to hold back derived value ``name``: its robot's info does not describe it
-        yet (its processor may have started after the info came, and a receiver of 0..1
-        cannot tell metres from fractions); ``UNDESCRIBED_WAIT_S`` after it first came,
-        still undescribed (a script's own derived key), it goes out raw."""
-        if name in self._described.get(robot, ()):
-            return False
-        if len(self._first_seen) > 4096:  # names made up on the fly must not grow it for ever
-            self._first_seen.clear()
-        first = self._first_seen.setdefault((robot, name), time.monotonic())
-        return time.monotonic() - first < UNDESCRIBED_WAIT_S
+        return scaled
 
     def _take_info(self, robot: str, info: dict[str, Any]) -> None:
-        try:
-            ranges = scale.ranges(info)
-        except (KeyError, TypeError, ValueError) as exc:
-            self.warn("info", f"{robot}/info unusable: {exc}")
-            return
         with self._state:
-            if robot not in self._ranges and len(self._ranges) >= MAX_ROBOTS:
+            try:
+                kept = self._ranges.keep(robot, info)
+            except (KeyError, TypeError, ValueError) as exc:
+                self.warn("info", f"{robot}/info unusable: {exc}")
+                return
+            if not kept:
                 self.capped(f"robot '{robot}': its info not kept, already {MAX_ROBOTS} robots' (its values go out "
                             "raw)")
                 return
-            self._ranges[robot] = ranges
-            self._described[robot] = {str(d.get("name")) for d in info.get("derived", []) if isinstance(d, dict)}
             self._lanes.clear()  # (worked out again with these ranges)
             for link in self._links:
                 link.derived_plans.clear()

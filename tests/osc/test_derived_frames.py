@@ -55,7 +55,7 @@ def test_a_derived_frame_goes_out_as_its_values_did_on_their_own_keys(net, recei
 
     first = 0
     if options.get("values") == "normalized":  # the ranges, asked for at the first message, in both sinks
-        wait_for(lambda: put(first) or all("qom/Body" in sink._described.get("toy", ()) for sink in (before, after)),
+        wait_for(lambda: put(first) or all(sink._ranges.describes("toy", "qom/Body") for sink in (before, after)),
                  what="both sinks knowing toy's derived ranges")
         first = 1_000
     for seq in range(first, first + 8):
