@@ -66,9 +66,10 @@ class FrameDecoder:
     bytes compared as they are and the values unpacked by one ``struct``, where msgpack
     made a string of each name and a float of each value, and the gate then compared the
     names and looked at the values' types one by one (issue 35: 30k of an OSC sink's 85k
-    instructions a 17-joint frame). ``decode`` gives None for any other bytes, a frame of
-    other names or of another shape (``unpackb`` reads those): it never reads what msgpack
-    would read otherwise.
+    instructions a 17-joint frame). ``decode`` gives None for a frame of other names or of
+    another shape, and for any other bytes (``unpackb`` reads those); a seq in a longer msgpack
+    form than ``FrameEncoder`` writes is read as ``unpackb`` reads it. It never reads what
+    msgpack would read otherwise.
 
     >>> frames = FrameDecoder(("HeadYaw", "HeadPitch"))
     >>> frames.decode(FrameEncoder(frames.names).encode(1.5, 300, [0.25, -1.0]))
@@ -88,6 +89,8 @@ class FrameDecoder:
         # seq's marker: compared, not read.)
         values = f"{len(self._middle)}s" + "cd" * n
         self._forms: dict[int, tuple[struct.Struct, bytes, int]] = {}
+        # bytes it holds, about: five structs of 2n + 5 codes (~32 bytes a code), the names' bytes
+        self.size = 5 * 32 * (2 * n + 5) + len(self._middle)
         for tag, seq, most in ((b"\xa3seq", "B", 0x7F), (b"\xa3seq\xcc", "B", 0xFF), (b"\xa3seq\xcd", "H", 0xFFFF),
                                (b"\xa3seq\xce", "I", 0xFFFF_FFFF), (b"\xa3seq\xcf", "Q", 0xFFFF_FFFF_FFFF_FFFF)):
             form = struct.Struct(f">4sd{len(tag)}s{seq}{values}")
@@ -95,7 +98,8 @@ class FrameDecoder:
 
     def decode(self, payload: bytes) -> tuple[float, int, tuple[float, ...]] | None:
         """``payload``'s ``t``, ``seq`` and values (a float per name), or None: not a frame of
-        these names as ``FrameEncoder`` writes it (msgpack's own bytes for such a frame)."""
+        these names as ``FrameEncoder`` writes it (msgpack's own bytes for such a frame, any
+        form of its seq)."""
         found = self._forms.get(len(payload))
         if found is None:
             return None

@@ -98,8 +98,10 @@ class Gate:
         self._known_names: Capped[tuple[str, ...], bool] = Capped(self.MAX_KNOWN, self.MAX_KNOWN_BYTES)
         # robot → the (checked) names of its last frame
         self._last_names: Capped[str, tuple[str, ...]] = Capped(self.MAX_KNOWN, self.MAX_KNOWN_BYTES)
-        # robot → the reader of frames of its last names, as ``FrameEncoder`` writes them (``known_frame``)
-        self._decoders: Capped[str, FrameDecoder] = Capped(self.MAX_KNOWN, 2 * self.MAX_KNOWN_BYTES)
+        # robot → its last names and the reader of its frames of them, as ``FrameEncoder`` writes them
+        # (None until a second frame comes with them: ``known_frame``)
+        self._decoders: Capped[str, tuple[tuple[str, ...], FrameDecoder | None]] = Capped(
+            self.MAX_KNOWN, 4 * self.MAX_KNOWN_BYTES)
         # derived frame's key → where its vectors are (its last frame's types), their sizes
         self._layouts = Layouts(MAX_DERIVED_SIZE, MAX_VALUE, self.MAX_KNOWN, self.MAX_KNOWN_BYTES)
 
@@ -139,14 +141,22 @@ class Gate:
         """A robot's frame (``key``: ``<robot>/frame``) with the names of its last one, in the bytes
         msgpack makes of a frame of floats (``codec.FrameDecoder``), checked as ``frame`` checks
         it: its ``t``, ``seq``, values and the names' tuple (the one ``verdict`` gives for them).
-        None for anything else, and for such a frame out of bounds: ``verdict`` says what it is.
-        What every node pays a frame, without a string or a float made for each joint (issue 35)."""
+        None for anything else: another shape, a frame out of bounds, or one whose values' length
+        as one vector passes ``MAX_VALUE`` (``verdict`` looks at each then); ``verdict`` says what
+        it is. What every node pays a frame, without a string or a float made for each joint
+        (issue 35). A decoder is made for the robot's names once they held over a frame: a robot
+        whose names change every frame (two publishers of one name, a fuzzer) makes none.
+        """
         last = self._last_names.get(key.robot)
         if last is None or len(payload) > self.limits.max_payload:
             return None
-        decoder = self._decoders.get(key.robot)
-        if decoder is None or decoder.names is not last:
-            decoder = self._decoders.put(key.robot, FrameDecoder(last), 2 * size_of(last) + len(key.robot))
+        names, decoder = self._decoders.get(key.robot) or (None, None)
+        if names is not last:  # (names new since the robot's last frame: the next frame may make one)
+            self._decoders.put(key.robot, (last, None), size_of(last) + len(key.robot))
+            return None
+        if decoder is None:
+            decoder = FrameDecoder(last)
+            self._decoders.put(key.robot, (last, decoder), decoder.size + len(key.robot))
         read = decoder.decode(payload)
         if read is None:
             return None

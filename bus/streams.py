@@ -224,7 +224,8 @@ class Selection:
         and checked by the gate's ``frame`` (the check ``incoming`` makes of it), then selected by
         the snapshot kept for those names. None for anything else, and for a frame the gate
         refuses, whatever it is: ``incoming`` takes it then, and says why (a frame refused is
-        decoded twice; the gate changes nothing before it refuses).
+        decoded twice, and refused the same way: what the gate noted of its names before it
+        refused it, it notes again).
 
         An OSC bundle frame of 17 joints: 72k instructions, against 90k by ``incoming``'s way
         (msgpack's strings and floats, the names compared, the types looked at, four calls and

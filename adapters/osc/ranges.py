@@ -3,8 +3,10 @@ normalized values (``values = "normalized"``): a value goes out as a fraction of
 range once its robot's info came, and a derived value its info does not describe yet is
 held back a while (a receiver of 0..1 cannot tell metres from fractions).
 
+>>> from sonibus.adapters.osc import scale
 >>> ranges = RobotRanges()
->>> ranges.keep("pepper", {"joints": [{"name": "HeadYaw", "min": -2.0, "max": 2.0}], "derived": []})
+>>> info = {"joints": [{"name": "HeadYaw", "min": -2.0, "max": 2.0}], "derived": []}
+>>> ranges.keep("pepper", info, scale.ranges(info))
 True
 >>> from sonibus.bus.keys import Key
 >>> ranges.scaled(Key.parse("pepper/joints/HeadYaw"), (1.0,)), ranges.scaled(Key.parse("nao/joints/HeadYaw"), (1.0,))
@@ -35,10 +37,9 @@ class RobotRanges:
         self._described: dict[str, set[str]] = {}  # robot → derived values its info describes
         self._first_seen: dict[tuple[str, str], float] = {}  # (robot, derived value) → when it first came
 
-    def keep(self, robot: str, info: dict[str, Any]) -> bool:
-        """``robot``'s ranges from its ``info`` (``KeyError``/``TypeError``/``ValueError`` when
-        it is not shaped so); False when it is not kept: ``MAX_ROBOTS`` robots' are already."""
-        spans = scale.ranges(info)
+    def keep(self, robot: str, info: dict[str, Any], spans: dict[str, tuple[float, float]]) -> bool:
+        """``robot``'s ranges, ``spans`` (``scale.ranges`` of its ``info``); False when they are
+        not kept: ``MAX_ROBOTS`` robots' are already."""
         if robot not in self.spans and len(self.spans) >= MAX_ROBOTS:
             return False
         self.spans[robot] = spans

@@ -463,15 +463,15 @@ class OscSink(Adapter):
         return scaled
 
     def _take_info(self, robot: str, info: dict[str, Any]) -> None:
+        try:
+            spans = scale.ranges(info)  # (not under _state: an info may be large, frames wait on it)
+        except (KeyError, TypeError, ValueError) as exc:
+            self.warn("info", f"{robot}/info unusable: {exc}")
+            return
         with self._state:
-            try:
-                kept = self._ranges.keep(robot, info)
-            except (KeyError, TypeError, ValueError) as exc:
-                self.warn("info", f"{robot}/info unusable: {exc}")
-                return
-            if not kept:
+            if not self._ranges.keep(robot, info, spans):
                 self.capped(f"robot '{robot}': its info not kept, already {MAX_ROBOTS} robots' (its values go out "
-                            "raw)")
+                            "raw to targets of raw values, not at all to those of normalized ones)")
                 return
             self._lanes.clear()  # (worked out again with these ranges)
             for link in self._links:

@@ -33,7 +33,9 @@ def test_a_controller_that_floods_and_vanishes_leaves_the_node_up_for_the_next(n
     flood.popen.wait(5)
 
     wait_for(lambda: node.stats["controllers_left"] == 1, 15, "the node to see the controller leave")
-    assert "controller 'surface:fader' left surface-in:sonibus-in, waiting for a port matching" in caplog.text
+    # (counted, then said, on the node's watch thread: the words may come a moment after the count)
+    wait_for(lambda: "controller 'surface:fader' left surface-in:sonibus-in, waiting for a port matching"
+             in caplog.text, 5, "the node to say the controller left")
     # every message heard is handled or counted dropped, none lost unsaid
     wait_for(lambda: node.stats["unmapped"] + node.stats["dropped"] == node._jack.heard, 5, "the queue drained")
     assert node.stats["received"] == node.stats["unmapped"]
