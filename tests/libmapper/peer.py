@@ -97,8 +97,11 @@ def main() -> None:
         manager.poll(0)
         if args.unmap_after and updates[0] >= args.unmap_after:
             # as webmapper does: from a graph of its own, not the device's, once that graph knows the map
-            into = [m for m in manager.maps() if m.get_is_ready() and any(
-                str(sig[mpr.Property.NAME]) == "yaw" for sig in m.signals(mpr.Map.Location.DESTINATION))]
+            # the device has (by its id: that graph may still know a map of a device of the same name
+            # before this one, whose release removes nothing)
+            running = {int(m[mpr.Property.ID]) for m in sig.maps()}
+            into = [m for m in manager.maps() if m.get_is_ready() and int(m[mpr.Property.ID]) in running and any(
+                str(s[mpr.Property.NAME]) == "yaw" for s in m.signals(mpr.Map.Location.DESTINATION))]
             for found in into:
                 found.release()
             if into:
